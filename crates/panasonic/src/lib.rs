@@ -1,0 +1,3 @@
+//! The panasonic protocol (work in progress).
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]

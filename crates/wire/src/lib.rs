@@ -1,0 +1,21 @@
+//! What every cellbus protocol shares, without I/O and without a clock.
+//!
+//! - [`checksum`]: the XOR block check of the JBC protocol and CRC-16/MODBUS.
+//! - [`codec`]: the [`Codec`] trait every protocol's frame layer implements, and the
+//!   [`Deframer`] that turns a byte stream into frames, resynchronising on bad input.
+//! - [`scan`]: a scanner for streams framed by a start and an end byte (`STX … ETX`,
+//!   `% … LF`).
+//! - [`ascii`]: fixed-width ASCII numbers as the serial protocols carry them.
+//! - [`device`]: the interface between a simulated device and the line that serves it,
+//!   and seeded [`device::FaultInjector`] for realistic line trouble.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod ascii;
+pub mod checksum;
+pub mod codec;
+pub mod device;
+pub mod scan;
+
+pub use codec::{Codec, Deframer, Resync};
+pub use device::{Device, Transmit};
