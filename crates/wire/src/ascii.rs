@@ -30,7 +30,10 @@ pub fn parse_signed(field: &[u8]) -> Option<i32> {
 pub fn write_unsigned(value: u32, width: usize, out: &mut Vec<u8>) -> Result<(), TooWide> {
     let text = value.to_string();
     if text.len() > width {
-        return Err(TooWide { value: value.into(), width });
+        return Err(TooWide {
+            value: value.into(),
+            width,
+        });
     }
     out.extend(std::iter::repeat_n(b'0', width - text.len()));
     out.extend_from_slice(text.as_bytes());
@@ -41,16 +44,24 @@ pub fn write_unsigned(value: u32, width: usize, out: &mut Vec<u8>) -> Result<(),
 /// number's `-` in the first position (`-50` in 5 characters is `-0050`).
 pub fn write_signed(value: i32, width: usize, out: &mut Vec<u8>) -> Result<(), TooWide> {
     if value >= 0 {
-        return write_unsigned(value.unsigned_abs(), width, out)
-            .map_err(|_| TooWide { value: value.into(), width });
+        return write_unsigned(value.unsigned_abs(), width, out).map_err(|_| TooWide {
+            value: value.into(),
+            width,
+        });
     }
     if width < 2 {
-        return Err(TooWide { value: value.into(), width });
+        return Err(TooWide {
+            value: value.into(),
+            width,
+        });
     }
     out.push(b'-');
     write_unsigned(value.unsigned_abs(), width - 1, out).map_err(|_| {
         out.pop();
-        TooWide { value: value.into(), width }
+        TooWide {
+            value: value.into(),
+            width,
+        }
     })
 }
 
@@ -76,8 +87,20 @@ mod tests {
     #[test]
     fn numbers_that_do_not_fit_are_refused_and_write_nothing() {
         let mut out = Vec::new();
-        assert_eq!(write_signed(100_000, 5, &mut out), Err(TooWide { value: 100_000, width: 5 }));
-        assert_eq!(write_signed(-10_000, 5, &mut out), Err(TooWide { value: -10_000, width: 5 }));
+        assert_eq!(
+            write_signed(100_000, 5, &mut out),
+            Err(TooWide {
+                value: 100_000,
+                width: 5
+            })
+        );
+        assert_eq!(
+            write_signed(-10_000, 5, &mut out),
+            Err(TooWide {
+                value: -10_000,
+                width: 5
+            })
+        );
         assert!(out.is_empty());
     }
 

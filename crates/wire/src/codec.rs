@@ -46,6 +46,8 @@ pub enum Chunk<F, E> {
     },
 }
 
+type Decoded<C> = Result<<C as Codec>::Frame, <C as Codec>::Error>;
+
 /// Turns a byte stream into frames, dropping what cannot be decoded.
 #[derive(Debug, Clone)]
 pub struct Deframer<C: Codec> {
@@ -56,7 +58,10 @@ pub struct Deframer<C: Codec> {
 impl<C: Codec> Deframer<C> {
     /// A deframer with an empty buffer.
     pub fn new(codec: C) -> Self {
-        Self { codec, buf: Vec::new() }
+        Self {
+            codec,
+            buf: Vec::new(),
+        }
     }
 
     /// Appends bytes received from the line.
@@ -98,7 +103,8 @@ impl<C: Codec> Deframer<C> {
         &self.codec
     }
 
-    fn decode_front(&self) -> Option<(Result<C::Frame, C::Error>, usize)> {
+    /// The decode result at the front and how many bytes it spans.
+    fn decode_front(&self) -> Option<(Decoded<C>, usize)> {
         if self.buf.is_empty() {
             return None;
         }
@@ -163,7 +169,10 @@ mod tests {
     fn deframer_drops_garbage_and_reports_each_drop() {
         let mut d = Deframer::new(Angle);
         d.push(b"xy<a><b>");
-        assert_eq!(frames(&mut d), vec![Err(Bad(1)), Err(Bad(1)), Ok(b'a'), Ok(b'b')]);
+        assert_eq!(
+            frames(&mut d),
+            vec![Err(Bad(1)), Err(Bad(1)), Ok(b'a'), Ok(b'b')]
+        );
     }
 
     #[test]
@@ -172,9 +181,18 @@ mod tests {
         d.push(b"z<q>");
         assert_eq!(
             d.next_chunk(),
-            Some(Chunk::Skipped { error: Bad(1), raw: b"z".to_vec() })
+            Some(Chunk::Skipped {
+                error: Bad(1),
+                raw: b"z".to_vec()
+            })
         );
-        assert_eq!(d.next_chunk(), Some(Chunk::Frame { frame: b'q', raw: b"<q>".to_vec() }));
+        assert_eq!(
+            d.next_chunk(),
+            Some(Chunk::Frame {
+                frame: b'q',
+                raw: b"<q>".to_vec()
+            })
+        );
         assert_eq!(d.next_chunk(), None);
     }
 

@@ -26,7 +26,10 @@ pub struct Transmit {
 impl Transmit {
     /// Bytes to send at once.
     pub fn now(bytes: Vec<u8>) -> Self {
-        Self { delay: Duration::ZERO, bytes }
+        Self {
+            delay: Duration::ZERO,
+            bytes,
+        }
     }
 
     /// Bytes to send after `delay`.
@@ -77,7 +80,10 @@ impl<M: Model> SharedModel<M> {
     /// A new line to the model, with its own deframer.
     pub fn line(&self) -> ModelLine<M> {
         let codec = self.lock().codec();
-        ModelLine { model: self.clone(), deframer: Deframer::new(codec) }
+        ModelLine {
+            model: self.clone(),
+            deframer: Deframer::new(codec),
+        }
     }
 
     /// The model, for inspection or to provoke a fault from a test or a control channel.
@@ -193,7 +199,8 @@ impl<D> FaultInjector<D> {
             }
             _ => {
                 self.injected.garbage += 1;
-                let mut bytes: Vec<u8> = (0..self.rng.usize(1..8)).map(|_| self.rng.u8(..)).collect();
+                let mut bytes: Vec<u8> =
+                    (0..self.rng.usize(1..8)).map(|_| self.rng.u8(..)).collect();
                 bytes.append(&mut tx.bytes);
                 tx.bytes = bytes;
                 Some(tx)
@@ -205,7 +212,10 @@ impl<D> FaultInjector<D> {
 impl<D: Device> Device for FaultInjector<D> {
     fn receive(&mut self, bytes: &[u8], now: Instant) -> Vec<Transmit> {
         let replies = self.inner.receive(bytes, now);
-        replies.into_iter().filter_map(|tx| self.disturb(tx)).collect()
+        replies
+            .into_iter()
+            .filter_map(|tx| self.disturb(tx))
+            .collect()
     }
 }
 
@@ -225,7 +235,9 @@ mod tests {
     fn run(seed: u64, rate: f64) -> (Vec<Vec<Transmit>>, FaultCounts) {
         let mut device = FaultInjector::new(Echo, seed, rate).expect("valid rate");
         let now = Instant::now();
-        let out = (0..400u16).map(|i| device.receive(&i.to_be_bytes(), now)).collect();
+        let out = (0..400u16)
+            .map(|i| device.receive(&i.to_be_bytes(), now))
+            .collect();
         (out, device.injected())
     }
 
@@ -240,21 +252,38 @@ mod tests {
         let (out, counts) = run(1, 0.0);
         assert_eq!(counts, FaultCounts::default());
         for (i, replies) in out.iter().enumerate() {
-            assert_eq!(replies, &vec![Transmit::now((i as u16).to_be_bytes().to_vec())]);
+            assert_eq!(
+                replies,
+                &vec![Transmit::now((i as u16).to_be_bytes().to_vec())]
+            );
         }
     }
 
     #[test]
     fn fault_injection_at_rate_one_injects_every_kind() {
         let (out, counts) = run(3, 1.0);
-        assert_eq!(counts.dropped + counts.delayed + counts.corrupted + counts.garbage, 400);
-        assert!(counts.dropped > 50 && counts.delayed > 50 && counts.corrupted > 50 && counts.garbage > 50);
-        assert_eq!(out.iter().filter(|r| r.is_empty()).count() as u64, counts.dropped);
+        assert_eq!(
+            counts.dropped + counts.delayed + counts.corrupted + counts.garbage,
+            400
+        );
+        assert!(
+            counts.dropped > 50
+                && counts.delayed > 50
+                && counts.corrupted > 50
+                && counts.garbage > 50
+        );
+        assert_eq!(
+            out.iter().filter(|r| r.is_empty()).count() as u64,
+            counts.dropped
+        );
     }
 
     #[test]
     fn fault_rates_outside_zero_to_one_are_refused() {
-        assert_eq!(FaultInjector::new(Echo, 0, 1.5).err(), Some(BadFaultRate(1.5)));
+        assert_eq!(
+            FaultInjector::new(Echo, 0, 1.5).err(),
+            Some(BadFaultRate(1.5))
+        );
         assert!(FaultInjector::new(Echo, 0, -0.1).is_err());
         assert!(FaultInjector::new(Echo, 0, f64::NAN).is_err());
     }
@@ -270,7 +299,10 @@ mod tests {
         type Frame = Vec<u8>;
         type Error = std::convert::Infallible;
         fn decode(&self, buf: &[u8]) -> Result<Option<(Vec<u8>, usize)>, Self::Error> {
-            Ok(buf.iter().position(|&b| b == b'\n').map(|i| (buf[..i].to_vec(), i + 1)))
+            Ok(buf
+                .iter()
+                .position(|&b| b == b'\n')
+                .map(|i| (buf[..i].to_vec(), i + 1)))
         }
         fn encode(&self, frame: &Vec<u8>, out: &mut Vec<u8>) {
             out.extend_from_slice(frame);
@@ -289,7 +321,11 @@ mod tests {
         fn codec(&self) -> Lines {
             Lines
         }
-        fn handle(&mut self, input: Result<Vec<u8>, std::convert::Infallible>, _now: Instant) -> Vec<Transmit> {
+        fn handle(
+            &mut self,
+            input: Result<Vec<u8>, std::convert::Infallible>,
+            _now: Instant,
+        ) -> Vec<Transmit> {
             let Ok(frame) = input;
             self.frames += 1;
             vec![Transmit::now(frame)]
@@ -303,8 +339,14 @@ mod tests {
         let now = Instant::now();
         assert!(a.receive(b"hel", now).is_empty());
         assert!(b.receive(b"wor", now).is_empty());
-        assert_eq!(a.receive(b"lo\n", now), vec![Transmit::now(b"hello".to_vec())]);
-        assert_eq!(b.receive(b"ld\n", now), vec![Transmit::now(b"world".to_vec())]);
+        assert_eq!(
+            a.receive(b"lo\n", now),
+            vec![Transmit::now(b"hello".to_vec())]
+        );
+        assert_eq!(
+            b.receive(b"ld\n", now),
+            vec![Transmit::now(b"world".to_vec())]
+        );
         assert_eq!(model.lock().frames, 2);
     }
 }

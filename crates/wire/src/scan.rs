@@ -48,13 +48,17 @@ impl Delimited {
             let len = self.next_start(buf, 0).unwrap_or(buf.len());
             return Scan::Garbage { len };
         }
-        let body_end = buf[1..].iter().position(|&b| b == self.end || b == self.start);
+        let body_end = buf[1..]
+            .iter()
+            .position(|&b| b == self.end || b == self.start);
         match body_end.map(|i| i + 1) {
             Some(i) if buf[i] == self.start => Scan::Unterminated { len: i },
             Some(i) => {
                 let len = i + 1 + self.trailer;
                 if len > self.max_len {
-                    Scan::Unterminated { len: (i + 1).min(buf.len()) }
+                    Scan::Unterminated {
+                        len: (i + 1).min(buf.len()),
+                    }
                 } else if buf.len() < len {
                     Scan::NeedMore
                 } else {
@@ -78,12 +82,25 @@ impl Delimited {
 mod tests {
     use super::*;
 
-    const STX_ETX_BCC: Delimited = Delimited { start: 0x02, end: 0x03, trailer: 1, max_len: 16 };
-    const PERCENT_LF: Delimited = Delimited { start: b'%', end: b'\n', trailer: 0, max_len: 12 };
+    const STX_ETX_BCC: Delimited = Delimited {
+        start: 0x02,
+        end: 0x03,
+        trailer: 1,
+        max_len: 16,
+    };
+    const PERCENT_LF: Delimited = Delimited {
+        start: b'%',
+        end: b'\n',
+        trailer: 0,
+        max_len: 12,
+    };
 
     #[test]
     fn scan_finds_a_frame_with_its_check_byte() {
-        assert_eq!(STX_ETX_BCC.scan(b"\x02RST1\x03\x41rest"), Scan::Frame { len: 7 });
+        assert_eq!(
+            STX_ETX_BCC.scan(b"\x02RST1\x03\x41rest"),
+            Scan::Frame { len: 7 }
+        );
     }
 
     #[test]
@@ -106,12 +123,21 @@ mod tests {
 
     #[test]
     fn scan_drops_a_half_frame_interrupted_by_a_new_start() {
-        assert_eq!(PERCENT_LF.scan(b"%05%051Q99\n"), Scan::Unterminated { len: 3 });
+        assert_eq!(
+            PERCENT_LF.scan(b"%05%051Q99\n"),
+            Scan::Unterminated { len: 3 }
+        );
     }
 
     #[test]
     fn scan_gives_up_on_a_frame_longer_than_the_longest() {
-        assert_eq!(PERCENT_LF.scan(b"%0123456789ab"), Scan::Unterminated { len: 13 });
-        assert_eq!(PERCENT_LF.scan(b"%0123456789abc\n"), Scan::Unterminated { len: 15 });
+        assert_eq!(
+            PERCENT_LF.scan(b"%0123456789ab"),
+            Scan::Unterminated { len: 13 }
+        );
+        assert_eq!(
+            PERCENT_LF.scan(b"%0123456789abc\n"),
+            Scan::Unterminated { len: 15 }
+        );
     }
 }

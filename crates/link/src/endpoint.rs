@@ -1,0 +1,593 @@
+//! Endpoint URLs and serial settings.
+//!
+//! ```text
+//! serial:///dev/ttyUSB0?baud=19200&framing=8E1
+//! serial:///dev/ttyUSB1?baud=9600&rs485=rts&echo=discard
+//! /dev/ttyUSB0                      (a bare device path is a serial endpoint)
+//! tcp://192.0.2.10:4001             (raw bytes over TCP: ser2net, Moxa NPort, our simulators)
+//! tcp://127.0.0.1:5020?baud=9600    (…behind which is a 9600-baud line: timing follows it)
+//! ```
+//!
+//! Settings a URL leaves out come from the protocol's defaults (JBC: 19200 8E1;
+//! Thermosald and CROSS: 9600 8N1).
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Duration;
+
+use url::Url;
+
+/// Lowest and highest baud rate accepted. Every JBC speed (1200–500000) is inside.
+pub const BAUD_RANGE: std::ops::RangeInclusive<u32> = 50..=4_000_000;
+
+/// Where a line is and how to talk on it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Endpoint {
+    /// A serial port on this machine.
+    Serial {
+        /// Device path, e.g. `/dev/ttyUSB0`.
+        path: String,
+        /// Speed and framing.
+        settings: SerialSettings,
+        /// RS-485 direction control and echo handling.
+        rs485: Rs485,
+    },
+    /// Raw bytes over TCP.
+    Tcp {
+        /// Host name or address.
+        host: String,
+        /// TCP port.
+        port: u16,
+        /// The serial line behind the TCP server, when the URL names one (`?baud=…`): the
+        /// clients derive their timing from it.
+        line: Option<SerialSettings>,
+    },
+}
+
+/// What is wrong with an endpoint URL.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EndpointError {
+    /// Not a URL at all.
+    #[error(
+        "endpoint {url:?} is not a URL ({reason}); write serial:///dev/ttyUSB0 or tcp://host:port"
+    )]
+    NotAUrl {
+        /// The text given.
+        url: String,
+        /// What the URL parser said.
+        reason: String,
+    },
+    /// A scheme other than `serial` or `tcp`.
+    #[error("endpoint {url:?} has scheme {scheme:?}; cellbus speaks serial:// and tcp://")]
+    Scheme {
+        /// The text given.
+        url: String,
+        /// The scheme found.
+        scheme: String,
+    },
+    /// A serial URL without a device path.
+    #[error("endpoint {url:?} names no serial device; write serial:///dev/ttyUSB0")]
+    NoPath {
+        /// The text given.
+        url: String,
+    },
+    /// A TCP URL without host or port.
+    #[error("endpoint {url:?} needs a host and a port: tcp://host:port")]
+    NoHostPort {
+        /// The text given.
+        url: String,
+    },
+    /// An option with a bad value.
+    #[error("endpoint {url:?}: option {option}={value:?} is not valid: {expected}")]
+    Option {
+        /// The text given.
+        url: String,
+        /// The option name.
+        option: String,
+        /// The value given.
+        value: String,
+        /// What would be accepted.
+        expected: String,
+    },
+    /// An option this endpoint does not know.
+    #[error("endpoint {url:?}: unknown option {option:?} (known: {known})")]
+    UnknownOption {
+        /// The text given.
+        url: String,
+        /// The option name.
+        option: String,
+        /// The options this kind of endpoint takes.
+        known: &'static str,
+    },
+}
+
+const SERIAL_OPTIONS: &str = "baud, framing, rs485, echo";
+const TCP_OPTIONS: &str = "baud, framing";
+
+impl Endpoint {
+    /// Parses `text`, taking the settings it leaves out from `defaults`.
+    pub fn parse(text: &str, defaults: SerialSettings) -> Result<Self, EndpointError> {
+        let text = text.trim();
+        if text.starts_with('/') {
+            return Self::parse(&format!("serial://{text}"), defaults);
+        }
+        let url = Url::parse(text).map_err(|e| EndpointError::NotAUrl {
+            url: text.to_owned(),
+            reason: e.to_string(),
+        })?;
+        match url.scheme() {
+            "serial" => Self::parse_serial(text, &url, defaults),
+            "tcp" => Self::parse_tcp(text, &url, defaults),
+            other => Err(EndpointError::Scheme {
+                url: text.to_owned(),
+                scheme: other.to_owned(),
+            }),
+        }
+    }
+
+    fn parse_serial(
+        text: &str,
+        url: &Url,
+        defaults: SerialSettings,
+    ) -> Result<Self, EndpointError> {
+        let path = match url.host_str() {
+            // serial://dev/ttyUSB0 (two slashes) reads "dev" as a host: take it as the path.
+            Some(host) if !host.is_empty() => format!("/{host}{}", url.path()),
+            _ => url.path().to_owned(),
+        };
+        if path.is_empty() || path == "/" {
+            return Err(EndpointError::NoPath {
+                url: text.to_owned(),
+            });
+        }
+        let mut settings = defaults;
+        let mut rs485 = Rs485::default();
+        for (key, value) in url.query_pairs() {
+            let bad = |expected: &str| EndpointError::Option {
+                url: text.to_owned(),
+                option: key.to_string(),
+                value: value.to_string(),
+                expected: expected.to_owned(),
+            };
+            match &*key {
+                "baud" => settings.baud = parse_baud(&value).map_err(|e| bad(&e))?,
+                "framing" => settings.set_framing(&value).map_err(|e| bad(&e))?,
+                "rs485" => rs485.direction = Some(value.parse().map_err(|e: String| bad(&e))?),
+                "echo" => rs485.echo = value.parse().map_err(|e: String| bad(&e))?,
+                _ => {
+                    return Err(EndpointError::UnknownOption {
+                        url: text.to_owned(),
+                        option: key.to_string(),
+                        known: SERIAL_OPTIONS,
+                    });
+                }
+            }
+        }
+        Ok(Self::Serial {
+            path,
+            settings,
+            rs485,
+        })
+    }
+
+    fn parse_tcp(text: &str, url: &Url, defaults: SerialSettings) -> Result<Self, EndpointError> {
+        let no_host = || EndpointError::NoHostPort {
+            url: text.to_owned(),
+        };
+        let host = url
+            .host_str()
+            .filter(|h| !h.is_empty())
+            .ok_or_else(no_host)?;
+        let host = host
+            .trim_start_matches('[')
+            .trim_end_matches(']')
+            .to_owned();
+        let port = url.port().ok_or_else(no_host)?;
+        let mut line: Option<SerialSettings> = None;
+        for (key, value) in url.query_pairs() {
+            let bad = |expected: &str| EndpointError::Option {
+                url: text.to_owned(),
+                option: key.to_string(),
+                value: value.to_string(),
+                expected: expected.to_owned(),
+            };
+            let settings = line.get_or_insert(defaults);
+            match &*key {
+                "baud" => settings.baud = parse_baud(&value).map_err(|e| bad(&e))?,
+                "framing" => settings.set_framing(&value).map_err(|e| bad(&e))?,
+                _ => {
+                    return Err(EndpointError::UnknownOption {
+                        url: text.to_owned(),
+                        option: key.to_string(),
+                        known: TCP_OPTIONS,
+                    });
+                }
+            }
+        }
+        Ok(Self::Tcp { host, port, line })
+    }
+
+    /// The serial line's settings, where the endpoint has or names one.
+    pub fn line_settings(&self) -> Option<SerialSettings> {
+        match self {
+            Self::Serial { settings, .. } => Some(*settings),
+            Self::Tcp { line, .. } => *line,
+        }
+    }
+}
+
+impl fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Serial {
+                path,
+                settings,
+                rs485,
+            } => {
+                write!(
+                    f,
+                    "serial://{path}?baud={}&framing={}",
+                    settings.baud,
+                    settings.framing()
+                )?;
+                if let Some(direction) = rs485.direction {
+                    write!(f, "&rs485={direction}")?;
+                }
+                if rs485.echo == Echo::Discard {
+                    write!(f, "&echo=discard")?;
+                }
+                Ok(())
+            }
+            Self::Tcp { host, port, line } => {
+                if host.contains(':') {
+                    write!(f, "tcp://[{host}]:{port}")?;
+                } else {
+                    write!(f, "tcp://{host}:{port}")?;
+                }
+                if let Some(settings) = line {
+                    write!(f, "?baud={}&framing={}", settings.baud, settings.framing())?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+fn parse_baud(value: &str) -> Result<u32, String> {
+    let expected = || {
+        format!(
+            "a speed in bit/s from {} to {}",
+            BAUD_RANGE.start(),
+            BAUD_RANGE.end()
+        )
+    };
+    let baud: u32 = value.parse().map_err(|_| expected())?;
+    if BAUD_RANGE.contains(&baud) {
+        Ok(baud)
+    } else {
+        Err(expected())
+    }
+}
+
+/// Speed and character framing of a serial line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SerialSettings {
+    /// Bits per second.
+    pub baud: u32,
+    /// Data bits per character.
+    pub data_bits: DataBits,
+    /// Parity bit.
+    pub parity: Parity,
+    /// Stop bits.
+    pub stop_bits: StopBits,
+}
+
+/// Data bits per character.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DataBits {
+    /// 5 bits.
+    Five,
+    /// 6 bits.
+    Six,
+    /// 7 bits.
+    Seven,
+    /// 8 bits.
+    Eight,
+}
+
+/// Parity bit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Parity {
+    /// No parity bit (`N`).
+    None,
+    /// Even parity (`E`).
+    Even,
+    /// Odd parity (`O`).
+    Odd,
+}
+
+/// Stop bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopBits {
+    /// One stop bit.
+    One,
+    /// Two stop bits.
+    Two,
+}
+
+impl SerialSettings {
+    /// 8 data bits, no parity, 1 stop bit at `baud` (Thermosald, CROSS).
+    pub const fn new_8n1(baud: u32) -> Self {
+        Self {
+            baud,
+            data_bits: DataBits::Eight,
+            parity: Parity::None,
+            stop_bits: StopBits::One,
+        }
+    }
+
+    /// 8 data bits, even parity, 1 stop bit at `baud` (the JBC manual's example, 19200-8E1).
+    pub const fn new_8e1(baud: u32) -> Self {
+        Self {
+            baud,
+            data_bits: DataBits::Eight,
+            parity: Parity::Even,
+            stop_bits: StopBits::One,
+        }
+    }
+
+    /// Bits on the wire per character: start, data, parity and stop bits.
+    pub fn bits_per_char(&self) -> u32 {
+        let data = match self.data_bits {
+            DataBits::Five => 5,
+            DataBits::Six => 6,
+            DataBits::Seven => 7,
+            DataBits::Eight => 8,
+        };
+        let parity = u32::from(self.parity != Parity::None);
+        let stop = match self.stop_bits {
+            StopBits::One => 1,
+            StopBits::Two => 2,
+        };
+        1 + data + parity + stop
+    }
+
+    /// Time one character takes on the wire.
+    pub fn char_time(&self) -> Duration {
+        Duration::from_nanos(
+            u64::from(self.bits_per_char()) * 1_000_000_000 / u64::from(self.baud.max(1)),
+        )
+    }
+
+    /// Time `chars` characters take on the wire.
+    pub fn time_for(&self, chars: usize) -> Duration {
+        let bits = u64::from(self.bits_per_char()) * chars as u64;
+        Duration::from_nanos(bits.saturating_mul(1_000_000_000) / u64::from(self.baud.max(1)))
+    }
+
+    /// The framing as written in URLs and manuals: `8E1`.
+    pub fn framing(&self) -> String {
+        let data = self.bits_per_char()
+            - 1
+            - u32::from(self.parity != Parity::None)
+            - if self.stop_bits == StopBits::Two {
+                2
+            } else {
+                1
+            };
+        let parity = match self.parity {
+            Parity::None => 'N',
+            Parity::Even => 'E',
+            Parity::Odd => 'O',
+        };
+        let stop = if self.stop_bits == StopBits::Two {
+            2
+        } else {
+            1
+        };
+        format!("{data}{parity}{stop}")
+    }
+
+    /// Sets data bits, parity and stop bits from text like `8E1`.
+    pub fn set_framing(&mut self, text: &str) -> Result<(), String> {
+        let expected = || "data bits 5-8, parity N/E/O, stop bits 1/2, e.g. 8N1 or 8E1".to_owned();
+        let [d, p, s] = text.as_bytes() else {
+            return Err(expected());
+        };
+        self.data_bits = match d {
+            b'5' => DataBits::Five,
+            b'6' => DataBits::Six,
+            b'7' => DataBits::Seven,
+            b'8' => DataBits::Eight,
+            _ => return Err(expected()),
+        };
+        self.parity = match p.to_ascii_uppercase() {
+            b'N' => Parity::None,
+            b'E' => Parity::Even,
+            b'O' => Parity::Odd,
+            _ => return Err(expected()),
+        };
+        self.stop_bits = match s {
+            b'1' => StopBits::One,
+            b'2' => StopBits::Two,
+            _ => return Err(expected()),
+        };
+        Ok(())
+    }
+}
+
+impl fmt::Display for SerialSettings {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} {}", self.baud, self.framing())
+    }
+}
+
+/// RS-485 half-duplex handling on a serial port.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Rs485 {
+    /// Which modem-control line switches the transceiver to transmit (held at 1 while
+    /// sending); `None` when the adapter switches by itself.
+    pub direction: Option<DirectionControl>,
+    /// What to do with the adapter's local echo of what we send.
+    pub echo: Echo,
+}
+
+/// Modem-control lines that switch an RS-485 transceiver's direction (1 = transmit).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DirectionControl {
+    /// `rs485=rts`.
+    Rts,
+    /// `rs485=dtr`.
+    Dtr,
+    /// `rs485=rts+dtr`: both lines.
+    RtsAndDtr,
+}
+
+impl FromStr for DirectionControl {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "rts" => Ok(Self::Rts),
+            "dtr" => Ok(Self::Dtr),
+            "rts+dtr" | "rts,dtr" | "both" => Ok(Self::RtsAndDtr),
+            _ => Err("rts, dtr or rts+dtr (the line held at 1 while transmitting)".to_owned()),
+        }
+    }
+}
+
+impl fmt::Display for DirectionControl {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Rts => "rts",
+            Self::Dtr => "dtr",
+            Self::RtsAndDtr => "rts+dtr",
+        })
+    }
+}
+
+/// Local echo handling: many USB–RS-485 adapters return every byte they send.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Echo {
+    /// The adapter does not echo (`echo=none`, the default).
+    #[default]
+    None,
+    /// Read back and drop our own bytes after each send (`echo=discard`).
+    Discard,
+}
+
+impl FromStr for Echo {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "none" | "off" => Ok(Self::None),
+            "discard" => Ok(Self::Discard),
+            _ => Err("none or discard".to_owned()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const JBC: SerialSettings = SerialSettings::new_8e1(19200);
+
+    #[test]
+    fn serial_url_takes_path_speed_and_framing() {
+        let e = Endpoint::parse("serial:///dev/ttyUSB0?baud=9600&framing=8N2", JBC).unwrap();
+        assert_eq!(
+            e,
+            Endpoint::Serial {
+                path: "/dev/ttyUSB0".into(),
+                settings: SerialSettings {
+                    stop_bits: StopBits::Two,
+                    ..SerialSettings::new_8n1(9600)
+                },
+                rs485: Rs485::default(),
+            }
+        );
+    }
+
+    #[test]
+    fn serial_url_without_options_uses_the_protocol_defaults() {
+        let e = Endpoint::parse("serial:///dev/ttyS0", JBC).unwrap();
+        assert_eq!(e.line_settings(), Some(JBC));
+        assert_eq!(e.to_string(), "serial:///dev/ttyS0?baud=19200&framing=8E1");
+    }
+
+    #[test]
+    fn a_bare_device_path_is_a_serial_endpoint() {
+        let e = Endpoint::parse("/dev/ttyACM3", JBC).unwrap();
+        assert!(matches!(e, Endpoint::Serial { path, .. } if path == "/dev/ttyACM3"));
+    }
+
+    #[test]
+    fn every_jbc_speed_is_accepted() {
+        for baud in [
+            1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 250000, 460800, 500000,
+        ] {
+            let e = Endpoint::parse(&format!("serial:///dev/ttyS0?baud={baud}"), JBC).unwrap();
+            assert_eq!(e.line_settings().unwrap().baud, baud);
+        }
+    }
+
+    #[test]
+    fn rs485_options_are_parsed() {
+        let e = Endpoint::parse("serial:///dev/ttyUSB1?rs485=rts&echo=discard", JBC).unwrap();
+        let Endpoint::Serial { rs485, .. } = e else {
+            panic!("serial expected")
+        };
+        assert_eq!(
+            rs485,
+            Rs485 {
+                direction: Some(DirectionControl::Rts),
+                echo: Echo::Discard
+            }
+        );
+    }
+
+    #[test]
+    fn tcp_url_takes_host_port_and_optional_line_speed() {
+        let e = Endpoint::parse("tcp://127.0.0.1:4001", JBC).unwrap();
+        assert_eq!(
+            e,
+            Endpoint::Tcp {
+                host: "127.0.0.1".into(),
+                port: 4001,
+                line: None
+            }
+        );
+        let e = Endpoint::parse("tcp://[::1]:4001?baud=9600&framing=8N1", JBC).unwrap();
+        assert_eq!(e.line_settings(), Some(SerialSettings::new_8n1(9600)));
+        assert_eq!(e.to_string(), "tcp://[::1]:4001?baud=9600&framing=8N1");
+    }
+
+    #[test]
+    fn bad_urls_are_refused_naming_the_bad_part() {
+        let err = |t| Endpoint::parse(t, JBC).unwrap_err().to_string();
+        assert!(err("serial:///dev/ttyS0?baud=fast").contains("baud=\"fast\""));
+        assert!(err("serial:///dev/ttyS0?baud=0").contains("from 50 to 4000000"));
+        assert!(err("serial:///dev/ttyS0?framing=9X1").contains("parity N/E/O"));
+        assert!(err("serial:///dev/ttyS0?parity=E").contains("unknown option \"parity\""));
+        assert!(err("serial:///dev/ttyS0?rs485=cts").contains("rts, dtr"));
+        assert!(err("http://example.invalid/").contains("scheme \"http\""));
+        assert!(err("tcp://127.0.0.1").contains("needs a host and a port"));
+        assert!(err("serial://").contains("names no serial device"));
+        assert!(err("ttyUSB0").contains("not a URL"));
+    }
+
+    #[test]
+    fn character_time_counts_start_parity_and_stop_bits() {
+        assert_eq!(SerialSettings::new_8n1(9600).bits_per_char(), 10);
+        assert_eq!(SerialSettings::new_8e1(19200).bits_per_char(), 11);
+        assert_eq!(
+            SerialSettings::new_8n1(9600).time_for(960),
+            Duration::from_secs(1)
+        );
+        assert_eq!(
+            SerialSettings::new_8n1(10_000).char_time(),
+            Duration::from_millis(1)
+        );
+    }
+}
