@@ -1,3 +1,17 @@
-//! The jbus protocol (work in progress).
+//! JBUS (Modbus RTU) without I/O, and the Chloride CROSS static transfer switch.
+//!
+//! - [`rtu`]: the generic Modbus RTU layer every Modbus device on the plant's lines
+//!   speaks: frames both directions, typed requests and responses, the check that a
+//!   response answers a request, line timing.
+//! - [`cross`]: the CROSS's register map as named, scaled values ([`cross::CrossState`]),
+//!   the fewest reads that fetch it ([`cross::read_plan`]), and a twin of the switch
+//!   ([`cross::device::CrossTwin`]) with its transfers and its exact refusals.
+//! - [`slave`]: a generic Modbus server model (coils, discrete inputs, holding and input
+//!   registers from a small map file, or everything writable), to test the generic layer.
+//!
+//! Nothing here reads a clock or touches a port: time comes in as `now`, bytes through
+//! `wire::Codec`s and `wire::device::Model`s, which the `link` crate serves.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
+
+pub mod rtu;

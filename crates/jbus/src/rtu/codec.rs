@@ -1,0 +1,873 @@
+//! The RTU frame layer: `unit function data… CRC`, CRC-16/MODBUS low byte first.
+//!
+//! RTU frames carry no length: a frame's length follows from its function code and, for
+//! variable frames, its byte count, so the decoders know when a frame is complete without
+//! timing. A frame whose CRC does not match loses its first byte and the scan goes on from
+//! the next one, which finds the next frame after any damage.
+//!
+//! Two codecs, one per direction, because the same function code frames differently:
+//! [`RequestCodec`] decodes what a server receives, [`ResponseCodec`] what a client
+//! receives. Both encode too.
+//!
+//! A request with a function outside the eight framed here (JBUS 7, 8, 11–14, 17, 20–24,
+//! 43, …) must still be answered with exception 1 when its CRC is good. Functions the
+//! Modbus standard gives a fixed or byte-counted request layout are framed by it; for
+//! others the request decoder takes the shortest run of 4 to 8 bytes that ends in a valid
+//! CRC ([`OTHER_FUNCTION_SCAN`]), which finds the usual short frames (the JBUS manual's
+//! own example is `01 09 00 00 00 00 CRC`) and gives up after 8 bytes.
+
+use wire::checksum::CRC16_MODBUS;
+use wire::{Codec, Resync};
+
+use super::request::{ByteField, OtherFunction, RequestAdu, RequestPdu};
+use super::response::{PackedBits, RegisterValues, Response, ResponseAdu};
+use super::value::{EXCEPTION_BIT, Exception, ExceptionCode, FunctionCode};
+
+/// The longest RTU frame the Modbus standard allows (a server's answer to 125 registers
+/// is 255 bytes). The decoders accept frames up to the length a byte count can express.
+pub const MAX_ADU: usize = 256;
+
+/// The shortest frame: unit, function and the two CRC bytes.
+pub const MIN_ADU: usize = 4;
+
+/// Length of a CRC.
+pub const CRC_LEN: usize = 2;
+
+/// The longest request of an unknown layout the request decoder looks for by its CRC.
+pub const OTHER_FUNCTION_SCAN: usize = 8;
+
+/// Why the front of the buffer is not a frame.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DecodeError {
+    /// The CRC received is not the CRC of the bytes: a damaged frame, or not a frame.
+    #[error(
+        "CRC mismatch in a {len}-byte frame for unit {unit}, function {function}: the bytes give 0x{expected:04X}, the frame carries 0x{actual:04X}"
+    )]
+    Crc {
+        /// The unit byte.
+        unit: u8,
+        /// The function byte.
+        function: u8,
+        /// The frame length the function code implies.
+        len: usize,
+        /// The CRC of the frame's bytes.
+        expected: u16,
+        /// The CRC the frame carries.
+        actual: u16,
+    },
+    /// The function byte is not one whose frame length this side knows.
+    #[error(
+        "no frame starts here: function byte {function} (0x{function:02X}) after unit {unit} is not one this side can frame"
+    )]
+    UnknownFunction {
+        /// The unit byte.
+        unit: u8,
+        /// The function byte.
+        function: u8,
+    },
+    /// The CRC is good but the content is not valid Modbus.
+    #[error("{len}-byte frame for unit {unit}, function {function} has a good CRC but {problem}")]
+    Malformed {
+        /// The unit byte.
+        unit: u8,
+        /// The function byte.
+        function: u8,
+        /// The frame's length (dropped whole: its CRC shows where it ends).
+        len: usize,
+        /// What is wrong.
+        problem: Malformed,
+    },
+}
+
+/// What is wrong in a frame with a good CRC.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Malformed {
+    /// A read response's byte count is not one a read can produce.
+    #[error("its byte count {byte_count} is not valid for {what} (allowed: {allowed})")]
+    ByteCount {
+        /// The byte count received.
+        byte_count: u8,
+        /// What the bytes hold.
+        what: &'static str,
+        /// The valid byte counts.
+        allowed: &'static str,
+    },
+    /// A write-coil echo with a value other than on (0xFF00) or off (0x0000).
+    #[error("its coil value 0x{value:04X} is neither on (0xFF00) nor off (0x0000)")]
+    CoilValue {
+        /// The value received.
+        value: u16,
+    },
+    /// An exception response with code 0, which does not exist.
+    #[error("its exception code is 0, which does not exist")]
+    ExceptionCodeZero,
+    /// The data is longer than any request of this function can be.
+    #[error("it holds {len} data bytes, more than {max}")]
+    TooLong {
+        /// Data bytes received.
+        len: usize,
+        /// The most allowed.
+        max: usize,
+    },
+}
+
+impl Resync for DecodeError {
+    fn drop_len(&self) -> usize {
+        match self {
+            Self::Crc { .. } | Self::UnknownFunction { .. } => 1,
+            Self::Malformed { len, .. } => (*len).max(1),
+        }
+    }
+}
+
+/// Decodes requests (what a server receives) and encodes them (what a client sends).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RequestCodec;
+
+/// Decodes responses (what a client receives) and encodes them (what a server sends).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ResponseCodec;
+
+impl Codec for RequestCodec {
+    type Frame = RequestAdu;
+    type Error = DecodeError;
+
+    fn decode(&self, buf: &[u8]) -> Result<Option<(RequestAdu, usize)>, DecodeError> {
+        decode_request(buf)
+    }
+
+    fn encode(&self, frame: &RequestAdu, out: &mut Vec<u8>) {
+        encode_request(frame, out);
+    }
+}
+
+impl Codec for ResponseCodec {
+    type Frame = ResponseAdu;
+    type Error = DecodeError;
+
+    fn decode(&self, buf: &[u8]) -> Result<Option<(ResponseAdu, usize)>, DecodeError> {
+        decode_response(buf)
+    }
+
+    fn encode(&self, frame: &ResponseAdu, out: &mut Vec<u8>) {
+        encode_response(frame, out);
+    }
+}
+
+impl RequestAdu {
+    /// The frame's bytes, CRC included.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(MIN_ADU + 8);
+        encode_request(self, &mut out);
+        out
+    }
+}
+
+impl ResponseAdu {
+    /// The frame's bytes, CRC included.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(MIN_ADU + 8);
+        encode_response(self, &mut out);
+        out
+    }
+}
+
+/// Decodes one request from the front of `buf` (see [`RequestCodec`]).
+pub fn decode_request(buf: &[u8]) -> Result<Option<(RequestAdu, usize)>, DecodeError> {
+    let &[unit, function, ..] = buf else {
+        return Ok(None);
+    };
+    let byte_at = |at: usize| buf.get(at).map(|&n| usize::from(n));
+    let len = match function {
+        1..=6 => 8,
+        15 | 16 => match byte_at(6) {
+            Some(n) => 9 + n,
+            None => return Ok(None),
+        },
+        // The Modbus standard's layouts of functions this crate does not serve.
+        7 | 11 | 12 | 17 => 4,
+        8 => 8,
+        20 | 21 => match byte_at(2) {
+            Some(n) => 5 + n,
+            None => return Ok(None),
+        },
+        22 => 10,
+        23 => match byte_at(10) {
+            Some(n) => 13 + n,
+            None => return Ok(None),
+        },
+        24 => 6,
+        _ => return scan_other_function(buf, unit, function),
+    };
+    let Some(frame) = buf.get(..len) else {
+        return Ok(None);
+    };
+    let body = check_crc(frame)?;
+    let pdu = parse_request(body).ok_or_else(|| malformed_too_long(body, len))?;
+    Ok(Some((RequestAdu { unit, pdu }, len)))
+}
+
+/// Decodes one response from the front of `buf` (see [`ResponseCodec`]).
+pub fn decode_response(buf: &[u8]) -> Result<Option<(ResponseAdu, usize)>, DecodeError> {
+    let &[unit, function, ..] = buf else {
+        return Ok(None);
+    };
+    let len = match function {
+        f if f & EXCEPTION_BIT != 0 => 5,
+        1..=4 => match buf.get(2) {
+            Some(&n) => 5 + usize::from(n),
+            None => return Ok(None),
+        },
+        5 | 6 | 15 | 16 => 8,
+        _ => return Err(DecodeError::UnknownFunction { unit, function }),
+    };
+    let Some(frame) = buf.get(..len) else {
+        return Ok(None);
+    };
+    let body = check_crc(frame)?;
+    let malformed = |problem| DecodeError::Malformed {
+        unit,
+        function,
+        len,
+        problem,
+    };
+    let response = parse_response(body).map_err(malformed)?;
+    Ok(Some((ResponseAdu { unit, response }, len)))
+}
+
+/// Appends a request frame to `out`.
+pub fn encode_request(frame: &RequestAdu, out: &mut Vec<u8>) {
+    let start = out.len();
+    out.push(frame.unit);
+    out.push(frame.pdu.function_byte());
+    match &frame.pdu {
+        RequestPdu::ReadCoils { address, count }
+        | RequestPdu::ReadDiscreteInputs { address, count }
+        | RequestPdu::ReadHoldingRegisters { address, count }
+        | RequestPdu::ReadInputRegisters { address, count } => {
+            out.extend_from_slice(&address.to_be_bytes());
+            out.extend_from_slice(&count.to_be_bytes());
+        }
+        RequestPdu::WriteSingleCoil { address, value }
+        | RequestPdu::WriteSingleRegister { address, value } => {
+            out.extend_from_slice(&address.to_be_bytes());
+            out.extend_from_slice(&value.to_be_bytes());
+        }
+        RequestPdu::WriteMultipleCoils {
+            address,
+            count,
+            data,
+        }
+        | RequestPdu::WriteMultipleRegisters {
+            address,
+            count,
+            data,
+        } => {
+            out.extend_from_slice(&address.to_be_bytes());
+            out.extend_from_slice(&count.to_be_bytes());
+            out.push(data.byte_count());
+            out.extend_from_slice(data.as_bytes());
+        }
+        RequestPdu::Other(other) => out.extend_from_slice(other.data()),
+    }
+    append_crc(out, start);
+}
+
+/// Appends a response frame to `out`.
+pub fn encode_response(frame: &ResponseAdu, out: &mut Vec<u8>) {
+    let start = out.len();
+    out.push(frame.unit);
+    match &frame.response {
+        Response::Exception(e) => {
+            out.push(e.function.get() | EXCEPTION_BIT);
+            out.push(e.code.get());
+        }
+        response => {
+            out.push(response.function().get());
+            match response {
+                Response::ReadCoils(bits) | Response::ReadDiscreteInputs(bits) => {
+                    out.push(bits.byte_count());
+                    out.extend_from_slice(bits.as_bytes());
+                }
+                Response::ReadHoldingRegisters(r) | Response::ReadInputRegisters(r) => {
+                    out.push(r.byte_count());
+                    out.extend(r.values().iter().flat_map(|v| v.to_be_bytes()));
+                }
+                Response::WriteSingleCoil(w) => {
+                    out.extend_from_slice(&w.address.to_be_bytes());
+                    let value = if w.value {
+                        super::COIL_ON
+                    } else {
+                        super::COIL_OFF
+                    };
+                    out.extend_from_slice(&value.to_be_bytes());
+                }
+                Response::WriteSingleRegister(w) => {
+                    out.extend_from_slice(&w.address.to_be_bytes());
+                    out.extend_from_slice(&w.value.to_be_bytes());
+                }
+                Response::WriteMultipleCoils { address, count }
+                | Response::WriteMultipleRegisters { address, count } => {
+                    out.extend_from_slice(&address.to_be_bytes());
+                    out.extend_from_slice(&count.to_be_bytes());
+                }
+                Response::Exception(_) => {}
+            }
+        }
+    }
+    append_crc(out, start);
+}
+
+/// Appends the CRC of `out[start..]`, low byte first.
+pub fn append_crc(out: &mut Vec<u8>, start: usize) {
+    let crc = CRC16_MODBUS.checksum(out.get(start..).unwrap_or_default());
+    out.extend_from_slice(&crc.to_le_bytes());
+}
+
+/// Whether `frame` (CRC included) ends in the CRC of the bytes before it.
+pub fn crc_is_good(frame: &[u8]) -> bool {
+    check_crc(frame).is_ok()
+}
+
+/// The frame without its CRC if the CRC is good.
+fn check_crc(frame: &[u8]) -> Result<&[u8], DecodeError> {
+    let (unit, function) = (
+        frame.first().copied().unwrap_or(0),
+        frame.get(1).copied().unwrap_or(0),
+    );
+    let Some(split) = frame.len().checked_sub(CRC_LEN) else {
+        return Err(DecodeError::Crc {
+            unit,
+            function,
+            len: frame.len(),
+            expected: 0,
+            actual: 0,
+        });
+    };
+    let (body, crc) = frame.split_at(split);
+    let expected = CRC16_MODBUS.checksum(body);
+    let actual = match *crc {
+        [lo, hi] => u16::from_le_bytes([lo, hi]),
+        _ => 0,
+    };
+    if expected == actual {
+        Ok(body)
+    } else {
+        Err(DecodeError::Crc {
+            unit,
+            function,
+            len: frame.len(),
+            expected,
+            actual,
+        })
+    }
+}
+
+/// A request of a function with no known layout: the shortest 4–8 byte run with a good CRC.
+fn scan_other_function(
+    buf: &[u8],
+    unit: u8,
+    function: u8,
+) -> Result<Option<(RequestAdu, usize)>, DecodeError> {
+    let longest = buf.len().min(OTHER_FUNCTION_SCAN);
+    for len in MIN_ADU..=longest {
+        if let Some(frame) = buf.get(..len)
+            && let Ok(body) = check_crc(frame)
+        {
+            let data = body.get(2..).unwrap_or_default().to_vec();
+            let other =
+                OtherFunction::new(function, data).map_err(|_| malformed_too_long(body, len))?;
+            return Ok(Some((
+                RequestAdu {
+                    unit,
+                    pdu: RequestPdu::Other(other),
+                },
+                len,
+            )));
+        }
+    }
+    if buf.len() < OTHER_FUNCTION_SCAN {
+        Ok(None)
+    } else {
+        Err(DecodeError::UnknownFunction { unit, function })
+    }
+}
+
+fn malformed_too_long(body: &[u8], len: usize) -> DecodeError {
+    DecodeError::Malformed {
+        unit: body.first().copied().unwrap_or(0),
+        function: body.get(1).copied().unwrap_or(0),
+        len,
+        problem: Malformed::TooLong {
+            len: body.len().saturating_sub(2),
+            max: OtherFunction::MAX_DATA,
+        },
+    }
+}
+
+/// Reads big-endian fields from a frame body whose length the function code fixed.
+struct Fields<'a>(&'a [u8]);
+
+impl<'a> Fields<'a> {
+    fn u8(&mut self) -> Option<u8> {
+        let (&first, rest) = self.0.split_first()?;
+        self.0 = rest;
+        Some(first)
+    }
+
+    fn u16(&mut self) -> Option<u16> {
+        Some(u16::from_be_bytes([self.u8()?, self.u8()?]))
+    }
+
+    fn rest(self) -> &'a [u8] {
+        self.0
+    }
+}
+
+/// Parses a request body (unit, function, data) whose length and CRC were checked.
+/// `None` only if the data is longer than any request of another function can be.
+fn parse_request(body: &[u8]) -> Option<RequestPdu> {
+    let mut f = Fields(body);
+    let (_unit, function) = (f.u8()?, f.u8()?);
+    Some(match function {
+        1 => RequestPdu::ReadCoils {
+            address: f.u16()?,
+            count: f.u16()?,
+        },
+        2 => RequestPdu::ReadDiscreteInputs {
+            address: f.u16()?,
+            count: f.u16()?,
+        },
+        3 => RequestPdu::ReadHoldingRegisters {
+            address: f.u16()?,
+            count: f.u16()?,
+        },
+        4 => RequestPdu::ReadInputRegisters {
+            address: f.u16()?,
+            count: f.u16()?,
+        },
+        5 => RequestPdu::WriteSingleCoil {
+            address: f.u16()?,
+            value: f.u16()?,
+        },
+        6 => RequestPdu::WriteSingleRegister {
+            address: f.u16()?,
+            value: f.u16()?,
+        },
+        15 | 16 => {
+            let (address, count, _byte_count) = (f.u16()?, f.u16()?, f.u8()?);
+            let data = ByteField::new(f.rest().to_vec()).ok()?;
+            if function == 15 {
+                RequestPdu::WriteMultipleCoils {
+                    address,
+                    count,
+                    data,
+                }
+            } else {
+                RequestPdu::WriteMultipleRegisters {
+                    address,
+                    count,
+                    data,
+                }
+            }
+        }
+        _ => RequestPdu::Other(OtherFunction::new(function, f.rest().to_vec()).ok()?),
+    })
+}
+
+/// Parses a response body (unit, function, data) whose length and CRC were checked.
+fn parse_response(body: &[u8]) -> Result<Response, Malformed> {
+    // The length checks made these fields present; a short body reads as zeros, which the
+    // checks below refuse or which cannot occur.
+    let mut f = Fields(body);
+    let (_unit, function) = (f.u8().unwrap_or(0), f.u8().unwrap_or(0));
+    if function & EXCEPTION_BIT != 0 {
+        let code =
+            ExceptionCode::new(f.u8().unwrap_or(0)).map_err(|_| Malformed::ExceptionCodeZero)?;
+        return Ok(Response::Exception(Exception {
+            function: FunctionCode::of_exception(function),
+            code,
+        }));
+    }
+    let mut word = || f.u16().unwrap_or(0);
+    match function {
+        1 | 2 => {
+            let byte_count = body.get(2).copied().unwrap_or(0);
+            let data = body.get(3..).unwrap_or_default().to_vec();
+            let bits = PackedBits::from_bytes(data).map_err(|_| Malformed::ByteCount {
+                byte_count,
+                what: "coils or discrete inputs",
+                allowed: "1 to 250",
+            })?;
+            Ok(if function == 1 {
+                Response::ReadCoils(bits)
+            } else {
+                Response::ReadDiscreteInputs(bits)
+            })
+        }
+        3 | 4 => {
+            let byte_count = body.get(2).copied().unwrap_or(0);
+            let data = body.get(3..).unwrap_or_default();
+            let bad = Malformed::ByteCount {
+                byte_count,
+                what: "registers",
+                allowed: "an even number from 2 to 250",
+            };
+            if data.len() % 2 != 0 {
+                return Err(bad);
+            }
+            let values = data
+                .chunks_exact(2)
+                .map(|b| u16::from_be_bytes([b[0], b[1]]))
+                .collect();
+            let registers = RegisterValues::new(values).map_err(|_| bad)?;
+            Ok(if function == 3 {
+                Response::ReadHoldingRegisters(registers)
+            } else {
+                Response::ReadInputRegisters(registers)
+            })
+        }
+        5 => {
+            let address = word();
+            let value = match word() {
+                super::COIL_ON => true,
+                super::COIL_OFF => false,
+                value => return Err(Malformed::CoilValue { value }),
+            };
+            Ok(Response::WriteSingleCoil(super::WriteCoil {
+                address,
+                value,
+            }))
+        }
+        6 => Ok(Response::WriteSingleRegister(super::WriteRegister {
+            address: word(),
+            value: word(),
+        })),
+        15 => Ok(Response::WriteMultipleCoils {
+            address: word(),
+            count: word(),
+        }),
+        _ => Ok(Response::WriteMultipleRegisters {
+            address: word(),
+            count: word(),
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rtu::{Request, Unit};
+    use wire::Deframer;
+
+    fn hex(text: &str) -> Vec<u8> {
+        text.split_whitespace()
+            .map(|b| u8::from_str_radix(b, 16).expect("test hex"))
+            .collect()
+    }
+
+    fn one_request(bytes: &[u8]) -> RequestAdu {
+        match decode_request(bytes) {
+            Ok(Some((adu, len))) if len == bytes.len() => adu,
+            other => panic!("expected one whole request in {bytes:02X?}, got {other:?}"),
+        }
+    }
+
+    fn one_response(bytes: &[u8]) -> ResponseAdu {
+        match decode_response(bytes) {
+            Ok(Some((adu, len))) if len == bytes.len() => adu,
+            other => panic!("expected one whole response in {bytes:02X?}, got {other:?}"),
+        }
+    }
+
+    // --- The CROSS manual's byte examples (chloride-cross-jbus.txt) ---
+
+    #[test]
+    fn cross_crc_example_frame_0207_gives_crc_4112_sent_41_12() {
+        let mut frame = vec![0x02, 0x07];
+        append_crc(&mut frame, 0);
+        assert_eq!(frame, hex("02 07 41 12"));
+        assert!(crc_is_good(&frame));
+    }
+
+    #[test]
+    fn standard_crc_check_value_of_123456789_is_4b37() {
+        assert_eq!(wire::checksum::crc16_modbus(b"123456789"), 0x4B37);
+        let mut frame = b"123456789".to_vec();
+        append_crc(&mut frame, 0);
+        assert_eq!(frame[9..], [0x37, 0x4B]);
+    }
+
+    #[test]
+    fn cross_example_read_words_0805_to_080a_of_slave_2() {
+        // "Reading of words from 805 to 80A of slave n° 2. Request: 2 3 0805 6 CRC 16".
+        let request = Addressed::new(
+            Unit::new(2).expect("unit 2"),
+            Request::read_holding_registers(0x0805, 6).expect("6 words"),
+        );
+        let bytes = request.to_adu().to_bytes();
+        assert_eq!(bytes[..6], hex("02 03 08 05 00 06"));
+        assert!(crc_is_good(&bytes));
+        assert_eq!(one_request(&bytes), request.to_adu());
+        // "Response: 2 3 0C XXX ..... YYY CRC 16": 12 bytes, six words.
+        let values = vec![0x0805, 0x0806, 0x0807, 0x0808, 0x0809, 0x080A];
+        let response = ResponseAdu {
+            unit: 2,
+            response: Response::ReadHoldingRegisters(
+                RegisterValues::new(values.clone()).expect("6 values"),
+            ),
+        };
+        let bytes = response.to_bytes();
+        assert_eq!(bytes[..3], hex("02 03 0C"));
+        assert_eq!(bytes.len(), 3 + 12 + 2);
+        assert_eq!(one_response(&bytes), response);
+    }
+
+    #[test]
+    fn cross_example_function_9_request_decodes_as_another_function() {
+        // "Request: 1 9 0 0 0 0 CRC 16": a function the slave does not have.
+        let mut bytes = hex("01 09 00 00 00 00");
+        append_crc(&mut bytes, 0);
+        let adu = one_request(&bytes);
+        assert_eq!(adu.unit, 1);
+        assert_eq!(adu.pdu.function_byte(), 9);
+        assert_eq!(
+            adu.pdu,
+            RequestPdu::Other(OtherFunction::new(9, vec![0; 4]).expect("9 is not framed"))
+        );
+        assert_eq!(adu.to_bytes(), bytes);
+    }
+
+    #[test]
+    fn cross_example_exception_response_89_01() {
+        // "Response: 1 89H 1 CRC 16": function 9 refused with exception 1.
+        let mut bytes = hex("01 89 01");
+        append_crc(&mut bytes, 0);
+        let adu = one_response(&bytes);
+        assert_eq!(
+            adu,
+            ResponseAdu {
+                unit: 1,
+                response: Response::exception(
+                    FunctionCode::new(9).expect("9"),
+                    ExceptionCode::ILLEGAL_FUNCTION
+                )
+            }
+        );
+        assert_eq!(adu.to_bytes(), bytes);
+    }
+
+    // --- Standard Modbus vectors with their CRCs (Modbus over serial line guide) ---
+
+    #[test]
+    fn read_holding_registers_request_01_03_0000_000a_has_crc_c5_cd() {
+        let bytes = hex("01 03 00 00 00 0A C5 CD");
+        assert_eq!(
+            one_request(&bytes),
+            RequestAdu {
+                unit: 1,
+                pdu: RequestPdu::ReadHoldingRegisters {
+                    address: 0,
+                    count: 10
+                }
+            }
+        );
+    }
+
+    #[test]
+    fn read_coils_request_11_01_0013_0025_has_crc_0e_84() {
+        let bytes = hex("11 01 00 13 00 25 0E 84");
+        assert_eq!(
+            one_request(&bytes),
+            RequestAdu {
+                unit: 17,
+                pdu: RequestPdu::ReadCoils {
+                    address: 0x13,
+                    count: 0x25
+                }
+            }
+        );
+    }
+
+    #[test]
+    fn write_single_coil_request_and_echo_round_trip() {
+        let bytes = hex("11 05 00 AC FF 00 4E 8B");
+        assert_eq!(
+            one_request(&bytes),
+            RequestAdu {
+                unit: 17,
+                pdu: RequestPdu::WriteSingleCoil {
+                    address: 0xAC,
+                    value: 0xFF00
+                }
+            }
+        );
+        let echo = one_response(&bytes);
+        assert_eq!(
+            echo.response,
+            Response::WriteSingleCoil(crate::rtu::WriteCoil {
+                address: 0xAC,
+                value: true
+            })
+        );
+    }
+
+    // --- Framing behaviour ---
+
+    #[test]
+    fn decoders_wait_for_every_byte_of_a_frame() {
+        let request = hex("11 01 00 13 00 25 0E 84");
+        for cut in 0..request.len() {
+            assert_eq!(decode_request(&request[..cut]), Ok(None), "cut at {cut}");
+        }
+        let response = ResponseAdu {
+            unit: 3,
+            response: Response::ReadInputRegisters(RegisterValues::new(vec![1, 2, 3]).expect("3")),
+        }
+        .to_bytes();
+        for cut in 0..response.len() {
+            assert_eq!(decode_response(&response[..cut]), Ok(None), "cut at {cut}");
+        }
+    }
+
+    #[test]
+    fn decode_rejects_frame_with_wrong_crc_and_drops_one_byte() {
+        let bytes = hex("01 03 00 00 00 0A C5 CE");
+        let err = decode_request(&bytes).expect_err("bad CRC");
+        assert_eq!(
+            err,
+            DecodeError::Crc {
+                unit: 1,
+                function: 3,
+                len: 8,
+                expected: 0xCDC5,
+                actual: 0xCEC5
+            }
+        );
+        assert_eq!(err.drop_len(), 1);
+    }
+
+    #[test]
+    fn response_decoder_drops_one_byte_of_an_unknown_function() {
+        let err = decode_response(&hex("01 07 00")).expect_err("unknown");
+        assert_eq!(
+            err,
+            DecodeError::UnknownFunction {
+                unit: 1,
+                function: 7
+            }
+        );
+        assert_eq!(err.drop_len(), 1);
+    }
+
+    #[test]
+    fn request_decoder_gives_up_on_an_unknown_function_after_8_bytes_without_a_good_crc() {
+        let bytes = hex("01 09 00 00 00 00 00 00");
+        assert_eq!(decode_request(&bytes[..7]), Ok(None));
+        assert_eq!(
+            decode_request(&bytes),
+            Err(DecodeError::UnknownFunction {
+                unit: 1,
+                function: 9
+            })
+        );
+    }
+
+    #[test]
+    fn request_decoder_frames_the_standard_layout_of_unserved_functions() {
+        // Function 22, mask write register: 10 bytes.
+        let mut bytes = hex("01 16 00 04 00 F2 00 25");
+        append_crc(&mut bytes, 0);
+        let adu = one_request(&bytes);
+        assert_eq!(adu.pdu.to_request(), Err(ExceptionCode::ILLEGAL_FUNCTION));
+        // Function 23 with 4 bytes to write: 13 + 4 bytes.
+        let mut bytes = hex("01 17 00 03 00 06 00 0E 00 02 04 00 FF 00 FF");
+        append_crc(&mut bytes, 0);
+        assert_eq!(one_request(&bytes).pdu.function_byte(), 23);
+    }
+
+    #[test]
+    fn response_with_a_good_crc_but_odd_register_byte_count_is_dropped_whole() {
+        let mut bytes = hex("01 03 03 00 01 02");
+        append_crc(&mut bytes, 0);
+        let err = decode_response(&bytes).expect_err("odd byte count");
+        assert!(matches!(
+            err,
+            DecodeError::Malformed {
+                len: 8,
+                problem: Malformed::ByteCount { byte_count: 3, .. },
+                ..
+            }
+        ));
+        assert_eq!(err.drop_len(), 8);
+    }
+
+    #[test]
+    fn response_with_zero_bytes_of_registers_is_malformed() {
+        let mut bytes = hex("01 04 00");
+        append_crc(&mut bytes, 0);
+        assert!(matches!(
+            decode_response(&bytes),
+            Err(DecodeError::Malformed { .. })
+        ));
+    }
+
+    #[test]
+    fn exception_response_with_code_0_is_malformed() {
+        let mut bytes = hex("01 83 00");
+        append_crc(&mut bytes, 0);
+        assert!(matches!(
+            decode_response(&bytes),
+            Err(DecodeError::Malformed {
+                problem: Malformed::ExceptionCodeZero,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn write_coil_echo_with_a_bad_value_is_malformed() {
+        let mut bytes = hex("01 05 00 01 12 34");
+        append_crc(&mut bytes, 0);
+        assert!(matches!(
+            decode_response(&bytes),
+            Err(DecodeError::Malformed {
+                problem: Malformed::CoilValue { value: 0x1234 },
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn server_decoder_keeps_counts_a_client_could_not_send() {
+        let mut bytes = hex("01 03 00 00 00 00");
+        append_crc(&mut bytes, 0);
+        let adu = one_request(&bytes);
+        assert_eq!(
+            adu.pdu,
+            RequestPdu::ReadHoldingRegisters {
+                address: 0,
+                count: 0
+            }
+        );
+        assert_eq!(adu.pdu.to_request(), Err(ExceptionCode::ILLEGAL_DATA_VALUE));
+    }
+
+    #[test]
+    fn deframer_finds_frames_after_garbage_and_a_damaged_frame() {
+        let good = hex("01 03 00 00 00 0A C5 CD");
+        let mut stream = hex("FF 00 13");
+        stream.extend_from_slice(&hex("01 03 00 00 00 0A C5 CE"));
+        stream.extend_from_slice(&good);
+        let mut deframer = Deframer::new(RequestCodec);
+        deframer.push(&stream);
+        let frames: Vec<_> = std::iter::from_fn(|| deframer.next_frame())
+            .filter_map(Result::ok)
+            .collect();
+        assert_eq!(frames, vec![one_request(&good)]);
+    }
+
+    use crate::rtu::Addressed;
+}
