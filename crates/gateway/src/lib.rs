@@ -1,0 +1,7 @@
+//! The cellbus gateway (work in progress).
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod point;
+pub mod store;
+pub mod time;

@@ -1,0 +1,548 @@
+//! Devices, points and values: the vocabulary every protocol driver maps its device onto.
+//!
+//! A device (`jbc1`) has points (`jbc1.air_temperature`). A point's [`PointSpec`] says
+//! what it is (name, unit, kind), which poll group reads it, whether and in which range it
+//! may be written, and which values are an alarm. Writes are checked against the spec
+//! ([`PointSpec::check_write`]) before anything reaches a line.
+
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+/// Longest device id or point name accepted.
+pub const MAX_ID_LEN: usize = 64;
+
+/// A device's id: 1–64 characters of `a-z`, `0-9`, `_` and `-`, starting with a letter or
+/// digit. It appears in URLs, point ids and metric labels, so it is kept plain.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(transparent)]
+pub struct DeviceId(String);
+
+/// A point's id: `<device>.<point>`, e.g. `jbc1.air_temperature`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(transparent)]
+pub struct PointId(String);
+
+/// An id that does not follow the rules.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{what} {text:?} is not valid: {rule}")]
+pub struct IdError {
+    /// What kind of id.
+    pub what: &'static str,
+    /// The text given.
+    pub text: String,
+    /// The rule it breaks.
+    pub rule: &'static str,
+}
+
+const ID_RULE: &str =
+    "use 1 to 64 characters a-z, 0-9, _ and -, starting with a letter or digit (e.g. jbc1)";
+
+fn check_name(what: &'static str, text: &str) -> Result<(), IdError> {
+    let ok = !text.is_empty()
+        && text.len() <= MAX_ID_LEN
+        && text
+            .bytes()
+            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_' || b == b'-')
+        && text
+            .bytes()
+            .next()
+            .is_some_and(|b| b.is_ascii_lowercase() || b.is_ascii_digit());
+    if ok {
+        Ok(())
+    } else {
+        Err(IdError {
+            what,
+            text: text.to_owned(),
+            rule: ID_RULE,
+        })
+    }
+}
+
+impl DeviceId {
+    /// A device id, checked.
+    pub fn new(text: &str) -> Result<Self, IdError> {
+        check_name("device id", text)?;
+        Ok(Self(text.to_owned()))
+    }
+
+    /// The id as text.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Display for DeviceId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl PointId {
+    /// The id of point `name` of `device`; `name` follows the device id rules.
+    pub fn new(device: &DeviceId, name: &str) -> Result<Self, IdError> {
+        check_name("point name", name)?;
+        Ok(Self(format!("{device}.{name}")))
+    }
+
+    /// Parses `device.point`.
+    pub fn parse(text: &str) -> Result<Self, IdError> {
+        let bad = || IdError {
+            what: "point id",
+            text: text.to_owned(),
+            rule: "write <device>.<point>, e.g. jbc1.air_temperature",
+        };
+        let (device, name) = text.split_once('.').ok_or_else(bad)?;
+        let device = DeviceId::new(device).map_err(|_| bad())?;
+        Self::new(&device, name).map_err(|_| bad())
+    }
+
+    /// The whole id as text.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// The device part.
+    pub fn device(&self) -> &str {
+        self.0.split_once('.').map_or("", |(d, _)| d)
+    }
+
+    /// The point part, after the device.
+    pub fn name(&self) -> &str {
+        self.0.split_once('.').map_or("", |(_, p)| p)
+    }
+}
+
+impl fmt::Display for PointId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// A point's value: a number (enumerations are numbers with labels) or text.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Value {
+    /// A number.
+    Number(f64),
+    /// Text (a model name, a program name).
+    Text(String),
+}
+
+impl Value {
+    /// The number, if it is one.
+    pub fn as_number(&self) -> Option<f64> {
+        match self {
+            Value::Number(n) => Some(*n),
+            Value::Text(_) => None,
+        }
+    }
+}
+
+impl fmt::Display for Value {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Value::Number(n) => write!(f, "{n}"),
+            Value::Text(t) => f.write_str(t),
+        }
+    }
+}
+
+/// How far a point's current value can be trusted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Quality {
+    /// Read at its last poll.
+    Good,
+    /// The last good value is older than its poll period allows (the line is slow or busy).
+    Stale,
+    /// The last read failed; the point carries the error.
+    Bad,
+}
+
+impl Quality {
+    /// The number stored in the history (0 good, 1 stale, 2 bad).
+    pub fn code(self) -> i64 {
+        match self {
+            Quality::Good => 0,
+            Quality::Stale => 1,
+            Quality::Bad => 2,
+        }
+    }
+
+    /// The quality for a stored number; unknown numbers read as bad.
+    pub fn from_code(code: i64) -> Self {
+        match code {
+            0 => Quality::Good,
+            1 => Quality::Stale,
+            _ => Quality::Bad,
+        }
+    }
+}
+
+/// One labelled value of an enumeration (`9` = `No tool`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EnumState {
+    /// The number.
+    pub value: i64,
+    /// Its words.
+    pub label: String,
+}
+
+/// What kind of value a point carries.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum PointKind {
+    /// A number with a unit; plotted.
+    Numeric,
+    /// Text.
+    Text,
+    /// A number from a table, shown by its label.
+    Enum {
+        /// The table.
+        states: Vec<EnumState>,
+    },
+}
+
+/// The range a writable number must fall into.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct WriteRange {
+    /// Lowest value accepted.
+    pub min: f64,
+    /// Highest value accepted.
+    pub max: f64,
+    /// Whether only whole numbers are accepted.
+    pub integer: bool,
+}
+
+/// Which values of a point are an alarm.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlarmRule {
+    /// Any value other than this normal one (error codes: 0 = OK).
+    NotEqual(f64),
+    /// Values above this.
+    Above(f64),
+    /// Values below this.
+    Below(f64),
+}
+
+impl AlarmRule {
+    /// Whether `value` is in alarm under this rule.
+    pub fn is_alarm(&self, value: &Value) -> bool {
+        let Some(n) = value.as_number() else {
+            return false;
+        };
+        match *self {
+            AlarmRule::NotEqual(normal) => n != normal,
+            AlarmRule::Above(limit) => n > limit,
+            AlarmRule::Below(limit) => n < limit,
+        }
+    }
+}
+
+/// What a point is.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PointSpec {
+    /// `device.point`.
+    pub id: PointId,
+    /// Words for people: `Air temperature`.
+    pub name: String,
+    /// Unit symbol (`°C`, `%`), if any.
+    pub unit: Option<String>,
+    /// Number, text or enumeration.
+    pub kind: PointKind,
+    /// The poll group that reads it.
+    pub group: String,
+    /// `Some` when it may be written, with the accepted range for numbers.
+    pub writable: Option<WriteRange>,
+    /// When its value is an alarm, if ever.
+    pub alarm: Option<AlarmRule>,
+}
+
+/// A value refused before it reached the line.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ValueError {
+    /// The point is read-only.
+    #[error("{point} ({name}) is read-only")]
+    ReadOnly {
+        /// The point.
+        point: PointId,
+        /// Its name.
+        name: String,
+    },
+    /// A number was needed.
+    #[error("{point} takes {expected}, not {got:?}")]
+    WrongType {
+        /// The point.
+        point: PointId,
+        /// What it takes.
+        expected: String,
+        /// What was given.
+        got: String,
+    },
+    /// A number outside the range.
+    #[error("{value} is out of range for {point} ({name}): {min} to {max}{unit}")]
+    OutOfRange {
+        /// The point.
+        point: PointId,
+        /// Its name.
+        name: String,
+        /// The value given.
+        value: f64,
+        /// Lowest accepted.
+        min: f64,
+        /// Highest accepted.
+        max: f64,
+        /// Unit suffix (` °C`) or empty.
+        unit: String,
+    },
+    /// A fraction where whole numbers are needed.
+    #[error("{point} takes whole numbers, not {value}")]
+    NotWhole {
+        /// The point.
+        point: PointId,
+        /// The value given.
+        value: f64,
+    },
+    /// A value not in an enumeration.
+    #[error("{value} is not a state of {point}; known: {known}")]
+    UnknownState {
+        /// The point.
+        point: PointId,
+        /// The value given.
+        value: String,
+        /// The states accepted.
+        known: String,
+    },
+}
+
+impl PointSpec {
+    /// The label of `value` for enumerations.
+    pub fn label(&self, value: &Value) -> Option<&str> {
+        let PointKind::Enum { states } = &self.kind else {
+            return None;
+        };
+        let n = value.as_number()?;
+        states
+            .iter()
+            .find(|s| s.value as f64 == n)
+            .map(|s| s.label.as_str())
+    }
+
+    /// Whether `value` is an alarm for this point.
+    pub fn is_alarm(&self, value: &Value) -> bool {
+        self.alarm.is_some_and(|rule| rule.is_alarm(value))
+    }
+
+    /// Checks a value to write and returns it as the driver takes it: enumeration labels
+    /// become their numbers. Nothing that fails here reaches a line.
+    pub fn check_write(&self, value: &Value) -> Result<Value, ValueError> {
+        let Some(range) = self.writable else {
+            return Err(ValueError::ReadOnly {
+                point: self.id.clone(),
+                name: self.name.clone(),
+            });
+        };
+        let number = match (&self.kind, value) {
+            (PointKind::Enum { states }, _) => {
+                let found = states.iter().find(|s| match value {
+                    Value::Number(n) => s.value as f64 == *n,
+                    Value::Text(t) => {
+                        s.label.eq_ignore_ascii_case(t.trim())
+                            || t.trim().parse::<i64>() == Ok(s.value)
+                    }
+                });
+                let allowed = |s: &&EnumState| (range.min..=range.max).contains(&(s.value as f64));
+                return match found.filter(allowed) {
+                    Some(state) => Ok(Value::Number(state.value as f64)),
+                    None => Err(ValueError::UnknownState {
+                        point: self.id.clone(),
+                        value: value.to_string(),
+                        known: states
+                            .iter()
+                            .filter(allowed)
+                            .map(|s| format!("{} ({})", s.value, s.label))
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    }),
+                };
+            }
+            (PointKind::Text, Value::Text(_)) => return Ok(value.clone()),
+            (PointKind::Text, Value::Number(_)) => {
+                return Err(ValueError::WrongType {
+                    point: self.id.clone(),
+                    expected: "text".into(),
+                    got: value.to_string(),
+                });
+            }
+            (PointKind::Numeric, Value::Number(n)) => *n,
+            (PointKind::Numeric, Value::Text(t)) => {
+                t.trim().parse::<f64>().map_err(|_| ValueError::WrongType {
+                    point: self.id.clone(),
+                    expected: "a number".into(),
+                    got: t.clone(),
+                })?
+            }
+        };
+        if !number.is_finite() || number < range.min || number > range.max {
+            return Err(ValueError::OutOfRange {
+                point: self.id.clone(),
+                name: self.name.clone(),
+                value: number,
+                min: range.min,
+                max: range.max,
+                unit: self
+                    .unit
+                    .as_deref()
+                    .map(|u| format!(" {u}"))
+                    .unwrap_or_default(),
+            });
+        }
+        if range.integer && number.fract() != 0.0 {
+            return Err(ValueError::NotWhole {
+                point: self.id.clone(),
+                value: number,
+            });
+        }
+        Ok(Value::Number(number))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn device() -> DeviceId {
+        DeviceId::new("jbc1").unwrap()
+    }
+
+    fn setpoint() -> PointSpec {
+        PointSpec {
+            id: PointId::new(&device(), "air_temperature_setpoint").unwrap(),
+            name: "Selected air temperature".into(),
+            unit: Some("°C".into()),
+            kind: PointKind::Numeric,
+            group: "live".into(),
+            writable: Some(WriteRange {
+                min: 150.0,
+                max: 450.0,
+                integer: true,
+            }),
+            alarm: None,
+        }
+    }
+
+    fn tool_on() -> PointSpec {
+        PointSpec {
+            id: PointId::new(&device(), "tool_on").unwrap(),
+            name: "Tool on".into(),
+            unit: None,
+            kind: PointKind::Enum {
+                states: vec![
+                    EnumState {
+                        value: 0,
+                        label: "off".into(),
+                    },
+                    EnumState {
+                        value: 1,
+                        label: "on".into(),
+                    },
+                ],
+            },
+            group: "live".into(),
+            writable: Some(WriteRange {
+                min: 0.0,
+                max: 1.0,
+                integer: true,
+            }),
+            alarm: None,
+        }
+    }
+
+    #[test]
+    fn device_ids_follow_the_plain_name_rule() {
+        assert!(DeviceId::new("jbc1").is_ok());
+        assert!(DeviceId::new("sealer-0_a").is_ok());
+        for bad in ["", "JBC1", "jbc 1", "-x", "a.b", &"x".repeat(65)] {
+            let err = DeviceId::new(bad).unwrap_err();
+            assert_eq!(err.text, bad);
+        }
+    }
+
+    #[test]
+    fn point_ids_split_into_device_and_point() {
+        let id = PointId::parse("jbc1.air_temperature").unwrap();
+        assert_eq!(id.device(), "jbc1");
+        assert_eq!(id.name(), "air_temperature");
+        assert!(PointId::parse("jbc1").is_err());
+        assert!(PointId::parse("jbc1.").is_err());
+        assert!(PointId::parse(".x").is_err());
+    }
+
+    #[test]
+    fn writes_inside_the_range_pass_and_outside_are_refused_with_the_facts() {
+        let spec = setpoint();
+        assert_eq!(
+            spec.check_write(&Value::Number(350.0)),
+            Ok(Value::Number(350.0))
+        );
+        assert_eq!(
+            spec.check_write(&Value::Text("400".into())),
+            Ok(Value::Number(400.0))
+        );
+        let err = spec.check_write(&Value::Number(900.0)).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "900 is out of range for jbc1.air_temperature_setpoint (Selected air temperature): 150 to 450 °C"
+        );
+        assert!(matches!(
+            spec.check_write(&Value::Number(300.5)),
+            Err(ValueError::NotWhole { .. })
+        ));
+        assert!(matches!(
+            spec.check_write(&Value::Number(f64::NAN)),
+            Err(ValueError::OutOfRange { .. })
+        ));
+        assert!(matches!(
+            spec.check_write(&Value::Text("hot".into())),
+            Err(ValueError::WrongType { .. })
+        ));
+    }
+
+    #[test]
+    fn enumerations_accept_labels_and_numbers_and_list_their_states_when_refusing() {
+        let spec = tool_on();
+        assert_eq!(
+            spec.check_write(&Value::Text("ON".into())),
+            Ok(Value::Number(1.0))
+        );
+        assert_eq!(
+            spec.check_write(&Value::Number(0.0)),
+            Ok(Value::Number(0.0))
+        );
+        let err = spec.check_write(&Value::Number(2.0)).unwrap_err();
+        assert!(err.to_string().contains("0 (off), 1 (on)"), "{err}");
+        assert_eq!(spec.label(&Value::Number(1.0)), Some("on"));
+    }
+
+    #[test]
+    fn read_only_points_refuse_every_write() {
+        let mut spec = setpoint();
+        spec.writable = None;
+        assert!(matches!(
+            spec.check_write(&Value::Number(300.0)),
+            Err(ValueError::ReadOnly { .. })
+        ));
+    }
+
+    #[test]
+    fn alarm_rules_judge_numbers_only() {
+        assert!(AlarmRule::NotEqual(0.0).is_alarm(&Value::Number(3.0)));
+        assert!(!AlarmRule::NotEqual(0.0).is_alarm(&Value::Number(0.0)));
+        assert!(AlarmRule::Above(400.0).is_alarm(&Value::Number(401.0)));
+        assert!(AlarmRule::Below(10.0).is_alarm(&Value::Number(9.0)));
+        assert!(!AlarmRule::Above(1.0).is_alarm(&Value::Text("x".into())));
+    }
+}

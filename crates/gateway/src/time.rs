@@ -1,0 +1,185 @@
+//! Wall-clock timestamps as the history and the API carry them.
+//!
+//! A [`Timestamp`] is milliseconds since the Unix epoch (UTC): what SQLite stores and sorts,
+//! what the API prints as RFC 3339 (`2026-11-03T08:15:02.125Z`). Query parameters accept RFC
+//! 3339 (`Z` or an offset such as `+01:00`), `now`, or a time relative to now (`-1h`,
+//! `-15m`, `-2d`), so a person can type them in a browser's address bar.
+
+use std::fmt;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use serde::{Serialize, Serializer};
+
+/// Milliseconds since 1970-01-01T00:00:00Z.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Timestamp(pub i64);
+
+impl Timestamp {
+    /// The current wall-clock time.
+    pub fn now() -> Self {
+        Self::from_system(SystemTime::now())
+    }
+
+    /// A system time as a timestamp (times before 1970 count negative).
+    pub fn from_system(time: SystemTime) -> Self {
+        match time.duration_since(UNIX_EPOCH) {
+            Ok(after) => Self(i64::try_from(after.as_millis()).unwrap_or(i64::MAX)),
+            Err(before) => Self(-i64::try_from(before.duration().as_millis()).unwrap_or(i64::MAX)),
+        }
+    }
+
+    /// The timestamp as a system time.
+    pub fn to_system(self) -> SystemTime {
+        let millis = Duration::from_millis(self.0.unsigned_abs());
+        if self.0 >= 0 {
+            UNIX_EPOCH + millis
+        } else {
+            UNIX_EPOCH - millis
+        }
+    }
+
+    /// Milliseconds since the epoch.
+    pub fn millis(self) -> i64 {
+        self.0
+    }
+
+    /// This time plus `d` (saturating).
+    pub fn plus(self, d: Duration) -> Self {
+        Self(self.0.saturating_add(duration_millis(d)))
+    }
+
+    /// This time minus `d` (saturating).
+    pub fn minus(self, d: Duration) -> Self {
+        Self(self.0.saturating_sub(duration_millis(d)))
+    }
+
+    /// Parses a time given by a person or a program, relative to `now`: RFC 3339, `now`, or
+    /// `-<duration>` such as `-1h`, `-90s`, `-2d`.
+    pub fn parse_relative(text: &str, now: Timestamp) -> Result<Self, TimeError> {
+        let text = text.trim();
+        if text.eq_ignore_ascii_case("now") {
+            return Ok(now);
+        }
+        if let Some(ago) = text.strip_prefix('-') {
+            let d = humantime::parse_duration(ago.trim()).map_err(|e| TimeError {
+                text: text.to_owned(),
+                reason: e.to_string(),
+            })?;
+            return Ok(now.minus(d));
+        }
+        parse_rfc3339(text)
+    }
+}
+
+impl fmt::Display for Timestamp {
+    /// RFC 3339 in UTC with milliseconds.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", humantime::format_rfc3339_millis(self.to_system()))
+    }
+}
+
+impl Serialize for Timestamp {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+/// A time the gateway could not read.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "{text:?} is not a time ({reason}); write RFC 3339 like 2026-11-03T08:00:00Z, `now`, or a time relative to now like -1h or -15m"
+)]
+pub struct TimeError {
+    /// The text given.
+    pub text: String,
+    /// What is wrong with it.
+    pub reason: String,
+}
+
+/// Milliseconds in `d`, saturating.
+pub fn duration_millis(d: Duration) -> i64 {
+    i64::try_from(d.as_millis()).unwrap_or(i64::MAX)
+}
+
+/// Parses RFC 3339 with `Z` or a numeric offset (`+01:00`, `-05:30`).
+fn parse_rfc3339(text: &str) -> Result<Timestamp, TimeError> {
+    let err = |reason: &str| TimeError {
+        text: text.to_owned(),
+        reason: reason.to_owned(),
+    };
+    // Split a trailing ±HH:MM offset from the local time; humantime reads UTC only.
+    let (local, offset_minutes) = match text.len().checked_sub(6).and_then(|at| {
+        let (head, tail) = (text.get(..at)?, text.get(at..)?);
+        let bytes = tail.as_bytes();
+        let sign = match bytes.first()? {
+            b'+' => 1,
+            b'-' => -1,
+            _ => return None,
+        };
+        (bytes.get(3) == Some(&b':') && head.contains('T')).then_some(())?;
+        let hours: i64 = tail.get(1..3)?.parse().ok()?;
+        let minutes: i64 = tail.get(4..6)?.parse().ok()?;
+        Some((head.to_owned() + "Z", sign * (hours * 60 + minutes)))
+    }) {
+        Some(split) => split,
+        None => (text.to_owned(), 0),
+    };
+    let time = humantime::parse_rfc3339_weak(&local).map_err(|e| err(&e.to_string()))?;
+    let utc = Timestamp::from_system(time);
+    Ok(Timestamp(utc.0 - offset_minutes * 60_000))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn timestamps_print_as_rfc3339_utc_with_milliseconds() {
+        assert_eq!(Timestamp(0).to_string(), "1970-01-01T00:00:00.000Z");
+        assert_eq!(
+            Timestamp(1_700_000_000_125).to_string(),
+            "2023-11-14T22:13:20.125Z"
+        );
+    }
+
+    #[test]
+    fn rfc3339_with_z_or_an_offset_gives_the_same_instant() {
+        let now = Timestamp(0);
+        let z = Timestamp::parse_relative("2023-11-14T22:13:20Z", now).unwrap();
+        let plus = Timestamp::parse_relative("2023-11-14T23:13:20+01:00", now).unwrap();
+        let minus = Timestamp::parse_relative("2023-11-14T16:43:20-05:30", now).unwrap();
+        assert_eq!(z, Timestamp(1_700_000_000_000));
+        assert_eq!(plus, z);
+        assert_eq!(minus, z);
+    }
+
+    #[test]
+    fn relative_times_count_back_from_now() {
+        let now = Timestamp(10_000_000);
+        assert_eq!(
+            Timestamp::parse_relative("-1h", now).unwrap(),
+            Timestamp(10_000_000 - 3_600_000)
+        );
+        assert_eq!(
+            Timestamp::parse_relative("-90s", now).unwrap(),
+            Timestamp(10_000_000 - 90_000)
+        );
+        assert_eq!(Timestamp::parse_relative("now", now).unwrap(), now);
+    }
+
+    #[test]
+    fn a_bad_time_names_the_text_and_the_accepted_forms() {
+        let err = Timestamp::parse_relative("yesterday", Timestamp(0)).unwrap_err();
+        assert_eq!(err.text, "yesterday");
+        assert!(err.to_string().contains("-1h"), "{err}");
+        assert!(Timestamp::parse_relative("-1 fortnight", Timestamp(0)).is_err());
+    }
+
+    #[test]
+    fn system_time_round_trips_through_timestamps() {
+        for millis in [0, 1, 1_700_000_000_125, -5_000] {
+            let t = Timestamp(millis);
+            assert_eq!(Timestamp::from_system(t.to_system()), t);
+        }
+    }
+}
