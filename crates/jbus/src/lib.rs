@@ -14,4 +14,9 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod cross;
 pub mod rtu;
+pub mod slave;
+
+#[doc(hidden)]
+pub mod fuzzing;

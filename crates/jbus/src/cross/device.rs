@@ -1,0 +1,1286 @@
+//! A twin of a Chloride CROSS static transfer switch, for tests and the simulator.
+//!
+//! Two three-phase sources (230 V, 50 Hz) feed one load through two static switches
+//! (S1-SW, S2-SW); each source has an input breaker (IS1, IS2) and a manual bypass (IBY1,
+//! IBY2); the output breaker (IOUT) connects the load. The preferred source feeds the load
+//! while it is healthy. [`CrossTwin::fail_source`] takes a source away: if it was feeding
+//! the load, the twin transfers the load to the other source at once, and retransfers it
+//! when [`CrossTwin::restore_source`] brings the preferred source back. Every reading is
+//! computed from that physical state, so state words, mimic lamps, segments and measures
+//! always agree; measures carry seeded noise (about ±0.4 % on voltages, ±0.02 Hz).
+//!
+//! The twin answers as the manual says and nothing more: function 3 on defined addresses;
+//! any other function gets exception 1, a read touching an undefined address exception 2,
+//! a count of 0 or above 125 exception 3 (checked before the addresses, as Modbus orders
+//! it); a frame with a bad CRC, for another unit or broadcast (unit 0) gets silence, as
+//! does a request whose function byte has the exception bit set (no valid answer exists).
+//! Answers leave [`REPLY_DELAY`] after the request.
+//!
+//! The manual's picture of the mimic diagram is lost, so the twin numbers its segments
+//! along the circuit, as follows (a segment is lit while energised):
+//!
+//! | segment | part of the circuit |
+//! |---|---|
+//! | 1 / 6 | S1 / S2 incoming line (the source has voltage) |
+//! | 2 / 7 | from IS1 / IS2 to the static switch (input breaker closed) |
+//! | 3 / 8 | from S1-SW / S2-SW to the output bus (the switch conducts) |
+//! | 4 / 9 | S1 / S2 bypass line up to IBY1 / IBY2 |
+//! | 5 / 10 | from IBY1 / IBY2 to the output bus (bypass closed) |
+//! | 11 / 12 | output bus on the S1 / S2 side (fed by segment 3 or 5 / 8 or 10) |
+//! | 13 | output bus up to IOUT |
+//! | 14 | from IOUT to the load (output breaker closed) |
+//! | 15 | the load (it draws power) |
+
+use std::fmt;
+use std::time::{Duration, Instant};
+
+use wire::Transmit;
+use wire::device::Model;
+
+use super::bits::{
+    InternalState, LoadAlarm, LoadOff, LoadOn, S1Alarm, S1Off, S1On, S1SwitchOff, S1SwitchOn,
+    S2Alarm, S2Off, S2On, S2SwitchOff, S2SwitchOn, SystemAlarm, SystemOn,
+};
+use super::map::{MAP_LEN, block_is_defined};
+use super::measure::{
+    Amperes, Celsius, Degrees, Hertz, KiloVoltAmperes, Measures, Phases, Ratings, Volts,
+    WholeAmperes,
+};
+use super::mimic::{Element, Lamps, Mimic, Segment, Segments};
+use super::state::{CrossState, Source};
+use crate::rtu::{
+    DecodeError, EXCEPTION_BIT, ExceptionCode, FunctionCode, RegisterValues, Request, RequestAdu,
+    RequestCodec, RequestPdu, Response, ResponseAdu, Unit,
+};
+
+/// How long after a request the twin's answer leaves: 5 ms, the order of a small
+/// controller's turnaround (the manual gives none).
+pub const REPLY_DELAY: Duration = Duration::from_millis(5);
+
+/// How long an output overload lasts before the LOAD "overload time out" bit comes on.
+pub const OVERLOAD_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// The JBUS protocol revision the twin reports (word 0x2E): the manual's.
+pub const PROTOCOL_REVISION: u16 = 5;
+
+/// Nominal phase voltage of both sources, in volts.
+pub const NOMINAL_VOLTAGE: f64 = 230.0;
+/// Nominal frequency of both sources, in hertz.
+pub const NOMINAL_FREQUENCY: f64 = 50.0;
+/// Rated current of the twin, in amperes (word 0x1E).
+pub const RATED_CURRENT: f64 = 100.0;
+
+/// How a source fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SourceFault {
+    /// No voltage at all (alarms: failure, voltage fault).
+    Outage,
+    /// Voltage well below tolerance, about 180 V (alarms: failure, voltage fault).
+    Undervoltage,
+    /// Frequency out of tolerance, about 47 Hz (alarms: failure, frequency fault).
+    FrequencyDrift,
+}
+
+/// A breaker or bypass of the switch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Breaker {
+    /// IS1: source 1 input breaker (closed by default).
+    Is1,
+    /// IS2: source 2 input breaker (closed by default).
+    Is2,
+    /// IBY1: source 1 manual bypass (open by default).
+    Iby1,
+    /// IBY2: source 2 manual bypass (open by default).
+    Iby2,
+    /// IOUT: output breaker (closed by default).
+    Iout,
+}
+
+impl Breaker {
+    const fn index(self) -> usize {
+        match self {
+            Self::Is1 => 0,
+            Self::Is2 => 1,
+            Self::Iby1 => 2,
+            Self::Iby2 => 3,
+            Self::Iout => 4,
+        }
+    }
+
+    const fn input(source: Source) -> Self {
+        match source {
+            Source::S1 => Self::Is1,
+            Source::S2 => Self::Is2,
+        }
+    }
+
+    const fn bypass(source: Source) -> Self {
+        match source {
+            Source::S1 => Self::Iby1,
+            Source::S2 => Self::Iby2,
+        }
+    }
+}
+
+impl fmt::Display for Breaker {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Is1 => "IS1",
+            Self::Is2 => "IS2",
+            Self::Iby1 => "IBY1",
+            Self::Iby2 => "IBY2",
+            Self::Iout => "IOUT",
+        })
+    }
+}
+
+/// A simulated CROSS on one unit number.
+#[derive(Debug, Clone)]
+pub struct CrossTwin {
+    unit: Unit,
+    rng: fastrand::Rng,
+    reply_delay: Duration,
+    preferred: Source,
+    faults: [Option<SourceFault>; 2],
+    closed: [bool; 5],
+    load_kva: f64,
+    conducting: Option<Source>,
+    transfers: u64,
+    overload_since: Option<Instant>,
+}
+
+impl CrossTwin {
+    /// A healthy switch answering as `unit` (JBUS numbers up to 255 allowed), with noise
+    /// seeded by `seed`: S1 preferred and feeding a 40 kVA load, input and output breakers
+    /// closed, bypasses open.
+    pub fn new(unit: Unit, seed: u64) -> Self {
+        let mut twin = Self {
+            unit,
+            rng: fastrand::Rng::with_seed(seed),
+            reply_delay: REPLY_DELAY,
+            preferred: Source::S1,
+            faults: [None, None],
+            closed: [true, true, false, false, true],
+            load_kva: 40.0,
+            conducting: None,
+            transfers: 0,
+            overload_since: None,
+        };
+        twin.settle();
+        twin
+    }
+
+    /// The same twin answering after `delay` instead of [`REPLY_DELAY`].
+    pub fn with_reply_delay(mut self, delay: Duration) -> Self {
+        self.reply_delay = delay;
+        self
+    }
+
+    /// The unit number it answers to.
+    pub fn unit(&self) -> Unit {
+        self.unit
+    }
+
+    /// The preferred source.
+    pub fn preferred(&self) -> Source {
+        self.preferred
+    }
+
+    /// Makes `source` the preferred one; the load moves to it if it is healthy.
+    pub fn set_preferred(&mut self, source: Source) {
+        self.preferred = source;
+        self.settle();
+    }
+
+    /// Takes `source` away (an outage); the load transfers if it was on it.
+    pub fn fail_source(&mut self, source: Source) {
+        self.fail_source_with(source, SourceFault::Outage);
+    }
+
+    /// Makes `source` fail in the given way; the load transfers if it was on it and the
+    /// other source is healthy (else it stays on a source that still has voltage: "load on
+    /// bad source").
+    pub fn fail_source_with(&mut self, source: Source, fault: SourceFault) {
+        self.faults[source.index()] = Some(fault);
+        self.settle();
+    }
+
+    /// Brings `source` back; the load retransfers to it if it is the preferred source.
+    pub fn restore_source(&mut self, source: Source) {
+        self.faults[source.index()] = None;
+        self.settle();
+    }
+
+    /// The fault of `source`, if it has one.
+    pub fn fault(&self, source: Source) -> Option<SourceFault> {
+        self.faults[source.index()]
+    }
+
+    /// Opens or closes a breaker or bypass; the load transfers if its source's input
+    /// breaker opens.
+    pub fn set_breaker(&mut self, breaker: Breaker, closed: bool) {
+        self.closed[breaker.index()] = closed;
+        self.settle();
+    }
+
+    /// Whether a breaker or bypass is closed.
+    pub fn is_closed(&self, breaker: Breaker) -> bool {
+        self.closed[breaker.index()]
+    }
+
+    /// Sets the load's apparent power in kVA (negative counts as 0). The twin's rating is
+    /// 100 A per phase, about 69 kVA.
+    pub fn set_load(&mut self, kva: f64) {
+        self.load_kva = if kva.is_finite() { kva.max(0.0) } else { 0.0 };
+    }
+
+    /// The source whose static switch conducts, if any.
+    pub fn conducting(&self) -> Option<Source> {
+        self.conducting
+    }
+
+    /// How many times the load moved from one source to the other.
+    pub fn transfers(&self) -> u64 {
+        self.transfers
+    }
+
+    /// A fresh reading of every word at `now`, noise included (each call draws new noise).
+    pub fn reading(&mut self, now: Instant) -> CrossState {
+        let measures = self.measure();
+        let overload = self.output_current_overload(&measures);
+        self.overload_since = match (overload, self.overload_since) {
+            (true, None) => Some(now),
+            (true, since) => since,
+            (false, _) => None,
+        };
+        let overload_timed_out = self
+            .overload_since
+            .is_some_and(|since| now.saturating_duration_since(since) >= OVERLOAD_TIMEOUT);
+        let internal = self.internal_state(overload, overload_timed_out);
+        let mimic = self.mimic(&internal);
+        CrossState {
+            internal,
+            mimic,
+            ratings: Self::ratings(),
+            measures,
+        }
+    }
+
+    /// The answer to a request for this unit, or `None` for silence.
+    pub fn answer(&mut self, pdu: &RequestPdu, now: Instant) -> Option<Response> {
+        let function = pdu.function_byte();
+        if function & EXCEPTION_BIT != 0 {
+            return None;
+        }
+        let refuse = |code| {
+            Some(Response::exception(
+                FunctionCode::of_exception(function),
+                code,
+            ))
+        };
+        if !matches!(pdu, RequestPdu::ReadHoldingRegisters { .. }) {
+            return refuse(ExceptionCode::ILLEGAL_FUNCTION);
+        }
+        let read = match pdu.to_request() {
+            Ok(Request::ReadHoldingRegisters(read)) => read,
+            Ok(_) => return refuse(ExceptionCode::ILLEGAL_FUNCTION),
+            Err(code) => return refuse(code),
+        };
+        let (start, count) = (read.address(), read.count().get());
+        if !block_is_defined(start, count) {
+            return refuse(ExceptionCode::ILLEGAL_DATA_ADDRESS);
+        }
+        let image = self.reading(now).to_image();
+        let words = image
+            .get(usize::from(start)..usize::from(start) + usize::from(count))?
+            .to_vec();
+        RegisterValues::new(words)
+            .ok()
+            .map(Response::ReadHoldingRegisters)
+    }
+
+    // --- The physics ---
+
+    /// Whether `source` can take the load: healthy, input breaker closed.
+    fn usable(&self, source: Source) -> bool {
+        self.faults[source.index()].is_none() && self.is_closed(Breaker::input(source))
+    }
+
+    /// Whether `source` has voltage at all.
+    fn has_voltage(&self, source: Source) -> bool {
+        self.faults[source.index()] != Some(SourceFault::Outage)
+    }
+
+    /// Whether `source` can keep a load it already has: voltage present, breaker closed.
+    fn live(&self, source: Source) -> bool {
+        self.has_voltage(source) && self.is_closed(Breaker::input(source))
+    }
+
+    /// Moves the load to where the switch's logic puts it after any change.
+    fn settle(&mut self) {
+        let (preferred, reserve) = (self.preferred, self.preferred.other());
+        let target = match self.conducting {
+            Some(s) if self.usable(s) => Some(if s != preferred && self.usable(preferred) {
+                preferred
+            } else {
+                s
+            }),
+            Some(s) if self.usable(s.other()) => Some(s.other()),
+            Some(s) if self.live(s) => Some(s),
+            _ if self.usable(preferred) => Some(preferred),
+            _ if self.usable(reserve) => Some(reserve),
+            _ => None,
+        };
+        if let (Some(from), Some(to)) = (self.conducting, target)
+            && from != to
+        {
+            self.transfers += 1;
+        }
+        self.conducting = target;
+    }
+
+    /// The source feeding the output bus, and through what: a closed bypass on a source
+    /// with voltage takes precedence over the static switches.
+    fn feeding(&self) -> Option<Source> {
+        [Source::S1, Source::S2]
+            .into_iter()
+            .find(|&s| self.is_closed(Breaker::bypass(s)) && self.has_voltage(s))
+            .or(self.conducting)
+    }
+
+    /// Whether the load draws power: something feeds the bus and IOUT is closed.
+    fn supplied(&self) -> bool {
+        self.feeding().is_some() && self.is_closed(Breaker::Iout)
+    }
+
+    fn noise(&mut self, amplitude: f64) -> f64 {
+        (self.rng.f64() * 2.0 - 1.0) * amplitude
+    }
+
+    fn source_voltage(&mut self, source: Source) -> [f64; 3] {
+        let level = match self.faults[source.index()] {
+            None | Some(SourceFault::FrequencyDrift) => NOMINAL_VOLTAGE,
+            Some(SourceFault::Undervoltage) => NOMINAL_VOLTAGE * 0.78,
+            Some(SourceFault::Outage) => return [0.0; 3],
+        };
+        std::array::from_fn(|_| level * (1.0 + self.noise(0.004)))
+    }
+
+    fn source_frequency(&mut self, source: Source) -> f64 {
+        match self.faults[source.index()] {
+            None | Some(SourceFault::Undervoltage) => NOMINAL_FREQUENCY + self.noise(0.02),
+            Some(SourceFault::FrequencyDrift) => 47.0 + self.noise(0.05),
+            Some(SourceFault::Outage) => 0.0,
+        }
+    }
+
+    fn measure(&mut self) -> Measures {
+        let volts = [
+            self.source_voltage(Source::S1),
+            self.source_voltage(Source::S2),
+        ];
+        let hertz = [
+            self.source_frequency(Source::S1),
+            self.source_frequency(Source::S2),
+        ];
+        let (bus_volts, bus_hertz) = match self.feeding() {
+            Some(s) => (volts[s.index()].map(|v| v * 0.998), hertz[s.index()]),
+            None => ([0.0; 3], 0.0),
+        };
+        let amps = if self.supplied() {
+            let per_phase = self.load_kva * 1000.0 / 3.0;
+            let mut amps = [0.0; 3];
+            for (a, v) in amps.iter_mut().zip(bus_volts) {
+                *a = if v > 1.0 {
+                    per_phase / v * (1.0 + self.noise(0.03))
+                } else {
+                    0.0
+                };
+            }
+            amps
+        } else {
+            [0.0; 3]
+        };
+        let kva: f64 = bus_volts.iter().zip(amps).map(|(v, a)| v * a).sum::<f64>() / 1000.0;
+        let neutral_amps = if self.supplied() {
+            (amps.iter().sum::<f64>() / 3.0 * 0.04 + self.noise(0.3)).max(0.0)
+        } else {
+            0.0
+        };
+        let neutral_volts = if self.supplied() {
+            (0.4 + self.noise(0.2)).max(0.0)
+        } else {
+            0.0
+        };
+        let phase_error = match self.faults {
+            [
+                None | Some(SourceFault::Undervoltage),
+                None | Some(SourceFault::Undervoltage),
+            ] => 0.3 + self.noise(1.2),
+            [Some(SourceFault::FrequencyDrift), _] | [_, Some(SourceFault::FrequencyDrift)] => {
+                self.noise(180.0)
+            }
+            _ => 0.0,
+        };
+        let inlet_air = 23.0 + 6.0 * (self.load_kva / Self::rated_kva()).min(2.0) + self.noise(0.3);
+        let phases_of = |values: [f64; 3]| Phases {
+            u: Volts::from_value(values[0]),
+            v: Volts::from_value(values[1]),
+            w: Volts::from_value(values[2]),
+        };
+        Measures {
+            s1_voltage: phases_of(volts[0]),
+            s1_frequency: Hertz::from_value(hertz[0]),
+            s2_voltage: phases_of(volts[1]),
+            s2_frequency: Hertz::from_value(hertz[1]),
+            output_voltage: phases_of(bus_volts),
+            output_current: Phases {
+                u: Amperes::from_value(amps[0]),
+                v: Amperes::from_value(amps[1]),
+                w: Amperes::from_value(amps[2]),
+            },
+            neutral_current: Amperes::from_value(neutral_amps),
+            neutral_voltage: Volts::from_value(neutral_volts),
+            output_frequency: Hertz::from_value(bus_hertz),
+            load_power: KiloVoltAmperes::from_value(kva),
+            phase_error: Degrees::from_value(phase_error),
+            inlet_air: Celsius::from_value(inlet_air),
+        }
+    }
+
+    fn rated_kva() -> f64 {
+        3.0 * NOMINAL_VOLTAGE * RATED_CURRENT / 1000.0
+    }
+
+    fn output_current_overload(&self, measures: &Measures) -> bool {
+        let rated = Amperes::from_value(RATED_CURRENT);
+        measures
+            .output_current
+            .to_array()
+            .iter()
+            .any(|&a| a > rated)
+    }
+
+    fn ratings() -> Ratings {
+        Ratings {
+            rated_current: Amperes::from_value(RATED_CURRENT),
+            s1_voltage_full_scale: Phases::all(Volts::from_value(300.0)),
+            s2_voltage_full_scale: Phases::all(Volts::from_value(300.0)),
+            output_voltage_full_scale: Phases::all(Volts::from_value(300.0)),
+            output_current_full_scale: Phases::all(WholeAmperes::from_value(150.0)),
+            neutral_current_full_scale: WholeAmperes::from_value(150.0),
+            neutral_voltage_full_scale: Volts::from_value(50.0),
+            inlet_air_full_scale: Celsius::from_value(100.0),
+            protocol_revision: PROTOCOL_REVISION,
+        }
+    }
+
+    fn internal_state(&self, overload: bool, overload_timed_out: bool) -> InternalState {
+        let mut s = InternalState::default();
+        let fault_bits = |fault: Option<SourceFault>| match fault {
+            None => (false, false, false),
+            Some(SourceFault::Outage | SourceFault::Undervoltage) => (true, false, true),
+            Some(SourceFault::FrequencyDrift) => (true, true, false),
+        };
+
+        let (failure, frequency, voltage) = fault_bits(self.faults[0]);
+        s.s1.off
+            .set(S1Off::BreakerOpen, !self.is_closed(Breaker::Is1));
+        s.s1.alarm.set(S1Alarm::Failure, failure);
+        s.s1.alarm.set(S1Alarm::FrequencyFault, frequency);
+        s.s1.alarm.set(S1Alarm::VoltageFault, voltage);
+        s.s1.on.set(S1On::Normal, !failure);
+
+        let (failure, frequency, voltage) = fault_bits(self.faults[1]);
+        s.s2.off
+            .set(S2Off::BreakerOpen, !self.is_closed(Breaker::Is2));
+        s.s2.alarm.set(S2Alarm::Failure, failure);
+        s.s2.alarm.set(S2Alarm::FrequencyFault, frequency);
+        s.s2.alarm.set(S2Alarm::VoltageFault, voltage);
+        s.s2.on.set(S2On::Normal, !failure);
+
+        let on = |source| self.conducting == Some(source);
+        s.s1_switch
+            .off
+            .set(S1SwitchOff::LoadOnSource2, on(Source::S2));
+        s.s1_switch
+            .on
+            .set(S1SwitchOn::LoadOnSource1, on(Source::S1));
+        s.s1_switch
+            .on
+            .set(S1SwitchOn::SourceOverload, on(Source::S1) && overload);
+        s.s2_switch
+            .off
+            .set(S2SwitchOff::LoadOnSource1, on(Source::S1));
+        s.s2_switch
+            .on
+            .set(S2SwitchOn::LoadOnSource2, on(Source::S2));
+        s.s2_switch
+            .on
+            .set(S2SwitchOn::SourceOverload, on(Source::S2) && overload);
+
+        let iout = self.is_closed(Breaker::Iout);
+        let supplied = self.supplied();
+        let bad_source = self
+            .feeding()
+            .is_some_and(|f| self.faults[f.index()].is_some());
+        s.load.off.set(LoadOff::OutputBreakerOpen, !iout);
+        s.load.alarm.set(LoadAlarm::NotSupplied, iout && !supplied);
+        s.load.on.set(LoadOn::OutputNormal, supplied && !bad_source);
+        s.load.on.set(
+            LoadOn::OnReserveLine,
+            supplied && self.feeding() != Some(self.preferred),
+        );
+        s.load.on.set(LoadOn::OutputOverload, supplied && overload);
+        s.load
+            .on
+            .set(LoadOn::OverloadTimeout, supplied && overload_timed_out);
+        s.load.on.set(LoadOn::OnBadSource, supplied && bad_source);
+
+        s.system.alarm.set(
+            SystemAlarm::SourcesOutOfSync,
+            self.faults.iter().any(Option::is_some),
+        );
+        s.system
+            .alarm
+            .set(SystemAlarm::BypassS1Closed, self.is_closed(Breaker::Iby1));
+        s.system
+            .alarm
+            .set(SystemAlarm::BypassS2Closed, self.is_closed(Breaker::Iby2));
+        s.system.on.set(SystemOn::Normal, s.alarms().is_empty());
+        s
+    }
+
+    fn mimic(&self, s: &InternalState) -> Mimic {
+        let mut mimic = Mimic::default();
+        let lamp = |on: bool, alarm: bool| Lamps {
+            on: on && !alarm,
+            off: !on && !alarm,
+            alarm,
+        };
+        mimic.set_lamps(
+            Element::S1,
+            lamp(
+                s.s1.on.contains(S1On::Normal) && self.is_closed(Breaker::Is1),
+                !s.s1.alarm.is_clear(),
+            ),
+        );
+        mimic.set_lamps(
+            Element::S2,
+            lamp(
+                s.s2.on.contains(S2On::Normal) && self.is_closed(Breaker::Is2),
+                !s.s2.alarm.is_clear(),
+            ),
+        );
+        mimic.set_lamps(
+            Element::S1Switch,
+            lamp(
+                self.conducting == Some(Source::S1),
+                !s.s1_switch.alarm.is_clear(),
+            ),
+        );
+        mimic.set_lamps(
+            Element::S2Switch,
+            lamp(
+                self.conducting == Some(Source::S2),
+                !s.s2_switch.alarm.is_clear(),
+            ),
+        );
+        mimic.set_lamps(
+            Element::Load,
+            lamp(
+                self.supplied(),
+                s.load.alarm.contains(LoadAlarm::NotSupplied),
+            ),
+        );
+        mimic.set_lamps(
+            Element::System,
+            lamp(
+                s.system.on.contains(SystemOn::Normal),
+                !s.system.alarm.is_clear(),
+            ),
+        );
+        for (element, breaker) in [
+            (Element::Is1, Breaker::Is1),
+            (Element::Is2, Breaker::Is2),
+            (Element::Iby1, Breaker::Iby1),
+            (Element::Iby2, Breaker::Iby2),
+            (Element::Iout, Breaker::Iout),
+        ] {
+            mimic.set_lamps(element, lamp(self.is_closed(breaker), false));
+        }
+
+        let mut lit = [false; 16];
+        for (source, base) in [(Source::S1, 0), (Source::S2, 5)] {
+            let incoming = self.has_voltage(source);
+            lit[base + 1] = incoming;
+            lit[base + 2] = incoming && self.is_closed(Breaker::input(source));
+            lit[base + 3] = lit[base + 2] && self.conducting == Some(source);
+            lit[base + 4] = incoming;
+            lit[base + 5] = incoming && self.is_closed(Breaker::bypass(source));
+        }
+        lit[11] = lit[3] || lit[5];
+        lit[12] = lit[8] || lit[10];
+        lit[13] = lit[11] || lit[12];
+        lit[14] = lit[13] && self.is_closed(Breaker::Iout);
+        lit[15] = lit[14] && self.load_kva > 0.0;
+        let mut segments = Segments::default();
+        for segment in Segment::all() {
+            segments.set(segment, lit[usize::from(segment.number())]);
+        }
+        mimic.segments = segments;
+        mimic
+    }
+
+    /// The register image at `now` (words 0x00–0x59, undefined ones 0).
+    pub fn image(&mut self, now: Instant) -> [u16; MAP_LEN] {
+        self.reading(now).to_image()
+    }
+}
+
+impl Model for CrossTwin {
+    type Codec = RequestCodec;
+
+    fn codec(&self) -> RequestCodec {
+        RequestCodec
+    }
+
+    fn handle(&mut self, input: Result<RequestAdu, DecodeError>, now: Instant) -> Vec<Transmit> {
+        // A bad CRC or bytes that frame nothing: the CROSS does not answer.
+        let Ok(adu) = input else { return Vec::new() };
+        // Broadcast (unit 0) or another unit's request: silence.
+        if adu.unit != self.unit.get() {
+            return Vec::new();
+        }
+        match self.answer(&adu.pdu, now) {
+            Some(response) => {
+                vec![Transmit::after(
+                    self.reply_delay,
+                    ResponseAdu {
+                        unit: adu.unit,
+                        response,
+                    }
+                    .to_bytes(),
+                )]
+            }
+            None => Vec::new(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cross::bits::{Flags, NamedBit};
+    use crate::cross::map::read_plan;
+    use crate::cross::state::Feed;
+    use crate::rtu::codec::{append_crc, decode_response};
+    use crate::rtu::{Addressed, Answer, check_response};
+    use wire::device::SharedModel;
+    use wire::{Codec, Device};
+
+    /// The word with exactly these bits set.
+    fn flags<B: NamedBit>(bits: &[B]) -> Flags<B> {
+        bits.iter().copied().collect()
+    }
+
+    fn unit2() -> Unit {
+        Unit::new(2).expect("unit 2")
+    }
+
+    fn twin() -> CrossTwin {
+        CrossTwin::new(unit2(), 7)
+    }
+
+    /// Sends `request` bytes to the twin and decodes its answer, if any.
+    fn exchange(
+        twin: &mut CrossTwin,
+        bytes: &[u8],
+        now: Instant,
+    ) -> Option<(Duration, ResponseAdu)> {
+        let input = match RequestCodec.decode(bytes) {
+            Ok(Some((adu, len))) => {
+                assert_eq!(len, bytes.len());
+                Ok(adu)
+            }
+            Ok(None) => panic!("incomplete request {bytes:02X?}"),
+            Err(e) => Err(e),
+        };
+        let mut out = twin.handle(input, now);
+        assert!(out.len() <= 1);
+        let tx = out.pop()?;
+        let (adu, len) = decode_response(&tx.bytes)
+            .expect("the twin sends valid frames")
+            .expect("whole frame");
+        assert_eq!(len, tx.bytes.len());
+        Some((tx.delay, adu))
+    }
+
+    fn read_state(twin: &mut CrossTwin, now: Instant) -> CrossState {
+        let mut blocks = Vec::new();
+        for (start, count) in read_plan() {
+            let request = Addressed::new(
+                unit2(),
+                Request::read_holding_registers(start, count).expect("plan"),
+            );
+            let (_, response) =
+                exchange(twin, &request.to_adu().to_bytes(), now).expect("an answer");
+            match check_response(&request, &response) {
+                Ok(Answer::Registers(words)) => blocks.push((start, words)),
+                other => panic!("read of 0x{start:02X}+{count}: {other:?}"),
+            }
+        }
+        CrossState::from_blocks(&blocks).expect("the plan covers the map")
+    }
+
+    fn refusal(twin: &mut CrossTwin, frame: &[u8]) -> Option<ExceptionCode> {
+        let mut bytes = frame.to_vec();
+        append_crc(&mut bytes, 0);
+        match exchange(twin, &bytes, Instant::now()) {
+            Some((
+                _,
+                ResponseAdu {
+                    response: Response::Exception(e),
+                    ..
+                },
+            )) => {
+                assert_eq!(e.function.get(), frame[1] & !EXCEPTION_BIT);
+                Some(e.code)
+            }
+            Some((_, other)) => panic!("expected an exception, got {other:?}"),
+            None => None,
+        }
+    }
+
+    // --- Consistency of the state ---
+
+    #[test]
+    fn healthy_twin_feeds_the_load_from_s1_with_everything_normal() {
+        let mut twin = twin();
+        let state = read_state(&mut twin, Instant::now());
+        let s = &state.internal;
+        assert_eq!(state.feed(), Feed::StaticSwitch(Source::S1));
+        assert!(state.alarms().is_empty(), "{:?}", state.alarms());
+        assert!(s.s1.on.contains(S1On::Normal) && s.s2.on.contains(S2On::Normal));
+        assert_eq!(s.s1_switch.on, flags(&[S1SwitchOn::LoadOnSource1]));
+        assert_eq!(s.s2_switch.off, flags(&[S2SwitchOff::LoadOnSource1]));
+        assert_eq!(s.load.on, flags(&[LoadOn::OutputNormal]));
+        assert_eq!(s.system.on, flags(&[SystemOn::Normal]));
+        assert_eq!(
+            state.mimic.on,
+            flags(&[
+                Element::S1,
+                Element::S2,
+                Element::S1Switch,
+                Element::Load,
+                Element::System,
+                Element::Is1,
+                Element::Is2,
+                Element::Iout
+            ])
+        );
+        assert_eq!(
+            state.mimic.off,
+            flags(&[Element::S2Switch, Element::Iby1, Element::Iby2])
+        );
+        assert!(state.mimic.alarm.is_clear());
+        let lit: Vec<u8> = state.mimic.segments.lit().map(Segment::number).collect();
+        assert_eq!(lit, vec![1, 2, 3, 4, 6, 7, 9, 11, 13, 14, 15]);
+        assert_eq!(state.ratings.protocol_revision, 5);
+        let m = &state.measures;
+        for v in m
+            .s1_voltage
+            .to_array()
+            .into_iter()
+            .chain(m.s2_voltage.to_array())
+            .chain(m.output_voltage.to_array())
+        {
+            assert!((2270..=2330).contains(&v.raw()), "{v}");
+        }
+        assert!(
+            (4997..=5003).contains(&m.s1_frequency.raw()),
+            "{}",
+            m.s1_frequency
+        );
+        assert_eq!(m.output_frequency, m.s1_frequency);
+        // 40 kVA over three phases at 230 V: about 58 A per phase.
+        for a in m.output_current.to_array() {
+            assert!((540..=620).contains(&a.raw()), "{a}");
+        }
+        assert!(
+            (390..=410).contains(&m.load_power.raw()),
+            "{}",
+            m.load_power
+        );
+    }
+
+    #[test]
+    fn preferred_source_failure_transfers_the_load_and_every_word_follows() {
+        let mut twin = twin();
+        twin.fail_source(Source::S1);
+        assert_eq!(twin.conducting(), Some(Source::S2));
+        assert_eq!(twin.transfers(), 1);
+        let state = read_state(&mut twin, Instant::now());
+        let s = &state.internal;
+        assert_eq!(state.feed(), Feed::StaticSwitch(Source::S2));
+        assert!(state.on_reserve_line());
+        assert_eq!(
+            s.s1.alarm,
+            flags(&[S1Alarm::Failure, S1Alarm::VoltageFault])
+        );
+        assert!(!s.s1.on.contains(S1On::Normal));
+        assert!(s.s2.on.contains(S2On::Normal) && s.s2.alarm.is_clear());
+        assert_eq!(s.s1_switch.on, Flags::empty());
+        assert_eq!(s.s1_switch.off, flags(&[S1SwitchOff::LoadOnSource2]));
+        assert_eq!(s.s2_switch.on, flags(&[S2SwitchOn::LoadOnSource2]));
+        assert_eq!(s.s2_switch.off, Flags::empty());
+        assert_eq!(
+            s.load.on,
+            flags(&[LoadOn::OutputNormal, LoadOn::OnReserveLine])
+        );
+        assert!(s.load.alarm.is_clear());
+        assert!(s.system.alarm.contains(SystemAlarm::SourcesOutOfSync));
+        assert!(!s.system.on.contains(SystemOn::Normal));
+        let lamps = |e| state.mimic.lamps(e);
+        assert_eq!(
+            lamps(Element::S1),
+            Lamps {
+                on: false,
+                off: false,
+                alarm: true
+            }
+        );
+        assert_eq!(
+            lamps(Element::S1Switch),
+            Lamps {
+                on: false,
+                off: true,
+                alarm: false
+            }
+        );
+        assert_eq!(
+            lamps(Element::S2Switch),
+            Lamps {
+                on: true,
+                off: false,
+                alarm: false
+            }
+        );
+        assert_eq!(
+            lamps(Element::Load),
+            Lamps {
+                on: true,
+                off: false,
+                alarm: false
+            }
+        );
+        assert_eq!(
+            lamps(Element::System),
+            Lamps {
+                on: false,
+                off: false,
+                alarm: true
+            }
+        );
+        let lit: Vec<u8> = state.mimic.segments.lit().map(Segment::number).collect();
+        assert_eq!(lit, vec![6, 7, 8, 9, 12, 13, 14, 15]);
+        let m = &state.measures;
+        assert_eq!(m.s1_voltage, Phases::all(Volts::from_raw(0)));
+        assert_eq!(m.s1_frequency, Hertz::from_raw(0));
+        assert_eq!(m.output_frequency, m.s2_frequency);
+        for (out, s2) in m
+            .output_voltage
+            .to_array()
+            .into_iter()
+            .zip(m.s2_voltage.to_array())
+        {
+            assert!(out <= s2 && s2.raw() - out.raw() <= 10, "{out} from {s2}");
+        }
+        assert!((390..=410).contains(&m.load_power.raw()));
+        assert_eq!(m.phase_error, Degrees::from_raw(0));
+    }
+
+    #[test]
+    fn restored_preferred_source_takes_the_load_back() {
+        let mut twin = twin();
+        twin.fail_source(Source::S1);
+        twin.restore_source(Source::S1);
+        assert_eq!(twin.conducting(), Some(Source::S1));
+        assert_eq!(twin.transfers(), 2);
+        let state = read_state(&mut twin, Instant::now());
+        assert_eq!(state.feed(), Feed::StaticSwitch(Source::S1));
+        assert!(state.alarms().is_empty());
+        assert!(!state.on_reserve_line());
+    }
+
+    #[test]
+    fn reserve_source_failure_does_not_move_the_load() {
+        let mut twin = twin();
+        twin.fail_source_with(Source::S2, SourceFault::FrequencyDrift);
+        assert_eq!(twin.conducting(), Some(Source::S1));
+        assert_eq!(twin.transfers(), 0);
+        let state = read_state(&mut twin, Instant::now());
+        assert_eq!(
+            state.internal.s2.alarm,
+            flags(&[S2Alarm::Failure, S2Alarm::FrequencyFault])
+        );
+        assert!((4690..=4710).contains(&state.measures.s2_frequency.raw()));
+        assert_eq!(state.feed(), Feed::StaticSwitch(Source::S1));
+    }
+
+    #[test]
+    fn both_sources_lost_leaves_the_load_not_supplied() {
+        let mut twin = twin();
+        twin.fail_source(Source::S1);
+        twin.fail_source(Source::S2);
+        assert_eq!(twin.conducting(), None);
+        let state = read_state(&mut twin, Instant::now());
+        assert_eq!(state.feed(), Feed::NotSupplied);
+        assert!(state.internal.load.alarm.contains(LoadAlarm::NotSupplied));
+        assert_eq!(
+            state.mimic.lamps(Element::Load),
+            Lamps {
+                on: false,
+                off: false,
+                alarm: true
+            }
+        );
+        assert_eq!(
+            state.measures.output_voltage,
+            Phases::all(Volts::from_raw(0))
+        );
+        assert_eq!(state.measures.load_power, KiloVoltAmperes::from_raw(0));
+        assert!(state.mimic.segments.lit().all(|s| s.number() != 13));
+        // Source 2 comes back: the load goes to it even though S1 is preferred.
+        twin.restore_source(Source::S2);
+        assert_eq!(
+            read_state(&mut twin, Instant::now()).feed(),
+            Feed::StaticSwitch(Source::S2)
+        );
+    }
+
+    #[test]
+    fn degraded_source_keeps_the_load_when_the_other_is_gone() {
+        let mut twin = twin();
+        twin.fail_source(Source::S2);
+        twin.fail_source_with(Source::S1, SourceFault::Undervoltage);
+        assert_eq!(twin.conducting(), Some(Source::S1));
+        let state = read_state(&mut twin, Instant::now());
+        assert_eq!(state.internal.load.on, flags(&[LoadOn::OnBadSource]));
+        assert!((1760..=1830).contains(&state.measures.output_voltage.u.raw()));
+    }
+
+    #[test]
+    fn s2_preferred_twin_feeds_from_s2() {
+        let mut twin = twin();
+        twin.set_preferred(Source::S2);
+        assert_eq!(twin.conducting(), Some(Source::S2));
+        let state = read_state(&mut twin, Instant::now());
+        assert_eq!(state.feed(), Feed::StaticSwitch(Source::S2));
+        assert!(!state.on_reserve_line());
+    }
+
+    #[test]
+    fn opening_the_feeding_input_breaker_transfers_the_load() {
+        let mut twin = twin();
+        twin.set_breaker(Breaker::Is1, false);
+        assert_eq!(twin.conducting(), Some(Source::S2));
+        let state = read_state(&mut twin, Instant::now());
+        assert!(state.internal.s1.off.contains(S1Off::BreakerOpen));
+        assert!(state.internal.s1.on.contains(S1On::Normal));
+        assert_eq!(
+            state.mimic.lamps(Element::Is1),
+            Lamps {
+                on: false,
+                off: true,
+                alarm: false
+            }
+        );
+        assert_eq!(
+            state.mimic.lamps(Element::S1),
+            Lamps {
+                on: false,
+                off: true,
+                alarm: false
+            }
+        );
+    }
+
+    #[test]
+    fn open_output_breaker_disconnects_the_load() {
+        let mut twin = twin();
+        twin.set_breaker(Breaker::Iout, false);
+        let state = read_state(&mut twin, Instant::now());
+        assert_eq!(state.feed(), Feed::OutputBreakerOpen);
+        assert!(state.internal.load.alarm.is_clear());
+        assert_eq!(
+            state.mimic.lamps(Element::Load),
+            Lamps {
+                on: false,
+                off: true,
+                alarm: false
+            }
+        );
+        assert_eq!(
+            state.measures.output_current,
+            Phases::all(Amperes::from_raw(0))
+        );
+        assert!(
+            state.measures.output_voltage.u.raw() > 2000,
+            "the bus stays live"
+        );
+    }
+
+    #[test]
+    fn closed_bypass_feeds_the_load_and_raises_its_alarm() {
+        let mut twin = twin();
+        twin.set_breaker(Breaker::Iby2, true);
+        let state = read_state(&mut twin, Instant::now());
+        assert_eq!(state.feed(), Feed::Bypass(Source::S2));
+        assert!(
+            state
+                .internal
+                .system
+                .alarm
+                .contains(SystemAlarm::BypassS2Closed)
+        );
+        assert!(state.on_reserve_line());
+        assert!(state.mimic.segments.is_lit(Segment::new(10).expect("10")));
+    }
+
+    #[test]
+    fn overload_times_out_after_a_minute_of_device_time() {
+        let mut twin = twin();
+        twin.set_load(80.0);
+        let start = Instant::now();
+        let first = twin.reading(start);
+        assert!(first.internal.load.on.contains(LoadOn::OutputOverload));
+        assert!(
+            first
+                .internal
+                .s1_switch
+                .on
+                .contains(S1SwitchOn::SourceOverload)
+        );
+        assert!(!first.internal.load.on.contains(LoadOn::OverloadTimeout));
+        let later = twin.reading(start + OVERLOAD_TIMEOUT);
+        assert!(later.internal.load.on.contains(LoadOn::OverloadTimeout));
+        twin.set_load(10.0);
+        let relieved = twin.reading(start + OVERLOAD_TIMEOUT * 2).internal.load.on;
+        assert_eq!(relieved, flags(&[LoadOn::OutputNormal]));
+    }
+
+    #[test]
+    fn measures_carry_noise_that_the_seed_reproduces() {
+        let now = Instant::now();
+        let (mut a, mut b, mut c) = (twin(), twin(), CrossTwin::new(unit2(), 8));
+        let readings_a: Vec<Measures> = (0..5).map(|_| a.reading(now).measures).collect();
+        let readings_b: Vec<Measures> = (0..5).map(|_| b.reading(now).measures).collect();
+        let readings_c: Vec<Measures> = (0..5).map(|_| c.reading(now).measures).collect();
+        assert_eq!(readings_a, readings_b);
+        assert_ne!(readings_a, readings_c);
+        assert!(
+            readings_a
+                .windows(2)
+                .any(|w| w[0].s1_voltage != w[1].s1_voltage)
+        );
+    }
+
+    // --- Refusals, exactly as the manual says ---
+
+    #[test]
+    fn every_function_but_3_gets_exception_1() {
+        let mut twin = twin();
+        for frame in [
+            vec![2, 1, 0, 0, 0, 1],
+            vec![2, 2, 0, 0, 0, 1],
+            vec![2, 4, 0, 0x46, 0, 1],
+            vec![2, 5, 0, 0, 0xFF, 0],
+            vec![2, 6, 0, 0, 0, 1],
+            vec![2, 15, 0, 0, 0, 1, 1, 1],
+            vec![2, 16, 0, 0, 0, 1, 2, 0, 1],
+            vec![2, 7],
+            vec![2, 8, 0, 0, 0xA5, 0x37],
+            vec![2, 9, 0, 0, 0, 0],
+            vec![2, 17],
+            vec![2, 22, 0, 4, 0, 0xF2, 0, 0x25],
+            vec![2, 0x2B, 0x0E, 1, 0],
+        ] {
+            assert_eq!(
+                refusal(&mut twin, &frame),
+                Some(ExceptionCode::ILLEGAL_FUNCTION),
+                "function {}",
+                frame[1]
+            );
+        }
+    }
+
+    #[test]
+    fn the_manuals_function_9_example_gets_89_01() {
+        let mut twin = CrossTwin::new(Unit::new(1).expect("1"), 0);
+        let mut bytes = vec![1, 9, 0, 0, 0, 0];
+        append_crc(&mut bytes, 0);
+        let out = twin.handle(
+            RequestCodec.decode(&bytes).map(|r| r.expect("whole").0),
+            Instant::now(),
+        );
+        let mut expected = vec![1, 0x89, 1];
+        append_crc(&mut expected, 0);
+        assert_eq!(out, vec![Transmit::after(REPLY_DELAY, expected)]);
+    }
+
+    #[test]
+    fn reads_touching_undefined_addresses_get_exception_2() {
+        let mut twin = twin();
+        for (start, count) in [
+            (0x12u16, 1u16),
+            (0x13, 1),
+            (0x11, 2),
+            (0x10, 5),
+            (0x18, 1),
+            (0x1D, 1),
+            (0x17, 2),
+            (0x2E, 2),
+            (0x2F, 1),
+            (0x45, 1),
+            (0x45, 2),
+            (0x59, 2),
+            (0x5A, 1),
+            (0x81, 1),
+            (0x00, 125),
+            (0x1000, 10),
+            (0xFFFF, 1),
+        ] {
+            let frame = [
+                2,
+                3,
+                (start >> 8) as u8,
+                start as u8,
+                (count >> 8) as u8,
+                count as u8,
+            ];
+            assert_eq!(
+                refusal(&mut twin, &frame),
+                Some(ExceptionCode::ILLEGAL_DATA_ADDRESS),
+                "0x{start:02X}+{count}"
+            );
+        }
+        // Running past 0xFFFF is an address error too.
+        assert_eq!(
+            refusal(&mut twin, &[2, 3, 0xFF, 0xF0, 0, 100]),
+            Some(ExceptionCode::ILLEGAL_DATA_ADDRESS)
+        );
+    }
+
+    #[test]
+    fn counts_of_0_or_above_125_get_exception_3() {
+        let mut twin = twin();
+        for count in [0u16, 126, 0x7D + 1, 1000, 0xFFFF] {
+            let frame = [2, 3, 0, 0, (count >> 8) as u8, count as u8];
+            assert_eq!(
+                refusal(&mut twin, &frame),
+                Some(ExceptionCode::ILLEGAL_DATA_VALUE),
+                "count {count}"
+            );
+        }
+        // The count is checked before the addresses.
+        assert_eq!(
+            refusal(&mut twin, &[2, 3, 0, 0x12, 0, 0]),
+            Some(ExceptionCode::ILLEGAL_DATA_VALUE)
+        );
+    }
+
+    #[test]
+    fn defined_reads_of_any_size_within_an_area_are_answered() {
+        let mut twin = twin();
+        for (start, count) in [
+            (0x00u16, 18u16),
+            (0x05, 3),
+            (0x14, 4),
+            (0x17, 1),
+            (0x1E, 17),
+            (0x2E, 1),
+            (0x46, 20),
+            (0x59, 1),
+        ] {
+            let request = Addressed::new(
+                unit2(),
+                Request::read_holding_registers(start, count).expect("valid"),
+            );
+            let (_, response) =
+                exchange(&mut twin, &request.to_adu().to_bytes(), Instant::now()).expect("answer");
+            assert!(
+                matches!(check_response(&request, &response), Ok(Answer::Registers(w)) if w.len() == usize::from(count))
+            );
+        }
+    }
+
+    #[test]
+    fn bad_crc_another_unit_and_broadcast_get_silence() {
+        let mut twin = twin();
+        let now = Instant::now();
+        let good = Addressed::new(
+            unit2(),
+            Request::read_holding_registers(0, 18).expect("valid"),
+        )
+        .to_adu()
+        .to_bytes();
+        let mut bad = good.clone();
+        bad[7] ^= 0x01;
+        assert!(
+            twin.handle(RequestCodec.decode(&bad).map(|r| r.expect("whole").0), now)
+                .is_empty()
+        );
+        let other = Addressed::new(
+            Unit::new(3).expect("3"),
+            Request::read_holding_registers(0, 18).expect("valid"),
+        );
+        assert!(exchange(&mut twin, &other.to_adu().to_bytes(), now).is_none());
+        let mut broadcast = vec![0, 3, 0, 0, 0, 18];
+        append_crc(&mut broadcast, 0);
+        assert!(exchange(&mut twin, &broadcast, now).is_none());
+        let mut broadcast_write = vec![0, 6, 0, 0, 0, 1];
+        append_crc(&mut broadcast_write, 0);
+        assert!(exchange(&mut twin, &broadcast_write, now).is_none());
+        // The exception bit in a request's function byte: no valid answer, silence.
+        assert_eq!(refusal(&mut twin, &[2, 0x83, 0, 0]), None);
+        assert!(exchange(&mut twin, &good, now).is_some());
+    }
+
+    #[test]
+    fn jbus_unit_255_is_served() {
+        let unit = Unit::jbus(255).expect("JBUS allows 255");
+        let mut twin = CrossTwin::new(unit, 1);
+        let request = Addressed::new(
+            unit,
+            Request::read_holding_registers(0x2E, 1).expect("valid"),
+        );
+        let (delay, response) =
+            exchange(&mut twin, &request.to_adu().to_bytes(), Instant::now()).expect("answer");
+        assert_eq!(delay, REPLY_DELAY);
+        assert_eq!(
+            check_response(&request, &response),
+            Ok(Answer::Registers(vec![PROTOCOL_REVISION]))
+        );
+    }
+
+    #[test]
+    fn a_shared_twin_answers_a_stream_split_anywhere() {
+        let model = SharedModel::new(twin().with_reply_delay(Duration::from_millis(3)));
+        let mut line = model.line();
+        let request = Addressed::new(
+            unit2(),
+            Request::read_holding_registers(0x46, 20).expect("valid"),
+        );
+        let bytes = request.to_adu().to_bytes();
+        let now = Instant::now();
+        let mut replies = Vec::new();
+        for chunk in bytes.chunks(3) {
+            replies.extend(line.receive(chunk, now));
+        }
+        assert_eq!(replies.len(), 1);
+        assert_eq!(replies[0].delay, Duration::from_millis(3));
+        model.lock().fail_source(Source::S1);
+        assert_eq!(model.lock().conducting(), Some(Source::S2));
+    }
+}

@@ -1,0 +1,38 @@
+//! The Chloride CROSS static transfer switch over JBUS: its register map as named, typed,
+//! scaled values, and a twin of the switch.
+//!
+//! The CROSS answers function 3 only, on four areas (see [`map`]). A client reads them
+//! with the requests of [`read_plan`] (one per area), then decodes the answers with
+//! [`CrossState::from_blocks`]:
+//!
+//! ```
+//! use jbus::cross::{CrossState, read_plan};
+//! # let words = |start: u16, count: u16| vec![0u16; count as usize];
+//! let blocks: Vec<(u16, Vec<u16>)> =
+//!     read_plan().into_iter().map(|(start, count)| (start, words(start, count))).collect();
+//! let state = CrossState::from_blocks(&blocks).expect("every area read");
+//! println!("{state}"); // which source feeds the load, alarms, measures with units
+//! ```
+//!
+//! - [`bits`]: the six operating conditions (S1, S2, S1-SW, S2-SW, LOAD, SYSTEM), each an
+//!   off, alarm and on word of named bits.
+//! - [`mimic`]: the mimic diagram's 15 segments and the lamps of its 11 elements.
+//! - [`measure`]: ratings and measures with their units and scaling.
+//! - [`state`]: [`CrossState`], all of it, shown in words.
+//! - [`device`]: [`device::CrossTwin`], the simulated switch.
+
+pub mod bits;
+pub mod device;
+pub mod map;
+pub mod measure;
+pub mod mimic;
+pub mod state;
+
+pub use bits::{Condition, Flags, InternalState, NamedBit};
+pub use map::{Area, MAP_LEN, addr, block_is_defined, is_defined, read_plan, read_requests};
+pub use measure::{
+    Amperes, Celsius, Degrees, Hertz, KiloVoltAmperes, Measures, Phases, Ratings, Volts,
+    WholeAmperes,
+};
+pub use mimic::{Element, Lamps, Mimic, Segment, Segments};
+pub use state::{CrossState, Feed, MissingWord, Source};
