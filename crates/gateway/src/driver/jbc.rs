@@ -1,0 +1,782 @@
+//! The JBC JTSE hot-air station as points, through `jbc::client`.
+//!
+//! Groups: `live` (1 s: temperatures, power, set points, status, errors, tool), `settings`
+//! (10 s: limits, adjust temperatures, work mode, external set point) and `info` (60 s:
+//! model and counters). At 19200 baud one read takes about 20 ms on the wire, so `live`
+//! keeps the line about 20 % busy.
+//!
+//! Writes: set points, limits, adjust temperatures, work mode and the tool (on/off, written
+//! as the port status `00001`/`00000`). Ranges are the JTSE's ([`jbc::device`]'s constants);
+//! set points are also checked against the station's own limits (`MIT`/`MAT`, `MIF`/`MAF`,
+//! `MIE`/`MAE`) as last read, so a value the station would refuse with NAK 3 never goes out.
+
+use std::collections::HashMap;
+use std::collections::hash_map::Entry;
+use std::ops::RangeInclusive;
+use std::time::Duration;
+
+use jbc::client::{Client, ClientConfig, ClientError, Trouble};
+use jbc::code::{Code, Port, StationError, Tool, ToolError};
+use jbc::device::{ADJUST_TEMP_RANGE, AIR_FLOW_RANGE, AIR_TEMP_RANGE, EXTERNAL_TEMP_RANGE};
+use jbc::frame::{Address, Route};
+use link::{SerialSettings, SharedLine};
+
+use super::{
+    BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
+};
+use crate::point::{
+    AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
+};
+
+/// A JTSE's line when the URL says nothing: 19200 baud, 8E1 (the manual's example).
+pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8e1(19200);
+
+/// Default station address (factory setting).
+pub const DEFAULT_ADDRESS: i64 = 1;
+
+/// Group read every second.
+pub const LIVE: &str = "live";
+/// Group read every 10 s.
+pub const SETTINGS: &str = "settings";
+/// Group read every minute.
+pub const INFO: &str = "info";
+
+use Meaning::{OnOff, Quantity};
+
+const PORT: Port = Port::One;
+
+/// Checks a station address: 0–99, or `None` for the form without addresses.
+pub fn check_address(address: Option<i64>) -> Result<(), String> {
+    match address {
+        None => Ok(()),
+        Some(a) if (0..=i64::from(Address::MAX)).contains(&a) => Ok(()),
+        Some(a) => Err(format!(
+            "JBC station address {a} is out of range: 0 to {} (factory default {DEFAULT_ADDRESS}), or \"none\" for the form without addresses",
+            Address::MAX
+        )),
+    }
+}
+
+/// Which part of a code's value a point shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Part {
+    /// The whole value.
+    Whole,
+    /// One digit of the port status (1 = tool on, 10 = cooling, 100 = suction).
+    StatusDigit(i32),
+}
+
+/// What a point's value means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Meaning {
+    Quantity,
+    Text,
+    OnOff,
+    ToolError,
+    StationError,
+    Tool,
+    WorkMode,
+}
+
+/// One point of the station.
+struct Def {
+    name: &'static str,
+    title: &'static str,
+    code: Code,
+    part: Part,
+    group: &'static str,
+    meaning: Meaning,
+    /// The JTSE's range for writes, if writable.
+    range: Option<RangeInclusive<i32>>,
+    /// Codes holding the lower and upper limit the station applies to writes.
+    limits: Option<(Code, Code)>,
+}
+
+const fn def(
+    name: &'static str,
+    title: &'static str,
+    code: Code,
+    group: &'static str,
+    meaning: Meaning,
+) -> Def {
+    Def {
+        name,
+        title,
+        code,
+        part: Part::Whole,
+        group,
+        meaning,
+        range: None,
+        limits: None,
+    }
+}
+
+const fn writable(mut d: Def, range: RangeInclusive<i32>) -> Def {
+    d.range = Some(range);
+    d
+}
+
+const fn limited(mut d: Def, low: Code, high: Code) -> Def {
+    d.limits = Some((low, high));
+    d
+}
+
+const fn digit(mut d: Def, place: i32) -> Def {
+    d.part = Part::StatusDigit(place);
+    d
+}
+
+/// Every point, in the order a person reads them.
+const POINTS: &[Def] = &[
+    def(
+        "air_temperature",
+        "Air temperature",
+        Code::AirTemp(PORT),
+        LIVE,
+        Quantity,
+    ),
+    limited(
+        writable(
+            def(
+                "air_temperature_setpoint",
+                "Selected air temperature",
+                Code::SelectAirTemp(PORT),
+                LIVE,
+                Quantity,
+            ),
+            AIR_TEMP_RANGE,
+        ),
+        Code::MinAirTemp,
+        Code::MaxAirTemp,
+    ),
+    limited(
+        writable(
+            def(
+                "air_flow_setpoint",
+                "Selected air flow",
+                Code::SelectAirFlow(PORT),
+                LIVE,
+                Quantity,
+            ),
+            AIR_FLOW_RANGE,
+        ),
+        Code::MinAirFlow,
+        Code::MaxAirFlow,
+    ),
+    def(
+        "external_temperature",
+        "External temperature",
+        Code::ExternalTemp(PORT),
+        LIVE,
+        Quantity,
+    ),
+    def("power", "Power", Code::PortPower(PORT), LIVE, Quantity),
+    writable(
+        digit(
+            def("tool_on", "Tool on", Code::PortStatus(PORT), LIVE, OnOff),
+            1,
+        ),
+        0..=1,
+    ),
+    digit(
+        def("cooling", "Cooling", Code::PortStatus(PORT), LIVE, OnOff),
+        10,
+    ),
+    digit(
+        def("suction", "Suction", Code::PortStatus(PORT), LIVE, OnOff),
+        100,
+    ),
+    def(
+        "tool_error",
+        "Tool error",
+        Code::PortError(PORT),
+        LIVE,
+        Meaning::ToolError,
+    ),
+    def(
+        "station_error",
+        "Station error",
+        Code::StationError,
+        LIVE,
+        Meaning::StationError,
+    ),
+    def(
+        "connected_tool",
+        "Connected tool",
+        Code::ConnectedTool(PORT),
+        LIVE,
+        Meaning::Tool,
+    ),
+    limited(
+        writable(
+            def(
+                "external_temperature_setpoint",
+                "Selected external temperature",
+                Code::SelectExternalTemp(PORT),
+                SETTINGS,
+                Quantity,
+            ),
+            EXTERNAL_TEMP_RANGE,
+        ),
+        Code::MinExternalTemp,
+        Code::MaxExternalTemp,
+    ),
+    writable(
+        def(
+            "work_mode",
+            "Work mode",
+            Code::WorkMode(PORT),
+            SETTINGS,
+            Meaning::WorkMode,
+        ),
+        0..=1,
+    ),
+    writable(
+        def(
+            "adjust_jt",
+            "Adjust temperature, JT tool",
+            Code::AdjustTemp(PORT, Tool::Jt),
+            SETTINGS,
+            Quantity,
+        ),
+        ADJUST_TEMP_RANGE,
+    ),
+    writable(
+        def(
+            "adjust_te",
+            "Adjust temperature, TE tool",
+            Code::AdjustTemp(PORT, Tool::Te),
+            SETTINGS,
+            Quantity,
+        ),
+        ADJUST_TEMP_RANGE,
+    ),
+    writable(
+        def(
+            "max_air_temperature",
+            "Maximum air temperature",
+            Code::MaxAirTemp,
+            SETTINGS,
+            Quantity,
+        ),
+        AIR_TEMP_RANGE,
+    ),
+    writable(
+        def(
+            "min_air_temperature",
+            "Minimum air temperature",
+            Code::MinAirTemp,
+            SETTINGS,
+            Quantity,
+        ),
+        AIR_TEMP_RANGE,
+    ),
+    writable(
+        def(
+            "max_air_flow",
+            "Maximum air flow",
+            Code::MaxAirFlow,
+            SETTINGS,
+            Quantity,
+        ),
+        AIR_FLOW_RANGE,
+    ),
+    writable(
+        def(
+            "min_air_flow",
+            "Minimum air flow",
+            Code::MinAirFlow,
+            SETTINGS,
+            Quantity,
+        ),
+        AIR_FLOW_RANGE,
+    ),
+    writable(
+        def(
+            "max_external_temperature",
+            "Maximum external temperature",
+            Code::MaxExternalTemp,
+            SETTINGS,
+            Quantity,
+        ),
+        EXTERNAL_TEMP_RANGE,
+    ),
+    writable(
+        def(
+            "min_external_temperature",
+            "Minimum external temperature",
+            Code::MinExternalTemp,
+            SETTINGS,
+            Quantity,
+        ),
+        EXTERNAL_TEMP_RANGE,
+    ),
+    def(
+        "model",
+        "Station model",
+        Code::StationModel,
+        INFO,
+        Meaning::Text,
+    ),
+    def(
+        "plugged_hours",
+        "Plugged hours",
+        Code::PluggedHours(PORT),
+        INFO,
+        Quantity,
+    ),
+    def(
+        "work_hours",
+        "Work hours",
+        Code::WorkHours(PORT),
+        INFO,
+        Quantity,
+    ),
+    def(
+        "tool_cycles",
+        "Tool cycles",
+        Code::ToolCycles(PORT),
+        INFO,
+        Quantity,
+    ),
+    def(
+        "suction_cycles",
+        "Suction cycles",
+        Code::SuctionCycles(PORT),
+        INFO,
+        Quantity,
+    ),
+];
+
+/// A JBC station on a line.
+pub struct JbcDriver {
+    device: DeviceId,
+    config: ClientConfig,
+    client: Option<Client>,
+    /// Last values read of the limit codes, for checking set points before the wire.
+    limits: HashMap<Code, i32>,
+}
+
+impl JbcDriver {
+    /// A driver for the station `config` describes.
+    pub fn new(config: &DriverConfig) -> Result<Self, String> {
+        check_address(config.address)?;
+        let defaults = ClientConfig::default();
+        let route = match config.address {
+            None => None,
+            Some(a) => {
+                let target = u8::try_from(a)
+                    .ok()
+                    .and_then(|a| Address::new(a).ok())
+                    .ok_or_else(|| format!("JBC station address {a} is out of range"))?;
+                Some(Route {
+                    source: Address::ROBOT,
+                    target,
+                })
+            }
+        };
+        Ok(Self {
+            device: config.id.clone(),
+            config: ClientConfig {
+                route,
+                timeout: config.timeout.unwrap_or(defaults.timeout),
+                retries: config.retries.unwrap_or(defaults.retries),
+            },
+            client: None,
+            limits: HashMap::new(),
+        })
+    }
+
+    fn point_id(&self, def: &Def) -> PointId {
+        PointId::new(&self.device, def.name).expect("point names in POINTS follow the id rules")
+    }
+
+    fn spec(&self, def: &Def) -> PointSpec {
+        let (kind, unit, alarm) = match def.meaning {
+            Quantity => (
+                PointKind::Numeric,
+                def.code.unit().map(|u| u.symbol().to_owned()),
+                None,
+            ),
+            Meaning::Text => (PointKind::Text, None, None),
+            OnOff => (
+                states([(0, "off".to_owned()), (1, "on".to_owned())]),
+                None,
+                None,
+            ),
+            Meaning::ToolError => (
+                states(
+                    ToolError::ALL
+                        .iter()
+                        .map(|e| (e.code(), e.words().to_owned())),
+                ),
+                None,
+                Some(AlarmRule::NotEqual(f64::from(ToolError::Ok.code()))),
+            ),
+            Meaning::StationError => (
+                states(
+                    StationError::ALL
+                        .iter()
+                        .map(|e| (e.code(), e.words().to_owned())),
+                ),
+                None,
+                Some(AlarmRule::NotEqual(f64::from(StationError::Ok.code()))),
+            ),
+            Meaning::Tool => (
+                states(Tool::ALL.iter().map(|t| (t.number(), t.words().to_owned()))),
+                None,
+                None,
+            ),
+            Meaning::WorkMode => (
+                states([
+                    (0, "manual (profiles off)".to_owned()),
+                    (1, "profile (profiles on)".to_owned()),
+                ]),
+                None,
+                None,
+            ),
+        };
+        PointSpec {
+            id: self.point_id(def),
+            name: def.title.to_owned(),
+            unit,
+            kind,
+            group: def.group.to_owned(),
+            writable: def.range.as_ref().map(|r| WriteRange {
+                min: f64::from(*r.start()),
+                max: f64::from(*r.end()),
+                integer: true,
+            }),
+            alarm,
+        }
+    }
+
+    async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
+        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let mut answers: HashMap<Code, Result<jbc::Reading, DeviceError>> = HashMap::new();
+        let mut readings = Vec::new();
+        for def in POINTS.iter().filter(|d| d.group == group) {
+            let answer = match answers.entry(def.code) {
+                Entry::Occupied(known) => known.into_mut(),
+                Entry::Vacant(slot) => slot.insert(match client.read(def.code).await {
+                    Ok(reading) => Ok(reading),
+                    Err(e) if point_level(&e) => Err(classify(&e)),
+                    Err(e) => return Err(classify(&e)),
+                }),
+            };
+            let value = match answer {
+                Ok(reading) => Ok(value_of(reading, def.part)),
+                Err(e) => Err(e.clone()),
+            };
+            readings.push(Reading {
+                point: PointId::new(&self.device, def.name)
+                    .expect("point names in POINTS follow the id rules"),
+                value,
+            });
+        }
+        for (code, answer) in &answers {
+            if let Ok(reading) = answer
+                && let jbc::code::Value::Number(n) = reading.value()
+            {
+                self.limits.insert(*code, n);
+            }
+        }
+        Ok(readings)
+    }
+
+    async fn write_point(&mut self, point: &PointSpec, value: &Value) -> Result<(), WriteError> {
+        let def = POINTS
+            .iter()
+            .find(|d| d.name == point.id.name())
+            .ok_or_else(|| WriteError::UnknownPoint {
+                point: point.id.clone(),
+            })?;
+        let checked = point.check_write(value)?;
+        let number = checked
+            .as_number()
+            .expect("check_write gives numbers for numeric and enumerated points");
+        // Whole and within the JTSE's range (check_write), so it fits an i32.
+        let number = number as i32;
+        if let Some((low, high)) = def.limits
+            && let (Some(&min), Some(&max)) = (self.limits.get(&low), self.limits.get(&high))
+            && !(min..=max).contains(&number)
+        {
+            return Err(WriteError::Invalid(ValueError::OutOfRange {
+                point: point.id.clone(),
+                name: format!("{}, limited by the station's {low}/{high}", point.name),
+                value: f64::from(number),
+                min: f64::from(min),
+                max: f64::from(max),
+                unit: point
+                    .unit
+                    .as_deref()
+                    .map(|u| format!(" {u}"))
+                    .unwrap_or_default(),
+            }));
+        }
+        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        client
+            .write(def.code, number)
+            .await
+            .map_err(|e| WriteError::Device(classify(&e)))
+    }
+}
+
+impl Driver for JbcDriver {
+    fn points(&self) -> Vec<PointSpec> {
+        POINTS.iter().map(|d| self.spec(d)).collect()
+    }
+
+    fn groups(&self) -> Vec<PollGroup> {
+        [
+            (LIVE, Duration::from_secs(1)),
+            (SETTINGS, Duration::from_secs(10)),
+            (INFO, Duration::from_secs(60)),
+        ]
+        .into_iter()
+        .map(|(name, period)| PollGroup {
+            name: name.to_owned(),
+            period,
+        })
+        .collect()
+    }
+
+    fn attach(&mut self, line: SharedLine) {
+        self.client = Some(Client::new(line, self.config));
+    }
+
+    fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>> {
+        Box::pin(self.poll_group(group))
+    }
+
+    fn write<'a>(
+        &'a mut self,
+        point: &'a PointSpec,
+        value: &'a Value,
+    ) -> BoxFuture<'a, Result<(), WriteError>> {
+        Box::pin(self.write_point(point, value))
+    }
+}
+
+fn states(items: impl IntoIterator<Item = (i32, String)>) -> PointKind {
+    PointKind::Enum {
+        states: items
+            .into_iter()
+            .map(|(value, label)| EnumState {
+                value: i64::from(value),
+                label,
+            })
+            .collect(),
+    }
+}
+
+fn value_of(reading: &jbc::Reading, part: Part) -> Value {
+    match (reading.value(), part) {
+        (jbc::code::Value::Number(n), Part::Whole) => Value::Number(f64::from(n)),
+        (jbc::code::Value::Number(n), Part::StatusDigit(place)) => {
+            Value::Number(f64::from((n / place) % 10))
+        }
+        (jbc::code::Value::Text(t), _) => Value::Text(t),
+    }
+}
+
+fn not_attached() -> DeviceError {
+    DeviceError::new(
+        ErrorKind::Disconnected,
+        "the line is not open yet (the gateway is connecting)",
+    )
+}
+
+/// Whether a failed read concerns one code only (the station answered, just not with a
+/// value), so the other points of the poll are still read.
+fn point_level(error: &ClientError) -> bool {
+    matches!(
+        error,
+        ClientError::Refused { .. } | ClientError::BadValue { .. } | ClientError::Request(_)
+    )
+}
+
+/// The kind of a client error.
+fn classify(error: &ClientError) -> DeviceError {
+    let kind = match error {
+        ClientError::Request(_) | ClientError::Refused { .. } => ErrorKind::Refused,
+        ClientError::BadValue { .. } => ErrorKind::Decode,
+        ClientError::NoAnswer { last, .. } => match last {
+            Trouble::Silence => ErrorKind::Timeout,
+            Trouble::Damaged(_) => ErrorKind::Decode,
+            _ => ErrorKind::Line,
+        },
+        ClientError::Line { source, .. } if source.is_fatal() => ErrorKind::Disconnected,
+        _ => ErrorKind::Line,
+    };
+    DeviceError::new(kind, error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use jbc::device::{Station, StationConfig};
+    use wire::device::SharedModel;
+
+    fn config(address: Option<i64>) -> DriverConfig {
+        DriverConfig {
+            id: DeviceId::new("jbc1").unwrap(),
+            protocol: super::super::Protocol::Jbc,
+            address,
+            timeout: Some(Duration::from_millis(200)),
+            retries: Some(1),
+        }
+    }
+
+    /// A driver attached to a station model over an in-memory line.
+    fn rig(station: StationConfig, address: Option<i64>) -> (JbcDriver, SharedModel<Station>) {
+        let model = SharedModel::new(Station::new(station));
+        let (a, b) = tokio::io::duplex(1024);
+        tokio::spawn(link::serve::serve_stream(b, model.line(), None));
+        let mut driver = JbcDriver::new(&config(address)).unwrap();
+        driver.attach(SharedLine::new(link::Line::from_stream(a, "test", None)));
+        (driver, model)
+    }
+
+    fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
+        readings
+            .iter()
+            .find(|r| r.point.name() == name)
+            .unwrap_or_else(|| panic!("no reading for {name}"))
+            .value
+            .clone()
+    }
+
+    #[test]
+    fn every_point_has_a_valid_id_and_belongs_to_a_known_group() {
+        let driver = JbcDriver::new(&config(Some(1))).unwrap();
+        let groups: Vec<String> = driver.groups().into_iter().map(|g| g.name).collect();
+        let points = driver.points();
+        assert_eq!(points.len(), POINTS.len());
+        for p in &points {
+            assert_eq!(p.id.device(), "jbc1");
+            assert!(groups.contains(&p.group), "{}", p.id);
+        }
+        let ids: std::collections::HashSet<_> = points.iter().map(|p| &p.id).collect();
+        assert_eq!(ids.len(), points.len(), "point ids are unique");
+    }
+
+    #[test]
+    fn station_addresses_outside_0_to_99_are_refused() {
+        assert!(check_address(Some(0)).is_ok());
+        assert!(check_address(Some(99)).is_ok());
+        assert!(check_address(None).is_ok());
+        let err = check_address(Some(100)).unwrap_err();
+        assert!(err.contains("0 to 99"), "{err}");
+        assert!(JbcDriver::new(&config(Some(-1))).is_err());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_live_poll_reads_temperatures_status_digits_and_errors() {
+        let (mut driver, model) = rig(StationConfig::default(), Some(1));
+        model.lock().set_tool_error(ToolError::HeaterMalfunction);
+        let readings = driver.poll(LIVE).await.unwrap();
+        assert_eq!(
+            readings.len(),
+            POINTS.iter().filter(|d| d.group == LIVE).count()
+        );
+        assert!(matches!(value(&readings, "air_temperature"), Ok(Value::Number(t)) if t < 100.0));
+        assert_eq!(value(&readings, "tool_on"), Ok(Value::Number(0.0)));
+        assert_eq!(value(&readings, "tool_error"), Ok(Value::Number(3.0)));
+        assert_eq!(value(&readings, "connected_tool"), Ok(Value::Number(1.0)));
+        let info = driver.poll(INFO).await.unwrap();
+        assert_eq!(value(&info, "model"), Ok(Value::Text("JTSE".into())));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_form_without_addresses_works_too() {
+        let station = StationConfig {
+            address: None,
+            ..StationConfig::default()
+        };
+        let (mut driver, _model) = rig(station, None);
+        let readings = driver.poll(SETTINGS).await.unwrap();
+        assert!(readings.iter().all(|r| r.value.is_ok()), "{readings:?}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn turning_the_tool_on_heats_the_air_toward_the_set_point() {
+        let (mut driver, model) = rig(StationConfig::default(), Some(1));
+        let points = driver.points();
+        let spec = |name: &str| points.iter().find(|p| p.id.name() == name).unwrap().clone();
+        driver
+            .write(&spec("air_temperature_setpoint"), &Value::Number(300.0))
+            .await
+            .unwrap();
+        driver
+            .write(&spec("tool_on"), &Value::Text("on".into()))
+            .await
+            .unwrap();
+        assert!(model.lock().port_status().tool_on);
+        tokio::time::sleep(Duration::from_secs(30)).await;
+        let readings = driver.poll(LIVE).await.unwrap();
+        assert_eq!(value(&readings, "tool_on"), Ok(Value::Number(1.0)));
+        assert_eq!(
+            value(&readings, "air_temperature_setpoint"),
+            Ok(Value::Number(300.0))
+        );
+        assert!(
+            matches!(value(&readings, "air_temperature"), Ok(Value::Number(t)) if t > 250.0),
+            "{readings:?}"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_set_point_outside_the_stations_own_limits_never_reaches_the_wire() {
+        let (mut driver, model) = rig(StationConfig::default(), Some(1));
+        let points = driver.points();
+        let spec = |name: &str| points.iter().find(|p| p.id.name() == name).unwrap().clone();
+        driver
+            .write(&spec("max_air_temperature"), &Value::Number(300.0))
+            .await
+            .unwrap();
+        driver.poll(SETTINGS).await.unwrap();
+        let before = model.lock().settings().air_temp;
+        let err = driver
+            .write(&spec("air_temperature_setpoint"), &Value::Number(400.0))
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(err, WriteError::Invalid(ValueError::OutOfRange { max, .. }) if max == 300.0),
+            "{err}"
+        );
+        assert!(err.to_string().contains("MIT/MAT"), "{err}");
+        assert_eq!(model.lock().settings().air_temp, before);
+        // The JTSE's own range is checked even before any limits were read.
+        let err = driver
+            .write(&spec("air_flow_setpoint"), &Value::Number(5.0))
+            .await
+            .unwrap_err();
+        assert!(matches!(err, WriteError::Invalid(_)), "{err}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_silent_station_is_a_timeout_and_a_refusal_marks_only_its_point() {
+        let (mut driver, model) = rig(StationConfig::default(), Some(1));
+        model.lock().set_robot_mode(false);
+        // Not in robot mode: every read gets NAK 5, point by point.
+        let readings = driver.poll(INFO).await.unwrap();
+        assert!(
+            readings
+                .iter()
+                .all(|r| matches!(&r.value, Err(e) if e.kind == ErrorKind::Refused))
+        );
+        // A station at another address never answers.
+        let (mut driver, _model) = rig(StationConfig::default(), Some(7));
+        let err = driver.poll(LIVE).await.unwrap_err();
+        assert_eq!(err.kind, ErrorKind::Timeout);
+        assert!(err.message.contains("07"), "{err}");
+    }
+
+    #[tokio::test]
+    async fn polling_before_the_line_is_attached_says_so() {
+        let mut driver = JbcDriver::new(&config(Some(1))).unwrap();
+        let err = driver.poll(LIVE).await.unwrap_err();
+        assert_eq!(err.kind, ErrorKind::Disconnected);
+    }
+}

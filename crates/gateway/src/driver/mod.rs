@@ -1,0 +1,218 @@
+//! Protocol drivers: one small module per protocol maps a device onto points.
+//!
+//! A [`Driver`] describes its device's points and poll groups, reads a group when the
+//! scheduler asks, and writes a point. It talks through its protocol crate's client over
+//! a [`link::SharedLine`] the scheduler attaches; it never opens lines, keeps no history
+//! and reads no clock. Errors are classified ([`ErrorKind`]) so the metrics can count
+//! timeouts apart from refusals and line trouble.
+//!
+//! Landed: [`jbc`] (JBC JTSE hot-air station). Thermosald, JBUS/CROSS and Panasonic get a
+//! module each when their clients land: implement [`Driver`], add a [`Protocol`] variant
+//! and its arms in [`Protocol::parse`], [`Protocol::check_address`] and [`build`].
+
+use std::fmt;
+use std::future::Future;
+use std::pin::Pin;
+use std::time::Duration;
+
+use link::{SerialSettings, SharedLine};
+use serde::Serialize;
+
+use crate::point::{DeviceId, PointId, PointSpec, Value, ValueError};
+
+pub mod jbc;
+
+/// A boxed future, so drivers of different protocols can sit in one list.
+pub type BoxFuture<'a, T> = Pin<Box<dyn Future<Output = T> + Send + 'a>>;
+
+/// A protocol driver for one device.
+pub trait Driver: Send {
+    /// Every point of the device.
+    fn points(&self) -> Vec<PointSpec>;
+
+    /// The poll groups and their default periods.
+    fn groups(&self) -> Vec<PollGroup>;
+
+    /// Gives the driver the line to talk on (again, after the scheduler reopened it).
+    fn attach(&mut self, line: SharedLine);
+
+    /// Reads every point of `group`. `Err` means the device did not answer at all (it is
+    /// then backed off); a point the device refused comes back as a failed reading.
+    fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>>;
+
+    /// Writes `value` to `point`. The caller has checked `value` against the point's
+    /// spec ([`PointSpec::check_write`]); the driver checks what depends on the device's
+    /// state (limits it read) before the wire.
+    fn write<'a>(
+        &'a mut self,
+        point: &'a PointSpec,
+        value: &'a Value,
+    ) -> BoxFuture<'a, Result<(), WriteError>>;
+}
+
+/// A group of points read together, at one period.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct PollGroup {
+    /// Its name (`live`, `settings`, `info`), used in the config to set its period.
+    pub name: String,
+    /// How often it is read.
+    pub period: Duration,
+}
+
+/// One point's outcome in a poll.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reading {
+    /// The point.
+    pub point: PointId,
+    /// Its value, or why the device would not give it.
+    pub value: Result<Value, DeviceError>,
+}
+
+/// How a request to a device failed, for metrics and for what the scheduler does next.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorKind {
+    /// No answer in time.
+    Timeout,
+    /// The device answered no (a NAK, an exception).
+    Refused,
+    /// Damaged or meaningless answers.
+    Decode,
+    /// Trouble on the line that does not close it (an echo mismatch, transmission errors
+    /// the device reported).
+    Line,
+    /// The line is gone (closed, an I/O error): the scheduler reopens it.
+    Disconnected,
+}
+
+impl ErrorKind {
+    /// Every kind, for metric labels.
+    pub const ALL: [ErrorKind; 5] = [
+        ErrorKind::Timeout,
+        ErrorKind::Refused,
+        ErrorKind::Decode,
+        ErrorKind::Line,
+        ErrorKind::Disconnected,
+    ];
+
+    /// The label (`timeout`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ErrorKind::Timeout => "timeout",
+            ErrorKind::Refused => "refused",
+            ErrorKind::Decode => "decode",
+            ErrorKind::Line => "line",
+            ErrorKind::Disconnected => "disconnected",
+        }
+    }
+}
+
+impl fmt::Display for ErrorKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A device or its line failed a request. The message is the protocol client's own
+/// (which names the endpoint, the device and what happened); the kind classifies it. It
+/// is cloneable text because one failure marks many points and travels to the API.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{message}")]
+pub struct DeviceError {
+    /// What kind of failure.
+    pub kind: ErrorKind,
+    /// The client's words.
+    pub message: String,
+}
+
+impl DeviceError {
+    /// A failure of `kind`, described by `error`.
+    pub fn new(kind: ErrorKind, error: impl fmt::Display) -> Self {
+        Self {
+            kind,
+            message: error.to_string(),
+        }
+    }
+}
+
+/// Why a write did not happen.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum WriteError {
+    /// Refused before the wire.
+    #[error(transparent)]
+    Invalid(#[from] ValueError),
+    /// The device refused it or did not answer.
+    #[error(transparent)]
+    Device(#[from] DeviceError),
+    /// The point is not one of this device's.
+    #[error("{point} is not a point of this device")]
+    UnknownPoint {
+        /// The point.
+        point: PointId,
+    },
+}
+
+/// The protocols the gateway speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Protocol {
+    /// JBC station–robot protocol (JTSE hot-air station), RS-232.
+    Jbc,
+}
+
+impl Protocol {
+    /// Names accepted in the config.
+    pub const KNOWN: &'static str = "jbc";
+
+    /// The protocol for its config name.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "jbc" => Some(Protocol::Jbc),
+            _ => None,
+        }
+    }
+
+    /// The name in the config.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Protocol::Jbc => "jbc",
+        }
+    }
+
+    /// Serial settings a line URL leaves out.
+    pub fn default_serial(self) -> SerialSettings {
+        match self {
+            Protocol::Jbc => jbc::DEFAULT_SERIAL,
+        }
+    }
+
+    /// Checks a device address; `Err` says what the protocol accepts.
+    pub fn check_address(self, address: Option<i64>) -> Result<(), String> {
+        match self {
+            Protocol::Jbc => jbc::check_address(address),
+        }
+    }
+}
+
+/// What the config says about one device, for its driver.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriverConfig {
+    /// The device's id.
+    pub id: DeviceId,
+    /// Its protocol.
+    pub protocol: Protocol,
+    /// Its address on the line, if the protocol has addresses.
+    pub address: Option<i64>,
+    /// Time to wait for each reply, if not the protocol's default.
+    pub timeout: Option<Duration>,
+    /// Retries after a failed attempt, if not the protocol's default.
+    pub retries: Option<u8>,
+}
+
+/// The driver for a device.
+pub fn build(config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
+    match config.protocol {
+        Protocol::Jbc => Ok(Box::new(jbc::JbcDriver::new(config)?)),
+    }
+}
