@@ -320,6 +320,19 @@ pub fn encode_response(frame: &ResponseAdu, out: &mut Vec<u8>) {
     append_crc(out, start);
 }
 
+/// The first complete frame with a good CRC anywhere in `buf`: `(offset, frame, length)`.
+///
+/// Without timing, bytes that look like the head of a long frame (a garbage byte followed
+/// by `0x10` and a large byte count, say) hold a decoder up until that many bytes have
+/// come. A client that sees the line fall silent (3.5 character times) with bytes still
+/// buffered can look past them with this, then drop `offset + length` bytes.
+pub fn find_frame<C: Codec>(codec: &C, buf: &[u8]) -> Option<(usize, C::Frame, usize)> {
+    (0..buf.len()).find_map(|offset| match codec.decode(buf.get(offset..)?) {
+        Ok(Some((frame, len))) => Some((offset, frame, len)),
+        _ => None,
+    })
+}
+
 /// Appends the CRC of `out[start..]`, low byte first.
 pub fn append_crc(out: &mut Vec<u8>, start: usize) {
     let crc = CRC16_MODBUS.checksum(out.get(start..).unwrap_or_default());
@@ -867,6 +880,22 @@ mod tests {
             .filter_map(Result::ok)
             .collect();
         assert_eq!(frames, vec![one_request(&good)]);
+    }
+
+    #[test]
+    fn find_frame_looks_past_a_garbage_head_that_holds_the_decoder_up() {
+        // `07 03 FA`: a read-response head announcing 250 bytes.
+        let mut buf = hex("07 03 FA");
+        let good = ResponseAdu {
+            unit: 7,
+            response: Response::ReadHoldingRegisters(RegisterValues::new(vec![42]).expect("1")),
+        };
+        buf.extend(good.to_bytes());
+        assert_eq!(decode_response(&buf), Ok(None), "held up by the head");
+        let (offset, frame, len) = find_frame(&ResponseCodec, &buf).expect("found");
+        assert_eq!((offset, len), (3, 7));
+        assert_eq!(frame, good);
+        assert_eq!(find_frame(&ResponseCodec, &hex("01 02 03")), None);
     }
 
     use crate::rtu::Addressed;
