@@ -1,1 +1,88 @@
-fn main() {}
+//! `cellbus`: talk to the cell's devices, simulate them, decode captures.
+//!
+//! This crate only parses arguments, calls the library crates and prints; no protocol
+//! logic lives here.
+#![forbid(unsafe_code)]
+
+mod decode;
+mod demo;
+mod jbc_cmd;
+mod output;
+mod sim;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// cellbus: a toolkit and gateway for a production cell's serial and legacy-protocol devices.
+///
+/// Exit codes: 0 done, 1 the device refused, did not answer, or the line failed, 2 bad
+/// arguments or configuration.
+#[derive(Debug, Parser)]
+#[command(
+    name = "cellbus",
+    version,
+    propagate_version = true,
+    max_term_width = 100
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run a simulated JBC station and a live view of it in the terminal (no hardware).
+    Demo(demo::DemoArgs),
+    /// Talk to a JBC JTSE hot-air station (RS-232 robot protocol).
+    Jbc(jbc_cmd::JbcArgs),
+    /// Run a simulated device on a TCP port or a PTY.
+    #[command(subcommand)]
+    Sim(sim::SimCommand),
+    /// Split a captured byte stream into annotated frames.
+    #[command(subcommand)]
+    Decode(decode::DecodeCommand),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_logging();
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(runtime) => runtime,
+        Err(e) => {
+            eprintln!("cellbus: cannot start the async runtime: {e}");
+            return ExitCode::from(1);
+        }
+    };
+    let result = runtime.block_on(async {
+        match cli.command {
+            Command::Demo(args) => demo::run(args).await,
+            Command::Jbc(args) => jbc_cmd::run(args).await,
+            Command::Sim(command) => sim::run(command).await,
+            Command::Decode(command) => decode::run(command),
+        }
+    });
+    // Simulators and watchers may leave tasks blocked on I/O: do not wait for them.
+    runtime.shutdown_background();
+    match result {
+        Ok(code) => code,
+        Err(err) if output::is_broken_pipe(&err) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("cellbus: {err:#}");
+            output::exit_code_for(&err)
+        }
+    }
+}
+
+/// Logs go to stderr, so stdout stays for results; `RUST_LOG=debug` shows protocol detail.
+fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
+}

@@ -886,6 +886,20 @@ impl NakReason {
         matches!(self, NakReason::Bcc | NakReason::Format)
     }
 
+    /// A few lowercase words for messages: `out of range`.
+    pub fn brief(self) -> &'static str {
+        match self {
+            NakReason::Bcc => "BCC error",
+            NakReason::Format => "format error",
+            NakReason::OutOfRange => "out of range",
+            NakReason::ControlCode => "control code not accepted",
+            NakReason::NotInRobotMode => "not in robot mode",
+            NakReason::StationModel => "station model unknown",
+            NakReason::Undefined => "undefined error",
+            NakReason::Other(_) => "error number not in the spec",
+        }
+    }
+
     /// The spec's words.
     pub fn words(self) -> &'static str {
         match self {

@@ -7,6 +7,8 @@
 //!   [`code::interpret`], which turns a station's data into a reading with words and units.
 //! - [`message`]: [`message::Request`] (checked reads and writes), [`message::Reply`], and
 //!   [`message::match_reply`], which says whether a frame answers the request in flight.
+//! - [`client`]: the async client over a [`link`] line: timeouts, retries, resync.
+//! - [`annotate`]: frames in words, for dumps of captured traffic.
 //! - [`device`]: [`device::Station`], a JTSE twin (heating curve, counters, exact NAKs) as a
 //!   pure [`wire::device::Model`] with time as a parameter.
 //!
@@ -15,6 +17,8 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod annotate;
+pub mod client;
 pub mod code;
 pub mod device;
 pub mod frame;

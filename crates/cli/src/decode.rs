@@ -1,0 +1,103 @@
+//! `cellbus decode …`: split a captured byte stream into annotated frames.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use wire::codec::Chunk;
+use wire::{Codec, Deframer};
+
+use crate::output::{self, hex, printable, usage};
+
+#[derive(Debug, Subcommand)]
+pub enum DecodeCommand {
+    /// JBC robot-protocol frames (STX … ETX BCC).
+    Jbc(Input),
+}
+
+/// Where the captured bytes come from.
+#[derive(Debug, Args)]
+pub struct Input {
+    /// Bytes in hex: `02 52 53 54 31 03 41` or `0252535431…`.
+    #[arg(value_name = "HEX", conflicts_with = "file")]
+    pub hex: Vec<String>,
+    /// A binary capture file (what a serial sniffer or `socat -x` saved).
+    #[arg(long, value_name = "FILE")]
+    pub file: Option<PathBuf>,
+}
+
+impl Input {
+    fn bytes(&self) -> anyhow::Result<Vec<u8>> {
+        match &self.file {
+            Some(path) => {
+                std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
+            }
+            None if self.hex.is_empty() => {
+                Err(usage("give the bytes as hex arguments or --file FILE"))
+            }
+            None => output::parse_hex(&self.hex),
+        }
+    }
+}
+
+pub fn run(command: DecodeCommand) -> anyhow::Result<ExitCode> {
+    match command {
+        DecodeCommand::Jbc(input) => dump(
+            jbc::frame::FrameCodec,
+            &input.bytes()?,
+            jbc::annotate::describe,
+        ),
+    }
+}
+
+/// Prints each frame and each run of dropped bytes in the stream, with its offset.
+/// Exits 1 when anything in the stream was not a good frame.
+fn dump<C: Codec>(
+    codec: C,
+    bytes: &[u8],
+    describe: impl Fn(&C::Frame) -> String,
+) -> anyhow::Result<ExitCode>
+where
+    C::Error: std::fmt::Display,
+{
+    let mut deframer = Deframer::new(codec);
+    deframer.push(bytes);
+    let (mut offset, mut bad) = (0, 0);
+    while let Some(chunk) = deframer.next_chunk() {
+        match chunk {
+            Chunk::Frame { frame, raw } => {
+                output::line(format!(
+                    "@{offset:<5} frame    {}\n       {}\n       {}",
+                    printable(&raw),
+                    hex(&raw),
+                    describe(&frame)
+                ))?;
+                offset += raw.len();
+            }
+            Chunk::Skipped { error, raw } => {
+                bad += 1;
+                output::line(format!(
+                    "@{offset:<5} dropped  {}\n       {}\n       {error}",
+                    printable(&raw),
+                    hex(&raw)
+                ))?;
+                offset += raw.len();
+            }
+        }
+    }
+    let rest = deframer.buffered();
+    if !rest.is_empty() {
+        bad += 1;
+        output::line(format!(
+            "@{offset:<5} partial  {}\n       {}\n       incomplete frame at the end of the capture",
+            printable(rest),
+            hex(rest)
+        ))?;
+    }
+    Ok(if bad == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}

@@ -1,0 +1,264 @@
+//! `cellbus jbc …`: read, write, status and watch a JBC station.
+
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use jbc::client::{Client, ClientConfig, DEFAULT_RETRIES};
+use jbc::code::{Code, Reading, Value};
+use jbc::frame::{Address, Route};
+use link::{Endpoint, Line, SerialSettings, SharedLine};
+use serde_json::{Map, json};
+
+use crate::output::{self, usage};
+
+/// The station's line defaults: 19200 baud, 8 data bits, even parity, 1 stop bit.
+pub const JBC_LINE: SerialSettings = SerialSettings::new_8e1(19200);
+
+#[derive(Debug, Args)]
+pub struct JbcArgs {
+    /// Where the station is: serial:///dev/ttyUSB0?baud=19200&framing=8E1 or tcp://host:port
+    /// (a serial server or `cellbus sim jbc`). Serial defaults: 19200 baud, 8E1.
+    #[arg(long, value_name = "URL")]
+    pub endpoint: String,
+    /// The station's address (00–99).
+    #[arg(long, default_value = "01")]
+    pub address: Address,
+    /// Our own (the robot's) address (00–99).
+    #[arg(long, default_value = "00")]
+    pub robot_address: Address,
+    /// Send frames without address fields (the station's "address off" setting).
+    #[arg(long)]
+    pub no_address: bool,
+    /// Time to wait for each reply.
+    #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
+    pub timeout: Duration,
+    /// Retries after a timeout or a damaged frame (never after a refusal).
+    #[arg(long, default_value_t = DEFAULT_RETRIES)]
+    pub retries: u8,
+    /// Print JSON instead of text.
+    #[arg(long, global = true)]
+    pub json: bool,
+    #[command(subcommand)]
+    pub action: JbcAction,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum JbcAction {
+    /// Read one value: CODE as in the manual without the R, e.g. ST1, AT1, A11, SMN, MAT.
+    Read {
+        /// The command code.
+        code: String,
+    },
+    /// Write one value: CODE without the W (ST1, SF1, PS1, MAT, …) and the value in the
+    /// code's unit (°C, %, ‰); RSP resets to factory values and takes 0.
+    Write {
+        /// The command code.
+        code: String,
+        /// The value.
+        #[arg(allow_negative_numbers = true)]
+        value: i32,
+    },
+    /// Read every readable value of the station.
+    Status,
+    /// Show air temperature, external temperature, power and port status until interrupted.
+    Watch {
+        /// Time between readings.
+        #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
+        interval: Duration,
+    },
+}
+
+pub async fn run(args: JbcArgs) -> anyhow::Result<ExitCode> {
+    let endpoint = Endpoint::parse(&args.endpoint, JBC_LINE).map_err(usage)?;
+    let route = (!args.no_address).then_some(Route {
+        source: args.robot_address,
+        target: args.address,
+    });
+    let config = ClientConfig {
+        route,
+        timeout: args.timeout,
+        retries: args.retries,
+    };
+    // Parse codes before opening the line: a bad argument never touches the device.
+    let action = Action::from_args(args.action)?;
+    let line = Line::open(&endpoint).await?;
+    let mut client = Client::new(SharedLine::new(line), config);
+    match action {
+        Action::Read(code) => read(&mut client, code, args.json).await,
+        Action::Write(code, value) => write(&mut client, code, value, args.json).await,
+        Action::Status => status(&mut client, args.json).await,
+        Action::Watch(interval) => watch(&mut client, interval, args.json).await,
+    }
+}
+
+enum Action {
+    Read(Code),
+    Write(Code, i32),
+    Status,
+    Watch(Duration),
+}
+
+impl Action {
+    fn from_args(action: JbcAction) -> anyhow::Result<Self> {
+        let code = |text: &str| text.parse::<Code>().map_err(usage);
+        Ok(match action {
+            JbcAction::Read { code: c } => Self::Read(code(&c)?),
+            JbcAction::Write { code: c, value } => Self::Write(code(&c)?, value),
+            JbcAction::Status => Self::Status,
+            JbcAction::Watch { interval } if interval.is_zero() => {
+                return Err(usage("--interval must be longer than 0"));
+            }
+            JbcAction::Watch { interval } => Self::Watch(interval),
+        })
+    }
+}
+
+/// A client error is the device's doing (exit 1), except a request refused before the wire
+/// (exit 2: the arguments were wrong).
+fn device_error(err: jbc::client::ClientError) -> anyhow::Error {
+    if err.is_device_error() {
+        err.into()
+    } else {
+        usage(err)
+    }
+}
+
+async fn read(client: &mut Client, code: Code, json: bool) -> anyhow::Result<ExitCode> {
+    let reading = client.read(code).await.map_err(device_error)?;
+    if json {
+        output::line(reading_json(code, &reading))?;
+    } else {
+        output::line(format!("{} ({code}): {reading}", code.describe()))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+async fn write(
+    client: &mut Client,
+    code: Code,
+    value: i32,
+    json: bool,
+) -> anyhow::Result<ExitCode> {
+    client.write(code, value).await.map_err(device_error)?;
+    if json {
+        output::line(json!({ "code": code.to_string(), "value": value, "ok": true }))?;
+    } else {
+        let unit = code
+            .unit()
+            .map(|u| format!(" {}", u.symbol()))
+            .unwrap_or_default();
+        output::line(format!(
+            "A{code} acknowledged: {} set to {value}{unit}",
+            code.describe()
+        ))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+async fn status(client: &mut Client, json: bool) -> anyhow::Result<ExitCode> {
+    let mut object = Map::new();
+    let mut failures = 0;
+    for code in Code::all().into_iter().filter(|c| c.readable()) {
+        let reading = client.read(code).await;
+        match (&reading, json) {
+            (Ok(reading), true) => {
+                object.insert(code.to_string(), reading_json(code, reading));
+            }
+            (Err(e), true) => {
+                object.insert(code.to_string(), json!({ "error": e.to_string() }));
+            }
+            (Ok(reading), false) => {
+                output::line(format!("{code:<4} {:<34} {reading}", code.describe()))?
+            }
+            (Err(e), false) => {
+                output::line(format!("{code:<4} {:<34} error: {e}", code.describe()))?
+            }
+        }
+        if let Err(e) = reading {
+            failures += 1;
+            if matches!(
+                e,
+                jbc::client::ClientError::NoAnswer { .. } | jbc::client::ClientError::Line { .. }
+            ) {
+                // A station that does not answer one read will not answer the others.
+                return Err(e).context("reading the station's status");
+            }
+        }
+    }
+    if json {
+        output::line(serde_json::Value::Object(object))?;
+    }
+    Ok(if failures == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+async fn watch(client: &mut Client, interval: Duration, json: bool) -> anyhow::Result<ExitCode> {
+    const WATCHED: [&str; 4] = ["AT1", "ET1", "PP1", "PS1"];
+    let codes: Vec<Code> = WATCHED
+        .iter()
+        .map(|c| c.parse().expect("the watched codes are valid"))
+        .collect();
+    if !json {
+        output::line(format!(
+            "{:<12} {:>14} {:>14} {:>8}  status",
+            "time", "air", "external", "power"
+        ))?;
+    }
+    let mut ticker = tokio::time::interval(interval);
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let started = tokio::time::Instant::now();
+    loop {
+        tokio::select! {
+            _ = ticker.tick() => {}
+            _ = tokio::signal::ctrl_c() => return Ok(ExitCode::SUCCESS),
+        }
+        let mut readings = Vec::with_capacity(codes.len());
+        for &code in &codes {
+            readings.push(client.read(code).await.map_err(device_error)?);
+        }
+        let elapsed =
+            humantime::format_duration(Duration::from_millis(started.elapsed().as_millis() as u64));
+        if json {
+            let mut object = Map::new();
+            object.insert(
+                "elapsed_ms".into(),
+                json!(started.elapsed().as_millis() as u64),
+            );
+            for (code, reading) in codes.iter().zip(&readings) {
+                object.insert(code.to_string(), reading_json(*code, reading));
+            }
+            output::line(serde_json::Value::Object(object))?;
+        } else {
+            output::line(format!(
+                "{:<12} {:>14} {:>14} {:>8}  {}",
+                elapsed.to_string(),
+                readings[0].to_string(),
+                readings[1].to_string(),
+                readings[2].to_string(),
+                readings[3]
+            ))?;
+        }
+    }
+}
+
+/// `{"code":"ST1","value":350,"unit":"°C"}`; enumerations add `"text"` with their meaning.
+fn reading_json(code: Code, reading: &Reading) -> serde_json::Value {
+    let value = match reading.value() {
+        Value::Number(n) => json!(n),
+        Value::Text(text) => json!(text),
+    };
+    let mut object = json!({
+        "code": code.to_string(),
+        "value": value,
+        "unit": reading.unit().map(|u| u.symbol()),
+    });
+    if reading.unit().is_none() && !matches!(reading.value(), Value::Text(_)) {
+        object["text"] = json!(reading.to_string());
+    }
+    object
+}

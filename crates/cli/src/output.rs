@@ -1,0 +1,133 @@
+//! Exit codes and printing shared by the subcommands.
+
+use std::io::Write;
+use std::process::ExitCode;
+
+/// A mistake in what the user asked (exit code 2), as opposed to a device or line failure
+/// (exit code 1).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+/// Makes a usage error (exit code 2) from anything printable.
+pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
+    UsageError(message.to_string()).into()
+}
+
+/// 2 for usage errors, 1 for everything else (the device refused, timed out, the line failed).
+pub fn exit_code_for(err: &anyhow::Error) -> ExitCode {
+    if err.chain().any(|cause| cause.is::<UsageError>()) {
+        ExitCode::from(2)
+    } else {
+        ExitCode::from(1)
+    }
+}
+
+/// A closed stdout (`cellbus … | head`) is not an error.
+pub fn is_broken_pipe(err: &anyhow::Error) -> bool {
+    err.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// Prints one line to stdout and flushes it, so programs reading our output see it at once.
+pub fn line(text: impl std::fmt::Display) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{text}")?;
+    out.flush()
+}
+
+/// Parses bytes written as hex: `02 52 53`, `025253`, `0x02,0x52`; whitespace, commas and
+/// colons separate.
+pub fn parse_hex(words: &[String]) -> anyhow::Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    for word in words
+        .iter()
+        .flat_map(|w| w.split(|c: char| c.is_whitespace() || c == ',' || c == ':'))
+    {
+        let digits = word
+            .strip_prefix("0x")
+            .or_else(|| word.strip_prefix("0X"))
+            .unwrap_or(word);
+        if digits.is_empty() {
+            continue;
+        }
+        if digits.len() % 2 != 0 {
+            return Err(usage(format!(
+                "{word:?} is not hex bytes: it has an odd number of digits"
+            )));
+        }
+        for pair in digits.as_bytes().chunks(2) {
+            let text = std::str::from_utf8(pair).unwrap_or("??");
+            let byte = u8::from_str_radix(text, 16).map_err(|_| {
+                usage(format!(
+                    "{word:?} is not hex bytes: {text:?} is not a hex byte"
+                ))
+            })?;
+            bytes.push(byte);
+        }
+    }
+    Ok(bytes)
+}
+
+/// Bytes as text a person can read: printable ASCII as is, others as `<STX>` or `<0xNN>`.
+pub fn printable(bytes: &[u8]) -> String {
+    bytes
+        .iter()
+        .map(|&b| match b {
+            0x02 => "<STX>".to_owned(),
+            0x03 => "<ETX>".to_owned(),
+            b'\n' => "<LF>".to_owned(),
+            b'\r' => "<CR>".to_owned(),
+            0x20..=0x7E => (b as char).to_string(),
+            _ => format!("<0x{b:02X}>"),
+        })
+        .collect()
+}
+
+/// Bytes as spaced hex.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes
+        .iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hex_input_accepts_spaced_packed_and_prefixed_bytes() {
+        let words = [
+            "02 52".to_owned(),
+            "5354".to_owned(),
+            "0x31,0x03".to_owned(),
+        ];
+        assert_eq!(
+            parse_hex(&words).unwrap(),
+            vec![0x02, 0x52, 0x53, 0x54, 0x31, 0x03]
+        );
+    }
+
+    #[test]
+    fn hex_input_with_a_bad_digit_names_it() {
+        let err = parse_hex(&["02 5G".to_owned()]).unwrap_err();
+        assert!(err.to_string().contains("\"5G\""), "{err}");
+        assert_eq!(exit_code_for(&err), ExitCode::from(2));
+        assert!(
+            parse_hex(&["123".to_owned()])
+                .unwrap_err()
+                .to_string()
+                .contains("odd number")
+        );
+    }
+
+    #[test]
+    fn printable_marks_control_bytes() {
+        assert_eq!(printable(b"\x02RST1\x03\xFF"), "<STX>RST1<ETX><0xFF>");
+    }
+}

@@ -1,0 +1,137 @@
+//! `cellbus sim …`: simulated devices on a TCP port or a PTY.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use link::SerialSettings;
+use link::serve::{Pty, serve_tcp};
+use wire::Device;
+use wire::device::FaultInjector;
+
+use crate::output::{self, usage};
+
+#[derive(Debug, Subcommand)]
+pub enum SimCommand {
+    /// A JBC JTSE hot-air station (address 01, robot mode on, JT tool connected).
+    Jbc(SimJbcArgs),
+}
+
+/// Where and how a simulator serves its device.
+#[derive(Debug, Clone, Args)]
+pub struct ServeArgs {
+    /// Listen for TCP connections here; each connection is a line to the same device.
+    /// Prints `listening on tcp://IP:PORT` first. Port 0 picks a free port.
+    #[arg(long, value_name = "IP:PORT", conflicts_with = "pty")]
+    pub listen: Option<SocketAddr>,
+    /// Create a pseudo-terminal and link its device end at PATH, so any serial program can
+    /// open PATH as a port. Prints `listening on PATH` first.
+    #[arg(long, value_name = "PATH")]
+    pub pty: Option<PathBuf>,
+    /// Seed for everything random in the simulator (measurement noise, injected faults):
+    /// the same seed gives the same run.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Share of replies, from 0 to 1, that meet a line fault: dropped, late, a flipped bit,
+    /// or garbage before it.
+    #[arg(long, value_name = "F", default_value_t = 0.0)]
+    pub fault_rate: f64,
+    /// Behave like a serial line of this speed (bit/s): requests are heard when their last
+    /// character would have arrived and replies leave at the line's character rate.
+    #[arg(long, value_name = "B")]
+    pub baud: Option<u32>,
+}
+
+#[derive(Debug, Args)]
+pub struct SimJbcArgs {
+    #[command(flatten)]
+    pub serve: ServeArgs,
+    /// The station's address on the line (00–99).
+    #[arg(long, default_value = "01")]
+    pub address: jbc::frame::Address,
+    /// Frames carry no address fields (the station's "address off" setting).
+    #[arg(long)]
+    pub no_address: bool,
+}
+
+pub async fn run(command: SimCommand) -> anyhow::Result<ExitCode> {
+    match command {
+        SimCommand::Jbc(args) => {
+            let config = jbc::device::StationConfig {
+                address: (!args.no_address).then_some(args.address),
+                ..jbc::device::StationConfig::default()
+            };
+            let station = wire::device::SharedModel::new(jbc::device::Station::new(config));
+            serve(&args.serve, SerialSettings::new_8e1(19200), move || {
+                station.line()
+            })
+            .await
+        }
+    }
+}
+
+/// Serves one device per connection (each a line to the same model) until interrupted.
+pub async fn serve<D, F>(
+    args: &ServeArgs,
+    framing: SerialSettings,
+    make: F,
+) -> anyhow::Result<ExitCode>
+where
+    D: Device,
+    F: Fn() -> D + Send + 'static,
+{
+    if !(0.0..=1.0).contains(&args.fault_rate) {
+        return Err(usage(format!(
+            "--fault-rate {} is not between 0 and 1",
+            args.fault_rate
+        )));
+    }
+    let pace = match args.baud {
+        Some(baud) if link::endpoint::BAUD_RANGE.contains(&baud) => {
+            Some(SerialSettings { baud, ..framing })
+        }
+        Some(baud) => {
+            return Err(usage(format!(
+                "--baud {baud} is not a serial speed (50 to 4000000 bit/s)"
+            )));
+        }
+        None => None,
+    };
+    let (seed, rate) = (args.seed, args.fault_rate);
+    let connection = AtomicU64::new(0);
+    // Each line gets its own fault sequence, reproducible from the seed and its order.
+    let faulty = move || {
+        let n = connection.fetch_add(1, Ordering::Relaxed);
+        FaultInjector::new(make(), seed.wrapping_add(n), rate).expect("fault rate checked above")
+    };
+    let served = if let Some(path) = &args.pty {
+        let pty =
+            Pty::create(path).with_context(|| format!("cannot serve on {}", path.display()))?;
+        output::line(format!("listening on {}", pty.link().display()))?;
+        tokio::select! {
+            served = pty.serve(faulty(), pace) => served.context("the PTY failed"),
+            _ = tokio::signal::ctrl_c() => Ok(()),
+        }
+    } else {
+        let addr = args
+            .listen
+            .unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 0)));
+        let listener = tokio::net::TcpListener::bind(addr).await.map_err(|e| {
+            let hint = if e.kind() == std::io::ErrorKind::AddrInUse {
+                "; the port is taken, try --listen 127.0.0.1:0"
+            } else {
+                ""
+            };
+            anyhow::anyhow!("cannot listen on {addr}: {e}{hint}")
+        })?;
+        output::line(format!("listening on tcp://{}", listener.local_addr()?))?;
+        tokio::select! {
+            served = serve_tcp(listener, faulty, pace) => served.context("the listener failed"),
+            _ = tokio::signal::ctrl_c() => Ok(()),
+        }
+    };
+    served.map(|()| ExitCode::SUCCESS)
+}
