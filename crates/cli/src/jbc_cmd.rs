@@ -145,12 +145,13 @@ async fn write(
     if json {
         output::line(json!({ "code": code.to_string(), "value": value, "ok": true }))?;
     } else {
-        let unit = code
-            .unit()
-            .map(|u| format!(" {}", u.symbol()))
-            .unwrap_or_default();
+        // Say the value the way a read shows it: `380 °C`, `tool on, cooling off, …`.
+        let shown = jbc::frame::Data::number(value)
+            .ok()
+            .and_then(|data| jbc::code::interpret(code, &data).ok())
+            .map_or_else(|| value.to_string(), |reading| reading.to_string());
         output::line(format!(
-            "A{code} acknowledged: {} set to {value}{unit}",
+            "A{code} acknowledged: {} set to {shown}",
             code.describe()
         ))?;
     }
@@ -160,7 +161,13 @@ async fn write(
 async fn status(client: &mut Client, json: bool) -> anyhow::Result<ExitCode> {
     let mut object = Map::new();
     let mut failures = 0;
-    for code in Code::all().into_iter().filter(|c| c.readable()) {
+    let codes: Vec<Code> = Code::all().into_iter().filter(|c| c.readable()).collect();
+    let width = codes
+        .iter()
+        .map(|c| c.describe().chars().count())
+        .max()
+        .unwrap_or(0);
+    for code in codes {
         let reading = client.read(code).await;
         match (&reading, json) {
             (Ok(reading), true) => {
@@ -170,10 +177,10 @@ async fn status(client: &mut Client, json: bool) -> anyhow::Result<ExitCode> {
                 object.insert(code.to_string(), json!({ "error": e.to_string() }));
             }
             (Ok(reading), false) => {
-                output::line(format!("{code:<4} {:<34} {reading}", code.describe()))?
+                output::line(format!("{code:<4} {:<width$}  {reading}", code.describe()))?
             }
             (Err(e), false) => {
-                output::line(format!("{code:<4} {:<34} error: {e}", code.describe()))?
+                output::line(format!("{code:<4} {:<width$}  error: {e}", code.describe()))?
             }
         }
         if let Err(e) = reading {
@@ -221,8 +228,7 @@ async fn watch(client: &mut Client, interval: Duration, json: bool) -> anyhow::R
         for &code in &codes {
             readings.push(client.read(code).await.map_err(device_error)?);
         }
-        let elapsed =
-            humantime::format_duration(Duration::from_millis(started.elapsed().as_millis() as u64));
+        let elapsed = format!("{:.1} s", started.elapsed().as_secs_f64());
         if json {
             let mut object = Map::new();
             object.insert(
