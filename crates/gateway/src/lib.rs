@@ -2,7 +2,11 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod cell;
+pub mod config;
 pub mod driver;
+pub mod metrics;
 pub mod point;
+pub mod scheduler;
 pub mod store;
 pub mod time;

@@ -116,7 +116,7 @@ impl fmt::Display for ErrorKind {
 /// A device or its line failed a request. The message is the protocol client's own
 /// (which names the endpoint, the device and what happened); the kind classifies it. It
 /// is cloneable text because one failure marks many points and travels to the API.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, Serialize)]
 #[error("{message}")]
 pub struct DeviceError {
     /// What kind of failure.
@@ -150,6 +150,12 @@ pub enum WriteError {
     UnknownPoint {
         /// The point.
         point: PointId,
+    },
+    /// The device's poller is not running (the gateway is stopping).
+    #[error("the poller of line {line} is not running; the gateway may be stopping")]
+    NotRunning {
+        /// The line.
+        line: String,
     },
 }
 

@@ -1,0 +1,665 @@
+//! The live state of the cell: every device and point with value, time and quality, the
+//! lines' health, and the stream of changes the web page and SSE clients follow.
+//!
+//! The [`scheduler`](crate::scheduler) tasks are the only writers of this state; the HTTP
+//! handlers read snapshots ([`Cell::devices`], [`Cell::lines`]) and send writes through
+//! [`Cell::write`], which checks the value and hands it to the line's task, so a write is
+//! serialised with the polls of its line.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
+use std::time::Duration;
+
+use serde::Serialize;
+use tokio::sync::{broadcast, mpsc, oneshot};
+
+use crate::config::CellConfig;
+use crate::driver::{self, DeviceError, Driver, PollGroup, Protocol, WriteError};
+use crate::metrics::Metrics;
+use crate::point::{DeviceId, PointId, PointKind, PointSpec, Quality, Value};
+use crate::scheduler::{LineTask, Opener};
+use crate::store::{Event, EventKind, StoreHandle};
+use crate::time::{Timestamp, duration_millis};
+
+/// Messages kept for slow event-stream clients before they miss some.
+const LIVE_CAPACITY: usize = 4096;
+
+/// Queued writes per line.
+const WRITE_QUEUE: usize = 32;
+
+/// The cell.
+#[derive(Debug)]
+pub struct Cell {
+    devices: BTreeMap<DeviceId, Arc<DeviceEntry>>,
+    lines: Vec<Arc<LineEntry>>,
+    live: broadcast::Sender<LiveMessage>,
+    store: StoreHandle,
+    metrics: Arc<Metrics>,
+}
+
+/// One device: what it is and its live state.
+#[derive(Debug)]
+pub struct DeviceEntry {
+    /// Its id.
+    pub id: DeviceId,
+    /// Words for people.
+    pub name: String,
+    /// Its protocol.
+    pub protocol: Protocol,
+    /// The line it is on.
+    pub line: String,
+    /// Its address on the line.
+    pub address: Option<i64>,
+    /// Its points.
+    pub points: Vec<PointSpec>,
+    /// Its poll groups, with the periods in force.
+    pub groups: Vec<PollGroup>,
+    index: HashMap<String, usize>,
+    state: RwLock<DeviceState>,
+    writes: mpsc::Sender<WriteRequest>,
+}
+
+/// Whether a device answers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DeviceStatus {
+    /// Not polled yet.
+    Connecting,
+    /// Answered its last poll.
+    Up,
+    /// Did not answer; backed off.
+    Down,
+}
+
+/// The changing part of a device.
+#[derive(Debug, Clone)]
+pub struct DeviceState {
+    /// Up, down or connecting.
+    pub status: DeviceStatus,
+    /// Since when.
+    pub since: Timestamp,
+    /// Why it is down, or the last error of a point-level refusal.
+    pub error: Option<DeviceError>,
+    /// Its last answered poll.
+    pub last_ok: Option<Timestamp>,
+    /// Failed polls in a row.
+    pub failures: u32,
+    /// When it is tried next while backed off.
+    pub next_try_at: Option<Timestamp>,
+    /// Points, in the order of [`DeviceEntry::points`].
+    pub points: Vec<PointState>,
+}
+
+/// The changing part of a point.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointState {
+    /// Last value read.
+    pub value: Option<Value>,
+    /// When it was last read (good) or last failed (bad).
+    pub t: Option<Timestamp>,
+    /// Good or bad (stale is judged when shown, from `t` and the period).
+    pub quality: Option<Quality>,
+    /// Why the last read failed.
+    pub error: Option<String>,
+    /// Whether the value is in alarm.
+    pub alarm: bool,
+}
+
+/// One line and its health.
+#[derive(Debug)]
+pub struct LineEntry {
+    /// Its name.
+    pub name: String,
+    /// Its endpoint, as text.
+    pub endpoint: String,
+    /// Devices on it, in poll order.
+    pub devices: Vec<DeviceId>,
+    state: RwLock<LineState>,
+}
+
+/// How a line is doing.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct LineState {
+    /// Whether it is open.
+    pub open: bool,
+    /// Why it is not.
+    pub error: Option<String>,
+    /// Share of the last window spent on requests (0–1).
+    pub utilisation: f64,
+    /// Polls per second over the last window.
+    pub polls_per_second: f64,
+    /// Failed polls per second over the last window.
+    pub errors_per_second: f64,
+}
+
+/// A change pushed to event-stream clients.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum LiveMessage {
+    /// A point's value or quality changed.
+    Value(PointView),
+    /// A device went up or down.
+    Device(DeviceSummary),
+    /// An event was recorded.
+    Event(Event),
+}
+
+impl LiveMessage {
+    /// The SSE event name (`value`, `device`, `event`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            LiveMessage::Value(_) => "value",
+            LiveMessage::Device(_) => "device",
+            LiveMessage::Event(_) => "event",
+        }
+    }
+}
+
+/// A point as the API shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PointView {
+    /// `device.point`.
+    pub id: PointId,
+    /// Words.
+    pub name: String,
+    /// Unit symbol.
+    pub unit: Option<String>,
+    /// Current value, if ever read.
+    pub value: Option<Value>,
+    /// The label of an enumerated value.
+    pub text: Option<String>,
+    /// Good, stale or bad; `null` before the first poll.
+    pub quality: Option<Quality>,
+    /// When it was last read.
+    pub t: Option<Timestamp>,
+    /// Why the last read failed.
+    pub error: Option<String>,
+    /// Whether the value is in alarm.
+    pub alarm: bool,
+    /// Its poll group's period, ms (a value older than a few periods is stale).
+    pub period_ms: i64,
+}
+
+/// A point with its description, for device listings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PointDetail {
+    /// The live part.
+    #[serde(flatten)]
+    pub view: PointView,
+    /// Number, text or enumeration with its states.
+    pub kind: PointKind,
+    /// The poll group.
+    pub group: String,
+    /// The write range, if writable.
+    pub writable: Option<crate::point::WriteRange>,
+}
+
+/// A device's status without its points.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DeviceSummary {
+    /// Its id.
+    pub id: DeviceId,
+    /// Up, down or connecting.
+    pub status: DeviceStatus,
+    /// Since when.
+    pub since: Timestamp,
+    /// Why it is down.
+    pub error: Option<DeviceError>,
+    /// Last answered poll.
+    pub last_ok: Option<Timestamp>,
+    /// Failed polls in a row.
+    pub failures: u32,
+    /// Next try while backed off.
+    pub next_try_at: Option<Timestamp>,
+}
+
+/// A device as the API shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DeviceView {
+    /// Its id.
+    pub id: DeviceId,
+    /// Words.
+    pub name: String,
+    /// Its protocol.
+    pub protocol: Protocol,
+    /// Its line.
+    pub line: String,
+    /// Its address.
+    pub address: Option<i64>,
+    /// Status.
+    #[serde(flatten)]
+    pub summary: DeviceSummary,
+    /// Milliseconds until the next try while backed off.
+    pub next_try_in_ms: Option<i64>,
+    /// Poll groups with their periods (ms).
+    pub groups: Vec<GroupView>,
+    /// Points with values.
+    pub points: Vec<PointDetail>,
+}
+
+/// A poll group as the API shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GroupView {
+    /// Its name.
+    pub name: String,
+    /// Its period, ms.
+    pub period_ms: i64,
+}
+
+/// A line as the API shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LineView {
+    /// Its name.
+    pub name: String,
+    /// Its endpoint.
+    pub endpoint: String,
+    /// Devices on it.
+    pub devices: Vec<DeviceId>,
+    /// Devices backed off now.
+    pub backed_off: Vec<DeviceId>,
+    /// Health.
+    #[serde(flatten)]
+    pub state: LineState,
+}
+
+/// A write for a line's task.
+#[derive(Debug)]
+pub(crate) struct WriteRequest {
+    pub device: DeviceId,
+    pub point: usize,
+    pub value: Value,
+    pub reply: oneshot::Sender<Result<(), WriteError>>,
+}
+
+/// What a write changed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WriteOutcome {
+    /// The value before, as last read.
+    pub old: Option<Value>,
+    /// The value written, as sent (labels turned into numbers).
+    pub new: Value,
+}
+
+/// Opens lines by their endpoint URL.
+pub fn endpoint_opener(endpoint: link::Endpoint) -> Opener {
+    Arc::new(move || {
+        let endpoint = endpoint.clone();
+        Box::pin(async move { link::Line::open(&endpoint).await.map_err(|e| e.to_string()) })
+    })
+}
+
+impl Cell {
+    /// The cell `config` describes, with one task per line to run; lines are opened by
+    /// their endpoints.
+    pub fn new(
+        config: &CellConfig,
+        store: StoreHandle,
+        metrics: Arc<Metrics>,
+    ) -> Result<(Arc<Cell>, Vec<LineTask>), String> {
+        Self::with_openers(config, store, metrics, |line| {
+            endpoint_opener(line.endpoint.clone())
+        })
+    }
+
+    /// Like [`Cell::new`], with the lines opened by `opener` (tests use in-memory lines).
+    pub fn with_openers(
+        config: &CellConfig,
+        store: StoreHandle,
+        metrics: Arc<Metrics>,
+        opener: impl Fn(&crate::config::LineConfig) -> Opener,
+    ) -> Result<(Arc<Cell>, Vec<LineTask>), String> {
+        let (live, _) = broadcast::channel(LIVE_CAPACITY);
+        let now = Timestamp::now();
+        let mut devices = BTreeMap::new();
+        let mut lines = Vec::new();
+        let mut plans = Vec::new();
+        for line in &config.lines {
+            let (writes_tx, writes_rx) = mpsc::channel(WRITE_QUEUE);
+            let mut slots: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)> = Vec::new();
+            for device in &line.devices {
+                let driver = driver::build(&device.driver)?;
+                let points = driver.points();
+                let groups = driver
+                    .groups()
+                    .into_iter()
+                    .map(|g| PollGroup {
+                        period: device
+                            .groups
+                            .get(&g.name)
+                            .copied()
+                            .or(device.period)
+                            .unwrap_or(g.period),
+                        name: g.name,
+                    })
+                    .collect();
+                let index = points
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| (p.id.name().to_owned(), i))
+                    .collect();
+                let entry = Arc::new(DeviceEntry {
+                    id: device.driver.id.clone(),
+                    name: device.name.clone(),
+                    protocol: device.driver.protocol,
+                    line: line.name.clone(),
+                    address: device.driver.address,
+                    state: RwLock::new(DeviceState {
+                        status: DeviceStatus::Connecting,
+                        since: now,
+                        error: None,
+                        last_ok: None,
+                        failures: 0,
+                        next_try_at: None,
+                        points: vec![PointState::default(); points.len()],
+                    }),
+                    points,
+                    groups,
+                    index,
+                    writes: writes_tx.clone(),
+                });
+                if devices
+                    .insert(entry.id.clone(), Arc::clone(&entry))
+                    .is_some()
+                {
+                    return Err(format!("device id {} is used twice", entry.id));
+                }
+                slots.push((entry, driver));
+            }
+            let entry = Arc::new(LineEntry {
+                name: line.name.clone(),
+                endpoint: line.endpoint.to_string(),
+                devices: slots.iter().map(|(d, _)| d.id.clone()).collect(),
+                state: RwLock::new(LineState::default()),
+            });
+            lines.push(Arc::clone(&entry));
+            plans.push((entry, opener(line), slots, writes_rx));
+        }
+        let cell = Arc::new(Cell {
+            devices,
+            lines,
+            live,
+            store,
+            metrics,
+        });
+        let tasks = plans
+            .into_iter()
+            .map(|(entry, opener, slots, writes)| {
+                LineTask::new(Arc::clone(&cell), entry, opener, slots, writes)
+            })
+            .collect();
+        Ok((cell, tasks))
+    }
+
+    /// The history.
+    pub fn store(&self) -> &StoreHandle {
+        &self.store
+    }
+
+    /// The metrics.
+    pub fn metrics(&self) -> &Metrics {
+        &self.metrics
+    }
+
+    /// Every device, by id.
+    pub fn device_entries(&self) -> impl Iterator<Item = &Arc<DeviceEntry>> {
+        self.devices.values()
+    }
+
+    /// A device by id.
+    pub fn device_entry(&self, id: &str) -> Option<&Arc<DeviceEntry>> {
+        DeviceId::new(id).ok().and_then(|id| self.devices.get(&id))
+    }
+
+    /// Every device with its points, as the API shows them.
+    pub fn devices(&self) -> Vec<DeviceView> {
+        let now = Timestamp::now();
+        self.devices.values().map(|d| d.view(now)).collect()
+    }
+
+    /// One device, as the API shows it.
+    pub fn device(&self, id: &str) -> Option<DeviceView> {
+        self.device_entry(id).map(|d| d.view(Timestamp::now()))
+    }
+
+    /// The spec of a point, if it exists.
+    pub fn point(&self, id: &PointId) -> Option<&PointSpec> {
+        let device = self.device_entry(id.device())?;
+        device
+            .index
+            .get(id.name())
+            .and_then(|&i| device.points.get(i))
+    }
+
+    /// Every line with its health.
+    pub fn lines(&self) -> Vec<LineView> {
+        self.lines
+            .iter()
+            .map(|line| LineView {
+                name: line.name.clone(),
+                endpoint: line.endpoint.clone(),
+                devices: line.devices.clone(),
+                backed_off: line
+                    .devices
+                    .iter()
+                    .filter(|id| {
+                        self.devices
+                            .get(*id)
+                            .is_some_and(|d| d.read().next_try_at.is_some())
+                    })
+                    .cloned()
+                    .collect(),
+                state: line.read().clone(),
+            })
+            .collect()
+    }
+
+    /// Follows live changes.
+    pub fn subscribe(&self) -> broadcast::Receiver<LiveMessage> {
+        self.live.subscribe()
+    }
+
+    /// Records an event and tells the event-stream clients.
+    pub fn emit(&self, event: Event) {
+        self.metrics.events.inc();
+        tracing::info!(kind = event.kind.as_str(), "{}", event.message);
+        self.store.event(event.clone());
+        self.publish(LiveMessage::Event(event));
+    }
+
+    /// Tells the event-stream clients.
+    pub(crate) fn publish(&self, message: LiveMessage) {
+        // No subscriber is not an error.
+        let _ = self.live.send(message);
+    }
+
+    /// Checks `value` against the point's spec and has the line's task write it (between
+    /// two polls of that line).
+    pub async fn write(&self, point: &PointId, value: &Value) -> Result<WriteOutcome, WriteError> {
+        let unknown = || WriteError::UnknownPoint {
+            point: point.clone(),
+        };
+        let device = self.device_entry(point.device()).ok_or_else(unknown)?;
+        let &index = device.index.get(point.name()).ok_or_else(unknown)?;
+        let spec = device.points.get(index).ok_or_else(unknown)?;
+        let checked = spec.check_write(value)?;
+        let old = device
+            .read()
+            .points
+            .get(index)
+            .and_then(|p| p.value.clone());
+        let (reply, answer) = oneshot::channel();
+        let not_running = || WriteError::NotRunning {
+            line: device.line.clone(),
+        };
+        device
+            .writes
+            .send(WriteRequest {
+                device: device.id.clone(),
+                point: index,
+                value: checked.clone(),
+                reply,
+            })
+            .await
+            .map_err(|_| not_running())?;
+        answer.await.map_err(|_| not_running())??;
+        Ok(WriteOutcome { old, new: checked })
+    }
+
+    /// Emits the event for a line that could not be opened or failed.
+    pub(crate) fn line_event(&self, line: &LineEntry, kind: EventKind, message: String) {
+        self.emit(Event {
+            t: Timestamp::now(),
+            kind,
+            line: Some(line.name.clone()),
+            device: None,
+            point: None,
+            message,
+        });
+    }
+}
+
+impl DeviceEntry {
+    /// The live state, for reading.
+    pub fn read(&self) -> RwLockReadGuard<'_, DeviceState> {
+        self.state.read().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    pub(crate) fn write_state(&self) -> RwLockWriteGuard<'_, DeviceState> {
+        self.state.write().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The index of a point by its name (the part after the device id).
+    pub fn point_index(&self, name: &str) -> Option<usize> {
+        self.index.get(name).copied()
+    }
+
+    /// The period of a poll group.
+    pub fn period(&self, group: &str) -> Duration {
+        self.groups
+            .iter()
+            .find(|g| g.name == group)
+            .map_or(Duration::from_secs(1), |g| g.period)
+    }
+
+    /// The device's status without points.
+    pub fn summary(&self) -> DeviceSummary {
+        summary_of(&self.id, &self.read())
+    }
+
+    /// A point's view.
+    pub fn point_view(&self, index: usize, state: &PointState, now: Timestamp) -> PointView {
+        let spec = &self.points[index];
+        let period = self.period(&spec.group);
+        PointView {
+            id: spec.id.clone(),
+            name: spec.name.clone(),
+            unit: spec.unit.clone(),
+            text: state
+                .value
+                .as_ref()
+                .and_then(|v| spec.label(v))
+                .map(str::to_owned),
+            value: state.value.clone(),
+            quality: state
+                .quality
+                .map(|q| judge_staleness(q, state.t, period, now)),
+            t: state.t,
+            error: state.error.clone(),
+            alarm: state.alarm,
+            period_ms: duration_millis(period),
+        }
+    }
+
+    fn view(&self, now: Timestamp) -> DeviceView {
+        let state = self.read();
+        let summary = summary_of(&self.id, &state);
+        DeviceView {
+            id: self.id.clone(),
+            name: self.name.clone(),
+            protocol: self.protocol,
+            line: self.line.clone(),
+            address: self.address,
+            next_try_in_ms: state.next_try_at.map(|t| (t.0 - now.0).max(0)),
+            summary,
+            groups: self
+                .groups
+                .iter()
+                .map(|g| GroupView {
+                    name: g.name.clone(),
+                    period_ms: duration_millis(g.period),
+                })
+                .collect(),
+            points: state
+                .points
+                .iter()
+                .enumerate()
+                .map(|(i, p)| PointDetail {
+                    view: self.point_view(i, p, now),
+                    kind: self.points[i].kind.clone(),
+                    group: self.points[i].group.clone(),
+                    writable: self.points[i].writable,
+                })
+                .collect(),
+        }
+    }
+}
+
+impl LineEntry {
+    /// The line's health.
+    pub fn read(&self) -> RwLockReadGuard<'_, LineState> {
+        self.state.read().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    pub(crate) fn write_state(&self) -> RwLockWriteGuard<'_, LineState> {
+        self.state.write().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+fn summary_of(id: &DeviceId, state: &DeviceState) -> DeviceSummary {
+    DeviceSummary {
+        id: id.clone(),
+        status: state.status,
+        since: state.since,
+        error: state.error.clone(),
+        last_ok: state.last_ok,
+        failures: state.failures,
+        next_try_at: state.next_try_at,
+    }
+}
+
+/// A good value older than three periods plus two seconds is stale.
+pub fn judge_staleness(
+    quality: Quality,
+    t: Option<Timestamp>,
+    period: Duration,
+    now: Timestamp,
+) -> Quality {
+    let limit = period * 3 + Duration::from_secs(2);
+    match (quality, t) {
+        (Quality::Good, Some(t)) if now.0 - t.0 > duration_millis(limit) => Quality::Stale,
+        _ => quality,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn good_values_turn_stale_after_three_periods_and_two_seconds() {
+        let t = Some(Timestamp(10_000));
+        let period = Duration::from_secs(1);
+        assert_eq!(
+            judge_staleness(Quality::Good, t, period, Timestamp(15_000)),
+            Quality::Good
+        );
+        assert_eq!(
+            judge_staleness(Quality::Good, t, period, Timestamp(15_001)),
+            Quality::Stale
+        );
+        assert_eq!(
+            judge_staleness(Quality::Bad, t, period, Timestamp(99_000)),
+            Quality::Bad
+        );
+    }
+}

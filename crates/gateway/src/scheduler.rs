@@ -1,0 +1,699 @@
+//! One poll task per line.
+//!
+//! A [`LineTask`] owns its line and the drivers of the devices on it. It polls one group of
+//! one device at a time, always the one due first, so requests on a line are strictly
+//! serialised and each device keeps its periods while the line has time. Writes queued by
+//! [`Cell::write`] go out between two polls. Separate lines run in parallel.
+//!
+//! A device that does not answer is marked down and backed off: it is tried again after
+//! [`BACKOFF_FIRST`], then twice as long each time up to [`BACKOFF_MAX`], with only its
+//! fastest group as a probe, so the others on the line keep their rate. The time of the
+//! next try is in the device's state (`next_try_at` in the API). When it answers it is
+//! promoted back at once: every group is read straight away and polling resumes at the
+//! configured periods.
+//!
+//! When the line itself fails (a TCP serial server closes, a USB adapter is pulled), every
+//! device on it goes down and the task reopens the line, waiting [`REOPEN_FIRST`] doubling
+//! to [`REOPEN_MAX`] between attempts.
+//!
+//! Value changes become history samples and live messages; a point crossing into or out
+//! of alarm and a device going down or up become events.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use link::{Line, SharedLine};
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::Histogram;
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+
+use crate::cell::{Cell, DeviceEntry, DeviceStatus, LineEntry, LiveMessage, WriteRequest};
+use crate::driver::{BoxFuture, DeviceError, Driver, ErrorKind, Reading, WriteError};
+use crate::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
+use crate::point::{Quality, Value};
+use crate::store::{Event, EventKind, Sample};
+use crate::time::Timestamp;
+
+/// First wait before a device that stopped answering is tried again.
+pub const BACKOFF_FIRST: Duration = Duration::from_secs(2);
+/// Longest wait between tries of a device that does not answer.
+pub const BACKOFF_MAX: Duration = Duration::from_secs(60);
+/// First wait before a line that failed is reopened.
+pub const REOPEN_FIRST: Duration = Duration::from_secs(1);
+/// Longest wait between attempts to reopen a line.
+pub const REOPEN_MAX: Duration = Duration::from_secs(30);
+/// Window over which line health (utilisation, poll and error rates) is measured.
+pub const HEALTH_WINDOW: Duration = Duration::from_secs(5);
+
+/// Opens a line (again): by endpoint in production, in memory in tests.
+pub type Opener = Arc<dyn Fn() -> BoxFuture<'static, Result<Line, String>> + Send + Sync>;
+
+/// The poll task of one line.
+pub struct LineTask {
+    cell: Arc<Cell>,
+    line: Arc<LineEntry>,
+    opener: Opener,
+    slots: Vec<Slot>,
+    writes: mpsc::Receiver<WriteRequest>,
+    window: Window,
+    busy_seconds: prometheus_client::metrics::counter::Counter<f64, std::sync::atomic::AtomicU64>,
+    utilisation: Gauge<f64, std::sync::atomic::AtomicU64>,
+    open_gauge: Gauge,
+}
+
+impl std::fmt::Debug for LineTask {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LineTask")
+            .field("line", &self.line.name)
+            .field("devices", &self.slots.len())
+            .finish()
+    }
+}
+
+/// A device on the line with its driver and its clocks.
+struct Slot {
+    entry: Arc<DeviceEntry>,
+    driver: Box<dyn Driver>,
+    clocks: Vec<Clock>,
+    /// The group used to probe a backed-off device (the fastest).
+    probe: usize,
+    backoff: Option<Backoff>,
+    m: SlotMetrics,
+}
+
+struct Clock {
+    group: String,
+    period: Duration,
+    next: Instant,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Backoff {
+    next: Instant,
+}
+
+struct SlotMetrics {
+    ok: Counter,
+    failed: Counter,
+    timeouts: Counter,
+    latency: Histogram,
+    up: Gauge,
+    errors: Vec<(ErrorKind, Counter)>,
+}
+
+#[derive(Debug)]
+struct Window {
+    started: Instant,
+    busy: Duration,
+    polls: u64,
+    errors: u64,
+}
+
+/// Why the poll loop ended.
+enum Ended {
+    Stop,
+    LineLost(String),
+}
+
+impl LineTask {
+    pub(crate) fn new(
+        cell: Arc<Cell>,
+        line: Arc<LineEntry>,
+        opener: Opener,
+        devices: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)>,
+        writes: mpsc::Receiver<WriteRequest>,
+    ) -> Self {
+        let shared = Arc::clone(&cell);
+        let metrics = shared.metrics();
+        let now = Instant::now();
+        let slots = devices
+            .into_iter()
+            .map(|(entry, driver)| {
+                let labels = DeviceLabels {
+                    line: line.name.clone(),
+                    device: entry.id.to_string(),
+                };
+                let poll = |result| {
+                    metrics
+                        .polls
+                        .get_or_create(&PollLabels {
+                            line: line.name.clone(),
+                            device: entry.id.to_string(),
+                            result,
+                        })
+                        .clone()
+                };
+                let m = SlotMetrics {
+                    ok: poll(PollResult::ok),
+                    failed: poll(PollResult::error),
+                    timeouts: metrics.timeouts.get_or_create(&labels).clone(),
+                    latency: metrics.poll_seconds.get_or_create(&labels).clone(),
+                    up: metrics.device_up.get_or_create(&labels).clone(),
+                    errors: ErrorKind::ALL
+                        .into_iter()
+                        .map(|kind| {
+                            let counter = metrics
+                                .errors
+                                .get_or_create(&ErrorLabels {
+                                    line: line.name.clone(),
+                                    device: entry.id.to_string(),
+                                    kind: kind.as_str().to_owned(),
+                                })
+                                .clone();
+                            (kind, counter)
+                        })
+                        .collect(),
+                };
+                let clocks: Vec<Clock> = entry
+                    .groups
+                    .iter()
+                    .map(|g| Clock {
+                        group: g.name.clone(),
+                        period: g.period,
+                        next: now,
+                    })
+                    .collect();
+                let probe = clocks
+                    .iter()
+                    .enumerate()
+                    .min_by_key(|(_, c)| c.period)
+                    .map_or(0, |(i, _)| i);
+                Slot {
+                    entry,
+                    driver,
+                    clocks,
+                    probe,
+                    backoff: None,
+                    m,
+                }
+            })
+            .collect();
+        let labels = LineLabels {
+            line: line.name.clone(),
+        };
+        Self {
+            busy_seconds: metrics.line_busy_seconds.get_or_create(&labels).clone(),
+            utilisation: metrics.line_utilisation.get_or_create(&labels).clone(),
+            open_gauge: metrics.line_open.get_or_create(&labels).clone(),
+            cell,
+            line,
+            opener,
+            slots,
+            writes,
+            window: Window {
+                started: now,
+                busy: Duration::ZERO,
+                polls: 0,
+                errors: 0,
+            },
+        }
+    }
+
+    /// The line's name.
+    pub fn name(&self) -> &str {
+        &self.line.name
+    }
+
+    /// Polls until `shutdown` turns true (or its sender is dropped).
+    pub async fn run(mut self, mut shutdown: watch::Receiver<bool>) {
+        let mut reopen = REOPEN_FIRST;
+        loop {
+            let opened = tokio::select! {
+                biased;
+                () = stopped(&mut shutdown) => return,
+                opened = (self.opener)() => opened,
+            };
+            let line = match opened {
+                Ok(line) => line,
+                Err(error) => {
+                    self.line_failed(&error, reopen);
+                    let until = Instant::now() + reopen;
+                    reopen = (reopen * 2).min(REOPEN_MAX);
+                    if !self
+                        .wait_refusing_writes(until, &error, &mut shutdown)
+                        .await
+                    {
+                        return;
+                    }
+                    continue;
+                }
+            };
+            reopen = REOPEN_FIRST;
+            self.line_opened();
+            let shared = SharedLine::new(line);
+            let now = Instant::now();
+            for slot in &mut self.slots {
+                slot.driver.attach(shared.clone());
+                slot.backoff = None;
+                for clock in &mut slot.clocks {
+                    clock.next = now;
+                }
+            }
+            match self.poll_loop(&mut shutdown).await {
+                Ended::Stop => return,
+                Ended::LineLost(error) => {
+                    self.line_failed(&error, REOPEN_FIRST);
+                    let until = Instant::now() + REOPEN_FIRST;
+                    if !self
+                        .wait_refusing_writes(until, &error, &mut shutdown)
+                        .await
+                    {
+                        return;
+                    }
+                }
+            }
+        }
+    }
+
+    async fn poll_loop(&mut self, shutdown: &mut watch::Receiver<bool>) -> Ended {
+        loop {
+            let due = self.next_due();
+            let at = due.map_or_else(|| Instant::now() + Duration::from_secs(3600), |d| d.2);
+            tokio::select! {
+                biased;
+                () = stopped(shutdown) => return Ended::Stop,
+                Some(request) = self.writes.recv() => {
+                    if let Some(lost) = self.write(request).await {
+                        return Ended::LineLost(lost);
+                    }
+                }
+                () = tokio::time::sleep_until(at) => {
+                    let Some((slot, group, _)) = due else { continue };
+                    let lost = tokio::select! {
+                        biased;
+                        () = stopped(shutdown) => return Ended::Stop,
+                        lost = self.poll(slot, group) => lost,
+                    };
+                    if let Some(lost) = lost {
+                        return Ended::LineLost(lost);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The device and group due first: `(slot, clock, when)`.
+    fn next_due(&self) -> Option<(usize, usize, Instant)> {
+        let mut best: Option<(usize, usize, Instant)> = None;
+        for (i, slot) in self.slots.iter().enumerate() {
+            let candidate = match slot.backoff {
+                Some(b) => Some((i, slot.probe, b.next)),
+                None => slot
+                    .clocks
+                    .iter()
+                    .enumerate()
+                    .min_by_key(|(_, c)| c.next)
+                    .map(|(g, c)| (i, g, c.next)),
+            };
+            if let Some(c) = candidate
+                && best.is_none_or(|b| c.2 < b.2)
+            {
+                best = Some(c);
+            }
+        }
+        best
+    }
+
+    /// Polls one group; returns the error if the line is lost.
+    async fn poll(&mut self, index: usize, clock: usize) -> Option<String> {
+        let slot = &mut self.slots[index];
+        let group = slot.clocks[clock].group.clone();
+        let started = Instant::now();
+        let result = slot.driver.poll(&group).await;
+        let now = Instant::now();
+        let took = now - started;
+        slot.m.latency.observe(took.as_secs_f64());
+        self.busy_seconds.inc_by(took.as_secs_f64());
+        self.window.busy += took;
+        self.window.polls += 1;
+        let mut lost = None;
+        match result {
+            Ok(readings) => {
+                slot.m.ok.inc();
+                let was_up = slot.backoff.is_none() && slot.entry.read().status == DeviceStatus::Up;
+                slot.backoff = None;
+                let c = &mut slot.clocks[clock];
+                c.next = (c.next + c.period).max(now);
+                if !was_up {
+                    // Promoted at once: read everything now, then resume the periods.
+                    for (g, c) in slot.clocks.iter_mut().enumerate() {
+                        if g != clock {
+                            c.next = now;
+                        }
+                    }
+                }
+                let entry = Arc::clone(&slot.entry);
+                slot.m.up.set(1);
+                apply_readings(&self.cell, &entry, readings);
+                mark_up(&self.cell, &entry);
+            }
+            Err(error) => {
+                slot.m.failed.inc();
+                self.window.errors += 1;
+                if error.kind == ErrorKind::Timeout {
+                    slot.m.timeouts.inc();
+                }
+                if let Some((_, counter)) = slot.m.errors.iter().find(|(k, _)| *k == error.kind) {
+                    counter.inc();
+                }
+                slot.m.up.set(0);
+                let failures = slot.entry.read().failures + 1;
+                let delay = backoff_delay(failures);
+                slot.backoff = Some(Backoff { next: now + delay });
+                let entry = Arc::clone(&slot.entry);
+                mark_down(&self.cell, &entry, &error, delay);
+                if error.kind == ErrorKind::Disconnected {
+                    lost = Some(error.message);
+                }
+            }
+        }
+        self.roll_window(now);
+        lost
+    }
+
+    /// Writes between polls; returns the error if the line is lost.
+    async fn write(&mut self, request: WriteRequest) -> Option<String> {
+        let Some(slot) = self.slots.iter_mut().find(|s| s.entry.id == request.device) else {
+            let _ = request.reply.send(Err(WriteError::NotRunning {
+                line: self.line.name.clone(),
+            }));
+            return None;
+        };
+        let Some(spec) = slot.entry.points.get(request.point).cloned() else {
+            let _ = request.reply.send(Err(WriteError::NotRunning {
+                line: self.line.name.clone(),
+            }));
+            return None;
+        };
+        let started = Instant::now();
+        let result = slot.driver.write(&spec, &request.value).await;
+        let now = Instant::now();
+        let took = now - started;
+        self.busy_seconds.inc_by(took.as_secs_f64());
+        self.window.busy += took;
+        let lost = match &result {
+            Ok(()) => {
+                // Read the point back at once (unless the device is backed off).
+                if let Some(c) = slot.clocks.iter_mut().find(|c| c.group == spec.group) {
+                    c.next = now;
+                }
+                None
+            }
+            Err(WriteError::Device(e)) if e.kind == ErrorKind::Disconnected => {
+                Some(e.message.clone())
+            }
+            Err(_) => None,
+        };
+        let _ = request.reply.send(result);
+        lost
+    }
+
+    /// Waits until `until`, answering writes with the line's error. False on shutdown.
+    async fn wait_refusing_writes(
+        &mut self,
+        until: Instant,
+        error: &str,
+        shutdown: &mut watch::Receiver<bool>,
+    ) -> bool {
+        loop {
+            tokio::select! {
+                biased;
+                () = stopped(shutdown) => return false,
+                Some(request) = self.writes.recv() => {
+                    let _ = request.reply.send(Err(WriteError::Device(DeviceError::new(
+                        ErrorKind::Disconnected,
+                        format_args!("line {} is not open: {error}", self.line.name),
+                    ))));
+                }
+                () = tokio::time::sleep_until(until) => return true,
+            }
+        }
+    }
+
+    fn line_opened(&mut self) {
+        self.open_gauge.set(1);
+        {
+            let mut state = self.line.write_state();
+            state.open = true;
+            state.error = None;
+        }
+        self.cell.line_event(
+            &self.line,
+            EventKind::LineUp,
+            format!("line {} open ({})", self.line.name, self.line.endpoint),
+        );
+    }
+
+    fn line_failed(&mut self, error: &str, retry: Duration) {
+        self.open_gauge.set(0);
+        let changed = {
+            let mut state = self.line.write_state();
+            let changed = state.open || state.error.as_deref() != Some(error);
+            state.open = false;
+            state.error = Some(error.to_owned());
+            changed
+        };
+        if changed {
+            self.cell.line_event(
+                &self.line,
+                EventKind::LineDown,
+                format!(
+                    "line {} is down: {error}; retrying every {} s at most",
+                    self.line.name,
+                    REOPEN_MAX.as_secs()
+                ),
+            );
+        }
+        let device_error = DeviceError::new(
+            ErrorKind::Disconnected,
+            format_args!("line {} is not open: {error}", self.line.name),
+        );
+        for slot in &mut self.slots {
+            slot.m.up.set(0);
+            mark_down(&self.cell, &slot.entry, &device_error, retry);
+        }
+    }
+
+    fn roll_window(&mut self, now: Instant) {
+        let elapsed = now - self.window.started;
+        if elapsed < HEALTH_WINDOW {
+            return;
+        }
+        let secs = elapsed.as_secs_f64();
+        let utilisation = (self.window.busy.as_secs_f64() / secs).min(1.0);
+        self.utilisation.set(utilisation);
+        {
+            let mut state = self.line.write_state();
+            state.utilisation = utilisation;
+            state.polls_per_second = self.window.polls as f64 / secs;
+            state.errors_per_second = self.window.errors as f64 / secs;
+        }
+        self.window = Window {
+            started: now,
+            busy: Duration::ZERO,
+            polls: 0,
+            errors: 0,
+        };
+    }
+}
+
+/// Resolves when shutdown is asked for (or nobody can ask any more).
+async fn stopped(shutdown: &mut watch::Receiver<bool>) {
+    let _ = shutdown.wait_for(|stop| *stop).await;
+}
+
+/// The wait before try number `failures + 1` of a device that does not answer.
+pub fn backoff_delay(failures: u32) -> Duration {
+    let doublings = failures.saturating_sub(1).min(16);
+    (BACKOFF_FIRST * 2u32.pow(doublings)).min(BACKOFF_MAX)
+}
+
+/// Stores and publishes what changed in a poll's readings.
+fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
+    let now = Timestamp::now();
+    let mut samples = Vec::new();
+    let mut messages = Vec::new();
+    let mut events = Vec::new();
+    {
+        let mut state = entry.write_state();
+        for reading in readings {
+            let Some(i) = entry.point_index(reading.point.name()) else {
+                continue;
+            };
+            let (Some(spec), Some(point)) = (entry.points.get(i), state.points.get_mut(i)) else {
+                continue;
+            };
+            let changed = match reading.value {
+                Ok(value) => {
+                    let changed = point.value.as_ref() != Some(&value)
+                        || point.quality != Some(Quality::Good);
+                    let alarm = spec.is_alarm(&value);
+                    if alarm != point.alarm {
+                        let text = spec
+                            .label(&value)
+                            .map(str::to_owned)
+                            .unwrap_or_else(|| with_unit(&value, spec.unit.as_deref()));
+                        let (kind, message) = if alarm {
+                            (
+                                EventKind::AlarmRaised,
+                                format!("{}: {} is {text}", entry.name, spec.name),
+                            )
+                        } else {
+                            (
+                                EventKind::AlarmCleared,
+                                format!("{}: {} back to {text}", entry.name, spec.name),
+                            )
+                        };
+                        events.push(Event {
+                            t: now,
+                            kind,
+                            line: Some(entry.line.clone()),
+                            device: Some(entry.id.clone()),
+                            point: Some(spec.id.clone()),
+                            message,
+                        });
+                    }
+                    point.value = Some(value);
+                    point.quality = Some(Quality::Good);
+                    point.error = None;
+                    point.alarm = alarm;
+                    point.t = Some(now);
+                    changed
+                }
+                Err(error) => {
+                    let changed = point.quality != Some(Quality::Bad)
+                        || point.error.as_deref() != Some(error.message.as_str());
+                    point.quality = Some(Quality::Bad);
+                    point.error = Some(error.message);
+                    point.t = Some(now);
+                    changed
+                }
+            };
+            if changed {
+                samples.push(Sample {
+                    point: spec.id.clone(),
+                    t: now,
+                    value: match point.quality {
+                        Some(Quality::Good) => point.value.clone(),
+                        _ => None,
+                    },
+                    quality: point.quality.unwrap_or(Quality::Bad),
+                });
+                messages.push(entry.point_view(i, point, now));
+            }
+        }
+    }
+    cell.metrics().value_changes.inc_by(samples.len() as u64);
+    for sample in samples {
+        cell.store().sample(sample);
+    }
+    for view in messages {
+        cell.publish(LiveMessage::Value(view));
+    }
+    for event in events {
+        cell.emit(event);
+    }
+}
+
+/// Marks a device up after an answered poll; an event if it was down.
+fn mark_up(cell: &Cell, entry: &DeviceEntry) {
+    let now = Timestamp::now();
+    let previous = {
+        let mut state = entry.write_state();
+        let previous = state.status;
+        state.failures = 0;
+        state.next_try_at = None;
+        state.last_ok = Some(now);
+        if previous != DeviceStatus::Up {
+            state.status = DeviceStatus::Up;
+            state.since = now;
+            state.error = None;
+        }
+        previous
+    };
+    if previous == DeviceStatus::Up {
+        return;
+    }
+    cell.publish(LiveMessage::Device(entry.summary()));
+    if previous == DeviceStatus::Down {
+        cell.emit(Event {
+            t: now,
+            kind: EventKind::DeviceUp,
+            line: Some(entry.line.clone()),
+            device: Some(entry.id.clone()),
+            point: None,
+            message: format!("{} ({}) answers again", entry.name, entry.id),
+        });
+    }
+}
+
+/// Marks a device down (backed off for `retry`) and its points bad.
+fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Duration) {
+    let now = Timestamp::now();
+    let mut samples = Vec::new();
+    let mut views = Vec::new();
+    let went_down = {
+        let mut state = entry.write_state();
+        let went_down = state.status != DeviceStatus::Down;
+        state.failures += 1;
+        state.next_try_at = Some(now.plus(retry));
+        state.error = Some(error.clone());
+        if went_down {
+            state.status = DeviceStatus::Down;
+            state.since = now;
+        }
+        for (i, point) in state.points.iter_mut().enumerate() {
+            if point.quality == Some(Quality::Bad) {
+                continue;
+            }
+            point.quality = Some(Quality::Bad);
+            point.error = Some(error.message.clone());
+            point.t = Some(now);
+            samples.push(Sample {
+                point: entry.points[i].id.clone(),
+                t: now,
+                value: None,
+                quality: Quality::Bad,
+            });
+            views.push(entry.point_view(i, point, now));
+        }
+        went_down
+    };
+    cell.metrics().value_changes.inc_by(samples.len() as u64);
+    for sample in samples {
+        cell.store().sample(sample);
+    }
+    for view in views {
+        cell.publish(LiveMessage::Value(view));
+    }
+    cell.publish(LiveMessage::Device(entry.summary()));
+    if went_down {
+        cell.emit(Event {
+            t: now,
+            kind: EventKind::DeviceDown,
+            line: Some(entry.line.clone()),
+            device: Some(entry.id.clone()),
+            point: None,
+            message: format!(
+                "{} ({}) is not answering ({}): {}; next try in {} s",
+                entry.name,
+                entry.id,
+                error.kind,
+                error.message,
+                retry.as_secs()
+            ),
+        });
+    }
+}
+
+fn with_unit(value: &Value, unit: Option<&str>) -> String {
+    match unit {
+        Some(unit) => format!("{value} {unit}"),
+        None => value.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,392 @@
+//! The scheduler against JBC station models on in-memory lines, with tokio's clock paused:
+//! minutes of polling run in milliseconds and no test waits for real time.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Duration;
+
+use jbc::code::ToolError;
+use jbc::device::{Station, StationConfig};
+use jbc::frame::Address;
+use link::{Endpoint, Line};
+use tokio::sync::watch;
+use wire::Transmit;
+use wire::device::{Device, SharedModel};
+
+use super::*;
+use crate::cell::{Cell, DeviceStatus};
+use crate::config::{CellConfig, DeviceConfig, LineConfig};
+use crate::driver::{DriverConfig, Protocol};
+use crate::metrics::Metrics;
+use crate::point::{DeviceId, PointId};
+use crate::store::{EventFilter, Series, Store, StoreOptions};
+
+/// Stations sharing one line; each can be unplugged (it then hears nothing).
+struct Bus {
+    stations: Vec<(Arc<AtomicBool>, wire::device::ModelLine<Station>)>,
+}
+
+impl Device for Bus {
+    fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
+        self.stations
+            .iter_mut()
+            .filter(|(plugged, _)| plugged.load(Ordering::SeqCst))
+            .flat_map(|(_, station)| station.receive(bytes, now))
+            .collect()
+    }
+}
+
+struct Rig {
+    cell: Arc<Cell>,
+    models: Vec<SharedModel<Station>>,
+    plugged: Vec<Arc<AtomicBool>>,
+    line_available: Arc<AtomicBool>,
+    opens: Arc<AtomicUsize>,
+    shutdown: watch::Sender<bool>,
+    task: tokio::task::JoinHandle<()>,
+    _store: Store,
+    _dir: tempfile::TempDir,
+}
+
+fn device(id: &str, address: i64) -> DeviceConfig {
+    DeviceConfig {
+        driver: DriverConfig {
+            id: DeviceId::new(id).unwrap(),
+            protocol: Protocol::Jbc,
+            address: Some(address),
+            timeout: None,
+            retries: None,
+        },
+        name: format!("Station {id}"),
+        period: None,
+        groups: BTreeMap::new(),
+    }
+}
+
+/// `count` stations at addresses 1, 2, … on one line, polled by a running line task.
+fn rig(count: u8) -> Rig {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let models: Vec<_> = (1..=count)
+        .map(|a| {
+            SharedModel::new(Station::new(StationConfig {
+                address: Some(Address::new(a).unwrap()),
+                ..StationConfig::default()
+            }))
+        })
+        .collect();
+    let plugged: Vec<_> = models
+        .iter()
+        .map(|_| Arc::new(AtomicBool::new(true)))
+        .collect();
+    let line_available = Arc::new(AtomicBool::new(true));
+    let opens = Arc::new(AtomicUsize::new(0));
+    let opener: Opener = {
+        let (models, plugged) = (models.clone(), plugged.clone());
+        let (available, opens) = (Arc::clone(&line_available), Arc::clone(&opens));
+        Arc::new(move || {
+            opens.fetch_add(1, Ordering::SeqCst);
+            let result = if available.load(Ordering::SeqCst) {
+                let (a, b) = tokio::io::duplex(4096);
+                let bus = Bus {
+                    stations: plugged
+                        .iter()
+                        .cloned()
+                        .zip(models.iter().map(SharedModel::line))
+                        .collect(),
+                };
+                tokio::spawn(link::serve::serve_stream(b, bus, None));
+                Ok(Line::from_stream(a, "memory", None))
+            } else {
+                Err("no such serial port".to_owned())
+            };
+            Box::pin(async move { result })
+        })
+    };
+    let config = CellConfig {
+        source: None,
+        token: None,
+        lines: vec![LineConfig {
+            name: "bench".into(),
+            endpoint: Endpoint::parse("tcp://127.0.0.1:9", crate::driver::jbc::DEFAULT_SERIAL)
+                .unwrap(),
+            devices: (1..=count)
+                .map(|a| device(&format!("jbc{a}"), i64::from(a)))
+                .collect(),
+        }],
+    };
+    let metrics = Arc::new(Metrics::new());
+    let (cell, mut tasks) =
+        Cell::with_openers(&config, store.handle(), metrics, |_| Arc::clone(&opener)).unwrap();
+    let (shutdown, stop) = watch::channel(false);
+    let task = tokio::spawn(tasks.remove(0).run(stop));
+    Rig {
+        cell,
+        models,
+        plugged,
+        line_available,
+        opens,
+        shutdown,
+        task,
+        _store: store,
+        _dir: dir,
+    }
+}
+
+fn polls(cell: &Cell, device: &str, result: PollResult) -> u64 {
+    cell.metrics()
+        .polls
+        .get_or_create(&PollLabels {
+            line: "bench".into(),
+            device: device.into(),
+            result,
+        })
+        .get()
+}
+
+fn status(cell: &Cell, device: &str) -> DeviceStatus {
+    cell.device_entry(device).unwrap().read().status
+}
+
+fn point(id: &str) -> PointId {
+    PointId::parse(id).unwrap()
+}
+
+fn value(cell: &Cell, id: &str) -> Option<Value> {
+    let id = point(id);
+    let device = cell.device_entry(id.device()).unwrap();
+    let index = device.point_index(id.name()).unwrap();
+    device.read().points[index].value.clone()
+}
+
+#[test]
+fn backoff_doubles_from_two_seconds_up_to_a_minute() {
+    let delays: Vec<u64> = (1..=8).map(|f| backoff_delay(f).as_secs()).collect();
+    assert_eq!(delays, vec![2, 4, 8, 16, 32, 60, 60, 60]);
+    assert_eq!(backoff_delay(u32::MAX), BACKOFF_MAX);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_silent_device_is_backed_off_while_its_neighbour_keeps_its_rate() {
+    let rig = rig(2);
+    rig.plugged[1].store(false, Ordering::SeqCst);
+    tokio::time::sleep(Duration::from_secs(60)).await;
+
+    // jbc1 reads its live group every second (plus the slower groups).
+    let ok = polls(&rig.cell, "jbc1", PollResult::ok);
+    assert!((60..=70).contains(&ok), "jbc1 polled {ok} times in 60 s");
+    assert_eq!(polls(&rig.cell, "jbc1", PollResult::error), 0);
+    // jbc2 is tried at 0, then after 2, 4, 8, 16 and 32 s (plus 1.5 s per failed try).
+    let failed = polls(&rig.cell, "jbc2", PollResult::error);
+    assert!((4..=6).contains(&failed), "jbc2 tried {failed} times");
+    assert_eq!(status(&rig.cell, "jbc2"), DeviceStatus::Down);
+    let view = rig.cell.device("jbc2").unwrap();
+    assert!(view.summary.next_try_at.is_some());
+    assert!(view.next_try_in_ms.is_some_and(|ms| ms <= 60_000));
+    assert_eq!(view.summary.error.unwrap().kind, ErrorKind::Timeout);
+    assert!(
+        view.points
+            .iter()
+            .all(|p| p.view.quality == Some(Quality::Bad))
+    );
+
+    // Plugged back in: answered at its next try and promoted at once (every group read).
+    rig.plugged[1].store(true, Ordering::SeqCst);
+    tokio::time::sleep(BACKOFF_MAX + Duration::from_secs(3)).await;
+    assert_eq!(status(&rig.cell, "jbc2"), DeviceStatus::Up);
+    assert!(
+        rig.cell
+            .device("jbc2")
+            .unwrap()
+            .summary
+            .next_try_at
+            .is_none()
+    );
+    assert_eq!(
+        value(&rig.cell, "jbc2.model"),
+        Some(Value::Text("JTSE".into()))
+    );
+    let before = polls(&rig.cell, "jbc2", PollResult::ok);
+    tokio::time::sleep(Duration::from_secs(10)).await;
+    let after = polls(&rig.cell, "jbc2", PollResult::ok);
+    assert!(
+        after - before >= 10,
+        "jbc2 back at its rate: {}",
+        after - before
+    );
+
+    rig.cell.store().flush().await.unwrap();
+    let events = rig
+        .cell
+        .store()
+        .events(&EventFilter {
+            device: Some("jbc2".into()),
+            limit: 10,
+            ..EventFilter::default()
+        })
+        .unwrap();
+    let kinds: Vec<&str> = events.iter().map(|e| e.kind.as_str()).collect();
+    assert_eq!(kinds, vec!["device_up", "device_down"]);
+    assert!(
+        events[1].message.contains("timeout"),
+        "{}",
+        events[1].message
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn value_changes_are_stored_and_alarms_become_events() {
+    let rig = rig(1);
+    let mut live = rig.cell.subscribe();
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    rig.models[0]
+        .lock()
+        .set_tool_error(ToolError::HeaterMalfunction);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    rig.models[0].lock().set_tool_error(ToolError::Ok);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let store = rig.cell.store();
+    store.flush().await.unwrap();
+
+    let history = store
+        .history(
+            &point("jbc1.tool_error"),
+            Timestamp(0),
+            Timestamp(i64::MAX),
+            None,
+        )
+        .unwrap();
+    let Series::Samples(samples) = history.series else {
+        panic!("raw samples expected")
+    };
+    let values: Vec<Option<Value>> = samples.into_iter().map(|s| s.value).collect();
+    assert_eq!(
+        values,
+        vec![
+            Some(Value::Number(0.0)),
+            Some(Value::Number(3.0)),
+            Some(Value::Number(0.0))
+        ],
+        "only changes are stored"
+    );
+    let events = store
+        .events(&EventFilter {
+            kind: None,
+            device: Some("jbc1".into()),
+            limit: 10,
+            ..EventFilter::default()
+        })
+        .unwrap();
+    let alarms: Vec<(&str, &str)> = events
+        .iter()
+        .map(|e| (e.kind.as_str(), e.message.as_str()))
+        .collect();
+    assert_eq!(
+        alarms,
+        vec![
+            ("alarm_cleared", "Station jbc1: Tool error back to OK"),
+            (
+                "alarm_raised",
+                "Station jbc1: Tool error is Heater malfunction: replace heater"
+            ),
+        ]
+    );
+    // The event stream saw the value change and the alarm.
+    let mut saw_value = false;
+    let mut saw_alarm = false;
+    while let Ok(message) = live.try_recv() {
+        match message {
+            LiveMessage::Value(v) if v.id.as_str() == "jbc1.tool_error" => {
+                saw_value |= v.value == Some(Value::Number(3.0))
+            }
+            LiveMessage::Event(e) => saw_alarm |= e.kind == EventKind::AlarmRaised,
+            _ => {}
+        }
+    }
+    assert!(saw_value && saw_alarm);
+}
+
+#[tokio::test(start_paused = true)]
+async fn writes_go_out_between_polls_and_are_read_back() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let setpoint = point("jbc1.air_temperature_setpoint");
+    let outcome = rig
+        .cell
+        .write(&setpoint, &Value::Number(320.0))
+        .await
+        .unwrap();
+    assert_eq!(outcome.new, Value::Number(320.0));
+    assert!(outcome.old.is_some());
+    assert_eq!(rig.models[0].lock().settings().air_temp, 320);
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert_eq!(
+        value(&rig.cell, "jbc1.air_temperature_setpoint"),
+        Some(Value::Number(320.0))
+    );
+
+    let err = rig
+        .cell
+        .write(&setpoint, &Value::Number(900.0))
+        .await
+        .unwrap_err();
+    assert!(matches!(err, WriteError::Invalid(_)), "{err}");
+    assert_eq!(rig.models[0].lock().settings().air_temp, 320);
+    let err = rig
+        .cell
+        .write(&point("jbc1.air_temperature"), &Value::Number(100.0))
+        .await
+        .unwrap_err();
+    assert!(err.to_string().contains("read-only"), "{err}");
+    let err = rig
+        .cell
+        .write(&point("jbc1.nothing"), &Value::Number(1.0))
+        .await
+        .unwrap_err();
+    assert!(matches!(err, WriteError::UnknownPoint { .. }), "{err}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_line_that_cannot_be_opened_marks_its_devices_down_and_is_retried() {
+    let rig = rig(1);
+    // The task has not run yet: its first open fails.
+    rig.line_available.store(false, Ordering::SeqCst);
+    tokio::time::sleep(Duration::from_secs(10)).await;
+    assert!(!rig.cell.lines()[0].state.open);
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Down);
+    let err = rig.cell.device("jbc1").unwrap().summary.error.unwrap();
+    assert_eq!(err.kind, ErrorKind::Disconnected);
+    assert!(
+        err.message.contains("no such serial port"),
+        "{}",
+        err.message
+    );
+    let write = rig
+        .cell
+        .write(
+            &point("jbc1.air_temperature_setpoint"),
+            &Value::Number(300.0),
+        )
+        .await
+        .unwrap_err();
+    assert!(write.to_string().contains("not open"), "{write}");
+    let attempts = rig.opens.load(Ordering::SeqCst);
+    // 1, 2, 4 s between attempts: about 4 attempts in 10 s, not a busy loop.
+    assert!((3..=6).contains(&attempts), "{attempts} attempts");
+    rig.line_available.store(true, Ordering::SeqCst);
+    tokio::time::sleep(REOPEN_MAX + Duration::from_secs(2)).await;
+    assert!(rig.cell.lines()[0].state.open);
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_task_stops_when_asked() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    rig.shutdown.send(true).unwrap();
+    tokio::time::timeout(Duration::from_secs(5), rig.task)
+        .await
+        .expect("the task ends promptly")
+        .unwrap();
+}
