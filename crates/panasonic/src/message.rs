@@ -1,0 +1,787 @@
+//! The message layout, the same on Port 1 and Port 2 (manual 3.1-2).
+//!
+//! ```text
+//! command   256 bytes  ASCII text, right-padded with blanks (0x20)
+//! size        4 bytes  byte count of the data field only, big-endian ("TCP/IP format")
+//! data     size bytes  present only when size > 0
+//! terminator  3 bytes  three 0x00 ("0 Char / 0 Char / 0 Char")
+//! ```
+//!
+//! No STX, ETX or checksum: a message is framed by its fixed header and its length field.
+//! A C2ST request is therefore 263 bytes, a D1 reply carrying `001` 266 bytes.
+//!
+//! Choices where the manual is loose (fact sheet §2, §7):
+//! - **Terminator [I]:** we send three NUL bytes. On receive, three ASCII `0` (0x30) are
+//!   accepted too, logged, and remembered in [`Message::terminator`]; any other trio is a
+//!   [`DecodeError::Terminator`].
+//! - **Size field [I]:** read as an unsigned 32-bit number, and refused above
+//!   [`MAX_DATA_LEN`], so a hostile length can never make a reader buffer more than
+//!   4 MiB + 263 bytes.
+//! - **Command field [I]:** printable ASCII (0x20–0x7E) starting with a capital letter (every
+//!   command class is one: `A`, `C`, `D`, `R`); trailing blanks are padding, so a command's
+//!   own trailing blanks cannot survive the trip (fact sheet §6).
+//!
+//! **Resynchronisation.** The stream has no start byte, so after an error the decoder drops
+//! bytes up to the next *possible* start: the next capital letter after the first byte that
+//! proves the current start wrong. A byte outside printable ASCII inside the first 256 bytes
+//! rules out every start up to and including it, so a stray NUL or CR/LF from a broken
+//! message is skipped in one step; a bad size or terminator rules out only the current start.
+//! A real message that follows garbage is never skipped, because no capital letter is ever
+//! dropped unless it has been proven not to start a message.
+
+use std::fmt;
+
+use wire::{Codec, Resync};
+
+/// Width of the command field.
+pub const COMMAND_LEN: usize = 256;
+/// Width of the data-size field.
+pub const SIZE_LEN: usize = 4;
+/// Command field plus size field: where the data starts.
+pub const HEADER_LEN: usize = COMMAND_LEN + SIZE_LEN;
+/// Width of the terminator.
+pub const TERMINATOR_LEN: usize = 3;
+/// The shortest message (no data): 263 bytes.
+pub const MIN_MESSAGE_LEN: usize = HEADER_LEN + TERMINATOR_LEN;
+/// The byte that pads the command field.
+pub const PAD: u8 = b' ';
+/// The terminator we send: three NUL bytes.
+pub const NUL_TERMINATOR: [u8; TERMINATOR_LEN] = [0x00; TERMINATOR_LEN];
+/// The terminator we also accept: three ASCII zeros (a literal reading of "0 Char").
+pub const ASCII_ZERO_TERMINATOR: [u8; TERMINATOR_LEN] = [b'0'; TERMINATOR_LEN];
+
+/// The largest data field we accept or build: 4 MiB.
+///
+/// The manual states no maximum beyond the 4-byte field. The largest transfers it names
+/// are a 5000-step product program and a 1000-entry part library (3.3-4). At a generous
+/// 256 bytes per step line a full program is about 1.3 MB, and a part library at 2 KB per
+/// entry about 2 MB; 4 MiB holds either with room to spare while keeping what one hostile
+/// length can make a reader buffer small.
+pub const MAX_DATA_LEN: usize = 4 * 1024 * 1024;
+
+/// Offsets inside a message.
+mod field {
+    use core::ops::Range;
+
+    pub const COMMAND: Range<usize> = 0..super::COMMAND_LEN;
+    pub const SIZE: Range<usize> = super::COMMAND_LEN..super::HEADER_LEN;
+    pub const fn data(size: usize) -> Range<usize> {
+        super::HEADER_LEN..super::HEADER_LEN + size
+    }
+    pub const fn terminator(size: usize) -> Range<usize> {
+        let start = super::HEADER_LEN + size;
+        start..start + super::TERMINATOR_LEN
+    }
+}
+
+/// Which terminator a message carried.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Terminator {
+    /// Three NUL bytes: what the manual's C-struct table means, and what we send.
+    #[default]
+    Nul,
+    /// Three ASCII `0` characters: tolerated on receive.
+    AsciiZero,
+}
+
+impl Terminator {
+    /// The three bytes on the wire.
+    pub const fn bytes(self) -> [u8; TERMINATOR_LEN] {
+        match self {
+            Terminator::Nul => NUL_TERMINATOR,
+            Terminator::AsciiZero => ASCII_ZERO_TERMINATOR,
+        }
+    }
+}
+
+/// One message: a command text and its data.
+///
+/// The fields are private so that every message can be encoded: the command fits the
+/// 256-byte field and the data is at most [`MAX_DATA_LEN`].
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct Message {
+    command: String,
+    data: Vec<u8>,
+    terminator: Terminator,
+}
+
+/// A command text or data field that cannot go into a message.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum MessageError {
+    /// Nothing but blanks.
+    #[error("a message needs a command: the command text is empty")]
+    EmptyCommand,
+    /// Longer than the command field.
+    #[error("command text is {len} characters long; the command field holds {max}")]
+    CommandTooLong {
+        /// Length of the text.
+        len: usize,
+        /// Width of the field (256).
+        max: usize,
+    },
+    /// Does not start with a capital letter.
+    #[error("command text must start with a capital letter (A, C, D, R …), not {found:?}")]
+    CommandStart {
+        /// The first character.
+        found: char,
+    },
+    /// A character outside printable ASCII.
+    #[error("command text has {found:?} at position {offset}; only printable ASCII is allowed")]
+    CommandChar {
+        /// Position in the text.
+        offset: usize,
+        /// The character.
+        found: char,
+    },
+    /// More data than we carry.
+    #[error("data of {len} bytes is larger than the {max}-byte limit")]
+    DataTooLong {
+        /// Length of the data.
+        len: usize,
+        /// The limit ([`MAX_DATA_LEN`]).
+        max: usize,
+    },
+}
+
+impl Message {
+    /// A message without data. Trailing blanks of `command` are padding and are dropped.
+    pub fn new(command: &str) -> Result<Message, MessageError> {
+        Message::with_data(command, Vec::new())
+    }
+
+    /// A message with data.
+    pub fn with_data(command: &str, data: Vec<u8>) -> Result<Message, MessageError> {
+        let command = command.trim_end_matches(' ');
+        check_command_text(command)?;
+        if data.len() > MAX_DATA_LEN {
+            return Err(MessageError::DataTooLong {
+                len: data.len(),
+                max: MAX_DATA_LEN,
+            });
+        }
+        Ok(Message {
+            command: command.to_owned(),
+            data,
+            terminator: Terminator::Nul,
+        })
+    }
+
+    /// The same message with another terminator (to reproduce a capture byte for byte).
+    pub fn with_terminator(mut self, terminator: Terminator) -> Message {
+        self.terminator = terminator;
+        self
+    }
+
+    /// The command text, without padding.
+    pub fn command(&self) -> &str {
+        &self.command
+    }
+
+    /// The data field (empty when the size is 0).
+    pub fn data(&self) -> &[u8] {
+        &self.data
+    }
+
+    /// The data field, by value.
+    pub fn into_data(self) -> Vec<u8> {
+        self.data
+    }
+
+    /// The terminator the message came with (or will be sent with).
+    pub fn terminator(&self) -> Terminator {
+        self.terminator
+    }
+
+    /// Length on the wire.
+    pub fn encoded_len(&self) -> usize {
+        MIN_MESSAGE_LEN + self.data.len()
+    }
+
+    /// The bytes on the wire.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.encoded_len());
+        MessageCodec.encode(self, &mut out);
+        out
+    }
+}
+
+impl fmt::Display for Message {
+    /// `C2ST`, or `D1 [3 bytes]` when there is data.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.command)?;
+        if !self.data.is_empty() {
+            write!(f, " [{} bytes]", self.data.len())?;
+        }
+        Ok(())
+    }
+}
+
+/// Why the front of the stream is not a message. Every variant says how many bytes to drop.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DecodeError {
+    /// A byte that cannot start a message.
+    #[error(
+        "byte {byte:#04x} cannot start a message (commands start with a capital letter); skipping {drop} bytes"
+    )]
+    NotAStart {
+        /// The first byte.
+        byte: u8,
+        /// Bytes to drop: up to the next capital letter.
+        drop: usize,
+    },
+    /// A byte outside printable ASCII in the command field.
+    #[error(
+        "command field byte {offset} is {byte:#04x}, not printable ASCII: not a message here; skipping {drop} bytes"
+    )]
+    CommandField {
+        /// Offset of the byte in the command field.
+        offset: usize,
+        /// The byte.
+        byte: u8,
+        /// Bytes to drop: past that byte, up to the next capital letter.
+        drop: usize,
+    },
+    /// A data size above the limit.
+    #[error(
+        "{command} announces {size} bytes of data, more than the {max}-byte limit: not a message here; skipping {drop} bytes"
+    )]
+    DataTooLong {
+        /// The command text (trimmed).
+        command: String,
+        /// The size field.
+        size: u32,
+        /// The limit ([`MAX_DATA_LEN`]).
+        max: usize,
+        /// Bytes to drop: up to the next capital letter.
+        drop: usize,
+    },
+    /// The three bytes after the data are not a terminator: the size is wrong, or the
+    /// message was cut.
+    #[error(
+        "{command} with {size} bytes of data ends in {found:02x?} instead of the 00 00 00 terminator; skipping {drop} bytes"
+    )]
+    Terminator {
+        /// The command text (trimmed).
+        command: String,
+        /// The size field.
+        size: u32,
+        /// The three bytes found.
+        found: [u8; TERMINATOR_LEN],
+        /// Bytes to drop: up to the next capital letter.
+        drop: usize,
+    },
+}
+
+impl Resync for DecodeError {
+    fn drop_len(&self) -> usize {
+        match self {
+            DecodeError::NotAStart { drop, .. }
+            | DecodeError::CommandField { drop, .. }
+            | DecodeError::DataTooLong { drop, .. }
+            | DecodeError::Terminator { drop, .. } => (*drop).max(1),
+        }
+    }
+}
+
+/// The message codec for both ports.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MessageCodec;
+
+impl Codec for MessageCodec {
+    type Frame = Message;
+    type Error = DecodeError;
+
+    fn decode(&self, buf: &[u8]) -> Result<Option<(Message, usize)>, DecodeError> {
+        let Some(&first) = buf.first() else {
+            return Ok(None);
+        };
+        if !is_start(first) {
+            return Err(DecodeError::NotAStart {
+                byte: first,
+                drop: next_start(buf, 0),
+            });
+        }
+        let command_field = buf.get(field::COMMAND).unwrap_or(buf);
+        if let Some(offset) = command_field.iter().position(|&b| !is_printable(b)) {
+            let byte = command_field.get(offset).copied().unwrap_or_default();
+            return Err(DecodeError::CommandField {
+                offset,
+                byte,
+                drop: next_start(buf, offset),
+            });
+        }
+        let Some(&[a, b, c, d]) = buf.get(field::SIZE) else {
+            return Ok(None);
+        };
+        let size = u32::from_be_bytes([a, b, c, d]);
+        let command = || command_text(command_field);
+        let len = match usize::try_from(size) {
+            Ok(len) if len <= MAX_DATA_LEN => len,
+            _ => {
+                return Err(DecodeError::DataTooLong {
+                    command: command(),
+                    size,
+                    max: MAX_DATA_LEN,
+                    drop: next_start(buf, 0),
+                });
+            }
+        };
+        let Some(&[t0, t1, t2]) = buf.get(field::terminator(len)) else {
+            return Ok(None);
+        };
+        let terminator = match [t0, t1, t2] {
+            NUL_TERMINATOR => Terminator::Nul,
+            ASCII_ZERO_TERMINATOR => {
+                tracing::warn!(command = %command(), "message ends in ASCII \"000\" instead of three NUL bytes; accepted");
+                Terminator::AsciiZero
+            }
+            found => {
+                return Err(DecodeError::Terminator {
+                    command: command(),
+                    size,
+                    found,
+                    drop: next_start(buf, 0),
+                });
+            }
+        };
+        let data = buf.get(field::data(len)).unwrap_or_default().to_vec();
+        let message = Message {
+            command: command(),
+            data,
+            terminator,
+        };
+        Ok(Some((message, HEADER_LEN + len + TERMINATOR_LEN)))
+    }
+
+    fn encode(&self, message: &Message, out: &mut Vec<u8>) {
+        out.reserve(message.encoded_len());
+        out.extend_from_slice(message.command.as_bytes());
+        let padding = COMMAND_LEN.saturating_sub(message.command.len());
+        out.extend(std::iter::repeat_n(PAD, padding));
+        let size = u32::try_from(message.data.len())
+            .expect("data is at most MAX_DATA_LEN, below u32::MAX");
+        out.extend_from_slice(&size.to_be_bytes());
+        out.extend_from_slice(&message.data);
+        out.extend_from_slice(&message.terminator.bytes());
+    }
+}
+
+/// Checks a (trimmed) command text.
+fn check_command_text(command: &str) -> Result<(), MessageError> {
+    let Some(first) = command.chars().next() else {
+        return Err(MessageError::EmptyCommand);
+    };
+    if let Some((offset, found)) = command
+        .char_indices()
+        .find(|&(_, c)| !c.is_ascii() || !is_printable(c as u8))
+    {
+        return Err(MessageError::CommandChar { offset, found });
+    }
+    if !is_start(first as u8) {
+        return Err(MessageError::CommandStart { found: first });
+    }
+    if command.len() > COMMAND_LEN {
+        return Err(MessageError::CommandTooLong {
+            len: command.len(),
+            max: COMMAND_LEN,
+        });
+    }
+    Ok(())
+}
+
+/// Whether a byte can be the first of a message.
+fn is_start(byte: u8) -> bool {
+    byte.is_ascii_uppercase()
+}
+
+/// Whether a byte can be in the command field.
+fn is_printable(byte: u8) -> bool {
+    (0x20..=0x7E).contains(&byte)
+}
+
+/// The command text of a checked command field: padding removed.
+fn command_text(field: &[u8]) -> String {
+    let end = field.iter().rposition(|&b| b != PAD).map_or(0, |i| i + 1);
+    field
+        .get(..end)
+        .unwrap_or_default()
+        .iter()
+        .map(|&b| char::from(b))
+        .collect()
+}
+
+/// Offset of the first possible message start after `after`, or the whole buffer.
+fn next_start(buf: &[u8], after: usize) -> usize {
+    buf.iter()
+        .enumerate()
+        .skip(after + 1)
+        .find(|&(_, &b)| is_start(b))
+        .map_or(buf.len(), |(i, _)| i)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use wire::Deframer;
+
+    fn decode_all(bytes: &[u8]) -> Vec<Result<Message, DecodeError>> {
+        let mut deframer = Deframer::new(MessageCodec);
+        deframer.push(bytes);
+        std::iter::from_fn(|| deframer.next_frame()).collect()
+    }
+
+    /// Fact sheet §2: "C2ST" + 252 blanks | 00 00 00 00 | 00 00 00 → 263 bytes.
+    fn c2st_request_bytes() -> Vec<u8> {
+        let mut bytes = b"C2ST".to_vec();
+        bytes.extend([0x20; 252]);
+        bytes.extend([0x00, 0x00, 0x00, 0x00]);
+        bytes.extend([0x00, 0x00, 0x00]);
+        bytes
+    }
+
+    /// Fact sheet §2: "D1" + 254 blanks | 00 00 00 03 | 30 30 31 | 00 00 00 → 266 bytes.
+    fn d1_001_reply_bytes() -> Vec<u8> {
+        let mut bytes = b"D1".to_vec();
+        bytes.extend([0x20; 254]);
+        bytes.extend([0x00, 0x00, 0x00, 0x03]);
+        bytes.extend([0x30, 0x30, 0x31]);
+        bytes.extend([0x00, 0x00, 0x00]);
+        bytes
+    }
+
+    #[test]
+    fn c2st_request_is_263_bytes_exactly_as_in_the_fact_sheet() {
+        let bytes = c2st_request_bytes();
+        assert_eq!(bytes.len(), 263);
+        let message = Message::new("C2ST").expect("valid command");
+        assert_eq!(message.to_bytes(), bytes);
+        assert_eq!(MessageCodec.decode(&bytes), Ok(Some((message, 263))));
+    }
+
+    #[test]
+    fn d1_reply_001_is_266_bytes_exactly_as_in_the_fact_sheet() {
+        let bytes = d1_001_reply_bytes();
+        assert_eq!(bytes.len(), 266);
+        let message = Message::with_data("D1", b"001".to_vec()).expect("valid reply");
+        assert_eq!(message.to_bytes(), bytes);
+        assert_eq!(MessageCodec.decode(&bytes), Ok(Some((message, 266))));
+    }
+
+    #[test]
+    fn a2_closing_a_d1_exchange_is_a2_254_blanks_and_seven_nul_bytes() {
+        // Fact sheet §2: "A2" + 254 spaces | 00000000 | 000000.
+        let mut bytes = b"A2".to_vec();
+        bytes.extend([b' '; 254]);
+        bytes.extend([0; 7]);
+        assert_eq!(Message::new("A2").expect("valid").to_bytes(), bytes);
+    }
+
+    #[test]
+    fn decode_waits_for_every_prefix_of_a_message() {
+        let bytes = d1_001_reply_bytes();
+        for end in 0..bytes.len() {
+            assert_eq!(
+                MessageCodec.decode(&bytes[..end]),
+                Ok(None),
+                "prefix of {end} bytes"
+            );
+        }
+    }
+
+    #[test]
+    fn decode_takes_one_message_and_leaves_the_next() {
+        let mut bytes = c2st_request_bytes();
+        bytes.extend(d1_001_reply_bytes());
+        let (first, used) = MessageCodec
+            .decode(&bytes)
+            .expect("valid")
+            .expect("complete");
+        assert_eq!((first.command(), used), ("C2ST", 263));
+        let results = decode_all(&bytes);
+        assert_eq!(results.len(), 2);
+        assert_eq!(results[1].as_ref().map(Message::data), Ok(&b"001"[..]));
+    }
+
+    #[test]
+    fn decode_accepts_an_ascii_zero_terminator_and_remembers_it() {
+        let mut bytes = d1_001_reply_bytes();
+        let len = bytes.len();
+        bytes[len - 3..].copy_from_slice(b"000");
+        let (message, _) = MessageCodec
+            .decode(&bytes)
+            .expect("accepted")
+            .expect("complete");
+        assert_eq!(message.terminator(), Terminator::AsciiZero);
+        assert_eq!(message.to_bytes(), bytes, "re-encodes byte for byte");
+    }
+
+    #[test]
+    fn decode_rejects_a_wrong_terminator_and_says_what_it_found() {
+        let mut bytes = d1_001_reply_bytes();
+        let len = bytes.len();
+        bytes[len - 3..].copy_from_slice(&[0x00, 0x0D, 0x0A]);
+        assert_eq!(
+            MessageCodec.decode(&bytes),
+            // No capital letter follows the D, so no message can start in these bytes.
+            Err(DecodeError::Terminator {
+                command: "D1".into(),
+                size: 3,
+                found: [0x00, 0x0D, 0x0A],
+                drop: 266
+            })
+        );
+    }
+
+    #[test]
+    fn decode_rejects_a_mixed_terminator() {
+        let mut bytes = c2st_request_bytes();
+        bytes[262] = b'0';
+        assert!(matches!(
+            MessageCodec.decode(&bytes),
+            Err(DecodeError::Terminator { .. })
+        ));
+    }
+
+    #[test]
+    fn decode_refuses_a_hostile_size_at_once_without_waiting_for_the_data() {
+        let mut bytes = b"C0PHOSTILE".to_vec();
+        bytes.resize(COMMAND_LEN, b' ');
+        bytes.extend(u32::MAX.to_be_bytes());
+        let error = MessageCodec.decode(&bytes).expect_err("size above the cap");
+        assert_eq!(
+            error,
+            // The next possible start is the P of "C0P".
+            DecodeError::DataTooLong {
+                command: "C0PHOSTILE".into(),
+                size: u32::MAX,
+                max: MAX_DATA_LEN,
+                drop: 2
+            }
+        );
+        assert!(error.to_string().contains("4194304-byte limit"), "{error}");
+    }
+
+    #[test]
+    fn decode_accepts_data_of_exactly_the_cap_and_refuses_one_more_byte() {
+        let mut header = b"D0".to_vec();
+        header.resize(COMMAND_LEN, b' ');
+        let mut at_cap = header.clone();
+        at_cap.extend((MAX_DATA_LEN as u32).to_be_bytes());
+        assert_eq!(MessageCodec.decode(&at_cap), Ok(None), "waits for the data");
+        let mut above = header;
+        above.extend((MAX_DATA_LEN as u32 + 1).to_be_bytes());
+        assert!(matches!(
+            MessageCodec.decode(&above),
+            Err(DecodeError::DataTooLong { .. })
+        ));
+    }
+
+    #[test]
+    fn decode_skips_a_run_of_garbage_up_to_the_next_capital_letter() {
+        let mut bytes = b"\x00\x01xyz\r\n".to_vec();
+        bytes.extend(c2st_request_bytes());
+        assert_eq!(
+            MessageCodec.decode(&bytes),
+            Err(DecodeError::NotAStart {
+                byte: 0x00,
+                drop: 7
+            })
+        );
+        let results = decode_all(&bytes);
+        assert_eq!(results.len(), 2);
+        assert_eq!(results[1].as_ref().map(Message::command), Ok("C2ST"));
+    }
+
+    #[test]
+    fn decode_skips_past_a_control_byte_inside_the_command_field_in_one_step() {
+        let mut bytes = b"ABC\x00def".to_vec();
+        bytes.extend(c2st_request_bytes());
+        assert_eq!(
+            MessageCodec.decode(&bytes),
+            Err(DecodeError::CommandField {
+                offset: 3,
+                byte: 0x00,
+                drop: 7
+            })
+        );
+        let results = decode_all(&bytes);
+        assert_eq!(results.len(), 2);
+        assert_eq!(results[1].as_ref().map(Message::command), Ok("C2ST"));
+    }
+
+    #[test]
+    fn capital_letters_before_a_message_cost_one_error_each_and_the_message_survives() {
+        let mut bytes = b"XY".to_vec();
+        bytes.extend(c2st_request_bytes());
+        let results = decode_all(&bytes);
+        assert_eq!(results.len(), 3, "{results:?}");
+        assert!(results[0].is_err() && results[1].is_err());
+        assert_eq!(results[2].as_ref().map(Message::command), Ok("C2ST"));
+    }
+
+    #[test]
+    fn a_message_whose_size_is_too_small_is_dropped_and_the_next_one_is_found() {
+        // D1 claims 1 byte but carries 3: its "terminator" is "01\0".
+        let mut broken = d1_001_reply_bytes();
+        broken[259] = 1;
+        let mut bytes = broken;
+        bytes.extend(c2st_request_bytes());
+        let results = decode_all(&bytes);
+        assert!(matches!(results[0], Err(DecodeError::Terminator { .. })));
+        let good: Vec<_> = results.iter().filter_map(|r| r.as_ref().ok()).collect();
+        assert_eq!(good.len(), 1);
+        assert_eq!(good[0].command(), "C2ST");
+    }
+
+    #[test]
+    fn message_new_trims_padding_and_refuses_what_cannot_be_sent() {
+        assert_eq!(Message::new("C2ST   ").expect("valid").command(), "C2ST");
+        assert_eq!(Message::new("   "), Err(MessageError::EmptyCommand));
+        assert_eq!(
+            Message::new("c2st"),
+            Err(MessageError::CommandStart { found: 'c' })
+        );
+        assert_eq!(
+            Message::new("C2\tST"),
+            Err(MessageError::CommandChar {
+                offset: 2,
+                found: '\t'
+            })
+        );
+        assert_eq!(
+            Message::new("Cé"),
+            Err(MessageError::CommandChar {
+                offset: 1,
+                found: 'é'
+            })
+        );
+        let long = "C".repeat(257);
+        assert_eq!(
+            Message::new(&long),
+            Err(MessageError::CommandTooLong { len: 257, max: 256 })
+        );
+        assert!(Message::new(&long[..256]).is_ok());
+        assert_eq!(
+            Message::with_data("D0", vec![0; MAX_DATA_LEN + 1]),
+            Err(MessageError::DataTooLong {
+                len: MAX_DATA_LEN + 1,
+                max: MAX_DATA_LEN
+            })
+        );
+    }
+
+    #[test]
+    fn errors_always_drop_at_least_one_byte() {
+        for error in [
+            DecodeError::NotAStart { byte: 0, drop: 0 },
+            DecodeError::CommandField {
+                offset: 0,
+                byte: 0,
+                drop: 0,
+            },
+        ] {
+            assert_eq!(error.drop_len(), 1);
+        }
+    }
+
+    fn arb_message() -> impl Strategy<Value = Message> {
+        (
+            "[A-Z][ -~]{0,40}",
+            prop::collection::vec(any::<u8>(), 0..600),
+            prop::bool::ANY,
+        )
+            .prop_filter_map("command must survive trimming", |(command, data, ascii)| {
+                let terminator = if ascii {
+                    Terminator::AsciiZero
+                } else {
+                    Terminator::Nul
+                };
+                Message::with_data(&command, data)
+                    .ok()
+                    .map(|m| m.with_terminator(terminator))
+            })
+    }
+
+    fn chunked(bytes: &[u8], cuts: &[usize]) -> Vec<Result<Message, DecodeError>> {
+        let mut deframer = Deframer::new(MessageCodec);
+        let mut out = Vec::new();
+        let mut at = 0;
+        let mut cuts: Vec<usize> = cuts.iter().map(|c| c % (bytes.len() + 1)).collect();
+        cuts.sort_unstable();
+        for cut in cuts.into_iter().chain([bytes.len()]) {
+            deframer.push(&bytes[at..cut]);
+            at = cut;
+            out.extend(std::iter::from_fn(|| deframer.next_frame()));
+        }
+        out
+    }
+
+    proptest! {
+        #[test]
+        fn messages_round_trip(message in arb_message()) {
+            let bytes = message.to_bytes();
+            prop_assert_eq!(bytes.len(), message.encoded_len());
+            prop_assert_eq!(MessageCodec.decode(&bytes), Ok(Some((message, bytes.len()))));
+        }
+
+        #[test]
+        fn messages_split_anywhere_decode_the_same(
+            messages in prop::collection::vec(arb_message(), 1..5),
+            cuts in prop::collection::vec(any::<usize>(), 0..12),
+        ) {
+            let bytes: Vec<u8> = messages.iter().flat_map(Message::to_bytes).collect();
+            let decoded: Vec<Message> = chunked(&bytes, &cuts).into_iter().collect::<Result<_, _>>().expect("clean stream");
+            prop_assert_eq!(decoded, messages);
+        }
+
+        #[test]
+        fn garbage_before_between_and_after_messages_never_hides_them(
+            messages in prop::collection::vec(arb_message(), 1..4),
+            garbage in prop::collection::vec(prop::collection::vec(any::<u8>(), 0..40), 5),
+            cuts in prop::collection::vec(any::<usize>(), 0..8),
+        ) {
+            // Garbage ends in a NUL so that it cannot run into the next message's command field.
+            let mut bytes = Vec::new();
+            for (message, junk) in messages.iter().zip(&garbage) {
+                bytes.extend(junk);
+                if !junk.is_empty() { bytes.push(0); }
+                bytes.extend(message.to_bytes());
+            }
+            bytes.extend(&garbage[4]);
+            let decoded: Vec<Message> = chunked(&bytes, &cuts).into_iter().filter_map(Result::ok).collect();
+            // Garbage may itself look like a message only if it carries a capital letter, a
+            // clean size and a terminator in the right place; 40 random bytes cannot.
+            prop_assert_eq!(decoded, messages);
+        }
+
+        #[test]
+        fn any_size_field_is_handled_without_panic_or_overallocation(size in any::<u32>(), tail in prop::collection::vec(any::<u8>(), 0..64)) {
+            let mut bytes = b"D0".to_vec();
+            bytes.resize(COMMAND_LEN, b' ');
+            bytes.extend(size.to_be_bytes());
+            bytes.extend(&tail);
+            match MessageCodec.decode(&bytes) {
+                Ok(None) => prop_assert!(size as usize <= MAX_DATA_LEN && (size as usize) + 3 > tail.len()),
+                Ok(Some((message, used))) => {
+                    prop_assert_eq!(message.data().len(), size as usize);
+                    prop_assert_eq!(used, MIN_MESSAGE_LEN + size as usize);
+                }
+                Err(DecodeError::DataTooLong { .. }) => prop_assert!(size as usize > MAX_DATA_LEN),
+                Err(DecodeError::Terminator { .. }) => prop_assert!((size as usize) + 3 <= tail.len()),
+                Err(other) => prop_assert!(false, "unexpected {other:?}"),
+            }
+        }
+
+        #[test]
+        fn random_bytes_never_panic_and_errors_drop_within_the_buffer(bytes in prop::collection::vec(any::<u8>(), 0..600)) {
+            match MessageCodec.decode(&bytes) {
+                Ok(Some((_, used))) => prop_assert!(used <= bytes.len()),
+                Ok(None) => {}
+                Err(error) => prop_assert!((1..=bytes.len()).contains(&error.drop_len())),
+            }
+        }
+    }
+}
