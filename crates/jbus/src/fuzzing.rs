@@ -9,7 +9,7 @@ use wire::{Codec, Deframer, Resync};
 
 use crate::cross::device::CrossTwin;
 use crate::rtu::codec::append_crc;
-use crate::rtu::{Addressed, RequestCodec, ResponseCodec, Unit, check_response};
+use crate::rtu::{Addressed, RequestCodec, ResponseCodec, SniffCodec, Unit, check_response};
 use crate::slave::Slave;
 
 /// Decodes `data` as requests (the server's side), checks every frame round-trips, checks
@@ -21,10 +21,21 @@ pub fn decode_request(data: &[u8]) {
 }
 
 /// Decodes `data` as responses (the client's side), checks every frame round-trips, and
-/// checks them against a few requests.
+/// checks them against a few requests; then sniffs it as a capture of both directions.
 pub fn decode_response(data: &[u8]) {
     for input in [data.to_vec(), with_crc(data)] {
         run_responses(&input);
+        run_sniffer(&input);
+    }
+}
+
+fn run_sniffer(data: &[u8]) {
+    let mut deframer = Deframer::new(SniffCodec);
+    deframer.push(data);
+    while let Some(result) = deframer.next_frame() {
+        if let Err(error) = result {
+            assert!(error.drop_len() >= 1);
+        }
     }
 }
 

@@ -75,9 +75,9 @@ pub mod addr {
     pub const FULL_SCALE_VS2_U: u16 = 0x22;
     /// Full scale Vout U, V, W [tenths of V].
     pub const FULL_SCALE_VOUT_U: u16 = 0x25;
-    /// Full scale Iout U, V, W [A].
+    /// Full scale Iout U, V, W (whole amperes).
     pub const FULL_SCALE_IOUT_U: u16 = 0x28;
-    /// Full scale Iout neutral [A].
+    /// Full scale Iout neutral (whole amperes).
     pub const FULL_SCALE_IOUT_NEUTRAL: u16 = 0x2B;
     /// Full scale neutral voltage [tenths of V].
     pub const FULL_SCALE_NEUTRAL_VOLTAGE: u16 = 0x2C;

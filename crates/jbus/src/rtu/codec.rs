@@ -14,7 +14,8 @@
 //! Modbus standard gives a fixed or byte-counted request layout are framed by it; for
 //! others the request decoder takes the shortest run of 4 to 8 bytes that ends in a valid
 //! CRC ([`OTHER_FUNCTION_SCAN`]), which finds the usual short frames (the JBUS manual's
-//! own example is `01 09 00 00 00 00 CRC`) and gives up after 8 bytes.
+//! own example is `01 09 00 00 00 00 CRC`) and gives up after 8 bytes. A function byte with
+//! the exception bit (0x80) set is never a request.
 
 use wire::checksum::CRC16_MODBUS;
 use wire::{Codec, Resync};
@@ -174,6 +175,61 @@ impl ResponseAdu {
     }
 }
 
+/// A frame of a capture in which requests and responses alternate.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Sniffed {
+    /// A request (only a request's layout gives a good CRC).
+    Request(RequestAdu),
+    /// A response (only a response's layout gives a good CRC).
+    Response(ResponseAdu),
+    /// Bytes that are both: a write of one coil or register and its echo are the same
+    /// bytes, so only the order in the capture tells them apart.
+    Either {
+        /// The bytes read as a request.
+        request: RequestAdu,
+        /// The bytes read as a response.
+        response: ResponseAdu,
+    },
+}
+
+/// Decodes a capture of both directions (for annotated dumps): each frame is taken as a
+/// request or a response, whichever layout ends in a good CRC. Encodes requests and
+/// responses as their own codecs do (`Either` as the request).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SniffCodec;
+
+impl Codec for SniffCodec {
+    type Frame = Sniffed;
+    type Error = DecodeError;
+
+    fn decode(&self, buf: &[u8]) -> Result<Option<(Sniffed, usize)>, DecodeError> {
+        match (decode_request(buf), decode_response(buf)) {
+            (Ok(Some((request, a))), Ok(Some((response, b)))) => Ok(Some(match a.cmp(&b) {
+                std::cmp::Ordering::Equal => (Sniffed::Either { request, response }, a),
+                std::cmp::Ordering::Less => (Sniffed::Request(request), a),
+                std::cmp::Ordering::Greater => (Sniffed::Response(response), b),
+            })),
+            (Ok(Some((request, len))), _) => Ok(Some((Sniffed::Request(request), len))),
+            (_, Ok(Some((response, len)))) => Ok(Some((Sniffed::Response(response), len))),
+            (Ok(None), _) | (_, Ok(None)) => Ok(None),
+            (Err(request), Err(response)) => Err(if response.drop_len() < request.drop_len() {
+                response
+            } else {
+                request
+            }),
+        }
+    }
+
+    fn encode(&self, frame: &Sniffed, out: &mut Vec<u8>) {
+        match frame {
+            Sniffed::Request(request) | Sniffed::Either { request, .. } => {
+                encode_request(request, out)
+            }
+            Sniffed::Response(response) => encode_response(response, out),
+        }
+    }
+}
+
 /// Decodes one request from the front of `buf` (see [`RequestCodec`]).
 pub fn decode_request(buf: &[u8]) -> Result<Option<(RequestAdu, usize)>, DecodeError> {
     let &[unit, function, ..] = buf else {
@@ -199,6 +255,8 @@ pub fn decode_request(buf: &[u8]) -> Result<Option<(RequestAdu, usize)>, DecodeE
             None => return Ok(None),
         },
         24 => 6,
+        // The exception bit marks responses: no request has it.
+        f if f & EXCEPTION_BIT != 0 => return Err(DecodeError::UnknownFunction { unit, function }),
         _ => return scan_other_function(buf, unit, function),
     };
     let Some(frame) = buf.get(..len) else {
@@ -896,6 +954,76 @@ mod tests {
         assert_eq!((offset, len), (3, 7));
         assert_eq!(frame, good);
         assert_eq!(find_frame(&ResponseCodec, &hex("01 02 03")), None);
+    }
+
+    #[test]
+    fn sniffing_a_capture_tells_requests_from_responses() {
+        let unit = Unit::new(1).expect("1");
+        let read =
+            Addressed::new(unit, Request::read_holding_registers(0, 2).expect("valid")).to_adu();
+        let registers = ResponseAdu {
+            unit: 1,
+            response: Response::ReadHoldingRegisters(RegisterValues::new(vec![5, 6]).expect("2")),
+        };
+        let write = Addressed::new(
+            unit,
+            Request::write_multiple_registers(4, vec![1, 2, 3]).expect("valid"),
+        )
+        .to_adu();
+        let written = ResponseAdu {
+            unit: 1,
+            response: Response::WriteMultipleRegisters {
+                address: 4,
+                count: 3,
+            },
+        };
+        let single = Addressed::new(unit, Request::write_single_register(9, 9)).to_adu();
+        let refused = ResponseAdu {
+            unit: 1,
+            response: Response::exception(
+                FunctionCode::READ_COILS,
+                ExceptionCode::ILLEGAL_DATA_ADDRESS,
+            ),
+        };
+        let mut capture = Vec::new();
+        for bytes in [
+            read.to_bytes(),
+            registers.to_bytes(),
+            write.to_bytes(),
+            written.to_bytes(),
+            single.to_bytes(),
+            single.to_bytes(),
+            refused.to_bytes(),
+        ] {
+            capture.extend(bytes);
+        }
+        let mut deframer = Deframer::new(SniffCodec);
+        deframer.push(&capture);
+        let frames: Vec<Sniffed> = std::iter::from_fn(|| deframer.next_frame())
+            .map(|f| f.expect("clean capture"))
+            .collect();
+        let echo = Sniffed::Either {
+            request: single.clone(),
+            response: ResponseAdu {
+                unit: 1,
+                response: Response::WriteSingleRegister(crate::rtu::WriteRegister {
+                    address: 9,
+                    value: 9,
+                }),
+            },
+        };
+        assert_eq!(
+            frames,
+            vec![
+                Sniffed::Request(read),
+                Sniffed::Response(registers),
+                Sniffed::Request(write),
+                Sniffed::Response(written),
+                echo.clone(),
+                echo,
+                Sniffed::Response(refused),
+            ]
+        );
     }
 
     use crate::rtu::Addressed;

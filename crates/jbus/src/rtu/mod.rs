@@ -23,7 +23,9 @@ pub mod response;
 pub mod timing;
 pub mod value;
 
-pub use codec::{DecodeError, MAX_ADU, Malformed, RequestCodec, ResponseCodec, find_frame};
+pub use codec::{
+    DecodeError, MAX_ADU, Malformed, RequestCodec, ResponseCodec, SniffCodec, Sniffed, find_frame,
+};
 pub use exchange::{Answer, EchoField, Mismatch, check_response};
 pub use request::{
     Addressed, Broadcast, ByteField, COIL_OFF, COIL_ON, OtherFunction, ReadBits, ReadRegisters,

@@ -168,18 +168,17 @@ pub enum MapProblem {
 #[derive(Clone, PartialEq, Eq)]
 pub(crate) struct TableData {
     values: Vec<u16>,
-    /// For each address: 0 if absent, else the map line that defined it (all-writable
-    /// maps use line 0 and `all`).
+    /// For each address: 0 if absent, else the map line that defined it (empty when
+    /// `all`: every address exists).
     defined_on: Vec<u32>,
     all: bool,
 }
 
 impl fmt::Debug for TableData {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let defined = self.defined_on.iter().filter(|&&l| l != 0).count();
         f.debug_struct("TableData")
             .field("all", &self.all)
-            .field("defined", &defined)
+            .field("defined", &self.defined())
             .finish()
     }
 }
@@ -196,7 +195,7 @@ impl TableData {
     fn full() -> Self {
         Self {
             values: vec![0; ADDRESS_SPACE],
-            defined_on: vec![0; ADDRESS_SPACE],
+            defined_on: Vec::new(),
             all: true,
         }
     }
