@@ -29,7 +29,8 @@
 //! handed to the serve loop (it writes at once over TCP), or, after
 //! [`Line::paced`], that moment plus the answer's wire time (a serve loop that paces
 //! replies at the line's rate). A message that ends before the line is free again is
-//! ignored and logged, as a real regulator would miss it.
+//! ignored and logged, as a real regulator would miss it; on a paced line, so is one that
+//! began (its end minus its wire time) before the line was free.
 //!
 //! When several regulators answer the same message (`$` reaches every one; two that took
 //! the same address), their answers overlap on the wire: identical answers are
@@ -136,10 +137,16 @@ impl Line {
 
     /// Handles one decoded message that ended at `now`; the bytes to answer, if any.
     fn handle_frame(&mut self, frame: Frame, now: Instant) -> Option<Vec<u8>> {
-        if let Some(from) = self.listening_from.filter(|from| now < *from) {
+        // On a paced line the message began its wire time before its end; it is heard only
+        // if it began once the regulators listened.
+        let start = self
+            .pace
+            .and_then(|t| now.checked_sub(t.wire_time(frame.wire_len())))
+            .unwrap_or(now);
+        if let Some(from) = self.listening_from.filter(|from| start < *from) {
             tracing::warn!(
                 %frame,
-                early_by = ?from - now,
+                early_by = ?from - start,
                 "message inside the regulators' turnaround (40 ms after a message, 200 ms before and 40 ms after an answer): ignored"
             );
             return None;

@@ -1,0 +1,9 @@
+//! Integration tests of the thermosald crate: one test binary (see Cargo.toml).
+
+mod common;
+mod exchange;
+mod roundtrip;
+mod tables;
+mod twin;
+mod twin_line;
+mod vectors;
