@@ -91,6 +91,8 @@ pub struct Line {
     name: String,
     settings: Option<SerialSettings>,
     rs485: Rs485,
+    /// The line must stay quiet until then (a device's turnaround, an inter-frame gap).
+    quiet_until: Option<Instant>,
 }
 
 impl std::fmt::Debug for Line {
@@ -117,6 +119,7 @@ impl Line {
                     name: endpoint.to_string(),
                     settings: Some(*settings),
                     rs485: *rs485,
+                    quiet_until: None,
                 };
                 line.set_direction(false).map_err(|e| OpenError::Serial {
                     path: path.clone(),
@@ -156,6 +159,7 @@ impl Line {
             name: name.into(),
             settings,
             rs485: Rs485::default(),
+            quiet_until: None,
         }
     }
 
@@ -174,9 +178,21 @@ impl Line {
         self.settings.map(|s| s.time_for(chars)).unwrap_or_default()
     }
 
-    /// Sends `bytes`: switches an RS-485 transceiver to transmit for their time on the
-    /// wire, and reads back the adapter's echo when told to.
+    /// Keeps the line quiet until `at`: the next [`send`](Self::send) waits for it. Protocols
+    /// use it for turnaround windows (a Thermosald regulator holds the line 40 ms after its
+    /// answer) and inter-frame gaps (Modbus RTU's 3.5 characters). It belongs to the line,
+    /// not to a client, because every device on the line must respect it. A later call
+    /// never shortens an earlier one.
+    pub fn keep_quiet_until(&mut self, at: Instant) {
+        self.quiet_until = Some(self.quiet_until.map_or(at, |quiet| quiet.max(at)));
+    }
+
+    /// Sends `bytes`: waits for the end of any quiet time, switches an RS-485 transceiver
+    /// to transmit for their time on the wire, and reads back the adapter's echo when told to.
     pub async fn send(&mut self, bytes: &[u8]) -> Result<(), LineError> {
+        if let Some(at) = self.quiet_until.take() {
+            tokio::time::sleep_until(at).await;
+        }
         self.set_direction(true)?;
         let written = self.write_all(bytes).await;
         if self.rs485.direction.is_some() {
@@ -380,6 +396,22 @@ mod tests {
             .await
             .unwrap_err();
         assert!(matches!(err, LineError::Timeout { after } if after == Duration::from_millis(300)));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn send_waits_for_the_quiet_time_and_the_longest_one_wins() {
+        let (a, mut b) = tokio::io::duplex(64);
+        let mut line = Line::from_stream(a, "test", None);
+        let started = Instant::now();
+        line.keep_quiet_until(started + Duration::from_millis(40));
+        line.keep_quiet_until(started + Duration::from_millis(10));
+        line.send(b"x").await.unwrap();
+        assert_eq!(started.elapsed(), Duration::from_millis(40));
+        let mut buf = [0u8; 1];
+        b.read_exact(&mut buf).await.unwrap();
+        // Once waited for, the quiet time is spent.
+        line.send(b"y").await.unwrap();
+        assert_eq!(started.elapsed(), Duration::from_millis(40));
     }
 
     #[tokio::test(start_paused = true)]
