@@ -1,0 +1,507 @@
+//! The API through `tower::ServiceExt::oneshot` on the router (paused clock, in-memory
+//! line), and over a real loopback socket for the event stream and client addresses.
+
+use std::time::Duration;
+
+use axum::body::Body;
+use axum::http::{Request, StatusCode};
+use serde_json::{Value as Json, json};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tower::ServiceExt;
+
+use super::*;
+use crate::testing::{Rig, rig};
+
+const TOKEN: &str = "s3cret-token";
+
+fn app(rig: &Rig, enabled: bool) -> Router {
+    router(
+        Arc::clone(&rig.cell),
+        WritePolicy {
+            enabled,
+            token: Some(TOKEN.into()),
+        },
+        rig.shutdown.subscribe(),
+    )
+}
+
+async fn call(app: &Router, request: Request<Body>) -> (StatusCode, Json) {
+    let response = app.clone().oneshot(request).await.unwrap();
+    let status = response.status();
+    let bytes = axum::body::to_bytes(response.into_body(), 16 << 20)
+        .await
+        .unwrap();
+    let body = serde_json::from_slice(&bytes)
+        .unwrap_or_else(|_| Json::String(String::from_utf8_lossy(&bytes).into_owned()));
+    (status, body)
+}
+
+async fn get(app: &Router, uri: &str) -> (StatusCode, Json) {
+    call(app, Request::get(uri).body(Body::empty()).unwrap()).await
+}
+
+fn write_request(device: &str, token: Option<&str>, body: &str) -> Request<Body> {
+    let mut request = Request::post(format!("/api/devices/{device}/write"))
+        .header("content-type", "application/json");
+    if let Some(token) = token {
+        request = request.header("authorization", format!("Bearer {token}"));
+    }
+    request.body(Body::from(body.to_owned())).unwrap()
+}
+
+fn error_of(body: &Json) -> &str {
+    body["error"]
+        .as_str()
+        .unwrap_or_else(|| panic!("no error field in {body}"))
+}
+
+/// Concrete URIs for the route patterns.
+fn example_uri(path: &str) -> String {
+    path.replace("{id}", "jbc1")
+}
+
+#[tokio::test(start_paused = true)]
+async fn every_route_is_in_the_openapi_document_and_every_documented_path_is_a_route() {
+    let rig = rig(1);
+    let app = app(&rig, true);
+    let doc: Json = serde_json::from_str(OPENAPI).unwrap();
+    assert_eq!(doc["openapi"], "3.0.3");
+    let paths = doc["paths"].as_object().unwrap();
+    for (method, path) in API_ROUTES {
+        let operation = &paths
+            .get(*path)
+            .unwrap_or_else(|| panic!("{path} is not in openapi.json"))[method.to_lowercase()];
+        assert!(
+            operation.is_object(),
+            "{method} {path} is not in openapi.json"
+        );
+        assert!(
+            operation["responses"].is_object(),
+            "{method} {path} has no responses"
+        );
+        // The router has the route: whatever it answers, it is not the fallback.
+        if *path == "/api/events/stream" {
+            continue;
+        }
+        let request = Request::builder()
+            .method(*method)
+            .uri(example_uri(path))
+            .header("content-type", "application/json")
+            .body(Body::from("{}"))
+            .unwrap();
+        let (status, body) = call(&app, request).await;
+        assert!(
+            !body.to_string().contains("no route"),
+            "{method} {path}: {status} {body}"
+        );
+    }
+    let documented: usize = paths.values().map(|p| p.as_object().unwrap().len()).sum();
+    assert_eq!(
+        documented,
+        API_ROUTES.len(),
+        "openapi.json has routes the router lacks"
+    );
+    // Every $ref points at something that exists.
+    let text = OPENAPI;
+    for reference in text.split("\"$ref\": \"#/").skip(1) {
+        let target = reference.split('"').next().unwrap();
+        let mut node = &doc;
+        for part in target.split('/') {
+            node = &node[part];
+        }
+        assert!(!node.is_null(), "dangling $ref #/{target}");
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn devices_show_points_with_value_unit_quality_and_time() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let (status, body) = get(&app, "/api/devices").await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(body["writes_enabled"], false);
+    let device = &body["devices"][0];
+    assert_eq!(device["id"], "jbc1");
+    assert_eq!(device["status"], "up");
+    assert_eq!(device["protocol"], "jbc");
+    let points = device["points"].as_array().unwrap();
+    let air = points
+        .iter()
+        .find(|p| p["id"] == "jbc1.air_temperature")
+        .unwrap();
+    assert_eq!(air["unit"], "°C");
+    assert_eq!(air["quality"], "good");
+    assert!(air["value"].is_number());
+    assert!(air["t"].as_str().unwrap().ends_with('Z'));
+    let tool = points
+        .iter()
+        .find(|p| p["id"] == "jbc1.connected_tool")
+        .unwrap();
+    assert_eq!(tool["text"], "JT");
+    assert_eq!(tool["kind"]["type"], "enum");
+
+    let (status, one) = get(&app, "/api/devices/jbc1").await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(one["id"], "jbc1");
+    let (status, body) = get(&app, "/api/lines").await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(body["lines"][0]["name"], "bench");
+    assert_eq!(body["lines"][0]["open"], true);
+}
+
+#[tokio::test(start_paused = true)]
+async fn unknown_ids_and_routes_are_404_with_json_that_says_what_exists() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    let (status, body) = get(&app, "/api/devices/nope").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert_eq!(error_of(&body), "no device \"nope\"; devices: jbc1");
+    let (status, body) = get(&app, "/api/nothing").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(error_of(&body).contains("/api/openapi.json"));
+    let (status, body) = call(
+        &app,
+        Request::delete("/api/devices").body(Body::empty()).unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::METHOD_NOT_ALLOWED);
+    assert!(error_of(&body).contains("DELETE"));
+    let (status, body) = get(&app, "/api/history?point=jbc1.nothing").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(error_of(&body).contains("no point \"nothing\""), "{body}");
+    let (status, _) = get(&app, "/api/history?point=zzz.air_temperature").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    let (status, _) = get(&app, "/api/events?device=zzz").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+}
+
+#[tokio::test(start_paused = true)]
+async fn malformed_queries_are_400_and_say_what_is_wrong() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    for (uri, expected) in [
+        ("/api/history", "give the point"),
+        ("/api/history?point=jbc1", "<device>.<point>"),
+        (
+            "/api/history?point=jbc1.air_temperature&from=yesterday",
+            "from: \"yesterday\" is not a time",
+        ),
+        (
+            "/api/history?point=jbc1.air_temperature&from=-1h&to=-2h",
+            "must be before",
+        ),
+        (
+            "/api/history?point=jbc1.air_temperature&step=often",
+            "step \"often\" is not a duration",
+        ),
+        (
+            "/api/history?point=jbc1.air_temperature&colour=red",
+            "unknown field `colour`",
+        ),
+        ("/api/events?kind=explosion", "kinds: gateway_started"),
+        ("/api/events?limit=0", "limit 0 is out of range"),
+        ("/api/events?limit=many", "bad query"),
+        ("/api/audit?limit=100000", "1 to 10000"),
+    ] {
+        let (status, body) = get(&app, uri).await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{uri}: {body}");
+        assert!(error_of(&body).contains(expected), "{uri}: {body}");
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn history_gives_changes_and_buckets_and_events_list_what_happened() {
+    let rig = rig(1);
+    let app = app(&rig, true);
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    rig.models[0]
+        .lock()
+        .set_tool_error(jbc::code::ToolError::AirPump);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    rig.cell.store().flush().await.unwrap();
+
+    let (status, body) = get(&app, "/api/history?point=jbc1.tool_error&from=-1h").await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let values: Vec<&Json> = body["samples"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| &s["value"])
+        .collect();
+    assert_eq!(values, vec![&json!(0.0), &json!(1.0)]);
+    let (status, body) = get(
+        &app,
+        "/api/history?point=jbc1.tool_error&from=-1h&to=now&step=1h",
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    let buckets = body["buckets"].as_array().unwrap();
+    let count: u64 = buckets.iter().map(|b| b["count"].as_u64().unwrap()).sum();
+    assert_eq!(count, 2);
+    assert_eq!(body["step_ms"], 3_600_000);
+
+    let (status, body) = get(&app, "/api/events?kind=alarm_raised&device=jbc1").await;
+    assert_eq!(status, StatusCode::OK);
+    let events = body["events"].as_array().unwrap();
+    assert_eq!(events.len(), 1);
+    assert_eq!(events[0]["point"], "jbc1.tool_error");
+    assert!(
+        events[0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("Air pump malfunction")
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn metrics_and_health_report_polls_and_history() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    rig.cell.store().flush().await.unwrap();
+    let response = app
+        .clone()
+        .oneshot(Request::get("/metrics").body(Body::empty()).unwrap())
+        .await
+        .unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    assert!(
+        response.headers()["content-type"]
+            .to_str()
+            .unwrap()
+            .starts_with("application/openmetrics-text")
+    );
+    let text = String::from_utf8(
+        axum::body::to_bytes(response.into_body(), 1 << 20)
+            .await
+            .unwrap()
+            .to_vec(),
+    )
+    .unwrap();
+    for expected in [
+        r#"cellbus_polls_total{line="bench",device="jbc1",result="ok"}"#,
+        r#"cellbus_errors_total{line="bench",device="jbc1",kind="timeout"} 0"#,
+        r#"cellbus_poll_duration_seconds_count{line="bench",device="jbc1"}"#,
+        r#"cellbus_line_busy_seconds_total{line="bench"}"#,
+        r#"cellbus_device_up{line="bench",device="jbc1"} 1"#,
+        "cellbus_history_rows_written_total",
+    ] {
+        assert!(text.contains(expected), "missing {expected} in\n{text}");
+    }
+    let (status, body) = get(&app, "/healthz").await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(body["status"], "ok");
+    assert_eq!(body["devices_up"], 1);
+    assert!(body["history_rows_written"].as_u64().unwrap() > 0);
+}
+
+#[tokio::test(start_paused = true)]
+async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let off = app(&rig, false);
+    let on = app(&rig, true);
+    let body = r#"{"point": "air_temperature_setpoint", "value": 333}"#;
+
+    let (status, reply) = call(&off, write_request("jbc1", Some(TOKEN), body)).await;
+    assert_eq!(status, StatusCode::FORBIDDEN);
+    assert!(error_of(&reply).contains("--allow-writes"));
+    let (status, reply) = call(&on, write_request("jbc1", None, body)).await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+    assert!(error_of(&reply).contains("Bearer"));
+    let (status, _) = call(&on, write_request("jbc1", Some("guess"), body)).await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+    let (status, reply) = call(
+        &on,
+        write_request(
+            "jbc1",
+            Some(TOKEN),
+            r#"{"point": "air_temperature_setpoint", "value": 999}"#,
+        ),
+    )
+    .await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+    assert!(error_of(&reply).contains("150 to 450 °C"), "{reply}");
+    let (status, reply) = call(&on, write_request("jbc1", Some(TOKEN), "{not json")).await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+    assert!(error_of(&reply).contains("bad request body"), "{reply}");
+    let (status, reply) = call(
+        &on,
+        write_request(
+            "jbc1",
+            Some(TOKEN),
+            r#"{"point": "air_temperature", "value": 1}"#,
+        ),
+    )
+    .await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+    assert!(error_of(&reply).contains("read-only"), "{reply}");
+    let (status, reply) = call(
+        &on,
+        write_request(
+            "jbc1",
+            Some(TOKEN),
+            r#"{"point": "warp_drive", "value": 1}"#,
+        ),
+    )
+    .await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(
+        error_of(&reply).contains("writable points: air_temperature_setpoint"),
+        "{reply}"
+    );
+    let (status, _) = call(&on, write_request("nope", Some(TOKEN), body)).await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert_ne!(
+        rig.models[0].lock().settings().air_temp,
+        333,
+        "nothing reached the station"
+    );
+
+    let (status, reply) = call(&on, write_request("jbc1", Some(TOKEN), body)).await;
+    assert_eq!(status, StatusCode::OK, "{reply}");
+    assert_eq!(reply["new"], 333.0);
+    assert_eq!(rig.models[0].lock().settings().air_temp, 333);
+    let (status, reply) = call(
+        &on,
+        write_request(
+            "jbc1",
+            Some(TOKEN),
+            r#"{"point": "jbc1.tool_on", "value": "on"}"#,
+        ),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{reply}");
+    assert!(
+        reply["detail"]
+            .as_str()
+            .unwrap()
+            .contains("set to on (was off)"),
+        "{reply}"
+    );
+    assert!(rig.models[0].lock().port_status().tool_on);
+
+    let (status, audit) = get(&on, "/api/audit?device=jbc1").await;
+    assert_eq!(status, StatusCode::OK);
+    let rows = audit["audit"].as_array().unwrap();
+    let results: Vec<&str> = rows.iter().map(|r| r["result"].as_str().unwrap()).collect();
+    assert_eq!(
+        results,
+        vec![
+            "accepted", "accepted", "refused", "refused", "refused", "refused", "refused",
+            "refused", "refused"
+        ]
+    );
+    let accepted = &rows[1];
+    assert_eq!(accepted["point"], "jbc1.air_temperature_setpoint");
+    assert_eq!(accepted["new_value"], 333);
+    assert!(accepted["old_value"].is_number());
+    let (_, all) = get(&on, "/api/audit").await;
+    assert_eq!(
+        all["audit"].as_array().unwrap().len(),
+        10,
+        "the unknown device is audited too"
+    );
+    let (_, events) = get(&on, "/api/events?kind=write").await;
+    assert_eq!(events["events"].as_array().unwrap().len(), 2);
+}
+
+/// Sends one request over a real socket and returns the raw response.
+async fn raw_http(addr: SocketAddr, request: &str) -> String {
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stream.write_all(request.as_bytes()).await.unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).await.unwrap();
+    response
+}
+
+async fn serve_on_loopback(app: Router) -> SocketAddr {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    tokio::spawn(async move {
+        axum::serve(
+            listener,
+            app.into_make_service_with_connect_info::<SocketAddr>(),
+        )
+        .await
+        .unwrap();
+    });
+    addr
+}
+
+#[tokio::test]
+async fn the_event_stream_starts_with_a_snapshot_and_carries_live_values_over_a_socket() {
+    let rig = rig(1);
+    let addr = serve_on_loopback(app(&rig, true)).await;
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stream
+        .write_all(b"GET /api/events/stream HTTP/1.1\r\nHost: test\r\n\r\n")
+        .await
+        .unwrap();
+    let mut seen = String::new();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    let mut buf = [0u8; 8192];
+    while !(seen.contains("event: snapshot") && seen.contains("event: value")) {
+        let n = tokio::time::timeout_at(deadline, stream.read(&mut buf))
+            .await
+            .expect("snapshot and a value within 20 s")
+            .unwrap();
+        assert!(n > 0, "the stream closed early: {seen}");
+        seen.push_str(&String::from_utf8_lossy(&buf[..n]));
+    }
+    assert!(seen.starts_with("HTTP/1.1 200 OK"), "{seen}");
+    assert!(seen.contains("text/event-stream"), "{seen}");
+    assert!(seen.contains("\"type\":\"value\""), "{seen}");
+    assert_eq!(rig.cell.metrics().sse_clients.get(), 1);
+    // Shutdown ends the stream, so a graceful stop is not held up by open pages.
+    rig.shutdown.send(true).unwrap();
+    // The chunked body ends (the connection itself is closed by the server's graceful stop).
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    while !seen.ends_with("0\r\n\r\n") {
+        let n = tokio::time::timeout_at(deadline, stream.read(&mut buf))
+            .await
+            .expect("the stream ends at shutdown")
+            .unwrap();
+        assert!(n > 0, "closed without ending the body");
+        seen.push_str(&String::from_utf8_lossy(&buf[..n]));
+    }
+}
+
+#[tokio::test]
+async fn the_audit_names_the_client_address_over_a_socket() {
+    let rig = rig(1);
+    let addr = serve_on_loopback(app(&rig, false)).await;
+    let body = r#"{"point":"tool_on","value":1}"#;
+    let response = raw_http(
+        addr,
+        &format!(
+            "POST /api/devices/jbc1/write HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\
+             Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+            body.len()
+        ),
+    )
+    .await;
+    assert!(response.starts_with("HTTP/1.1 403"), "{response}");
+    assert!(
+        response.contains("{\"error\":\"writes are disabled"),
+        "{response}"
+    );
+    let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
+    assert_eq!(rows.len(), 1);
+    assert!(
+        rows[0].client.starts_with("127.0.0.1:"),
+        "{}",
+        rows[0].client
+    );
+    assert_eq!(rows[0].new_value, json!(1));
+}
+
+#[test]
+fn tokens_compare_equal_only_when_identical() {
+    assert!(constant_time_eq(b"abc", b"abc"));
+    assert!(!constant_time_eq(b"abc", b"abd"));
+    assert!(!constant_time_eq(b"abc", b"abcd"));
+    assert!(!constant_time_eq(b"", b"a"));
+    assert!(constant_time_eq(b"", b""));
+}

@@ -1,0 +1,133 @@
+//! Test rigs shared by the unit tests: JBC station models on an in-memory line, polled by
+//! a real line task and recorded in a real (temporary) store.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use jbc::device::{Station, StationConfig};
+use jbc::frame::Address;
+use link::{Endpoint, Line};
+use tokio::sync::watch;
+use wire::Transmit;
+use wire::device::{Device, SharedModel};
+
+use crate::cell::Cell;
+use crate::config::{CellConfig, DeviceConfig, LineConfig};
+use crate::driver::{DriverConfig, Protocol};
+use crate::metrics::Metrics;
+use crate::point::DeviceId;
+use crate::scheduler::Opener;
+use crate::store::{Store, StoreOptions};
+
+/// Stations sharing one line; each can be unplugged (it then hears nothing).
+pub struct Bus {
+    pub stations: Vec<(Arc<AtomicBool>, wire::device::ModelLine<Station>)>,
+}
+
+impl Device for Bus {
+    fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
+        self.stations
+            .iter_mut()
+            .filter(|(plugged, _)| plugged.load(Ordering::SeqCst))
+            .flat_map(|(_, station)| station.receive(bytes, now))
+            .collect()
+    }
+}
+
+pub struct Rig {
+    pub cell: Arc<Cell>,
+    pub models: Vec<SharedModel<Station>>,
+    pub plugged: Vec<Arc<AtomicBool>>,
+    pub line_available: Arc<AtomicBool>,
+    pub opens: Arc<AtomicUsize>,
+    pub shutdown: watch::Sender<bool>,
+    pub task: tokio::task::JoinHandle<()>,
+    _store: Store,
+    _dir: tempfile::TempDir,
+}
+
+pub fn device(id: &str, address: i64) -> DeviceConfig {
+    DeviceConfig {
+        driver: DriverConfig {
+            id: DeviceId::new(id).unwrap(),
+            protocol: Protocol::Jbc,
+            address: Some(address),
+            timeout: None,
+            retries: None,
+        },
+        name: format!("Station {id}"),
+        period: None,
+        groups: BTreeMap::new(),
+    }
+}
+
+/// `count` stations at addresses 1, 2, … on one line, polled by a running line task.
+pub fn rig(count: u8) -> Rig {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let models: Vec<_> = (1..=count)
+        .map(|a| {
+            SharedModel::new(Station::new(StationConfig {
+                address: Some(Address::new(a).unwrap()),
+                ..StationConfig::default()
+            }))
+        })
+        .collect();
+    let plugged: Vec<_> = models
+        .iter()
+        .map(|_| Arc::new(AtomicBool::new(true)))
+        .collect();
+    let line_available = Arc::new(AtomicBool::new(true));
+    let opens = Arc::new(AtomicUsize::new(0));
+    let opener: Opener = {
+        let (models, plugged) = (models.clone(), plugged.clone());
+        let (available, opens) = (Arc::clone(&line_available), Arc::clone(&opens));
+        Arc::new(move || {
+            opens.fetch_add(1, Ordering::SeqCst);
+            let result = if available.load(Ordering::SeqCst) {
+                let (a, b) = tokio::io::duplex(4096);
+                let bus = Bus {
+                    stations: plugged
+                        .iter()
+                        .cloned()
+                        .zip(models.iter().map(SharedModel::line))
+                        .collect(),
+                };
+                tokio::spawn(link::serve::serve_stream(b, bus, None));
+                Ok(Line::from_stream(a, "memory", None))
+            } else {
+                Err("no such serial port".to_owned())
+            };
+            Box::pin(async move { result })
+        })
+    };
+    let config = CellConfig {
+        source: None,
+        token: None,
+        lines: vec![LineConfig {
+            name: "bench".into(),
+            endpoint: Endpoint::parse("tcp://127.0.0.1:9", crate::driver::jbc::DEFAULT_SERIAL)
+                .unwrap(),
+            devices: (1..=count)
+                .map(|a| device(&format!("jbc{a}"), i64::from(a)))
+                .collect(),
+        }],
+    };
+    let metrics = Arc::new(Metrics::new());
+    let (cell, mut tasks) =
+        Cell::with_openers(&config, store.handle(), metrics, |_| Arc::clone(&opener)).unwrap();
+    let (shutdown, stop) = watch::channel(false);
+    let task = tokio::spawn(tasks.remove(0).run(stop));
+    Rig {
+        cell,
+        models,
+        plugged,
+        line_available,
+        opens,
+        shutdown,
+        task,
+        _store: store,
+        _dir: dir,
+    }
+}
