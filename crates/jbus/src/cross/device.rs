@@ -901,6 +901,37 @@ mod tests {
     }
 
     #[test]
+    fn status_in_words_after_a_transfer_names_the_source_alarms_and_units() {
+        let mut twin = twin();
+        twin.fail_source(Source::S1);
+        let text = read_state(&mut twin, Instant::now()).to_string();
+        assert!(
+            text.contains(
+                "load: supplied by source 2 (S2) through static switch S2-SW (reserve line)"
+            ),
+            "{text}"
+        );
+        assert!(
+            text.contains("alarms: S1 failure, S1 voltage fault, sources out of synchronisation"),
+            "{text}"
+        );
+        assert!(
+            text.contains("source 1  U 0.0 V, V 0.0 V, W 0.0 V, 0.00 Hz"),
+            "{text}"
+        );
+        for unit in [
+            " V,",
+            " Hz",
+            " A,",
+            " kVA",
+            "°C",
+            "JBUS protocol revision 5",
+        ] {
+            assert!(text.contains(unit), "{unit} missing from {text}");
+        }
+    }
+
+    #[test]
     fn restored_preferred_source_takes_the_load_back() {
         let mut twin = twin();
         twin.fail_source(Source::S1);

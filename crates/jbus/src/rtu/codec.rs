@@ -351,7 +351,10 @@ pub fn encode_response(frame: &ResponseAdu, out: &mut Vec<u8>) {
                 }
                 Response::ReadHoldingRegisters(r) | Response::ReadInputRegisters(r) => {
                     out.push(r.byte_count());
-                    out.extend(r.values().iter().flat_map(|v| v.to_be_bytes()));
+                    out.reserve(2 * r.values().len() + CRC_LEN);
+                    for value in r.values() {
+                        out.extend_from_slice(&value.to_be_bytes());
+                    }
                 }
                 Response::WriteSingleCoil(w) => {
                     out.extend_from_slice(&w.address.to_be_bytes());
