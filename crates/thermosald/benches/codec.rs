@@ -12,7 +12,9 @@ use wire::device::Model;
 use wire::{Codec, Deframer};
 
 fn reply(message: u8, count: Count, items: usize) -> Frame {
-    let data = (0..items).map(|i| RawValue::new((i * 37 % 1000) as u16).expect("below 1000")).collect();
+    let data = (0..items)
+        .map(|i| RawValue::new((i * 37 % 1000) as u16).expect("below 1000"))
+        .collect();
     Frame::new(
         Target::Address(Address::new(3).expect("valid")),
         MessageNumber::new(message).expect("valid"),
@@ -27,9 +29,18 @@ fn codec(c: &mut Criterion) {
     let mut group = c.benchmark_group("encode+decode");
     group.throughput(Throughput::Elements(1));
     let frames = [
-        ("single item (12 B)", reply(52, Count::item(15).expect("index"), 1)),
-        ("run-time table (30 B)", reply(53, Count::All, Table::Runtime.len())),
-        ("machine table (84 B)", reply(51, Count::All, Table::Machine.len())),
+        (
+            "single item (12 B)",
+            reply(52, Count::item(15).expect("index"), 1),
+        ),
+        (
+            "run-time table (30 B)",
+            reply(53, Count::All, Table::Runtime.len()),
+        ),
+        (
+            "machine table (84 B)",
+            reply(51, Count::All, Table::Machine.len()),
+        ),
     ];
     for (name, frame) in frames {
         let mut buf = Vec::with_capacity(96);
@@ -70,7 +81,11 @@ fn codec(c: &mut Criterion) {
     group.throughput(Throughput::Elements(1));
     let t0 = Instant::now();
     let mut line = Line::new(&[Address::new(0).expect("valid")], t0).expect("one regulator");
-    let query = FrameCodec.decode(b"%053Q990\n").expect("valid").expect("whole").0;
+    let query = FrameCodec
+        .decode(b"%053Q990\n")
+        .expect("valid")
+        .expect("whole")
+        .0;
     let mut now = t0;
     group.bench_function("run-time read answered (model time +250 ms each)", |b| {
         b.iter(|| {

@@ -490,6 +490,101 @@ impl From<Command> for Request {
     }
 }
 
+/// A message in words, for annotated dumps and logs: whom it is for, what it asks or
+/// answers, and its data as named, scaled items, e.g. `address 0, message 52 (read settings
+/// data), response, item 15: Set sealing temperature = 180 °C`. Messages the spec does not
+/// know, and data that do not fit the message, are described as such, never refused.
+pub fn describe(frame: &Frame) -> String {
+    use std::fmt::Write as _;
+
+    let mut text = String::new();
+    let direction = match frame.direction() {
+        Direction::Query => "question",
+        Direction::Reply => "response",
+    };
+    let message = Message::from_number(frame.message());
+    let _ = match &message {
+        Ok(m) => write!(text, "{}, message {m}, {direction}", frame.target()),
+        Err(RequestError::UnusedMessage { .. }) => {
+            write!(
+                text,
+                "{}, message {} (not used), {direction}",
+                frame.target(),
+                frame.message()
+            )
+        }
+        Err(_) => write!(
+            text,
+            "{}, message {} (unknown), {direction}",
+            frame.target(),
+            frame.message()
+        ),
+    };
+    let Ok(message) = message else {
+        return describe_raw(text, frame);
+    };
+    let table = match message.kind() {
+        MessageKind::Read(table) | MessageKind::Write(table) => table,
+        MessageKind::SetAddress => {
+            let _ = match frame.data().first() {
+                Some(raw) => write!(text, ", new address {}", raw.get()),
+                None => write!(text, ", no address given"),
+            };
+            return text;
+        }
+        MessageKind::Command(_) => return text,
+    };
+    let items: &'static [Item] = match frame.count() {
+        Count::All => {
+            text.push_str(", whole table");
+            table.items()
+        }
+        Count::Item(index) => match table.item(index.get()) {
+            Ok(item) => {
+                let _ = write!(text, ", item {}", item.index());
+                std::slice::from_ref(item)
+            }
+            Err(_) => {
+                let _ = write!(text, ", item {} (beyond the {table} table)", index.get());
+                return describe_raw(text, frame);
+            }
+        },
+    };
+    if frame.data().is_empty() {
+        if let [item] = items {
+            let _ = write!(text, " ({})", item.name());
+        }
+        return text;
+    }
+    if frame.data().len() != items.len() {
+        let _ = write!(
+            text,
+            ", {} data item(s) where {} belong",
+            frame.data().len(),
+            items.len()
+        );
+        return describe_raw(text, frame);
+    }
+    for (i, (item, raw)) in items.iter().zip(frame.data()).enumerate() {
+        text.push_str(if i == 0 { ": " } else { "; " });
+        let reading = item.reading(*raw);
+        let _ = write!(text, "{} = {reading}", item.name());
+        if item.table() == Table::Runtime && item.index() == crate::tables::runtime::FAULT {
+            let _ = write!(text, " ({})", crate::diagnostic::describe(raw.get()));
+        }
+    }
+    text
+}
+
+fn describe_raw(mut text: String, frame: &Frame) -> String {
+    if !frame.data().is_empty() {
+        let raw: Vec<String> = frame.data().iter().map(ToString::to_string).collect();
+        text.push_str(", data ");
+        text.push_str(&raw.join(" "));
+    }
+    text
+}
+
 /// A request that cannot be built or understood.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]

@@ -3,7 +3,7 @@
 //! units (`99` = all data), one unused byte, 3-digit data items, `LF`), one per message.
 
 use thermosald::frame::{Count, Direction, Frame, MessageNumber, RawValue, Target};
-use thermosald::request::{Command, Message, Read, Request, RequestError, Write};
+use thermosald::request::{Command, Message, Read, Request, RequestError, Write, describe};
 use thermosald::tables::{Table, settings};
 
 use crate::common::{addr, decode_one};
@@ -259,5 +259,52 @@ fn the_longest_message_is_the_whole_machine_table() {
     assert_eq!(
         too_many,
         Err(thermosald::frame::FrameError::TooManyItems { items: 26, max: 25 })
+    );
+}
+
+#[test]
+fn messages_are_described_in_words_for_annotated_dumps() {
+    let said = |bytes: &[u8]| describe(&decode_one(bytes));
+    assert_eq!(
+        said(b"%052R150180\n"),
+        "address 0, message 52 (read settings data), response, item 15: Set sealing temperature = 180 °C"
+    );
+    assert_eq!(
+        said(b"%052Q150\n"),
+        "address 0, message 52 (read settings data), question, item 15 (Set sealing temperature)"
+    );
+    assert_eq!(
+        said(b"%011Q030125\n"),
+        "address 0, message 11 (write machine data), question, item 3: KINT gain = 12.5"
+    );
+    assert_eq!(
+        said(b"%$10Q000003\n"),
+        "address assignment '$', message 10 (write logic address), question, new address 3"
+    );
+    assert_eq!(
+        said(b"%514R000000\n"),
+        "address 5, message 14 (clear faults), response"
+    );
+    assert_eq!(
+        said(b"%053R990000035000000025000000\n"),
+        "address 0, message 53 (read run-time data), response, whole table: Not used = 0; \
+         Current temperature = 35 °C; Fault/warning number = 0 (ready); Maximum current = 0.0 A; \
+         Resistance = 0.25 Ω; Actual voltage = 0 V; Power = 0 VA"
+    );
+    assert_eq!(
+        said(b"%013Q000000\n"),
+        "address 0, message 13 (not used), question, data 000"
+    );
+    assert_eq!(
+        said(b"%020Q000\n"),
+        "address 0, message 20 (unknown), question"
+    );
+    assert_eq!(
+        said(b"%053Q070\n"),
+        "address 0, message 53 (read run-time data), question, item 7 (beyond the runtime table)"
+    );
+    assert_eq!(
+        said(b"%051R990001\n"),
+        "address 0, message 51 (read machine data), response, whole table, 1 data item(s) where 25 belong, data 001"
     );
 }

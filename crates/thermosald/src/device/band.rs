@@ -4,7 +4,7 @@
 //!
 //! From the service data (items 0–8):
 //!
-//! - cross-section `A` [mm²] = width × thickness for a flat band; when either is 0, a round
+//! - cross-section `A` (mm²) = width × thickness for a flat band; when either is 0, a round
 //!   wire: `A = π/4 × gauge²`;
 //! - one band: `R₁ = ρ × (L / 1000) / A` with `ρ` in Ω·mm²/m and `L` in mm;
 //! - the circuit: `R₂₀ = R₁ × series / parallel` (at 20 °C);
