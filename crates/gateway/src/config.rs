@@ -1,14 +1,52 @@
 //! The cell's configuration (TOML): lines, the devices on them, and how often to poll.
 //!
-//! Parsing and checking live in this module; see [`EXAMPLE_CONFIG`] for the format.
+//! ```toml
+//! token = "change-me"                   # optional; CELLBUS_TOKEN and --token win over it
+//!
+//! [[line]]
+//! name = "rework"                       # unique; a-z, 0-9, _ and -
+//! endpoint = "serial:///dev/ttyUSB0?baud=19200&framing=8E1"
+//!
+//! [[line.device]]
+//! id = "jbc1"                           # unique in the cell; used in URLs and point ids
+//! name = "Rework station 1"             # words for people (default: the id)
+//! protocol = "jbc"
+//! address = 1                           # JBC: 0-99, or "none" for the form without addresses
+//! timeout = "500ms"                     # per reply (protocol default if left out)
+//! retries = 2                           # after a failed attempt (protocol default)
+//! period = "2s"                         # for every poll group not listed in [poll]
+//! poll = { live = "1s", info = "5m" }   # per poll group
+//! ```
+//!
+//! Every table refuses fields it does not know. A file that does not parse or does not make
+//! sense is refused whole, with the file, line and column and what is wrong
+//! ([`ConfigError`]). [`EXAMPLE_CONFIG`] is a commented example for a real cell.
 
-use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::collections::{BTreeMap, HashSet};
+use std::fmt;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use link::Endpoint;
+use serde::Deserialize;
+use toml::Spanned;
 
-use crate::driver::DriverConfig;
+use crate::driver::{self, DriverConfig, Protocol};
+use crate::point::DeviceId;
+
+/// An example configuration for a real cell (`cellbus config example` prints it); the
+/// same file is `crates/gateway/examples/cell.toml`.
+pub const EXAMPLE_CONFIG: &str = include_str!("../examples/cell.toml");
+
+/// Shortest poll period accepted.
+pub const MIN_PERIOD: Duration = Duration::from_millis(50);
+/// Longest poll period accepted.
+pub const MAX_PERIOD: Duration = Duration::from_secs(24 * 3600);
+/// Longest reply timeout accepted.
+pub const MAX_TIMEOUT: Duration = Duration::from_secs(60);
+/// Most retries accepted.
+pub const MAX_RETRIES: u8 = 10;
 
 /// A checked configuration.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,4 +81,550 @@ pub struct DeviceConfig {
     pub period: Option<Duration>,
     /// Periods of named poll groups.
     pub groups: BTreeMap<String, Duration>,
+}
+
+/// Why a configuration was refused.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read config {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// The file is not valid, at a place in it.
+    #[error("{}", self.describe())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// Line, from 1.
+        line: usize,
+        /// Column, from 1.
+        column: usize,
+        /// What is wrong.
+        message: String,
+        /// The text of the line, for the caret display.
+        source_line: String,
+    },
+}
+
+impl ConfigError {
+    fn describe(&self) -> String {
+        match self {
+            ConfigError::Read { .. } => self.to_string(),
+            ConfigError::Invalid {
+                path,
+                line,
+                column,
+                message,
+                source_line,
+            } => {
+                let gutter = line.to_string().len();
+                format!(
+                    "{}:{line}:{column}: {message}\n{:gutter$} |\n{line} | {source_line}\n{:gutter$} | {:>column$}",
+                    path.display(),
+                    "",
+                    "",
+                    "^"
+                )
+            }
+        }
+    }
+
+    /// Where the error is: `(line, column)`, from 1.
+    pub fn position(&self) -> Option<(usize, usize)> {
+        match self {
+            ConfigError::Invalid { line, column, .. } => Some((*line, *column)),
+            ConfigError::Read { .. } => None,
+        }
+    }
+}
+
+/// Reads and checks the configuration at `path`.
+pub fn check_config(path: &Path) -> Result<CellConfig, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    parse_config(&text, path)
+}
+
+/// Checks configuration text; `path` names it in errors.
+pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> {
+    let at = |span: Range<usize>, message: String| locate(text, path, span, message);
+    let raw: RawConfig = toml::from_str(text).map_err(|e| {
+        let message = e.message().trim_end().to_owned();
+        at(e.span().unwrap_or(0..0), message)
+    })?;
+    if raw.line.is_empty() {
+        return Err(at(
+            0..0,
+            "no [[line]]: a cell needs at least one line with a device on it (see `cellbus config example`)"
+                .into(),
+        ));
+    }
+    let mut lines = Vec::new();
+    let mut line_names = HashSet::new();
+    let mut device_ids = HashSet::new();
+    for line in raw.line {
+        let name = line.name.get_ref();
+        DeviceId::new(name).map_err(|e| {
+            at(
+                line.name.span(),
+                format!("line name {name:?} is not valid: {}", e.rule),
+            )
+        })?;
+        if !line_names.insert(name.clone()) {
+            return Err(at(
+                line.name.span(),
+                format!("line name {name:?} is used twice"),
+            ));
+        }
+        let Some(first) = line.device.first() else {
+            return Err(at(
+                line.name.span(),
+                format!("line {name:?} has no devices; add a [[line.device]] under it"),
+            ));
+        };
+        let protocol = protocol_of(&first.protocol).map_err(|m| at(first.protocol.span(), m))?;
+        let endpoint = Endpoint::parse(line.endpoint.get_ref(), protocol.default_serial())
+            .map_err(|e| at(line.endpoint.span(), e.to_string()))?;
+        let mut devices = Vec::new();
+        for device in line.device {
+            let this = protocol_of(&device.protocol).map_err(|m| at(device.protocol.span(), m))?;
+            if this != protocol {
+                return Err(at(
+                    device.protocol.span(),
+                    format!(
+                        "line {name:?} carries {} devices; a {} device needs a line of its own",
+                        protocol.as_str(),
+                        this.as_str()
+                    ),
+                ));
+            }
+            let id_span = device.id.span();
+            let device = check_device(device, protocol, &at)?;
+            if !device_ids.insert(device.driver.id.clone()) {
+                return Err(at(
+                    id_span,
+                    format!("device id {:?} is used twice", device.driver.id.as_str()),
+                ));
+            }
+            devices.push(device);
+        }
+        lines.push(LineConfig {
+            name: name.clone(),
+            endpoint,
+            devices,
+        });
+    }
+    if let Some(token) = &raw.token
+        && token.get_ref().trim().is_empty()
+    {
+        return Err(at(
+            token.span(),
+            "token is empty; remove it or set a secret".into(),
+        ));
+    }
+    Ok(CellConfig {
+        source: Some(path.to_owned()),
+        token: raw.token.map(Spanned::into_inner),
+        lines,
+    })
+}
+
+fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
+    Protocol::parse(text.get_ref()).ok_or_else(|| {
+        format!(
+            "protocol {:?} is not one the gateway speaks yet; known: {}",
+            text.get_ref(),
+            Protocol::KNOWN
+        )
+    })
+}
+
+fn check_device(
+    raw: RawDevice,
+    protocol: Protocol,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<DeviceConfig, ConfigError> {
+    let id = DeviceId::new(raw.id.get_ref()).map_err(|e| {
+        at(
+            raw.id.span(),
+            format!("device id {:?} is not valid: {}", raw.id.get_ref(), e.rule),
+        )
+    })?;
+    let address = match &raw.address {
+        None => protocol.default_address(),
+        Some(spanned) => match spanned.get_ref() {
+            RawAddress::Number(n) => Some(*n),
+            RawAddress::Text(t) if t == "none" => None,
+            RawAddress::Text(t) => {
+                return Err(at(
+                    spanned.span(),
+                    format!("address {t:?} is not a number; write a number or \"none\""),
+                ));
+            }
+        },
+    };
+    if let Err(message) = protocol.check_address(address) {
+        let span = raw.address.as_ref().map_or(raw.id.span(), Spanned::span);
+        return Err(at(span, message));
+    }
+    let timeout = raw
+        .timeout
+        .as_ref()
+        .map(|t| duration(t, Duration::from_millis(1), MAX_TIMEOUT, "timeout", at))
+        .transpose()?;
+    let retries = raw
+        .retries
+        .as_ref()
+        .map(|r| match u8::try_from(*r.get_ref()) {
+            Ok(n) if n <= MAX_RETRIES => Ok(n),
+            _ => Err(at(
+                r.span(),
+                format!(
+                    "retries {} is out of range: 0 to {MAX_RETRIES}",
+                    r.get_ref()
+                ),
+            )),
+        })
+        .transpose()?;
+    let period = raw
+        .period
+        .as_ref()
+        .map(|p| duration(p, MIN_PERIOD, MAX_PERIOD, "period", at))
+        .transpose()?;
+    let driver_config = DriverConfig {
+        id: id.clone(),
+        protocol,
+        address,
+        timeout,
+        retries,
+    };
+    let known: Vec<String> = driver::build(&driver_config)
+        .map_err(|m| at(raw.id.span(), m))?
+        .groups()
+        .into_iter()
+        .map(|g| g.name)
+        .collect();
+    let mut groups = BTreeMap::new();
+    for (group, text) in &raw.poll {
+        if !known.contains(group) {
+            return Err(at(
+                text.span(),
+                format!(
+                    "{} devices have no poll group {group:?}; groups: {}",
+                    protocol.as_str(),
+                    known.join(", ")
+                ),
+            ));
+        }
+        let what = format!("poll period of {group}");
+        groups.insert(
+            group.clone(),
+            duration(text, MIN_PERIOD, MAX_PERIOD, &what, at)?,
+        );
+    }
+    Ok(DeviceConfig {
+        name: raw.name.unwrap_or_else(|| id.to_string()),
+        driver: driver_config,
+        period,
+        groups,
+    })
+}
+
+fn duration(
+    text: &Spanned<String>,
+    min: Duration,
+    max: Duration,
+    what: &str,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Duration, ConfigError> {
+    let d = humantime::parse_duration(text.get_ref().trim()).map_err(|e| {
+        at(
+            text.span(),
+            format!(
+                "{what} {:?} is not a duration ({e}); write e.g. 500ms, 2s or 5m",
+                text.get_ref()
+            ),
+        )
+    })?;
+    if d < min || d > max {
+        return Err(at(
+            text.span(),
+            format!(
+                "{what} {} is out of range: {} to {}",
+                humantime::format_duration(d),
+                humantime::format_duration(min),
+                humantime::format_duration(max)
+            ),
+        ));
+    }
+    Ok(d)
+}
+
+/// An error at a byte range of the text.
+fn locate(text: &str, path: &Path, span: Range<usize>, message: String) -> ConfigError {
+    let start = span.start.min(text.len());
+    let before = text.get(..start).unwrap_or("");
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = text
+        .get(line_start..start)
+        .map_or(1, |s| s.chars().count() + 1);
+    let source_line = text
+        .get(line_start..)
+        .and_then(|rest| rest.lines().next())
+        .unwrap_or("")
+        .to_owned();
+    ConfigError::Invalid {
+        path: path.to_owned(),
+        line,
+        column,
+        message,
+        source_line,
+    }
+}
+
+impl fmt::Display for LineConfig {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} ({})", self.name, self.endpoint)
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    token: Option<Spanned<String>>,
+    #[serde(default)]
+    line: Vec<RawLine>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLine {
+    name: Spanned<String>,
+    endpoint: Spanned<String>,
+    #[serde(default)]
+    device: Vec<RawDevice>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDevice {
+    id: Spanned<String>,
+    name: Option<String>,
+    protocol: Spanned<String>,
+    address: Option<Spanned<RawAddress>>,
+    timeout: Option<Spanned<String>>,
+    retries: Option<Spanned<i64>>,
+    period: Option<Spanned<String>>,
+    #[serde(default)]
+    poll: BTreeMap<String, Spanned<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum RawAddress {
+    Number(i64),
+    Text(String),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<CellConfig, ConfigError> {
+        parse_config(text, Path::new("cell.toml"))
+    }
+
+    /// Parses `text`, expecting an error at `line:column` whose message contains `words`.
+    fn refused(text: &str, line: usize, column: usize, words: &str) {
+        let err = parse(text).expect_err("the config must be refused");
+        let shown = err.to_string();
+        assert_eq!(err.position(), Some((line, column)), "{shown}");
+        assert!(
+            shown.starts_with(&format!("cell.toml:{line}:{column}: ")),
+            "{shown}"
+        );
+        assert!(shown.contains(words), "{shown}");
+    }
+
+    const ONE: &str = r#"
+[[line]]
+name = "rework"
+endpoint = "serial:///dev/ttyUSB0"
+
+[[line.device]]
+id = "jbc1"
+protocol = "jbc"
+"#;
+
+    #[test]
+    fn the_example_config_parses_into_its_lines_and_devices() {
+        let config = parse(EXAMPLE_CONFIG).unwrap();
+        assert!(!config.lines.is_empty());
+        let devices: usize = config.lines.iter().map(|l| l.devices.len()).sum();
+        assert!(devices >= 2, "the example shows more than one device");
+        assert!(
+            config
+                .lines
+                .iter()
+                .any(|l| matches!(l.endpoint, Endpoint::Serial { .. }))
+        );
+        assert!(
+            config
+                .lines
+                .iter()
+                .any(|l| matches!(l.endpoint, Endpoint::Tcp { .. }))
+        );
+    }
+
+    #[test]
+    fn the_example_file_in_examples_is_the_one_built_in() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), EXAMPLE_CONFIG);
+        check_config(&path).unwrap();
+    }
+
+    #[test]
+    fn a_minimal_config_takes_the_protocol_defaults() {
+        let config = parse(ONE).unwrap();
+        let line = &config.lines[0];
+        assert_eq!(line.name, "rework");
+        assert_eq!(
+            line.endpoint.line_settings(),
+            Some(link::SerialSettings::new_8e1(19200)),
+            "JBC's 19200 8E1 when the URL says nothing"
+        );
+        let device = &line.devices[0];
+        assert_eq!(device.name, "jbc1");
+        assert_eq!(device.driver.address, Some(1));
+        assert_eq!(device.driver.timeout, None);
+        assert!(device.groups.is_empty());
+    }
+
+    #[test]
+    fn periods_addresses_and_retries_are_read() {
+        let config = parse(&format!(
+            "token = \"t0k\"\n{ONE}address = \"none\"\ntimeout = \"300ms\"\nretries = 1\nperiod = \"2s\"\npoll = {{ live = \"500ms\", info = \"5m\" }}\n"
+        ))
+        .unwrap();
+        let device = &config.lines[0].devices[0];
+        assert_eq!(config.token.as_deref(), Some("t0k"));
+        assert_eq!(device.driver.address, None);
+        assert_eq!(device.driver.timeout, Some(Duration::from_millis(300)));
+        assert_eq!(device.driver.retries, Some(1));
+        assert_eq!(device.period, Some(Duration::from_secs(2)));
+        assert_eq!(device.groups["live"], Duration::from_millis(500));
+        assert_eq!(device.groups["info"], Duration::from_secs(300));
+    }
+
+    #[test]
+    fn unknown_fields_are_refused_where_they_are() {
+        refused(
+            &format!("{ONE}colour = \"red\"\n"),
+            9,
+            1,
+            "unknown field `colour`",
+        );
+        refused(
+            "[[line]]\nname = \"a\"\nendpoint = \"tcp://h:1\"\nspeed = 9600\n",
+            4,
+            1,
+            "unknown field `speed`",
+        );
+    }
+
+    #[test]
+    fn toml_syntax_errors_name_line_and_column() {
+        refused("[[line]\nname = \"a\"\n", 1, 8, "expected `]`");
+    }
+
+    #[test]
+    fn semantic_errors_point_at_the_offending_value() {
+        refused(&ONE.replace("\"jbc\"", "\"modbus\""), 8, 12, "known: jbc");
+        refused(
+            &ONE.replace("serial:///dev/ttyUSB0", "serial:///dev/ttyUSB0?baud=fast"),
+            4,
+            12,
+            "option baud=",
+        );
+        refused(&format!("{ONE}address = 100\n"), 9, 11, "0 to 99");
+        refused(
+            &format!("{ONE}address = \"one\"\n"),
+            9,
+            11,
+            "write a number or \"none\"",
+        );
+        refused(
+            &format!("{ONE}timeout = \"soon\"\n"),
+            9,
+            11,
+            "not a duration",
+        );
+        refused(
+            &format!("{ONE}period = \"1ms\"\n"),
+            9,
+            10,
+            "out of range: 50ms",
+        );
+        refused(&format!("{ONE}retries = 99\n"), 9, 11, "0 to 10");
+        refused(
+            &format!("{ONE}poll = {{ fast = \"1s\" }}\n"),
+            9,
+            17,
+            "groups: live, settings, info",
+        );
+        refused(
+            &ONE.replace("\"jbc1\"", "\"JBC 1\""),
+            7,
+            6,
+            "device id \"JBC 1\" is not valid",
+        );
+        refused(&ONE.replace("\"rework\"", "\"re work\""), 3, 8, "line name");
+        refused(
+            &format!("{ONE}\n{}", ONE.replace("\"rework\"", "\"two\"")),
+            16,
+            6,
+            "\"jbc1\" is used twice",
+        );
+        refused(
+            &format!("{ONE}\n{}", ONE.replace("\"jbc1\"", "\"jbc2\"")),
+            12,
+            8,
+            "line name \"rework\" is used twice",
+        );
+        refused("token = \"x\"\n", 1, 1, "no [[line]]");
+        refused(
+            "[[line]]\nname = \"a\"\nendpoint = \"tcp://h:1\"\n",
+            2,
+            8,
+            "has no devices",
+        );
+        refused(
+            &ONE.replace("[[line]]", "token = \" \"\n[[line]]"),
+            2,
+            9,
+            "token is empty",
+        );
+    }
+
+    #[test]
+    fn the_error_shows_the_line_with_a_caret_under_the_column() {
+        let err = parse(&format!("{ONE}address = 100\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("9 | address = 100\n  |           ^"), "{err}");
+    }
+
+    #[test]
+    fn a_missing_file_is_named() {
+        let err = check_config(Path::new("/nonexistent/cell.toml")).unwrap_err();
+        assert!(err.to_string().contains("/nonexistent/cell.toml"), "{err}");
+    }
 }

@@ -1,16 +1,48 @@
-//! The cellbus gateway (work in progress).
+//! The cellbus gateway: `cellbus serve` polls the cell, keeps its history and serves it over
+//! HTTP, a live web page and Prometheus metrics.
+//!
+//! ```text
+//!  config / demo ──► Cell ──► one LineTask per line ──► Driver per device ──► protocol client ──► link
+//!                     │            │ value changes, events
+//!                     │            ▼
+//!                     │         Store (SQLite, writer thread) ◄── history, events, audit queries
+//!                     ▼
+//!                   HTTP (axum): API, SSE, /metrics, web page
+//! ```
+//!
+//! - [`serve`] / [`Gateway`]: the whole thing, from [`ServeOptions`] to a graceful stop.
+//! - [`config`]: the TOML configuration, [`check_config`] and [`EXAMPLE_CONFIG`].
+//! - [`driver`]: one small module per protocol maps a device onto points. Landed: JBC.
+//!   Thermosald, JBUS/CROSS and Panasonic drivers are added when their clients land: a
+//!   module implementing [`driver::Driver`], a [`driver::Protocol`] variant and a
+//!   `start_*` function in [`demo`].
+//! - [`scheduler`]: one task per line, strict serialisation, exponential backoff of silent
+//!   devices with prompt promotion, line reopening.
+//! - [`cell`]: the live state (values with time and quality), the change stream.
+//! - [`store`]: SQLite history (WAL, FULL sync, batched writer thread, retention,
+//!   downsampled queries).
+//! - [`http`]: the API, described at `/api/openapi.json`, and the web page at `/`.
+//! - [`metrics`]: Prometheus metrics.
+//! - [`demo`]: the simulated cell `serve` starts without a configuration.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod cell;
 pub mod config;
+pub mod demo;
 pub mod driver;
 pub mod http;
 pub mod metrics;
 pub mod point;
 pub mod scheduler;
+pub mod serve;
 pub mod store;
 pub mod time;
 
 #[cfg(test)]
 mod testing;
+
+pub use config::{CellConfig, ConfigError, EXAMPLE_CONFIG, check_config};
+pub use serve::{
+    DEFAULT_DATA_DIR, DEFAULT_LISTEN, DEFAULT_RETAIN, Gateway, ServeOptions, TOKEN_ENV, serve,
+};

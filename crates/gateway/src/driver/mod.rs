@@ -193,6 +193,13 @@ impl Protocol {
         }
     }
 
+    /// The address a device has when the config names none.
+    pub fn default_address(self) -> Option<i64> {
+        match self {
+            Protocol::Jbc => Some(jbc::DEFAULT_ADDRESS),
+        }
+    }
+
     /// Checks a device address; `Err` says what the protocol accepts.
     pub fn check_address(self, address: Option<i64>) -> Result<(), String> {
         match self {

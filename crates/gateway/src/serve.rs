@@ -1,0 +1,280 @@
+//! `cellbus serve`: the whole gateway, from options to a graceful stop.
+
+use std::future::{Future, IntoFuture};
+use std::io::Write;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+
+use crate::cell::Cell;
+use crate::config::{CellConfig, check_config};
+use crate::demo::DemoCell;
+use crate::http::{self, WritePolicy};
+use crate::metrics::Metrics;
+use crate::store::{Event, EventKind, Store, StoreOptions};
+use crate::time::Timestamp;
+
+/// Address the gateway listens on by default: loopback only.
+pub const DEFAULT_LISTEN: SocketAddr =
+    SocketAddr::new(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST), 8080);
+
+/// Data directory by default, relative to the working directory.
+pub const DEFAULT_DATA_DIR: &str = "cellbus-data";
+
+/// History kept by default: 30 days.
+pub const DEFAULT_RETAIN: Duration = Duration::from_secs(30 * 24 * 3600);
+
+/// Environment variable holding the write token.
+pub const TOKEN_ENV: &str = "CELLBUS_TOKEN";
+
+/// How long line tasks get to finish their request at shutdown.
+const STOP_GRACE: Duration = Duration::from_secs(5);
+
+/// What `cellbus serve` was asked for.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ServeOptions {
+    /// Where to listen (default 127.0.0.1:8080; port 0 for any free port).
+    pub listen: SocketAddr,
+    /// The cell's configuration; `None` starts the demo cell.
+    pub config: Option<PathBuf>,
+    /// Where the history database lives (default `./cellbus-data`).
+    pub data_dir: PathBuf,
+    /// How long history is kept (default 30 days).
+    pub retain: Duration,
+    /// Whether `POST /api/devices/{id}/write` is allowed.
+    pub allow_writes: bool,
+    /// The write token; else `CELLBUS_TOKEN`, else the config's `token`.
+    pub token: Option<String>,
+}
+
+impl Default for ServeOptions {
+    fn default() -> Self {
+        Self {
+            listen: DEFAULT_LISTEN,
+            config: None,
+            data_dir: PathBuf::from(DEFAULT_DATA_DIR),
+            retain: DEFAULT_RETAIN,
+            allow_writes: false,
+            token: None,
+        }
+    }
+}
+
+/// Runs the gateway until `shutdown` resolves (Ctrl-C, SIGTERM), then stops the pollers,
+/// commits the history and returns.
+///
+/// Its first line on standard output, once the port is bound, is exactly
+/// `listening on http://IP:PORT`; other tools wait for it.
+pub async fn serve(
+    options: ServeOptions,
+    shutdown: impl Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let gateway = Gateway::start(options).await?;
+    {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "listening on http://{}", gateway.local_addr())
+            .and_then(|()| out.flush())
+            .context("cannot write to standard output")?;
+    }
+    gateway.run(shutdown).await
+}
+
+/// A started gateway: port bound, history open, lines being polled.
+#[derive(Debug)]
+pub struct Gateway {
+    listener: tokio::net::TcpListener,
+    addr: SocketAddr,
+    cell: Arc<Cell>,
+    store: Store,
+    writes: WritePolicy,
+    stop: watch::Sender<bool>,
+    pollers: Vec<JoinHandle<()>>,
+    _demo: Option<DemoCell>,
+}
+
+impl Gateway {
+    /// Reads the configuration (or starts the demo cell), opens the history, binds the
+    /// port and starts polling.
+    pub async fn start(options: ServeOptions) -> anyhow::Result<Self> {
+        let (config, demo) = match &options.config {
+            Some(path) => (check_config(path)?, None),
+            None => {
+                let demo = DemoCell::start()
+                    .await
+                    .context("cannot start the demo cell's simulators on 127.0.0.1")?;
+                (demo.config.clone(), Some(demo))
+            }
+        };
+        let writes = write_policy(&options, &config)?;
+        let store = Store::open(
+            &options.data_dir,
+            StoreOptions {
+                retain: options.retain,
+                ..StoreOptions::default()
+            },
+        )?;
+        let listener = bind(options.listen).await?;
+        let addr = listener
+            .local_addr()
+            .context("cannot read the bound address")?;
+        let metrics = Arc::new(Metrics::new());
+        let (cell, tasks) =
+            Cell::new(&config, store.handle(), metrics).map_err(anyhow::Error::msg)?;
+        cell.emit(Event {
+            t: Timestamp::now(),
+            kind: EventKind::GatewayStarted,
+            line: None,
+            device: None,
+            point: None,
+            message: format!(
+                "gateway started on http://{addr} with {} ({} devices on {} lines); writes {}",
+                match &config.source {
+                    Some(path) => format!("config {}", path.display()),
+                    None => "the demo cell".to_owned(),
+                },
+                config.lines.iter().map(|l| l.devices.len()).sum::<usize>(),
+                config.lines.len(),
+                if writes.enabled {
+                    "enabled"
+                } else {
+                    "disabled"
+                },
+            ),
+        });
+        let (stop, stopped) = watch::channel(false);
+        let pollers = tasks
+            .into_iter()
+            .map(|task| tokio::spawn(task.run(stopped.clone())))
+            .collect();
+        Ok(Self {
+            listener,
+            addr,
+            cell,
+            store,
+            writes,
+            stop,
+            pollers,
+            _demo: demo,
+        })
+    }
+
+    /// The address the gateway listens on.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The live cell.
+    pub fn cell(&self) -> &Arc<Cell> {
+        &self.cell
+    }
+
+    /// Serves HTTP until `shutdown` resolves, then stops polling and commits the history.
+    pub async fn run(self, shutdown: impl Future<Output = ()>) -> anyhow::Result<()> {
+        let Gateway {
+            listener,
+            cell,
+            store,
+            writes,
+            stop,
+            pollers,
+            _demo,
+            ..
+        } = self;
+        let app = http::router(Arc::clone(&cell), writes, stop.subscribe());
+        let mut stopping = stop.subscribe();
+        let server = axum::serve(
+            listener,
+            app.into_make_service_with_connect_info::<SocketAddr>(),
+        )
+        .with_graceful_shutdown(async move {
+            let _ = stopping.wait_for(|stop| *stop).await;
+        })
+        .into_future();
+        tokio::pin!(server);
+        let served = tokio::select! {
+            served = &mut server => served,
+            () = shutdown => {
+                // Ends the event streams and starts the graceful stop of the server.
+                let _ = stop.send(true);
+                server.await
+            }
+        };
+        let _ = stop.send(true);
+        for poller in pollers {
+            if tokio::time::timeout(STOP_GRACE, poller).await.is_err() {
+                tracing::warn!("a line task did not stop in {STOP_GRACE:?}");
+            }
+        }
+        cell.emit(Event {
+            t: Timestamp::now(),
+            kind: EventKind::GatewayStopped,
+            line: None,
+            device: None,
+            point: None,
+            message: "gateway stopped".to_owned(),
+        });
+        let flushed = cell.store().flush().await;
+        drop(cell);
+        tokio::task::spawn_blocking(move || store.close())
+            .await
+            .context("the history writer did not stop cleanly")?;
+        served.context("the HTTP server failed")?;
+        flushed.context("the history could not be committed at shutdown")?;
+        Ok(())
+    }
+}
+
+/// Binds the listening port, saying what to do when it is taken.
+async fn bind(addr: SocketAddr) -> anyhow::Result<tokio::net::TcpListener> {
+    tokio::net::TcpListener::bind(addr).await.map_err(|e| {
+        let hint = match e.kind() {
+            std::io::ErrorKind::AddrInUse => format!(
+                "port {} is already in use (another cellbus serve, or another program); \
+                 choose another with --listen, e.g. --listen 127.0.0.1:0 for any free port",
+                addr.port()
+            ),
+            std::io::ErrorKind::PermissionDenied => format!(
+                "permission denied; ports below 1024 need privileges: try --listen {}:8080, \
+                 or --listen 127.0.0.1:0 for any free port",
+                addr.ip()
+            ),
+            std::io::ErrorKind::AddrNotAvailable => format!(
+                "{} is not an address of this machine; try --listen 127.0.0.1:0",
+                addr.ip()
+            ),
+            _ => "try --listen 127.0.0.1:0 for any free port".to_owned(),
+        };
+        anyhow::anyhow!("cannot listen on {addr}: {e}; {hint}")
+    })
+}
+
+/// Who may write: `--allow-writes` and a token from the options, the environment or the
+/// config, in that order.
+fn write_policy(options: &ServeOptions, config: &CellConfig) -> anyhow::Result<WritePolicy> {
+    let token = options
+        .token
+        .clone()
+        .or_else(|| std::env::var(TOKEN_ENV).ok())
+        .or_else(|| config.token.clone())
+        .map(|t| t.trim().to_owned());
+    if let Some(t) = &token
+        && t.is_empty()
+    {
+        bail!("the write token is empty; set a non-empty {TOKEN_ENV} or token in the config");
+    }
+    if options.allow_writes && token.is_none() {
+        bail!(
+            "--allow-writes needs a token for clients to send as Authorization: Bearer <token>; \
+             set {TOKEN_ENV} or token = \"...\" in the config"
+        );
+    }
+    Ok(WritePolicy {
+        enabled: options.allow_writes,
+        token,
+    })
+}

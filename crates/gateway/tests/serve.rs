@@ -1,0 +1,183 @@
+//! `serve` end to end over real loopback sockets: the demo cell comes alive, the API shows
+//! it, a stop commits the history; bad starts say what to do.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use gateway::store::{EventFilter, Series, Store, StoreOptions};
+use gateway::time::Timestamp;
+use gateway::{Gateway, ServeOptions};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+fn options(dir: &std::path::Path) -> ServeOptions {
+    ServeOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        data_dir: dir.join("data"),
+        ..ServeOptions::default()
+    }
+}
+
+/// GETs `path` and returns the status line and the JSON body.
+async fn get(addr: SocketAddr, path: &str) -> (String, serde_json::Value) {
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stream
+        .write_all(
+            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
+        )
+        .await
+        .unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).await.unwrap();
+    let (head, body) = response.split_once("\r\n\r\n").unwrap();
+    let status = head.lines().next().unwrap().to_owned();
+    (
+        status,
+        serde_json::from_str(body).unwrap_or(serde_json::Value::Null),
+    )
+}
+
+fn point<'a>(devices: &'a serde_json::Value, id: &str) -> &'a serde_json::Value {
+    devices["devices"][0]["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["id"] == id)
+        .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start(options(dir.path())).await.unwrap();
+    let addr = gateway.local_addr();
+    assert_eq!(addr.ip().to_string(), "127.0.0.1");
+    assert_ne!(addr.port(), 0);
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let run = tokio::spawn(gateway.run(async {
+        let _ = stopped.await;
+    }));
+
+    // The station answers through the protocol and its air temperature moves: the demo
+    // operator turns the tool on at once. Poll the API with a generous deadline.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    let mut first: Option<f64> = None;
+    loop {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no live change within 60 s"
+        );
+        let (status, devices) = get(addr, "/api/devices").await;
+        assert_eq!(status, "HTTP/1.1 200 OK");
+        let air = point(&devices, "jbc1.air_temperature");
+        if let Some(t) = air["value"].as_f64() {
+            assert_eq!(devices["devices"][0]["status"], "up");
+            assert_eq!(air["quality"], "good");
+            match first {
+                None => first = Some(t),
+                Some(f) if (t - f).abs() >= 5.0 => break,
+                Some(_) => {}
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+    let (status, lines) = get(addr, "/api/lines").await;
+    assert_eq!(status, "HTTP/1.1 200 OK");
+    assert_eq!(lines["lines"][0]["open"], true);
+    let (status, health) = get(addr, "/healthz").await;
+    assert_eq!(status, "HTTP/1.1 200 OK");
+    assert_eq!(health["devices_up"], 1);
+
+    stop.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(30), run)
+        .await
+        .expect("serve stops within 30 s")
+        .unwrap()
+        .unwrap();
+
+    // Everything was committed: the history shows the rise, the events the start and stop.
+    let store = Store::open(&dir.path().join("data"), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    assert_eq!(h.integrity_check().unwrap(), "ok");
+    let history = h
+        .history(
+            &gateway::point::PointId::parse("jbc1.air_temperature").unwrap(),
+            Timestamp(0),
+            Timestamp(i64::MAX),
+            None,
+        )
+        .unwrap();
+    let Series::Samples(samples) = history.series else {
+        panic!("raw samples expected")
+    };
+    assert!(samples.len() >= 2, "{} samples", samples.len());
+    assert_ne!(
+        samples.first().unwrap().value,
+        samples.last().unwrap().value
+    );
+    let events = h
+        .events(&EventFilter {
+            limit: 100,
+            ..EventFilter::default()
+        })
+        .unwrap();
+    let kinds: Vec<&str> = events.iter().map(|e| e.kind.as_str()).collect();
+    assert_eq!(kinds.first(), Some(&"gateway_stopped"), "{kinds:?}");
+    assert_eq!(kinds.last(), Some(&"gateway_started"), "{kinds:?}");
+    assert!(kinds.contains(&"line_up"), "{kinds:?}");
+}
+
+#[tokio::test]
+async fn a_taken_port_is_reported_with_the_way_out() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let err = Gateway::start(ServeOptions {
+        listen: taken.local_addr().unwrap(),
+        ..options(dir.path())
+    })
+    .await
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("already in use"), "{err}");
+    assert!(err.contains("--listen 127.0.0.1:0"), "{err}");
+}
+
+#[tokio::test]
+async fn a_bad_config_is_refused_at_start_with_file_line_and_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cell.toml");
+    std::fs::write(
+        &path,
+        "[[line]]\nname = \"a\"\nendpoint = \"tcp://127.0.0.1:1\"\n[[line.device]]\nid = \"x\"\nprotocol = \"jbc\"\naddress = 250\n",
+    )
+    .unwrap();
+    let err = Gateway::start(ServeOptions {
+        config: Some(path.clone()),
+        ..options(dir.path())
+    })
+    .await
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.starts_with(&format!("{}:7:11: ", path.display())),
+        "{err}"
+    );
+    assert!(err.contains("0 to 99"), "{err}");
+}
+
+#[tokio::test]
+async fn writes_without_a_token_are_refused_at_start() {
+    if std::env::var_os(gateway::TOKEN_ENV).is_some() {
+        // The environment supplies a token; this start would be valid.
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let err = Gateway::start(ServeOptions {
+        allow_writes: true,
+        ..options(dir.path())
+    })
+    .await
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("--allow-writes needs a token"), "{err}");
+    assert!(err.contains("CELLBUS_TOKEN"), "{err}");
+}
