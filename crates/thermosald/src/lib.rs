@@ -14,6 +14,38 @@
 //! - [`device`]: a twin of a line of regulators with a sealing band's physics, faults,
 //!   calibration and EEPROM, as a [`wire::device::Model`].
 //!
+//! ```
+//! use std::time::{Duration, Instant};
+//! use thermosald::exchange::{Answer, Classified, Exchange};
+//! use thermosald::{Address, FrameCodec, Read, Table, Write, device::Line};
+//! use wire::{Codec, device::Model};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let address = Address::new(0)?;
+//! let sealing = Table::Settings.find("sealing temperature")?;
+//! let write = Exchange::new(address.into(), Write::value(sealing, 180.0)?.into())?;
+//! assert_eq!(write.query_bytes(), b"%012Q150180\n");
+//!
+//! // The twin answers 200 ms after the question; the master checks the echo.
+//! let t0 = Instant::now();
+//! let mut line = Line::new(&[address], t0)?;
+//! let answer = line.handle(Ok(write.query().clone()), t0).remove(0);
+//! assert_eq!(answer.delay, Duration::from_millis(200));
+//! let (echo, _) = FrameCodec.decode(&answer.bytes)?.ok_or("a whole frame")?;
+//! assert_eq!(write.classify(&echo), Classified::Answer(Answer::Echoed));
+//!
+//! // A read 240 ms later (the line's turnaround) gives named, scaled values.
+//! let read = Exchange::new(address.into(), Read::all(Table::Runtime).into())?;
+//! let answer = line.handle(Ok(read.query().clone()), t0 + Duration::from_millis(240)).remove(0);
+//! let (reply, _) = FrameCodec.decode(&answer.bytes)?.ok_or("a whole frame")?;
+//! if let Classified::Answer(Answer::Values(values)) = read.classify(&reply) {
+//!     for reading in values.readings() {
+//!         println!("{:>2} {} = {reading}", reading.item().index(), reading.item().name());
+//!     }
+//! }
+//! # Ok(())
+//! # }
+//! ```
+//!
 //! Sources: thermosald-isc-rs485.txt and the "Thermosald ISC/RS485: decisions" in
 //! specs/README.md; where both are silent, the module docs say what this crate chose.
 #![forbid(unsafe_code)]
@@ -29,6 +61,7 @@ pub mod tables;
 #[doc(hidden)]
 pub mod fuzzing;
 
+pub use exchange::Exchange;
 pub use frame::{Address, Direction, Frame, FrameCodec, MessageNumber, RawValue, Target};
 pub use request::{Command, Message, Read, Request, Write};
 pub use tables::{Item, Table};

@@ -384,7 +384,11 @@ impl Regulator {
             0.0
         };
         let wait = Duration::try_from_secs_f64(wait).unwrap_or(Duration::ZERO);
-        let until = now + wait + self.config.measurement;
+        // A measurement time too long for the clock: balancing cannot end.
+        let Some(until) = now.checked_add(wait.saturating_add(self.config.measurement)) else {
+            tracing::warn!(measurement = ?self.config.measurement, "balancing measurement time out of range");
+            return;
+        };
         self.mode = Mode::Balancing { until };
         tracing::info!(?wait, measurement = ?self.config.measurement, "automatic balancing started (36)");
     }
@@ -530,6 +534,7 @@ impl Regulator {
         let since = t.saturating_duration_since(origin);
         let into_cycle = Duration::from_nanos((since.as_nanos() % period.as_nanos()) as u64);
         let cycle_start = t - into_cycle;
+        // The impulse is at most the maximum sealing time (99.9 s): no overflow.
         let impulse_end = cycle_start + self.impulse();
         if since >= period && t < impulse_end {
             let seal = self.true_for(
@@ -545,7 +550,9 @@ impl Regulator {
             Control {
                 stage: Stage::PreHeat,
                 target: pre_heat,
-                event: Some((cycle_start + period, Event::CycleStart)),
+                event: cycle_start
+                    .checked_add(period)
+                    .map(|at| (at, Event::CycleStart)),
             }
         }
     }
@@ -930,6 +937,27 @@ mod tests {
                 assert!(item.accepts(*raw), "{table} {} = {raw}", item.name());
             }
         }
+    }
+
+    #[test]
+    fn absurd_twin_durations_do_not_overflow_the_clock() {
+        let t0 = Instant::now();
+        let config = RegulatorConfig {
+            seal_period: Some(Duration::MAX),
+            measurement: Duration::MAX,
+            cooling: Duration::MAX,
+            ..RegulatorConfig::default()
+        };
+        let mut regulator = Regulator::new(Address::new(0).expect("valid"), config, t0);
+        assert_eq!(
+            regulator.status(t0 + Duration::from_secs(10)).phase,
+            Phase::PreHeating
+        );
+        regulator.start_balancing(t0 + Duration::from_secs(10));
+        assert_eq!(
+            regulator.status(t0 + Duration::from_secs(20)).phase,
+            Phase::PreHeating
+        );
     }
 
     #[test]
