@@ -29,6 +29,8 @@ use crate::point::{PointId, Value};
 use crate::store::{AuditEntry, AuditResult, Event, EventFilter, EventKind};
 use crate::time::Timestamp;
 
+pub mod web;
+
 /// The API's routes: method and path as axum writes them.
 pub const API_ROUTES: &[(&str, &str)] = &[
     ("GET", "/healthz"),
@@ -91,6 +93,7 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
         .route("/api/events/stream", get(stream))
         .route("/api/audit", get(audit))
         .route("/api/openapi.json", get(openapi))
+        .merge(web::routes())
         .fallback(no_route)
         .method_not_allowed_fallback(wrong_method)
         .with_state(state)

@@ -505,3 +505,39 @@ fn tokens_compare_equal_only_when_identical() {
     assert!(!constant_time_eq(b"", b"a"));
     assert!(constant_time_eq(b"", b""));
 }
+
+#[tokio::test(start_paused = true)]
+async fn the_page_and_its_assets_are_served_and_fetch_nothing_from_elsewhere() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    for (_, path) in web::PAGE_ROUTES {
+        let response = app
+            .clone()
+            .oneshot(Request::get(*path).body(Body::empty()).unwrap())
+            .await
+            .unwrap();
+        assert_eq!(response.status(), StatusCode::OK, "{path}");
+        let content_type = response.headers()["content-type"]
+            .to_str()
+            .unwrap()
+            .to_owned();
+        let body = axum::body::to_bytes(response.into_body(), 1 << 20)
+            .await
+            .unwrap();
+        let text = String::from_utf8(body.to_vec()).unwrap();
+        let expected = match *path {
+            "/" => "text/html",
+            "/app.css" => "text/css",
+            _ => "text/javascript",
+        };
+        assert!(content_type.starts_with(expected), "{path}: {content_type}");
+        for external in ["http://", "https://", "//fonts.", "@import", "cdn"] {
+            assert!(!text.contains(external), "{path} refers to {external}");
+        }
+    }
+    // The page is built from the stream and marks devices and points for tests and tools.
+    assert!(web::INDEX_HTML.contains(r#"<script src="/app.js"></script>"#));
+    assert!(web::APP_JS.contains("new EventSource('/api/events/stream')"));
+    assert!(web::APP_JS.contains("card.id = `device-${device.id}`"));
+    assert!(web::APP_JS.contains("tile.id = `point-${point.id}`"));
+}
