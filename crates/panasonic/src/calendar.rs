@@ -3,7 +3,7 @@
 //!
 //! The machine has a calendar clock; the twin has only the `Instant`s it is given, so it
 //! keeps a [`Timestamp`] for its first instant and adds elapsed seconds
-//! ([`Timestamp::plus_seconds`]). Two-digit years are read as 2000–2099 [I].
+//! ([`Timestamp::plus_seconds`]). Two-digit years are read as 2000–2099 \[I\].
 
 use std::fmt;
 
@@ -197,7 +197,7 @@ impl Timestamp {
         out.extend_from_slice(self.to_string().as_bytes());
     }
 
-    /// Reads `yyyy/mm/dd hh/mm/ss`; `hh:mm:ss` is accepted for the time too [I].
+    /// Reads `yyyy/mm/dd hh/mm/ss`; `hh:mm:ss` is accepted for the time too \[I\].
     pub fn parse(text: &[u8]) -> Result<Timestamp, CalendarParseError> {
         let layout = || CalendarParseError::Layout {
             text: String::from_utf8_lossy(text).into_owned(),

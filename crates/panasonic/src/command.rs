@@ -3,7 +3,7 @@
 //! | command | wire | data | machine answers |
 //! |---|---|---|---|
 //! | [`Command::Download`] | `C0` + target (`C0P123456789ABC`, `C0G`) | program text | `A0`, host closes with `A2` |
-//! | [`Command::Delete`] | `C0R` + target | – | `A2` |
+//! | [`Command::Delete`] | `C0R` + target | – | `A2` (the manual's text is cut; A2 \[I\]) |
 //! | [`Command::Upload`] | `C1` + target | – | `D0` + text, host `A0`, machine `A2` |
 //! | [`Command::Production`] | `C1M000`, `C1M900`, `C1M000P`, `C1M900P`, `C1N000`, `C1N900`, `C1Z000`, `C1Z900` | – | `D0` … |
 //! | [`Command::ProgramList`] | `C1RP` | – | `D0` … |
@@ -17,8 +17,8 @@
 //!
 //! Choices where the manual is loose:
 //! - `C3` is sent as `C3P` ("C3 + program type"; only product programs have names); a
-//!   bare `C3` is read as `C3P` too [I].
-//! - `C5HB` (once in 3.5-2) is read as a typo for `C2HB` and not accepted [I].
+//!   bare `C3` is read as `C3P` too \[I\].
+//! - `C5HB` (once in 3.5-2) is read as a typo for `C2HB` and not accepted \[I\].
 //! - The `00` between `C2HB` and the id is sent as is; a `C2HB` with anything else there,
 //!   or an id that is not 6 printable characters, is a bad keep-alive, which 3.5-2 answers
 //!   with `A4E00` (see [`CommandError::refusal`]).
@@ -197,7 +197,7 @@ impl ProductionRequest {
 
 /// A C command.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize)]
-#[serde(tag = "command", rename_all = "snake_case")]
+#[serde(tag = "command", content = "args", rename_all = "snake_case")]
 pub enum Command {
     /// `C0`: store a program, a library or machine data on the machine.
     Download {

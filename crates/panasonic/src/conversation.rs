@@ -21,15 +21,15 @@
 //! middle of an exchange with `A4E00` and abandons that exchange (the manual: A4 = "a
 //! sequence anomaly, or a command that arrived when the machine could not accept it"; the
 //! machine discards what it received). Abandoning, rather than keeping the old exchange
-//! open, lets a host that timed out start again cleanly [I].
+//! open, lets a host that timed out start again cleanly \[I\].
 //!
 //! Choices where the manual is loose:
 //! - The data receiver may refuse a data block: a host that cannot read a `D0`/`D1` answers
 //!   `A4E01` and ends the exchange; a machine that receives `A3`/`A4` instead of `A0`/`A2`
-//!   ends the exchange quietly [I].
+//!   ends the exchange quietly \[I\].
 //! - Whichever of `D0` or `D1` the machine sends, the host follows it (`A0` then wait for
-//!   `A2`, or `A2` and done): the manual's examples label D1 answers "D0 command" [C 3.3-12].
-//! - One `D0` per exchange: a second `D0` where `A2` is due is a sequence error [?].
+//!   `A2`, or `A2` and done): the manual's examples label D1 answers "D0 command" \[C 3.3-12\].
+//! - One `D0` per exchange: a second `D0` where `A2` is due is a sequence error \[?\].
 //! - A stray `A0`/`A2`/`A3`/`A4` on an idle machine is ignored (never answer an
 //!   acknowledgement with one); a stray `D`/`R`/unknown message gets `A4E01`.
 //! - Undecodable bytes (bad size or terminator) get one `A4E01` per run of bad bytes, and the

@@ -1,7 +1,7 @@
 //! R messages: the machine's unsolicited events, Port 2 (3.4).
 //!
 //! Command field only, data size 0. The host need not answer (3.4-1); the twin and the
-//! host side both accept an `A2` after one and ignore it [I].
+//! host side both accept an `A2` after one and ignore it \[I\].
 //!
 //! | event | wire |
 //! |---|---|
@@ -19,7 +19,7 @@
 //! | [`Event::RecoveryStop`] | `R3NGEP`: recovery failed, the machine stops |
 //!
 //! The bracketed parts appear only when the machine's extended-format switch is on
-//! (3.4-7); they are `Option`s here. Meanings the pages do not give are marked [?].
+//! (3.4-7); they are `Option`s here. Meanings the pages do not give are marked \[?\].
 
 use std::fmt;
 
@@ -110,8 +110,8 @@ impl BoardTime {
 
 /// The `R2` error information: `R2ExxSxxxNxxxZxxxMxTxxx[xxxxxx]`.
 ///
-/// [I] S, N and Z are read as step, nozzle and feeder (Z) numbers; the meaning of M, T and
-/// the 6-character extension is not in the pages we have [?], so they are kept as they come.
+/// \[I\] S, N and Z are read as step, nozzle and feeder (Z) numbers; the meaning of M, T and
+/// the 6-character extension is not in the pages we have \[?\], so they are kept as they come.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize)]
 pub struct ErrorInfo {
     code: u8,
@@ -215,32 +215,32 @@ impl ErrorInfo {
         self.code == PARTS_EXHAUSTED
     }
 
-    /// The S field: step number [I].
+    /// The S field: step number \[I\].
     pub fn step(&self) -> u16 {
         self.step
     }
 
-    /// The N field: nozzle number [I].
+    /// The N field: nozzle number \[I\].
     pub fn nozzle(&self) -> u16 {
         self.nozzle
     }
 
-    /// The Z field: feeder (Z) number [I].
+    /// The Z field: feeder (Z) number \[I\].
     pub fn feeder(&self) -> u16 {
         self.feeder
     }
 
-    /// The M field [?].
+    /// The M field \[?\].
     pub fn m(&self) -> u8 {
         self.m
     }
 
-    /// The T field [?].
+    /// The T field \[?\].
     pub fn t(&self) -> u16 {
         self.t
     }
 
-    /// The 6-character extension [?].
+    /// The 6-character extension \[?\].
     pub fn detail(&self) -> Option<&str> {
         self.detail.as_deref()
     }
@@ -292,7 +292,7 @@ impl ErrorInfo {
     }
 }
 
-/// The extended part of `R1SENG`: `E***` + 6 characters [?].
+/// The extended part of `R1SENG`: `E***` + 6 characters \[?\].
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize)]
 pub struct SeNgDetail {
     code: String,
@@ -346,12 +346,12 @@ pub enum Event {
         /// The id of the C2HB it answers.
         id: KeepAliveId,
     },
-    /// `R1SE[P name]` [?]: read by the twin as "program selected" [I].
+    /// `R1SE[P name]` \[?\]: read by the twin as "program selected" \[I\].
     Se {
         /// The program (extended format).
         program: Option<ProgramName>,
     },
-    /// `R1SENG[P name E*** xxxxxx]` [?]: read by the twin as "program selection failed" [I].
+    /// `R1SENG[P name E*** xxxxxx]` \[?\]: read by the twin as "program selection failed" \[I\].
     SeNg {
         /// The program (extended format).
         program: Option<ProgramName>,
@@ -569,7 +569,7 @@ fn optional_program(rest: &str) -> Option<Option<ProgramName>> {
     ProgramName::parse_field(rest.as_bytes()).ok().map(Some)
 }
 
-/// `R1SENG` tails: nothing, `P` + name, or `P` + name padded to 15 + `E` + 3 + 6 [I].
+/// `R1SENG` tails: nothing, `P` + name, or `P` + name padded to 15 + `E` + 3 + 6 \[I\].
 fn se_ng(rest: &str) -> Option<Event> {
     const FIXED: usize = 1 + PROGRAM_NAME_LEN + 1 + 3 + DETAIL_LEN;
     if rest.len() == FIXED && rest.as_bytes().get(1 + PROGRAM_NAME_LEN) == Some(&b'E') {

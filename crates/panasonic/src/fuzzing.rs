@@ -129,6 +129,27 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        #[test]
+        fn fuzz_bodies_survive_random_bytes(data in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..2000)) {
+            decode(&data);
+            twin(&data);
+        }
+
+        #[test]
+        fn fuzz_bodies_survive_valid_messages_with_flipped_bytes(
+            flips in proptest::collection::vec((0usize..4000, proptest::prelude::any::<u8>()), 0..6),
+        ) {
+            let mut data = samples().swap_remove(1);
+            for (at, byte) in flips {
+                let at = at % data.len();
+                data[at] = byte;
+            }
+            decode(&data);
+            twin(&data);
+        }
+    }
+
     #[test]
     fn fuzz_twin_body_survives_sample_inputs() {
         for sample in samples() {

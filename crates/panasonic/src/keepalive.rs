@@ -16,7 +16,7 @@ use crate::command::{Command, KeepAliveId};
 pub const MIN_INTERVAL: Duration = Duration::from_secs(30);
 /// Default interval.
 pub const DEFAULT_INTERVAL: Duration = Duration::from_secs(30);
-/// Default time to wait for both answers [?] (the manual gives none).
+/// Default time to wait for both answers \[?\] (the manual gives none).
 pub const DEFAULT_REPLY_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// How the check runs.

@@ -18,8 +18,8 @@
 //!   a production run over simulated time, the R-message buffer and the exact refusals.
 //!
 //! Where the manual is silent or unavailable the crate follows the fact sheet's
-//! recommendations; each choice is documented where it is made and marked [I] (inferred)
-//! or [?] (unknown, decided here).
+//! recommendations; each choice is documented where it is made and marked \[I\] (inferred)
+//! or \[?\] (unknown, decided here).
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 

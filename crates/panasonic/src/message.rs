@@ -11,15 +11,18 @@
 //! A C2ST request is therefore 263 bytes, a D1 reply carrying `001` 266 bytes.
 //!
 //! Choices where the manual is loose (fact sheet §2, §7):
-//! - **Terminator [I]:** we send three NUL bytes. On receive, three ASCII `0` (0x30) are
+//! - **Terminator \[I\]:** we send three NUL bytes. On receive, three ASCII `0` (0x30) are
 //!   accepted too, logged, and remembered in [`Message::terminator`]; any other trio is a
 //!   [`DecodeError::Terminator`].
-//! - **Size field [I]:** read as an unsigned 32-bit number, and refused above
+//! - **Size field \[I\]:** read as an unsigned 32-bit number, and refused above
 //!   [`MAX_DATA_LEN`], so a hostile length can never make a reader buffer more than
 //!   4 MiB + 263 bytes.
-//! - **Command field [I]:** printable ASCII (0x20–0x7E) starting with a capital letter (every
+//! - **Command field \[I\]:** printable ASCII (0x20–0x7E) starting with a capital letter (every
 //!   command class is one: `A`, `C`, `D`, `R`); trailing blanks are padding, so a command's
 //!   own trailing blanks cannot survive the trip (fact sheet §6).
+//!
+//! - **Character set \[I\]:** the command field is ASCII; the data field is passed through as
+//!   bytes (program text is CRLF-separated ASCII in every example, but nothing says it must be).
 //!
 //! **Resynchronisation.** The stream has no start byte, so after an error the decoder drops
 //! bytes up to the next *possible* start: the next capital letter after the first byte that
@@ -477,6 +480,20 @@ mod tests {
         bytes.extend([b' '; 254]);
         bytes.extend([0; 7]);
         assert_eq!(Message::new("A2").expect("valid").to_bytes(), bytes);
+    }
+
+    #[test]
+    fn d1_reply_of_the_c3_example_carries_16_bytes_pabc_padded() {
+        // 3.3-12: D1, data size 16, data "PABC" (+ 12 blanks), terminator.
+        let mut bytes = b"D1".to_vec();
+        bytes.extend([b' '; 254]);
+        bytes.extend([0x00, 0x00, 0x00, 0x10]);
+        bytes.extend(b"PABC            ");
+        bytes.extend([0x00; 3]);
+        assert_eq!(bytes.len(), 279);
+        let message = Message::with_data("D1", b"PABC            ".to_vec()).expect("valid");
+        assert_eq!(message.to_bytes(), bytes);
+        assert_eq!(MessageCodec.decode(&bytes), Ok(Some((message, 279))));
     }
 
     #[test]

@@ -176,4 +176,82 @@ mod tests {
         );
         assert_eq!(notes.last().map(|n| &n.item), Some(&Annotated::Incomplete));
     }
+
+    #[test]
+    fn every_typed_value_serialises_to_json_for_the_cli() {
+        use crate::command::{KeepAliveId, ProductionRequest, ProductionScope};
+        use crate::event::{BoardTime, ErrorInfo};
+        use crate::program::{ProgramName, Target};
+        use crate::status::StopMode;
+        let json = |value: &dyn erased::Json| value.json();
+        let abc = ProgramName::new("ABC").expect("valid");
+        let commands = [
+            Command::Download {
+                target: Target::Product(abc.clone()),
+                data: b"*\r\n".to_vec(),
+            },
+            Command::Delete {
+                target: Target::PartLibrary,
+            },
+            Command::Upload {
+                target: Target::MachineData,
+            },
+            Command::Production(ProductionRequest {
+                scope: ProductionScope::CurrentTotal,
+                clear: true,
+            }),
+            Command::ProgramList,
+            Command::Status,
+            Command::KeepAlive(KeepAliveId::new("ABC123").expect("valid")),
+            Command::CurrentProgram,
+            Command::Start(Some(StopMode::OneBlock)),
+            Command::Start(None),
+            Command::Reset,
+        ];
+        for command in &commands {
+            assert!(json(command).contains("\"command\""), "{command}");
+        }
+        assert_eq!(
+            json(&Command::KeepAlive(
+                KeepAliveId::new("ABC123").expect("valid")
+            )),
+            r#"{"command":"keep_alive","args":"ABC123"}"#
+        );
+        let events = [
+            Event::BoardFinished {
+                time: Some(BoardTime::new(22).expect("fits")),
+            },
+            Event::Heartbeat {
+                id: KeepAliveId::new("ABC123").expect("valid"),
+            },
+            Event::Se { program: Some(abc) },
+            Event::Error(ErrorInfo::new(3, 1, 2, 3).expect("valid")),
+            Event::RecoveryOk,
+        ];
+        for event in &events {
+            assert!(json(event).starts_with("{\"event\":"), "{event}");
+        }
+        assert_eq!(json(&events[0]), r#"{"event":"board_finished","time":22}"#);
+        for reply in [
+            Reply::Finished,
+            Reply::PROTOCOL_ERROR,
+            Reply::Value(b"001".to_vec()),
+        ] {
+            assert!(json(&reply).contains("\"reply\""), "{reply}");
+        }
+        let status = crate::status::MachineStatus::parse(b"001").expect("valid");
+        assert_eq!(json(&status), r#"{"state":"run","mode":"remote"}"#);
+    }
+
+    /// `serde_json::to_string` behind a trait object, so one helper takes every type.
+    mod erased {
+        pub trait Json {
+            fn json(&self) -> String;
+        }
+        impl<T: serde::Serialize> Json for T {
+            fn json(&self) -> String {
+                serde_json::to_string(self).expect("every typed value serialises")
+            }
+        }
+    }
 }

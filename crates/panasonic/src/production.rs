@@ -17,7 +17,7 @@
 //! ```
 //!
 //! Every line ends in CRLF. The manual shows the keys above and a few more (the full list is
-//! in the separate "Prg./DATA FORMAT" manual [?]). So this module keeps every `KEY=VALUE`
+//! in the separate "Prg./DATA FORMAT" manual \[?\]). So this module keeps every `KEY=VALUE`
 //! line it reads, in order, typed by its look: 7-digit counters as [`Value::Count`],
 //! `ddd.dd` rates as [`Value::Rate`], anything else as [`Value::Text`]; the keys the
 //! manual names have typed accessors ([`Counter`], [`RateKind`]).
@@ -39,7 +39,7 @@ pub const COUNT_WIDTH: usize = 7;
 pub const MAX_COUNT: u32 = 9_999_999;
 /// `MACHINE=` value of the manual's example.
 pub const MACHINE_BM: &str = "BM";
-/// `PANASONIC=` value of the manual's example (a format version, we assume [I]).
+/// `PANASONIC=` value of the manual's example (a format version, we assume \[I\]).
 pub const PANASONIC_FORMAT: &str = "3010";
 
 /// A percentage with two decimals, 0.00–100.00 (`075.75` on the wire).
@@ -175,7 +175,7 @@ pub struct Section {
 #[derive(Debug, Clone, Default, PartialEq, Eq, Hash, Serialize)]
 pub struct ProductionHeader {
     /// `NAME=`: which data (the manual shows `M…`; the twin writes the request code,
-    /// e.g. `M000P` [I]).
+    /// e.g. `M000P` \[I\]).
     pub name: Option<String>,
     /// `MACHINE=`: `BM`.
     pub machine: Option<String>,
@@ -204,15 +204,15 @@ pub struct ProductionData {
 pub enum Counter {
     /// `PRODUCTPLAN1`: boards planned.
     ProductPlan1,
-    /// `PRODUCTPLAN2`: second plan figure ([?] meaning not in the pages we have).
+    /// `PRODUCTPLAN2`: second plan figure (\[?\] meaning not in the pages we have).
     ProductPlan2,
     /// `PRODUCT1`: boards produced.
     Product1,
-    /// `PRODUCT2`: second production figure ([?] meaning not in the pages we have).
+    /// `PRODUCT2`: second production figure (\[?\] meaning not in the pages we have).
     Product2,
     /// `PARTS_EXHAUST_C`: parts-exhaustion stops.
     PartsExhaustCount,
-    /// `PARTS_EXHAUST_T`: time stopped for parts exhaustion, in seconds [I].
+    /// `PARTS_EXHAUST_T`: time stopped for parts exhaustion, in seconds \[I\].
     PartsExhaustTime,
     /// `PICKUP`: pick-up attempts.
     Pickup,

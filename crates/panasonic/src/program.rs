@@ -11,7 +11,7 @@
 //! - [`ConditionData`]: the one line of machine data `C0G` may change.
 //!
 //! The program data format itself is in a separate Panasonic manual we do not have
-//! ("Prg./DATA FORMAT"); what this module assumes about it is marked [?] and kept small.
+//! ("Prg./DATA FORMAT"); what this module assumes about it is marked \[?\] and kept small.
 
 use std::fmt;
 use std::str::FromStr;
@@ -499,7 +499,7 @@ impl ProgramText {
     /// How many steps (program) or entries (library) the text holds, for the limits of
     /// 3.3-4.
     ///
-    /// [?] The data format is in a manual we do not have. We count every non-empty line
+    /// \[?\] The data format is in a manual we do not have. We count every non-empty line
     /// that is not in the `%HEADER` section, not a section mark (`%…`), not a sub-section
     /// mark (`&…`, as in machine data's `&CONDITIONDATA1`) and not the `*` end mark.
     pub fn entries(&self) -> usize {
@@ -548,7 +548,7 @@ pub const CONDITION_DATA_NUMBER: u32 = 1_010_001;
 /// The part of the operating-condition data a host may change with `C0G` (3.3-4): the
 /// line after `&CONDITIONDATA1`, e.g. `1010001,1,1,0,0`.
 ///
-/// [I] Which flag sits in which position is inferred from the order the manual lists them.
+/// \[I\] Which flag sits in which position is inferred from the order the manual lists them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 pub struct ConditionData {
     /// Pass-through (boards go through without placement).

@@ -11,7 +11,7 @@
 //! | [`Reply::Value`] | `D1` + data | a fixed-length value (status, program name); answered by `A2` |
 //!
 //! There is no `A1`. `A4` sub-codes other than `E00`/`E01` are not in the pages we have
-//! [?]: they decode as [`A4Reason::Other`], a bare `A4` as [`A4Reason::Unspecified`].
+//! \[?\]: they decode as [`A4Reason::Other`], a bare `A4` as [`A4Reason::Unspecified`].
 
 use std::fmt;
 

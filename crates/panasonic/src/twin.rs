@@ -13,6 +13,17 @@
 //!   in a buffer of [`EVENT_BUFFER_LEN`] (about 40 in the manual), the oldest dropped first,
 //!   and are delivered in order when a host connects.
 //!
+//! Choices for the server around the twin (fact sheet, "What the product decides"):
+//! - **One host per port \[?\]:** the twin keeps one Port 1 conversation and one Port 2
+//!   listener. A server should refuse a second Port 1 connection politely (accept, log,
+//!   close) rather than queue it, and call [`Machine::port1_closed`] when the host's
+//!   connection goes, so a half message or an open exchange does not outlive it.
+//! - **R messages in both modes \[?\]:** 3.4.6's table of which R messages go out in Online
+//!   and Remote mode is garbled in our copy; the twin sends them in both, when its R-command
+//!   switch ([`MachineConfig::events_enabled`]) is on.
+//! - **Buffer while nobody listens \[I\]:** the ~40-message rule applies while no host is
+//!   connected to Port 2; a listening host gets every message at the next poll.
+//!
 //! Nothing here reads a clock, sleeps or touches a socket; randomness comes from a seeded
 //! `fastrand` generator, so a seed and the same inputs give the same run. A TCP server
 //! around it calls [`Machine::next_event_at`] to know when to poll again.
@@ -23,13 +34,13 @@
 //! |---|---|
 //! | C5 (start, reset) in Online mode | `A4E00` |
 //! | C5ST while running, in an error stop, or with no (or an empty) program selected | `A4E00` |
-//! | C5RE while running [I] | `A4E00` |
+//! | C5RE while running \[I\] | `A4E00` |
 //! | C0 of the selected program | `A4E00` |
 //! | C0 beyond 100 programs, 5000 steps or a library's size | `A4E00` |
-//! | C0R of the selected program, or of a library or machine data [I] | `A4E00` |
+//! | C0R of the selected program, or of a library or machine data \[I\] | `A4E00` |
 //! | C1/C0R of a program that does not exist, C1 of a library never downloaded | `A3` |
 //! | C3 with no program selected | `A4E01` |
-//! | C0 data without the `*` CRLF end mark, or C0G without valid condition data [I] | `A4E01` |
+//! | C0 data without the `*` CRLF end mark, or C0G without valid condition data \[I\] | `A4E01` |
 //! | malformed C2HB (3.5-2) | `A4E00` |
 //! | unknown command, undecodable bytes, out-of-sequence messages | `A4E01` (see [`conversation`](crate::conversation)) |
 //!
@@ -47,7 +58,7 @@
 //! CONT mode (the next board starts at once), `R0EP[time]` in EOP or 1-BLOCK mode (the
 //! machine stops, Ready). In 1-BLOCK mode the machine also stops after every block.
 //!
-//! [?] The program data format is not in the pages we have: the twin's demo program uses
+//! \[?\] The program data format is not in the pages we have: the twin's demo program uses
 //! an invented step line (`0001,X012.50,Y008.00,R000,Z001`), and it counts steps as
 //! [`ProgramText::entries`] does. Per-nozzle and per-feeder breakdowns of C1N/C1Z are
 //! not modelled: those answers carry the same counters, cleared separately.
@@ -573,7 +584,7 @@ impl Machine {
     }
 
     /// Selects a stored program (the operator's choice at the machine). Sends `R1SE`; an
-    /// unknown name sends `R1SENG` and fails [I].
+    /// unknown name sends `R1SENG` and fails \[I\].
     pub fn select_program(&mut self, name: &ProgramName, now: Instant) -> Result<(), TwinError> {
         self.advance(now);
         let program = self.config.extended_format.then(|| name.clone());
@@ -1014,7 +1025,7 @@ impl Machine {
 
     /// R2 fields for an error at `block`: step, nozzle and feeder of that block; the
     /// extension (extended format) carries the board number, as the meaning of those six
-    /// characters is not in the pages we have [?].
+    /// characters is not in the pages we have \[?\].
     fn error_info(&self, code: u8, block: usize) -> Option<ErrorInfo> {
         let three = |n: usize| u16::try_from(n % 1000).unwrap_or(0);
         let info = ErrorInfo::new(
@@ -1113,7 +1124,7 @@ impl Machine {
 }
 
 /// A demo program of `steps` steps over `feeders` feeders, in the twin's invented step
-/// format [?].
+/// format \[?\].
 fn demo_program_text(steps: usize, feeders: u16) -> ProgramText {
     let mut text = format!("%HEADER\r\nNAME={DEMO_PROGRAM}\r\nMACHINE={MACHINE_BM}\r\n%STEP\r\n");
     for step in 0..steps {

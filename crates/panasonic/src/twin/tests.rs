@@ -979,3 +979,9 @@ fn invalid_configurations_are_refused() {
         })
     ));
 }
+
+#[test]
+fn the_twin_can_be_shared_across_server_tasks() {
+    fn send<T: Send + 'static>() {}
+    send::<Machine>();
+}
