@@ -523,7 +523,7 @@ impl Machine {
         input: Result<Message, DecodeError>,
         now: Instant,
     ) -> Vec<Message> {
-        self.advance(now);
+        let now = self.advance(now);
         match self.conversation.receive(input) {
             MachineStep::Command(command) => {
                 tracing::debug!(%command, "Port 1 command");
@@ -612,7 +612,7 @@ impl Machine {
         mode: Option<StopMode>,
         now: Instant,
     ) -> Result<(), TwinError> {
-        self.advance(now);
+        let now = self.advance(now);
         self.start(mode, now)
     }
 
@@ -665,7 +665,7 @@ impl Machine {
     /// The operator clears every cause and presses RESET: empty feeders get a full reel,
     /// paused ones resume, an error stop becomes Ready.
     pub fn clear(&mut self, now: Instant) {
-        self.advance(now);
+        let now = self.advance(now);
         let reel = self.config.reel_size;
         for feeder in &mut self.feeders {
             feeder.paused = false;
@@ -893,8 +893,9 @@ impl Machine {
         Ok(())
     }
 
-    /// Runs everything due up to `now`, in time order.
-    fn advance(&mut self, now: Instant) {
+    /// Runs everything due up to `now`, in time order; returns `now`, or the latest time
+    /// already reached if `now` is earlier (time never runs backwards).
+    fn advance(&mut self, now: Instant) -> Instant {
         let epoch = *self.epoch.get_or_insert(now);
         let now = now.max(self.clock_now.unwrap_or(epoch));
         self.clock_now = Some(now);
@@ -913,6 +914,7 @@ impl Machine {
                 (None, None) => break,
             }
         }
+        now
     }
 
     fn emit_scheduled(&mut self) {

@@ -985,3 +985,21 @@ fn the_twin_can_be_shared_across_server_tasks() {
     fn send<T: Send + 'static>() {}
     send::<Machine>();
 }
+
+#[test]
+fn a_command_stamped_earlier_than_the_twins_time_acts_at_the_twins_time() {
+    let mut rig = Rig::remote();
+    let early = rig.now;
+    rig.wait(Duration::from_secs(100));
+    assert!(rig.events().is_empty());
+    let start = Command::Start(Some(StopMode::Continuous))
+        .to_message()
+        .expect("fits")
+        .to_bytes();
+    let replies = rig.machine.handle_port1(&start, early);
+    assert_eq!(replies, vec![Message::new("A2").expect("valid")]);
+    assert_eq!(
+        rig.machine.next_event_at(),
+        Some(rig.now + Duration::from_millis(4150))
+    );
+}
