@@ -98,8 +98,13 @@ impl Line {
         }
     }
 
-    /// Counts each answer's wire time at `timing` before the line is released: use it when
-    /// the serve loop paces replies at the line's rate.
+    /// Counts each answer's wire time at `timing` before the line is released, and hears a
+    /// message only if it began (its end minus its wire time) once the line was free. Use it
+    /// exactly when the serve loop paces the line at the same rate (`link`'s `pace`): then
+    /// the master receives each answer at the end of its wire time and
+    /// [`crate::exchange::earliest_next_send`] agrees with the twin. Over an unpaced loop
+    /// answers arrive 200 ms after the question, and a paced twin would still think the
+    /// line busy for the answer's wire time.
     pub fn paced(mut self, timing: LineTiming) -> Self {
         self.pace = Some(timing);
         self
