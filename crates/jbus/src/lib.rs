@@ -8,12 +8,16 @@
 //!   ([`cross::device::CrossTwin`]) with its transfers and its exact refusals.
 //! - [`slave`]: a generic Modbus server model (coils, discrete inputs, holding and input
 //!   registers from a small map file, or everything writable), to test the generic layer.
+//! - [`client`]: the async master over a `link` line: one request in flight per line,
+//!   timeouts, retries, the inter-frame silence, answers checked before they are accepted.
 //!
-//! Nothing here reads a clock or touches a port: time comes in as `now`, bytes through
-//! `wire::Codec`s and `wire::device::Model`s, which the `link` crate serves.
+//! Apart from [`client`], nothing here reads a clock or touches a port: time comes in as
+//! `now`, bytes through `wire::Codec`s and `wire::device::Model`s, which the `link` crate
+//! serves.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod client;
 pub mod cross;
 pub mod rtu;
 pub mod slave;

@@ -1,0 +1,1142 @@
+//! The async Modbus RTU client: typed requests to the units on a [`link`] line, with a
+//! response timeout, retries, the line's inter-frame silence and checked answers.
+//!
+//! - **One request in flight per line.** A [`Client`] holds a [`SharedLine`]; clones of it
+//!   and clients made on the same shared line queue for it in order, so units that share
+//!   an RS-485 pair never see interleaved frames.
+//! - **Inter-frame silence.** After every exchange the client keeps the line quiet for 3.5
+//!   character times at the line's speed and format (1.75 ms above 19200 baud) through
+//!   [`Line::keep_quiet_until`], so the next request, whoever sends it, respects it. A TCP
+//!   endpoint that names no serial line (`tcp://host:port` without `?baud=`) has no
+//!   character time, and no silence.
+//! - **Checked answers.** A frame is the answer only if [`check_response`] accepts it (same
+//!   unit, function, count or echo). Other frames (a late answer to an earlier request,
+//!   another master's traffic) are skipped.
+//! - **Retries for line trouble only.** Silence, a damaged frame (bad CRC, bytes that the
+//!   line's silence cut short) and answers that never match are retried; an exception is
+//!   the device's answer and is reported at once, in words ([`ClientError::Exception`]).
+//!   A damaged answer is retried as soon as the line falls quiet after it, without waiting
+//!   for the timeout.
+//! - **Resynchronisation.** RTU frames carry no length; bytes that look like the head of a
+//!   long frame would hold the decoder until that many bytes arrive. When the line falls
+//!   quiet with bytes still undecoded, the client looks past them with [`find_frame`].
+//! - **Broadcasts** (unit 0, writes only) are sent and never answered; the line is then kept
+//!   quiet for the units' turnaround time ([`ClientConfig::turnaround`]).
+//! - **A dead unit costs its own timeouts only**: every attempt starts on a clean line
+//!   (stale input dropped), so the next unit's exchange is unaffected.
+
+use std::time::Duration;
+
+use link::{Line, LineError, SharedLine};
+use tokio::time::Instant;
+use wire::Deframer;
+
+use crate::cross::{CrossState, read_plan};
+use crate::rtu::{
+    Addressed, Answer, Broadcast, DecodeError, Exception, ExceptionCode, InvalidValue, LineTiming,
+    Mismatch, Request, ResponseAdu, ResponseCodec, Unit, check_response, find_frame,
+};
+
+/// Default time to wait for an answer after the request has left, on top of the wire time
+/// of the request and the answer at the line's speed (when known): Modbus devices answer
+/// within a few to a few hundred milliseconds.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(500);
+
+/// Default number of retries after the first attempt.
+pub const DEFAULT_RETRIES: u8 = 2;
+
+/// Default quiet time after a broadcast, so every unit has handled it before the next
+/// request (the Modbus serial-line guide's "turnaround delay", typically 100–200 ms).
+pub const DEFAULT_TURNAROUND: Duration = Duration::from_millis(100);
+
+/// The shortest quiet time after which undecoded bytes are taken as a finished (damaged or
+/// padded) frame. The standard's 3.5 characters are 4 ms at 9600 baud, but USB adapters
+/// and TCP serial servers deliver a frame in bursts with gaps of up to about 16 ms inside
+/// it; a longer wait only delays recovery from damage, never a good answer.
+pub const MIN_QUIET_GAP: Duration = Duration::from_millis(50);
+
+/// How the client talks to the units on a line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClientConfig {
+    /// Time to wait for each answer (the wire time of request and answer is added).
+    pub timeout: Duration,
+    /// Retries after the first attempt, for line trouble only.
+    pub retries: u8,
+    /// Quiet time after a broadcast.
+    pub turnaround: Duration,
+}
+
+impl Default for ClientConfig {
+    /// 500 ms, 2 retries, 100 ms turnaround after broadcasts.
+    fn default() -> Self {
+        Self {
+            timeout: DEFAULT_TIMEOUT,
+            retries: DEFAULT_RETRIES,
+            turnaround: DEFAULT_TURNAROUND,
+        }
+    }
+}
+
+/// Why a request did not get its answer.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ClientError {
+    /// The request was refused before reaching the wire (a count out of range, a block
+    /// past the last address).
+    #[error(transparent)]
+    Request(#[from] InvalidValue),
+    /// The unit understood the request and refused it.
+    #[error("unit {unit} refused \"{request}\": {}", exception.code)]
+    Exception {
+        /// The unit that answered.
+        unit: u8,
+        /// The request, in words.
+        request: String,
+        /// The function refused and why.
+        exception: Exception,
+    },
+    /// No valid answer within the attempts.
+    #[error(
+        "no valid answer from unit {unit} on {endpoint} to \"{request}\" after {attempts} attempts of {timeout:?} each (last: {last})"
+    )]
+    NoAnswer {
+        /// The line.
+        endpoint: String,
+        /// The unit asked.
+        unit: u8,
+        /// The request, in words.
+        request: String,
+        /// Attempts made.
+        attempts: u8,
+        /// Time waited in each (the configured timeout plus wire time).
+        timeout: Duration,
+        /// What went wrong on the last attempt.
+        last: Trouble,
+    },
+    /// The line itself failed (closed, I/O error).
+    #[error("line {endpoint} failed: {source}")]
+    Line {
+        /// The line.
+        endpoint: String,
+        /// What happened.
+        source: LineError,
+    },
+}
+
+impl ClientError {
+    /// Whether the device, its absence or the line is the cause, rather than our request.
+    pub fn is_device_error(&self) -> bool {
+        !matches!(self, Self::Request(_))
+    }
+
+    /// The exception code, when the unit refused the request.
+    pub fn exception_code(&self) -> Option<ExceptionCode> {
+        match self {
+            Self::Exception { exception, .. } => Some(exception.code),
+            _ => None,
+        }
+    }
+}
+
+/// Line trouble on one attempt: what makes the client retry.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Trouble {
+    /// Nothing came.
+    #[error("no answer")]
+    Silence,
+    /// A damaged frame came (bad CRC, or a good CRC around invalid content).
+    #[error("damaged answer: {0}")]
+    Damaged(DecodeError),
+    /// The line fell quiet after bytes that make no frame.
+    #[error("the line fell quiet after {bytes} bytes that make no frame")]
+    Incomplete {
+        /// How many bytes were left undecoded.
+        bytes: usize,
+    },
+    /// Well-formed frames came, but none answers the request.
+    #[error("an answer that does not match the request: {0}")]
+    Mismatch(Mismatch),
+}
+
+/// A Modbus RTU master on one (possibly shared) line. Clone it to give each task its own
+/// handle: clones queue for the same line.
+#[derive(Debug, Clone)]
+pub struct Client {
+    line: SharedLine,
+    config: ClientConfig,
+    deframer: Deframer<ResponseCodec>,
+}
+
+impl Client {
+    /// A client on `line`.
+    pub fn new(line: SharedLine, config: ClientConfig) -> Self {
+        Self {
+            line,
+            config,
+            deframer: Deframer::new(ResponseCodec),
+        }
+    }
+
+    /// The client's settings.
+    pub fn config(&self) -> &ClientConfig {
+        &self.config
+    }
+
+    /// The shared line, to make clients with other settings on it.
+    pub fn line(&self) -> &SharedLine {
+        &self.line
+    }
+
+    /// Function 1: `count` (1–2000) coils from `address`.
+    pub async fn read_coils(
+        &mut self,
+        unit: Unit,
+        address: u16,
+        count: u16,
+    ) -> Result<Vec<bool>, ClientError> {
+        let request = Request::read_coils(address, count)?;
+        self.read_bits(unit, request).await
+    }
+
+    /// Function 2: `count` (1–2000) discrete inputs from `address`.
+    pub async fn read_discrete_inputs(
+        &mut self,
+        unit: Unit,
+        address: u16,
+        count: u16,
+    ) -> Result<Vec<bool>, ClientError> {
+        let request = Request::read_discrete_inputs(address, count)?;
+        self.read_bits(unit, request).await
+    }
+
+    /// Function 3: `count` (1–125) holding registers from `address`.
+    pub async fn read_holding_registers(
+        &mut self,
+        unit: Unit,
+        address: u16,
+        count: u16,
+    ) -> Result<Vec<u16>, ClientError> {
+        let request = Request::read_holding_registers(address, count)?;
+        self.read_registers(unit, request).await
+    }
+
+    /// Function 4: `count` (1–125) input registers from `address`.
+    pub async fn read_input_registers(
+        &mut self,
+        unit: Unit,
+        address: u16,
+        count: u16,
+    ) -> Result<Vec<u16>, ClientError> {
+        let request = Request::read_input_registers(address, count)?;
+        self.read_registers(unit, request).await
+    }
+
+    /// Function 5: switches one coil on or off.
+    pub async fn write_single_coil(
+        &mut self,
+        unit: Unit,
+        address: u16,
+        value: bool,
+    ) -> Result<(), ClientError> {
+        self.write(unit, Request::write_single_coil(address, value))
+            .await
+    }
+
+    /// Function 6: writes one holding register.
+    pub async fn write_single_register(
+        &mut self,
+        unit: Unit,
+        address: u16,
+        value: u16,
+    ) -> Result<(), ClientError> {
+        self.write(unit, Request::write_single_register(address, value))
+            .await
+    }
+
+    /// Function 15: writes 1–1968 coils from `address`.
+    pub async fn write_multiple_coils(
+        &mut self,
+        unit: Unit,
+        address: u16,
+        values: &[bool],
+    ) -> Result<(), ClientError> {
+        let request = Request::write_multiple_coils(address, values.to_vec())?;
+        self.write(unit, request).await
+    }
+
+    /// Function 16: writes 1–123 holding registers from `address`.
+    pub async fn write_multiple_registers(
+        &mut self,
+        unit: Unit,
+        address: u16,
+        values: &[u16],
+    ) -> Result<(), ClientError> {
+        let request = Request::write_multiple_registers(address, values.to_vec())?;
+        self.write(unit, request).await
+    }
+
+    /// Reads the whole state of a Chloride CROSS: one function-3 read per area of
+    /// [`read_plan`], decoded into named, scaled values.
+    pub async fn read_cross(&mut self, unit: Unit) -> Result<CrossState, ClientError> {
+        let mut blocks = Vec::with_capacity(4);
+        for (start, count) in read_plan() {
+            let words = self.read_holding_registers(unit, start, count).await?;
+            blocks.push((start, words));
+        }
+        Ok(CrossState::from_blocks(&blocks)
+            .expect("the read plan covers every defined word and each answer's count is checked"))
+    }
+
+    /// Sends `request` to its unit and returns the checked answer (never
+    /// [`Answer::Exception`]: a refusal is [`ClientError::Exception`]).
+    pub async fn request(&mut self, request: &Addressed) -> Result<Answer, ClientError> {
+        let bytes = request.to_adu().to_bytes();
+        let mut line = self.line.lock().await;
+        let silence = inter_frame_silence(&line);
+        let timeout = self.config.timeout
+            + line.wire_time(bytes.len() + expected_answer_len(&request.request));
+        let quiet_gap = MIN_QUIET_GAP.max(silence);
+        let attempts = self.config.retries.saturating_add(1);
+        let mut last = Trouble::Silence;
+        for attempt in 1..=attempts {
+            let outcome = attempt_once(
+                &mut line,
+                &mut self.deframer,
+                request,
+                &bytes,
+                timeout,
+                quiet_gap,
+            )
+            .await;
+            // Whatever happened, the next frame on this line waits for the silence.
+            line.keep_quiet_until(Instant::now() + silence);
+            match outcome {
+                Ok(Answer::Exception(exception)) => {
+                    return Err(ClientError::Exception {
+                        unit: request.unit.get(),
+                        request: request.request.to_string(),
+                        exception,
+                    });
+                }
+                Ok(answer) => return Ok(answer),
+                Err(Failure::Trouble(trouble)) => last = trouble,
+                Err(Failure::Line(source)) => {
+                    return Err(ClientError::Line {
+                        endpoint: line.name().to_owned(),
+                        source,
+                    });
+                }
+            }
+            tracing::debug!(%request, attempt, %last, "retrying");
+        }
+        Err(ClientError::NoAnswer {
+            endpoint: line.name().to_owned(),
+            unit: request.unit.get(),
+            request: request.request.to_string(),
+            attempts,
+            timeout,
+            last,
+        })
+    }
+
+    /// Sends a write to every unit on the line (unit 0). Nobody answers; the line is then
+    /// kept quiet for [`ClientConfig::turnaround`] and the inter-frame silence.
+    pub async fn broadcast(&mut self, write: &Broadcast) -> Result<(), ClientError> {
+        let bytes = write.to_adu().to_bytes();
+        let mut line = self.line.lock().await;
+        let sent = async {
+            line.discard_input().await?;
+            line.send(&bytes).await
+        }
+        .await;
+        if let Err(source) = sent {
+            return Err(ClientError::Line {
+                endpoint: line.name().to_owned(),
+                source,
+            });
+        }
+        // A serial port may return before the last byte left: count the frame's wire time.
+        let quiet =
+            line.wire_time(bytes.len()) + self.config.turnaround + inter_frame_silence(&line);
+        line.keep_quiet_until(Instant::now() + quiet);
+        Ok(())
+    }
+
+    async fn read_bits(&mut self, unit: Unit, request: Request) -> Result<Vec<bool>, ClientError> {
+        match self.request(&Addressed::new(unit, request)).await? {
+            Answer::Bits(bits) => Ok(bits),
+            other => unreachable_answer(other),
+        }
+    }
+
+    async fn read_registers(
+        &mut self,
+        unit: Unit,
+        request: Request,
+    ) -> Result<Vec<u16>, ClientError> {
+        match self.request(&Addressed::new(unit, request)).await? {
+            Answer::Registers(values) => Ok(values),
+            other => unreachable_answer(other),
+        }
+    }
+
+    async fn write(&mut self, unit: Unit, request: Request) -> Result<(), ClientError> {
+        self.request(&Addressed::new(unit, request)).await.map(drop)
+    }
+}
+
+/// `check_response` gives a read's kind of answer for a read: another kind cannot come.
+fn unreachable_answer<T>(answer: Answer) -> Result<T, ClientError> {
+    unreachable!("check_response answers a read with its own kind of values, not {answer:?}")
+}
+
+/// The silence before each frame on `line`: 3.5 characters at its speed and format, 1.75 ms
+/// above 19200 baud, none when the line's speed is unknown.
+pub fn inter_frame_silence(line: &Line) -> Duration {
+    line.settings()
+        .and_then(|s| LineTiming::new(s.baud, s.bits_per_char()).ok())
+        .map_or(Duration::ZERO, |timing| timing.inter_frame_silence())
+}
+
+/// The length of a normal answer to `request`, to count its wire time.
+pub fn expected_answer_len(request: &Request) -> usize {
+    // unit, function, CRC; reads add a byte count and the data, writes an echo of 4 bytes.
+    const FIXED: usize = 4;
+    match request {
+        Request::ReadCoils(r) | Request::ReadDiscreteInputs(r) => {
+            FIXED + 1 + crate::rtu::packed_len(usize::from(r.count().get()))
+        }
+        Request::ReadHoldingRegisters(r) | Request::ReadInputRegisters(r) => {
+            FIXED + 1 + 2 * usize::from(r.count().get())
+        }
+        _ => FIXED + 4,
+    }
+}
+
+/// Why one attempt ended without an answer.
+enum Failure {
+    /// Retry.
+    Trouble(Trouble),
+    /// Give up: the line is gone.
+    Line(LineError),
+}
+
+impl From<LineError> for Failure {
+    fn from(e: LineError) -> Self {
+        Self::Line(e)
+    }
+}
+
+/// What one decoded frame (or run of dropped bytes) means for the request in flight.
+enum Judged {
+    /// The answer (maybe an exception).
+    Answer(Answer),
+    /// Not the answer, but a sign of trouble.
+    Trouble(Trouble),
+    /// A byte that starts no frame: noise between frames.
+    Noise,
+}
+
+fn judge(request: &Addressed, input: Result<ResponseAdu, DecodeError>) -> Judged {
+    match input {
+        Ok(adu) => match check_response(request, &adu) {
+            Ok(answer) => Judged::Answer(answer),
+            Err(mismatch) => {
+                tracing::debug!(%mismatch, "skipping a frame that does not answer the request");
+                Judged::Trouble(Trouble::Mismatch(mismatch))
+            }
+        },
+        Err(DecodeError::UnknownFunction { .. }) => Judged::Noise,
+        Err(damage) => Judged::Trouble(Trouble::Damaged(damage)),
+    }
+}
+
+/// One attempt: clean line, send, listen until the answer, the deadline, or (after
+/// damage) the line falling quiet.
+async fn attempt_once(
+    line: &mut Line,
+    deframer: &mut Deframer<ResponseCodec>,
+    request: &Addressed,
+    bytes: &[u8],
+    timeout: Duration,
+    quiet_gap: Duration,
+) -> Result<Answer, Failure> {
+    line.discard_input().await?;
+    deframer.clear();
+    line.send(bytes).await?;
+    let deadline = Instant::now() + timeout;
+    let mut trouble: Option<Trouble> = None;
+    let mut buf = [0u8; 512];
+    loop {
+        let damaged = matches!(trouble, Some(Trouble::Damaged(_)));
+        let listen_until = if damaged || !deframer.buffered().is_empty() {
+            deadline.min(Instant::now() + quiet_gap)
+        } else {
+            deadline
+        };
+        match line.recv(&mut buf, listen_until).await {
+            Ok(n) => {
+                deframer.push(buf.get(..n).unwrap_or_default());
+                while let Some(input) = deframer.next_frame() {
+                    match judge(request, input) {
+                        Judged::Answer(answer) => return Ok(answer),
+                        Judged::Trouble(t) => trouble = Some(t),
+                        Judged::Noise => {}
+                    }
+                }
+            }
+            Err(LineError::Timeout { .. }) => {
+                // Quiet line, bytes left: the silence ended a frame; look past its head.
+                let left = deframer.buffered().len();
+                if let Some((offset, adu, len)) = find_frame(&ResponseCodec, deframer.buffered()) {
+                    let rest = deframer
+                        .buffered()
+                        .get(offset + len..)
+                        .unwrap_or_default()
+                        .to_vec();
+                    deframer.clear();
+                    deframer.push(&rest);
+                    match check_response(request, &adu) {
+                        Ok(answer) => return Ok(answer),
+                        Err(mismatch) => trouble = Some(Trouble::Mismatch(mismatch)),
+                    }
+                    continue;
+                }
+                if left > 0 {
+                    deframer.clear();
+                    trouble = Some(Trouble::Incomplete { bytes: left });
+                }
+                let retry_now = matches!(
+                    trouble,
+                    Some(Trouble::Damaged(_) | Trouble::Incomplete { .. })
+                );
+                if retry_now || Instant::now() >= deadline {
+                    return Err(Failure::Trouble(trouble.unwrap_or(Trouble::Silence)));
+                }
+            }
+            Err(e) => return Err(Failure::Line(e)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::VecDeque;
+    use std::sync::{Arc, Mutex};
+    use std::time::Instant as StdInstant;
+
+    use link::SerialSettings;
+    use wire::device::{Device, SharedModel};
+    use wire::{Codec, Transmit};
+
+    use super::*;
+    use crate::cross::device::{CrossTwin, REPLY_DELAY};
+    use crate::cross::{Feed, Source};
+    use crate::rtu::{FunctionCode, RegisterValues, Response, Write, WriteRegister};
+    use crate::slave::{DEFAULT_REPLY_DELAY, Slave, SlaveMap, Table};
+
+    /// What the line does to the device's next answer.
+    #[derive(Debug, Clone, Copy)]
+    enum Trick {
+        /// Swallow it.
+        Drop,
+        /// Flip a bit of its CRC.
+        Corrupt,
+        /// Put bytes before it that look like the head of a 255-byte answer.
+        LongHead,
+        /// Put another unit's answer before it.
+        StrayFirst,
+        /// Send it with another unit number (and a good CRC).
+        WrongUnit,
+        /// Answer with this exception code instead.
+        Refuse(u8),
+    }
+
+    /// When each request arrived, and the bytes.
+    type Heard = Arc<Mutex<Vec<(StdInstant, Vec<u8>)>>>;
+
+    /// A device behind a line that plays tricks on its answers and notes what it hears.
+    struct Tricky<D> {
+        inner: D,
+        tricks: VecDeque<Trick>,
+        heard: Heard,
+    }
+
+    impl<D: Device> Device for Tricky<D> {
+        fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
+            self.heard
+                .lock()
+                .expect("not poisoned")
+                .push((now, bytes.to_vec()));
+            let answers = self.inner.receive(bytes, now);
+            answers
+                .into_iter()
+                .flat_map(|mut tx| match self.tricks.pop_front() {
+                    None => vec![tx],
+                    Some(Trick::Drop) => vec![],
+                    Some(Trick::Corrupt) => {
+                        if let Some(last) = tx.bytes.last_mut() {
+                            *last ^= 0x01;
+                        }
+                        vec![tx]
+                    }
+                    Some(Trick::LongHead) => {
+                        let mut bytes = vec![0x07, 0x03, 0xFA];
+                        bytes.append(&mut tx.bytes);
+                        tx.bytes = bytes;
+                        vec![tx]
+                    }
+                    Some(Trick::StrayFirst) => {
+                        let stray = ResponseAdu {
+                            unit: 99,
+                            response: Response::ReadHoldingRegisters(
+                                RegisterValues::new(vec![1, 2]).expect("2 values"),
+                            ),
+                        };
+                        let mut bytes = stray.to_bytes();
+                        bytes.append(&mut tx.bytes);
+                        tx.bytes = bytes;
+                        vec![tx]
+                    }
+                    Some(Trick::WrongUnit) => {
+                        let mut adu = decode(&tx.bytes);
+                        adu.unit = adu.unit.wrapping_add(1);
+                        tx.bytes = adu.to_bytes();
+                        vec![tx]
+                    }
+                    Some(Trick::Refuse(code)) => {
+                        let adu = decode(&tx.bytes);
+                        let refusal = ResponseAdu {
+                            unit: adu.unit,
+                            response: Response::exception(
+                                adu.response.function(),
+                                ExceptionCode::new(code).expect("test codes are 1-255"),
+                            ),
+                        };
+                        tx.bytes = refusal.to_bytes();
+                        vec![tx]
+                    }
+                })
+                .collect()
+        }
+    }
+
+    fn decode(bytes: &[u8]) -> ResponseAdu {
+        ResponseCodec
+            .decode(bytes)
+            .expect("our devices send valid frames")
+            .expect("whole frame")
+            .0
+    }
+
+    /// Every device on one RS-485 pair hears every frame.
+    struct Bus(Vec<Box<dyn Device>>);
+
+    impl Device for Bus {
+        fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
+            self.0
+                .iter_mut()
+                .flat_map(|device| device.receive(bytes, now))
+                .collect()
+        }
+    }
+
+    struct Bench {
+        client: Client,
+        heard: Heard,
+    }
+
+    impl Bench {
+        fn requests(&self) -> usize {
+            self.heard.lock().expect("not poisoned").len()
+        }
+
+        fn heard_at(&self, index: usize) -> StdInstant {
+            self.heard.lock().expect("not poisoned")[index].0
+        }
+    }
+
+    /// A client on a line (`settings` if it has a speed) to `device`, with `tricks`.
+    fn bench<D: Device>(
+        device: D,
+        tricks: &[Trick],
+        settings: Option<SerialSettings>,
+        config: ClientConfig,
+    ) -> Bench {
+        let heard = Heard::default();
+        let device = Tricky {
+            inner: device,
+            tricks: tricks.iter().copied().collect(),
+            heard: Arc::clone(&heard),
+        };
+        let (ours, theirs) = tokio::io::duplex(4096);
+        tokio::spawn(link::serve::serve_stream(theirs, device, None));
+        let line = SharedLine::new(Line::from_stream(ours, "test line", settings));
+        Bench {
+            client: Client::new(line, config),
+            heard,
+        }
+    }
+
+    fn unit(number: u8) -> Unit {
+        Unit::new(number).expect("test unit")
+    }
+
+    fn twin() -> SharedModel<CrossTwin> {
+        SharedModel::new(CrossTwin::new(unit(2), 7))
+    }
+
+    fn slave() -> SharedModel<Slave> {
+        SharedModel::new(Slave::all_writable(unit(1)))
+    }
+
+    fn at_9600() -> Option<SerialSettings> {
+        Some(SerialSettings::new_8n1(9600))
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn every_function_reads_and_writes_a_generic_server() {
+        let server = slave();
+        let mut b = bench(server.line(), &[], None, ClientConfig::default());
+        let c = &mut b.client;
+        c.write_single_coil(unit(1), 3, true)
+            .await
+            .expect("written");
+        c.write_multiple_coils(unit(1), 10, &[true, false, true, true])
+            .await
+            .expect("written");
+        assert_eq!(
+            c.read_coils(unit(1), 2, 12).await.expect("read"),
+            [
+                false, true, false, false, false, false, false, false, true, false, true, true
+            ]
+        );
+        c.write_single_register(unit(1), 100, 0xBEEF)
+            .await
+            .expect("written");
+        c.write_multiple_registers(unit(1), 101, &[1, 2, 3])
+            .await
+            .expect("written");
+        assert_eq!(
+            c.read_holding_registers(unit(1), 100, 4)
+                .await
+                .expect("read"),
+            [0xBEEF, 1, 2, 3]
+        );
+        {
+            let mut s = server.lock();
+            s.set(Table::DiscreteInputs, 7, 1);
+            s.set(Table::InputRegisters, 30, 4242);
+        }
+        assert_eq!(
+            c.read_discrete_inputs(unit(1), 6, 3).await.expect("read"),
+            [false, true, false]
+        );
+        assert_eq!(
+            c.read_input_registers(unit(1), 30, 2).await.expect("read"),
+            [4242, 0]
+        );
+        assert_eq!(b.requests(), 8);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn read_cross_decodes_the_twin_in_four_requests_and_sees_a_transfer() {
+        let cross = twin();
+        let mut b = bench(cross.line(), &[], at_9600(), ClientConfig::default());
+        let state = b.client.read_cross(unit(2)).await.expect("read");
+        assert_eq!(state.feed(), Feed::StaticSwitch(Source::S1));
+        assert!(state.alarms().is_empty(), "{:?}", state.alarms());
+        assert_eq!(b.requests(), 4);
+        cross.lock().fail_source(Source::S1);
+        let state = b.client.read_cross(unit(2)).await.expect("read");
+        assert_eq!(state.feed(), Feed::StaticSwitch(Source::S2));
+        assert!(
+            state.alarms().iter().any(|a| a.contains("S1 failure")),
+            "{:?}",
+            state.alarms()
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_exception_is_reported_at_once_in_words_and_never_retried() {
+        let mut b = bench(twin().line(), &[], None, ClientConfig::default());
+        let started = Instant::now();
+        let err = b
+            .client
+            .read_holding_registers(unit(2), 0x12, 2)
+            .await
+            .expect_err("0x12 is undefined");
+        assert_eq!(
+            err.exception_code(),
+            Some(ExceptionCode::ILLEGAL_DATA_ADDRESS)
+        );
+        assert_eq!(
+            err.to_string(),
+            "unit 2 refused \"read 2 holding registers from 18 (0x0012)\": exception 2 \
+             (illegal data address: the request touches an address the device does not have)"
+        );
+        assert!(err.is_device_error());
+        assert_eq!(b.requests(), 1);
+        assert_eq!(started.elapsed(), REPLY_DELAY);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_cross_refuses_any_function_but_3_with_exception_1() {
+        let mut b = bench(twin().line(), &[], None, ClientConfig::default());
+        let err = b
+            .client
+            .read_input_registers(unit(2), 0, 1)
+            .await
+            .expect_err("function 4 is unknown to a CROSS");
+        assert!(
+            matches!(
+                err,
+                ClientError::Exception {
+                    unit: 2,
+                    exception: Exception {
+                        function: FunctionCode::READ_INPUT_REGISTERS,
+                        code: ExceptionCode::ILLEGAL_FUNCTION
+                    },
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("illegal function"), "{err}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn exception_3_is_reported_with_its_number_and_meaning() {
+        let mut b = bench(
+            slave().line(),
+            &[Trick::Refuse(3)],
+            None,
+            ClientConfig::default(),
+        );
+        let err = b
+            .client
+            .read_holding_registers(unit(1), 0, 100)
+            .await
+            .expect_err("refused");
+        assert_eq!(
+            err.exception_code(),
+            Some(ExceptionCode::ILLEGAL_DATA_VALUE)
+        );
+        assert!(
+            err.to_string().contains("exception 3 (illegal data value"),
+            "{err}"
+        );
+        assert_eq!(b.requests(), 1);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_address_missing_from_a_slave_map_is_exception_2() {
+        let map = SlaveMap::parse("unit 5\nholding 0 = 1 2 3\n").expect("valid map");
+        let server = SharedModel::new(Slave::new(map));
+        let mut b = bench(server.line(), &[], None, ClientConfig::default());
+        assert_eq!(
+            b.client
+                .read_holding_registers(unit(5), 0, 3)
+                .await
+                .expect("defined"),
+            [1, 2, 3]
+        );
+        let err = b
+            .client
+            .write_single_register(unit(5), 3, 9)
+            .await
+            .expect_err("3 is not in the map");
+        assert_eq!(
+            err.exception_code(),
+            Some(ExceptionCode::ILLEGAL_DATA_ADDRESS)
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_lost_answer_is_retried_after_the_timeout() {
+        let mut b = bench(twin().line(), &[Trick::Drop], None, ClientConfig::default());
+        let started = Instant::now();
+        b.client
+            .read_holding_registers(unit(2), 0x46, 20)
+            .await
+            .expect("answered on the second attempt");
+        assert_eq!(started.elapsed(), DEFAULT_TIMEOUT + REPLY_DELAY);
+        assert_eq!(b.requests(), 2);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_dead_unit_gives_up_after_every_attempt_naming_endpoint_unit_and_attempts() {
+        let mut b = bench(twin().line(), &[], None, ClientConfig::default());
+        let started = Instant::now();
+        let err = b
+            .client
+            .read_holding_registers(unit(9), 0, 1)
+            .await
+            .expect_err("nobody is unit 9");
+        assert_eq!(started.elapsed(), DEFAULT_TIMEOUT * 3);
+        assert_eq!(
+            err.to_string(),
+            "no valid answer from unit 9 on test line to \"read 1 holding registers from 0 \
+             (0x0000)\" after 3 attempts of 500ms each (last: no answer)"
+        );
+        assert_eq!(b.requests(), 3);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_timeout_counts_the_wire_time_of_request_and_answer() {
+        let mut b = bench(twin().line(), &[], at_9600(), ClientConfig::default());
+        let err = b
+            .client
+            .read_holding_registers(unit(9), 0, 125)
+            .await
+            .expect_err("nobody is unit 9");
+        // 8 + 255 bytes at 1.0417 ms each.
+        let ClientError::NoAnswer { timeout, .. } = err else {
+            panic!("{err}")
+        };
+        assert_eq!(timeout, DEFAULT_TIMEOUT + Duration::from_nanos(273_958_333));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_damaged_answer_is_retried_when_the_line_falls_quiet_not_after_the_timeout() {
+        let mut b = bench(
+            twin().line(),
+            &[Trick::Corrupt],
+            None,
+            ClientConfig::default(),
+        );
+        let started = Instant::now();
+        b.client
+            .read_holding_registers(unit(2), 0x00, 18)
+            .await
+            .expect("answered on the second attempt");
+        assert_eq!(started.elapsed(), REPLY_DELAY + MIN_QUIET_GAP + REPLY_DELAY);
+        assert_eq!(b.requests(), 2);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn damage_on_every_attempt_is_reported_as_the_last_trouble() {
+        let mut b = bench(
+            twin().line(),
+            &[Trick::Corrupt; 3],
+            None,
+            ClientConfig::default(),
+        );
+        let err = b
+            .client
+            .read_holding_registers(unit(2), 0x14, 4)
+            .await
+            .expect_err("damaged every time");
+        assert!(
+            matches!(
+                err,
+                ClientError::NoAnswer {
+                    attempts: 3,
+                    last: Trouble::Damaged(DecodeError::Crc { .. }) | Trouble::Incomplete { .. },
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn bytes_that_look_like_a_long_frame_do_not_hold_the_answer_back() {
+        let mut b = bench(
+            twin().line(),
+            &[Trick::LongHead],
+            None,
+            ClientConfig::default(),
+        );
+        let started = Instant::now();
+        let words = b
+            .client
+            .read_holding_registers(unit(2), 0x1E, 17)
+            .await
+            .expect("found behind the garbage");
+        assert_eq!(words.len(), 17);
+        // Found when the line fell quiet, on the first attempt.
+        assert_eq!(started.elapsed(), REPLY_DELAY + MIN_QUIET_GAP);
+        assert_eq!(b.requests(), 1);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_answer_that_does_not_match_is_skipped() {
+        let mut b = bench(
+            twin().line(),
+            &[Trick::StrayFirst],
+            None,
+            ClientConfig::default(),
+        );
+        let words = b
+            .client
+            .read_holding_registers(unit(2), 0x2E, 1)
+            .await
+            .expect("the real answer follows");
+        assert_eq!(words, [crate::cross::device::PROTOCOL_REVISION]);
+        assert_eq!(b.requests(), 1);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_answer_from_another_unit_is_never_accepted() {
+        let mut b = bench(
+            twin().line(),
+            &[Trick::WrongUnit; 3],
+            None,
+            ClientConfig::default(),
+        );
+        let err = b
+            .client
+            .read_holding_registers(unit(2), 0x2E, 1)
+            .await
+            .expect_err("only wrong units answered");
+        assert!(
+            matches!(
+                err,
+                ClientError::NoAnswer {
+                    last: Trouble::Mismatch(Mismatch::Unit {
+                        expected: 2,
+                        actual: 3
+                    }),
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert_eq!(b.requests(), 3);
+    }
+
+    /// Time from the end of the first answer to the second request.
+    async fn gap_between_exchanges(settings: Option<SerialSettings>) -> Duration {
+        let mut b = bench(slave().line(), &[], settings, ClientConfig::default());
+        b.client
+            .read_holding_registers(unit(1), 0, 1)
+            .await
+            .expect("read");
+        b.client
+            .read_holding_registers(unit(1), 0, 1)
+            .await
+            .expect("read");
+        let answered = b.heard_at(0) + DEFAULT_REPLY_DELAY;
+        b.heard_at(1).duration_since(answered)
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn each_request_waits_3_5_character_times_after_the_last_frame() {
+        let gap = gap_between_exchanges(at_9600()).await;
+        let silence = Duration::from_nanos(3_645_834);
+        // tokio's timers tick in milliseconds: the wait ends on the next tick.
+        assert!(
+            gap >= silence && gap < silence + Duration::from_millis(1),
+            "{gap:?}"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn above_19200_baud_the_silence_is_1_75_ms() {
+        let gap = gap_between_exchanges(Some(SerialSettings::new_8e1(38_400))).await;
+        let silence = Duration::from_micros(1_750);
+        assert!(
+            gap >= silence && gap < silence + Duration::from_millis(1),
+            "{gap:?}"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_line_without_a_speed_has_no_silence() {
+        assert_eq!(gap_between_exchanges(None).await, Duration::ZERO);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_broadcast_is_never_answered_and_the_line_stays_quiet_for_the_turnaround() {
+        let server = slave();
+        let mut b = bench(server.line(), &[], at_9600(), ClientConfig::default());
+        let started = Instant::now();
+        let write = Broadcast(Write::SingleRegister(WriteRegister {
+            address: 4,
+            value: 77,
+        }));
+        b.client.broadcast(&write).await.expect("sent");
+        assert_eq!(started.elapsed(), Duration::ZERO, "no wait for an answer");
+        assert_eq!(
+            b.client
+                .read_holding_registers(unit(1), 4, 1)
+                .await
+                .expect("read"),
+            [77]
+        );
+        assert_eq!(server.lock().counters().broadcasts, 1);
+        let quiet = b.heard_at(1).duration_since(b.heard_at(0));
+        // 8 bytes on the wire, the turnaround, the silence.
+        let least =
+            Duration::from_nanos(8_333_334) + DEFAULT_TURNAROUND + Duration::from_nanos(3_645_834);
+        assert!(
+            quiet >= least && quiet < least + Duration::from_millis(1),
+            "{quiet:?}"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_dead_unit_delays_the_others_on_its_line_only_by_its_own_timeouts() {
+        let cross = twin();
+        let server = slave();
+        let bus = Bus(vec![Box::new(cross.line()), Box::new(server.line())]);
+        let b = bench(bus, &[], None, ClientConfig::default());
+        let mut dead = b.client.clone();
+        let mut alive = b.client.clone();
+        let started = Instant::now();
+        let dead_task =
+            tokio::spawn(async move { dead.read_holding_registers(unit(9), 0, 1).await });
+        tokio::task::yield_now().await;
+        let alive_task = tokio::spawn(async move {
+            let state = alive.read_cross(unit(2)).await;
+            let first = Instant::now();
+            let words = alive.read_holding_registers(unit(1), 0, 2).await;
+            (state, first, words)
+        });
+        let dead_result = dead_task.await.expect("task ran");
+        let (state, first, words) = alive_task.await.expect("task ran");
+        assert!(matches!(
+            dead_result,
+            Err(ClientError::NoAnswer { unit: 9, .. })
+        ));
+        assert_eq!(state.expect("read").feed(), Feed::StaticSwitch(Source::S1));
+        assert_eq!(words.expect("read"), [0, 0]);
+        // The dead unit's three timeouts, then the CROSS's four reads, then one more.
+        assert_eq!(
+            first.duration_since(started),
+            DEFAULT_TIMEOUT * 3 + REPLY_DELAY * 4
+        );
+        assert_eq!(Instant::now().duration_since(first), DEFAULT_REPLY_DELAY);
+        // 3 attempts for the dead unit, 4 + 1 requests for the others, never interleaved.
+        assert_eq!(b.requests(), 8);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_closed_line_fails_at_once_naming_it() {
+        let (ours, theirs) = tokio::io::duplex(64);
+        drop(theirs);
+        let line = SharedLine::new(Line::from_stream(ours, "gone line", None));
+        let mut client = Client::new(line, ClientConfig::default());
+        let err = client
+            .read_holding_registers(unit(1), 0, 1)
+            .await
+            .expect_err("closed");
+        assert!(matches!(err, ClientError::Line { .. }), "{err}");
+        assert!(err.to_string().contains("gone line"), "{err}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_invalid_request_never_reaches_the_wire() {
+        let mut b = bench(slave().line(), &[], None, ClientConfig::default());
+        let err = b
+            .client
+            .read_holding_registers(unit(1), 0, 126)
+            .await
+            .expect_err("126 registers is too many");
+        assert!(matches!(err, ClientError::Request(_)), "{err}");
+        assert!(!err.is_device_error());
+        assert_eq!(b.requests(), 0);
+    }
+}
