@@ -97,7 +97,8 @@ pub struct PointState {
     pub value: Option<Value>,
     /// When it was last read (good) or last failed (bad).
     pub t: Option<Timestamp>,
-    /// Good or bad (stale is judged when shown, from `t` and the period).
+    /// Good, stale (not refreshed in time: set by the line task's sweep, and judged again
+    /// when shown) or bad.
     pub quality: Option<Quality>,
     /// Why the last read failed.
     pub error: Option<String>,

@@ -47,6 +47,9 @@ pub const REOPEN_MAX: Duration = Duration::from_secs(30);
 /// Window over which line health (utilisation, poll and error rates) is measured.
 pub const HEALTH_WINDOW: Duration = Duration::from_secs(5);
 
+/// How often good values are checked for staleness.
+pub const STALE_SWEEP: Duration = Duration::from_secs(1);
+
 /// Opens a line (again): by endpoint in production, in memory in tests.
 pub type Opener = Arc<dyn Fn() -> BoxFuture<'static, Result<Line, String>> + Send + Sync>;
 
@@ -58,6 +61,7 @@ pub struct LineTask {
     slots: Vec<Slot>,
     writes: mpsc::Receiver<WriteRequest>,
     window: Window,
+    last_sweep: Instant,
     busy_seconds: prometheus_client::metrics::counter::Counter<f64, std::sync::atomic::AtomicU64>,
     utilisation: Gauge<f64, std::sync::atomic::AtomicU64>,
     open_gauge: Gauge,
@@ -202,6 +206,7 @@ impl LineTask {
             opener,
             slots,
             writes,
+            last_sweep: now,
             window: Window {
                 started: now,
                 busy: Duration::ZERO,
@@ -370,6 +375,12 @@ impl LineTask {
             }
         }
         self.roll_window(now);
+        if now - self.last_sweep >= STALE_SWEEP {
+            self.last_sweep = now;
+            for slot in &self.slots {
+                mark_stale(&self.cell, &slot.entry);
+            }
+        }
         lost
     }
 
@@ -685,6 +696,44 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
                 retry.as_secs()
             ),
         });
+    }
+}
+
+/// Turns good values that were not refreshed in time stale (stored and published), so a
+/// slow or overloaded line shows on every screen, not only in fresh API reads.
+fn mark_stale(cell: &Cell, entry: &DeviceEntry) {
+    let now = Timestamp::now();
+    let mut samples = Vec::new();
+    let mut views = Vec::new();
+    {
+        let mut state = entry.write_state();
+        for (i, point) in state.points.iter_mut().enumerate() {
+            let Some(spec) = entry.points.get(i) else {
+                continue;
+            };
+            if point.quality != Some(Quality::Good) {
+                continue;
+            }
+            let period = entry.period(&spec.group);
+            if crate::cell::judge_staleness(Quality::Good, point.t, period, now) != Quality::Stale {
+                continue;
+            }
+            point.quality = Some(Quality::Stale);
+            samples.push(Sample {
+                point: spec.id.clone(),
+                t: now,
+                value: point.value.clone(),
+                quality: Quality::Stale,
+            });
+            views.push(entry.point_view(i, point, now));
+        }
+    }
+    cell.metrics().value_changes.inc_by(samples.len() as u64);
+    for sample in samples {
+        cell.store().sample(sample);
+    }
+    for view in views {
+        cell.publish(LiveMessage::Value(view));
     }
 }
 

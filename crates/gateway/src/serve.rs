@@ -132,7 +132,7 @@ impl Gateway {
             device: None,
             point: None,
             message: format!(
-                "gateway started on http://{addr} with {} ({} devices on {} lines); writes {}",
+                "gateway started on http://{addr} with {} (devices: {}, lines: {}); writes {}",
                 match &config.source {
                     Some(path) => format!("config {}", path.display()),
                     None => "the demo cell".to_owned(),

@@ -1,6 +1,7 @@
 //! The scheduler against JBC station models on in-memory lines, with tokio's clock paused:
 //! minutes of polling run in milliseconds and no test waits for real time.
 
+use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
@@ -267,4 +268,48 @@ async fn the_task_stops_when_asked() {
         .await
         .expect("the task ends promptly")
         .unwrap();
+}
+
+#[tokio::test(start_paused = true)]
+async fn values_not_refreshed_in_time_turn_stale_and_good_again_at_the_next_read() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let entry = Arc::clone(rig.cell.device_entry("jbc1").unwrap());
+    let index = entry.point_index("air_temperature").unwrap();
+    // As if the line had not reached it for a minute.
+    entry.write_state().points[index].t = Some(Timestamp::now().minus(Duration::from_secs(60)));
+    let mut live = rig.cell.subscribe();
+    mark_stale(&rig.cell, &entry);
+    assert_eq!(entry.read().points[index].quality, Some(Quality::Stale));
+    let LiveMessage::Value(view) = live.try_recv().unwrap() else {
+        panic!("a value message")
+    };
+    assert_eq!(view.id.as_str(), "jbc1.air_temperature");
+    assert_eq!(view.quality, Some(Quality::Stale));
+    assert!(live.try_recv().is_err(), "only the old value went stale");
+
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    assert_eq!(entry.read().points[index].quality, Some(Quality::Good));
+    let mut back = false;
+    while let Ok(message) = live.try_recv() {
+        if let LiveMessage::Value(v) = message {
+            back |= v.id.as_str() == "jbc1.air_temperature" && v.quality == Some(Quality::Good);
+        }
+    }
+    assert!(back, "the return to good is published");
+    rig.cell.store().flush().await.unwrap();
+    let history = rig
+        .cell
+        .store()
+        .history(
+            &point("jbc1.air_temperature"),
+            Timestamp(0),
+            Timestamp(i64::MAX),
+            None,
+        )
+        .unwrap();
+    let Series::Samples(samples) = history.series else {
+        panic!("raw samples expected")
+    };
+    assert!(samples.iter().any(|s| s.quality == Quality::Stale));
 }

@@ -7,7 +7,7 @@
 // shows the live value.
 'use strict';
 
-const PLOT_WINDOW_MS = 15 * 60 * 1000;
+const PLOT_WINDOW_MS = 10 * 60 * 1000;
 const MAX_EVENTS = 200;
 
 const state = {
@@ -38,14 +38,9 @@ function formatClock(ms) {
   return d.toLocaleTimeString([], { hour: '2-digit', minute: '2-digit', second: '2-digit', hour12: false });
 }
 
-/** Quality as shown now: a good value older than 3 periods + 2 s has gone stale. */
+/** Quality as shown: the gateway pushes every change of it (stale included). */
 function judge(point) {
-  if (!point.quality) return 'none';
-  if (point.quality === 'good' && point.t) {
-    const age = Date.now() - Date.parse(point.t);
-    if (age > 3 * point.period_ms + 2000) return 'stale';
-  }
-  return point.quality;
+  return point.quality || 'none';
 }
 
 function shownValue(point) {
@@ -170,7 +165,7 @@ function statusDetail(device) {
 
 async function loadHistory(pointId) {
   try {
-    const response = await fetch(`/api/history?point=${encodeURIComponent(pointId)}&from=-15m`);
+    const response = await fetch(`/api/history?point=${encodeURIComponent(pointId)}&from=-10m`);
     if (!response.ok) return;
     const history = await response.json();
     const samples = (history.before ? [history.before] : []).concat(history.samples || []);
@@ -408,10 +403,6 @@ function tick() {
   for (const device of state.devices.values()) {
     const card = document.getElementById(`device-${device.id}`);
     if (card) card.querySelector('.status-detail').textContent = statusDetail(device);
-    for (const point of device.byId.values()) {
-      const node = document.getElementById(`point-${point.id}`);
-      if (node) node.dataset.quality = judge(point);
-    }
   }
 }
 
