@@ -8,6 +8,7 @@ mod decode;
 mod demo;
 mod jbc_cmd;
 mod output;
+mod serve_cmd;
 mod sim;
 
 use std::process::ExitCode;
@@ -32,6 +33,12 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Run the gateway: poll the cell, keep its history, serve it over HTTP, a live web
+    /// page and Prometheus metrics. Without --config, a simulated demo cell.
+    Serve(serve_cmd::ServeArgs),
+    /// Check or print a gateway configuration file.
+    #[command(subcommand)]
+    Config(serve_cmd::ConfigCommand),
     /// Run a simulated JBC station and a live view of it in the terminal (no hardware).
     Demo(demo::DemoArgs),
     /// Talk to a JBC JTSE hot-air station (RS-232 robot protocol).
@@ -59,6 +66,8 @@ fn main() -> ExitCode {
     };
     let result = runtime.block_on(async {
         match cli.command {
+            Command::Serve(args) => serve_cmd::serve(args).await,
+            Command::Config(command) => serve_cmd::config(command),
             Command::Demo(args) => demo::run(args).await,
             Command::Jbc(args) => jbc_cmd::run(args).await,
             Command::Sim(command) => sim::run(command).await,

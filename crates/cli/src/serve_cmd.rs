@@ -1,0 +1,109 @@
+//! `cellbus serve` and `cellbus config …`: the gateway, and its configuration file.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use clap::{Args, Subcommand};
+
+use crate::output::{self, usage};
+
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// Where the web page, the API and /metrics listen. Port 0 picks a free port. The
+    /// first line printed is `listening on http://IP:PORT`.
+    #[arg(long, value_name = "IP:PORT", default_value_t = gateway::DEFAULT_LISTEN)]
+    pub listen: SocketAddr,
+    /// The cell's configuration (TOML; `cellbus config example` prints one). Without it,
+    /// a simulated demo cell runs in this process.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Where the history database is kept.
+    #[arg(long, value_name = "DIR", default_value = gateway::DEFAULT_DATA_DIR)]
+    pub data: PathBuf,
+    /// How long history is kept: `30d`, `12h`, `90min`.
+    #[arg(long, value_name = "AGE", default_value = "30d", value_parser = humantime::parse_duration)]
+    pub retain: Duration,
+    /// Accept `POST /api/devices/{id}/write`, with `Authorization: Bearer <token>` (the
+    /// token from --token, CELLBUS_TOKEN or the configuration).
+    #[arg(long)]
+    pub allow_writes: bool,
+    /// The write token (prefer CELLBUS_TOKEN, which does not show in the process list).
+    #[arg(long, value_name = "TOKEN")]
+    pub token: Option<String>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ConfigCommand {
+    /// Check a configuration file and say what it describes, or what is wrong and where.
+    Check {
+        /// The file.
+        file: PathBuf,
+    },
+    /// Print an example configuration for a real cell.
+    Example,
+}
+
+pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
+    if let Some(path) = &args.config {
+        // A bad file is a usage error (exit 2), reported before anything starts.
+        gateway::check_config(path).map_err(usage)?;
+    }
+    let options = gateway::ServeOptions {
+        listen: args.listen,
+        config: args.config,
+        data_dir: args.data,
+        retain: args.retain,
+        allow_writes: args.allow_writes,
+        token: args.token,
+    };
+    gateway::serve(options, shutdown_signal()).await?;
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
+    match command {
+        ConfigCommand::Example => {
+            print!("{}", gateway::EXAMPLE_CONFIG);
+            Ok(ExitCode::SUCCESS)
+        }
+        ConfigCommand::Check { file } => {
+            let cell = gateway::check_config(&file).map_err(usage)?;
+            let devices: usize = cell.lines.iter().map(|line| line.devices.len()).sum();
+            output::line(format!(
+                "{}: ok, {} lines, {devices} devices",
+                file.display(),
+                cell.lines.len()
+            ))?;
+            for line in &cell.lines {
+                output::line(format!("  line {} on {}", line.name, line.endpoint))?;
+                for device in &line.devices {
+                    output::line(format!("    {}", device.name))?;
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// Resolves on Ctrl-C or SIGTERM, so the gateway can flush its history before exiting.
+async fn shutdown_signal() {
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut signal) => {
+                signal.recv().await;
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "cannot listen for SIGTERM ({e}); Ctrl-C still stops the gateway cleanly"
+                );
+                std::future::pending::<()>().await;
+            }
+        }
+    };
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        () = terminate => {}
+    }
+}
