@@ -2,8 +2,10 @@
 
 #![allow(dead_code)]
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
 use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
 
 /// The built `cellbus` binary.
 pub fn cellbus() -> Command {
@@ -65,4 +67,90 @@ pub fn stdout(output: &Output) -> String {
 /// Stderr as text.
 pub fn stderr(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// A running gateway, killed when dropped.
+pub struct Gateway {
+    child: Child,
+    /// `IP:PORT` of its HTTP server.
+    pub addr: String,
+}
+
+impl Gateway {
+    pub fn start(data: &std::path::Path) -> Gateway {
+        let mut child = cellbus()
+            .args(["serve", "--listen", "127.0.0.1:0", "--data"])
+            .arg(data)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("cellbus runs");
+        let mut first = String::new();
+        BufReader::new(child.stdout.take().expect("piped"))
+            .read_line(&mut first)
+            .expect("a first line");
+        let addr = first
+            .trim_end()
+            .strip_prefix("listening on http://")
+            .unwrap_or_else(|| panic!("first line is `listening on http://…`, got {first:?}"))
+            .to_owned();
+        Gateway { child, addr }
+    }
+
+    /// A plain HTTP/1.1 GET; returns the status code and the body.
+    pub fn get(&self, path: &str) -> (u16, String) {
+        let mut stream = TcpStream::connect(&self.addr).expect("the gateway accepts connections");
+        stream
+            .set_read_timeout(Some(Duration::from_secs(30)))
+            .expect("timeout set");
+        write!(
+            stream,
+            "GET {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            self.addr
+        )
+        .expect("request sent");
+        let mut response = String::new();
+        stream.read_to_string(&mut response).expect("response read");
+        let status = response
+            .split(' ')
+            .nth(1)
+            .and_then(|s| s.parse().ok())
+            .expect("a status line");
+        let body = response
+            .split_once("\r\n\r\n")
+            .map(|(_, b)| b.to_owned())
+            .unwrap_or_default();
+        (status, body)
+    }
+}
+
+impl Gateway {
+    /// Reads `/api/events/stream` until an event of `kind` arrives; returns its data line.
+    pub fn first_event(&self, kind: &str) -> String {
+        let mut stream = TcpStream::connect(&self.addr).expect("the gateway accepts connections");
+        stream
+            .set_read_timeout(Some(Duration::from_secs(60)))
+            .expect("timeout set");
+        write!(
+            stream,
+            "GET /api/events/stream HTTP/1.1\r\nHost: {}\r\n\r\n",
+            self.addr
+        )
+        .expect("request sent");
+        let mut lines = BufReader::new(stream).lines();
+        let wanted = format!("event: {kind}");
+        while let Some(Ok(line)) = lines.next() {
+            if line.trim_end() == wanted {
+                return lines.next().and_then(Result::ok).unwrap_or_default();
+            }
+        }
+        panic!("the event stream ended before a {kind} event");
+    }
+}
+
+impl Drop for Gateway {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }

@@ -1,0 +1,58 @@
+//! The gateway's web page in a real browser: headless Chromium, driven by playwright-core
+//! (both installed by `.ci/run`: Debian's `chromium`, and `npm install` in tests/web).
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use common::Gateway;
+
+#[test]
+fn the_page_shows_every_demo_device_and_a_value_changes_by_itself() {
+    let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/web");
+    assert!(
+        web.join("node_modules/playwright-core").is_dir(),
+        "playwright-core is missing: run .ci/run once, or `npm install --prefix {}`",
+        web.display()
+    );
+    let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".to_owned());
+    assert!(
+        Path::new(&chromium).exists(),
+        "no Chromium at {chromium}: run .ci/run once, or `apt-get install chromium`"
+    );
+
+    let data = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start(data.path());
+    let screenshot = data.path().join("page.png");
+    let out = Command::new("node")
+        .arg(web.join("page.mjs"))
+        .arg(format!("http://{}", gateway.addr))
+        .arg(&screenshot)
+        .env("CHROMIUM", &chromium)
+        .output()
+        .expect("node runs (install Node.js: it comes with npm)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
+    let (status, body) = gateway.get("/api/devices");
+    assert_eq!(status, 200);
+    let api: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let ids: Vec<_> = api["devices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["id"].clone())
+        .collect();
+    assert_eq!(
+        seen["devices"].as_array().unwrap(),
+        &ids,
+        "a card for every device"
+    );
+    assert_ne!(seen["change"]["before"], seen["change"]["after"]);
+    assert!(screenshot.exists());
+}

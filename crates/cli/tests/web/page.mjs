@@ -1,0 +1,54 @@
+// Opens the gateway's page in headless Chromium and checks what a person would see:
+// a card for every device the API lists, and a value on the page that changes by itself.
+// Usage: node page.mjs http://127.0.0.1:PORT screenshot.png
+// Prints one JSON line with what it saw; exits non-zero with a reason otherwise.
+import { chromium } from 'playwright-core';
+
+const [base, screenshot] = process.argv.slice(2);
+const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
+
+const api = await (await fetch(`${base}/api/devices`)).json();
+const ids = api.devices.map((d) => d.id);
+
+const browser = await chromium.launch({
+  executablePath,
+  args: [
+    '--no-sandbox', '--disable-gpu', '--disable-dev-shm-usage', '--no-first-run',
+    '--disable-background-networking', '--disable-component-update', '--disable-sync',
+  ],
+});
+try {
+  const page = await browser.newPage({ viewport: { width: 1600, height: 1000 } });
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(String(e)));
+  await page.goto(`${base}/`);
+  for (const id of ids) {
+    await page.waitForSelector(`[id="device-${id}"]`, { timeout: 20000 });
+  }
+  const values = () =>
+    [...document.querySelectorAll('[id^="point-"]')].map((el) => [
+      el.id,
+      el.querySelector('.value')?.textContent ?? '',
+    ]);
+  const before = await page.evaluate(values);
+  const changed = await page.waitForFunction(
+    (before) => {
+      const then = new Map(before);
+      for (const el of document.querySelectorAll('[id^="point-"]')) {
+        const text = el.querySelector('.value')?.textContent ?? '';
+        if (then.has(el.id) && text !== '' && text !== then.get(el.id)) {
+          return { id: el.id, before: then.get(el.id), after: text };
+        }
+      }
+      return false;
+    },
+    before,
+    { timeout: 20000, polling: 100 },
+  );
+  const change = await changed.jsonValue();
+  if (screenshot) await page.screenshot({ path: screenshot, fullPage: true });
+  if (errors.length) throw new Error(`the page threw: ${errors.join('; ')}`);
+  console.log(JSON.stringify({ devices: ids, points: before.length, change }));
+} finally {
+  await browser.close();
+}
