@@ -14,6 +14,9 @@ use crate::output::{self, hex, printable, usage};
 pub enum DecodeCommand {
     /// JBC robot-protocol frames (STX … ETX BCC).
     Jbc(Input),
+    /// Modbus RTU / JBUS frames of both directions (unit, function, addresses, values, CRC;
+    /// requests and responses told apart).
+    Modbus(Input),
 }
 
 /// Where the captured bytes come from.
@@ -48,6 +51,12 @@ pub fn run(command: DecodeCommand) -> anyhow::Result<ExitCode> {
             &input.bytes()?,
             jbc::annotate::describe,
         ),
+        DecodeCommand::Modbus(input) => {
+            let annotator = jbus::annotate::Annotator::new();
+            dump(jbus::annotate::CaptureCodec, &input.bytes()?, |frame| {
+                annotator.describe(frame)
+            })
+        }
     }
 }
 

@@ -7,6 +7,7 @@
 mod decode;
 mod demo;
 mod jbc_cmd;
+mod jbus_cmd;
 mod output;
 mod serve_cmd;
 mod sim;
@@ -43,6 +44,12 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Talk to a JBC JTSE hot-air station (RS-232 robot protocol).
     Jbc(jbc_cmd::JbcArgs),
+    /// Talk to any Modbus RTU / JBUS device: read and write coils and registers (functions
+    /// 1-6, 15, 16). Serial defaults: 9600 baud, 8N1.
+    Modbus(jbus_cmd::ModbusArgs),
+    /// Read a Chloride CROSS static transfer switch over JBUS: its state in words, or its
+    /// changes live. Serial defaults: 9600 baud, 8N1, unit 2.
+    Cross(jbus_cmd::CrossArgs),
     /// Run a simulated device on a TCP port or a PTY.
     #[command(subcommand)]
     Sim(sim::SimCommand),
@@ -70,6 +77,8 @@ fn main() -> ExitCode {
             Command::Config(command) => serve_cmd::config(command),
             Command::Demo(args) => demo::run(args).await,
             Command::Jbc(args) => jbc_cmd::run(args).await,
+            Command::Modbus(args) => jbus_cmd::run_modbus(args).await,
+            Command::Cross(args) => jbus_cmd::run_cross(args).await,
             Command::Sim(command) => sim::run(command).await,
             Command::Decode(command) => decode::run(command),
         }

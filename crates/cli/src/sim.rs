@@ -18,6 +18,12 @@ use crate::output::{self, usage};
 pub enum SimCommand {
     /// A JBC JTSE hot-air station (address 01, robot mode on, JT tool connected).
     Jbc(SimJbcArgs),
+    /// A Chloride CROSS static transfer switch on JBUS (unit 2, 9600 8N1; S1 preferred and
+    /// feeding a 40 kVA load; answers function 3 only, exactly as its manual says).
+    Cross(crate::jbus_cmd::SimCrossArgs),
+    /// A generic Modbus RTU server (functions 1-6, 15, 16; unit 1; every address writable,
+    /// or the tables of a map file).
+    Modbus(crate::jbus_cmd::SimModbusArgs),
 }
 
 /// Where and how a simulator serves its device.
@@ -70,6 +76,8 @@ pub async fn run(command: SimCommand) -> anyhow::Result<ExitCode> {
             })
             .await
         }
+        SimCommand::Cross(args) => crate::jbus_cmd::sim_cross(args).await,
+        SimCommand::Modbus(args) => crate::jbus_cmd::sim_modbus(args).await,
     }
 }
 

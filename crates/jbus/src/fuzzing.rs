@@ -37,6 +37,24 @@ fn run_sniffer(data: &[u8]) {
             assert!(error.drop_len() >= 1);
         }
     }
+    // The capture decoder and its annotations, as `cellbus decode modbus` runs them.
+    let annotator = crate::annotate::Annotator::new();
+    let mut deframer = Deframer::new(crate::annotate::CaptureCodec);
+    deframer.push(data);
+    let mut consumed = 0;
+    while let Some(chunk) = deframer.next_chunk() {
+        match chunk {
+            wire::codec::Chunk::Frame { frame, raw } => {
+                assert!(annotator.describe(&frame).ends_with("good"));
+                consumed += raw.len();
+            }
+            wire::codec::Chunk::Skipped { error, raw } => {
+                assert_eq!(error.len, raw.len());
+                consumed += raw.len();
+            }
+        }
+    }
+    assert_eq!(consumed + deframer.buffered().len(), data.len());
 }
 
 fn with_crc(data: &[u8]) -> Vec<u8> {

@@ -10,6 +10,7 @@
 //!   registers from a small map file, or everything writable), to test the generic layer.
 //! - [`client`]: the async master over a `link` line: one request in flight per line,
 //!   timeouts, retries, the inter-frame silence, answers checked before they are accepted.
+//! - [`annotate`]: frames of a capture in words, requests and responses told apart.
 //!
 //! Apart from [`client`], nothing here reads a clock or touches a port: time comes in as
 //! `now`, bytes through `wire::Codec`s and `wire::device::Model`s, which the `link` crate
@@ -17,6 +18,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod annotate;
 pub mod client;
 pub mod cross;
 pub mod rtu;

@@ -1,0 +1,766 @@
+//! `cellbus modbus …`, `cellbus cross …`, `cellbus sim cross|modbus` and `cellbus decode
+//! modbus`: JBUS / Modbus RTU devices and the Chloride CROSS static transfer switch.
+
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use jbus::client::{Client, ClientConfig, ClientError, DEFAULT_RETRIES, DEFAULT_TURNAROUND};
+use jbus::cross::device::CrossTwin;
+use jbus::cross::{CrossState, NamedBit, Phases, Source};
+use jbus::rtu::{Addressed, Answer, Broadcast, Request, Unit, Write};
+use jbus::slave::{Slave, SlaveMap};
+use link::{Endpoint, Line, SerialSettings, SharedLine};
+use serde_json::{Map, Value, json};
+use wire::device::SharedModel;
+
+use crate::output::{self, usage};
+use crate::sim::{ServeArgs, serve};
+
+/// The CROSS's line defaults (also the defaults for any Modbus line): 9600 baud, 8 data
+/// bits, no parity, 1 stop bit.
+pub const JBUS_LINE: SerialSettings = SerialSettings::new_8n1(9600);
+
+/// The CROSS's unit number unless told otherwise: the manual's own example reads "slave
+/// n° 2". A real switch answers to the number set on it.
+pub const DEFAULT_CROSS_UNIT: u8 = 2;
+
+/// The generic simulator's unit number unless its map or `--unit` says otherwise.
+pub const DEFAULT_SLAVE_UNIT: u8 = 1;
+
+/// How the client reaches the line, shared by `modbus` and `cross`.
+#[derive(Debug, Args)]
+pub struct LineArgs {
+    /// Where the line is: serial:///dev/ttyUSB0?baud=9600&framing=8N1, or tcp://host:port (a
+    /// serial server or `cellbus sim`), optionally tcp://host:port?baud=9600 to keep the
+    /// serial line's timing behind it. Serial defaults: 9600 baud, 8N1.
+    #[arg(long, value_name = "URL")]
+    pub endpoint: String,
+    /// Time to wait for each answer, on top of the frames' time on the wire.
+    #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
+    pub timeout: Duration,
+    /// Retries after no answer, a damaged answer or one that does not match (never after an
+    /// exception: that is the device's answer).
+    #[arg(long, default_value_t = DEFAULT_RETRIES)]
+    pub retries: u8,
+    /// Print JSON instead of text.
+    #[arg(long, global = true)]
+    pub json: bool,
+}
+
+impl LineArgs {
+    fn endpoint(&self) -> anyhow::Result<Endpoint> {
+        Endpoint::parse(&self.endpoint, JBUS_LINE).map_err(usage)
+    }
+
+    fn config(&self) -> ClientConfig {
+        ClientConfig {
+            timeout: self.timeout,
+            retries: self.retries,
+            turnaround: DEFAULT_TURNAROUND,
+        }
+    }
+}
+
+async fn open(endpoint: &Endpoint, config: ClientConfig) -> anyhow::Result<Client> {
+    let line = Line::open(endpoint).await?;
+    Ok(Client::new(SharedLine::new(line), config))
+}
+
+// --- cellbus modbus ---
+
+#[derive(Debug, Args)]
+pub struct ModbusArgs {
+    #[command(flatten)]
+    pub line: LineArgs,
+    /// The unit number: 1–247 (JBUS devices: up to 255); 0 sends a write to every unit at
+    /// once (broadcast: nobody answers).
+    #[arg(long, value_name = "N")]
+    pub unit: u8,
+    #[command(subcommand)]
+    pub action: ModbusAction,
+}
+
+/// Addresses and values are decimal or 0x hex.
+#[derive(Debug, Subcommand)]
+pub enum ModbusAction {
+    /// Function 3: read COUNT (1–125) holding registers from ADDR.
+    ReadHolding {
+        #[arg(value_parser = parse_address)]
+        address: u16,
+        #[arg(value_parser = parse_address)]
+        count: u16,
+    },
+    /// Function 4: read COUNT (1–125) input registers from ADDR.
+    ReadInput {
+        #[arg(value_parser = parse_address)]
+        address: u16,
+        #[arg(value_parser = parse_address)]
+        count: u16,
+    },
+    /// Function 1: read COUNT (1–2000) coils from ADDR.
+    ReadCoils {
+        #[arg(value_parser = parse_address)]
+        address: u16,
+        #[arg(value_parser = parse_address)]
+        count: u16,
+    },
+    /// Function 2: read COUNT (1–2000) discrete inputs from ADDR.
+    ReadDiscrete {
+        #[arg(value_parser = parse_address)]
+        address: u16,
+        #[arg(value_parser = parse_address)]
+        count: u16,
+    },
+    /// Function 6: write VALUE (0–65535, or -32768–-1 as two's complement) to the holding
+    /// register at ADDR.
+    WriteRegister {
+        #[arg(value_parser = parse_address)]
+        address: u16,
+        #[arg(value_parser = parse_word, allow_negative_numbers = true)]
+        value: u16,
+    },
+    /// Function 16: write 1–123 values to the holding registers from ADDR on.
+    WriteRegisters {
+        #[arg(value_parser = parse_address)]
+        address: u16,
+        #[arg(value_parser = parse_word, allow_negative_numbers = true, required = true)]
+        values: Vec<u16>,
+    },
+    /// Function 5: switch the coil at ADDR on or off.
+    WriteCoil {
+        #[arg(value_parser = parse_address)]
+        address: u16,
+        #[arg(value_parser = parse_on_off, value_name = "on|off", action = clap::ArgAction::Set)]
+        state: bool,
+    },
+    /// Function 15: write 1–1968 coils from ADDR on, each 1 or 0.
+    WriteCoils {
+        #[arg(value_parser = parse_address)]
+        address: u16,
+        #[arg(value_parser = parse_bit_value, value_name = "1|0", required = true)]
+        values: Vec<bool>,
+    },
+}
+
+/// What `cellbus modbus` sends, checked before the line is opened.
+enum Send {
+    To(Addressed),
+    Broadcast(Broadcast),
+}
+
+pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
+    let endpoint = args.line.endpoint()?;
+    // Build the request before opening the line: bad arguments never touch the device.
+    let request = modbus_request(&args.action).map_err(usage)?;
+    let send = if args.unit == 0 {
+        match request {
+            Request::WriteSingleCoil(w) => Send::Broadcast(Broadcast(Write::SingleCoil(w))),
+            Request::WriteSingleRegister(w) => Send::Broadcast(Broadcast(Write::SingleRegister(w))),
+            Request::WriteMultipleCoils(w) => Send::Broadcast(Broadcast(Write::MultipleCoils(w))),
+            Request::WriteMultipleRegisters(w) => {
+                Send::Broadcast(Broadcast(Write::MultipleRegisters(w)))
+            }
+            _ => {
+                return Err(usage(
+                    "--unit 0 is a broadcast, which nobody answers: only writes can be broadcast; \
+                     give the unit number of the device to read",
+                ));
+            }
+        }
+    } else {
+        Send::To(Addressed::new(
+            Unit::jbus(args.unit).map_err(usage)?,
+            request,
+        ))
+    };
+    let mut client = open(&endpoint, args.line.config()).await?;
+    match send {
+        Send::Broadcast(write) => {
+            client.broadcast(&write).await?;
+            let request = Request::from(write.0.clone());
+            if args.line.json {
+                output::line(values_json(0, &request, written_values(&request)))?;
+            } else {
+                output::line(format!(
+                    "broadcast to every unit (no answer is expected): {request}"
+                ))?;
+            }
+        }
+        Send::To(addressed) => {
+            let answer = match client.request(&addressed).await {
+                Ok(answer) => answer,
+                Err(err) => return Err(refusal(err, &addressed, args.line.json)?),
+            };
+            print_answer(&addressed, &answer, args.line.json)?;
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn modbus_request(action: &ModbusAction) -> Result<Request, jbus::rtu::InvalidValue> {
+    match action {
+        &ModbusAction::ReadHolding { address, count } => {
+            Request::read_holding_registers(address, count)
+        }
+        &ModbusAction::ReadInput { address, count } => {
+            Request::read_input_registers(address, count)
+        }
+        &ModbusAction::ReadCoils { address, count } => Request::read_coils(address, count),
+        &ModbusAction::ReadDiscrete { address, count } => {
+            Request::read_discrete_inputs(address, count)
+        }
+        &ModbusAction::WriteRegister { address, value } => {
+            Ok(Request::write_single_register(address, value))
+        }
+        ModbusAction::WriteRegisters { address, values } => {
+            Request::write_multiple_registers(*address, values.clone())
+        }
+        &ModbusAction::WriteCoil { address, state } => {
+            Ok(Request::write_single_coil(address, state))
+        }
+        ModbusAction::WriteCoils { address, values } => {
+            Request::write_multiple_coils(*address, values.clone())
+        }
+    }
+}
+
+/// An exception also goes to stdout as JSON when asked, so scripts see its number.
+fn refusal(err: ClientError, request: &Addressed, json: bool) -> anyhow::Result<anyhow::Error> {
+    if let (true, ClientError::Exception { exception, .. }) = (json, &err) {
+        output::line(json!({
+            "unit": request.unit.get(),
+            "address": request.request.address(),
+            "exception": {
+                "code": exception.code.get(),
+                "meaning": exception.code.meaning(),
+            },
+        }))?;
+    }
+    Ok(device_error(err))
+}
+
+/// A client error is the device's doing (exit 1), except a request refused before the wire
+/// (exit 2: the arguments were wrong).
+fn device_error(err: ClientError) -> anyhow::Error {
+    if err.is_device_error() {
+        err.into()
+    } else {
+        usage(err)
+    }
+}
+
+fn print_answer(request: &Addressed, answer: &Answer, json: bool) -> anyhow::Result<()> {
+    let unit = request.unit.get();
+    let address = request.request.address();
+    match (answer, json) {
+        (Answer::Registers(values), true) => {
+            output::line(json!({ "unit": unit, "address": address, "values": values }))?;
+        }
+        (Answer::Bits(bits), true) => {
+            output::line(json!({ "unit": unit, "address": address, "values": bits }))?;
+        }
+        (Answer::Registers(values), false) => {
+            for (a, value) in (address..=u16::MAX).zip(values) {
+                output::line(format!("{a:>5} (0x{a:04X}) = {value:>5} (0x{value:04X})"))?;
+            }
+        }
+        (Answer::Bits(bits), false) => {
+            for (a, &bit) in (address..=u16::MAX).zip(bits) {
+                let state = if bit { "1 (on)" } else { "0 (off)" };
+                output::line(format!("{a:>5} (0x{a:04X}) = {state}"))?;
+            }
+        }
+        (Answer::Written | Answer::Exception(_), true) => {
+            output::line(values_json(
+                unit,
+                &request.request,
+                written_values(&request.request),
+            ))?;
+        }
+        (Answer::Written | Answer::Exception(_), false) => {
+            output::line(format!("unit {unit} acknowledged: {}", request.request))?;
+        }
+    }
+    Ok(())
+}
+
+fn values_json(unit: u8, request: &Request, values: Value) -> Value {
+    json!({ "unit": unit, "address": request.address(), "values": values })
+}
+
+/// The values a write carries, as JSON (registers as numbers, coils as booleans).
+fn written_values(request: &Request) -> Value {
+    match request {
+        Request::WriteSingleCoil(w) => json!([w.value]),
+        Request::WriteSingleRegister(w) => json!([w.value]),
+        Request::WriteMultipleCoils(w) => json!(w.values()),
+        Request::WriteMultipleRegisters(w) => json!(w.values()),
+        _ => json!([]),
+    }
+}
+
+/// An address or count: decimal or `0x` hex, 0–65535.
+fn parse_address(text: &str) -> Result<u16, String> {
+    let parsed = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        Some(hex) => u16::from_str_radix(hex, 16),
+        None => text.parse(),
+    };
+    parsed.map_err(|_| format!("{text:?} is not a number from 0 to 65535 (decimal or 0x hex)"))
+}
+
+/// A register value: 0–65535 (decimal or 0x hex), or -32768–-1 as two's complement.
+fn parse_word(text: &str) -> Result<u16, String> {
+    if let Some(negative) = text.strip_prefix('-') {
+        return negative
+            .parse::<u16>()
+            .ok()
+            .filter(|&n| (1..=0x8000).contains(&n))
+            .map(|n| 0u16.wrapping_sub(n))
+            .ok_or_else(|| format!("{text:?} is below -32768, the lowest 16-bit value"));
+    }
+    parse_address(text).map_err(|_| {
+        format!("{text:?} is not a register value: 0 to 65535, 0x hex, or -32768 to -1")
+    })
+}
+
+fn parse_on_off(text: &str) -> Result<bool, String> {
+    match text.to_ascii_lowercase().as_str() {
+        "on" | "1" | "true" => Ok(true),
+        "off" | "0" | "false" => Ok(false),
+        _ => Err(format!("{text:?} is not a coil state: write on or off")),
+    }
+}
+
+fn parse_bit_value(text: &str) -> Result<bool, String> {
+    match text {
+        "1" => Ok(true),
+        "0" => Ok(false),
+        _ => Err(format!("{text:?} is not a coil value: write 1 or 0")),
+    }
+}
+
+// --- cellbus cross ---
+
+#[derive(Debug, Args)]
+pub struct CrossArgs {
+    #[command(flatten)]
+    pub line: LineArgs,
+    /// The switch's unit number (1–255), as set on it.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CROSS_UNIT)]
+    pub unit: u8,
+    #[command(subcommand)]
+    pub action: CrossAction,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CrossAction {
+    /// The switch's state in words: what feeds the load, active alarms, states, the mimic
+    /// diagram, measures and ratings with their units (4 reads of function 3).
+    Status,
+    /// Read the switch every INTERVAL and print what changes: the load's source, alarms
+    /// raised and cleared, states, and the measures at each change; the first line gives
+    /// the state at the start. Measures alone (which always move a little) are not changes.
+    Watch {
+        /// Time between readings.
+        #[arg(long, default_value = "1s", value_parser = humantime::parse_duration)]
+        interval: Duration,
+        /// Stop after this many changes (default: run until interrupted).
+        #[arg(long, value_name = "N")]
+        changes: Option<u64>,
+    },
+}
+
+pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
+    let endpoint = args.line.endpoint()?;
+    let unit = Unit::jbus(args.unit).map_err(usage)?;
+    if let CrossAction::Watch { interval, .. } = args.action
+        && interval.is_zero()
+    {
+        return Err(usage("--interval must be longer than 0"));
+    }
+    let mut client = open(&endpoint, args.line.config()).await?;
+    match args.action {
+        CrossAction::Status => {
+            let state = client
+                .read_cross(unit)
+                .await
+                .map_err(device_error)
+                .with_context(|| format!("reading the CROSS at unit {unit} on {endpoint}"))?;
+            if args.line.json {
+                output::line(cross_json(unit, &state))?;
+            } else {
+                output::line(format!("Chloride CROSS, unit {unit} on {endpoint}"))?;
+                output::line(state.to_string().trim_end())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        CrossAction::Watch { interval, changes } => {
+            watch(&mut client, unit, interval, changes, args.line.json).await
+        }
+    }
+}
+
+/// The parts of a state whose change `watch` reports.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Discrete {
+    load: String,
+    alarms: BTreeSet<&'static str>,
+    states: BTreeSet<&'static str>,
+}
+
+impl Discrete {
+    fn of(state: &CrossState) -> Self {
+        let reserve = if state.on_reserve_line() {
+            " (reserve line)"
+        } else {
+            ""
+        };
+        Self {
+            load: format!("{}{reserve}", state.feed()),
+            alarms: state.alarms().into_iter().collect(),
+            states: state.conditions().into_iter().collect(),
+        }
+    }
+
+    /// What changed from `before` to `self`, in words.
+    fn changes_from(&self, before: &Self) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.load != before.load {
+            out.push(format!("load {}", self.load));
+        }
+        out.extend(
+            self.alarms
+                .difference(&before.alarms)
+                .map(|a| format!("alarm raised: {a}")),
+        );
+        out.extend(
+            before
+                .alarms
+                .difference(&self.alarms)
+                .map(|a| format!("alarm cleared: {a}")),
+        );
+        out.extend(
+            self.states
+                .difference(&before.states)
+                .map(|s| format!("now: {s}")),
+        );
+        out.extend(
+            before
+                .states
+                .difference(&self.states)
+                .map(|s| format!("no longer: {s}")),
+        );
+        out
+    }
+}
+
+async fn watch(
+    client: &mut Client,
+    unit: Unit,
+    interval: Duration,
+    stop_after: Option<u64>,
+    json: bool,
+) -> anyhow::Result<ExitCode> {
+    let mut ticker = tokio::time::interval(interval);
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let started = tokio::time::Instant::now();
+    let mut last: Option<Discrete> = None;
+    let mut lost = false;
+    let mut seen = 0u64;
+    loop {
+        tokio::select! {
+            _ = ticker.tick() => {}
+            _ = tokio::signal::ctrl_c() => return Ok(ExitCode::SUCCESS),
+        }
+        let elapsed = started.elapsed();
+        match client.read_cross(unit).await {
+            Ok(state) => {
+                let now = Discrete::of(&state);
+                let mut events = Vec::new();
+                if std::mem::take(&mut lost) {
+                    events.push("contact restored".to_owned());
+                }
+                match &last {
+                    // The state at the start is not a change.
+                    None => {
+                        events.push(format!("load {}", now.load));
+                        let alarms: Vec<&str> = now.alarms.iter().copied().collect();
+                        events.push(if alarms.is_empty() {
+                            "alarms: none".to_owned()
+                        } else {
+                            format!("alarms: {}", alarms.join(", "))
+                        });
+                        print_watch(elapsed, &events, Some(&state), json)?;
+                    }
+                    Some(before) => {
+                        events.extend(now.changes_from(before));
+                        if !events.is_empty() {
+                            print_watch(elapsed, &events, Some(&state), json)?;
+                            seen += 1;
+                        }
+                    }
+                }
+                last = Some(now);
+            }
+            Err(err @ ClientError::Line { .. }) => return Err(err.into()),
+            Err(err) => {
+                if !lost {
+                    lost = true;
+                    print_watch(elapsed, &[format!("contact lost: {err}")], None, json)?;
+                    seen += 1;
+                }
+            }
+        }
+        if stop_after.is_some_and(|n| seen >= n) {
+            return Ok(ExitCode::SUCCESS);
+        }
+    }
+}
+
+fn print_watch(
+    elapsed: Duration,
+    events: &[String],
+    state: Option<&CrossState>,
+    json: bool,
+) -> anyhow::Result<()> {
+    if json {
+        let mut object = Map::new();
+        object.insert("elapsed_ms".into(), json!(elapsed.as_millis() as u64));
+        object.insert("changes".into(), json!(events));
+        if let Some(state) = state {
+            object.insert("state".into(), state_json(state));
+        }
+        output::line(Value::Object(object))?;
+        return Ok(());
+    }
+    let time = format!("{:.1} s", elapsed.as_secs_f64());
+    for event in events {
+        output::line(format!("{time:<9} {event}"))?;
+    }
+    if let Some(state) = state {
+        let m = &state.measures;
+        output::line(format!(
+            "{:<9} S1 {} {}, S2 {} {}, output {} {} {}",
+            "",
+            m.s1_voltage.u,
+            m.s1_frequency,
+            m.s2_voltage.u,
+            m.s2_frequency,
+            m.output_voltage.u,
+            m.output_frequency,
+            m.load_power
+        ))?;
+    }
+    Ok(())
+}
+
+/// `cellbus cross status --json`: the state with the unit number.
+fn cross_json(unit: Unit, state: &CrossState) -> Value {
+    let mut object = Map::new();
+    object.insert("unit".into(), json!(unit.get()));
+    if let Value::Object(rest) = state_json(state) {
+        object.extend(rest);
+    }
+    Value::Object(object)
+}
+
+/// The state as JSON: words for the discrete parts, `{"value":…,"unit":…}` for quantities.
+fn state_json(state: &CrossState) -> Value {
+    let feed = state.feed();
+    let source = match feed {
+        jbus::cross::Feed::StaticSwitch(s) | jbus::cross::Feed::Bypass(s) => Some(match s {
+            Source::S1 => "S1",
+            Source::S2 => "S2",
+        }),
+        _ => None,
+    };
+    let m = &state.measures;
+    let r = &state.ratings;
+    let mimic: Map<String, Value> = jbus::cross::Element::ALL
+        .iter()
+        .map(|&e| (e.to_string(), json!(state.mimic.lamps(e).to_string())))
+        .collect();
+    json!({
+        "load": feed.to_string(),
+        "source": source,
+        "reserve_line": state.on_reserve_line(),
+        "alarms": state.alarms(),
+        "states": state.conditions(),
+        "mimic": {
+            "lamps": mimic,
+            "segments_lit": state.mimic.segments.lit().map(|s| s.number()).collect::<Vec<_>>(),
+        },
+        "measures": {
+            "s1_voltage": phases(m.s1_voltage, |v| v.value(), "V"),
+            "s1_frequency": quantity(m.s1_frequency.value(), "Hz"),
+            "s2_voltage": phases(m.s2_voltage, |v| v.value(), "V"),
+            "s2_frequency": quantity(m.s2_frequency.value(), "Hz"),
+            "output_voltage": phases(m.output_voltage, |v| v.value(), "V"),
+            "output_current": phases(m.output_current, |a| a.value(), "A"),
+            "neutral_current": quantity(m.neutral_current.value(), "A"),
+            "neutral_voltage": quantity(m.neutral_voltage.value(), "V"),
+            "output_frequency": quantity(m.output_frequency.value(), "Hz"),
+            "load_power": quantity(m.load_power.value(), "kVA"),
+            "phase_error": quantity(m.phase_error.value(), "°"),
+            "inlet_air": quantity(m.inlet_air.value(), "°C"),
+        },
+        "ratings": {
+            "rated_current": quantity(r.rated_current.value(), "A"),
+            "s1_voltage_full_scale": phases(r.s1_voltage_full_scale, |v| v.value(), "V"),
+            "s2_voltage_full_scale": phases(r.s2_voltage_full_scale, |v| v.value(), "V"),
+            "output_voltage_full_scale": phases(r.output_voltage_full_scale, |v| v.value(), "V"),
+            "output_current_full_scale": phases(r.output_current_full_scale, |a| a.value(), "A"),
+            "neutral_current_full_scale": quantity(r.neutral_current_full_scale.value(), "A"),
+            "neutral_voltage_full_scale": quantity(r.neutral_voltage_full_scale.value(), "V"),
+            "inlet_air_full_scale": quantity(r.inlet_air_full_scale.value(), "°C"),
+            "protocol_revision": r.protocol_revision,
+        },
+    })
+}
+
+fn quantity(value: f64, unit: &str) -> Value {
+    json!({ "value": value, "unit": unit })
+}
+
+fn phases<T: Copy>(p: Phases<T>, value: impl Fn(T) -> f64, unit: &str) -> Value {
+    json!({ "u": value(p.u), "v": value(p.v), "w": value(p.w), "unit": unit })
+}
+
+// --- cellbus sim cross | modbus ---
+
+#[derive(Debug, Args)]
+pub struct SimCrossArgs {
+    #[command(flatten)]
+    pub serve: ServeArgs,
+    /// The switch's unit number (1–255).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CROSS_UNIT)]
+    pub unit: u8,
+    /// Make source 1 fail after this long and come back after as long again, over and over,
+    /// so the switch transfers the load back and forth (for `cross watch` and demos).
+    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
+    pub cycle_outage: Option<Duration>,
+}
+
+#[derive(Debug, Args)]
+pub struct SimModbusArgs {
+    #[command(flatten)]
+    pub serve: ServeArgs,
+    /// The unit number (1–255); overrides the map's `unit` line. Default: the map's, or 1.
+    #[arg(long, value_name = "N")]
+    pub unit: Option<u8>,
+    /// Which coils, discrete inputs, holding and input registers exist, with their first
+    /// values (lines like `holding 0x0000 = 1 2 3`, `coil 10 = 1 0 1`, `unit 17`; see the
+    /// jbus crate's slave::map). Without it every address of every table exists, holds 0,
+    /// and coils and holding registers are writable.
+    #[arg(long, value_name = "FILE")]
+    pub map: Option<PathBuf>,
+}
+
+pub async fn sim_cross(args: SimCrossArgs) -> anyhow::Result<ExitCode> {
+    let unit = Unit::jbus(args.unit).map_err(usage)?;
+    if args.cycle_outage.is_some_and(|d| d.is_zero()) {
+        return Err(usage("--cycle-outage must be longer than 0"));
+    }
+    let twin = SharedModel::new(CrossTwin::new(unit, args.serve.seed));
+    if let Some(period) = args.cycle_outage {
+        let twin = twin.clone();
+        tokio::spawn(async move {
+            loop {
+                tokio::time::sleep(period).await;
+                twin.lock().fail_source(Source::S1);
+                tokio::time::sleep(period).await;
+                twin.lock().restore_source(Source::S1);
+            }
+        });
+    }
+    serve(&args.serve, JBUS_LINE, move || twin.line()).await
+}
+
+pub async fn sim_modbus(args: SimModbusArgs) -> anyhow::Result<ExitCode> {
+    let map = match &args.map {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read the map {}", path.display()))
+                .map_err(usage)?;
+            SlaveMap::parse(&text).map_err(|e| usage(format!("map {}: {e}", path.display())))?
+        }
+        None => SlaveMap::all_writable(Unit::jbus(DEFAULT_SLAVE_UNIT).map_err(usage)?),
+    };
+    let map = match args.unit {
+        Some(number) => map.with_unit(Unit::jbus(number).map_err(usage)?),
+        None => map,
+    };
+    let slave = SharedModel::new(Slave::new(map));
+    serve(&args.serve, JBUS_LINE, move || slave.line()).await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_argument_definitions_are_consistent() {
+        use clap::Args as _;
+        for command in [
+            ModbusArgs::augment_args(clap::Command::new("modbus")),
+            CrossArgs::augment_args(clap::Command::new("cross")),
+            SimCrossArgs::augment_args(clap::Command::new("sim-cross")),
+            SimModbusArgs::augment_args(clap::Command::new("sim-modbus")),
+        ] {
+            command.debug_assert();
+        }
+    }
+
+    #[test]
+    fn addresses_are_decimal_or_hex() {
+        assert_eq!(parse_address("70"), Ok(70));
+        assert_eq!(parse_address("0x46"), Ok(70));
+        assert_eq!(parse_address("0X0046"), Ok(70));
+        assert!(parse_address("65536").is_err());
+        assert!(parse_address("0xG").unwrap_err().contains("\"0xG\""));
+    }
+
+    #[test]
+    fn register_values_take_negative_numbers_as_twos_complement() {
+        assert_eq!(parse_word("-1"), Ok(0xFFFF));
+        assert_eq!(parse_word("-32768"), Ok(0x8000));
+        assert!(parse_word("-32769").is_err());
+        assert_eq!(parse_word("0xBEEF"), Ok(0xBEEF));
+    }
+
+    #[test]
+    fn coil_states_are_on_or_off() {
+        assert_eq!(parse_on_off("ON"), Ok(true));
+        assert_eq!(parse_on_off("off"), Ok(false));
+        assert!(parse_on_off("maybe").is_err());
+        assert_eq!(parse_bit_value("1"), Ok(true));
+        assert!(parse_bit_value("2").is_err());
+    }
+
+    #[test]
+    fn watch_names_what_changed() {
+        let before = Discrete {
+            load: "supplied by S1".into(),
+            alarms: BTreeSet::new(),
+            states: ["S1 normal"].into_iter().collect(),
+        };
+        let after = Discrete {
+            load: "supplied by S2".into(),
+            alarms: ["S1 failure"].into_iter().collect(),
+            states: BTreeSet::new(),
+        };
+        assert_eq!(
+            after.changes_from(&before),
+            [
+                "load supplied by S2",
+                "alarm raised: S1 failure",
+                "no longer: S1 normal"
+            ]
+        );
+        assert!(before.changes_from(&before).is_empty());
+    }
+}

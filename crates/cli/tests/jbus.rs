@@ -1,0 +1,509 @@
+//! `cellbus modbus`, `cellbus cross`, `cellbus sim cross|modbus` and `cellbus decode
+//! modbus`, end to end through the binary.
+
+mod common;
+
+use std::process::{Output, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use common::{Sim, cellbus, run, stderr, stdout};
+use serde_json::{Value, json};
+
+fn modbus(sim: &Sim, unit: &str, args: &[&str]) -> Output {
+    let mut all = vec!["modbus", "--endpoint", &sim.endpoint, "--unit", unit];
+    all.extend_from_slice(args);
+    run(&all)
+}
+
+fn cross(sim: &Sim, args: &[&str]) -> Output {
+    let mut all = vec!["cross", "--endpoint", &sim.endpoint];
+    all.extend_from_slice(args);
+    run(&all)
+}
+
+fn json_of(output: &Output) -> Value {
+    serde_json::from_str(stdout(output).trim())
+        .unwrap_or_else(|e| panic!("one JSON object expected ({e}): {}", stdout(output)))
+}
+
+/// Runs `cellbus ARGS…`, killing it if it is still running after `limit` (a watchdog for
+/// commands that wait for events; a passing run ends long before).
+fn run_within(args: &[&str], limit: Duration) -> Output {
+    let child = cellbus()
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("cellbus runs");
+    let id = child.id();
+    let (done, finished) = mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = done.send(child.wait_with_output());
+    });
+    match finished.recv_timeout(limit) {
+        Ok(output) => output.expect("cellbus ran"),
+        Err(_) => {
+            let _ = std::process::Command::new("kill")
+                .arg(id.to_string())
+                .status();
+            panic!("cellbus {args:?} still running after {limit:?}");
+        }
+    }
+}
+
+#[test]
+fn sim_cross_prints_its_tcp_address_first() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
+    assert!(
+        sim.endpoint.starts_with("tcp://127.0.0.1:"),
+        "{}",
+        sim.endpoint
+    );
+}
+
+#[test]
+fn cross_status_says_what_feeds_the_load_the_alarms_and_the_measures_with_units() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0", "--seed", "3"]);
+    let out = cross(&sim, &["status"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    for expected in [
+        "unit 2",
+        "load: supplied by source 1 (S1) through static switch S1-SW",
+        "alarms: none",
+        " Hz",
+        " kVA",
+        " V",
+        " A",
+        "JBUS protocol revision 5",
+    ] {
+        assert!(text.contains(expected), "{expected:?} missing in:\n{text}");
+    }
+}
+
+#[test]
+fn cross_status_json_names_the_source_and_gives_every_measure_with_its_unit() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0", "--unit", "7"]);
+    let out = cross(&sim, &["--unit", "7", "status", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let value = json_of(&out);
+    assert_eq!(value["unit"], 7);
+    assert_eq!(value["source"], "S1");
+    assert_eq!(value["alarms"], json!([]));
+    assert_eq!(value["measures"]["load_power"]["unit"], "kVA");
+    assert_eq!(value["measures"]["s1_frequency"]["unit"], "Hz");
+    assert_eq!(value["ratings"]["protocol_revision"], 5);
+    let volts = value["measures"]["s1_voltage"]["u"]
+        .as_f64()
+        .expect("a number");
+    assert!((220.0..240.0).contains(&volts), "{volts}");
+    assert_eq!(value["mimic"]["lamps"]["IOUT"], "on");
+}
+
+#[test]
+fn cross_watch_prints_a_transfer_when_the_preferred_source_fails_and_returns() {
+    let sim = Sim::start(&[
+        "cross",
+        "--listen",
+        "127.0.0.1:0",
+        "--cycle-outage",
+        "400ms",
+    ]);
+    let out = run_within(
+        &[
+            "cross",
+            "--endpoint",
+            &sim.endpoint,
+            "watch",
+            "--interval",
+            "100ms",
+            "--changes",
+            "2",
+        ],
+        Duration::from_secs(60),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains("S1 failure"), "{text}");
+    assert!(
+        text.contains("load supplied by source 2 (S2) through static switch S2-SW"),
+        "{text}"
+    );
+    assert!(
+        text.contains("load supplied by source 1 (S1) through static switch S1-SW"),
+        "{text}"
+    );
+}
+
+#[test]
+fn modbus_reads_a_cross_area_in_text_and_json_with_hex_addresses() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
+    let out = modbus(&sim, "2", &["read-holding", "0x2E", "1"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(stdout(&out).trim(), "46 (0x002E) =     5 (0x0005)");
+    let out = modbus(&sim, "2", &["--json", "read-holding", "30", "17"]);
+    let value = json_of(&out);
+    assert_eq!(value["unit"], 2);
+    assert_eq!(value["address"], 30);
+    assert_eq!(value["values"].as_array().map(Vec::len), Some(17));
+    assert_eq!(value["values"][16], 5);
+}
+
+#[test]
+fn exceptions_exit_1_with_their_number_and_meaning() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
+    let out = modbus(&sim, "2", &["read-input", "0", "1"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("exception 1 (illegal function"),
+        "{}",
+        stderr(&out)
+    );
+    let out = modbus(&sim, "2", &["read-holding", "0x12", "2"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("exception 2 (illegal data address"),
+        "{}",
+        stderr(&out)
+    );
+    let out = modbus(&sim, "2", &["--json", "write-register", "0", "1"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(
+        json_of(&out)["exception"]["code"],
+        1,
+        "a CROSS writes nothing"
+    );
+}
+
+#[test]
+fn every_read_and_write_form_works_against_the_generic_simulator() {
+    let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0"]);
+    let ok = |args: &[&str]| {
+        let out = modbus(&sim, "1", args);
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        out
+    };
+    let out = ok(&["write-register", "0x10", "-2"]);
+    assert!(
+        stdout(&out).contains("unit 1 acknowledged: write register 16 (0x0010) = 65534"),
+        "{}",
+        stdout(&out)
+    );
+    ok(&["write-registers", "17", "1", "0x0002", "3"]);
+    let out = ok(&["--json", "read-holding", "16", "4"]);
+    assert_eq!(
+        json_of(&out),
+        json!({"unit": 1, "address": 16, "values": [65534, 1, 2, 3]})
+    );
+    ok(&["write-coil", "5", "on"]);
+    ok(&["write-coils", "6", "1", "0", "1"]);
+    let out = ok(&["--json", "read-coils", "4", "5"]);
+    assert_eq!(
+        json_of(&out),
+        json!({"unit": 1, "address": 4, "values": [false, true, true, false, true]})
+    );
+    ok(&["write-coil", "5", "off"]);
+    let out = ok(&["read-coils", "5", "1"]);
+    assert_eq!(stdout(&out).trim(), "5 (0x0005) = 0 (off)");
+    let out = ok(&["--json", "read-discrete", "0", "3"]);
+    assert_eq!(json_of(&out)["values"], json!([false, false, false]));
+    let out = ok(&["--json", "read-input", "0x100", "2"]);
+    assert_eq!(json_of(&out)["values"], json!([0, 0]));
+    let out = ok(&["--json", "write-registers", "100", "7", "8"]);
+    assert_eq!(
+        json_of(&out),
+        json!({"unit": 1, "address": 100, "values": [7, 8]})
+    );
+}
+
+#[test]
+fn a_map_file_defines_the_simulators_tables_and_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("pump.map");
+    std::fs::write(
+        &path,
+        "# a pump\nunit 17\nholding 0 = 100 200\ninput 5 = 7\ncoil 3 = 1\n",
+    )
+    .unwrap();
+    let sim = Sim::start(&[
+        "modbus",
+        "--listen",
+        "127.0.0.1:0",
+        "--map",
+        path.to_str().unwrap(),
+    ]);
+    let out = modbus(&sim, "17", &["--json", "read-holding", "0", "2"]);
+    assert_eq!(json_of(&out)["values"], json!([100, 200]));
+    let out = modbus(&sim, "17", &["read-holding", "0", "3"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("exception 2"), "{}", stderr(&out));
+    let out = modbus(&sim, "17", &["--json", "read-input", "5", "1"]);
+    assert_eq!(json_of(&out)["values"], json!([7]));
+
+    let sim = Sim::start(&[
+        "modbus",
+        "--listen",
+        "127.0.0.1:0",
+        "--map",
+        path.to_str().unwrap(),
+        "--unit",
+        "30",
+    ]);
+    let out = modbus(&sim, "30", &["--json", "read-coils", "3", "1"]);
+    assert_eq!(json_of(&out)["values"], json!([true]));
+}
+
+#[test]
+fn a_bad_map_file_exits_2_naming_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.map");
+    std::fs::write(&path, "holding 0 = 1\nregister 4 = 2\n").unwrap();
+    let out = run(&["sim", "modbus", "--map", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("line 2"), "{}", stderr(&out));
+}
+
+#[test]
+fn a_broadcast_write_is_done_without_an_answer_and_a_broadcast_read_is_refused() {
+    let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0"]);
+    let out = modbus(&sim, "0", &["write-register", "5", "42"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stdout(&out).contains("broadcast"), "{}", stdout(&out));
+    let out = modbus(&sim, "1", &["--json", "read-holding", "5", "1"]);
+    assert_eq!(json_of(&out)["values"], json!([42]));
+    let out = modbus(&sim, "0", &["read-holding", "5", "1"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("only writes can be broadcast"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn a_silent_unit_exits_1_naming_endpoint_unit_and_attempts() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
+    let out = modbus(
+        &sim,
+        "9",
+        &[
+            "--timeout",
+            "100ms",
+            "--retries",
+            "1",
+            "read-holding",
+            "0",
+            "1",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(
+        err.contains(&sim.endpoint) && err.contains("unit 9") && err.contains("2 attempts"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_arguments_exit_2_before_touching_the_line() {
+    // No simulator: the endpoint is never opened.
+    let endpoint = "tcp://127.0.0.1:9";
+    for args in [
+        &["read-holding", "0", "126"][..],
+        &["read-holding", "70000", "1"],
+        &["read-coils", "0", "2001"],
+        &["write-coil", "1", "maybe"],
+        &["write-coils", "1", "1", "2"],
+        &["write-register", "1", "-40000"],
+    ] {
+        let mut all = vec!["modbus", "--endpoint", endpoint, "--unit", "1"];
+        all.extend_from_slice(args);
+        let out = run(&all);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+    }
+    let out = run(&[
+        "modbus",
+        "--endpoint",
+        "bogus://x",
+        "--unit",
+        "1",
+        "read-holding",
+        "0",
+        "1",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let out = run(&["cross", "--endpoint", endpoint, "--unit", "0", "status"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+}
+
+#[test]
+fn the_client_recovers_through_injected_line_faults() {
+    let sim = Sim::start(&[
+        "cross",
+        "--listen",
+        "127.0.0.1:0",
+        "--fault-rate",
+        "0.3",
+        "--seed",
+        "11",
+    ]);
+    // Late replies are up to 2 s late: keep the timeout short so a late one costs one retry.
+    for _ in 0..3 {
+        let out = cross(
+            &sim,
+            &["--timeout", "300ms", "--retries", "8", "status", "--json"],
+        );
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert_eq!(json_of(&out)["source"], "S1");
+    }
+}
+
+#[test]
+fn a_paced_simulator_and_a_client_that_knows_the_line_speed_work_together() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0", "--baud", "9600"]);
+    let endpoint = format!("{}?baud=9600", sim.endpoint);
+    let out = run(&["cross", "--endpoint", &endpoint, "status", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(json_of(&out)["ratings"]["protocol_revision"], 5);
+}
+
+#[test]
+fn the_simulator_serves_a_pty_that_the_client_opens_as_a_serial_port() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ttyCROSS");
+    let path_text = path.to_str().unwrap();
+    let sim = Sim::start(&["cross", "--pty", path_text]);
+    assert_eq!(sim.endpoint, path_text);
+    let url = format!("serial://{path_text}?baud=9600&framing=8N1");
+    let out = run(&["cross", "--endpoint", &url, "status"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stdout(&out).contains("supplied by source 1"),
+        "{}",
+        stdout(&out)
+    );
+    let out = run(&[
+        "modbus",
+        "--endpoint",
+        &url,
+        "--unit",
+        "2",
+        "--json",
+        "read-holding",
+        "0x46",
+        "20",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(json_of(&out)["values"].as_array().map(Vec::len), Some(20));
+}
+
+#[test]
+fn the_generic_simulator_serves_a_pty_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ttyMODBUS");
+    let path_text = path.to_str().unwrap();
+    let _sim = Sim::start(&["modbus", "--pty", path_text, "--unit", "4"]);
+    let out = run(&[
+        "modbus",
+        "--endpoint",
+        path_text,
+        "--unit",
+        "4",
+        "write-coils",
+        "0",
+        "1",
+        "1",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = run(&[
+        "modbus",
+        "--endpoint",
+        path_text,
+        "--unit",
+        "4",
+        "--json",
+        "read-coils",
+        "0",
+        "3",
+    ]);
+    assert_eq!(json_of(&out)["values"], json!([true, true, false]));
+}
+
+/// The CRC-16/MODBUS of `body` appended, low byte first.
+fn frame(body: &[u8]) -> Vec<u8> {
+    let mut crc: u16 = 0xFFFF;
+    for &byte in body {
+        crc ^= u16::from(byte);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xA001
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    let mut bytes = body.to_vec();
+    bytes.extend_from_slice(&crc.to_le_bytes());
+    bytes
+}
+
+fn hex_args(bytes: &[u8]) -> Vec<String> {
+    bytes.iter().map(|b| format!("{b:02X}")).collect()
+}
+
+#[test]
+fn decode_tells_requests_from_responses_and_marks_a_bad_crc() {
+    let mut capture = frame(&[0x02, 0x03, 0x00, 0x46, 0x00, 0x02]);
+    capture.extend(frame(&[0x02, 0x03, 0x04, 0x08, 0xFC, 0x09, 0x01]));
+    capture.extend(frame(&[0x02, 0x83, 0x02]));
+    let mut damaged = frame(&[0x01, 0x06, 0x00, 0x04, 0x00, 0x4D]);
+    damaged[3] ^= 0x10;
+    capture.extend(damaged);
+    capture.extend(frame(&[0x01, 0x06, 0x00, 0x04, 0x00, 0x4D]));
+    let hex = hex_args(&capture);
+    let mut args = vec!["decode", "modbus"];
+    args.extend(hex.iter().map(String::as_str));
+    let out = run(&args);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "the bad CRC makes the exit code 1"
+    );
+    let text = stdout(&out);
+    for expected in [
+        "request to unit 2, function 3 (read holding registers): 2 holding registers from 70 (0x0046)",
+        "response from unit 2, function 3 (read holding registers): 2 registers: 2300 2305",
+        "refused: exception 2 (illegal data address",
+        "8 bytes dropped, CRC bad",
+        "request to unit 1, function 6 (write single register): write register 4 (0x0004) = 77",
+        "CRC 0x",
+        "good",
+    ] {
+        assert!(text.contains(expected), "{expected:?} missing in:\n{text}");
+    }
+}
+
+#[test]
+fn decode_reads_a_capture_file_and_the_spec_crc_example() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("capture.bin");
+    let mut capture = frame(&[0x01, 0x06, 0x00, 0x04, 0x00, 0x4D]);
+    capture.extend(frame(&[0x01, 0x06, 0x00, 0x04, 0x00, 0x4D]));
+    std::fs::write(&path, &capture).unwrap();
+    let out = run(&["decode", "modbus", "--file", path.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stdout(&out));
+    let text = stdout(&out);
+    assert!(text.contains("request to unit 1"), "{text}");
+    assert!(
+        text.contains("response from unit 1, function 6 (write single register): wrote register 4"),
+        "{text}"
+    );
+    // The manual's example: frame 02 07 has CRC 0x1241, sent 41 12. A request of function 7
+    // (read exception status) is exactly that frame.
+    assert_eq!(frame(&[0x02, 0x07])[2..], [0x41, 0x12]);
+    let out = run(&["decode", "modbus", "02 07 41 12"]);
+    assert!(out.status.success(), "{}", stdout(&out));
+    assert!(stdout(&out).contains("CRC 0x1241 good"), "{}", stdout(&out));
+}
