@@ -507,3 +507,276 @@ fn decode_reads_a_capture_file_and_the_spec_crc_example() {
     assert!(out.status.success(), "{}", stdout(&out));
     assert!(stdout(&out).contains("CRC 0x1241 good"), "{}", stdout(&out));
 }
+
+// --- Interoperability with pymodbus (CI installs it: see .ci/run) ---
+
+/// The pinned pymodbus version, as .ci/run installs it.
+const PYMODBUS: &str = "3.16.1";
+
+/// Where the Python halves of the interoperability tests are.
+fn interop_script(name: &str) -> String {
+    format!(
+        "{}/../jbus/tests/interop/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+/// Fails (never skips) when python3 or pymodbus is missing: CI installs them.
+fn require_pymodbus() {
+    let found = std::process::Command::new("python3")
+        .args(["-c", "import pymodbus; print(pymodbus.__version__)"])
+        .output();
+    let hint =
+        format!("run .ci/run, which installs it, or: python3 -m pip install pymodbus=={PYMODBUS}");
+    match found {
+        Err(e) => panic!("python3 is needed for the pymodbus interoperability tests ({e}); {hint}"),
+        Ok(out) if !out.status.success() => panic!(
+            "pymodbus is not installed for python3 ({}); {hint}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ),
+        Ok(out) => {
+            let version = String::from_utf8_lossy(&out.stdout).trim().to_owned();
+            assert!(
+                version.starts_with("3."),
+                "pymodbus {version} is installed, the tests need 3.x; {hint}"
+            );
+        }
+    }
+}
+
+/// A pymodbus RTU server over TCP, killed when dropped.
+struct PyServer {
+    child: std::process::Child,
+    endpoint: String,
+}
+
+impl PyServer {
+    fn start() -> Self {
+        require_pymodbus();
+        let mut child = std::process::Command::new("python3")
+            .arg(interop_script("pymodbus_server.py"))
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("python3 runs");
+        let stdout = child.stdout.take().expect("stdout is piped");
+        let mut first = String::new();
+        std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut first)
+            .expect("the server prints a line");
+        let endpoint = first
+            .trim_end()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| panic!("first line is `listening on …`, got {first:?}"))
+            .to_owned();
+        Self { child, endpoint }
+    }
+}
+
+impl Drop for PyServer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs the pymodbus client script against a simulator and returns its JSON report.
+fn pymodbus_reads(sim: &Sim, unit: &str) -> Value {
+    require_pymodbus();
+    let port = sim
+        .endpoint
+        .rsplit(':')
+        .next()
+        .expect("tcp://IP:PORT")
+        .to_owned();
+    let out = std::process::Command::new("python3")
+        .args([&interop_script("pymodbus_read_cross.py"), &port, unit])
+        .stdin(Stdio::null())
+        .output()
+        .expect("python3 runs");
+    assert!(out.status.success(), "{}", stderr(&out));
+    json_of(&out)
+}
+
+/// The CROSS's four areas, as `(first address, words)`, in the read plan's order.
+const READ_PLAN: [(u16, u16); 4] = [(0x00, 18), (0x14, 4), (0x1E, 17), (0x46, 20)];
+
+#[test]
+fn pymodbus_reads_every_area_of_the_cross_exactly_as_our_client_does() {
+    // The twin's measures carry noise drawn from its seed, one draw per read: two
+    // simulators with the same seed, read with the same sequence of requests, give the
+    // same words. So every area compares exactly, measures included.
+    let seed = "21";
+    let theirs = Sim::start(&["cross", "--listen", "127.0.0.1:0", "--seed", seed]);
+    let report = pymodbus_reads(&theirs, "2");
+    let areas = report["areas"].as_array().expect("areas");
+    assert_eq!(areas.len(), READ_PLAN.len());
+
+    let ours = Sim::start(&["cross", "--listen", "127.0.0.1:0", "--seed", seed]);
+    for ((address, count), theirs) in READ_PLAN.iter().zip(areas) {
+        let out = modbus(
+            &ours,
+            "2",
+            &[
+                "--json",
+                "read-holding",
+                &address.to_string(),
+                &count.to_string(),
+            ],
+        );
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert_eq!(theirs[0], json!(address));
+        assert_eq!(
+            json_of(&out)["values"],
+            theirs[1],
+            "area at 0x{address:02X} differs"
+        );
+    }
+
+    // Our decoding of the same words: a third twin with the same seed, read by `cross status`
+    // (the same four reads in the same order).
+    let decoded = Sim::start(&["cross", "--listen", "127.0.0.1:0", "--seed", seed]);
+    let out = cross(&decoded, &["status", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let state = json_of(&out);
+    let word = |address: u16| -> f64 {
+        let (start, words) = READ_PLAN
+            .iter()
+            .zip(areas)
+            .find(|((start, count), _)| (*start..start + count).contains(&address))
+            .map(|((start, _), area)| (*start, area[1].clone()))
+            .expect("a defined address");
+        words[usize::from(address - start)]
+            .as_f64()
+            .expect("a number")
+    };
+    let measures = &state["measures"];
+    let close = |decoded: &Value, expected: f64| {
+        let decoded = decoded.as_f64().expect("a number");
+        assert!((decoded - expected).abs() < 1e-9, "{decoded} vs {expected}");
+    };
+    close(&measures["s1_voltage"]["u"], word(0x46) / 10.0);
+    close(&measures["s1_frequency"]["value"], word(0x49) / 100.0);
+    close(&measures["s2_voltage"]["w"], word(0x4C) / 10.0);
+    close(&measures["output_current"]["v"], word(0x52) / 10.0);
+    close(&measures["output_frequency"]["value"], word(0x56) / 100.0);
+    close(&measures["load_power"]["value"], word(0x57) / 10.0);
+    close(&measures["inlet_air"]["value"], word(0x59) / 10.0);
+    close(
+        &state["ratings"]["rated_current"]["value"],
+        word(0x1E) / 10.0,
+    );
+    close(
+        &state["ratings"]["output_current_full_scale"]["u"],
+        word(0x28),
+    );
+    assert_eq!(
+        state["ratings"]["protocol_revision"],
+        json!(word(0x2E) as u16)
+    );
+    // Word 0x08 bit 0: "load on source 1"; alarm words 0x01, 0x04, 0x07, 0x0A, 0x0D, 0x10.
+    assert_eq!(word(0x08) as u16 & 1, 1);
+    assert_eq!(state["source"], "S1");
+    for alarm_word in [0x01, 0x04, 0x07, 0x0A, 0x0D, 0x10] {
+        assert_eq!(word(alarm_word), 0.0, "alarm word 0x{alarm_word:02X}");
+    }
+    assert_eq!(state["alarms"], json!([]));
+}
+
+#[test]
+fn pymodbus_gets_the_refusals_the_manual_specifies_from_the_cross() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
+    let report = pymodbus_reads(&sim, "2");
+    assert_eq!(report["pymodbus"], PYMODBUS, "the pinned version runs");
+    assert_eq!(
+        report["exceptions"],
+        json!({
+            "function 4": 1,
+            "function 1": 1,
+            "function 6": 1,
+            "function 16": 1,
+            "undefined 0x12": 2,
+            "straddling 0x10-0x13": 2,
+            "past the map 0x59-0x5A": 2,
+            "count 0": 3,
+            "count 126": 3,
+        })
+    );
+    assert_eq!(report["silent"], json!({"another unit": true}));
+}
+
+#[test]
+fn our_client_reads_and_writes_a_pymodbus_server_with_every_function() {
+    let server = PyServer::start();
+    let run_ok = |args: &[&str]| {
+        let mut all = vec!["modbus", "--endpoint", &server.endpoint, "--unit", "1"];
+        all.extend_from_slice(args);
+        let out = run(&all);
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        out
+    };
+    // Functions 3 and 4, as pymodbus filled them.
+    let out = run_ok(&["--json", "read-holding", "0", "5"]);
+    assert_eq!(
+        json_of(&out),
+        json!({"unit": 1, "address": 0, "values": [0, 3, 6, 9, 12]})
+    );
+    let out = run_ok(&["--json", "read-input", "0x62", "2"]);
+    assert_eq!(json_of(&out)["values"], json!([1098, 1099]));
+    // Function 2.
+    let out = run_ok(&["--json", "read-discrete", "0", "4"]);
+    assert_eq!(json_of(&out)["values"], json!([true, false, true, false]));
+    // Functions 6 and 16, read back with 3.
+    run_ok(&["write-register", "1", "777"]);
+    run_ok(&["write-registers", "2", "8", "0xFFFF", "-2"]);
+    let out = run_ok(&["--json", "read-holding", "0", "6"]);
+    assert_eq!(
+        json_of(&out)["values"],
+        json!([0, 777, 8, 65535, 65534, 15])
+    );
+    // Functions 5 and 15, read back with 1 (across a 16-bit boundary).
+    run_ok(&["write-coils", "14", "1", "0", "1", "1"]);
+    run_ok(&["write-coil", "20", "on"]);
+    run_ok(&["write-coil", "16", "off"]);
+    let out = run_ok(&["--json", "read-coils", "13", "8"]);
+    assert_eq!(
+        json_of(&out)["values"],
+        json!([false, true, false, false, true, false, false, true])
+    );
+}
+
+#[test]
+fn our_client_reports_a_pymodbus_servers_exceptions_in_words() {
+    let server = PyServer::start();
+    let refused = |args: &[&str]| {
+        let mut all = vec![
+            "modbus",
+            "--endpoint",
+            &server.endpoint,
+            "--unit",
+            "1",
+            "--json",
+        ];
+        all.extend_from_slice(args);
+        let out = run(&all);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {}", stderr(&out));
+        (json_of(&out)["exception"]["code"].clone(), stderr(&out))
+    };
+    let (code, text) = refused(&["read-holding", "98", "3"]);
+    assert_eq!(code, 2);
+    assert!(text.contains("exception 2 (illegal data address"), "{text}");
+    let (code, text) = refused(&["read-holding", "500", "1"]);
+    assert_eq!(code, 3);
+    assert!(text.contains("exception 3 (illegal data value"), "{text}");
+    let (code, text) = refused(&["write-register", "501", "1"]);
+    assert_eq!(code, 4);
+    assert!(
+        text.contains("exception 4 (server device failure"),
+        "{text}"
+    );
+    let (code, text) = refused(&["write-registers", "502", "1"]);
+    assert_eq!(code, 1);
+    assert!(text.contains("exception 1 (illegal function"), "{text}");
+    let (code, _) = refused(&["read-coils", "1600", "1"]);
+    assert_eq!(code, 2);
+}
