@@ -1,0 +1,86 @@
+//! History throughput: committing value changes (batched, WAL, synchronous=FULL) and a
+//! downsampled query over a day of one point.
+//!
+//! `cargo bench -p gateway --bench store -- --warm-up-time 1 --measurement-time 2`
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use gateway::point::{PointId, Quality, Value};
+use gateway::store::{Sample, Store, StoreOptions};
+use gateway::time::Timestamp;
+
+const ROWS: usize = 10_000;
+const POINTS: usize = 1_000;
+
+fn commit(c: &mut Criterion) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let store = Store::open(dir.path(), StoreOptions::default()).expect("store");
+    let handle = store.handle();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .build()
+        .expect("runtime");
+    let points: Vec<PointId> = (0..POINTS)
+        .map(|i| PointId::parse(&format!("dev{}.point{}", i / 20, i % 20)).expect("valid id"))
+        .collect();
+    let mut t = 0i64;
+    let mut group = c.benchmark_group("history");
+    group.throughput(Throughput::Elements(ROWS as u64));
+    group.bench_function("commit 10k value changes over 1000 points", |b| {
+        b.iter(|| {
+            for i in 0..ROWS {
+                t += 1;
+                handle.sample(Sample {
+                    point: points[i % POINTS].clone(),
+                    t: Timestamp(t),
+                    value: Some(Value::Number(t as f64)),
+                    quality: Quality::Good,
+                });
+            }
+            black_box(runtime.block_on(handle.flush()).expect("commit"));
+        });
+    });
+    group.finish();
+}
+
+fn query(c: &mut Criterion) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let store = Store::open(dir.path(), StoreOptions::default()).expect("store");
+    let handle = store.handle();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .build()
+        .expect("runtime");
+    let point = PointId::parse("jbc1.air_temperature").expect("valid id");
+    // A day of changes every second.
+    let day = 86_400i64;
+    for s in 0..day {
+        handle.sample(Sample {
+            point: point.clone(),
+            t: Timestamp(s * 1000),
+            value: Some(Value::Number((s % 400) as f64)),
+            quality: Quality::Good,
+        });
+    }
+    runtime.block_on(handle.flush()).expect("commit");
+    let mut group = c.benchmark_group("history");
+    group.throughput(Throughput::Elements(day as u64));
+    group.bench_function("one day of 1 s changes in 1 min buckets", |b| {
+        b.iter(|| {
+            black_box(
+                handle
+                    .history(
+                        &point,
+                        Timestamp(0),
+                        Timestamp(day * 1000),
+                        Some(Duration::from_secs(60)),
+                    )
+                    .expect("query"),
+            )
+        });
+    });
+    group.finish();
+}
+
+criterion_group!(benches, commit, query);
+criterion_main!(benches);
