@@ -1,7 +1,9 @@
-//! Thermosald ISC/RS485 impulse-sealer temperature regulators, sans-IO.
+//! Thermosald ISC/RS485 impulse-sealer temperature regulators: a sans-IO core and an async
+//! client.
 //!
 //! Up to eight regulators (addresses 0–7) share one RS-485 line at 9600 8N1; the master
-//! (controller) asks, a regulator answers 200 ms later. This crate has no I/O and no clock:
+//! (controller) asks, a regulator answers 200 ms later. Apart from [`client`], which talks
+//! over a `link` line, the modules have no I/O and no clock:
 //!
 //! - [`frame`]: the `% addr msg Q/R count _ data… LF` layout, a resynchronising
 //!   [`wire::Codec`], typed [`frame::Address`], [`frame::Target`], [`frame::MessageNumber`].
@@ -11,6 +13,8 @@
 //! - [`diagnostic`]: fault/warning numbers (35, 36 and the twin's faults) in words.
 //! - [`exchange`]: the master's side of one exchange (is this frame my answer, an echo
 //!   mismatch, or someone else's?) and the line timing (40/200/40 ms).
+//! - [`client`]: the async master over a `link` line: timing windows, timeout, retries,
+//!   echo checks, several regulators sharing one line.
 //! - [`device`]: a twin of a line of regulators with a sealing band's physics, faults,
 //!   calibration and EEPROM, as a [`wire::device::Model`].
 //!
@@ -51,6 +55,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod client;
 pub mod device;
 pub mod diagnostic;
 pub mod exchange;

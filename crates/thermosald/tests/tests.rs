@@ -1,5 +1,6 @@
 //! Integration tests of the thermosald crate: one test binary (see Cargo.toml).
 
+mod client;
 mod common;
 mod exchange;
 mod roundtrip;

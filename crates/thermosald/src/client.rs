@@ -1,0 +1,500 @@
+//! The async master: typed requests to one regulator over a [`link`] line, respecting the
+//! line's timing, with a timeout, retries and echo checks.
+//!
+//! # Timing on the line
+//!
+//! A regulator listens again 40 ms after the end of any message, answers 200 ms after the
+//! question and releases the line 40 ms after its answer ([`crate::exchange`]). After every
+//! attempt the client tells the line when it is free again with
+//! [`link::Line::keep_quiet_until`], computed by [`earliest_next_send`]:
+//!
+//! - after an answer (good or not): 40 ms after it arrived;
+//! - after any other message heard while waiting (another regulator's late answer, the
+//!   adapter's local echo) or a damaged one: 40 ms after it;
+//! - after a question left unanswered: the end of the whole window in which its answer could
+//!   still have come (200 ms + the answer's wire time + 40 ms), usually already over when
+//!   the timeout ends.
+//!
+//! The quiet time lives on the line, not in the client, so every client of a
+//! [`SharedLine`] (one per regulator) respects the windows the others opened.
+//!
+//! # Several regulators on one line
+//!
+//! Clients of the regulators on one line share one [`SharedLine`]. Each *attempt* holds the
+//! line from its question until its answer or its timeout, then lets it go: the clients
+//! waiting for the line go first, in the order they asked, before the next retry. So a dead
+//! regulator delays the others by one timeout per attempt, never by its whole retry series.
+//!
+//! # Retries
+//!
+//! The protocol has no negative answer and no checksum: a regulator that does not accept a
+//! message stays silent, and a digit damaged on the line can still look like a digit.
+//!
+//! - No answer within the timeout: retried.
+//! - A damaged message (bad digits, wrong length) where the answer should be: retried as
+//!   soon as the line is free again (40 ms), without waiting for the timeout.
+//! - A read answer of the wrong shape (count or number of items): retried.
+//! - An echo that differs from what was sent: retried **once**, because without a checksum
+//!   a digit damaged on the line looks exactly like a regulator that kept another value; a
+//!   second differing echo is reported at once as [`ClientError::EchoMismatch`] (what was
+//!   sent and what came back). Writes and commands are safe to repeat: a write sets a
+//!   value, and repeating a command leaves the regulator where one would.
+//! - Noise and half messages are skipped: the answer may still follow.
+//! - Messages that are not the answer (another address, another message number, a question
+//!   such as the adapter's local echo) are skipped, never taken for the answer.
+//!
+//! A request the crate refuses to build (a value out of range, a read-only item) never
+//! reaches the wire: [`ClientError::Request`].
+
+use std::time::Duration;
+
+use link::{Line, LineError, SharedLine, Step};
+use tokio::time::Instant;
+use wire::Deframer;
+
+use crate::exchange::{
+    Answer, Classified, DEFAULT_REPLY_TIMEOUT, Exchange, ExchangeError, LineActivity, LineTiming,
+    Values, earliest_next_send,
+};
+use crate::frame::{Address, Count, DecodeError, Frame, FrameCodec, RawValue, Target};
+use crate::request::{Command, Message, MessageKind, Read, Request, RequestError, Write};
+use crate::tables::{Item, Reading, Table};
+
+/// Default time to wait for an answer, counted from handing the question to the line: 500 ms
+/// at 9600 baud ([`DEFAULT_REPLY_TIMEOUT`]); [`Exchange::reply_timeout`] gives more on
+/// slower lines.
+pub const DEFAULT_TIMEOUT: Duration = DEFAULT_REPLY_TIMEOUT;
+
+/// Default number of retries after the first attempt.
+pub const DEFAULT_RETRIES: u8 = 2;
+
+/// How many differing echoes end a request at once (see the module doc): the first may be
+/// line damage, the second is the regulator's answer.
+pub const ECHO_MISMATCHES_TOLERATED: u8 = 1;
+
+/// How the client talks to one regulator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClientConfig {
+    /// The regulator's address, or `$` (address assignment, message 10 only).
+    pub target: Target,
+    /// Time to wait for each answer; `None`: [`Exchange::reply_timeout`] (500 ms at 9600
+    /// baud, longer on slower lines).
+    pub timeout: Option<Duration>,
+    /// Retries after the first attempt (see the module doc for what is retried).
+    pub retries: u8,
+    /// The line's character timing; `None`: from the line's serial settings when it knows
+    /// them, else the spec's 9600 8N1.
+    pub timing: Option<LineTiming>,
+}
+
+impl ClientConfig {
+    /// The defaults for the regulator at `target`.
+    pub fn new(target: impl Into<Target>) -> Self {
+        Self {
+            target: target.into(),
+            timeout: None,
+            retries: DEFAULT_RETRIES,
+            timing: None,
+        }
+    }
+}
+
+impl Default for ClientConfig {
+    /// Address 0, the default timeout, 2 retries, the line's own timing.
+    fn default() -> Self {
+        Self::new(Address::new(0).expect("0 is a valid address"))
+    }
+}
+
+/// Why a request did not get its answer.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ClientError {
+    /// The request was refused before reaching the wire (a value out of range, a read-only
+    /// item, `$` with another message than 10).
+    #[error(transparent)]
+    Request(#[from] RequestError),
+    /// No valid answer within the attempts.
+    #[error(
+        "no valid answer from {} on {endpoint} after {attempts} attempt(s) of {timeout:?} each (last: {last})",
+        regulator(target)
+    )]
+    NoAnswer {
+        /// The line.
+        endpoint: String,
+        /// Whom we asked.
+        target: Target,
+        /// Attempts made.
+        attempts: u8,
+        /// Time waited in each.
+        timeout: Duration,
+        /// What went wrong on the last attempt.
+        last: Trouble,
+    },
+    /// The regulator echoed a write or command differently from what was sent, again after a
+    /// retry: it kept another value (or something on the line changes the message).
+    #[error(
+        "echo mismatch from {} on {endpoint}: sent {sent}, it echoed {received}{}",
+        regulator(target),
+        differences(sent, received)
+    )]
+    EchoMismatch {
+        /// The line.
+        endpoint: String,
+        /// Whom we asked.
+        target: Target,
+        /// The question as sent.
+        sent: Frame,
+        /// The (last) echo as received.
+        received: Frame,
+    },
+    /// The line itself failed (closed, I/O error, an adapter echo that does not match).
+    #[error("line {endpoint} failed: {source}")]
+    Line {
+        /// The line.
+        endpoint: String,
+        /// What happened.
+        source: LineError,
+    },
+}
+
+impl ClientError {
+    /// Whether the regulator (or its absence, or the line) is the cause, rather than our
+    /// request.
+    pub fn is_device_error(&self) -> bool {
+        !matches!(self, Self::Request(_))
+    }
+}
+
+/// Line trouble on one attempt.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Trouble {
+    /// Nothing came.
+    #[error("no reply")]
+    Silence,
+    /// A damaged message came where the answer should be.
+    #[error("damaged reply: {0}")]
+    Damaged(DecodeError),
+    /// The answer had the wrong shape or echoed something else.
+    #[error("{0}")]
+    Mismatch(ExchangeError),
+}
+
+/// A client for one regulator on a (possibly shared) line.
+#[derive(Debug)]
+pub struct Client {
+    line: SharedLine,
+    config: ClientConfig,
+    deframer: Deframer<FrameCodec>,
+}
+
+impl Client {
+    /// A client for the regulator `config` names on `line`.
+    pub fn new(line: SharedLine, config: ClientConfig) -> Self {
+        Self {
+            line,
+            config,
+            deframer: Deframer::new(FrameCodec),
+        }
+    }
+
+    /// The client's settings.
+    pub fn config(&self) -> &ClientConfig {
+        &self.config
+    }
+
+    /// Whom the client talks to.
+    pub fn target(&self) -> Target {
+        self.config.target
+    }
+
+    /// Reads a whole table: every item, named and scaled.
+    pub async fn read_table(&mut self, table: Table) -> Result<Values, ClientError> {
+        self.read(Read::all(table)).await
+    }
+
+    /// Reads one item.
+    pub async fn read_item(&mut self, item: &'static Item) -> Result<Reading, ClientError> {
+        let values = self.read(Read::item(item)).await?;
+        Ok(values
+            .get(item)
+            .expect("a read answer is checked to carry the item asked"))
+    }
+
+    /// Reads what `read` selects.
+    pub async fn read(&mut self, read: Read) -> Result<Values, ClientError> {
+        match self.request(read.into()).await? {
+            Answer::Values(values) => Ok(values),
+            Answer::Echoed => unreachable!("a read is answered with values"),
+        }
+    }
+
+    /// Writes `value` in the item's unit (`180.0` °C, KINT gain `12.5`); checked against the
+    /// item before the wire. Returns the value as the regulator echoed it.
+    pub async fn write(&mut self, item: &'static Item, value: f64) -> Result<Reading, ClientError> {
+        let raw = item.to_raw(value).map_err(RequestError::from)?;
+        self.write_raw(item, raw).await
+    }
+
+    /// Writes the raw digits `raw` to `item` (checked against its range before the wire).
+    pub async fn write_raw(
+        &mut self,
+        item: &'static Item,
+        raw: RawValue,
+    ) -> Result<Reading, ClientError> {
+        self.request(Write::item(item, raw)?.into()).await?;
+        Ok(item.reading(raw))
+    }
+
+    /// Writes a whole table (read it, change it, write it back); the echo is compared on the
+    /// writable items.
+    pub async fn write_table(
+        &mut self,
+        table: Table,
+        values: Vec<RawValue>,
+    ) -> Result<(), ClientError> {
+        self.request(Write::whole(table, values)?.into())
+            .await
+            .map(drop)
+    }
+
+    /// 14: clears latched faults whose cause is gone.
+    pub async fn clear_faults(&mut self) -> Result<(), ClientError> {
+        self.command(Command::ClearFaults).await
+    }
+
+    /// 15: starts automatic balancing (diagnostic 36 while it runs).
+    pub async fn balance(&mut self) -> Result<(), ClientError> {
+        self.command(Command::Balance).await
+    }
+
+    /// 16: saves the working data to EEPROM (writes are volatile until then).
+    pub async fn save_eeprom(&mut self) -> Result<(), ClientError> {
+        self.command(Command::SaveEeprom).await
+    }
+
+    /// 17: loads the working data from EEPROM.
+    pub async fn load_eeprom(&mut self) -> Result<(), ClientError> {
+        self.command(Command::LoadEeprom).await
+    }
+
+    /// 99: master reset: factory data, no address until one is set, diagnostic 35 until
+    /// balancing.
+    pub async fn master_reset(&mut self) -> Result<(), ClientError> {
+        self.command(Command::MasterReset).await
+    }
+
+    /// 10: gives the regulator (or, with target `$`, every powered regulator) the address
+    /// `new`. Once echoed, the client talks to `new`.
+    pub async fn set_address(&mut self, new: Address) -> Result<(), ClientError> {
+        self.request(Request::SetAddress(new)).await?;
+        self.config.target = Target::Address(new);
+        Ok(())
+    }
+
+    async fn command(&mut self, command: Command) -> Result<(), ClientError> {
+        self.request(command.into()).await.map(drop)
+    }
+
+    /// Sends `request` and returns the regulator's answer, with the timing, retries and
+    /// checks of the module doc.
+    pub async fn request(&mut self, request: Request) -> Result<Answer, ClientError> {
+        let exchange = Exchange::new(self.config.target, request)?;
+        let query = exchange.query_bytes();
+        let attempts = self.config.retries.saturating_add(1);
+        let mut last = Trouble::Silence;
+        let mut mismatches = 0u8;
+        let mut timeout = DEFAULT_TIMEOUT;
+        let mut endpoint = String::new();
+        for attempt in 1..=attempts {
+            // One attempt at a time: other regulators' clients may use the line in between.
+            let mut line = self.line.lock().await;
+            let timing = self.timing(&line);
+            timeout = self
+                .config
+                .timeout
+                .unwrap_or_else(|| exchange.reply_timeout(&timing));
+            endpoint = line.name().to_owned();
+            let outcome = attempt_once(
+                &mut line,
+                &mut self.deframer,
+                &exchange,
+                &query,
+                timeout,
+                &timing,
+            )
+            .await;
+            drop(line);
+            last = match outcome {
+                Ok(Outcome::Answer(answer)) => return Ok(answer),
+                Ok(Outcome::Mismatch(ExchangeError::EchoMismatch { sent, received })) => {
+                    mismatches += 1;
+                    if mismatches > ECHO_MISMATCHES_TOLERATED {
+                        return Err(ClientError::EchoMismatch {
+                            endpoint,
+                            target: self.config.target,
+                            sent,
+                            received,
+                        });
+                    }
+                    Trouble::Mismatch(ExchangeError::EchoMismatch { sent, received })
+                }
+                Ok(Outcome::Mismatch(other)) => Trouble::Mismatch(other),
+                Ok(Outcome::Damaged(damage)) => Trouble::Damaged(damage),
+                Err(LineError::Timeout { .. }) => Trouble::Silence,
+                Err(source) => return Err(ClientError::Line { endpoint, source }),
+            };
+            tracing::debug!(target = %self.config.target, attempt, %last, "retrying");
+        }
+        if let Trouble::Mismatch(ExchangeError::EchoMismatch { sent, received }) = last {
+            return Err(ClientError::EchoMismatch {
+                endpoint,
+                target: self.config.target,
+                sent,
+                received,
+            });
+        }
+        Err(ClientError::NoAnswer {
+            endpoint,
+            target: self.config.target,
+            attempts,
+            timeout,
+            last,
+        })
+    }
+
+    /// The configured timing, else the line's, else the spec's 9600 8N1.
+    fn timing(&self, line: &Line) -> LineTiming {
+        self.config.timing.unwrap_or_else(|| {
+            line.settings()
+                .and_then(|s| LineTiming::new(s.baud, s.bits_per_char()).ok())
+                .unwrap_or_default()
+        })
+    }
+}
+
+/// The outcome of one attempt that heard something.
+enum Outcome {
+    Answer(Answer),
+    Mismatch(ExchangeError),
+    Damaged(DecodeError),
+}
+
+/// One question and its answer (or timeout); leaves the line quiet for as long as the
+/// regulators need.
+async fn attempt_once(
+    line: &mut Line,
+    deframer: &mut Deframer<FrameCodec>,
+    exchange: &Exchange,
+    query: &[u8],
+    timeout: Duration,
+    timing: &LineTiming,
+) -> Result<Outcome, LineError> {
+    // The end of the last message heard that was not the answer.
+    let mut traffic: Option<Instant> = None;
+    let result = link::exchange(line, deframer, query, timeout, |input| {
+        judge(exchange, input, &mut traffic)
+    })
+    .await;
+    let now = Instant::now();
+    let activity = match &result {
+        Ok(Outcome::Answer(_) | Outcome::Mismatch(_)) => Some(LineActivity::Answered {
+            ended: now.into_std(),
+        }),
+        Ok(Outcome::Damaged(_)) => Some(LineActivity::Traffic {
+            ended: now.into_std(),
+        }),
+        // The question was handed to the line `timeout` ago and ended its wire time later.
+        Err(LineError::Timeout { .. }) => Some(LineActivity::Unanswered {
+            ended: now
+                .checked_sub(timeout)
+                .map_or(now, |sent| sent + timing.wire_time(query.len()))
+                .into_std(),
+            reply_len: exchange.reply_len(),
+        }),
+        Err(_) => None,
+    };
+    let activities = activity
+        .into_iter()
+        .chain(traffic.map(|ended| LineActivity::Traffic {
+            ended: ended.into_std(),
+        }));
+    for activity in activities {
+        line.keep_quiet_until(Instant::from_std(earliest_next_send(activity, timing)));
+    }
+    result
+}
+
+/// What one decoded message (or dropped run of bytes) means for the waiting exchange.
+fn judge(
+    exchange: &Exchange,
+    input: Result<Frame, DecodeError>,
+    traffic: &mut Option<Instant>,
+) -> Step<Outcome> {
+    match input {
+        Ok(frame) => match exchange.classify(&frame) {
+            Classified::Answer(answer) => Step::Done(Outcome::Answer(answer)),
+            Classified::Mismatch(mismatch) => Step::Done(Outcome::Mismatch(mismatch)),
+            Classified::NotOurs(why) => {
+                tracing::debug!(%frame, ?why, "skipping a message that is not the answer");
+                *traffic = Some(Instant::now());
+                Step::Continue
+            }
+        },
+        // A damaged whole message where the answer should be: retry once the line is free.
+        Err(damage) if damage.is_whole_message() => Step::Done(Outcome::Damaged(damage)),
+        // Noise or a half message: the answer may still come.
+        Err(noise) => {
+            tracing::debug!(%noise, "skipping noise while waiting for the answer");
+            Step::Continue
+        }
+    }
+}
+
+/// `regulator 3`, or `the regulators listening to '$'`.
+fn regulator(target: &Target) -> String {
+    match target {
+        Target::Address(address) => format!("regulator {address}"),
+        Target::Assign => "the regulators listening to '$' (address assignment)".to_owned(),
+    }
+}
+
+/// What differs between a question and its echo, in words: `; it kept Set sealing
+/// temperature = 180 °C, not 300 °C`. Empty when the messages say nothing more precise.
+fn differences(sent: &Frame, received: &Frame) -> String {
+    let Ok(message) = Message::from_number(sent.message()) else {
+        return String::new();
+    };
+    let MessageKind::Write(table) = message.kind() else {
+        return String::new();
+    };
+    let items: &'static [Item] = match sent.count() {
+        Count::All => table.items(),
+        Count::Item(index) => match table.item(index.get()) {
+            Ok(item) => std::slice::from_ref(item),
+            Err(_) => return String::new(),
+        },
+    };
+    if sent.count() != received.count() || received.data().len() != items.len() {
+        return String::new();
+    }
+    let kept: Vec<String> = items
+        .iter()
+        .zip(sent.data().iter().zip(received.data()))
+        .filter(|(item, (s, r))| item.writable() && s != r)
+        .map(|(item, (s, r))| {
+            format!(
+                "{} = {}, not {}",
+                item.name(),
+                item.reading(*r),
+                item.reading(*s)
+            )
+        })
+        .collect();
+    if kept.is_empty() {
+        String::new()
+    } else {
+        format!("; it kept {}", kept.join(", "))
+    }
+}
