@@ -41,6 +41,8 @@ pub struct Rig {
     pub plugged: Vec<Arc<AtomicBool>>,
     pub line_available: Arc<AtomicBool>,
     pub opens: Arc<AtomicUsize>,
+    /// The serve loops of the lines opened so far (abort one to cut its line).
+    pub servers: Arc<std::sync::Mutex<Vec<tokio::task::JoinHandle<std::io::Result<()>>>>>,
     pub shutdown: watch::Sender<bool>,
     pub task: tokio::task::JoinHandle<()>,
     _store: Store,
@@ -80,9 +82,11 @@ pub fn rig(count: u8) -> Rig {
         .collect();
     let line_available = Arc::new(AtomicBool::new(true));
     let opens = Arc::new(AtomicUsize::new(0));
+    let servers = Arc::new(std::sync::Mutex::new(Vec::new()));
     let opener: Opener = {
         let (models, plugged) = (models.clone(), plugged.clone());
         let (available, opens) = (Arc::clone(&line_available), Arc::clone(&opens));
+        let servers = Arc::clone(&servers);
         Arc::new(move || {
             opens.fetch_add(1, Ordering::SeqCst);
             let result = if available.load(Ordering::SeqCst) {
@@ -94,7 +98,8 @@ pub fn rig(count: u8) -> Rig {
                         .zip(models.iter().map(SharedModel::line))
                         .collect(),
                 };
-                tokio::spawn(link::serve::serve_stream(b, bus, None));
+                let server = tokio::spawn(link::serve::serve_stream(b, bus, None));
+                servers.lock().unwrap().push(server);
                 Ok(Line::from_stream(a, "memory", None))
             } else {
                 Err("no such serial port".to_owned())
@@ -125,6 +130,7 @@ pub fn rig(count: u8) -> Rig {
         plugged,
         line_available,
         opens,
+        servers,
         shutdown,
         task,
         _store: store,

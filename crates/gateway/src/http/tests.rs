@@ -541,3 +541,25 @@ async fn the_page_and_its_assets_are_served_and_fetch_nothing_from_elsewhere() {
     assert!(web::APP_JS.contains("card.id = `device-${device.id}`"));
     assert!(web::APP_JS.contains("tile.id = `point-${point.id}`"));
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_write_the_device_does_not_answer_is_a_504_and_audited_as_failed() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    rig.plugged[0].store(false, std::sync::atomic::Ordering::SeqCst);
+    let on = app(&rig, true);
+    let (status, reply) = call(
+        &on,
+        write_request(
+            "jbc1",
+            Some(TOKEN),
+            r#"{"point": "air_flow_setpoint", "value": 50}"#,
+        ),
+    )
+    .await;
+    assert_eq!(status, StatusCode::GATEWAY_TIMEOUT, "{reply}");
+    assert!(error_of(&reply).contains("no valid reply"), "{reply}");
+    let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
+    assert_eq!(rows[0].result, "failed");
+    assert_eq!(rows[0].point, "jbc1.air_flow_setpoint");
+}

@@ -313,3 +313,52 @@ async fn values_not_refreshed_in_time_turn_stale_and_good_again_at_the_next_read
     };
     assert!(samples.iter().any(|s| s.quality == Quality::Stale));
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_line_closed_by_the_other_end_is_reopened_and_polling_resumes() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    assert_eq!(rig.opens.load(Ordering::SeqCst), 1);
+    // The serial server drops the connection.
+    for server in rig.servers.lock().unwrap().drain(..) {
+        server.abort();
+    }
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    assert_eq!(rig.opens.load(Ordering::SeqCst), 2, "reopened once");
+    assert!(rig.cell.lines()[0].state.open);
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+    let errors = rig
+        .cell
+        .metrics()
+        .errors
+        .get_or_create(&crate::metrics::ErrorLabels {
+            line: "bench".into(),
+            device: "jbc1".into(),
+            kind: "disconnected".into(),
+        })
+        .get();
+    assert_eq!(errors, 1);
+    rig.cell.store().flush().await.unwrap();
+    let kinds: Vec<String> = rig
+        .cell
+        .store()
+        .events(&EventFilter {
+            limit: 20,
+            ..EventFilter::default()
+        })
+        .unwrap()
+        .into_iter()
+        .map(|e| e.kind)
+        .collect();
+    assert_eq!(
+        kinds,
+        vec![
+            "device_up",
+            "line_up",
+            "line_down",
+            "device_down",
+            "line_up"
+        ],
+        "newest first: the poll fails, the line goes down, is reopened, the station answers"
+    );
+}
