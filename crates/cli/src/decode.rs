@@ -17,6 +17,8 @@ pub enum DecodeCommand {
     /// Modbus RTU / JBUS frames of both directions (unit, function, addresses, values, CRC;
     /// requests and responses told apart).
     Modbus(Input),
+    /// Thermosald ISC messages (% address message Q/R count data LF), as text or hex.
+    Thermosald(crate::thermosald_cmd::DecodeInput),
 }
 
 /// Where the captured bytes come from.
@@ -57,12 +59,13 @@ pub fn run(command: DecodeCommand) -> anyhow::Result<ExitCode> {
                 annotator.describe(frame)
             })
         }
+        DecodeCommand::Thermosald(input) => crate::thermosald_cmd::decode(input),
     }
 }
 
 /// Prints each frame and each run of dropped bytes in the stream, with its offset.
 /// Exits 1 when anything in the stream was not a good frame.
-fn dump<C: Codec>(
+pub(crate) fn dump<C: Codec>(
     codec: C,
     bytes: &[u8],
     describe: impl Fn(&C::Frame) -> String,

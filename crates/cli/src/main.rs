@@ -11,6 +11,7 @@ mod jbus_cmd;
 mod output;
 mod serve_cmd;
 mod sim;
+mod thermosald_cmd;
 
 use std::process::ExitCode;
 
@@ -50,6 +51,9 @@ enum Command {
     /// Read a Chloride CROSS static transfer switch over JBUS: its state in words, or its
     /// changes live. Serial defaults: 9600 baud, 8N1, unit 2.
     Cross(jbus_cmd::CrossArgs),
+    /// Talk to Thermosald ISC impulse-sealer regulators on RS-485 (addresses 0-7): read and
+    /// write their data, commands, scan, watch. Serial defaults: 9600 baud, 8N1.
+    Thermosald(thermosald_cmd::ThermosaldArgs),
     /// Run a simulated device on a TCP port or a PTY.
     #[command(subcommand)]
     Sim(sim::SimCommand),
@@ -79,6 +83,7 @@ fn main() -> ExitCode {
             Command::Jbc(args) => jbc_cmd::run(args).await,
             Command::Modbus(args) => jbus_cmd::run_modbus(args).await,
             Command::Cross(args) => jbus_cmd::run_cross(args).await,
+            Command::Thermosald(args) => thermosald_cmd::run(args).await,
             Command::Sim(command) => sim::run(command).await,
             Command::Decode(command) => decode::run(command),
         }

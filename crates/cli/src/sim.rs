@@ -24,6 +24,9 @@ pub enum SimCommand {
     /// A generic Modbus RTU server (functions 1-6, 15, 16; unit 1; every address writable,
     /// or the tables of a map file).
     Modbus(crate::jbus_cmd::SimModbusArgs),
+    /// Thermosald ISC regulators on one RS-485 line (address 0, or --addresses 0,1,2), each
+    /// with its own sealing band, memory and faults; 9600 8N1, answers 200 ms after a question.
+    Thermosald(crate::thermosald_cmd::SimThermosaldArgs),
 }
 
 /// Where and how a simulator serves its device.
@@ -78,6 +81,7 @@ pub async fn run(command: SimCommand) -> anyhow::Result<ExitCode> {
         }
         SimCommand::Cross(args) => crate::jbus_cmd::sim_cross(args).await,
         SimCommand::Modbus(args) => crate::jbus_cmd::sim_modbus(args).await,
+        SimCommand::Thermosald(args) => crate::thermosald_cmd::sim(args).await,
     }
 }
 

@@ -306,6 +306,20 @@ pub enum ValueError {
         /// The value given.
         value: f64,
     },
+    /// A value between the steps the device stores (a tenths item given hundredths).
+    #[error("{value} is not a multiple of {step}{unit} for {point} ({name})")]
+    NotAStep {
+        /// The point.
+        point: PointId,
+        /// Its name.
+        name: String,
+        /// The value given.
+        value: f64,
+        /// The device's step.
+        step: f64,
+        /// Unit suffix (` °C`) or empty.
+        unit: String,
+    },
     /// A value not in an enumeration.
     #[error("{value} is not a state of {point}; known: {known}")]
     UnknownState {

@@ -330,6 +330,26 @@ impl Command {
         }
     }
 
+    /// Whether sending the command again, after an attempt whose answer was lost, is
+    /// harmless: the reads that change nothing (status, selected program, program list,
+    /// upload, production data kept, keep-alive). A download, a delete, a read that clears
+    /// counters, a start or a reset may have happened already, so a client must not repeat
+    /// them on its own.
+    pub fn is_repeatable(&self) -> bool {
+        match self {
+            Command::Status
+            | Command::CurrentProgram
+            | Command::ProgramList
+            | Command::Upload { .. }
+            | Command::KeepAlive(_) => true,
+            Command::Production(request) => !request.clear,
+            Command::Download { .. }
+            | Command::Delete { .. }
+            | Command::Start(_)
+            | Command::Reset => false,
+        }
+    }
+
     /// Whether this is a C5 command, which only Remote mode accepts.
     pub fn is_remote_control(&self) -> bool {
         matches!(self, Command::Start(_) | Command::Reset)
@@ -654,6 +674,41 @@ mod tests {
                 size: 1
             })
         );
+    }
+
+    #[test]
+    fn only_commands_that_change_nothing_are_repeatable() {
+        let repeatable: Vec<String> = [
+            Command::Status,
+            Command::CurrentProgram,
+            Command::ProgramList,
+            Command::Upload {
+                target: Target::Product(name("ABC")),
+            },
+            Command::KeepAlive(KeepAliveId::sequence(1)),
+            Command::Production(ProductionRequest {
+                scope: ProductionScope::GrandTotal,
+                clear: false,
+            }),
+            Command::Production(ProductionRequest {
+                scope: ProductionScope::CurrentTotal,
+                clear: true,
+            }),
+            Command::Download {
+                target: Target::MachineData,
+                data: b"*\r\n".to_vec(),
+            },
+            Command::Delete {
+                target: Target::Product(name("ABC")),
+            },
+            Command::Start(None),
+            Command::Reset,
+        ]
+        .iter()
+        .filter(|command| command.is_repeatable())
+        .map(Command::wire)
+        .collect();
+        assert_eq!(repeatable, ["C2ST", "C3P", "C1RP", "C1PABC", "C2HB00000001", "C1M000"]);
     }
 
     fn arb_target() -> impl Strategy<Value = Target> {

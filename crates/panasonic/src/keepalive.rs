@@ -151,6 +151,11 @@ impl KeepAlive {
         Some(Command::KeepAlive(id))
     }
 
+    /// Whether a check is open: sent, its verdict not yet given.
+    pub fn is_checking(&self) -> bool {
+        self.probe.is_some()
+    }
+
     /// When to call [`poll_transmit`](Self::poll_transmit) or [`poll_verdict`](Self::poll_verdict) next.
     pub fn poll_timeout(&self) -> Instant {
         self.probe
@@ -220,7 +225,9 @@ mod tests {
         assert_eq!(keep.poll_transmit(t0 + Duration::from_secs(29)), None);
         assert_eq!(keep.poll_timeout(), t0 + DEFAULT_INTERVAL);
         let t1 = t0 + DEFAULT_INTERVAL;
+        assert!(!keep.is_checking());
         let id = id_of(keep.poll_transmit(t1));
+        assert!(keep.is_checking());
         assert_eq!(Command::KeepAlive(id.clone()).wire(), "C2HB00000001");
         assert_eq!(keep.poll_transmit(t1), None, "one check at a time");
         keep.port1_answered();
@@ -231,6 +238,7 @@ mod tests {
         );
         assert!(keep.port2_echo(&id));
         assert_eq!(keep.poll_verdict(t1), Some(Verdict::Alive { id }));
+        assert!(!keep.is_checking());
         assert_eq!(keep.poll_timeout(), t1 + DEFAULT_INTERVAL);
     }
 

@@ -271,6 +271,31 @@ impl Counter {
         }
     }
 
+    /// What it counts, in words.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Counter::ProductPlan1 => "boards planned",
+            Counter::ProductPlan2 => "second plan figure",
+            Counter::Product1 => "boards produced",
+            Counter::Product2 => "second production figure",
+            Counter::PartsExhaustCount => "parts-exhaustion stops",
+            Counter::PartsExhaustTime => "time stopped for parts exhaustion (s)",
+            Counter::Pickup => "pick-ups",
+            Counter::Mount => "parts placed",
+            Counter::PickupError => "pick-up error stops",
+            Counter::PickupMiss => "pick-up misses",
+            Counter::RecognitionError1 => "part recognition errors (1)",
+            Counter::RecognitionError2 => "part recognition errors (2)",
+            Counter::BoardRecognitionError1 => "board mark recognition errors (1)",
+            Counter::BoardRecognitionError2 => "board mark recognition errors (2)",
+        }
+    }
+
+    /// The counter with this key, if the manual names it.
+    pub fn from_key(key: &str) -> Option<Counter> {
+        Counter::ALL.into_iter().find(|counter| counter.key() == key)
+    }
+
     /// The section the manual puts it in.
     pub const fn section(self) -> &'static str {
         match self {
@@ -302,6 +327,19 @@ impl RateKind {
             RateKind::Pickup => "PICKUP_RATE",
             RateKind::Mount => "MOUNT_RATE",
         }
+    }
+
+    /// What it measures, in words.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            RateKind::Pickup => "pick-up rate",
+            RateKind::Mount => "placement rate",
+        }
+    }
+
+    /// The rate with this key, if the manual names it.
+    pub fn from_key(key: &str) -> Option<RateKind> {
+        RateKind::ALL.into_iter().find(|rate| rate.key() == key)
     }
 }
 

@@ -569,6 +569,18 @@ impl Machine {
         }
     }
 
+    /// R messages that [`poll_events`](Self::poll_events) gave but that could not be sent
+    /// (the host's connection failed while they were written) go back to the front of the
+    /// buffer, in order, for the next host; the buffer rule applies to them as to any other.
+    pub fn requeue_events(&mut self, messages: Vec<Message>) {
+        for message in messages.into_iter().rev() {
+            self.events.push_front(message);
+        }
+        if !self.port2_connected {
+            self.trim_events();
+        }
+    }
+
     /// Takes bytes from the host on Port 2: an optional `A2` after an R message, ignored
     /// (3.4-1 says no answer is needed).
     pub fn handle_port2(&mut self, bytes: &[u8]) {

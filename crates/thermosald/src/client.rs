@@ -54,7 +54,7 @@ use wire::Deframer;
 
 use crate::exchange::{
     Answer, Classified, DEFAULT_REPLY_TIMEOUT, Exchange, ExchangeError, LineActivity, LineTiming,
-    Values, earliest_next_send,
+    TIMEOUT_MARGIN, Values, earliest_next_send,
 };
 use crate::frame::{Address, Count, DecodeError, Frame, FrameCodec, RawValue, Target};
 use crate::request::{Command, Message, MessageKind, Read, Request, RequestError, Write};
@@ -372,6 +372,69 @@ impl Client {
                 .unwrap_or_default()
         })
     }
+}
+
+/// What a scan found at one address.
+#[derive(Debug)]
+pub struct Probe {
+    /// The address asked.
+    pub address: Address,
+    /// Its fault/warning number (run-time item 2), or why none came.
+    pub outcome: Result<Reading, ClientError>,
+}
+
+impl Probe {
+    /// Whether something answered at the address (a damaged or odd answer counts: a
+    /// regulator is there).
+    pub fn answered(&self) -> bool {
+        match &self.outcome {
+            Ok(_) | Err(ClientError::EchoMismatch { .. }) => true,
+            Err(ClientError::NoAnswer { last, .. }) => *last != Trouble::Silence,
+            Err(_) => false,
+        }
+    }
+}
+
+/// How long a scan waits at each address: the question's and a one-item answer's time on
+/// the wire, the regulator's 200 ms and [`TIMEOUT_MARGIN`] (422 ms at 9600 baud).
+pub fn probe_timeout(timing: &LineTiming) -> Duration {
+    timing.wire_time(PROBE_QUERY_LEN) + timing.answer_window(PROBE_REPLY_LEN) + TIMEOUT_MARGIN
+}
+
+/// A one-item read: `%a53Q020` + LF.
+const PROBE_QUERY_LEN: usize = 9;
+/// Its answer: `%a53R020ddd` + LF.
+const PROBE_REPLY_LEN: usize = 12;
+
+/// Asks every address 0–7 for its fault/warning number, one attempt each, one after the
+/// other as fast as the line's timing allows: an address that answers costs one poll cycle
+/// (262 ms at 9600 baud), a silent one [`probe_timeout`] (`timeout` overrides it). A
+/// regulator without an address (after a master reset) answers only `$` and is not found.
+pub async fn scan(line: &SharedLine, timeout: Option<Duration>) -> Result<Vec<Probe>, ClientError> {
+    let timing = {
+        let line = line.lock().await;
+        line.settings()
+            .and_then(|s| LineTiming::new(s.baud, s.bits_per_char()).ok())
+            .unwrap_or_default()
+    };
+    let timeout = timeout.unwrap_or_else(|| probe_timeout(&timing));
+    let fault = Table::Runtime
+        .item(crate::tables::runtime::FAULT)
+        .expect("run-time data has item 2");
+    let mut probes = Vec::new();
+    for address in Address::all() {
+        let config = ClientConfig {
+            target: Target::Address(address),
+            timeout: Some(timeout),
+            retries: 0,
+            timing: Some(timing),
+        };
+        match Client::new(line.clone(), config).read_item(fault).await {
+            Err(failed @ ClientError::Line { .. }) => return Err(failed),
+            outcome => probes.push(Probe { address, outcome }),
+        }
+    }
+    Ok(probes)
 }
 
 /// The outcome of one attempt that heard something.

@@ -7,7 +7,9 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant as StdInstant};
 
 use link::{Line, SerialSettings, SharedLine};
-use thermosald::client::{Client, ClientConfig, ClientError, DEFAULT_TIMEOUT, Trouble};
+use thermosald::client::{
+    Client, ClientConfig, ClientError, DEFAULT_TIMEOUT, Trouble, probe_timeout, scan,
+};
 use thermosald::device::Line as Twin;
 use thermosald::diagnostic::{self, Fault};
 use thermosald::exchange::{LineTiming, RELEASE_AFTER_ANSWER};
@@ -572,4 +574,28 @@ async fn dollar_carries_only_address_assignment() {
     let err = client.clear_faults().await.expect_err("refused");
     assert!(matches!(err, ClientError::Request(_)), "{err}");
     assert_eq!(b.questions(), 0);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_scan_finds_the_regulators_with_one_attempt_per_address() {
+    let b = Bench::new(&[0, 2, 5], &[]);
+    let started = Instant::now();
+    let probes = scan(&b.line, None).await.expect("the line works");
+    let elapsed = started.elapsed();
+    let found: Vec<u8> = probes
+        .iter()
+        .filter(|p| p.answered())
+        .map(|p| p.address.get())
+        .collect();
+    assert_eq!(found, [0, 2, 5]);
+    assert_eq!(b.questions(), 8, "one question per address");
+    // Three answers (200 ms each, then 40 ms release), five silent addresses.
+    let silent = probe_timeout(&LineTiming::RS485_9600_8N1);
+    assert_eq!(silent, Duration::from_nanos(421_875_000));
+    let least = ms(3 * 200) + silent * 5;
+    assert!(
+        elapsed >= least && elapsed <= least + ms(3 * 40 + 8),
+        "took {elapsed:?}"
+    );
+    b.assert_line_discipline();
 }

@@ -1003,3 +1003,44 @@ fn a_command_stamped_earlier_than_the_twins_time_acts_at_the_twins_time() {
         Some(rig.now + Duration::from_millis(4150))
     );
 }
+
+#[test]
+fn requeued_events_go_out_first_and_in_order_to_the_next_host() {
+    let mut rig = Rig::remote();
+    for n in 1..=3 {
+        rig.exchange(Command::KeepAlive(KeepAliveId::sequence(n)))
+            .expect("port 1 works");
+    }
+    let sent = rig.machine.poll_events(rig.now);
+    assert_eq!(sent.len(), 3);
+    rig.machine.host_connected_on_port2(false, rig.now);
+    rig.exchange(Command::KeepAlive(KeepAliveId::sequence(4)))
+        .expect("port 1 works");
+    rig.machine.requeue_events(sent);
+    rig.machine.host_connected_on_port2(true, rig.now);
+    let ids: Vec<String> = rig
+        .events()
+        .into_iter()
+        .map(|e| match e {
+            Event::Heartbeat { id } => id.as_str().to_owned(),
+            other => panic!("unexpected {other:?}"),
+        })
+        .collect();
+    assert_eq!(ids, ["000001", "000002", "000003", "000004"]);
+}
+
+#[test]
+fn requeued_events_obey_the_buffer_rule_while_nobody_listens() {
+    let mut rig = Rig::remote();
+    rig.exchange(Command::KeepAlive(KeepAliveId::sequence(1)))
+        .expect("port 1 works");
+    let sent = rig.machine.poll_events(rig.now);
+    rig.machine.host_connected_on_port2(false, rig.now);
+    for n in 2..=41 {
+        rig.exchange(Command::KeepAlive(KeepAliveId::sequence(n)))
+            .expect("port 1 works");
+    }
+    rig.machine.requeue_events(sent);
+    assert_eq!(rig.machine.pending_events(), EVENT_BUFFER_LEN);
+    assert_eq!(rig.machine.dropped_events(), 1, "the requeued one was the oldest");
+}
