@@ -309,8 +309,11 @@ impl Client {
                 quiet_gap,
             )
             .await;
-            // Whatever happened, the next frame on this line waits for the silence.
-            line.keep_quiet_until(Instant::now() + silence);
+            // Whatever happened, the next frame on this line waits for the silence (a zero
+            // wait would still cost a timer tick: tokio rounds deadlines up to 1 ms).
+            if !silence.is_zero() {
+                line.keep_quiet_until(Instant::now() + silence);
+            }
             match outcome {
                 Ok(Answer::Exception(exception)) => {
                     return Err(ClientError::Exception {
@@ -346,7 +349,7 @@ impl Client {
         let bytes = write.to_adu().to_bytes();
         let mut line = self.line.lock().await;
         let sent = async {
-            line.discard_input().await?;
+            drop_stale_input(&mut line).await?;
             line.send(&bytes).await
         }
         .await;
@@ -414,6 +417,31 @@ pub fn expected_answer_len(request: &Request) -> usize {
     }
 }
 
+/// Drops whatever has already arrived on `line` (a late answer to an earlier request), so
+/// the next request starts on a quiet line, without waiting: [`Line::discard_input`] waits
+/// for a deadline of "now", which tokio's timer rounds up to its next millisecond tick, a
+/// cost on every request.
+async fn drop_stale_input(line: &mut Line) -> Result<usize, LineError> {
+    // The runtime polls its I/O driver before it resumes a yielded task, so bytes that
+    // reached the socket or port since it last looked are seen below.
+    tokio::task::yield_now().await;
+    let mut dropped = 0;
+    let mut buf = [0u8; 256];
+    loop {
+        // Never reached: the read is polled once, then the ready branch wins.
+        let far = Instant::now() + Duration::from_secs(60);
+        tokio::select! {
+            biased;
+            read = line.recv(&mut buf, far) => match read {
+                Ok(n) => dropped += n,
+                Err(LineError::Timeout { .. }) => return Ok(dropped),
+                Err(e) => return Err(e),
+            },
+            () = std::future::ready(()) => return Ok(dropped),
+        }
+    }
+}
+
 /// Why one attempt ended without an answer.
 enum Failure {
     /// Retry.
@@ -462,7 +490,7 @@ async fn attempt_once(
     timeout: Duration,
     quiet_gap: Duration,
 ) -> Result<Answer, Failure> {
-    line.discard_input().await?;
+    drop_stale_input(line).await?;
     deframer.clear();
     line.send(bytes).await?;
     let deadline = Instant::now() + timeout;
@@ -850,6 +878,34 @@ mod tests {
         assert_eq!(
             err.exception_code(),
             Some(ExceptionCode::ILLEGAL_DATA_ADDRESS)
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_late_answer_waiting_on_the_line_is_dropped_not_taken_for_the_answer() {
+        use tokio::io::AsyncWriteExt as _;
+        let (ours, mut theirs) = tokio::io::duplex(4096);
+        // An answer to the same request that came too late for an earlier exchange.
+        let stale = ResponseAdu {
+            unit: 1,
+            response: Response::ReadHoldingRegisters(
+                RegisterValues::new(vec![0xDEAD, 0xBEEF]).expect("2 values"),
+            ),
+        };
+        theirs.write_all(&stale.to_bytes()).await.expect("buffered");
+        tokio::spawn(link::serve::serve_stream(theirs, slave().line(), None));
+        let line = SharedLine::new(Line::from_stream(ours, "test line", None));
+        let mut client = Client::new(line, ClientConfig::default());
+        let started = Instant::now();
+        let words = client
+            .read_holding_registers(unit(1), 0, 2)
+            .await
+            .expect("the server answers");
+        assert_eq!(words, [0, 0], "the server's registers, not the stale ones");
+        assert_eq!(
+            started.elapsed(),
+            DEFAULT_REPLY_DELAY,
+            "no wait to drop them"
         );
     }
 
