@@ -77,7 +77,11 @@ impl Codec for CaptureCodec {
             (None, None) => Ok(None),
             // Nothing good follows: drop the run of bad bytes up to what may be a frame's head.
             (None, Some(first)) => {
-                let mut len = first.drop_len();
+                // A frame with a bad CRC goes whole, not byte by byte.
+                let mut len = match first {
+                    DecodeError::Crc { len, .. } if len <= buf.len() => len,
+                    _ => first.drop_len(),
+                };
                 while let Some(rest) = buf.get(len..).filter(|rest| !rest.is_empty()) {
                     match SniffCodec.decode(rest) {
                         Err(e) => len += e.drop_len(),
@@ -364,6 +368,28 @@ mod tests {
         assert!(deframer.next_frame().is_none());
         assert_eq!(dropped.len + deframer.buffered().len(), garbage.len());
         assert!(deframer.buffered().len() < crate::rtu::codec::OTHER_FUNCTION_SCAN);
+    }
+
+    #[test]
+    fn a_damaged_exception_at_the_end_of_a_capture_is_dropped_whole_as_a_bad_crc() {
+        let mut deframer = wire::Deframer::new(CaptureCodec);
+        // Exception 2 from unit 2 to a function-3 read, its CRC (30 F1) damaged.
+        deframer.push(&[0x02, 0x83, 0x02, 0x30, 0xF0]);
+        match deframer.next_frame() {
+            Some(Err(Dropped {
+                first:
+                    Some(DecodeError::Crc {
+                        unit: 2,
+                        function: 0x83,
+                        len: 5,
+                        ..
+                    }),
+                len: 5,
+            })) => {}
+            other => panic!("expected the 5 bytes dropped for their CRC, got {other:?}"),
+        }
+        assert!(deframer.next_frame().is_none());
+        assert!(deframer.buffered().is_empty());
     }
 
     #[test]

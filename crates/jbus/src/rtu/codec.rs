@@ -212,11 +212,20 @@ impl Codec for SniffCodec {
             (Ok(Some((request, len))), _) => Ok(Some((Sniffed::Request(request), len))),
             (_, Ok(Some((response, len)))) => Ok(Some((Sniffed::Response(response), len))),
             (Ok(None), _) | (_, Ok(None)) => Ok(None),
-            (Err(request), Err(response)) => Err(if response.drop_len() < request.drop_len() {
-                response
-            } else {
-                request
-            }),
+            // The error that drops fewer bytes; on a tie, a bad CRC (the bytes frame as a
+            // damaged frame of that side) over a function the other side cannot frame.
+            (Err(request), Err(response)) => {
+                Err(match response.drop_len().cmp(&request.drop_len()) {
+                    std::cmp::Ordering::Less => response,
+                    std::cmp::Ordering::Equal
+                        if matches!(response, DecodeError::Crc { .. })
+                            && !matches!(request, DecodeError::Crc { .. }) =>
+                    {
+                        response
+                    }
+                    _ => request,
+                })
+            }
         }
     }
 
