@@ -316,7 +316,7 @@ async fn a_silent_address_gives_up_after_every_attempt_with_the_facts() {
     assert_eq!(started.elapsed(), DEFAULT_TIMEOUT * 3);
     assert_eq!(
         err.to_string(),
-        "no valid answer from regulator 5 on test line after 3 attempt(s) of 500ms each (last: no reply)"
+        "no valid answer from regulator 5 on test line after 3 attempts of 500 ms each (last: no reply)"
     );
     assert!(matches!(
         err,
