@@ -34,15 +34,15 @@ pub struct ThermosaldArgs {
     pub endpoint: String,
     /// The regulator's address, 0–7; `$` to assign an address (set-address only, with one
     /// regulator powered); several for watch: 0,1,2.
-    #[arg(long, default_value = "0", value_name = "N")]
+    #[arg(long, default_value = "0", value_name = "N", global = true)]
     pub address: String,
     /// Time to wait for each answer [default: 500ms at 9600 baud, longer on slower lines;
     /// scan: 422ms]. A regulator answers 200 ms after the question.
-    #[arg(long, value_parser = humantime::parse_duration)]
+    #[arg(long, value_parser = humantime::parse_duration, global = true)]
     pub timeout: Option<Duration>,
     /// Retries after no answer, a damaged answer or one of the wrong shape. An echo that
     /// differs from what was sent is retried once, then reported.
-    #[arg(long, default_value_t = DEFAULT_RETRIES)]
+    #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
     /// Print JSON instead of text.
     #[arg(long, global = true)]
@@ -139,7 +139,10 @@ pub async fn run(args: ThermosaldArgs) -> anyhow::Result<ExitCode> {
     }
     let targets = parse_targets(&args.address)?;
     let action = Action::from_args(args.action, &targets)?;
-    let line = SharedLine::new(Line::open(&endpoint).await?);
+    let mut line = Line::open(&endpoint).await?;
+    // Another master (an earlier run) may have had an answer moments ago.
+    client::quiet_after_open(&mut line);
+    let line = SharedLine::new(line);
     let config = |target: Target| ClientConfig {
         timeout: args.timeout,
         retries: args.retries,
@@ -226,7 +229,8 @@ impl Action {
             } => {
                 let item = table(&t)?.lookup(&item).map_err(usage)?;
                 // Refused here, before the line is opened: range, step, read-only.
-                thermosald::Write::value(item, value).map_err(usage)?;
+                thermosald::Write::value(item, value)
+                    .map_err(|e| usage(format!("{e}; nothing was sent")))?;
                 one(One::Write(item, value))?
             }
             ThermosaldAction::ClearFaults => {
@@ -288,11 +292,11 @@ fn device_error(err: ClientError) -> anyhow::Error {
     }
 }
 
-/// `regulator 3`, or `the regulator(s) listening to '$'`.
+/// `regulator 3`, or `every regulator listening to '$'`.
 fn who(target: Target) -> String {
     match target {
         Target::Address(a) => format!("regulator {a}"),
-        Target::Assign => "the regulator(s) listening to '$'".to_owned(),
+        Target::Assign => "every regulator listening to '$'".to_owned(),
     }
 }
 
@@ -406,7 +410,7 @@ async fn request_cmd(
             format!("now answers at address {new} (eeprom-save keeps it after a power cycle)")
         }
         Request::Command(thermosald::Command::ClearFaults) => {
-            "cleared its faults whose cause is gone (run-time item 2 shows what remains)".into()
+            "cleared its faults whose cause is gone; run-time item 2 shows what remains".into()
         }
         Request::Command(thermosald::Command::Balance) => {
             "started automatic balancing: diagnostic 36 shows until it is done".into()
@@ -424,7 +428,11 @@ async fn request_cmd(
         }
         other => format!("echoed {}", other.message()),
     };
-    output::line(format!("{asked} {what} (message {message})"))?;
+    output::line(format!(
+        "{asked} {what} (message {}: {})",
+        message.number(),
+        message.description()
+    ))?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -491,7 +499,7 @@ async fn scan(
             .join(", ");
         output::line(format!(
             "{} of 8 addresses answer{} on {endpoint}; the scan took {:.2} s ({} baud: one \
-             question per address, {:.0} ms for one that answers, {} ms for a silent one)",
+             question per address, {:.0} ms for one that answers, {:.0} ms for a silent one)",
             found.len(),
             if found.is_empty() {
                 String::new()
@@ -501,7 +509,7 @@ async fn scan(
             took.as_secs_f64(),
             timing.baud(),
             timing.poll_cycle(9, 12).as_secs_f64() * 1000.0,
-            waited.as_millis()
+            waited.as_secs_f64() * 1000.0
         ))?;
     }
     Ok(ExitCode::SUCCESS)
@@ -620,11 +628,11 @@ fn number(reading: &Reading) -> serde_json::Value {
     }
 }
 
-/// `{"name":"Set sealing temperature","value":180,"unit":"°C","raw":"180"}`; the
-/// fault/warning number adds `"text"` in words.
+/// `{"name":"Set sealing temperature","value":180,"unit":"°C","raw":"180"}`: the issue's
+/// shape, nothing more (`watch --json` gives the fault number in words).
 fn reading_json(reading: &Reading) -> serde_json::Value {
     let item = reading.item();
-    let mut object = json!({
+    let object = json!({
         "name": item.name(),
         "value": number(reading),
         "unit": match item.unit() {
@@ -633,9 +641,6 @@ fn reading_json(reading: &Reading) -> serde_json::Value {
         },
         "raw": reading.raw().to_string(),
     });
-    if item.table() == Table::Runtime && item.index() == runtime::FAULT {
-        object["text"] = json!(diagnostic::describe(reading.raw().get()));
-    }
     object
 }
 

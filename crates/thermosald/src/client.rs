@@ -54,7 +54,7 @@ use wire::Deframer;
 
 use crate::exchange::{
     Answer, Classified, DEFAULT_REPLY_TIMEOUT, Exchange, ExchangeError, LineActivity, LineTiming,
-    TIMEOUT_MARGIN, Values, earliest_next_send,
+    RELEASE_AFTER_ANSWER, TIMEOUT_MARGIN, Values, earliest_next_send,
 };
 use crate::frame::{Address, Count, DecodeError, Frame, FrameCodec, RawValue, Target};
 use crate::request::{Command, Message, MessageKind, Read, Request, RequestError, Write};
@@ -116,8 +116,10 @@ pub enum ClientError {
     Request(#[from] RequestError),
     /// No valid answer within the attempts.
     #[error(
-        "no valid answer from {} on {endpoint} after {attempts} attempt(s) of {timeout:?} each (last: {last})",
-        regulator(target)
+        "no valid answer from {} on {endpoint} after {} of {} each (last: {last})",
+        regulator(target),
+        attempts_in_words(*attempts),
+        millis(*timeout)
     )]
     NoAnswer {
         /// The line.
@@ -374,6 +376,18 @@ impl Client {
     }
 }
 
+/// How long a line just opened is kept quiet before its first question: the release time
+/// after an answer. Another master (an earlier `cellbus` run, a PLC) may have had an answer
+/// moments ago; a question inside the regulators' window would be ignored and cost a whole
+/// timeout.
+pub const QUIET_AFTER_OPEN: Duration = RELEASE_AFTER_ANSWER;
+
+/// Keeps a line just opened quiet for [`QUIET_AFTER_OPEN`]: we cannot know when the last
+/// exchange on it ended.
+pub fn quiet_after_open(line: &mut Line) {
+    line.keep_quiet_until(Instant::now() + QUIET_AFTER_OPEN);
+}
+
 /// What a scan found at one address.
 #[derive(Debug)]
 pub struct Probe {
@@ -512,6 +526,24 @@ fn judge(
             tracing::debug!(%noise, "skipping noise while waiting for the answer");
             Step::Continue
         }
+    }
+}
+
+/// `1 attempt`, `3 attempts`.
+fn attempts_in_words(attempts: u8) -> String {
+    match attempts {
+        1 => "1 attempt".to_owned(),
+        n => format!("{n} attempts"),
+    }
+}
+
+/// A timeout as a plant engineer reads it: `500 ms`, `422 ms`, `1.5 s`.
+fn millis(duration: Duration) -> String {
+    let ms = duration.as_secs_f64() * 1000.0;
+    if ms < 1000.0 {
+        format!("{ms:.0} ms")
+    } else {
+        format!("{:.1} s", ms / 1000.0)
     }
 }
 

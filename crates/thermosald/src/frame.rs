@@ -136,7 +136,7 @@ impl std::str::FromStr for Address {
 #[non_exhaustive]
 pub enum AddressError {
     /// A number outside the range.
-    #[error("regulator address {value} is outside {min}..={max}")]
+    #[error("regulator address {value} is not one of {min} to {max}")]
     OutOfRange {
         /// The number given.
         value: u32,
@@ -146,7 +146,7 @@ pub enum AddressError {
         max: u8,
     },
     /// Not a number at all.
-    #[error("regulator address {text:?} is not a number 0..=7")]
+    #[error("regulator address {text:?} is not a number from 0 to 7")]
     NotANumber {
         /// The text given.
         text: String,
@@ -549,7 +549,7 @@ pub enum DecodeError {
         max: usize,
     },
     /// `%…LF` shorter than a header.
-    #[error("a {len}-byte message is shorter than the {min}-byte header and LF")]
+    #[error("a message of {len} bytes is shorter than the {min}-byte header and LF")]
     TooShort {
         /// Bytes of the message, dropped.
         len: usize,

@@ -630,7 +630,7 @@ pub enum RequestError {
         index: u8,
     },
     /// Raw digits outside an item's range.
-    #[error("{table} item {item:?}: raw value {raw:03} is outside its range {min:03}..={max:03}")]
+    #[error("{table} item {item:?}: raw value {raw:03} is outside its range, {min:03} to {max:03}")]
     RawOutOfRange {
         /// The table.
         table: Table,

@@ -192,7 +192,7 @@ impl std::str::FromStr for Table {
 #[non_exhaustive]
 pub enum LookupError {
     /// No item at this index.
-    #[error("{table} data has no item {index} (items 0..={})", .len - 1)]
+    #[error("{table} data has no item {index} (its items are 0 to {})", .len - 1)]
     NoIndex {
         /// The table.
         table: Table,
@@ -481,7 +481,12 @@ impl Item {
 #[non_exhaustive]
 pub enum ValueError {
     /// Outside the item's range (which never exceeds three digits).
-    #[error("{table} item {item:?} = {value} {unit} is outside its range {min}..={max} {unit}")]
+    #[error(
+        "{table} item {item:?} = {} is outside its range, {} to {}",
+        Quantity(*value, *unit),
+        Quantity(*min, *unit),
+        Quantity(*max, *unit)
+    )]
     OutOfRange {
         /// The table.
         table: Table,
@@ -497,7 +502,11 @@ pub enum ValueError {
         unit: Unit,
     },
     /// Not a whole number of the item's steps.
-    #[error("{table} item {item:?} = {value} {unit} is not a multiple of its step {step} {unit}")]
+    #[error(
+        "{table} item {item:?} = {} is not a multiple of its step, {}",
+        Quantity(*value, *unit),
+        Quantity(*step, *unit)
+    )]
     NotAStep {
         /// The table.
         table: Table,
@@ -520,6 +529,18 @@ pub enum ValueError {
         /// The value given.
         value: f64,
     },
+}
+
+/// A value with its unit, for messages: `180 °C`, or `12.5` when the item has no unit.
+struct Quantity(f64, Unit);
+
+impl fmt::Display for Quantity {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.1 {
+            Unit::None => write!(f, "{}", self.0),
+            unit => write!(f, "{} {unit}", self.0),
+        }
+    }
 }
 
 /// An item and its raw value: what a read returns, shown as `180 °C` or `12.5`.

@@ -316,7 +316,7 @@ async fn a_silent_address_gives_up_after_every_attempt_with_the_facts() {
     assert_eq!(started.elapsed(), DEFAULT_TIMEOUT * 3);
     assert_eq!(
         err.to_string(),
-        "no valid answer from regulator 5 on test line after 3 attempt(s) of 500ms each (last: no reply)"
+        "no valid answer from regulator 5 on test line after 3 attempts of 500 ms each (last: no reply)"
     );
     assert!(matches!(
         err,
@@ -598,4 +598,41 @@ async fn a_scan_finds_the_regulators_with_one_attempt_per_address() {
         "took {elapsed:?}"
     );
     b.assert_line_discipline();
+}
+
+/// A second line to the same regulators (another master, or the next `cellbus` run), opened
+/// right after the first one's answer.
+fn second_line(b: &Bench) -> Line {
+    let (ours, theirs) = tokio::io::duplex(1024);
+    tokio::spawn(link::serve::serve_stream(theirs, b.twin.line(), None));
+    Line::from_stream(ours, "second line", None)
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_line_just_opened_waits_the_release_time_so_its_first_question_is_heard() {
+    let b = Bench::new(&[0], &[]);
+    let temperature = item(Table::Runtime, runtime::TEMPERATURE);
+    b.client(0).read_item(temperature).await.expect("answered");
+
+    // Without the quiet time, the question falls inside the regulator's 40 ms release and is
+    // ignored: it costs a whole timeout.
+    let hasty = SharedLine::new(second_line(&b));
+    let started = Instant::now();
+    Client::new(hasty, ClientConfig::new(addr(0)))
+        .read_item(temperature)
+        .await
+        .expect("answered on the retry");
+    assert_eq!(started.elapsed(), DEFAULT_TIMEOUT + ms(200));
+
+    let mut line = second_line(&b);
+    thermosald::client::quiet_after_open(&mut line);
+    let started = Instant::now();
+    Client::new(SharedLine::new(line), ClientConfig::new(addr(0)))
+        .read_item(temperature)
+        .await
+        .expect("answered at once");
+    assert_eq!(
+        started.elapsed(),
+        thermosald::client::QUIET_AFTER_OPEN + ms(200)
+    );
 }

@@ -214,7 +214,7 @@ fn values_beyond_three_digits_are_refused_naming_item_range_and_unit() {
     );
     assert_eq!(
         error.to_string(),
-        "settings item \"Set sealing temperature\" = 1200 °C is outside its range 0..=999 °C"
+        "settings item \"Set sealing temperature\" = 1200 °C is outside its range, 0 °C to 999 °C"
     );
     assert!(matches!(
         item.to_raw(-1.0),
