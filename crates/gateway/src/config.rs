@@ -193,6 +193,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
         let endpoint = Endpoint::parse(line.endpoint.get_ref(), protocol.default_serial())
             .map_err(|e| at(line.endpoint.span(), e.to_string()))?;
         let mut devices = Vec::new();
+        let mut addresses = HashSet::new();
         for device in line.device {
             let this = protocol_of(&device.protocol).map_err(|m| at(device.protocol.span(), m))?;
             if this != protocol {
@@ -206,7 +207,18 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 ));
             }
             let id_span = device.id.span();
+            let address_span = device.address.as_ref().map_or(id_span.clone(), Spanned::span);
             let device = check_device(device, protocol, &at)?;
+            if let Some(address) = device.driver.address
+                && !addresses.insert(address)
+            {
+                return Err(at(
+                    address_span,
+                    format!(
+                        "address {address} is used twice on line {name:?}: both devices would answer the same requests"
+                    ),
+                ));
+            }
             if !device_ids.insert(device.driver.id.clone()) {
                 return Err(at(
                     id_span,

@@ -446,6 +446,7 @@ impl JbcDriver {
                 min: f64::from(*r.start()),
                 max: f64::from(*r.end()),
                 integer: true,
+                step: None,
             }),
             alarm,
         }

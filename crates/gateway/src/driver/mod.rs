@@ -6,9 +6,15 @@
 //! and reads no clock. Errors are classified ([`ErrorKind`]) so the metrics can count
 //! timeouts apart from refusals and line trouble.
 //!
-//! Landed: [`jbc`] (JBC JTSE hot-air station). Thermosald, JBUS/CROSS and Panasonic get a
-//! module each when their clients land: implement [`Driver`], add a [`Protocol`] variant
+//! Landed: [`jbc`] (JBC JTSE hot-air station), [`thermosald`] (ISC impulse-sealer
+//! regulators, several on one RS-485 line) and [`cross`] (Chloride CROSS transfer switch
+//! over JBUS). Adding a protocol: a module implementing [`Driver`], a [`Protocol`] variant
 //! and its arms in [`Protocol::parse`], [`Protocol::check_address`] and [`build`].
+//!
+//! State transitions a driver sees between polls (a CROSS transfer) and unsolicited
+//! messages are reported through [`Driver::take_events`]; a point going into or out of
+//! alarm (a regulator fault) needs no code in the driver: its [`crate::point::AlarmRule`]
+//! is enough.
 
 use std::fmt;
 use std::future::Future;
@@ -19,8 +25,11 @@ use link::{SerialSettings, SharedLine};
 use serde::Serialize;
 
 use crate::point::{DeviceId, PointId, PointSpec, Value, ValueError};
+use crate::store::EventKind;
 
+pub mod cross;
 pub mod jbc;
+pub mod thermosald;
 
 /// A boxed future, so drivers of different protocols can sit in one list.
 pub type BoxFuture<'a, T> = Pin<Box<dyn Future<Output = T> + Send + 'a>>;
@@ -48,6 +57,28 @@ pub trait Driver: Send {
         point: &'a PointSpec,
         value: &'a Value,
     ) -> BoxFuture<'a, Result<(), WriteError>>;
+
+    /// Events the device caused since the last call: state transitions the driver saw
+    /// between two polls (a CROSS transfer, a machine going from run to error) and
+    /// unsolicited messages (Panasonic R events). The scheduler drains them after every
+    /// poll and write and records them with the device and line. Most drivers have none:
+    /// points crossing into or out of alarm are recorded by the scheduler itself.
+    fn take_events(&mut self) -> Vec<DeviceEvent> {
+        Vec::new()
+    }
+}
+
+/// Something a device did that is worth an entry in the event log.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DeviceEvent {
+    /// What kind of event ([`EventKind::StateChanged`], [`EventKind::DeviceEvent`], or an
+    /// alarm kind).
+    pub kind: EventKind,
+    /// The point it concerns (its name, without the device), if one.
+    pub point: Option<&'static str>,
+    /// What happened, in words, without the device's name (the scheduler puts it in
+    /// front): `load transferred from source 1 (S1) to source 2 (S2)`.
+    pub message: String,
 }
 
 /// A group of points read together, at one period.
@@ -165,16 +196,22 @@ pub enum WriteError {
 pub enum Protocol {
     /// JBC station–robot protocol (JTSE hot-air station), RS-232.
     Jbc,
+    /// Thermosald ISC/RS485 impulse-sealer regulators, addresses 0–7 on one line.
+    Thermosald,
+    /// Chloride CROSS static transfer switch, JBUS (Modbus RTU) units 1–255.
+    Cross,
 }
 
 impl Protocol {
     /// Names accepted in the config.
-    pub const KNOWN: &'static str = "jbc";
+    pub const KNOWN: &'static str = "jbc, thermosald, cross";
 
     /// The protocol for its config name.
     pub fn parse(name: &str) -> Option<Self> {
         match name {
             "jbc" => Some(Protocol::Jbc),
+            "thermosald" => Some(Protocol::Thermosald),
+            "cross" => Some(Protocol::Cross),
             _ => None,
         }
     }
@@ -183,6 +220,8 @@ impl Protocol {
     pub fn as_str(self) -> &'static str {
         match self {
             Protocol::Jbc => "jbc",
+            Protocol::Thermosald => "thermosald",
+            Protocol::Cross => "cross",
         }
     }
 
@@ -190,6 +229,8 @@ impl Protocol {
     pub fn default_serial(self) -> SerialSettings {
         match self {
             Protocol::Jbc => jbc::DEFAULT_SERIAL,
+            Protocol::Thermosald => thermosald::DEFAULT_SERIAL,
+            Protocol::Cross => cross::DEFAULT_SERIAL,
         }
     }
 
@@ -197,6 +238,8 @@ impl Protocol {
     pub fn default_address(self) -> Option<i64> {
         match self {
             Protocol::Jbc => Some(jbc::DEFAULT_ADDRESS),
+            Protocol::Thermosald => Some(thermosald::DEFAULT_ADDRESS),
+            Protocol::Cross => Some(cross::DEFAULT_UNIT),
         }
     }
 
@@ -204,6 +247,8 @@ impl Protocol {
     pub fn check_address(self, address: Option<i64>) -> Result<(), String> {
         match self {
             Protocol::Jbc => jbc::check_address(address),
+            Protocol::Thermosald => thermosald::check_address(address),
+            Protocol::Cross => cross::check_address(address),
         }
     }
 }
@@ -227,5 +272,7 @@ pub struct DriverConfig {
 pub fn build(config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
     match config.protocol {
         Protocol::Jbc => Ok(Box::new(jbc::JbcDriver::new(config)?)),
+        Protocol::Thermosald => Ok(Box::new(thermosald::ThermosaldDriver::new(config)?)),
+        Protocol::Cross => Ok(Box::new(cross::CrossDriver::new(config)?)),
     }
 }
