@@ -11,7 +11,8 @@
 //! id = "jbc1"                           # unique in the cell; used in URLs and point ids
 //! name = "Rework station 1"             # words for people (default: the id)
 //! protocol = "jbc"
-//! address = 1                           # JBC: 0-99, or "none" for the form without addresses
+//! address = 1                           # JBC: 0-99, or "none" for the form without addresses;
+//!                                       # thermosald: 0-7; cross: JBUS unit 1-255
 //! timeout = "500ms"                     # per reply (protocol default if left out)
 //! retries = 2                           # after a failed attempt (protocol default)
 //! period = "2s"                         # for every poll group not listed in [poll]
@@ -207,7 +208,10 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 ));
             }
             let id_span = device.id.span();
-            let address_span = device.address.as_ref().map_or(id_span.clone(), Spanned::span);
+            let address_span = device
+                .address
+                .as_ref()
+                .map_or(id_span.clone(), Spanned::span);
             let device = check_device(device, protocol, &at)?;
             if let Some(address) = device.driver.address
                 && !addresses.insert(address)
@@ -251,7 +255,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
 fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
     Protocol::parse(text.get_ref()).ok_or_else(|| {
         format!(
-            "protocol {:?} is not one the gateway speaks yet; known: {}",
+            "protocol {:?} is not one the gateway speaks; known: {}",
             text.get_ref(),
             Protocol::KNOWN
         )
@@ -559,7 +563,12 @@ protocol = "jbc"
 
     #[test]
     fn semantic_errors_point_at_the_offending_value() {
-        refused(&ONE.replace("\"jbc\"", "\"modbus\""), 8, 12, "known: jbc");
+        refused(
+            &ONE.replace("\"jbc\"", "\"profibus\""),
+            8,
+            12,
+            "known: jbc, thermosald, cross",
+        );
         refused(
             &ONE.replace("serial:///dev/ttyUSB0", "serial:///dev/ttyUSB0?baud=fast"),
             4,
@@ -623,6 +632,93 @@ protocol = "jbc"
             2,
             9,
             "token is empty",
+        );
+    }
+
+    const SEALERS: &str = r#"
+[[line]]
+name = "sealers"
+endpoint = "tcp://192.0.2.1:4001"
+
+[[line.device]]
+id = "sealer0"
+protocol = "thermosald"
+address = 0
+"#;
+
+    #[test]
+    fn thermosald_and_cross_devices_take_their_protocols_defaults() {
+        let config = parse(&format!(
+            "{SEALERS}\n[[line.device]]\nid = \"sealer7\"\nprotocol = \"thermosald\"\naddress = 7\n\n[[line]]\nname = \"mains\"\nendpoint = \"serial:///dev/ttyUSB1\"\n[[line.device]]\nid = \"cross1\"\nprotocol = \"cross\"\npoll = {{ ratings = \"10m\" }}\n"
+        ))
+        .unwrap();
+        let sealers = &config.lines[0];
+        assert_eq!(sealers.endpoint.line_settings(), None, "TCP without ?baud=");
+        assert_eq!(sealers.devices.len(), 2);
+        assert_eq!(sealers.devices[1].driver.address, Some(7));
+        let mains = &config.lines[1];
+        assert_eq!(
+            mains.endpoint.line_settings(),
+            Some(link::SerialSettings::new_8n1(9600)),
+            "JBUS's 9600 8N1 when the URL says nothing"
+        );
+        assert_eq!(mains.devices[0].driver.protocol, Protocol::Cross);
+        assert_eq!(
+            mains.devices[0].driver.address,
+            Some(1),
+            "unit 1 by default"
+        );
+        assert_eq!(mains.devices[0].groups["ratings"], Duration::from_secs(600));
+    }
+
+    #[test]
+    fn thermosald_and_cross_mistakes_are_refused_where_they_are() {
+        refused(
+            &SEALERS.replace("address = 0", "address = 8"),
+            9,
+            11,
+            "address 8 is out of range: 0 to 7",
+        );
+        refused(
+            &SEALERS.replace("address = 0", "address = \"none\""),
+            9,
+            11,
+            "needs its address",
+        );
+        refused(
+            &format!(
+                "{SEALERS}\n[[line.device]]\nid = \"sealer9\"\nprotocol = \"thermosald\"\naddress = 0\n"
+            ),
+            14,
+            11,
+            "address 0 is used twice on line \"sealers\"",
+        );
+        refused(
+            &format!("{SEALERS}\n[[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n"),
+            13,
+            12,
+            "a jbc device needs a line of its own",
+        );
+        refused(
+            &format!("{SEALERS}poll = {{ fast = \"1s\" }}\n"),
+            10,
+            17,
+            "groups: live, settings, machine, service",
+        );
+        let cross = SEALERS
+            .replace("thermosald", "cross")
+            .replace("sealer0", "cross1");
+        refused(
+            &cross,
+            9,
+            11,
+            "JBUS unit number 0 is out of range: 1 to 255",
+        );
+        refused(
+            &cross.replace("address = 0", "address = 300"),
+            9,
+            11,
+            "1 to 255",
         );
     }
 

@@ -571,7 +571,10 @@ mod tests {
         );
         let err = spec.check_write(&Value::Number(12.34)).unwrap_err();
         assert!(matches!(err, ValueError::NotAStep { step, .. } if step == 0.1));
-        assert!(err.to_string().contains("not a multiple of 0.1 °C"), "{err}");
+        assert!(
+            err.to_string().contains("not a multiple of 0.1 °C"),
+            "{err}"
+        );
     }
 
     #[test]

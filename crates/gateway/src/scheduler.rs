@@ -32,9 +32,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 use crate::cell::{Cell, DeviceEntry, DeviceStatus, LineEntry, LiveMessage, WriteRequest};
-use crate::driver::{
-    BoxFuture, DeviceError, DeviceEvent, Driver, ErrorKind, Reading, WriteError,
-};
+use crate::driver::{BoxFuture, DeviceError, DeviceEvent, Driver, ErrorKind, Reading, WriteError};
 use crate::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
 use crate::point::{Quality, Value};
 use crate::store::{Event, EventKind, Sample};
@@ -771,3 +769,6 @@ fn with_unit(value: &Value, unit: Option<&str>) -> String {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod protocol_tests;

@@ -157,14 +157,30 @@ const POINTS: &[Def] = &[
         "System alarms",
         Show::Alarms(Condition::System),
     ),
-    measure("s1_voltage_u", "S1 voltage U", V, |m| m.s1_voltage.u.value()),
-    measure("s1_voltage_v", "S1 voltage V", V, |m| m.s1_voltage.v.value()),
-    measure("s1_voltage_w", "S1 voltage W", V, |m| m.s1_voltage.w.value()),
-    measure("s1_frequency", "S1 frequency", HZ, |m| m.s1_frequency.value()),
-    measure("s2_voltage_u", "S2 voltage U", V, |m| m.s2_voltage.u.value()),
-    measure("s2_voltage_v", "S2 voltage V", V, |m| m.s2_voltage.v.value()),
-    measure("s2_voltage_w", "S2 voltage W", V, |m| m.s2_voltage.w.value()),
-    measure("s2_frequency", "S2 frequency", HZ, |m| m.s2_frequency.value()),
+    measure("s1_voltage_u", "S1 voltage U", V, |m| {
+        m.s1_voltage.u.value()
+    }),
+    measure("s1_voltage_v", "S1 voltage V", V, |m| {
+        m.s1_voltage.v.value()
+    }),
+    measure("s1_voltage_w", "S1 voltage W", V, |m| {
+        m.s1_voltage.w.value()
+    }),
+    measure("s1_frequency", "S1 frequency", HZ, |m| {
+        m.s1_frequency.value()
+    }),
+    measure("s2_voltage_u", "S2 voltage U", V, |m| {
+        m.s2_voltage.u.value()
+    }),
+    measure("s2_voltage_v", "S2 voltage V", V, |m| {
+        m.s2_voltage.v.value()
+    }),
+    measure("s2_voltage_w", "S2 voltage W", V, |m| {
+        m.s2_voltage.w.value()
+    }),
+    measure("s2_frequency", "S2 frequency", HZ, |m| {
+        m.s2_frequency.value()
+    }),
     measure("output_voltage_u", "Output voltage U", V, |m| {
         m.output_voltage.u.value()
     }),
@@ -193,9 +209,12 @@ const POINTS: &[Def] = &[
         m.output_frequency.value()
     }),
     measure("load_power", "Load power", "kVA", |m| m.load_power.value()),
-    measure("phase_error", "Phase error between the sources", "°", |m| {
-        m.phase_error.value()
-    }),
+    measure(
+        "phase_error",
+        "Phase error between the sources",
+        "°",
+        |m| m.phase_error.value(),
+    ),
     measure("inlet_air", "Inlet air temperature", "°C", |m| {
         m.inlet_air.value()
     }),
@@ -330,7 +349,10 @@ impl CrossDriver {
 
     /// Reads one area; `Ok(Err)` when the unit refused it (an exception), which marks only
     /// that area's points.
-    async fn read_area(&mut self, area: Area) -> Result<Result<Vec<u16>, DeviceError>, DeviceError> {
+    async fn read_area(
+        &mut self,
+        area: Area,
+    ) -> Result<Result<Vec<u16>, DeviceError>, DeviceError> {
         let client = self.client.as_mut().ok_or_else(not_attached)?;
         match client
             .read_holding_registers(self.unit, area.start(), area.words())
@@ -520,10 +542,7 @@ fn words<const N: usize>(words: &[u16], area: Area) -> Result<[u16; N], DeviceEr
     words.try_into().map_err(|_| {
         DeviceError::new(
             ErrorKind::Decode,
-            format_args!(
-                "the {area} area came with {} words, not {N}",
-                words.len()
-            ),
+            format_args!("the {area} area came with {} words, not {N}", words.len()),
         )
     })
 }
@@ -624,7 +643,10 @@ mod tests {
     async fn a_healthy_switch_feeds_the_load_from_source_1_with_measures_in_their_units() {
         let (mut driver, _twin) = rig(1);
         let live = driver.poll(LIVE).await.unwrap();
-        assert_eq!(live.len(), POINTS.iter().filter(|d| d.group() == LIVE).count());
+        assert_eq!(
+            live.len(),
+            POINTS.iter().filter(|d| d.group() == LIVE).count()
+        );
         assert_eq!(value(&live, "load_feed"), Ok(Value::Number(1.0)));
         assert_eq!(value(&live, "s1_alarms"), Ok(Value::Text("none".into())));
         let v = number(&live, "s1_voltage_u");
@@ -670,7 +692,9 @@ mod tests {
         assert_eq!(value(&live, "s1_alarms"), Ok(Value::Text("none".into())));
         let back = driver.take_events();
         assert!(
-            back[0].message.contains("from source 2 (S2) to source 1 (S1)"),
+            back[0]
+                .message
+                .contains("from source 2 (S2) to source 1 (S1)"),
             "{back:?}"
         );
     }

@@ -515,7 +515,8 @@ mod tests {
         let drivers = addresses
             .iter()
             .map(|&n| {
-                let mut d = ThermosaldDriver::new(&config(&format!("sealer{n}"), n.into())).unwrap();
+                let mut d =
+                    ThermosaldDriver::new(&config(&format!("sealer{n}"), n.into())).unwrap();
                 d.attach(line.clone());
                 d
             })
@@ -567,7 +568,11 @@ mod tests {
         assert!(check_address(Some(0)).is_ok());
         assert!(check_address(Some(7)).is_ok());
         assert!(check_address(Some(8)).unwrap_err().contains("0 to 7"));
-        assert!(check_address(None).unwrap_err().contains("needs its address"));
+        assert!(
+            check_address(None)
+                .unwrap_err()
+                .contains("needs its address")
+        );
         assert!(ThermosaldDriver::new(&config("sealer9", 9)).is_err());
     }
 
@@ -599,10 +604,7 @@ mod tests {
         let live = drivers[1].poll(LIVE).await.unwrap();
         assert_eq!(value(&live, "fault"), Ok(Value::Number(1.0)));
         let fault = spec(&drivers[1], "fault");
-        assert_eq!(
-            fault.label(&Value::Number(1.0)),
-            Some("sealing band open")
-        );
+        assert_eq!(fault.label(&Value::Number(1.0)), Some("sealing band open"));
         assert!(fault.is_alarm(&Value::Number(1.0)));
         let other = drivers[0].poll(LIVE).await.unwrap();
         assert_eq!(value(&other, "fault"), Ok(Value::Number(0.0)));
@@ -630,35 +632,46 @@ mod tests {
         let (mut drivers, model) = rig(&[0]);
         let driver = &mut drivers[0];
         driver.poll(SETTINGS).await.unwrap();
-        let before = model.lock().regulators_mut()[0].table(
-            Table::Settings,
-            tokio::time::Instant::now().into_std(),
-        );
+        let before = model.lock().regulators_mut()[0]
+            .table(Table::Settings, tokio::time::Instant::now().into_std());
         let sealing = spec(driver, "sealing_temperature");
         let err = driver
             .write(&sealing, &Value::Number(1000.0))
             .await
             .unwrap_err();
-        assert!(matches!(err, WriteError::Invalid(ValueError::OutOfRange { .. })), "{err}");
+        assert!(
+            matches!(err, WriteError::Invalid(ValueError::OutOfRange { .. })),
+            "{err}"
+        );
         let max = driver.max_working.expect("read with the settings");
         let err = driver
             .write(&sealing, &Value::Number(max + 1.0))
             .await
             .unwrap_err();
-        assert!(err.to_string().contains("maximum working temperature"), "{err}");
+        assert!(
+            err.to_string().contains("maximum working temperature"),
+            "{err}"
+        );
         let kint = spec(driver, "kint_gain");
         let err = driver
             .write(&kint, &Value::Number(12.55))
             .await
             .unwrap_err();
-        assert!(matches!(err, WriteError::Invalid(ValueError::NotAStep { .. })), "{err}");
-        let address = spec(driver, "address");
-        let err = driver.write(&address, &Value::Number(3.0)).await.unwrap_err();
-        assert!(matches!(err, WriteError::Invalid(ValueError::ReadOnly { .. })), "{err}");
-        let after = model.lock().regulators_mut()[0].table(
-            Table::Settings,
-            tokio::time::Instant::now().into_std(),
+        assert!(
+            matches!(err, WriteError::Invalid(ValueError::NotAStep { .. })),
+            "{err}"
         );
+        let address = spec(driver, "address");
+        let err = driver
+            .write(&address, &Value::Number(3.0))
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(err, WriteError::Invalid(ValueError::ReadOnly { .. })),
+            "{err}"
+        );
+        let after = model.lock().regulators_mut()[0]
+            .table(Table::Settings, tokio::time::Instant::now().into_std());
         assert_eq!(before, after, "nothing was written");
     }
 
@@ -668,7 +681,11 @@ mod tests {
         let (a, b) = tokio::io::duplex(1024);
         tokio::spawn(link::serve::serve_stream(b, model.line(), None));
         let mut driver = ThermosaldDriver::new(&config("sealer5", 5)).unwrap();
-        driver.attach(SharedLine::new(link::Line::from_stream(a, "rs485", Some(DEFAULT_SERIAL))));
+        driver.attach(SharedLine::new(link::Line::from_stream(
+            a,
+            "rs485",
+            Some(DEFAULT_SERIAL),
+        )));
         let err = driver.poll(LIVE).await.unwrap_err();
         assert_eq!(err.kind, ErrorKind::Timeout, "{err}");
         assert!(err.message.contains('5'), "{err}");
