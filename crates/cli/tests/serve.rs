@@ -14,7 +14,7 @@ fn serve_without_arguments_runs_the_demo_cell_and_answers_http() {
     // event stream as they change (a blocking read, bounded by the socket's read timeout).
     let event = gateway.first_event("value");
     assert!(
-        ["jbc1.", "sealer", "cross1."]
+        ["jbc1.", "sealer", "cross1.", "placer1."]
             .iter()
             .any(|device| event.contains(device)),
         "{event}"

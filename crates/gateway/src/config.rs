@@ -17,6 +17,7 @@
 //! retries = 2                           # after a failed attempt (protocol default)
 //! period = "2s"                         # for every poll group not listed in [poll]
 //! poll = { live = "1s", info = "5m" }   # per poll group
+//! event_port = 49153                    # panasonic only: Port 2 (the endpoint names Port 1)
 //! ```
 //!
 //! Every table refuses fields it does not know. A file that does not parse or does not make
@@ -193,6 +194,16 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
         let protocol = protocol_of(&first.protocol).map_err(|m| at(first.protocol.span(), m))?;
         let endpoint = Endpoint::parse(line.endpoint.get_ref(), protocol.default_serial())
             .map_err(|e| at(line.endpoint.span(), e.to_string()))?;
+        if protocol.owns_connections() && !matches!(endpoint, Endpoint::Tcp { .. }) {
+            return Err(at(
+                line.endpoint.span(),
+                format!(
+                    "a {} machine is reached over TCP: write tcp://host:{} (its Port 1)",
+                    protocol.as_str(),
+                    panasonic::DEFAULT_COMMAND_PORT
+                ),
+            ));
+        }
         let mut devices = Vec::new();
         let mut addresses = HashSet::new();
         for device in line.device {
@@ -212,7 +223,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 .address
                 .as_ref()
                 .map_or(id_span.clone(), Spanned::span);
-            let device = check_device(device, protocol, &at)?;
+            let device = check_device(device, protocol, &endpoint, &at)?;
             if let Some(address) = device.driver.address
                 && !addresses.insert(address)
             {
@@ -230,6 +241,19 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 ));
             }
             devices.push(device);
+        }
+        if protocol.owns_connections()
+            && let Some(second) = devices.get(1)
+        {
+            return Err(at(
+                line.name.span(),
+                format!(
+                    "line {name:?} has {} {} machines: each machine is its own TCP server and needs a [[line]] of its own (device {:?})",
+                    devices.len(),
+                    protocol.as_str(),
+                    second.driver.id.as_str()
+                ),
+            ));
         }
         lines.push(LineConfig {
             name: name.clone(),
@@ -265,6 +289,7 @@ fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
 fn check_device(
     raw: RawDevice,
     protocol: Protocol,
+    endpoint: &Endpoint,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<DeviceConfig, ConfigError> {
     let id = DeviceId::new(raw.id.get_ref()).map_err(|e| {
@@ -314,12 +339,41 @@ fn check_device(
         .as_ref()
         .map(|p| duration(p, MIN_PERIOD, MAX_PERIOD, "period", at))
         .transpose()?;
+    let event_port = match &raw.event_port {
+        None => None,
+        Some(port) if protocol != Protocol::Panasonic => {
+            return Err(at(
+                port.span(),
+                format!(
+                    "event_port is for Panasonic machines only, not {} devices",
+                    protocol.as_str()
+                ),
+            ));
+        }
+        Some(port) => Some(
+            u16::try_from(*port.get_ref())
+                .ok()
+                .filter(|&p| p != 0)
+                .ok_or_else(|| {
+                    at(
+                        port.span(),
+                        format!(
+                            "event_port {} is out of range: 1 to 65535 (the machine's default is {})",
+                            port.get_ref(),
+                            panasonic::DEFAULT_EVENT_PORT
+                        ),
+                    )
+                })?,
+        ),
+    };
     let driver_config = DriverConfig {
         id: id.clone(),
         protocol,
         address,
         timeout,
         retries,
+        event_port,
+        endpoint: protocol.owns_connections().then(|| endpoint.clone()),
     };
     let known: Vec<String> = driver::build(&driver_config)
         .map_err(|m| at(raw.id.span(), m))?
@@ -441,6 +495,7 @@ struct RawDevice {
     period: Option<Spanned<String>>,
     #[serde(default)]
     poll: BTreeMap<String, Spanned<String>>,
+    event_port: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -1,6 +1,6 @@
 //! The demo cell `cellbus serve` starts without a configuration.
 //!
-//! Each simulated device runs in this process behind its own TCP listener on 127.0.0.1
+//! Each simulated device runs in this process behind its own TCP listener(s) on 127.0.0.1
 //! (an ephemeral port; nothing else is opened to the network), served by
 //! [`link::serve::serve_tcp`] at the speed of its real serial line. The gateway polls it
 //! through the same `tcp://` endpoint, `link` line and protocol client a real device behind
@@ -17,7 +17,10 @@
 //!   three minutes regulator 2's supply sags and it latches a fault until it is switched
 //!   off and on;
 //! - one CROSS transfer switch ([`start_cross`]): every two minutes source 1 fails (an
-//!   outage, then an undervoltage) for 40 s, so the load transfers to source 2 and back.
+//!   outage, then an undervoltage) for 40 s, so the load transfers to source 2 and back;
+//! - one Panasonic placement machine ([`start_panasonic`]), its twin on two loopback TCP
+//!   ports: the operator starts a run, a feeder runs out of parts (error stop, R2E03),
+//!   is refilled and the machine reset to ready, every 75 s; boards and R messages flow.
 //!
 //! Adding a device is one `start_*` function and one line in [`DemoCell::start`].
 
@@ -30,6 +33,9 @@ use jbc::device::{Station, StationConfig};
 use jbus::cross::Source;
 use jbus::cross::device::{CrossTwin, SourceFault};
 use link::{Endpoint, Line, SerialSettings, SharedLine};
+use panasonic::server::{Control, RunningTwin, TwinServer};
+use panasonic::status::StopMode;
+use panasonic::{Machine, MachineConfig};
 use thermosald::Address;
 use thermosald::device::{Line as RegulatorLine, Regulator, RegulatorConfig};
 use thermosald::diagnostic::Fault;
@@ -54,6 +60,8 @@ pub struct DemoCell {
     pub regulators: Vec<SharedModel<RegulatorLine>>,
     /// The CROSS twins.
     pub crosses: Vec<SharedModel<CrossTwin>>,
+    /// The Panasonic machines, served on their two ports (their `control()` is the panel).
+    pub machines: Vec<RunningTwin>,
     tasks: Vec<JoinHandle<()>>,
 }
 
@@ -69,11 +77,13 @@ impl DemoCell {
             stations: Vec::new(),
             regulators: Vec::new(),
             crosses: Vec::new(),
+            machines: Vec::new(),
             tasks: Vec::new(),
         };
         start_jbc_station(&mut demo, "jbc1", "Rework station (JBC JTSE)").await?;
         start_thermosald_line(&mut demo, "sealers-rs485").await?;
         start_cross(&mut demo, "cross1", "Transfer switch (Chloride CROSS)").await?;
+        start_panasonic(&mut demo, "placer1", "Placement machine (Panasonic BM)").await?;
         Ok(demo)
     }
 }
@@ -125,6 +135,8 @@ fn device(id: DeviceId, protocol: Protocol, address: i64, name: &str) -> DeviceC
             address: Some(address),
             timeout: None,
             retries: None,
+            event_port: None,
+            endpoint: None,
         },
         name: name.to_owned(),
         period: None,
@@ -236,6 +248,62 @@ pub async fn start_cross(demo: &mut DemoCell, id: &str, name: &str) -> std::io::
         devices: vec![device(id, Protocol::Cross, 1, name)],
     });
     Ok(())
+}
+
+/// A Panasonic placement machine: its twin served on two ephemeral loopback ports (Port 1
+/// commands, Port 2 R messages) by `panasonic::server`, with an operator at its panel who
+/// starts a production run, lets a feeder run out of parts (an error stop), refills it and
+/// presses RESET, over and over.
+pub async fn start_panasonic(demo: &mut DemoCell, id: &str, name: &str) -> std::io::Result<()> {
+    let machine =
+        Machine::new(MachineConfig::default()).map_err(|e| std::io::Error::other(e.to_string()))?;
+    let any = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
+    let twin = TwinServer::bind(any, any, machine).await?.spawn()?;
+    let (command, event) = (twin.command_addr(), twin.event_addr());
+    demo.tasks
+        .push(tokio::spawn(operate_panasonic(twin.control().clone())));
+    demo.machines.push(twin);
+    let endpoint = Endpoint::Tcp {
+        host: command.ip().to_string(),
+        port: command.port(),
+        line: None,
+    };
+    let id = device_id(id)?;
+    let mut device = device(id.clone(), Protocol::Panasonic, 0, name);
+    device.driver.address = None;
+    device.driver.event_port = Some(event.port());
+    device.driver.endpoint = Some(endpoint.clone());
+    demo.config.lines.push(LineConfig {
+        name: format!("{id}-lan"),
+        endpoint,
+        devices: vec![device],
+    });
+    Ok(())
+}
+
+/// The feeder the demo operator lets run out.
+const EMPTY_FEEDER: u16 = 7;
+
+/// The placement operator's routine, forever: about 50 s running, 15 s in error, 10 s ready.
+async fn operate_panasonic(control: Control) {
+    loop {
+        tokio::time::sleep(Duration::from_secs(10)).await;
+        if let Err(e) = control.operator_start(Some(StopMode::Continuous)) {
+            tracing::warn!("demo placement operator cannot start: {e}");
+        }
+        tokio::time::sleep(Duration::from_secs(50)).await;
+        if let Err(e) = control.pause_feeder(EMPTY_FEEDER) {
+            tracing::warn!("demo placement operator: {e}");
+        }
+        tokio::time::sleep(Duration::from_secs(15)).await;
+        let refilled = control
+            .resume_feeder(EMPTY_FEEDER)
+            .and_then(|()| control.refill_feeder(EMPTY_FEEDER));
+        if let Err(e) = refilled {
+            tracing::warn!("demo placement operator: {e}");
+        }
+        control.clear();
+    }
 }
 
 /// The mains trouble the CROSS rides through, forever.

@@ -56,7 +56,7 @@ fn point<'a>(devices: &'a serde_json::Value, id: &str) -> &'a serde_json::Value 
 }
 
 /// The devices of the demo cell.
-const DEMO: [&str; 5] = ["cross1", "jbc1", "sealer0", "sealer1", "sealer2"];
+const DEMO: [&str; 6] = ["cross1", "jbc1", "placer1", "sealer0", "sealer1", "sealer2"];
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
@@ -128,7 +128,7 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     }
     let (status, lines) = get(addr, "/api/lines").await;
     assert_eq!(status, "HTTP/1.1 200 OK");
-    assert_eq!(lines["lines"].as_array().unwrap().len(), 3);
+    assert_eq!(lines["lines"].as_array().unwrap().len(), 4);
     assert!(
         lines["lines"]
             .as_array()

@@ -583,6 +583,8 @@ mod tests {
             address: Some(unit),
             timeout: Some(Duration::from_millis(200)),
             retries: Some(1),
+            event_port: None,
+            endpoint: None,
         }
     }
 

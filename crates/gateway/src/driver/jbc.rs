@@ -626,6 +626,8 @@ mod tests {
             address,
             timeout: Some(Duration::from_millis(200)),
             retries: Some(1),
+            event_port: None,
+            endpoint: None,
         }
     }
 

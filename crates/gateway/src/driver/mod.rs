@@ -29,6 +29,7 @@ use crate::store::EventKind;
 
 pub mod cross;
 pub mod jbc;
+pub mod panasonic;
 pub mod thermosald;
 
 /// A boxed future, so drivers of different protocols can sit in one list.
@@ -200,11 +201,13 @@ pub enum Protocol {
     Thermosald,
     /// Chloride CROSS static transfer switch, JBUS (Modbus RTU) units 1–255.
     Cross,
+    /// Panasonic placement machine, PanaProtocol LAN (TCP, two ports, R events).
+    Panasonic,
 }
 
 impl Protocol {
     /// Names accepted in the config.
-    pub const KNOWN: &'static str = "jbc, thermosald, cross";
+    pub const KNOWN: &'static str = "jbc, thermosald, cross, panasonic";
 
     /// The protocol for its config name.
     pub fn parse(name: &str) -> Option<Self> {
@@ -212,6 +215,7 @@ impl Protocol {
             "jbc" => Some(Protocol::Jbc),
             "thermosald" => Some(Protocol::Thermosald),
             "cross" => Some(Protocol::Cross),
+            "panasonic" => Some(Protocol::Panasonic),
             _ => None,
         }
     }
@@ -222,6 +226,7 @@ impl Protocol {
             Protocol::Jbc => "jbc",
             Protocol::Thermosald => "thermosald",
             Protocol::Cross => "cross",
+            Protocol::Panasonic => "panasonic",
         }
     }
 
@@ -231,6 +236,8 @@ impl Protocol {
             Protocol::Jbc => jbc::DEFAULT_SERIAL,
             Protocol::Thermosald => thermosald::DEFAULT_SERIAL,
             Protocol::Cross => cross::DEFAULT_SERIAL,
+            // Never used: a Panasonic line must be a tcp:// endpoint.
+            Protocol::Panasonic => cross::DEFAULT_SERIAL,
         }
     }
 
@@ -240,7 +247,15 @@ impl Protocol {
             Protocol::Jbc => Some(jbc::DEFAULT_ADDRESS),
             Protocol::Thermosald => Some(thermosald::DEFAULT_ADDRESS),
             Protocol::Cross => Some(cross::DEFAULT_UNIT),
+            Protocol::Panasonic => None,
         }
+    }
+
+    /// Whether the protocol's client keeps its own connections (Panasonic: two TCP ports,
+    /// reconnection and keep-alive in the client), so the line task opens nothing for the
+    /// line and only schedules the polls.
+    pub fn owns_connections(self) -> bool {
+        matches!(self, Protocol::Panasonic)
     }
 
     /// Checks a device address; `Err` says what the protocol accepts.
@@ -249,6 +264,7 @@ impl Protocol {
             Protocol::Jbc => jbc::check_address(address),
             Protocol::Thermosald => thermosald::check_address(address),
             Protocol::Cross => cross::check_address(address),
+            Protocol::Panasonic => panasonic::check_address(address),
         }
     }
 }
@@ -266,6 +282,12 @@ pub struct DriverConfig {
     pub timeout: Option<Duration>,
     /// Retries after a failed attempt, if not the protocol's default.
     pub retries: Option<u8>,
+    /// Panasonic: the machine's Port 2 (R messages), if not the default 49153. The line's
+    /// endpoint names Port 1.
+    pub event_port: Option<u16>,
+    /// The line's endpoint, for drivers whose client keeps its own connections
+    /// ([`Protocol::owns_connections`]).
+    pub endpoint: Option<link::Endpoint>,
 }
 
 /// The driver for a device.
@@ -274,5 +296,6 @@ pub fn build(config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
         Protocol::Jbc => Ok(Box::new(jbc::JbcDriver::new(config)?)),
         Protocol::Thermosald => Ok(Box::new(thermosald::ThermosaldDriver::new(config)?)),
         Protocol::Cross => Ok(Box::new(cross::CrossDriver::new(config)?)),
+        Protocol::Panasonic => Ok(Box::new(panasonic::PanasonicDriver::new(config)?)),
     }
 }

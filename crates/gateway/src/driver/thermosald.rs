@@ -497,6 +497,8 @@ mod tests {
             address: Some(address),
             timeout: None,
             retries: Some(1),
+            event_port: None,
+            endpoint: None,
         }
     }
 

@@ -41,6 +41,8 @@ fn device(id: &str, protocol: Protocol, address: i64) -> DeviceConfig {
             address: Some(address),
             timeout: None,
             retries: None,
+            event_port: None,
+            endpoint: None,
         },
         name: format!("Device {id}"),
         period: None,
