@@ -622,7 +622,7 @@ protocol = "jbc"
             &ONE.replace("\"jbc\"", "\"profibus\""),
             8,
             12,
-            "known: jbc, thermosald, cross",
+            "known: jbc, thermosald, cross, panasonic",
         );
         refused(
             &ONE.replace("serial:///dev/ttyUSB0", "serial:///dev/ttyUSB0?baud=fast"),
@@ -774,6 +774,56 @@ address = 0
             9,
             11,
             "1 to 255",
+        );
+    }
+
+    const PLACER: &str = r#"
+[[line]]
+name = "placement"
+endpoint = "tcp://192.0.2.50:49152"
+
+[[line.device]]
+id = "placer1"
+protocol = "panasonic"
+"#;
+
+    #[test]
+    fn a_panasonic_machine_takes_its_ports_from_the_endpoint_and_event_port() {
+        let config = parse(PLACER).unwrap();
+        let driver = &config.lines[0].devices[0].driver;
+        assert_eq!(driver.address, None);
+        assert_eq!(driver.event_port, None, "49153 by default");
+        assert_eq!(driver.endpoint, Some(config.lines[0].endpoint.clone()));
+        let config = parse(&format!("{PLACER}event_port = 50000\n")).unwrap();
+        assert_eq!(config.lines[0].devices[0].driver.event_port, Some(50000));
+    }
+
+    #[test]
+    fn panasonic_mistakes_are_refused_where_they_are() {
+        refused(
+            &PLACER.replace("tcp://192.0.2.50:49152", "serial:///dev/ttyS0"),
+            4,
+            12,
+            "is reached over TCP: write tcp://host:49152",
+        );
+        refused(&format!("{PLACER}address = 3\n"), 9, 11, "has no address");
+        refused(
+            &format!("{PLACER}event_port = 70000\n"),
+            9,
+            14,
+            "event_port 70000 is out of range: 1 to 65535",
+        );
+        refused(
+            &format!("{ONE}event_port = 49153\n"),
+            9,
+            14,
+            "event_port is for Panasonic machines only",
+        );
+        refused(
+            &format!("{PLACER}\n[[line.device]]\nid = \"placer2\"\nprotocol = \"panasonic\"\n"),
+            3,
+            8,
+            "each machine is its own TCP server and needs a [[line]] of its own",
         );
     }
 

@@ -299,3 +299,115 @@ async fn writes_outside_the_range_or_the_regulators_limit_are_refused_before_the
         Some(Value::Number(max - 10.0))
     );
 }
+
+/// A Panasonic twin on its two loopback ports, polled by a line task that opens nothing
+/// itself; returns the cell and the running twin.
+async fn panasonic_rig() -> (
+    Arc<Cell>,
+    tokio::sync::broadcast::Receiver<crate::cell::LiveMessage>,
+    panasonic::server::RunningTwin,
+    watch::Sender<bool>,
+    Store,
+    tempfile::TempDir,
+) {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let any: std::net::SocketAddr = "127.0.0.1:0".parse().unwrap();
+    let machine = panasonic::Machine::new(panasonic::MachineConfig::default()).unwrap();
+    let twin = panasonic::server::TwinServer::bind(any, any, machine)
+        .await
+        .unwrap()
+        .spawn()
+        .unwrap();
+    let text = format!(
+        "[[line]]\nname = \"placement\"\nendpoint = \"tcp://127.0.0.1:{}\"\n[[line.device]]\nid = \"placer1\"\nname = \"Placer\"\nprotocol = \"panasonic\"\nevent_port = {}\n",
+        twin.command_addr().port(),
+        twin.event_addr().port()
+    );
+    let config = crate::config::parse_config(&text, std::path::Path::new("cell.toml")).unwrap();
+    let (cell, tasks) = Cell::new(&config, store.handle(), Arc::new(Metrics::new())).unwrap();
+    let live = cell.subscribe();
+    let (shutdown, stop) = watch::channel(false);
+    for task in tasks {
+        tokio::spawn(task.run(stop.clone()));
+    }
+    (cell, live, twin, shutdown, store, dir)
+}
+
+/// Waits (generously, on the live stream: no sleeps) for an event `matches` accepts.
+async fn wait_for_event(
+    live: &mut tokio::sync::broadcast::Receiver<crate::cell::LiveMessage>,
+    matches: impl Fn(&crate::store::Event) -> bool,
+) -> crate::store::Event {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let message = tokio::time::timeout_at(deadline, live.recv())
+            .await
+            .expect("the event within 30 s")
+            .expect("the cell runs");
+        if let crate::cell::LiveMessage::Event(event) = message
+            && matches(&event)
+        {
+            return event;
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_panasonic_machines_r_messages_and_state_changes_are_recorded_as_events() {
+    let (cell, mut live, twin, _shutdown, _store, _dir) = panasonic_rig().await;
+    // The first status read: the driver is connected to both ports.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let message = tokio::time::timeout_at(deadline, live.recv())
+            .await
+            .expect("a first status within 30 s")
+            .unwrap();
+        if let crate::cell::LiveMessage::Value(view) = message
+            && view.id == point("placer1.state")
+        {
+            break;
+        }
+    }
+    twin.control()
+        .operator_start(Some(panasonic::StopMode::Continuous))
+        .unwrap();
+    // The state change (seen by a status poll) and the R1ST (drained after that poll) may
+    // be recorded in either order.
+    let mut seen = Vec::new();
+    while !(seen
+        .iter()
+        .any(|e: &crate::store::Event| e.kind == EventKind::StateChanged)
+        && seen
+            .iter()
+            .any(|e| e.kind == EventKind::DeviceEvent && e.message.contains("R1ST")))
+    {
+        seen.push(
+            wait_for_event(&mut live, |e| {
+                matches!(e.kind, EventKind::StateChanged | EventKind::DeviceEvent)
+            })
+            .await,
+        );
+    }
+    let started = seen
+        .iter()
+        .find(|e| e.kind == EventKind::DeviceEvent && e.message.contains("R1ST"))
+        .unwrap();
+    assert!(
+        started.message.starts_with("Placer: R message R1ST"),
+        "{}",
+        started.message
+    );
+    let running = seen
+        .iter()
+        .find(|e| e.kind == EventKind::StateChanged)
+        .unwrap();
+    assert_eq!(running.message, "Placer: machine went from ready to run");
+    assert_eq!(running.point, Some(point("placer1.state")));
+    twin.control().force_error(3).unwrap();
+    let alarm = wait_for_event(&mut live, |e| e.kind == EventKind::AlarmRaised).await;
+    assert_eq!(alarm.message, "Placer: Run state is error stop");
+    let entry = cell.device_entry("placer1").unwrap();
+    assert_eq!(entry.read().status, DeviceStatus::Up);
+    assert_eq!(value(&cell, "placer1.state"), Some(Value::Number(2.0)));
+}
