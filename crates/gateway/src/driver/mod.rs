@@ -6,10 +6,16 @@
 //! and reads no clock. Errors are classified ([`ErrorKind`]) so the metrics can count
 //! timeouts apart from refusals and line trouble.
 //!
-//! Landed: [`jbc`] (JBC JTSE hot-air station), [`thermosald`] (ISC impulse-sealer
-//! regulators, several on one RS-485 line) and [`cross`] (Chloride CROSS transfer switch
-//! over JBUS). Adding a protocol: a module implementing [`Driver`], a [`Protocol`] variant
-//! and its arms in [`Protocol::parse`], [`Protocol::check_address`] and [`build`].
+//! Protocols: [`jbc`] (JBC JTSE hot-air station), [`thermosald`] (ISC impulse-sealer
+//! regulators, several on one RS-485 line), [`cross`] (Chloride CROSS transfer switch over
+//! JBUS) and [`panasonic`] (placement machine over TCP). Adding a protocol: a module
+//! implementing [`Driver`], a [`Protocol`] variant and its arms in [`Protocol::parse`],
+//! [`Protocol::check_address`] and [`build`].
+//!
+//! A protocol whose client keeps its own connections (Panasonic: two TCP ports, keep-alive,
+//! reconnection) says so with [`Protocol::owns_connections`]: its line task opens nothing,
+//! the driver ignores [`Driver::attach`] and connects on its first poll from
+//! [`DriverConfig::endpoint`].
 //!
 //! State transitions a driver sees between polls (a CROSS transfer) and unsolicited
 //! messages are reported through [`Driver::take_events`]; a point going into or out of
