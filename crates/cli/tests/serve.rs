@@ -10,10 +10,15 @@ fn serve_without_arguments_runs_the_demo_cell_and_answers_http() {
     let gateway = Gateway::start(data.path());
     let (status, body) = gateway.get("/healthz");
     assert_eq!(status, 200, "{body}");
-    // The demo station is polled through the real client: its values arrive on the event
-    // stream as they change (a blocking read, bounded by the socket's read timeout).
+    // The demo devices are polled through the real clients: their values arrive on the
+    // event stream as they change (a blocking read, bounded by the socket's read timeout).
     let event = gateway.first_event("value");
-    assert!(event.contains("jbc1."), "{event}");
+    assert!(
+        ["jbc1.", "sealer", "cross1.", "placer1."]
+            .iter()
+            .any(|device| event.contains(device)),
+        "{event}"
+    );
     let (status, body) = gateway.get("/api/devices");
     assert_eq!(status, 200, "{body}");
     assert!(body.contains("\"quality\":\"good\""), "{body}");

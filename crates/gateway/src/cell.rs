@@ -281,6 +281,24 @@ pub struct WriteOutcome {
     pub new: Value,
 }
 
+/// Opens a configured line: by its endpoint URL, or, for a protocol whose client keeps
+/// its own connections ([`Protocol::owns_connections`]), not at all: the line task then
+/// gets a line that carries nothing and only schedules the device's polls.
+pub fn line_opener(line: &crate::config::LineConfig) -> Opener {
+    let own = line
+        .devices
+        .first()
+        .is_some_and(|d| d.driver.protocol.owns_connections());
+    if !own {
+        return endpoint_opener(line.endpoint.clone());
+    }
+    let name = line.endpoint.to_string();
+    Arc::new(move || {
+        let line = link::Line::from_stream(tokio::io::empty(), name.clone(), None);
+        Box::pin(async move { Ok(line) })
+    })
+}
+
 /// Opens lines by their endpoint URL.
 pub fn endpoint_opener(endpoint: link::Endpoint) -> Opener {
     Arc::new(move || {
@@ -297,9 +315,7 @@ impl Cell {
         store: StoreHandle,
         metrics: Arc<Metrics>,
     ) -> Result<(Arc<Cell>, Vec<LineTask>), String> {
-        Self::with_openers(config, store, metrics, |line| {
-            endpoint_opener(line.endpoint.clone())
-        })
+        Self::with_openers(config, store, metrics, line_opener)
     }
 
     /// Like [`Cell::new`], with the lines opened by `opener` (tests use in-memory lines).

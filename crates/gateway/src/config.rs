@@ -11,11 +11,13 @@
 //! id = "jbc1"                           # unique in the cell; used in URLs and point ids
 //! name = "Rework station 1"             # words for people (default: the id)
 //! protocol = "jbc"
-//! address = 1                           # JBC: 0-99, or "none" for the form without addresses
+//! address = 1                           # JBC: 0-99, or "none" for the form without addresses;
+//!                                       # thermosald: 0-7; cross: JBUS unit 1-255
 //! timeout = "500ms"                     # per reply (protocol default if left out)
 //! retries = 2                           # after a failed attempt (protocol default)
 //! period = "2s"                         # for every poll group not listed in [poll]
 //! poll = { live = "1s", info = "5m" }   # per poll group
+//! event_port = 49153                    # panasonic only: Port 2 (the endpoint names Port 1)
 //! ```
 //!
 //! Every table refuses fields it does not know. A file that does not parse or does not make
@@ -192,7 +194,18 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
         let protocol = protocol_of(&first.protocol).map_err(|m| at(first.protocol.span(), m))?;
         let endpoint = Endpoint::parse(line.endpoint.get_ref(), protocol.default_serial())
             .map_err(|e| at(line.endpoint.span(), e.to_string()))?;
+        if protocol.owns_connections() && !matches!(endpoint, Endpoint::Tcp { .. }) {
+            return Err(at(
+                line.endpoint.span(),
+                format!(
+                    "a {} machine is reached over TCP: write tcp://host:{} (its Port 1)",
+                    protocol.as_str(),
+                    panasonic::DEFAULT_COMMAND_PORT
+                ),
+            ));
+        }
         let mut devices = Vec::new();
+        let mut addresses = HashSet::new();
         for device in line.device {
             let this = protocol_of(&device.protocol).map_err(|m| at(device.protocol.span(), m))?;
             if this != protocol {
@@ -206,7 +219,21 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 ));
             }
             let id_span = device.id.span();
-            let device = check_device(device, protocol, &at)?;
+            let address_span = device
+                .address
+                .as_ref()
+                .map_or(id_span.clone(), Spanned::span);
+            let device = check_device(device, protocol, &endpoint, &at)?;
+            if let Some(address) = device.driver.address
+                && !addresses.insert(address)
+            {
+                return Err(at(
+                    address_span,
+                    format!(
+                        "address {address} is used twice on line {name:?}: both devices would answer the same requests"
+                    ),
+                ));
+            }
             if !device_ids.insert(device.driver.id.clone()) {
                 return Err(at(
                     id_span,
@@ -214,6 +241,19 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 ));
             }
             devices.push(device);
+        }
+        if protocol.owns_connections()
+            && let Some(second) = devices.get(1)
+        {
+            return Err(at(
+                line.name.span(),
+                format!(
+                    "line {name:?} has {} {} machines: each machine is its own TCP server and needs a [[line]] of its own (device {:?})",
+                    devices.len(),
+                    protocol.as_str(),
+                    second.driver.id.as_str()
+                ),
+            ));
         }
         lines.push(LineConfig {
             name: name.clone(),
@@ -239,7 +279,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
 fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
     Protocol::parse(text.get_ref()).ok_or_else(|| {
         format!(
-            "protocol {:?} is not one the gateway speaks yet; known: {}",
+            "protocol {:?} is not one the gateway speaks; known: {}",
             text.get_ref(),
             Protocol::KNOWN
         )
@@ -249,6 +289,7 @@ fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
 fn check_device(
     raw: RawDevice,
     protocol: Protocol,
+    endpoint: &Endpoint,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<DeviceConfig, ConfigError> {
     let id = DeviceId::new(raw.id.get_ref()).map_err(|e| {
@@ -298,12 +339,41 @@ fn check_device(
         .as_ref()
         .map(|p| duration(p, MIN_PERIOD, MAX_PERIOD, "period", at))
         .transpose()?;
+    let event_port = match &raw.event_port {
+        None => None,
+        Some(port) if protocol != Protocol::Panasonic => {
+            return Err(at(
+                port.span(),
+                format!(
+                    "event_port is for Panasonic machines only, not {} devices",
+                    protocol.as_str()
+                ),
+            ));
+        }
+        Some(port) => Some(
+            u16::try_from(*port.get_ref())
+                .ok()
+                .filter(|&p| p != 0)
+                .ok_or_else(|| {
+                    at(
+                        port.span(),
+                        format!(
+                            "event_port {} is out of range: 1 to 65535 (the machine's default is {})",
+                            port.get_ref(),
+                            panasonic::DEFAULT_EVENT_PORT
+                        ),
+                    )
+                })?,
+        ),
+    };
     let driver_config = DriverConfig {
         id: id.clone(),
         protocol,
         address,
         timeout,
         retries,
+        event_port,
+        endpoint: protocol.owns_connections().then(|| endpoint.clone()),
     };
     let known: Vec<String> = driver::build(&driver_config)
         .map_err(|m| at(raw.id.span(), m))?
@@ -425,6 +495,7 @@ struct RawDevice {
     period: Option<Spanned<String>>,
     #[serde(default)]
     poll: BTreeMap<String, Spanned<String>>,
+    event_port: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -547,7 +618,12 @@ protocol = "jbc"
 
     #[test]
     fn semantic_errors_point_at_the_offending_value() {
-        refused(&ONE.replace("\"jbc\"", "\"modbus\""), 8, 12, "known: jbc");
+        refused(
+            &ONE.replace("\"jbc\"", "\"profibus\""),
+            8,
+            12,
+            "known: jbc, thermosald, cross, panasonic",
+        );
         refused(
             &ONE.replace("serial:///dev/ttyUSB0", "serial:///dev/ttyUSB0?baud=fast"),
             4,
@@ -611,6 +687,143 @@ protocol = "jbc"
             2,
             9,
             "token is empty",
+        );
+    }
+
+    const SEALERS: &str = r#"
+[[line]]
+name = "sealers"
+endpoint = "tcp://192.0.2.1:4001"
+
+[[line.device]]
+id = "sealer0"
+protocol = "thermosald"
+address = 0
+"#;
+
+    #[test]
+    fn thermosald_and_cross_devices_take_their_protocols_defaults() {
+        let config = parse(&format!(
+            "{SEALERS}\n[[line.device]]\nid = \"sealer7\"\nprotocol = \"thermosald\"\naddress = 7\n\n[[line]]\nname = \"mains\"\nendpoint = \"serial:///dev/ttyUSB1\"\n[[line.device]]\nid = \"cross1\"\nprotocol = \"cross\"\npoll = {{ ratings = \"10m\" }}\n"
+        ))
+        .unwrap();
+        let sealers = &config.lines[0];
+        assert_eq!(sealers.endpoint.line_settings(), None, "TCP without ?baud=");
+        assert_eq!(sealers.devices.len(), 2);
+        assert_eq!(sealers.devices[1].driver.address, Some(7));
+        let mains = &config.lines[1];
+        assert_eq!(
+            mains.endpoint.line_settings(),
+            Some(link::SerialSettings::new_8n1(9600)),
+            "JBUS's 9600 8N1 when the URL says nothing"
+        );
+        assert_eq!(mains.devices[0].driver.protocol, Protocol::Cross);
+        assert_eq!(
+            mains.devices[0].driver.address,
+            Some(1),
+            "unit 1 by default"
+        );
+        assert_eq!(mains.devices[0].groups["ratings"], Duration::from_secs(600));
+    }
+
+    #[test]
+    fn thermosald_and_cross_mistakes_are_refused_where_they_are() {
+        refused(
+            &SEALERS.replace("address = 0", "address = 8"),
+            9,
+            11,
+            "address 8 is out of range: 0 to 7",
+        );
+        refused(
+            &SEALERS.replace("address = 0", "address = \"none\""),
+            9,
+            11,
+            "needs its address",
+        );
+        refused(
+            &format!(
+                "{SEALERS}\n[[line.device]]\nid = \"sealer9\"\nprotocol = \"thermosald\"\naddress = 0\n"
+            ),
+            14,
+            11,
+            "address 0 is used twice on line \"sealers\"",
+        );
+        refused(
+            &format!("{SEALERS}\n[[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n"),
+            13,
+            12,
+            "a jbc device needs a line of its own",
+        );
+        refused(
+            &format!("{SEALERS}poll = {{ fast = \"1s\" }}\n"),
+            10,
+            17,
+            "groups: live, settings, machine, service",
+        );
+        let cross = SEALERS
+            .replace("thermosald", "cross")
+            .replace("sealer0", "cross1");
+        refused(
+            &cross,
+            9,
+            11,
+            "JBUS unit number 0 is out of range: 1 to 255",
+        );
+        refused(
+            &cross.replace("address = 0", "address = 300"),
+            9,
+            11,
+            "1 to 255",
+        );
+    }
+
+    const PLACER: &str = r#"
+[[line]]
+name = "placement"
+endpoint = "tcp://192.0.2.50:49152"
+
+[[line.device]]
+id = "placer1"
+protocol = "panasonic"
+"#;
+
+    #[test]
+    fn a_panasonic_machine_takes_its_ports_from_the_endpoint_and_event_port() {
+        let config = parse(PLACER).unwrap();
+        let driver = &config.lines[0].devices[0].driver;
+        assert_eq!(driver.address, None);
+        assert_eq!(driver.event_port, None, "49153 by default");
+        assert_eq!(driver.endpoint, Some(config.lines[0].endpoint.clone()));
+        let config = parse(&format!("{PLACER}event_port = 50000\n")).unwrap();
+        assert_eq!(config.lines[0].devices[0].driver.event_port, Some(50000));
+    }
+
+    #[test]
+    fn panasonic_mistakes_are_refused_where_they_are() {
+        refused(
+            &PLACER.replace("tcp://192.0.2.50:49152", "serial:///dev/ttyS0"),
+            4,
+            12,
+            "is reached over TCP: write tcp://host:49152",
+        );
+        refused(&format!("{PLACER}address = 3\n"), 9, 11, "has no address");
+        refused(
+            &format!("{PLACER}event_port = 70000\n"),
+            9,
+            14,
+            "event_port 70000 is out of range: 1 to 65535",
+        );
+        refused(
+            &format!("{ONE}event_port = 49153\n"),
+            9,
+            14,
+            "event_port is for Panasonic machines only",
+        );
+        refused(
+            &format!("{PLACER}\n[[line.device]]\nid = \"placer2\"\nprotocol = \"panasonic\"\n"),
+            3,
+            8,
+            "each machine is its own TCP server and needs a [[line]] of its own",
         );
     }
 

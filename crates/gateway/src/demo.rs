@@ -1,20 +1,28 @@
 //! The demo cell `cellbus serve` starts without a configuration.
 //!
-//! Each simulated device runs in this process behind its own TCP listener on 127.0.0.1
+//! Each simulated device runs in this process behind its own TCP listener(s) on 127.0.0.1
 //! (an ephemeral port; nothing else is opened to the network), served by
 //! [`link::serve::serve_tcp`] at the speed of its real serial line. The gateway polls it
 //! through the same `tcp://` endpoint, `link` line and protocol client a real device behind
 //! a serial server gets: nothing short-cuts the protocol.
 //!
-//! The cell is alive: a scripted operator works each station (set points, tool on and off
-//! through a second connection, as a cell controller would; the suction pedal and an
-//! occasional tool fault at the station itself), so temperatures rise and fall, alarms come
-//! and go.
+//! The cell is alive, driven by scripted operators on timers through each twin's own
+//! provocation API (never through the gateway):
 //!
-//! Landed: one JBC JTSE station. Thermosald regulators (three on one RS-485 line), the
-//! CROSS transfer switch and the Panasonic machine join when their crates have clients:
-//! each is one `start_*` function like [`start_jbc_station`] and one line in
-//! [`DemoCell::start`].
+//! - one JBC JTSE station ([`start_jbc_station`]): set points, tool on and off through a
+//!   second connection, as a cell controller would; the suction pedal and an occasional
+//!   tool fault at the station itself;
+//! - three Thermosald regulators sharing one RS-485 line ([`start_thermosald_line`]):
+//!   sealing cycles run at 3, 4 and 5 s, so temperature, current and power move; every
+//!   three minutes regulator 2's supply sags and it latches a fault until it is switched
+//!   off and on;
+//! - one CROSS transfer switch ([`start_cross`]): every two minutes source 1 fails (an
+//!   outage, then an undervoltage) for 40 s, so the load transfers to source 2 and back;
+//! - one Panasonic placement machine ([`start_panasonic`]), its twin on two loopback TCP
+//!   ports: the operator starts a run, a feeder runs out of parts (error stop, R2E03),
+//!   is refilled and the machine reset to ready, every 75 s; boards and R messages flow.
+//!
+//! Adding a device is one `start_*` function and one line in [`DemoCell::start`].
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -22,7 +30,16 @@ use std::time::Duration;
 use jbc::client::{Client, ClientConfig};
 use jbc::code::{Code, Port, ToolError};
 use jbc::device::{Station, StationConfig};
-use link::{Endpoint, Line, SharedLine};
+use jbus::cross::Source;
+use jbus::cross::device::{CrossTwin, SourceFault};
+use link::{Endpoint, Line, SerialSettings, SharedLine};
+use panasonic::server::{Control, RunningTwin, TwinServer};
+use panasonic::status::StopMode;
+use panasonic::{Machine, MachineConfig};
+use thermosald::Address;
+use thermosald::device::{Line as RegulatorLine, Regulator, RegulatorConfig};
+use thermosald::diagnostic::Fault;
+use thermosald::exchange::LineTiming;
 use tokio::net::TcpListener;
 use tokio::task::JoinHandle;
 use wire::device::SharedModel;
@@ -39,6 +56,12 @@ pub struct DemoCell {
     pub config: CellConfig,
     /// The JBC station models, for tests and for a look inside.
     pub stations: Vec<SharedModel<Station>>,
+    /// The Thermosald lines (each with its regulators).
+    pub regulators: Vec<SharedModel<RegulatorLine>>,
+    /// The CROSS twins.
+    pub crosses: Vec<SharedModel<CrossTwin>>,
+    /// The Panasonic machines, served on their two ports (their `control()` is the panel).
+    pub machines: Vec<RunningTwin>,
     tasks: Vec<JoinHandle<()>>,
 }
 
@@ -52,9 +75,15 @@ impl DemoCell {
                 lines: Vec::new(),
             },
             stations: Vec::new(),
+            regulators: Vec::new(),
+            crosses: Vec::new(),
+            machines: Vec::new(),
             tasks: Vec::new(),
         };
         start_jbc_station(&mut demo, "jbc1", "Rework station (JBC JTSE)").await?;
+        start_thermosald_line(&mut demo, "sealers-rs485").await?;
+        start_cross(&mut demo, "cross1", "Transfer switch (Chloride CROSS)").await?;
+        start_panasonic(&mut demo, "placer1", "Placement machine (Panasonic BM)").await?;
         Ok(demo)
     }
 }
@@ -67,47 +96,227 @@ impl Drop for DemoCell {
     }
 }
 
-/// A JTSE at address 01 on its own RS-232 line (19200 8E1), with an operator.
-pub async fn start_jbc_station(demo: &mut DemoCell, id: &str, name: &str) -> std::io::Result<()> {
-    let model = SharedModel::new(Station::new(StationConfig::default()));
+/// Serves `model` on an ephemeral loopback port at the speed of `serial`, and returns the
+/// endpoint that reaches it as a serial server's port would.
+async fn serve_model<M>(
+    demo: &mut DemoCell,
+    model: SharedModel<M>,
+    serial: SerialSettings,
+    what: &'static str,
+) -> std::io::Result<Endpoint>
+where
+    M: wire::device::Model + Send + 'static,
+    wire::device::ModelLine<M>: wire::device::Device + Send + 'static,
+{
     let listener = TcpListener::bind(("127.0.0.1", 0)).await?;
     let addr = listener.local_addr()?;
-    let served = model.clone();
     demo.tasks.push(tokio::spawn(async move {
-        if let Err(e) =
-            link::serve::serve_tcp(listener, move || served.line(), Some(DEFAULT_SERIAL)).await
-        {
-            tracing::error!("demo station stopped: {e}");
+        if let Err(e) = link::serve::serve_tcp(listener, move || model.line(), Some(serial)).await {
+            tracing::error!("demo {what} stopped: {e}");
         }
     }));
     let url = format!(
         "tcp://{addr}?baud={}&framing={}",
-        DEFAULT_SERIAL.baud,
-        DEFAULT_SERIAL.framing()
+        serial.baud,
+        serial.framing()
     );
-    let endpoint =
-        Endpoint::parse(&url, DEFAULT_SERIAL).map_err(|e| std::io::Error::other(e.to_string()))?;
+    Endpoint::parse(&url, serial).map_err(|e| std::io::Error::other(e.to_string()))
+}
+
+fn device_id(id: &str) -> std::io::Result<DeviceId> {
+    DeviceId::new(id).map_err(|e| std::io::Error::other(e.to_string()))
+}
+
+fn device(id: DeviceId, protocol: Protocol, address: i64, name: &str) -> DeviceConfig {
+    DeviceConfig {
+        driver: DriverConfig {
+            id,
+            protocol,
+            address: Some(address),
+            timeout: None,
+            retries: None,
+            event_port: None,
+            endpoint: None,
+        },
+        name: name.to_owned(),
+        period: None,
+        groups: BTreeMap::new(),
+    }
+}
+
+/// A JTSE at address 01 on its own RS-232 line (19200 8E1), with an operator.
+pub async fn start_jbc_station(demo: &mut DemoCell, id: &str, name: &str) -> std::io::Result<()> {
+    let model = SharedModel::new(Station::new(StationConfig::default()));
+    let endpoint = serve_model(demo, model.clone(), DEFAULT_SERIAL, "JBC station").await?;
     demo.tasks
         .push(tokio::spawn(operate_jbc(endpoint.clone(), model.clone())));
     demo.stations.push(model);
-    let id = DeviceId::new(id).map_err(|e| std::io::Error::other(e.to_string()))?;
+    let id = device_id(id)?;
     demo.config.lines.push(LineConfig {
         name: format!("{id}-rs232"),
         endpoint,
-        devices: vec![DeviceConfig {
-            driver: DriverConfig {
-                id,
-                protocol: Protocol::Jbc,
-                address: Some(crate::driver::jbc::DEFAULT_ADDRESS),
-                timeout: None,
-                retries: None,
-            },
-            name: name.to_owned(),
-            period: None,
-            groups: BTreeMap::new(),
-        }],
+        devices: vec![device(
+            id,
+            Protocol::Jbc,
+            crate::driver::jbc::DEFAULT_ADDRESS,
+            name,
+        )],
     });
     Ok(())
+}
+
+/// Sealing rhythms of the demo regulators: three packaging machines at their own pace.
+const SEAL_PERIODS: [Duration; 3] = [
+    Duration::from_secs(3),
+    Duration::from_secs(4),
+    Duration::from_secs(5),
+];
+
+/// Three Thermosald regulators (addresses 0, 1, 2) sharing one RS-485 line (9600 8N1),
+/// sealing at their own rhythms; every few minutes the third one's supply sags, so it
+/// latches "sealing temperature not reached" until the operator fixes the supply and
+/// switches it off and on.
+pub async fn start_thermosald_line(demo: &mut DemoCell, line: &str) -> std::io::Result<()> {
+    let now = tokio::time::Instant::now().into_std();
+    let mut regulators = Vec::new();
+    let mut devices = Vec::new();
+    for (n, period) in (0u8..).zip(SEAL_PERIODS) {
+        let address = Address::new(n).map_err(|e| std::io::Error::other(e.to_string()))?;
+        let config = RegulatorConfig {
+            seal_period: Some(period),
+            ..RegulatorConfig::default()
+        };
+        regulators.push(Regulator::new(address, config, now));
+        devices.push(device(
+            device_id(&format!("sealer{n}"))?,
+            Protocol::Thermosald,
+            i64::from(n),
+            &format!("Sealer {n} (Thermosald ISC, address {n})"),
+        ));
+    }
+    let serial = crate::driver::thermosald::DEFAULT_SERIAL;
+    let timing = LineTiming::new(serial.baud, serial.bits_per_char())
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+    let model = SharedModel::new(RegulatorLine::from_regulators(regulators).paced(timing));
+    let endpoint = serve_model(demo, model.clone(), serial, "Thermosald line").await?;
+    demo.tasks
+        .push(tokio::spawn(operate_sealers(model.clone())));
+    demo.regulators.push(model);
+    demo.config.lines.push(LineConfig {
+        name: line.to_owned(),
+        endpoint,
+        devices,
+    });
+    Ok(())
+}
+
+/// The sealers' supply trouble, repeated: every 3 minutes regulator 2's supply sags for
+/// half a minute.
+async fn operate_sealers(model: SharedModel<RegulatorLine>) {
+    let Ok(address) = Address::new(2) else {
+        return;
+    };
+    let now = || tokio::time::Instant::now().into_std();
+    loop {
+        tokio::time::sleep(Duration::from_secs(60)).await;
+        if let Some(r) = model.lock().regulator_mut(address) {
+            r.provoke(Fault::TemperatureNotReached, now());
+        }
+        tokio::time::sleep(Duration::from_secs(30)).await;
+        if let Some(r) = model.lock().regulator_mut(address) {
+            r.remove_cause(Fault::TemperatureNotReached, now());
+            r.power_cycle(now());
+        }
+        tokio::time::sleep(Duration::from_secs(90)).await;
+    }
+}
+
+/// A CROSS at JBUS unit 1 on its own RS-485 line (9600 8N1); every two minutes source 1
+/// fails for 40 s (an outage, then an undervoltage), so the load transfers to source 2
+/// and back.
+pub async fn start_cross(demo: &mut DemoCell, id: &str, name: &str) -> std::io::Result<()> {
+    let unit = jbus::rtu::Unit::jbus(1).map_err(|e| std::io::Error::other(e.to_string()))?;
+    let model = SharedModel::new(CrossTwin::new(unit, 1));
+    let serial = crate::driver::cross::DEFAULT_SERIAL;
+    let endpoint = serve_model(demo, model.clone(), serial, "CROSS").await?;
+    demo.tasks.push(tokio::spawn(operate_cross(model.clone())));
+    demo.crosses.push(model);
+    let id = device_id(id)?;
+    demo.config.lines.push(LineConfig {
+        name: format!("{id}-rs485"),
+        endpoint,
+        devices: vec![device(id, Protocol::Cross, 1, name)],
+    });
+    Ok(())
+}
+
+/// A Panasonic placement machine: its twin served on two ephemeral loopback ports (Port 1
+/// commands, Port 2 R messages) by `panasonic::server`, with an operator at its panel who
+/// starts a production run, lets a feeder run out of parts (an error stop), refills it and
+/// presses RESET, over and over.
+pub async fn start_panasonic(demo: &mut DemoCell, id: &str, name: &str) -> std::io::Result<()> {
+    let machine =
+        Machine::new(MachineConfig::default()).map_err(|e| std::io::Error::other(e.to_string()))?;
+    let any = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
+    let twin = TwinServer::bind(any, any, machine).await?.spawn()?;
+    let (command, event) = (twin.command_addr(), twin.event_addr());
+    demo.tasks
+        .push(tokio::spawn(operate_panasonic(twin.control().clone())));
+    demo.machines.push(twin);
+    let endpoint = Endpoint::Tcp {
+        host: command.ip().to_string(),
+        port: command.port(),
+        line: None,
+    };
+    let id = device_id(id)?;
+    let mut device = device(id.clone(), Protocol::Panasonic, 0, name);
+    device.driver.address = None;
+    device.driver.event_port = Some(event.port());
+    device.driver.endpoint = Some(endpoint.clone());
+    demo.config.lines.push(LineConfig {
+        name: format!("{id}-lan"),
+        endpoint,
+        devices: vec![device],
+    });
+    Ok(())
+}
+
+/// The feeder the demo operator lets run out.
+const EMPTY_FEEDER: u16 = 7;
+
+/// The placement operator's routine, forever: about 50 s running, 15 s in error, 10 s ready.
+async fn operate_panasonic(control: Control) {
+    loop {
+        tokio::time::sleep(Duration::from_secs(10)).await;
+        if let Err(e) = control.operator_start(Some(StopMode::Continuous)) {
+            tracing::warn!("demo placement operator cannot start: {e}");
+        }
+        tokio::time::sleep(Duration::from_secs(50)).await;
+        if let Err(e) = control.pause_feeder(EMPTY_FEEDER) {
+            tracing::warn!("demo placement operator: {e}");
+        }
+        tokio::time::sleep(Duration::from_secs(15)).await;
+        let refilled = control
+            .resume_feeder(EMPTY_FEEDER)
+            .and_then(|()| control.refill_feeder(EMPTY_FEEDER));
+        if let Err(e) = refilled {
+            tracing::warn!("demo placement operator: {e}");
+        }
+        control.clear();
+    }
+}
+
+/// The mains trouble the CROSS rides through, forever.
+async fn operate_cross(model: SharedModel<CrossTwin>) {
+    let faults = [SourceFault::Outage, SourceFault::Undervoltage];
+    loop {
+        for fault in faults {
+            tokio::time::sleep(Duration::from_secs(80)).await;
+            model.lock().fail_source_with(Source::S1, fault);
+            tokio::time::sleep(Duration::from_secs(40)).await;
+            model.lock().restore_source(Source::S1);
+        }
+    }
 }
 
 /// One step of the rework operator's routine.

@@ -12,10 +12,11 @@
 //!
 //! - [`serve`] / [`Gateway`]: the whole thing, from [`ServeOptions`] to a graceful stop.
 //! - [`config`]: the TOML configuration, [`check_config`] and [`EXAMPLE_CONFIG`].
-//! - [`driver`]: one small module per protocol maps a device onto points. Landed: JBC.
-//!   Thermosald, JBUS/CROSS and Panasonic drivers are added when their clients land: a
-//!   module implementing [`driver::Driver`], a [`driver::Protocol`] variant and a
-//!   `start_*` function in [`demo`].
+//! - [`driver`]: one small module per protocol maps a device onto points: JBC,
+//!   Thermosald (several regulators on one line), CROSS (JBUS) and Panasonic (a TCP
+//!   machine whose client keeps its own connections and whose R messages become events).
+//!   Adding one: a module implementing [`driver::Driver`], a [`driver::Protocol`] variant
+//!   and a `start_*` function in [`demo`].
 //! - [`scheduler`]: one task per line, strict serialisation, exponential backoff of silent
 //!   devices with prompt promotion, line reopening.
 //! - [`cell`]: the live state (values with time and quality), the change stream.

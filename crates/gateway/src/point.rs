@@ -213,6 +213,10 @@ pub struct WriteRange {
     pub max: f64,
     /// Whether only whole numbers are accepted.
     pub integer: bool,
+    /// The device's step for numbers it stores in fixed point (0.1 for a tenths item),
+    /// if finer than whole numbers matter: values between two steps are refused.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub step: Option<f64>,
 }
 
 /// Which values of a point are an alarm.
@@ -225,15 +229,21 @@ pub enum AlarmRule {
     Above(f64),
     /// Values below this.
     Below(f64),
+    /// Any text other than this normal one (a list of active alarms other than `none`).
+    NotText(&'static str),
 }
 
 impl AlarmRule {
     /// Whether `value` is in alarm under this rule.
     pub fn is_alarm(&self, value: &Value) -> bool {
+        if let (AlarmRule::NotText(normal), Value::Text(text)) = (self, value) {
+            return text != normal;
+        }
         let Some(n) = value.as_number() else {
             return false;
         };
         match *self {
+            AlarmRule::NotText(_) => false,
             AlarmRule::NotEqual(normal) => n != normal,
             AlarmRule::Above(limit) => n > limit,
             AlarmRule::Below(limit) => n < limit,
@@ -420,6 +430,25 @@ impl PointSpec {
                 value: number,
             });
         }
+        if let Some(step) = range.step
+            && step > 0.0
+        {
+            let steps = number / step;
+            // Tolerates the binary representation of decimal steps (0.1 × 3 ≠ 0.3).
+            if (steps - steps.round()).abs() > 1e-6 {
+                return Err(ValueError::NotAStep {
+                    point: self.id.clone(),
+                    name: self.name.clone(),
+                    value: number,
+                    step,
+                    unit: self
+                        .unit
+                        .as_deref()
+                        .map(|u| format!(" {u}"))
+                        .unwrap_or_default(),
+                });
+            }
+        }
         Ok(Value::Number(number))
     }
 }
@@ -443,6 +472,7 @@ mod tests {
                 min: 150.0,
                 max: 450.0,
                 integer: true,
+                step: None,
             }),
             alarm: None,
         }
@@ -470,6 +500,7 @@ mod tests {
                 min: 0.0,
                 max: 1.0,
                 integer: true,
+                step: None,
             }),
             alarm: None,
         }
@@ -526,6 +557,27 @@ mod tests {
     }
 
     #[test]
+    fn values_between_the_devices_steps_are_refused() {
+        let mut spec = setpoint();
+        spec.writable = Some(WriteRange {
+            min: 0.0,
+            max: 99.9,
+            integer: false,
+            step: Some(0.1),
+        });
+        assert_eq!(
+            spec.check_write(&Value::Number(12.3)),
+            Ok(Value::Number(12.3))
+        );
+        let err = spec.check_write(&Value::Number(12.34)).unwrap_err();
+        assert!(matches!(err, ValueError::NotAStep { step, .. } if step == 0.1));
+        assert!(
+            err.to_string().contains("not a multiple of 0.1 °C"),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn enumerations_accept_labels_and_numbers_and_list_their_states_when_refusing() {
         let spec = tool_on();
         assert_eq!(
@@ -552,11 +604,14 @@ mod tests {
     }
 
     #[test]
-    fn alarm_rules_judge_numbers_only() {
+    fn alarm_rules_judge_numbers_and_text_by_their_kind() {
         assert!(AlarmRule::NotEqual(0.0).is_alarm(&Value::Number(3.0)));
         assert!(!AlarmRule::NotEqual(0.0).is_alarm(&Value::Number(0.0)));
         assert!(AlarmRule::Above(400.0).is_alarm(&Value::Number(401.0)));
         assert!(AlarmRule::Below(10.0).is_alarm(&Value::Number(9.0)));
         assert!(!AlarmRule::Above(1.0).is_alarm(&Value::Text("x".into())));
+        assert!(AlarmRule::NotText("none").is_alarm(&Value::Text("S1 failure".into())));
+        assert!(!AlarmRule::NotText("none").is_alarm(&Value::Text("none".into())));
+        assert!(!AlarmRule::NotText("none").is_alarm(&Value::Number(1.0)));
     }
 }

@@ -17,7 +17,9 @@
 //! to [`REOPEN_MAX`] between attempts.
 //!
 //! Value changes become history samples and live messages; a point crossing into or out
-//! of alarm and a device going down or up become events.
+//! of alarm and a device going down or up become events, and so do the events a driver
+//! reports ([`Driver::take_events`]: transfers, machine states, unsolicited messages),
+//! drained after every poll and write.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -30,7 +32,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 use crate::cell::{Cell, DeviceEntry, DeviceStatus, LineEntry, LiveMessage, WriteRequest};
-use crate::driver::{BoxFuture, DeviceError, Driver, ErrorKind, Reading, WriteError};
+use crate::driver::{BoxFuture, DeviceError, DeviceEvent, Driver, ErrorKind, Reading, WriteError};
 use crate::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
 use crate::point::{Quality, Value};
 use crate::store::{Event, EventKind, Sample};
@@ -353,6 +355,7 @@ impl LineTask {
                 slot.m.up.set(1);
                 apply_readings(&self.cell, &entry, readings);
                 mark_up(&self.cell, &entry);
+                record_events(&self.cell, &entry, slot.driver.take_events());
             }
             Err(error) => {
                 slot.m.failed.inc();
@@ -404,6 +407,7 @@ impl LineTask {
         let took = now - started;
         self.busy_seconds.inc_by(took.as_secs_f64());
         self.window.busy += took;
+        record_events(&self.cell, &slot.entry, slot.driver.take_events());
         let lost = match &result {
             Ok(()) => {
                 // Read the point back at once (unless the device is backed off).
@@ -608,6 +612,25 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
     }
 }
 
+/// Records what the driver saw happen (transfers, machine states, unsolicited messages).
+fn record_events(cell: &Cell, entry: &DeviceEntry, events: Vec<DeviceEvent>) {
+    for event in events {
+        let point = event
+            .point
+            .and_then(|name| entry.point_index(name))
+            .and_then(|i| entry.points.get(i))
+            .map(|spec| spec.id.clone());
+        cell.emit(Event {
+            t: Timestamp::now(),
+            kind: event.kind,
+            line: Some(entry.line.clone()),
+            device: Some(entry.id.clone()),
+            point,
+            message: format!("{}: {}", entry.name, event.message),
+        });
+    }
+}
+
 /// Marks a device up after an answered poll; an event if it was down.
 fn mark_up(cell: &Cell, entry: &DeviceEntry) {
     let now = Timestamp::now();
@@ -746,3 +769,6 @@ fn with_unit(value: &Value, unit: Option<&str>) -> String {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod protocol_tests;

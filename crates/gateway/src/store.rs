@@ -133,11 +133,16 @@ pub enum EventKind {
     AlarmCleared,
     /// A write was made.
     Write,
+    /// A device changed state on its own: a CROSS transferred its load, a machine went
+    /// from run to error.
+    StateChanged,
+    /// A device reported something unsolicited (a Panasonic R message).
+    DeviceEvent,
 }
 
 impl EventKind {
     /// Every kind, for filters and the API description.
-    pub const ALL: [EventKind; 9] = [
+    pub const ALL: [EventKind; 11] = [
         EventKind::GatewayStarted,
         EventKind::GatewayStopped,
         EventKind::LineUp,
@@ -147,6 +152,8 @@ impl EventKind {
         EventKind::AlarmRaised,
         EventKind::AlarmCleared,
         EventKind::Write,
+        EventKind::StateChanged,
+        EventKind::DeviceEvent,
     ];
 
     /// The name stored and printed (`device_down`).
@@ -161,6 +168,8 @@ impl EventKind {
             EventKind::AlarmRaised => "alarm_raised",
             EventKind::AlarmCleared => "alarm_cleared",
             EventKind::Write => "write",
+            EventKind::StateChanged => "state_changed",
+            EventKind::DeviceEvent => "device_event",
         }
     }
 

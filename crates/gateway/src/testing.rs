@@ -57,6 +57,8 @@ pub fn device(id: &str, address: i64) -> DeviceConfig {
             address: Some(address),
             timeout: None,
             retries: None,
+            event_port: None,
+            endpoint: None,
         },
         name: format!("Station {id}"),
         period: None,

@@ -36,14 +36,27 @@ async fn get(addr: SocketAddr, path: &str) -> (String, serde_json::Value) {
     )
 }
 
+fn device<'a>(devices: &'a serde_json::Value, id: &str) -> &'a serde_json::Value {
+    devices["devices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|d| d["id"] == id)
+        .unwrap_or_else(|| panic!("no device {id}"))
+}
+
 fn point<'a>(devices: &'a serde_json::Value, id: &str) -> &'a serde_json::Value {
-    devices["devices"][0]["points"]
+    let (d, _) = id.split_once('.').unwrap();
+    device(devices, d)["points"]
         .as_array()
         .unwrap()
         .iter()
         .find(|p| p["id"] == id)
         .unwrap()
 }
+
+/// The devices of the demo cell.
+const DEMO: [&str; 6] = ["cross1", "jbc1", "placer1", "sealer0", "sealer1", "sealer2"];
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
@@ -70,7 +83,7 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
         assert_eq!(status, "HTTP/1.1 200 OK");
         let air = point(&devices, "jbc1.air_temperature");
         if let Some(t) = air["value"].as_f64() {
-            assert_eq!(devices["devices"][0]["status"], "up");
+            assert_eq!(device(&devices, "jbc1")["status"], "up");
             assert_eq!(air["quality"], "good");
             match first {
                 None => first = Some(t),
@@ -80,12 +93,52 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
         }
         tokio::time::sleep(Duration::from_millis(250)).await;
     }
+    // Every demo device is up with every point read good (the slow groups are read at
+    // start too), and the sealers' temperatures move with their seal cycles.
+    let mut temperatures = std::collections::HashSet::new();
+    loop {
+        let (_, devices) = get(addr, "/api/devices").await;
+        let ids: Vec<&str> = devices["devices"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| d["id"].as_str().unwrap())
+            .collect();
+        assert_eq!(ids, DEMO);
+        let all_good = DEMO.iter().all(|id| {
+            let d = device(&devices, id);
+            d["status"] == "up"
+                && d["points"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .all(|p| p["quality"] == "good" && !p["value"].is_null())
+        });
+        if let Some(t) = point(&devices, "sealer0.temperature")["value"].as_f64() {
+            temperatures.insert(t.to_bits());
+        }
+        if all_good && temperatures.len() >= 2 {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "not every demo device shows good values within 60 s: {devices}"
+        );
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
     let (status, lines) = get(addr, "/api/lines").await;
     assert_eq!(status, "HTTP/1.1 200 OK");
-    assert_eq!(lines["lines"][0]["open"], true);
+    assert_eq!(lines["lines"].as_array().unwrap().len(), 4);
+    assert!(
+        lines["lines"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|l| l["open"] == true)
+    );
     let (status, health) = get(addr, "/healthz").await;
     assert_eq!(status, "HTTP/1.1 200 OK");
-    assert_eq!(health["devices_up"], 1);
+    assert_eq!(health["devices_up"], DEMO.len());
 
     stop.send(()).unwrap();
     tokio::time::timeout(Duration::from_secs(30), run)

@@ -446,6 +446,7 @@ impl JbcDriver {
                 min: f64::from(*r.start()),
                 max: f64::from(*r.end()),
                 integer: true,
+                step: None,
             }),
             alarm,
         }
@@ -625,6 +626,8 @@ mod tests {
             address,
             timeout: Some(Duration::from_millis(200)),
             retries: Some(1),
+            event_port: None,
+            endpoint: None,
         }
     }
 

@@ -6,9 +6,21 @@
 //! and reads no clock. Errors are classified ([`ErrorKind`]) so the metrics can count
 //! timeouts apart from refusals and line trouble.
 //!
-//! Landed: [`jbc`] (JBC JTSE hot-air station). Thermosald, JBUS/CROSS and Panasonic get a
-//! module each when their clients land: implement [`Driver`], add a [`Protocol`] variant
-//! and its arms in [`Protocol::parse`], [`Protocol::check_address`] and [`build`].
+//! Protocols: [`jbc`] (JBC JTSE hot-air station), [`thermosald`] (ISC impulse-sealer
+//! regulators, several on one RS-485 line), [`cross`] (Chloride CROSS transfer switch over
+//! JBUS) and [`panasonic`] (placement machine over TCP). Adding a protocol: a module
+//! implementing [`Driver`], a [`Protocol`] variant and its arms in [`Protocol::parse`],
+//! [`Protocol::check_address`] and [`build`].
+//!
+//! A protocol whose client keeps its own connections (Panasonic: two TCP ports, keep-alive,
+//! reconnection) says so with [`Protocol::owns_connections`]: its line task opens nothing,
+//! the driver ignores [`Driver::attach`] and connects on its first poll from
+//! [`DriverConfig::endpoint`].
+//!
+//! State transitions a driver sees between polls (a CROSS transfer) and unsolicited
+//! messages are reported through [`Driver::take_events`]; a point going into or out of
+//! alarm (a regulator fault) needs no code in the driver: its [`crate::point::AlarmRule`]
+//! is enough.
 
 use std::fmt;
 use std::future::Future;
@@ -19,8 +31,12 @@ use link::{SerialSettings, SharedLine};
 use serde::Serialize;
 
 use crate::point::{DeviceId, PointId, PointSpec, Value, ValueError};
+use crate::store::EventKind;
 
+pub mod cross;
 pub mod jbc;
+pub mod panasonic;
+pub mod thermosald;
 
 /// A boxed future, so drivers of different protocols can sit in one list.
 pub type BoxFuture<'a, T> = Pin<Box<dyn Future<Output = T> + Send + 'a>>;
@@ -48,6 +64,28 @@ pub trait Driver: Send {
         point: &'a PointSpec,
         value: &'a Value,
     ) -> BoxFuture<'a, Result<(), WriteError>>;
+
+    /// Events the device caused since the last call: state transitions the driver saw
+    /// between two polls (a CROSS transfer, a machine going from run to error) and
+    /// unsolicited messages (Panasonic R events). The scheduler drains them after every
+    /// poll and write and records them with the device and line. Most drivers have none:
+    /// points crossing into or out of alarm are recorded by the scheduler itself.
+    fn take_events(&mut self) -> Vec<DeviceEvent> {
+        Vec::new()
+    }
+}
+
+/// Something a device did that is worth an entry in the event log.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DeviceEvent {
+    /// What kind of event ([`EventKind::StateChanged`], [`EventKind::DeviceEvent`], or an
+    /// alarm kind).
+    pub kind: EventKind,
+    /// The point it concerns (its name, without the device), if one.
+    pub point: Option<&'static str>,
+    /// What happened, in words, without the device's name (the scheduler puts it in
+    /// front): `load transferred from source 1 (S1) to source 2 (S2)`.
+    pub message: String,
 }
 
 /// A group of points read together, at one period.
@@ -165,16 +203,25 @@ pub enum WriteError {
 pub enum Protocol {
     /// JBC station–robot protocol (JTSE hot-air station), RS-232.
     Jbc,
+    /// Thermosald ISC/RS485 impulse-sealer regulators, addresses 0–7 on one line.
+    Thermosald,
+    /// Chloride CROSS static transfer switch, JBUS (Modbus RTU) units 1–255.
+    Cross,
+    /// Panasonic placement machine, PanaProtocol LAN (TCP, two ports, R events).
+    Panasonic,
 }
 
 impl Protocol {
     /// Names accepted in the config.
-    pub const KNOWN: &'static str = "jbc";
+    pub const KNOWN: &'static str = "jbc, thermosald, cross, panasonic";
 
     /// The protocol for its config name.
     pub fn parse(name: &str) -> Option<Self> {
         match name {
             "jbc" => Some(Protocol::Jbc),
+            "thermosald" => Some(Protocol::Thermosald),
+            "cross" => Some(Protocol::Cross),
+            "panasonic" => Some(Protocol::Panasonic),
             _ => None,
         }
     }
@@ -183,6 +230,9 @@ impl Protocol {
     pub fn as_str(self) -> &'static str {
         match self {
             Protocol::Jbc => "jbc",
+            Protocol::Thermosald => "thermosald",
+            Protocol::Cross => "cross",
+            Protocol::Panasonic => "panasonic",
         }
     }
 
@@ -190,6 +240,10 @@ impl Protocol {
     pub fn default_serial(self) -> SerialSettings {
         match self {
             Protocol::Jbc => jbc::DEFAULT_SERIAL,
+            Protocol::Thermosald => thermosald::DEFAULT_SERIAL,
+            Protocol::Cross => cross::DEFAULT_SERIAL,
+            // Never used: a Panasonic line must be a tcp:// endpoint.
+            Protocol::Panasonic => cross::DEFAULT_SERIAL,
         }
     }
 
@@ -197,13 +251,26 @@ impl Protocol {
     pub fn default_address(self) -> Option<i64> {
         match self {
             Protocol::Jbc => Some(jbc::DEFAULT_ADDRESS),
+            Protocol::Thermosald => Some(thermosald::DEFAULT_ADDRESS),
+            Protocol::Cross => Some(cross::DEFAULT_UNIT),
+            Protocol::Panasonic => None,
         }
+    }
+
+    /// Whether the protocol's client keeps its own connections (Panasonic: two TCP ports,
+    /// reconnection and keep-alive in the client), so the line task opens nothing for the
+    /// line and only schedules the polls.
+    pub fn owns_connections(self) -> bool {
+        matches!(self, Protocol::Panasonic)
     }
 
     /// Checks a device address; `Err` says what the protocol accepts.
     pub fn check_address(self, address: Option<i64>) -> Result<(), String> {
         match self {
             Protocol::Jbc => jbc::check_address(address),
+            Protocol::Thermosald => thermosald::check_address(address),
+            Protocol::Cross => cross::check_address(address),
+            Protocol::Panasonic => panasonic::check_address(address),
         }
     }
 }
@@ -221,11 +288,20 @@ pub struct DriverConfig {
     pub timeout: Option<Duration>,
     /// Retries after a failed attempt, if not the protocol's default.
     pub retries: Option<u8>,
+    /// Panasonic: the machine's Port 2 (R messages), if not the default 49153. The line's
+    /// endpoint names Port 1.
+    pub event_port: Option<u16>,
+    /// The line's endpoint, for drivers whose client keeps its own connections
+    /// ([`Protocol::owns_connections`]).
+    pub endpoint: Option<link::Endpoint>,
 }
 
 /// The driver for a device.
 pub fn build(config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
     match config.protocol {
         Protocol::Jbc => Ok(Box::new(jbc::JbcDriver::new(config)?)),
+        Protocol::Thermosald => Ok(Box::new(thermosald::ThermosaldDriver::new(config)?)),
+        Protocol::Cross => Ok(Box::new(cross::CrossDriver::new(config)?)),
+        Protocol::Panasonic => Ok(Box::new(panasonic::PanasonicDriver::new(config)?)),
     }
 }

@@ -328,7 +328,7 @@ function setUpWriteForm(device, form) {
       input.type = 'number';
       input.min = point.writable.min;
       input.max = point.writable.max;
-      input.step = point.writable.integer ? '1' : 'any';
+      input.step = point.writable.integer ? '1' : (point.writable.step ? String(point.writable.step) : 'any');
       input.required = true;
       const current = device.byId.get(point.id);
       if (current && typeof current.value === 'number') input.value = current.value;

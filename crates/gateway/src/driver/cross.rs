@@ -1,0 +1,711 @@
+//! The Chloride CROSS static transfer switch as points, through `jbus::client`.
+//!
+//! Groups: `live` (1 s: the internal-state and measures areas, two function-3 reads) and
+//! `ratings` (60 s: the ratings area). At 9600 baud a `live` poll takes about 120 ms on the
+//! wire, so several CROSS units can share one line.
+//!
+//! Points:
+//! - `load_feed`: which source feeds the load and how (static switch, manual bypass), or
+//!   that it is disconnected or not supplied; `on_reserve_line`;
+//! - `states`: the on/off states of the six operating conditions in words;
+//! - one alarm point per condition (`s1_alarms`, `s2_alarms`, `s1_switch_alarms`,
+//!   `s2_switch_alarms`, `load_alarms`, `system_alarms`): the active alarms in words, or
+//!   `none`; anything else is an alarm, so alarms appearing and clearing are events;
+//! - the measures with their units: source, output and neutral voltages (V), currents (A),
+//!   frequencies (Hz), load power (kVA), phase error (°), inlet air (°C); the ratings.
+//!
+//! A change of `load_feed` between two polls is recorded as a `state_changed` event: a
+//! transfer (the load moved to the other source) says from which source to which.
+//!
+//! The CROSS is read-only over JBUS (it answers function 3 only): no point is writable.
+//! The mimic diagram area is not shown; the state words say the same in words.
+
+use std::time::Duration;
+
+use jbus::client::{Client, ClientConfig, ClientError, Trouble};
+use jbus::cross::{Area, CrossState, Feed, InternalState, Measures, Ratings, Source};
+use jbus::rtu::Unit;
+use link::{SerialSettings, SharedLine};
+
+use super::{
+    BoxFuture, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
+    WriteError,
+};
+use crate::point::{AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value};
+use crate::store::EventKind;
+
+/// A CROSS line when the URL says nothing: 9600 baud, 8N1.
+pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
+
+/// Default JBUS unit number.
+pub const DEFAULT_UNIT: i64 = 1;
+
+/// The state and measures, every second.
+pub const LIVE: &str = "live";
+/// The ratings, every minute.
+pub const RATINGS: &str = "ratings";
+
+/// What an alarm point shows when no alarm is active.
+const NO_ALARM: &str = "none";
+
+/// Checks a JBUS unit number: 1–255 (JBUS allows numbers above Modbus's 247).
+pub fn check_address(address: Option<i64>) -> Result<(), String> {
+    match address {
+        Some(a) if (i64::from(Unit::MIN)..=i64::from(Unit::JBUS_MAX)).contains(&a) => Ok(()),
+        Some(a) => Err(format!(
+            "JBUS unit number {a} is out of range: {} to {} (0 is broadcast, which the CROSS never answers)",
+            Unit::MIN,
+            Unit::JBUS_MAX
+        )),
+        None => Err(format!(
+            "a CROSS needs its JBUS unit number, {} to {}",
+            Unit::MIN,
+            Unit::JBUS_MAX
+        )),
+    }
+}
+
+/// What a point shows.
+#[derive(Clone, Copy)]
+enum Show {
+    Feed,
+    Reserve,
+    States,
+    Alarms(Condition),
+    Measure(fn(&Measures) -> f64),
+    Rating(fn(&Ratings) -> f64),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Condition {
+    S1,
+    S2,
+    S1Switch,
+    S2Switch,
+    Load,
+    System,
+}
+
+struct Def {
+    name: &'static str,
+    title: &'static str,
+    unit: Option<&'static str>,
+    show: Show,
+}
+
+const fn def(name: &'static str, title: &'static str, show: Show) -> Def {
+    Def {
+        name,
+        title,
+        unit: None,
+        show,
+    }
+}
+
+const fn measure(
+    name: &'static str,
+    title: &'static str,
+    unit: &'static str,
+    f: fn(&Measures) -> f64,
+) -> Def {
+    Def {
+        name,
+        title,
+        unit: Some(unit),
+        show: Show::Measure(f),
+    }
+}
+
+const fn rating(
+    name: &'static str,
+    title: &'static str,
+    unit: Option<&'static str>,
+    f: fn(&Ratings) -> f64,
+) -> Def {
+    Def {
+        name,
+        title,
+        unit,
+        show: Show::Rating(f),
+    }
+}
+
+const V: &str = "V";
+const A: &str = "A";
+const HZ: &str = "Hz";
+
+/// Every point, in the order a person reads them.
+const POINTS: &[Def] = &[
+    def("load_feed", "Load fed by", Show::Feed),
+    def("on_reserve_line", "Load on reserve line", Show::Reserve),
+    def("states", "States", Show::States),
+    def("s1_alarms", "Source 1 alarms", Show::Alarms(Condition::S1)),
+    def("s2_alarms", "Source 2 alarms", Show::Alarms(Condition::S2)),
+    def(
+        "s1_switch_alarms",
+        "S1 static switch alarms",
+        Show::Alarms(Condition::S1Switch),
+    ),
+    def(
+        "s2_switch_alarms",
+        "S2 static switch alarms",
+        Show::Alarms(Condition::S2Switch),
+    ),
+    def("load_alarms", "Load alarms", Show::Alarms(Condition::Load)),
+    def(
+        "system_alarms",
+        "System alarms",
+        Show::Alarms(Condition::System),
+    ),
+    measure("s1_voltage_u", "S1 voltage U", V, |m| {
+        m.s1_voltage.u.value()
+    }),
+    measure("s1_voltage_v", "S1 voltage V", V, |m| {
+        m.s1_voltage.v.value()
+    }),
+    measure("s1_voltage_w", "S1 voltage W", V, |m| {
+        m.s1_voltage.w.value()
+    }),
+    measure("s1_frequency", "S1 frequency", HZ, |m| {
+        m.s1_frequency.value()
+    }),
+    measure("s2_voltage_u", "S2 voltage U", V, |m| {
+        m.s2_voltage.u.value()
+    }),
+    measure("s2_voltage_v", "S2 voltage V", V, |m| {
+        m.s2_voltage.v.value()
+    }),
+    measure("s2_voltage_w", "S2 voltage W", V, |m| {
+        m.s2_voltage.w.value()
+    }),
+    measure("s2_frequency", "S2 frequency", HZ, |m| {
+        m.s2_frequency.value()
+    }),
+    measure("output_voltage_u", "Output voltage U", V, |m| {
+        m.output_voltage.u.value()
+    }),
+    measure("output_voltage_v", "Output voltage V", V, |m| {
+        m.output_voltage.v.value()
+    }),
+    measure("output_voltage_w", "Output voltage W", V, |m| {
+        m.output_voltage.w.value()
+    }),
+    measure("output_current_u", "Output current U", A, |m| {
+        m.output_current.u.value()
+    }),
+    measure("output_current_v", "Output current V", A, |m| {
+        m.output_current.v.value()
+    }),
+    measure("output_current_w", "Output current W", A, |m| {
+        m.output_current.w.value()
+    }),
+    measure("neutral_current", "Neutral current", A, |m| {
+        m.neutral_current.value()
+    }),
+    measure("neutral_voltage", "Neutral voltage", V, |m| {
+        m.neutral_voltage.value()
+    }),
+    measure("output_frequency", "Output frequency", HZ, |m| {
+        m.output_frequency.value()
+    }),
+    measure("load_power", "Load power", "kVA", |m| m.load_power.value()),
+    measure(
+        "phase_error",
+        "Phase error between the sources",
+        "°",
+        |m| m.phase_error.value(),
+    ),
+    measure("inlet_air", "Inlet air temperature", "°C", |m| {
+        m.inlet_air.value()
+    }),
+    rating("rated_current", "Rated current", Some(A), |r| {
+        r.rated_current.value()
+    }),
+    rating(
+        "output_voltage_full_scale",
+        "Output voltage full scale",
+        Some(V),
+        |r| r.output_voltage_full_scale.u.value(),
+    ),
+    rating(
+        "output_current_full_scale",
+        "Output current full scale",
+        Some(A),
+        |r| r.output_current_full_scale.u.value(),
+    ),
+    rating("protocol_revision", "JBUS protocol revision", None, |r| {
+        f64::from(r.protocol_revision)
+    }),
+];
+
+impl Def {
+    fn group(&self) -> &'static str {
+        match self.show {
+            Show::Rating(_) => RATINGS,
+            _ => LIVE,
+        }
+    }
+}
+
+/// The feeds, numbered for the `load_feed` point.
+const FEEDS: [(Feed, i64); 6] = [
+    (Feed::NotSupplied, 0),
+    (Feed::StaticSwitch(Source::S1), 1),
+    (Feed::StaticSwitch(Source::S2), 2),
+    (Feed::Bypass(Source::S1), 3),
+    (Feed::Bypass(Source::S2), 4),
+    (Feed::OutputBreakerOpen, 5),
+];
+
+fn feed_number(feed: Feed) -> i64 {
+    FEEDS
+        .iter()
+        .find(|(f, _)| *f == feed)
+        .map_or(0, |(_, n)| *n)
+}
+
+/// A CROSS on a line.
+pub struct CrossDriver {
+    device: DeviceId,
+    unit: Unit,
+    config: ClientConfig,
+    client: Option<Client>,
+    /// What fed the load at the last poll, to see transfers.
+    feed: Option<Feed>,
+    events: Vec<DeviceEvent>,
+}
+
+impl CrossDriver {
+    /// A driver for the CROSS `config` describes.
+    pub fn new(config: &DriverConfig) -> Result<Self, String> {
+        check_address(config.address)?;
+        let unit = config
+            .address
+            .and_then(|a| u8::try_from(a).ok())
+            .and_then(|a| Unit::jbus(a).ok())
+            .ok_or_else(|| "JBUS unit number out of range".to_owned())?;
+        let defaults = ClientConfig::default();
+        Ok(Self {
+            device: config.id.clone(),
+            unit,
+            config: ClientConfig {
+                timeout: config.timeout.unwrap_or(defaults.timeout),
+                retries: config.retries.unwrap_or(defaults.retries),
+                ..defaults
+            },
+            client: None,
+            feed: None,
+            events: Vec::new(),
+        })
+    }
+
+    fn point_id(&self, def: &Def) -> PointId {
+        PointId::new(&self.device, def.name).expect("point names in POINTS follow the id rules")
+    }
+
+    fn spec(&self, def: &Def) -> PointSpec {
+        let (kind, alarm) = match def.show {
+            Show::Feed => (
+                PointKind::Enum {
+                    states: FEEDS
+                        .iter()
+                        .map(|(feed, value)| EnumState {
+                            value: *value,
+                            label: feed.to_string(),
+                        })
+                        .collect(),
+                },
+                None,
+            ),
+            Show::Reserve => (
+                PointKind::Enum {
+                    states: vec![
+                        EnumState {
+                            value: 0,
+                            label: "no".into(),
+                        },
+                        EnumState {
+                            value: 1,
+                            label: "yes".into(),
+                        },
+                    ],
+                },
+                None,
+            ),
+            Show::States => (PointKind::Text, None),
+            Show::Alarms(_) => (PointKind::Text, Some(AlarmRule::NotText(NO_ALARM))),
+            Show::Measure(_) | Show::Rating(_) => (PointKind::Numeric, None),
+        };
+        PointSpec {
+            id: self.point_id(def),
+            name: def.title.to_owned(),
+            unit: def.unit.map(str::to_owned),
+            kind,
+            group: def.group().to_owned(),
+            writable: None,
+            alarm,
+        }
+    }
+
+    /// Reads one area; `Ok(Err)` when the unit refused it (an exception), which marks only
+    /// that area's points.
+    async fn read_area(
+        &mut self,
+        area: Area,
+    ) -> Result<Result<Vec<u16>, DeviceError>, DeviceError> {
+        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        match client
+            .read_holding_registers(self.unit, area.start(), area.words())
+            .await
+        {
+            Ok(words) => Ok(Ok(words)),
+            Err(e @ ClientError::Exception { .. }) => Ok(Err(classify(&e))),
+            Err(e) => Err(classify(&e)),
+        }
+    }
+
+    async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
+        let mut readings = Vec::new();
+        if group == LIVE {
+            let internal = self
+                .read_area(Area::InternalState)
+                .await?
+                .and_then(|w| words::<{ InternalState::LEN }>(&w, Area::InternalState))
+                .map(|w| InternalState::from_words(&w));
+            let measures = self
+                .read_area(Area::Measures)
+                .await?
+                .and_then(|w| words::<{ Measures::LEN }>(&w, Area::Measures))
+                .map(|w| Measures::from_words(&w));
+            if let Ok(internal) = &internal {
+                self.note_feed(state_of(internal).feed());
+            }
+            for def in POINTS.iter().filter(|d| d.group() == LIVE) {
+                let value = match def.show {
+                    Show::Measure(f) => measures
+                        .as_ref()
+                        .map(|m| Value::Number(round(f(m))))
+                        .map_err(Clone::clone),
+                    _ => internal
+                        .as_ref()
+                        .map(|s| live_value(def.show, s))
+                        .map_err(Clone::clone),
+                };
+                readings.push(Reading {
+                    point: self.point_id(def),
+                    value,
+                });
+            }
+        } else if group == RATINGS {
+            let ratings = self
+                .read_area(Area::Ratings)
+                .await?
+                .and_then(|w| words::<{ Ratings::LEN }>(&w, Area::Ratings))
+                .map(|w| Ratings::from_words(&w));
+            for def in POINTS.iter().filter(|d| d.group() == RATINGS) {
+                let value = match (def.show, &ratings) {
+                    (Show::Rating(f), Ok(r)) => Ok(Value::Number(round(f(r)))),
+                    (_, Err(e)) => Err(e.clone()),
+                    _ => continue,
+                };
+                readings.push(Reading {
+                    point: self.point_id(def),
+                    value,
+                });
+            }
+        } else {
+            return Err(DeviceError::new(
+                ErrorKind::Refused,
+                format_args!("a CROSS has no poll group {group:?}"),
+            ));
+        }
+        Ok(readings)
+    }
+
+    /// Records a change of what feeds the load.
+    fn note_feed(&mut self, feed: Feed) {
+        let Some(old) = self.feed.replace(feed) else {
+            return;
+        };
+        if old == feed {
+            return;
+        }
+        let message = match (source_of(old), source_of(feed)) {
+            (Some(from), Some(to)) if from != to => {
+                format!("load transferred from {from} to {to}: {feed} (was {old})")
+            }
+            _ => format!("load {feed} (was {old})"),
+        };
+        self.events.push(DeviceEvent {
+            kind: EventKind::StateChanged,
+            point: Some("load_feed"),
+            message,
+        });
+    }
+}
+
+impl Driver for CrossDriver {
+    fn points(&self) -> Vec<PointSpec> {
+        POINTS.iter().map(|d| self.spec(d)).collect()
+    }
+
+    fn groups(&self) -> Vec<PollGroup> {
+        [
+            (LIVE, Duration::from_secs(1)),
+            (RATINGS, Duration::from_secs(60)),
+        ]
+        .into_iter()
+        .map(|(name, period)| PollGroup {
+            name: name.to_owned(),
+            period,
+        })
+        .collect()
+    }
+
+    fn attach(&mut self, line: SharedLine) {
+        self.client = Some(Client::new(line, self.config));
+    }
+
+    fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>> {
+        Box::pin(self.poll_group(group))
+    }
+
+    fn write<'a>(
+        &'a mut self,
+        point: &'a PointSpec,
+        _value: &'a Value,
+    ) -> BoxFuture<'a, Result<(), WriteError>> {
+        Box::pin(async move {
+            Err(WriteError::Invalid(crate::point::ValueError::ReadOnly {
+                point: point.id.clone(),
+                name: point.name.clone(),
+            }))
+        })
+    }
+
+    fn take_events(&mut self) -> Vec<DeviceEvent> {
+        std::mem::take(&mut self.events)
+    }
+}
+
+/// The state words as a [`CrossState`] (for its `feed`).
+fn state_of(internal: &InternalState) -> CrossState {
+    CrossState {
+        internal: *internal,
+        ..CrossState::default()
+    }
+}
+
+fn source_of(feed: Feed) -> Option<Source> {
+    match feed {
+        Feed::StaticSwitch(s) | Feed::Bypass(s) => Some(s),
+        Feed::OutputBreakerOpen | Feed::NotSupplied => None,
+    }
+}
+
+fn live_value(show: Show, s: &InternalState) -> Value {
+    let text = |t: String| Value::Text(t);
+    match show {
+        Show::Feed => Value::Number(feed_number(state_of(s).feed()) as f64),
+        Show::Reserve => Value::Number(if state_of(s).on_reserve_line() {
+            1.0
+        } else {
+            0.0
+        }),
+        Show::States => {
+            let states = state_of(s).conditions();
+            text(if states.is_empty() {
+                NO_ALARM.to_owned()
+            } else {
+                states.join(", ")
+            })
+        }
+        Show::Alarms(c) => text(match c {
+            Condition::S1 => s.s1.alarm.to_string(),
+            Condition::S2 => s.s2.alarm.to_string(),
+            Condition::S1Switch => s.s1_switch.alarm.to_string(),
+            Condition::S2Switch => s.s2_switch.alarm.to_string(),
+            Condition::Load => s.load.alarm.to_string(),
+            Condition::System => s.system.alarm.to_string(),
+        }),
+        Show::Measure(_) | Show::Rating(_) => text(String::new()),
+    }
+}
+
+/// Scaled register values as the nearest short decimal (230.1, not 230.10000000000002).
+fn round(value: f64) -> f64 {
+    (value * 1000.0).round() / 1000.0
+}
+
+/// An area's words as an array; the client checks the count, so a mismatch is damage.
+fn words<const N: usize>(words: &[u16], area: Area) -> Result<[u16; N], DeviceError> {
+    words.try_into().map_err(|_| {
+        DeviceError::new(
+            ErrorKind::Decode,
+            format_args!("the {area} area came with {} words, not {N}", words.len()),
+        )
+    })
+}
+
+fn not_attached() -> DeviceError {
+    DeviceError::new(
+        ErrorKind::Disconnected,
+        "the line is not open yet (the gateway is connecting)",
+    )
+}
+
+/// The kind of a client error.
+fn classify(error: &ClientError) -> DeviceError {
+    let kind = match error {
+        ClientError::Request(_) | ClientError::Exception { .. } => ErrorKind::Refused,
+        ClientError::NoAnswer { last, .. } => match last {
+            Trouble::Silence => ErrorKind::Timeout,
+            _ => ErrorKind::Decode,
+        },
+        ClientError::Line { source, .. } if source.is_fatal() => ErrorKind::Disconnected,
+        _ => ErrorKind::Line,
+    };
+    DeviceError::new(kind, error)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashSet;
+
+    use super::*;
+    use jbus::cross::device::CrossTwin;
+    use wire::device::SharedModel;
+
+    fn config(unit: i64) -> DriverConfig {
+        DriverConfig {
+            id: DeviceId::new("cross1").unwrap(),
+            protocol: super::super::Protocol::Cross,
+            address: Some(unit),
+            timeout: Some(Duration::from_millis(200)),
+            retries: Some(1),
+            event_port: None,
+            endpoint: None,
+        }
+    }
+
+    fn rig(unit: i64) -> (CrossDriver, SharedModel<CrossTwin>) {
+        let twin = SharedModel::new(CrossTwin::new(Unit::jbus(1).unwrap(), 7));
+        let (a, b) = tokio::io::duplex(1024);
+        tokio::spawn(link::serve::serve_stream(b, twin.line(), None));
+        let mut driver = CrossDriver::new(&config(unit)).unwrap();
+        driver.attach(SharedLine::new(link::Line::from_stream(
+            a,
+            "cross",
+            Some(DEFAULT_SERIAL),
+        )));
+        (driver, twin)
+    }
+
+    fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
+        readings
+            .iter()
+            .find(|r| r.point.name() == name)
+            .unwrap_or_else(|| panic!("no reading for {name}"))
+            .value
+            .clone()
+    }
+
+    fn number(readings: &[Reading], name: &str) -> f64 {
+        value(readings, name)
+            .unwrap()
+            .as_number()
+            .unwrap_or_else(|| panic!("{name} is not a number"))
+    }
+
+    #[test]
+    fn every_point_has_a_unique_id_and_a_known_group_and_none_is_writable() {
+        let driver = CrossDriver::new(&config(1)).unwrap();
+        let points = driver.points();
+        let ids: HashSet<_> = points.iter().map(|p| &p.id).collect();
+        assert_eq!(ids.len(), points.len());
+        assert!(points.iter().all(|p| p.group == LIVE || p.group == RATINGS));
+        assert!(points.iter().all(|p| p.writable.is_none()));
+        let feed = points.iter().find(|p| p.id.name() == "load_feed").unwrap();
+        assert_eq!(
+            feed.label(&Value::Number(2.0)),
+            Some("supplied by source 2 (S2) through static switch S2-SW")
+        );
+    }
+
+    #[test]
+    fn unit_numbers_outside_1_to_255_are_refused() {
+        assert!(check_address(Some(1)).is_ok());
+        assert!(check_address(Some(255)).is_ok());
+        assert!(check_address(Some(0)).unwrap_err().contains("1 to 255"));
+        assert!(check_address(Some(256)).is_err());
+        assert!(check_address(None).is_err());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_healthy_switch_feeds_the_load_from_source_1_with_measures_in_their_units() {
+        let (mut driver, _twin) = rig(1);
+        let live = driver.poll(LIVE).await.unwrap();
+        assert_eq!(
+            live.len(),
+            POINTS.iter().filter(|d| d.group() == LIVE).count()
+        );
+        assert_eq!(value(&live, "load_feed"), Ok(Value::Number(1.0)));
+        assert_eq!(value(&live, "s1_alarms"), Ok(Value::Text("none".into())));
+        let v = number(&live, "s1_voltage_u");
+        assert!((220.0..240.0).contains(&v), "{v}");
+        let f = number(&live, "output_frequency");
+        assert!((49.5..50.5).contains(&f), "{f}");
+        assert!(number(&live, "load_power") > 0.0);
+        let ratings = driver.poll(RATINGS).await.unwrap();
+        assert_eq!(number(&ratings, "rated_current"), 100.0);
+        assert!(driver.take_events().is_empty());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn losing_source_1_is_a_transfer_event_and_its_alarms_appear_and_clear() {
+        let (mut driver, twin) = rig(1);
+        driver.poll(LIVE).await.unwrap();
+        twin.lock().fail_source(Source::S1);
+        let live = driver.poll(LIVE).await.unwrap();
+        assert_eq!(value(&live, "load_feed"), Ok(Value::Number(2.0)));
+        let alarms = value(&live, "s1_alarms").unwrap();
+        assert!(
+            matches!(&alarms, Value::Text(t) if t.contains("S1 failure")),
+            "{alarms:?}"
+        );
+        let spec = driver
+            .points()
+            .into_iter()
+            .find(|p| p.id.name() == "s1_alarms")
+            .unwrap();
+        assert!(spec.is_alarm(&alarms));
+        let events = driver.take_events();
+        assert_eq!(events.len(), 1, "{events:?}");
+        assert_eq!(events[0].kind, EventKind::StateChanged);
+        assert!(
+            events[0]
+                .message
+                .starts_with("load transferred from source 1 (S1) to source 2 (S2)"),
+            "{}",
+            events[0].message
+        );
+        twin.lock().restore_source(Source::S1);
+        let live = driver.poll(LIVE).await.unwrap();
+        assert_eq!(value(&live, "s1_alarms"), Ok(Value::Text("none".into())));
+        let back = driver.take_events();
+        assert!(
+            back[0]
+                .message
+                .contains("from source 2 (S2) to source 1 (S1)"),
+            "{back:?}"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn another_unit_number_is_a_timeout_naming_the_unit() {
+        let (mut driver, _twin) = rig(9);
+        let err = driver.poll(LIVE).await.unwrap_err();
+        assert_eq!(err.kind, ErrorKind::Timeout);
+        assert!(err.message.contains("unit 9"), "{err}");
+    }
+}

@@ -1,0 +1,619 @@
+//! Panasonic placement machines (PanaProtocol LAN) as points and events, through
+//! `panasonic::client`.
+//!
+//! # How an event-driven TCP device fits the line scheduler
+//!
+//! The machine is a TCP server with two ports: Port 1 for C commands and their answers,
+//! Port 2 for its unsolicited R messages. Its client keeps both connections itself
+//! (reconnection with backoff, the C2HB/R1HB keep-alive), so the driver owns its
+//! [`Client`] instead of talking over the line the scheduler attaches: the line's
+//! endpoint (`tcp://host:49152`) names Port 1, the device's `event_port` Port 2 (49153 by
+//! default), and the line task opens nothing for such a line
+//! ([`super::Protocol::owns_connections`]). Everything else is the scheduler's as for any
+//! device: the poll groups at their periods, backoff of a silent machine, quality, history,
+//! metrics.
+//!
+//! The driver connects on its first poll and forwards Port 2's notices from a small task
+//! into a queue, which the scheduler drains after every poll ([`Driver::take_events`]): R
+//! messages become `device_event` events (in words: `R2E03… (error stop: parts
+//! exhausted …)`), a lost Port 2 connection too; so an R message is recorded at most one
+//! `live` period (1 s) after it arrived. Keep-alive echoes (`R1HB`) are not recorded.
+//!
+//! Groups: `live` (1 s: C2ST, run state and control mode), `program` (10 s: C3P, the
+//! selected program), `production` (10 s: C1M, the grand total of the production
+//! management data, read without clearing). The run state going from run to ready or
+//! error (and back) is a `state_changed` event; the error state is an alarm.
+//!
+//! Nothing is writable: C5 start and reset are commands, not values, and the gateway writes
+//! values only.
+
+use std::time::Duration;
+
+use link::{Endpoint, SharedLine};
+use panasonic::client::{Client, ClientConfig, ClientError, Notice, Trouble};
+use panasonic::command::{ProductionRequest, ProductionScope};
+use panasonic::event::Event;
+use panasonic::production::{Counter, RateKind};
+use panasonic::status::{ControlMode, RunState};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+
+use super::{
+    BoxFuture, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
+    WriteError,
+};
+use crate::point::{
+    AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value, ValueError,
+};
+use crate::store::EventKind;
+
+/// The status, every second.
+pub const LIVE: &str = "live";
+/// The selected program, every 10 s.
+pub const PROGRAM: &str = "program";
+/// The production management data, every 10 s.
+pub const PRODUCTION: &str = "production";
+
+/// Checks the address: a Panasonic machine has none (its endpoint says where it is).
+pub fn check_address(address: Option<i64>) -> Result<(), String> {
+    match address {
+        None => Ok(()),
+        Some(a) => Err(format!(
+            "a Panasonic machine has no address (given {a}): the line's tcp:// endpoint names its Port 1, event_port its Port 2"
+        )),
+    }
+}
+
+/// The run states, numbered for the `state` point (the C2ST digits).
+const STATES: [(RunState, i64); 3] = [
+    (RunState::Run, 0),
+    (RunState::Ready, 1),
+    (RunState::Error, 2),
+];
+
+fn state_number(state: RunState) -> i64 {
+    STATES
+        .iter()
+        .find(|(s, _)| *s == state)
+        .map_or(2, |(_, n)| *n)
+}
+
+/// The counters shown, with their point names.
+const COUNTERS: [(Counter, &str); 9] = [
+    (Counter::ProductPlan1, "boards_planned"),
+    (Counter::Product1, "boards_produced"),
+    (Counter::Pickup, "pickups"),
+    (Counter::Mount, "parts_placed"),
+    (Counter::PickupMiss, "pickup_misses"),
+    (Counter::PickupError, "pickup_error_stops"),
+    (Counter::RecognitionError1, "recognition_errors"),
+    (Counter::PartsExhaustCount, "parts_exhaustion_stops"),
+    (Counter::PartsExhaustTime, "parts_exhaustion_time"),
+];
+
+/// The rates shown, with their point names.
+const RATES: [(RateKind, &str); 2] = [
+    (RateKind::Pickup, "pickup_rate"),
+    (RateKind::Mount, "placement_rate"),
+];
+
+/// A placement machine.
+pub struct PanasonicDriver {
+    device: DeviceId,
+    config: ClientConfig,
+    client: Option<Client>,
+    notices: Option<mpsc::UnboundedReceiver<Notice>>,
+    forward: Option<JoinHandle<()>>,
+    state: Option<RunState>,
+    events: Vec<DeviceEvent>,
+}
+
+impl Drop for PanasonicDriver {
+    fn drop(&mut self) {
+        if let Some(task) = &self.forward {
+            task.abort();
+        }
+    }
+}
+
+impl PanasonicDriver {
+    /// A driver for the machine `config` describes; its endpoint must be `tcp://`.
+    pub fn new(config: &DriverConfig) -> Result<Self, String> {
+        check_address(config.address)?;
+        let (host, port) = match &config.endpoint {
+            Some(Endpoint::Tcp { host, port, .. }) => (host.clone(), *port),
+            Some(other) => {
+                return Err(format!(
+                    "a Panasonic machine is reached over TCP (tcp://host:49152), not {other}"
+                ));
+            }
+            None => ("localhost".to_owned(), panasonic::DEFAULT_COMMAND_PORT),
+        };
+        let mut client = ClientConfig::new(host);
+        client.command_port = port;
+        client.event_port = Some(config.event_port.unwrap_or(panasonic::DEFAULT_EVENT_PORT));
+        if let Some(timeout) = config.timeout {
+            client.timeout = timeout;
+            client.connect_timeout = timeout;
+        }
+        if let Some(retries) = config.retries {
+            client.retries = retries;
+        }
+        Ok(Self {
+            device: config.id.clone(),
+            config: client,
+            client: None,
+            notices: None,
+            forward: None,
+            state: None,
+            events: Vec::new(),
+        })
+    }
+
+    fn id(&self, name: &str) -> PointId {
+        PointId::new(&self.device, name).expect("point names of this driver follow the id rules")
+    }
+
+    fn spec(
+        &self,
+        name: &str,
+        title: &str,
+        unit: Option<&str>,
+        kind: PointKind,
+        group: &str,
+    ) -> PointSpec {
+        PointSpec {
+            id: self.id(name),
+            name: title.to_owned(),
+            unit: unit.map(str::to_owned),
+            kind,
+            group: group.to_owned(),
+            writable: None,
+            alarm: None,
+        }
+    }
+
+    /// The client, connecting on first use.
+    async fn client(&mut self) -> Result<&Client, DeviceError> {
+        if self.client.is_none() {
+            let (client, mut events) = Client::connect(self.config.clone())
+                .await
+                .map_err(|e| classify(&e))?;
+            let (tx, rx) = mpsc::unbounded_channel();
+            self.forward = Some(tokio::spawn(async move {
+                while let Some(notice) = events.next().await {
+                    if tx.send(notice).is_err() {
+                        break;
+                    }
+                }
+            }));
+            self.notices = Some(rx);
+            self.client = Some(client);
+        }
+        Ok(self.client.as_ref().expect("connected just above"))
+    }
+
+    async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
+        let readings = match group {
+            LIVE => {
+                let status = self
+                    .client()
+                    .await?
+                    .status()
+                    .await
+                    .map_err(|e| classify(&e))?;
+                self.note_state(status.state);
+                vec![
+                    Reading {
+                        point: self.id("state"),
+                        value: Ok(Value::Number(state_number(status.state) as f64)),
+                    },
+                    Reading {
+                        point: self.id("mode"),
+                        value: Ok(Value::Number(match status.mode {
+                            ControlMode::Online => 0.0,
+                            ControlMode::Remote => 1.0,
+                        })),
+                    },
+                ]
+            }
+            PROGRAM => {
+                let value = match self.client().await?.current_program().await {
+                    Ok(name) => Ok(Value::Text(name.to_string())),
+                    Err(e @ ClientError::Refused(_)) => Err(classify(&e)),
+                    Err(e) => return Err(classify(&e)),
+                };
+                vec![Reading {
+                    point: self.id("program"),
+                    value,
+                }]
+            }
+            PRODUCTION => {
+                let request = ProductionRequest {
+                    scope: ProductionScope::GrandTotal,
+                    clear: false,
+                };
+                let data = match self.client().await?.production(request).await {
+                    Ok(data) => Ok(data),
+                    Err(e @ ClientError::Refused(_)) => Err(classify(&e)),
+                    Err(e) => return Err(classify(&e)),
+                };
+                let missing = |what: &str| {
+                    DeviceError::new(
+                        ErrorKind::Decode,
+                        format_args!("the production data carry no {what}"),
+                    )
+                };
+                let mut readings = Vec::new();
+                for (counter, name) in COUNTERS {
+                    let value = match &data {
+                        Ok(d) => d
+                            .count(counter)
+                            .map(|n| Value::Number(f64::from(n)))
+                            .ok_or_else(|| missing(counter.key())),
+                        Err(e) => Err(e.clone()),
+                    };
+                    readings.push(Reading {
+                        point: self.id(name),
+                        value,
+                    });
+                }
+                for (rate, name) in RATES {
+                    let value = match &data {
+                        Ok(d) => d
+                            .rate(rate)
+                            .map(|r| Value::Number(r.percent()))
+                            .ok_or_else(|| missing(rate.key())),
+                        Err(e) => Err(e.clone()),
+                    };
+                    readings.push(Reading {
+                        point: self.id(name),
+                        value,
+                    });
+                }
+                readings
+            }
+            other => {
+                return Err(DeviceError::new(
+                    ErrorKind::Refused,
+                    format_args!("a Panasonic machine has no poll group {other:?}"),
+                ));
+            }
+        };
+        Ok(readings)
+    }
+
+    /// Records a change of the run state.
+    fn note_state(&mut self, state: RunState) {
+        let Some(old) = self.state.replace(state) else {
+            return;
+        };
+        if old != state {
+            self.events.push(DeviceEvent {
+                kind: EventKind::StateChanged,
+                point: Some("state"),
+                message: format!(
+                    "machine went from {} to {}",
+                    old.describe(),
+                    state.describe()
+                ),
+            });
+        }
+    }
+
+    /// What came on Port 2 since the last call.
+    fn drain_notices(&mut self) {
+        let Some(rx) = self.notices.as_mut() else {
+            return;
+        };
+        let mut notices = Vec::new();
+        while let Ok(notice) = rx.try_recv() {
+            notices.push(notice);
+        }
+        for notice in notices {
+            self.record_notice(&notice);
+        }
+    }
+
+    /// Turns a Port 2 notice into an event, unless it is routine (keep-alive echoes,
+    /// connections made, reconnection attempts: the device's status shows those).
+    fn record_notice(&mut self, notice: &Notice) {
+        let message = match notice {
+            Notice::Event(Event::Heartbeat { .. })
+            | Notice::Connected { .. }
+            | Notice::ConnectFailed { .. } => return,
+            Notice::Event(event) => format!("R message {event}"),
+            other => other.to_string(),
+        };
+        self.events.push(DeviceEvent {
+            kind: EventKind::DeviceEvent,
+            point: None,
+            message,
+        });
+    }
+}
+
+impl Driver for PanasonicDriver {
+    fn points(&self) -> Vec<PointSpec> {
+        let mut state = self.spec(
+            "state",
+            "Run state",
+            None,
+            PointKind::Enum {
+                states: STATES
+                    .iter()
+                    .map(|(s, n)| EnumState {
+                        value: *n,
+                        label: s.describe().to_owned(),
+                    })
+                    .collect(),
+            },
+            LIVE,
+        );
+        state.alarm = Some(AlarmRule::Above(1.5));
+        let mut points = vec![
+            state,
+            self.spec(
+                "mode",
+                "Control mode",
+                None,
+                PointKind::Enum {
+                    states: [ControlMode::Online, ControlMode::Remote]
+                        .iter()
+                        .zip(0..)
+                        .map(|(m, n)| EnumState {
+                            value: n,
+                            label: m.describe().to_owned(),
+                        })
+                        .collect(),
+                },
+                LIVE,
+            ),
+            self.spec(
+                "program",
+                "Selected program",
+                None,
+                PointKind::Text,
+                PROGRAM,
+            ),
+        ];
+        for (counter, name) in COUNTERS {
+            let unit = (counter == Counter::PartsExhaustTime).then_some("s");
+            let words = counter.describe();
+            let title = words.replace(" (s)", "");
+            let mut chars = title.chars();
+            let title = chars
+                .next()
+                .map(|c| c.to_uppercase().chain(chars).collect::<String>())
+                .unwrap_or_default();
+            points.push(self.spec(name, &title, unit, PointKind::Numeric, PRODUCTION));
+        }
+        for (rate, name) in RATES {
+            let words = rate.describe();
+            let mut chars = words.chars();
+            let title: String = chars
+                .next()
+                .map(|c| c.to_uppercase().chain(chars).collect())
+                .unwrap_or_default();
+            points.push(self.spec(name, &title, Some("%"), PointKind::Numeric, PRODUCTION));
+        }
+        points
+    }
+
+    fn groups(&self) -> Vec<PollGroup> {
+        [
+            (LIVE, Duration::from_secs(1)),
+            (PROGRAM, Duration::from_secs(10)),
+            (PRODUCTION, Duration::from_secs(10)),
+        ]
+        .into_iter()
+        .map(|(name, period)| PollGroup {
+            name: name.to_owned(),
+            period,
+        })
+        .collect()
+    }
+
+    /// The machine's client keeps its own connections: the line is not used.
+    fn attach(&mut self, _line: SharedLine) {}
+
+    fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>> {
+        Box::pin(self.poll_group(group))
+    }
+
+    fn write<'a>(
+        &'a mut self,
+        point: &'a PointSpec,
+        _value: &'a Value,
+    ) -> BoxFuture<'a, Result<(), WriteError>> {
+        Box::pin(async move {
+            Err(WriteError::Invalid(ValueError::ReadOnly {
+                point: point.id.clone(),
+                name: point.name.clone(),
+            }))
+        })
+    }
+
+    fn take_events(&mut self) -> Vec<DeviceEvent> {
+        self.drain_notices();
+        std::mem::take(&mut self.events)
+    }
+}
+
+/// The kind of a client error. A lost connection is a timeout of the device, not of a
+/// line: the client reconnects by itself, the scheduler only backs the machine off.
+fn classify(error: &ClientError) -> DeviceError {
+    let kind = match error {
+        ClientError::Refused(_) | ClientError::Request { .. } | ClientError::Config(_) => {
+            ErrorKind::Refused
+        }
+        ClientError::NoAnswer { last, .. } => match last {
+            Trouble::Silence => ErrorKind::Timeout,
+            Trouble::Damaged(_) => ErrorKind::Decode,
+            _ => ErrorKind::Line,
+        },
+        ClientError::Protocol { .. } => ErrorKind::Decode,
+        ClientError::ConnectTimeout { .. } | ClientError::Connect { .. } => ErrorKind::Timeout,
+        _ => ErrorKind::Line,
+    };
+    DeviceError::new(kind, error)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashSet;
+
+    use super::*;
+    use panasonic::server::TwinServer;
+    use panasonic::status::StopMode;
+    use panasonic::{Machine, MachineConfig};
+
+    async fn rig() -> (PanasonicDriver, panasonic::server::RunningTwin) {
+        let any: std::net::SocketAddr = "127.0.0.1:0".parse().unwrap();
+        let twin = TwinServer::bind(any, any, Machine::new(MachineConfig::default()).unwrap())
+            .await
+            .unwrap()
+            .spawn()
+            .unwrap();
+        let driver = PanasonicDriver::new(&DriverConfig {
+            id: DeviceId::new("placer1").unwrap(),
+            protocol: super::super::Protocol::Panasonic,
+            address: None,
+            timeout: None,
+            retries: None,
+            event_port: Some(twin.event_addr().port()),
+            endpoint: Some(Endpoint::Tcp {
+                host: "127.0.0.1".into(),
+                port: twin.command_addr().port(),
+                line: None,
+            }),
+        })
+        .unwrap();
+        (driver, twin)
+    }
+
+    fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
+        readings
+            .iter()
+            .find(|r| r.point.name() == name)
+            .unwrap_or_else(|| panic!("no reading for {name}"))
+            .value
+            .clone()
+    }
+
+    /// Polls `live` and waits for the next Port 2 notice until `done` holds for the
+    /// collected events (real sockets: bounded generously, no sleeps).
+    async fn events_until(
+        driver: &mut PanasonicDriver,
+        done: impl Fn(&[DeviceEvent]) -> bool,
+    ) -> Vec<DeviceEvent> {
+        let mut events = Vec::new();
+        for _ in 0..50 {
+            driver.poll(LIVE).await.unwrap();
+            events.extend(driver.take_events());
+            if done(&events) {
+                return events;
+            }
+            let rx = driver.notices.as_mut().expect("connected by the poll");
+            let notice = tokio::time::timeout(Duration::from_secs(20), rx.recv())
+                .await
+                .expect("a notice within 20 s")
+                .expect("the client runs");
+            driver.record_notice(&notice);
+        }
+        panic!("not seen in time: {events:?}");
+    }
+
+    #[test]
+    fn every_point_has_a_unique_id_and_none_is_writable() {
+        let driver = PanasonicDriver::new(&DriverConfig {
+            id: DeviceId::new("placer1").unwrap(),
+            protocol: super::super::Protocol::Panasonic,
+            address: None,
+            timeout: None,
+            retries: None,
+            event_port: None,
+            endpoint: None,
+        })
+        .unwrap();
+        let points = driver.points();
+        let ids: HashSet<_> = points.iter().map(|p| &p.id).collect();
+        assert_eq!(ids.len(), points.len());
+        assert!(points.iter().all(|p| p.writable.is_none()));
+        let state = &points[0];
+        assert_eq!(state.label(&Value::Number(2.0)), Some("error stop"));
+        assert!(state.is_alarm(&Value::Number(2.0)));
+        assert!(!state.is_alarm(&Value::Number(0.0)));
+        assert!(check_address(Some(1)).unwrap_err().contains("no address"));
+    }
+
+    #[tokio::test]
+    async fn status_program_and_production_data_are_read_from_the_twin() {
+        let (mut driver, _twin) = rig().await;
+        let live = driver.poll(LIVE).await.unwrap();
+        assert_eq!(value(&live, "state"), Ok(Value::Number(1.0)), "ready");
+        assert_eq!(value(&live, "mode"), Ok(Value::Number(0.0)), "online");
+        let program = driver.poll(PROGRAM).await.unwrap();
+        assert!(matches!(value(&program, "program"), Ok(Value::Text(t)) if !t.is_empty()));
+        let production = driver.poll(PRODUCTION).await.unwrap();
+        assert_eq!(production.len(), COUNTERS.len() + RATES.len());
+        assert!(production.iter().all(|r| r.value.is_ok()), "{production:?}");
+    }
+
+    #[tokio::test]
+    async fn r_messages_and_run_state_changes_become_events() {
+        let (mut driver, twin) = rig().await;
+        driver.poll(LIVE).await.unwrap();
+        twin.control()
+            .operator_start(Some(StopMode::Continuous))
+            .unwrap();
+        let events = events_until(&mut driver, |events| {
+            events.iter().any(|e| e.kind == EventKind::StateChanged)
+                && events.iter().any(|e| e.message.contains("R1ST"))
+        })
+        .await;
+        let change = events
+            .iter()
+            .find(|e| e.kind == EventKind::StateChanged)
+            .unwrap();
+        assert_eq!(change.message, "machine went from ready to run");
+        assert_eq!(change.point, Some("state"));
+        twin.control().force_error(3).unwrap();
+        let events = events_until(&mut driver, |events| {
+            events
+                .iter()
+                .any(|e| e.message == "machine went from run to error stop")
+        })
+        .await;
+        assert!(
+            events
+                .iter()
+                .any(|e| e.kind == EventKind::DeviceEvent && e.message.starts_with("R message R2E")),
+            "{events:?}"
+        );
+    }
+
+    #[tokio::test]
+    async fn a_machine_that_is_not_there_is_a_timeout_naming_its_port() {
+        let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = closed.local_addr().unwrap().port();
+        drop(closed);
+        let mut driver = PanasonicDriver::new(&DriverConfig {
+            id: DeviceId::new("placer1").unwrap(),
+            protocol: super::super::Protocol::Panasonic,
+            address: None,
+            timeout: Some(Duration::from_secs(2)),
+            retries: None,
+            event_port: Some(port),
+            endpoint: Some(Endpoint::Tcp {
+                host: "127.0.0.1".into(),
+                port,
+                line: None,
+            }),
+        })
+        .unwrap();
+        let err = driver.poll(LIVE).await.unwrap_err();
+        assert_eq!(err.kind, ErrorKind::Timeout, "{err}");
+        assert!(err.message.contains("Port 2"), "{err}");
+    }
+}

@@ -1,0 +1,695 @@
+//! Thermosald ISC impulse-sealer regulators as points, through `thermosald::client`.
+//!
+//! Each regulator (address 0–7) is one device; several on one RS-485 line share its
+//! scheduler, which polls them in turn, and its [`link::SharedLine`], whose quiet times
+//! carry the protocol's 40/200/40 ms windows from one regulator's client to the next.
+//!
+//! Groups, one table read (one message) each: `live` (2 s: the run-time table —
+//! temperature, the fault/warning number in words, current, resistance, voltage, power),
+//! `settings` (10 s: set points and balancing), `machine` (60 s: gains, ramp, limits) and
+//! `service` (60 s: the sealing band and its supply). An exchange takes about 300 ms at
+//! 9600 baud (200 ms until the answer, 40 ms release, wire time), so three regulators
+//! with `live` at 2 s keep the line about half busy and leave room for the slow groups
+//! and writes; `live` at 1 s for three regulators would fill it.
+//!
+//! Names and units come from the crate's tables ([`thermosald::tables`]), the fault number
+//! from [`thermosald::diagnostic`]. The `fault` point is an alarm whenever it is not 0
+//! (ready), so a fault appearing or clearing is recorded as an event.
+//!
+//! Writes: the set points and balancing data of the settings table, and the control data of
+//! the machine table (not the address or the serial switch, which would cut the gateway
+//! off). Each is checked against the item's range and step before the wire (a tenths item
+//! takes 12.5, not 12.55), and the sealing and pre-heating set points also against the
+//! maximum working temperature as last read. Writes go to the regulator's working memory;
+//! saving them to EEPROM is left to `cellbus thermosald`, on purpose.
+
+use std::time::Duration;
+
+use link::{SerialSettings, SharedLine};
+use thermosald::client::{Client, ClientConfig, ClientError, Trouble};
+use thermosald::diagnostic::{self, Fault};
+use thermosald::tables::{self, Item, Table, machine, runtime, service, settings};
+use thermosald::{Address, Target};
+
+use super::{
+    BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
+};
+use crate::point::{
+    AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
+};
+
+/// A Thermosald line when the URL says nothing: 9600 baud, 8N1 (the spec's).
+pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
+
+/// Default regulator address.
+pub const DEFAULT_ADDRESS: i64 = 0;
+
+/// Highest regulator address.
+pub const MAX_ADDRESS: i64 = 7;
+
+/// The run-time table, every 2 s.
+pub const LIVE: &str = "live";
+/// The settings table, every 10 s.
+pub const SETTINGS: &str = "settings";
+/// The machine table, every minute.
+pub const MACHINE: &str = "machine";
+/// The service table, every minute.
+pub const SERVICE: &str = "service";
+
+/// Checks a regulator address: 0–7.
+pub fn check_address(address: Option<i64>) -> Result<(), String> {
+    match address {
+        Some(a) if (0..=MAX_ADDRESS).contains(&a) => Ok(()),
+        Some(a) => Err(format!(
+            "Thermosald regulator address {a} is out of range: 0 to {MAX_ADDRESS} (machine data item 14)"
+        )),
+        None => Err(format!(
+            "a Thermosald regulator needs its address, 0 to {MAX_ADDRESS}"
+        )),
+    }
+}
+
+/// What a point's value means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Meaning {
+    /// The item's scaled value with its unit.
+    Quantity,
+    /// The fault/warning number, in words.
+    Fault,
+    /// A `1 = …` switch.
+    Switch,
+}
+
+/// One point of a regulator.
+struct Def {
+    name: &'static str,
+    table: Table,
+    index: u8,
+    meaning: Meaning,
+    writable: bool,
+    /// Limited by the maximum working temperature (settings item 11).
+    below_max_working: bool,
+}
+
+const fn def(name: &'static str, table: Table, index: u8) -> Def {
+    Def {
+        name,
+        table,
+        index,
+        meaning: Meaning::Quantity,
+        writable: false,
+        below_max_working: false,
+    }
+}
+
+const fn rw(mut d: Def) -> Def {
+    d.writable = true;
+    d
+}
+
+const fn meaning(mut d: Def, meaning: Meaning) -> Def {
+    d.meaning = meaning;
+    d
+}
+
+const fn limited(mut d: Def) -> Def {
+    d.below_max_working = true;
+    d
+}
+
+use Table::{Machine as M, Runtime as RT, Service as SV, Settings as ST};
+
+/// Every point, table by table, in the order a person reads them.
+const POINTS: &[Def] = &[
+    def("temperature", RT, runtime::TEMPERATURE),
+    meaning(def("fault", RT, runtime::FAULT), Meaning::Fault),
+    def("maximum_current", RT, runtime::MAXIMUM_CURRENT),
+    def("resistance", RT, runtime::RESISTANCE),
+    def("voltage", RT, runtime::VOLTAGE),
+    def("power", RT, runtime::POWER),
+    limited(rw(def(
+        "sealing_temperature",
+        ST,
+        settings::SEALING_TEMPERATURE,
+    ))),
+    limited(rw(def(
+        "preheat_temperature",
+        ST,
+        settings::PRE_HEATING_TEMPERATURE,
+    ))),
+    rw(def(
+        "max_working_temperature",
+        ST,
+        settings::MAXIMUM_WORKING_TEMPERATURE,
+    )),
+    rw(def(
+        "balancing_temperature",
+        ST,
+        settings::BALANCING_TEMPERATURE,
+    )),
+    rw(def("cooling_gradient", ST, settings::COOLING_GRADIENT)),
+    rw(def("heating_factor", ST, settings::HEATING_FACTOR)),
+    rw(def("heating_ramp", M, machine::HEATING_RAMP)),
+    rw(def("kv_gain", M, 2)),
+    rw(def("kint_gain", M, machine::KINT_GAIN)),
+    rw(def("kint_threshold", M, 4)),
+    rw(def("kd_gain", M, 11)),
+    rw(def("max_sealing_time", M, machine::MAXIMUM_SEALING_TIME)),
+    rw(def(
+        "short_circuit_factor",
+        M,
+        machine::PARTIAL_SHORT_CIRCUIT_FACTOR,
+    )),
+    rw(def("nominal_current", M, 10)),
+    rw(meaning(
+        def("cold_structure_compensation", M, 12),
+        Meaning::Switch,
+    )),
+    def("mains_frequency", M, 6),
+    meaning(
+        def("serial_enabled", M, machine::SERIAL_ENABLING),
+        Meaning::Switch,
+    ),
+    def("address", M, machine::ADDRESS),
+    rw(def("burn_in_temperature", M, 21)),
+    rw(def("burn_in_time", M, 22)),
+    def("band_width", SV, service::WIDTH),
+    def("band_thickness", SV, service::THICKNESS),
+    def("band_length", SV, service::LENGTH),
+    def("bands_in_parallel", SV, service::IN_PARALLEL),
+    def("bands_in_series", SV, service::IN_SERIES),
+    def("duty_cycle", SV, service::DUTY_CYCLE),
+    def("set_maximum_current", SV, service::SET_MAXIMUM_CURRENT),
+    def("set_voltage", SV, service::SET_VOLTAGE),
+    def("set_power", SV, service::SET_POWER),
+    def("theoretical_current", SV, service::THEORETICAL_CURRENT),
+    def("theoretical_voltage", SV, service::THEORETICAL_VOLTAGE),
+    def("theoretical_power", SV, service::THEORETICAL_POWER),
+];
+
+impl Def {
+    fn item(&self) -> &'static Item {
+        self.table
+            .item(self.index)
+            .expect("POINTS names items that exist (checked by a test)")
+    }
+
+    fn group(&self) -> &'static str {
+        group_of(self.table)
+    }
+}
+
+fn group_of(table: Table) -> &'static str {
+    match table {
+        Table::Runtime => LIVE,
+        Table::Settings => SETTINGS,
+        Table::Machine => MACHINE,
+        Table::Service => SERVICE,
+    }
+}
+
+fn table_of(group: &str) -> Option<Table> {
+    Table::ALL.into_iter().find(|t| group_of(*t) == group)
+}
+
+/// One regulator on a line.
+pub struct ThermosaldDriver {
+    device: DeviceId,
+    config: ClientConfig,
+    client: Option<Client>,
+    /// The maximum working temperature as last read, °C.
+    max_working: Option<f64>,
+}
+
+impl ThermosaldDriver {
+    /// A driver for the regulator `config` describes.
+    pub fn new(config: &DriverConfig) -> Result<Self, String> {
+        check_address(config.address)?;
+        let address = config
+            .address
+            .and_then(|a| u8::try_from(a).ok())
+            .and_then(|a| Address::new(a).ok())
+            .ok_or_else(|| "Thermosald regulator address out of range".to_owned())?;
+        let mut client = ClientConfig::new(Target::Address(address));
+        client.timeout = config.timeout;
+        if let Some(retries) = config.retries {
+            client.retries = retries;
+        }
+        Ok(Self {
+            device: config.id.clone(),
+            config: client,
+            client: None,
+            max_working: None,
+        })
+    }
+
+    fn point_id(&self, def: &Def) -> PointId {
+        PointId::new(&self.device, def.name).expect("point names in POINTS follow the id rules")
+    }
+
+    fn spec(&self, def: &Def) -> PointSpec {
+        let item = def.item();
+        let symbol = item.unit().symbol();
+        let unit = (!symbol.is_empty()).then(|| symbol.to_owned());
+        let (kind, unit, alarm) = match def.meaning {
+            Meaning::Quantity => (PointKind::Numeric, unit, None),
+            Meaning::Fault => (
+                states(
+                    [
+                        diagnostic::NONE,
+                        diagnostic::CALIBRATION_REQUEST,
+                        diagnostic::CALIBRATION_IN_PROGRESS,
+                    ]
+                    .into_iter()
+                    .chain(Fault::ALL.iter().map(|f| f.code()))
+                    .map(|code| (code, diagnostic::describe(code).to_owned())),
+                ),
+                None,
+                Some(AlarmRule::NotEqual(f64::from(diagnostic::NONE))),
+            ),
+            Meaning::Switch => (states([(0, "off".into()), (1, "on".into())]), None, None),
+        };
+        let step = item.scale().step();
+        PointSpec {
+            id: self.point_id(def),
+            name: item.name().to_owned(),
+            unit,
+            kind,
+            group: def.group().to_owned(),
+            writable: (def.writable && item.writable()).then(|| WriteRange {
+                min: item.min(),
+                max: item.max(),
+                integer: step.fract() == 0.0,
+                step: (step != 1.0).then_some(step),
+            }),
+            alarm,
+        }
+    }
+
+    async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
+        let table = table_of(group).ok_or_else(|| {
+            DeviceError::new(
+                ErrorKind::Refused,
+                format_args!("Thermosald regulators have no poll group {group:?}"),
+            )
+        })?;
+        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let values = client.read_table(table).await.map_err(|e| classify(&e))?;
+        let mut readings = Vec::new();
+        for def in POINTS.iter().filter(|d| d.table == table) {
+            let item = def.item();
+            let value = match values.get(item) {
+                Some(reading) => Ok(Value::Number(match def.meaning {
+                    Meaning::Quantity => reading.value(),
+                    Meaning::Fault | Meaning::Switch => f64::from(reading.raw().get()),
+                })),
+                None => Err(DeviceError::new(
+                    ErrorKind::Decode,
+                    format_args!("the answer carries no {}", item.name()),
+                )),
+            };
+            if def.index == settings::MAXIMUM_WORKING_TEMPERATURE
+                && table == Table::Settings
+                && let Ok(Value::Number(n)) = value
+            {
+                self.max_working = Some(n);
+            }
+            readings.push(Reading {
+                point: self.point_id(def),
+                value,
+            });
+        }
+        Ok(readings)
+    }
+
+    async fn write_point(&mut self, point: &PointSpec, value: &Value) -> Result<(), WriteError> {
+        let def = POINTS
+            .iter()
+            .find(|d| d.name == point.id.name())
+            .ok_or_else(|| WriteError::UnknownPoint {
+                point: point.id.clone(),
+            })?;
+        let checked = point.check_write(value)?;
+        let number = checked
+            .as_number()
+            .expect("check_write gives numbers for numeric and enumerated points");
+        let item = def.item();
+        if def.below_max_working
+            && let Some(max) = self.max_working
+            && number > max
+        {
+            return Err(WriteError::Invalid(ValueError::OutOfRange {
+                point: point.id.clone(),
+                name: format!(
+                    "{}, limited by the regulator's maximum working temperature",
+                    point.name
+                ),
+                value: number,
+                min: item.min(),
+                max,
+                unit: point
+                    .unit
+                    .as_deref()
+                    .map(|u| format!(" {u}"))
+                    .unwrap_or_default(),
+            }));
+        }
+        // The crate's own check (range, step) once more, so nothing it would refuse is sent.
+        let raw = item
+            .to_raw(number)
+            .map_err(|e| WriteError::Invalid(value_error(point, e)))?;
+        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        client
+            .write_raw(item, raw)
+            .await
+            .map(drop)
+            .map_err(|e| WriteError::Device(classify(&e)))
+    }
+}
+
+impl Driver for ThermosaldDriver {
+    fn points(&self) -> Vec<PointSpec> {
+        POINTS.iter().map(|d| self.spec(d)).collect()
+    }
+
+    fn groups(&self) -> Vec<PollGroup> {
+        [
+            (LIVE, Duration::from_secs(2)),
+            (SETTINGS, Duration::from_secs(10)),
+            (MACHINE, Duration::from_secs(60)),
+            (SERVICE, Duration::from_secs(60)),
+        ]
+        .into_iter()
+        .map(|(name, period)| PollGroup {
+            name: name.to_owned(),
+            period,
+        })
+        .collect()
+    }
+
+    fn attach(&mut self, line: SharedLine) {
+        self.client = Some(Client::new(line, self.config));
+    }
+
+    fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>> {
+        Box::pin(self.poll_group(group))
+    }
+
+    fn write<'a>(
+        &'a mut self,
+        point: &'a PointSpec,
+        value: &'a Value,
+    ) -> BoxFuture<'a, Result<(), WriteError>> {
+        Box::pin(self.write_point(point, value))
+    }
+}
+
+fn states(items: impl IntoIterator<Item = (u16, String)>) -> PointKind {
+    PointKind::Enum {
+        states: items
+            .into_iter()
+            .map(|(value, label)| EnumState {
+                value: i64::from(value),
+                label,
+            })
+            .collect(),
+    }
+}
+
+/// The crate's refusal of a value, as the gateway's.
+fn value_error(point: &PointSpec, error: tables::ValueError) -> ValueError {
+    let unit = |u: tables::Unit| {
+        let s = u.symbol();
+        if s.is_empty() {
+            String::new()
+        } else {
+            format!(" {s}")
+        }
+    };
+    match error {
+        tables::ValueError::OutOfRange {
+            value,
+            min,
+            max,
+            unit: u,
+            ..
+        } => ValueError::OutOfRange {
+            point: point.id.clone(),
+            name: point.name.clone(),
+            value,
+            min,
+            max,
+            unit: unit(u),
+        },
+        tables::ValueError::NotAStep {
+            value,
+            step,
+            unit: u,
+            ..
+        } => ValueError::NotAStep {
+            point: point.id.clone(),
+            name: point.name.clone(),
+            value,
+            step,
+            unit: unit(u),
+        },
+        other => ValueError::WrongType {
+            point: point.id.clone(),
+            expected: "a number".into(),
+            got: other.to_string(),
+        },
+    }
+}
+
+fn not_attached() -> DeviceError {
+    DeviceError::new(
+        ErrorKind::Disconnected,
+        "the line is not open yet (the gateway is connecting)",
+    )
+}
+
+/// The kind of a client error.
+fn classify(error: &ClientError) -> DeviceError {
+    let kind = match error {
+        ClientError::Request(_) | ClientError::EchoMismatch { .. } => ErrorKind::Refused,
+        ClientError::NoAnswer { last, .. } => match last {
+            Trouble::Silence => ErrorKind::Timeout,
+            _ => ErrorKind::Decode,
+        },
+        ClientError::Line { source, .. } if source.is_fatal() => ErrorKind::Disconnected,
+        _ => ErrorKind::Line,
+    };
+    DeviceError::new(kind, error)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashSet;
+
+    use super::*;
+    use thermosald::device::Line as Twin;
+    use wire::device::SharedModel;
+
+    fn config(id: &str, address: i64) -> DriverConfig {
+        DriverConfig {
+            id: DeviceId::new(id).unwrap(),
+            protocol: super::super::Protocol::Thermosald,
+            address: Some(address),
+            timeout: None,
+            retries: Some(1),
+            event_port: None,
+            endpoint: None,
+        }
+    }
+
+    fn address(n: u8) -> Address {
+        Address::new(n).unwrap()
+    }
+
+    /// Drivers for regulators 0, 1 and 2 on one simulated RS-485 line.
+    fn rig(addresses: &[u8]) -> (Vec<ThermosaldDriver>, SharedModel<Twin>) {
+        let list: Vec<Address> = addresses.iter().map(|&a| address(a)).collect();
+        let twin = Twin::new(&list, tokio::time::Instant::now().into_std()).unwrap();
+        let model = SharedModel::new(twin);
+        let (a, b) = tokio::io::duplex(1024);
+        tokio::spawn(link::serve::serve_stream(b, model.line(), None));
+        let line = SharedLine::new(link::Line::from_stream(a, "rs485", Some(DEFAULT_SERIAL)));
+        let drivers = addresses
+            .iter()
+            .map(|&n| {
+                let mut d =
+                    ThermosaldDriver::new(&config(&format!("sealer{n}"), n.into())).unwrap();
+                d.attach(line.clone());
+                d
+            })
+            .collect();
+        (drivers, model)
+    }
+
+    fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
+        readings
+            .iter()
+            .find(|r| r.point.name() == name)
+            .unwrap_or_else(|| panic!("no reading for {name}"))
+            .value
+            .clone()
+    }
+
+    fn spec(driver: &ThermosaldDriver, name: &str) -> PointSpec {
+        driver
+            .points()
+            .into_iter()
+            .find(|p| p.id.name() == name)
+            .unwrap()
+    }
+
+    #[test]
+    fn every_point_names_an_item_with_a_unit_and_a_known_group() {
+        let driver = ThermosaldDriver::new(&config("sealer0", 0)).unwrap();
+        let groups: Vec<String> = driver.groups().into_iter().map(|g| g.name).collect();
+        let points = driver.points();
+        assert_eq!(points.len(), POINTS.len());
+        for p in &points {
+            assert!(groups.contains(&p.group), "{}", p.id);
+        }
+        let ids: HashSet<_> = points.iter().map(|p| &p.id).collect();
+        assert_eq!(ids.len(), points.len(), "point ids are unique");
+        let temperature = spec(&driver, "temperature");
+        assert_eq!(temperature.unit.as_deref(), Some("°C"));
+        assert_eq!(temperature.group, LIVE);
+        assert_eq!(spec(&driver, "power").unit.as_deref(), Some("VA"));
+        assert!(spec(&driver, "address").writable.is_none());
+        assert!(spec(&driver, "serial_enabled").writable.is_none());
+        let kint = spec(&driver, "kint_gain").writable.unwrap();
+        assert_eq!(kint.step, Some(0.1));
+        assert!(!kint.integer);
+    }
+
+    #[test]
+    fn regulator_addresses_outside_0_to_7_are_refused() {
+        assert!(check_address(Some(0)).is_ok());
+        assert!(check_address(Some(7)).is_ok());
+        assert!(check_address(Some(8)).unwrap_err().contains("0 to 7"));
+        assert!(
+            check_address(None)
+                .unwrap_err()
+                .contains("needs its address")
+        );
+        assert!(ThermosaldDriver::new(&config("sealer9", 9)).is_err());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn three_regulators_on_one_line_each_answer_their_own_polls() {
+        let (mut drivers, _model) = rig(&[0, 1, 2]);
+        for driver in &mut drivers {
+            let live = driver.poll(LIVE).await.unwrap();
+            assert_eq!(live.len(), 6);
+            assert!(matches!(value(&live, "temperature"), Ok(Value::Number(t)) if t > 0.0));
+            assert_eq!(value(&live, "fault"), Ok(Value::Number(0.0)));
+            for group in [SETTINGS, MACHINE, SERVICE] {
+                let readings = driver.poll(group).await.unwrap();
+                assert!(readings.iter().all(|r| r.value.is_ok()), "{readings:?}");
+            }
+        }
+        let machine = drivers[2].poll(MACHINE).await.unwrap();
+        assert_eq!(value(&machine, "address"), Ok(Value::Number(2.0)));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_provoked_fault_shows_as_its_number_and_words() {
+        let (mut drivers, model) = rig(&[0, 1]);
+        model
+            .lock()
+            .regulator_mut(address(1))
+            .unwrap()
+            .provoke(Fault::OpenBand, tokio::time::Instant::now().into_std());
+        let live = drivers[1].poll(LIVE).await.unwrap();
+        assert_eq!(value(&live, "fault"), Ok(Value::Number(1.0)));
+        let fault = spec(&drivers[1], "fault");
+        assert_eq!(fault.label(&Value::Number(1.0)), Some("sealing band open"));
+        assert!(fault.is_alarm(&Value::Number(1.0)));
+        let other = drivers[0].poll(LIVE).await.unwrap();
+        assert_eq!(value(&other, "fault"), Ok(Value::Number(0.0)));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_set_point_write_reaches_the_regulator_and_reads_back() {
+        let (mut drivers, _model) = rig(&[0]);
+        let driver = &mut drivers[0];
+        let sealing = spec(driver, "sealing_temperature");
+        driver.write(&sealing, &Value::Number(150.0)).await.unwrap();
+        let kint = spec(driver, "kint_gain");
+        driver.write(&kint, &Value::Number(12.5)).await.unwrap();
+        let settings = driver.poll(SETTINGS).await.unwrap();
+        assert_eq!(
+            value(&settings, "sealing_temperature"),
+            Ok(Value::Number(150.0))
+        );
+        let machine = driver.poll(MACHINE).await.unwrap();
+        assert_eq!(value(&machine, "kint_gain"), Ok(Value::Number(12.5)));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn writes_out_of_range_between_steps_or_above_the_working_limit_never_reach_the_wire() {
+        let (mut drivers, model) = rig(&[0]);
+        let driver = &mut drivers[0];
+        driver.poll(SETTINGS).await.unwrap();
+        let before = model.lock().regulators_mut()[0]
+            .table(Table::Settings, tokio::time::Instant::now().into_std());
+        let sealing = spec(driver, "sealing_temperature");
+        let err = driver
+            .write(&sealing, &Value::Number(1000.0))
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(err, WriteError::Invalid(ValueError::OutOfRange { .. })),
+            "{err}"
+        );
+        let max = driver.max_working.expect("read with the settings");
+        let err = driver
+            .write(&sealing, &Value::Number(max + 1.0))
+            .await
+            .unwrap_err();
+        assert!(
+            err.to_string().contains("maximum working temperature"),
+            "{err}"
+        );
+        let kint = spec(driver, "kint_gain");
+        let err = driver
+            .write(&kint, &Value::Number(12.55))
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(err, WriteError::Invalid(ValueError::NotAStep { .. })),
+            "{err}"
+        );
+        let address = spec(driver, "address");
+        let err = driver
+            .write(&address, &Value::Number(3.0))
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(err, WriteError::Invalid(ValueError::ReadOnly { .. })),
+            "{err}"
+        );
+        let after = model.lock().regulators_mut()[0]
+            .table(Table::Settings, tokio::time::Instant::now().into_std());
+        assert_eq!(before, after, "nothing was written");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_regulator_that_is_not_on_the_line_times_out() {
+        let (_drivers, model) = rig(&[0]);
+        let (a, b) = tokio::io::duplex(1024);
+        tokio::spawn(link::serve::serve_stream(b, model.line(), None));
+        let mut driver = ThermosaldDriver::new(&config("sealer5", 5)).unwrap();
+        driver.attach(SharedLine::new(link::Line::from_stream(
+            a,
+            "rs485",
+            Some(DEFAULT_SERIAL),
+        )));
+        let err = driver.poll(LIVE).await.unwrap_err();
+        assert_eq!(err.kind, ErrorKind::Timeout, "{err}");
+        assert!(err.message.contains('5'), "{err}");
+    }
+}
