@@ -1,0 +1,1167 @@
+//! Gateway load benchmark: N simulated devices over M lines, polled by the real gateway at
+//! the drivers' periods; prints polls, points and history rows per second, the poll
+//! periods achieved, the gateway's CPU share and its peak memory.
+//!
+//! ```text
+//! cargo bench -p gateway --bench load                                   # 100 devices, 10 lines, 10 s
+//! nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
+//! cargo bench -p gateway --bench load -- --help                         # every option
+//! ```
+//!
+//! # How it runs
+//!
+//! - **Two processes.** The bench re-executes itself with `--simulators`: that child process
+//!   runs every simulated device, one TCP listener on 127.0.0.1 per line. The parent runs
+//!   the gateway exactly as `cellbus serve --config` does: a generated `cell.toml` (checked
+//!   by [`gateway::check_config`]), [`Gateway::start`] on a multi-threaded tokio runtime
+//!   like the CLI's, the real scheduler, drivers, protocol clients and `tcp://` lines, the
+//!   SQLite history in a temporary directory, the HTTP server listening on a free port. So
+//!   the CPU share and peak RSS printed for the gateway are the gateway's own (plus this
+//!   bench's sampler, which reads the point timestamps ten times a second); the simulators'
+//!   figures are printed apart. Both processes share the machine's cores.
+//! - **Lines are multi-drop buses.** Each line is one TCP endpoint behind which a [`Bus`]
+//!   hands every byte to all the stations on that line (each with its own deframer, as on
+//!   a real RS-485 line where every device hears everything); only the addressed station
+//!   answers (the station model is silent to frames for other addresses). The gateway
+//!   polls the stations of a line in turn over one connection, as it would a real bus.
+//!   Real JBC stations are RS-232, one per port: until the Thermosald and CROSS drivers
+//!   land, JTSE stations stand in for multi-drop devices here.
+//! - **Timing.** By default the lines are not paced (a serial server at loopback speed) and
+//!   the stations answer after [`DEFAULT_REPLY_DELAY`] instead of the model's 5 ms, so that
+//!   20 stations fit on one line at the driver's periods (live 1 s, settings 10 s, info
+//!   60 s: about ten reads per station per second). `--baud 19200 --reply-delay 5ms` gives
+//!   a JTSE's real wire timing; a line then carries only about four stations at those
+//!   periods, and the report shows the periods the scheduler could keep.
+//! - **A working cell.** An operator script in the simulator process works every station
+//!   (set points, tool on and off, the suction pedal, an occasional air-flow fault), each
+//!   on its own phase, so temperatures move and the history grows as in production.
+//! - **Measured** over `--seconds` after `--warmup` (connections, first reads of every
+//!   group): counters from the gateway's own metrics ([`gateway::metrics::Metrics`]) and
+//!   history writer ([`gateway::store::StoreStats`]); CPU time (user + system) from
+//!   `/proc/PID/stat` over wall time; peak RSS from `VmHWM` in `/proc/PID/status`.
+//!
+//! # Adding device kinds
+//!
+//! The device mix is `--mix jbc=1` (weights per line). A kind is one [`Kind`] variant with
+//! its arms in [`Kind::parse`], [`Kind::protocol`], [`Kind::max_per_line`],
+//! [`Kind::line_serial`] and [`simulate_line`] (its simulator models behind the bus, and
+//! their operator). Thermosald regulators and CROSS switches join this way when their
+//! gateway drivers merge.
+//!
+//! Under `cargo test --benches` (no `--bench` flag) it runs a one-second smoke test with
+//! four devices.
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::PathBuf;
+use std::process::{Child, Command, ExitCode, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use gateway::cell::Cell;
+use gateway::driver::ErrorKind;
+use gateway::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
+use gateway::point::Quality;
+use gateway::{Gateway, ServeOptions};
+use jbc::code::{Code, Port, ToolError};
+use jbc::device::{Station, StationConfig};
+use jbc::frame::{Address, Route};
+use jbc::message::{Reply, Request};
+use link::SerialSettings;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use wire::device::{Device, SharedModel, Transmit};
+
+/// Devices simulated when `--devices` is not given.
+const DEFAULT_DEVICES: usize = 100;
+/// Lines when `--lines` is not given.
+const DEFAULT_LINES: usize = 10;
+/// Measured time when `--seconds` is not given.
+const DEFAULT_SECONDS: Duration = Duration::from_secs(10);
+/// Time before measuring: lines open, every group read once.
+const DEFAULT_WARMUP: Duration = Duration::from_secs(5);
+/// Station processing time before each reply, unless `--reply-delay` says otherwise.
+const DEFAULT_REPLY_DELAY: Duration = Duration::from_millis(1);
+/// How often the sampler reads the point timestamps.
+const SAMPLE_EVERY: Duration = Duration::from_millis(100);
+/// How often the simulated operators act.
+const OPERATOR_TICK: Duration = Duration::from_millis(250);
+/// One round of the operator's routine.
+const ROUTINE: Duration = Duration::from_secs(120);
+/// The flag that makes the process the simulators' one.
+const SIMULATORS_FLAG: &str = "--simulators";
+/// What the simulator process prints once every line listens.
+const READY: &str = "ready";
+
+const USAGE: &str = "\
+gateway load benchmark: simulated devices polled by the real gateway
+
+usage: cargo bench -p gateway --bench load -- [options]
+
+  --devices N         simulated devices (default 100)
+  --lines M           lines they share, each a multi-drop bus (default 10)
+  --seconds S         measured time, e.g. 60 or 60s (default 10 s)
+  --warmup S          time before measuring (default 5 s)
+  --mix KIND=W,...    device kinds, by weight per line (default jbc=1; known: jbc)
+  --baud B|none       pace each line like a serial line of B baud (default none:
+                      loopback speed)
+  --reply-delay D     station processing time before each reply (default 1ms; the
+                      JTSE model's own is 5ms)
+
+1,000 devices over 50 lines for a minute:
+  nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
+";
+
+fn main() -> ExitCode {
+    let raw: Vec<String> = std::env::args().skip(1).collect();
+    // `cargo bench` passes --bench; `cargo test --benches` does not: then a smoke run.
+    let benching = raw.iter().any(|a| a == "--bench");
+    let simulators = raw.iter().any(|a| a == SIMULATORS_FLAG);
+    let rest: Vec<String> = raw
+        .into_iter()
+        .filter(|a| a != "--bench" && a != SIMULATORS_FLAG)
+        .collect();
+    if rest.iter().any(|a| a == "--help" || a == "-h") {
+        print!("{USAGE}");
+        return ExitCode::SUCCESS;
+    }
+    let mut args = match Args::parse(&rest) {
+        Ok(args) => args,
+        Err(message) => {
+            eprintln!("load: {message}\n\n{USAGE}");
+            return ExitCode::from(2);
+        }
+    };
+    if !benching && !simulators && rest.is_empty() {
+        args = Args {
+            devices: 4,
+            lines: 2,
+            seconds: Duration::from_secs(1),
+            warmup: Duration::from_secs(1),
+            ..args
+        };
+        println!("load: smoke run (cargo bench -p gateway --bench load for the benchmark)");
+    }
+    let result = if simulators {
+        run_simulators(&args)
+    } else {
+        run_bench(&args).map(|report| print!("{report}"))
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("load: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+// ---- arguments ---------------------------------------------------------------------------
+
+#[derive(Debug, Clone, PartialEq)]
+struct Args {
+    devices: usize,
+    lines: usize,
+    seconds: Duration,
+    warmup: Duration,
+    mix: Vec<(Kind, u32)>,
+    baud: Option<u32>,
+    reply_delay: Duration,
+}
+
+impl Args {
+    fn parse(raw: &[String]) -> Result<Args, String> {
+        let mut args = Args {
+            devices: DEFAULT_DEVICES,
+            lines: DEFAULT_LINES,
+            seconds: DEFAULT_SECONDS,
+            warmup: DEFAULT_WARMUP,
+            mix: vec![(Kind::Jbc, 1)],
+            baud: None,
+            reply_delay: DEFAULT_REPLY_DELAY,
+        };
+        let mut it = raw.iter();
+        while let Some(flag) = it.next() {
+            let value = it
+                .next()
+                .ok_or_else(|| format!("{flag} needs a value"))?
+                .as_str();
+            match flag.as_str() {
+                "--devices" => args.devices = count(flag, value)?,
+                "--lines" => args.lines = count(flag, value)?,
+                "--seconds" => args.seconds = seconds(flag, value)?,
+                "--warmup" => args.warmup = seconds(flag, value)?,
+                "--mix" => args.mix = mix(value)?,
+                "--baud" => {
+                    args.baud = match value {
+                        "none" => None,
+                        text => Some(
+                            text.parse::<u32>()
+                                .ok()
+                                .filter(|b| (300..=1_000_000).contains(b))
+                                .ok_or_else(|| {
+                                    format!("--baud {text:?}: a speed from 300 to 1000000, or none")
+                                })?,
+                        ),
+                    }
+                }
+                "--reply-delay" => {
+                    args.reply_delay = humantime::parse_duration(value)
+                        .map_err(|e| format!("--reply-delay {value:?}: {e}; e.g. 1ms"))?;
+                }
+                other => return Err(format!("unknown option {other:?}")),
+            }
+        }
+        if args.seconds.is_zero() {
+            return Err("--seconds must be more than 0".into());
+        }
+        if args.lines > args.devices {
+            return Err(format!(
+                "{} lines need at least {} devices (one per line), not {}",
+                args.lines, args.lines, args.devices
+            ));
+        }
+        plan(&args)?;
+        Ok(args)
+    }
+
+    /// The arguments the simulator process needs.
+    fn for_simulators(&self) -> Vec<String> {
+        let mix = self
+            .mix
+            .iter()
+            .map(|(k, w)| format!("{}={w}", k.protocol()))
+            .collect::<Vec<_>>()
+            .join(",");
+        vec![
+            SIMULATORS_FLAG.into(),
+            "--devices".into(),
+            self.devices.to_string(),
+            "--lines".into(),
+            self.lines.to_string(),
+            "--mix".into(),
+            mix,
+            "--baud".into(),
+            self.baud.map_or("none".into(), |b| b.to_string()),
+            "--reply-delay".into(),
+            format!("{}us", self.reply_delay.as_micros()),
+        ]
+    }
+}
+
+fn count(flag: &str, value: &str) -> Result<usize, String> {
+    value
+        .parse::<usize>()
+        .ok()
+        .filter(|n| *n >= 1)
+        .ok_or_else(|| format!("{flag} {value:?}: a whole number from 1"))
+}
+
+fn seconds(flag: &str, value: &str) -> Result<Duration, String> {
+    if let Ok(s) = value.parse::<f64>() {
+        if (0.0..=86_400.0).contains(&s) {
+            return Ok(Duration::from_secs_f64(s));
+        }
+        return Err(format!("{flag} {value}: from 0 to 86400 seconds"));
+    }
+    humantime::parse_duration(value).map_err(|e| format!("{flag} {value:?}: {e}; e.g. 60 or 60s"))
+}
+
+fn mix(value: &str) -> Result<Vec<(Kind, u32)>, String> {
+    let mut mix = Vec::new();
+    for part in value.split(',') {
+        let (name, weight) = part.split_once('=').unwrap_or((part, "1"));
+        let kind = Kind::parse(name.trim()).ok_or_else(|| {
+            format!(
+                "--mix: {name:?} is not a device kind the bench simulates; known: {}",
+                Kind::KNOWN
+            )
+        })?;
+        let weight = weight
+            .trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|w| *w >= 1)
+            .ok_or_else(|| format!("--mix: the weight of {name} must be a whole number from 1"))?;
+        mix.push((kind, weight));
+    }
+    Ok(mix)
+}
+
+// ---- device kinds and the plan of lines --------------------------------------------------
+
+/// A kind of simulated device. Add Thermosald and CROSS here when their drivers land.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Kind {
+    /// JBC JTSE hot-air station.
+    Jbc,
+}
+
+impl Kind {
+    const KNOWN: &'static str = "jbc";
+
+    fn parse(name: &str) -> Option<Kind> {
+        match name {
+            "jbc" => Some(Kind::Jbc),
+            _ => None,
+        }
+    }
+
+    /// The protocol name in the config.
+    fn protocol(self) -> &'static str {
+        match self {
+            Kind::Jbc => "jbc",
+        }
+    }
+
+    /// Most devices on one line: the addresses the protocol has for them.
+    fn max_per_line(self) -> usize {
+        match self {
+            // 01-99; 00 is the robot's (the gateway's) own address.
+            Kind::Jbc => usize::from(Address::MAX),
+        }
+    }
+
+    /// The device address of the `index`-th device on a line.
+    fn address(self, index: usize) -> i64 {
+        match self {
+            Kind::Jbc => index as i64 + 1,
+        }
+    }
+
+    /// The line's character framing at `baud`, when the line is paced.
+    fn line_serial(self, baud: u32) -> SerialSettings {
+        match self {
+            Kind::Jbc => SerialSettings::new_8e1(baud),
+        }
+    }
+}
+
+/// One line of the bench: its kind and how many devices it carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct LinePlan {
+    kind: Kind,
+    devices: usize,
+}
+
+/// Spreads the devices over the lines (as evenly as whole numbers allow) and the kinds
+/// over the lines by weight.
+fn plan(args: &Args) -> Result<Vec<LinePlan>, String> {
+    let cycle: Vec<Kind> = args
+        .mix
+        .iter()
+        .flat_map(|(kind, weight)| std::iter::repeat_n(*kind, *weight as usize))
+        .collect();
+    if cycle.is_empty() {
+        return Err("--mix names no device kind".into());
+    }
+    let base = args.devices / args.lines;
+    let extra = args.devices % args.lines;
+    let mut lines = Vec::with_capacity(args.lines);
+    for i in 0..args.lines {
+        let kind = cycle[i % cycle.len()];
+        let devices = base + usize::from(i < extra);
+        if devices > kind.max_per_line() {
+            return Err(format!(
+                "{devices} {} devices on one line: at most {} have addresses; use more lines",
+                kind.protocol(),
+                kind.max_per_line()
+            ));
+        }
+        lines.push(LinePlan { kind, devices });
+    }
+    Ok(lines)
+}
+
+// ---- the simulator process ---------------------------------------------------------------
+
+/// A multi-drop line: every device hears every byte; what they send goes out in turn.
+struct Bus {
+    devices: Vec<Box<dyn Device>>,
+}
+
+impl Device for Bus {
+    fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
+        self.devices
+            .iter_mut()
+            .flat_map(|d| d.receive(bytes, now))
+            .collect()
+    }
+}
+
+/// What an operator does to the devices of a line, every [`OPERATOR_TICK`].
+type Operator = Box<dyn FnMut(std::time::Instant) + Send>;
+
+/// The bus of one line's simulated devices (a new bus per connection, sharing the models)
+/// and their operator.
+fn simulate_line(
+    plan: LinePlan,
+    line: usize,
+    reply_delay: Duration,
+) -> anyhow::Result<(Arc<dyn Fn() -> Bus + Send + Sync>, Operator)> {
+    match plan.kind {
+        Kind::Jbc => {
+            let mut stations = Vec::with_capacity(plan.devices);
+            for i in 0..plan.devices {
+                let address = u8::try_from(plan.kind.address(i))
+                    .ok()
+                    .and_then(|a| Address::new(a).ok())
+                    .context("a JBC address out of range (plan checks it)")?;
+                let model = SharedModel::new(Station::new(StationConfig {
+                    address: Some(address),
+                    reply_delay,
+                    ..StationConfig::default()
+                }));
+                // Phases spread the stations' routines over the round.
+                let phase = Duration::from_millis(((line * 97 + i * 7919) % 120_000) as u64);
+                stations.push((model, address, phase, JbcOperator::default()));
+            }
+            let models: Vec<SharedModel<Station>> =
+                stations.iter().map(|(m, ..)| m.clone()).collect();
+            let bus = Arc::new(move || Bus {
+                devices: models
+                    .iter()
+                    .map(|m| Box::new(m.line()) as Box<dyn Device>)
+                    .collect(),
+            });
+            let started = std::time::Instant::now();
+            let operator = Box::new(move |now: std::time::Instant| {
+                let elapsed = now.saturating_duration_since(started);
+                for (model, address, phase, op) in &mut stations {
+                    op.act(model, *address, elapsed + *phase, now);
+                }
+            });
+            Ok((bus, operator))
+        }
+    }
+}
+
+/// What the operator of one JTSE last did.
+#[derive(Debug, Default)]
+struct JbcOperator {
+    heat: Option<(i32, i32)>,
+    suction: bool,
+    fault: bool,
+    refused: bool,
+}
+
+impl JbcOperator {
+    /// The routine, 120 s a round: heat to 350 °C, off, heat to 420 °C with the suction
+    /// pedal pressed for a while, an air-flow fault in one round of three, off.
+    fn act(
+        &mut self,
+        model: &SharedModel<Station>,
+        address: Address,
+        at: Duration,
+        now: std::time::Instant,
+    ) {
+        let round = at.as_secs() / ROUTINE.as_secs();
+        let s = at.as_secs() % ROUTINE.as_secs();
+        let heat = match s {
+            0..45 => Some((350, 60)),
+            60..95 => Some((420, 80)),
+            _ => None,
+        };
+        let suction = (70..75).contains(&s);
+        let fault = round % 3 == 0 && (85..90).contains(&s);
+        let mut station = model.lock();
+        station.advance(now);
+        if heat != self.heat {
+            let writes: &[(Code, i32)] = match heat {
+                Some((celsius, flow)) => &[
+                    (Code::SelectAirTemp(Port::One), celsius),
+                    (Code::SelectAirFlow(Port::One), flow),
+                    (Code::PortStatus(Port::One), 1),
+                ],
+                None => &[(Code::PortStatus(Port::One), 0)],
+            };
+            let route = Route {
+                source: Address::ROBOT,
+                target: address,
+            };
+            for &(code, value) in writes {
+                let accepted = Request::write(code, value).ok().is_some_and(|request| {
+                    let reply = station.reply_to(Ok(request.to_frame(Some(route))), now);
+                    reply.is_some_and(|frame| {
+                        matches!(Reply::from_frame(&frame), Ok(Reply::Ack { .. }))
+                    })
+                });
+                if !accepted && !self.refused {
+                    self.refused = true;
+                    eprintln!("load: station {address:?} refused the operator's {code}");
+                }
+            }
+            self.heat = heat;
+        }
+        if suction != self.suction {
+            station.set_suction(suction);
+            self.suction = suction;
+        }
+        if fault != self.fault {
+            station.set_tool_error(if fault {
+                ToolError::InsufficientAirFlow
+            } else {
+                ToolError::Ok
+            });
+            self.fault = fault;
+        }
+    }
+}
+
+/// The child process: serves every line, prints `line I PORT` for each and then `ready`,
+/// and runs until its standard input closes (the bench ends or dies).
+fn run_simulators(args: &Args) -> anyhow::Result<()> {
+    let plans = plan(args).map_err(anyhow::Error::msg)?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the simulators' runtime")?;
+    runtime.block_on(async {
+        let mut operators = Vec::new();
+        let mut out = String::new();
+        for (i, plan) in plans.iter().enumerate() {
+            let (bus, operator) = simulate_line(*plan, i, args.reply_delay)?;
+            let listener = tokio::net::TcpListener::bind(("127.0.0.1", 0))
+                .await
+                .context("cannot listen on 127.0.0.1")?;
+            let port = listener.local_addr()?.port();
+            let pace = args.baud.map(|b| plan.kind.line_serial(b));
+            tokio::spawn(async move {
+                if let Err(e) = link::serve::serve_tcp(listener, move || bus(), pace).await {
+                    eprintln!("load: simulated line {i} stopped: {e}");
+                }
+            });
+            operators.push(operator);
+            writeln!(out, "line {i} {port}").expect("writing to a String cannot fail");
+        }
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(OPERATOR_TICK);
+            loop {
+                tick.tick().await;
+                let now = std::time::Instant::now();
+                for operator in &mut operators {
+                    operator(now);
+                }
+            }
+        });
+        {
+            let mut stdout = std::io::stdout().lock();
+            writeln!(stdout, "{out}{READY}").and_then(|()| stdout.flush())?;
+        }
+        // Until the bench closes our standard input (or dies).
+        tokio::task::spawn_blocking(|| {
+            let mut sink = Vec::new();
+            let _ = std::io::stdin().read_to_end(&mut sink);
+        })
+        .await
+        .context("the standard input watcher failed")?;
+        anyhow::Ok(())
+    })?;
+    runtime.shutdown_background();
+    Ok(())
+}
+
+/// The simulator process, killed when dropped.
+struct Simulators {
+    child: Child,
+    ports: Vec<u16>,
+}
+
+impl Simulators {
+    fn start(args: &Args) -> anyhow::Result<Self> {
+        let exe = std::env::current_exe().context("cannot find the bench's own executable")?;
+        let mut child = Command::new(exe)
+            .args(args.for_simulators())
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .context("cannot start the simulator process")?;
+        let stdout = child.stdout.take().context("the child has no stdout")?;
+        let mut simulators = Simulators {
+            child,
+            ports: Vec::new(),
+        };
+        for line in BufReader::new(stdout).lines() {
+            let line = line.context("reading the simulator process's output")?;
+            if line == READY {
+                return Ok(simulators);
+            }
+            let port = line
+                .strip_prefix("line ")
+                .and_then(|rest| rest.split_once(' '))
+                .and_then(|(_, port)| port.parse::<u16>().ok())
+                .with_context(|| format!("unexpected line from the simulators: {line:?}"))?;
+            simulators.ports.push(port);
+        }
+        bail!("the simulator process ended before it was ready")
+    }
+
+    fn pid(&self) -> u32 {
+        self.child.id()
+    }
+}
+
+impl Drop for Simulators {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+// ---- the gateway and the measurement -----------------------------------------------------
+
+/// The cell configuration for the simulated lines, as a file for `cellbus serve --config`.
+fn config_text(args: &Args, plans: &[LinePlan], ports: &[u16]) -> String {
+    let mut text = String::from("# Generated by the gateway load benchmark.\n");
+    for (i, (plan, port)) in plans.iter().zip(ports).enumerate() {
+        let timing = args.baud.map_or(String::new(), |b| {
+            format!("?baud={b}&framing={}", plan.kind.line_serial(b).framing())
+        });
+        let _ = write!(
+            text,
+            "\n[[line]]\nname = \"line{i:02}\"\nendpoint = \"tcp://127.0.0.1:{port}{timing}\"\n"
+        );
+        for d in 0..plan.devices {
+            let address = plan.kind.address(d);
+            let _ = write!(
+                text,
+                "\n[[line.device]]\nid = \"l{i:02}-{kind}{address:02}\"\nprotocol = \"{kind}\"\naddress = {address}\n",
+                kind = plan.kind.protocol()
+            );
+        }
+    }
+    text
+}
+
+/// CPU time and peak memory of a process, from `/proc`.
+#[derive(Debug, Clone, Copy, Default)]
+struct ProcessUse {
+    cpu: Duration,
+    peak_rss_kib: u64,
+}
+
+impl ProcessUse {
+    fn of(pid: &str, ticks_per_second: u64) -> anyhow::Result<Self> {
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .with_context(|| format!("cannot read /proc/{pid}/stat"))?;
+        // Fields after the command name (which may hold spaces) in parentheses: state is
+        // field 3, utime 14, stime 15.
+        let after = stat
+            .rsplit_once(')')
+            .map(|(_, rest)| rest)
+            .context("/proc/PID/stat without a command name")?;
+        let fields: Vec<&str> = after.split_whitespace().collect();
+        let ticks = |n: usize| -> anyhow::Result<u64> {
+            fields
+                .get(n - 3)
+                .and_then(|f| f.parse().ok())
+                .with_context(|| format!("/proc/{pid}/stat field {n}"))
+        };
+        let total = ticks(14)? + ticks(15)?;
+        let status = std::fs::read_to_string(format!("/proc/{pid}/status"))
+            .with_context(|| format!("cannot read /proc/{pid}/status"))?;
+        let peak_rss_kib = status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .context("no VmHWM in /proc/PID/status")?;
+        Ok(Self {
+            cpu: Duration::from_secs_f64(total as f64 / ticks_per_second as f64),
+            peak_rss_kib,
+        })
+    }
+}
+
+/// Clock ticks per second of `/proc/PID/stat` (USER_HZ; 100 on Linux unless `getconf`
+/// says otherwise).
+fn ticks_per_second() -> u64 {
+    Command::new("getconf")
+        .arg("CLK_TCK")
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .and_then(|s| s.trim().parse().ok())
+        .filter(|t| *t > 0)
+        .unwrap_or(100)
+}
+
+/// The gateway's counters at one moment.
+#[derive(Debug, Clone, Default)]
+struct Counters {
+    at: Option<Instant>,
+    polls_ok: u64,
+    polls_failed: u64,
+    timeouts: u64,
+    errors: HashMap<ErrorKind, u64>,
+    value_changes: u64,
+    events: u64,
+    rows: u64,
+    samples: u64,
+    commits: u64,
+    busy: Vec<f64>,
+    gateway: ProcessUse,
+    simulators: ProcessUse,
+}
+
+impl Counters {
+    fn take(cell: &Cell, simulators: u32, ticks: u64) -> anyhow::Result<Self> {
+        let metrics = cell.metrics();
+        let stats = cell.store().stats();
+        let mut c = Counters {
+            at: Some(Instant::now()),
+            gateway: ProcessUse::of("self", ticks)?,
+            simulators: ProcessUse::of(&simulators.to_string(), ticks)?,
+            value_changes: metrics.value_changes.get(),
+            events: metrics.events.get(),
+            rows: stats.rows_written(),
+            samples: stats.samples_written.load(Ordering::Relaxed),
+            commits: stats.commits.load(Ordering::Relaxed),
+            ..Counters::default()
+        };
+        for line in cell.lines() {
+            c.busy.push(
+                metrics
+                    .line_busy_seconds
+                    .get_or_create(&LineLabels {
+                        line: line.name.clone(),
+                    })
+                    .get(),
+            );
+            for device in &line.devices {
+                let poll = |result| {
+                    metrics
+                        .polls
+                        .get_or_create(&PollLabels {
+                            line: line.name.clone(),
+                            device: device.to_string(),
+                            result,
+                        })
+                        .get()
+                };
+                c.polls_ok += poll(PollResult::ok);
+                c.polls_failed += poll(PollResult::error);
+                c.timeouts += metrics
+                    .timeouts
+                    .get_or_create(&DeviceLabels {
+                        line: line.name.clone(),
+                        device: device.to_string(),
+                    })
+                    .get();
+                for kind in ErrorKind::ALL {
+                    *c.errors.entry(kind).or_default() += metrics
+                        .errors
+                        .get_or_create(&ErrorLabels {
+                            line: line.name.clone(),
+                            device: device.to_string(),
+                            kind: kind.as_str().to_owned(),
+                        })
+                        .get();
+                }
+            }
+        }
+        Ok(c)
+    }
+}
+
+/// Per poll group: good reads seen, points they carried, intervals between reads.
+#[derive(Debug, Clone, Default)]
+struct GroupSeen {
+    period: Duration,
+    devices: usize,
+    reads: u64,
+    points: u64,
+    intervals_ms: Vec<i64>,
+}
+
+/// Follows the time stamp of one point per device and group: each new good time stamp is
+/// one answered poll of that group, and the time since the previous one the period kept.
+struct Sampler {
+    measuring: Arc<AtomicBool>,
+    task: tokio::task::JoinHandle<Vec<(String, GroupSeen)>>,
+}
+
+impl Sampler {
+    fn start(cell: Arc<Cell>) -> Self {
+        struct Watch {
+            group: usize,
+            device: Arc<gateway::cell::DeviceEntry>,
+            point: usize,
+            points: u64,
+            last: Option<i64>,
+        }
+        let measuring = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&measuring);
+        let task = tokio::spawn(async move {
+            let mut groups: Vec<(String, GroupSeen)> = Vec::new();
+            let mut watches = Vec::new();
+            for device in cell.device_entries() {
+                for g in &device.groups {
+                    let Some(point) = device.points.iter().position(|p| p.group == g.name) else {
+                        continue;
+                    };
+                    let points = device.points.iter().filter(|p| p.group == g.name).count();
+                    let group = match groups
+                        .iter()
+                        .position(|(name, seen)| *name == g.name && seen.period == g.period)
+                    {
+                        Some(i) => i,
+                        None => {
+                            groups.push((
+                                g.name.clone(),
+                                GroupSeen {
+                                    period: g.period,
+                                    ..GroupSeen::default()
+                                },
+                            ));
+                            groups.len() - 1
+                        }
+                    };
+                    groups[group].1.devices += 1;
+                    watches.push(Watch {
+                        group,
+                        device: Arc::clone(device),
+                        point,
+                        points: points as u64,
+                        last: None,
+                    });
+                }
+            }
+            let mut tick = tokio::time::interval(SAMPLE_EVERY);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            while Arc::strong_count(&flag) > 1 {
+                tick.tick().await;
+                let measuring = flag.load(Ordering::Relaxed);
+                for w in &mut watches {
+                    let (t, good) = {
+                        let state = w.device.read();
+                        match state.points.get(w.point) {
+                            Some(p) => (p.t.map(|t| t.0), p.quality == Some(Quality::Good)),
+                            None => (None, false),
+                        }
+                    };
+                    if t == w.last {
+                        continue;
+                    }
+                    if measuring && good {
+                        let seen = &mut groups[w.group].1;
+                        seen.reads += 1;
+                        seen.points += w.points;
+                        if let (Some(now), Some(before)) = (t, w.last) {
+                            seen.intervals_ms.push(now - before);
+                        }
+                    }
+                    w.last = if good { t } else { None };
+                }
+            }
+            groups
+        });
+        Self { measuring, task }
+    }
+
+    fn measure(&self) {
+        self.measuring.store(true, Ordering::Relaxed);
+    }
+
+    async fn finish(self) -> anyhow::Result<Vec<(String, GroupSeen)>> {
+        let Sampler { measuring, task } = self;
+        drop(measuring);
+        task.await.context("the sampler failed")
+    }
+}
+
+/// Times one GET on the gateway's HTTP port; returns the status line, the body's size and
+/// the time to the last byte.
+async fn get(addr: std::net::SocketAddr, path: &str) -> anyhow::Result<(String, usize, Duration)> {
+    let started = Instant::now();
+    let mut stream = tokio::net::TcpStream::connect(addr).await?;
+    stream
+        .write_all(format!("GET {path} HTTP/1.1\r\nHost: bench\r\nConnection: close\r\n\r\n").as_bytes())
+        .await?;
+    let mut response = Vec::new();
+    stream.read_to_end(&mut response).await?;
+    let took = started.elapsed();
+    let text = String::from_utf8_lossy(&response);
+    let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
+    let status = head.lines().next().unwrap_or("").to_owned();
+    Ok((status, body.len(), took))
+}
+
+/// Everything measured.
+struct Report {
+    args: Args,
+    plans: Vec<LinePlan>,
+    cores: usize,
+    load_before: String,
+    load_after: String,
+    window: Duration,
+    before: Counters,
+    after: Counters,
+    groups: Vec<(String, GroupSeen)>,
+    scrapes: Vec<(String, String, usize, Duration)>,
+    stop_took: Duration,
+    rows_at_stop: u64,
+    integrity: String,
+}
+
+fn run_bench(args: &Args) -> anyhow::Result<Report> {
+    let plans = plan(args).map_err(anyhow::Error::msg)?;
+    let ticks = ticks_per_second();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let load_before = loadavg();
+    let simulators = Simulators::start(args)?;
+    if simulators.ports.len() != plans.len() {
+        bail!(
+            "the simulators opened {} lines, not {}",
+            simulators.ports.len(),
+            plans.len()
+        );
+    }
+    let dir = tempfile::tempdir().context("cannot create a temporary directory")?;
+    let config = dir.path().join("cell.toml");
+    std::fs::write(&config, config_text(args, &plans, &simulators.ports))
+        .context("cannot write the generated cell.toml")?;
+    let data_dir: PathBuf = dir.path().join("data");
+    let options = ServeOptions {
+        listen: "127.0.0.1:0".parse().expect("a valid socket address"),
+        config: Some(config),
+        data_dir: data_dir.clone(),
+        ..ServeOptions::default()
+    };
+    // The same runtime as `cellbus serve`: multi-threaded, one worker per core.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the runtime")?;
+    let pid = simulators.pid();
+    let report = runtime.block_on(async {
+        let gateway = Gateway::start(options).await?;
+        let addr = gateway.local_addr();
+        let cell = Arc::clone(gateway.cell());
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let run = tokio::spawn(gateway.run(async {
+            let _ = stopped.await;
+        }));
+        let sampler = Sampler::start(Arc::clone(&cell));
+        tokio::time::sleep(args.warmup).await;
+        let before = Counters::take(&cell, pid, ticks)?;
+        sampler.measure();
+        tokio::time::sleep(args.seconds).await;
+        let after = Counters::take(&cell, pid, ticks)?;
+        let groups = sampler.finish().await?;
+        let load_after = loadavg();
+        // After the window: what a dashboard and a Prometheus scrape cost with this cell.
+        let mut scrapes = Vec::new();
+        for path in ["/metrics", "/api/devices", "/healthz"] {
+            let (status, size, took) = get(addr, path).await?;
+            scrapes.push((path.to_owned(), status, size, took));
+        }
+        drop(cell);
+        let stopping = Instant::now();
+        let _ = stop.send(());
+        run.await.context("the gateway task failed")??;
+        let stop_took = stopping.elapsed();
+        anyhow::Ok((before, after, groups, load_after, scrapes, stop_took))
+    })?;
+    runtime.shutdown_timeout(Duration::from_secs(5));
+    drop(simulators);
+    let (before, after, groups, load_after, scrapes, stop_took) = report;
+    // Reopen the history the gateway closed: every row it committed is there.
+    let store = gateway::store::Store::open(&data_dir, gateway::store::StoreOptions::default())?;
+    let integrity = store.handle().integrity_check()?;
+    let rows_at_stop = store_rows(&data_dir)?;
+    drop(store);
+    let window = after
+        .at
+        .zip(before.at)
+        .map_or(args.seconds, |(a, b)| a - b);
+    Ok(Report {
+        args: args.clone(),
+        plans,
+        cores,
+        load_before,
+        load_after,
+        window,
+        before,
+        after,
+        groups,
+        scrapes,
+        stop_took,
+        rows_at_stop,
+        integrity,
+    })
+}
+
+/// Rows in the history tables.
+fn store_rows(data_dir: &std::path::Path) -> anyhow::Result<u64> {
+    let conn = rusqlite::Connection::open(data_dir.join(gateway::store::DB_FILE))?;
+    let mut rows = 0u64;
+    for table in ["samples", "events"] {
+        let n: i64 = conn.query_row(&format!("SELECT count(*) FROM {table}"), [], |r| r.get(0))?;
+        rows += u64::try_from(n).unwrap_or(0);
+    }
+    Ok(rows)
+}
+
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|| "unknown".into())
+}
+
+// ---- the report --------------------------------------------------------------------------
+
+fn percentile(sorted: &[i64], p: f64) -> Option<i64> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let rank = ((p / 100.0) * (sorted.len() - 1) as f64).round() as usize;
+    sorted.get(rank.min(sorted.len() - 1)).copied()
+}
+
+fn mib(kib: u64) -> f64 {
+    kib as f64 / 1024.0
+}
+
+impl std::fmt::Display for Report {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let secs = self.window.as_secs_f64();
+        let rate = |a: u64, b: u64| a.saturating_sub(b) as f64 / secs;
+        let (a, b) = (&self.after, &self.before);
+        let kinds: Vec<String> = self
+            .args
+            .mix
+            .iter()
+            .map(|(k, w)| format!("{}×{w}", k.protocol()))
+            .collect();
+        let most = self.plans.iter().map(|p| p.devices).max().unwrap_or(0);
+        let least = self.plans.iter().map(|p| p.devices).min().unwrap_or(0);
+        writeln!(f, "gateway load benchmark")?;
+        writeln!(
+            f,
+            "  cell         {} devices ({}) on {} lines, {}{} per line; lines {}, reply delay {}",
+            self.args.devices,
+            kinds.join(", "),
+            self.args.lines,
+            least,
+            if most == least {
+                String::new()
+            } else {
+                format!("-{most}")
+            },
+            self.args.baud.map_or("not paced (loopback speed)".to_owned(), |b| format!(
+                "paced at {b} baud"
+            )),
+            humantime::format_duration(self.args.reply_delay),
+        )?;
+        writeln!(
+            f,
+            "  run          {:.1} s measured after {} s warm-up; machine: {} cores, load average {} before, {} after",
+            secs,
+            self.args.warmup.as_secs_f64(),
+            self.cores,
+            self.load_before,
+            self.load_after
+        )?;
+        let polls = rate(a.polls_ok, b.polls_ok);
+        let failed = rate(a.polls_failed, b.polls_failed);
+        writeln!(
+            f,
+            "  polls        {polls:.0}/s answered, {failed:.1}/s failed (timeouts {}, errors {})",
+            a.timeouts.saturating_sub(b.timeouts),
+            ErrorKind::ALL
+                .iter()
+                .map(|k| format!(
+                    "{k} {}",
+                    a.errors
+                        .get(k)
+                        .copied()
+                        .unwrap_or(0)
+                        .saturating_sub(b.errors.get(k).copied().unwrap_or(0))
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )?;
+        let points: u64 = self.groups.iter().map(|(_, g)| g.points).sum();
+        writeln!(
+            f,
+            "  points       {:.0}/s read good; {:.0}/s value changes",
+            points as f64 / secs,
+            rate(a.value_changes, b.value_changes),
+        )?;
+        writeln!(
+            f,
+            "  history      {:.0} rows/s committed ({:.0} samples/s, {:.1} commits/s, {:.1} events/s); {} rows on disk after stop, integrity {}",
+            rate(a.rows, b.rows),
+            rate(a.samples, b.samples),
+            rate(a.commits, b.commits),
+            rate(a.events, b.events),
+            self.rows_at_stop,
+            self.integrity
+        )?;
+        for (name, g) in &self.groups {
+            let mut sorted = g.intervals_ms.clone();
+            sorted.sort_unstable();
+            let period = g.period.as_millis() as i64;
+            let show = |p: Option<i64>| p.map_or("-".to_owned(), |v| format!("{v}"));
+            writeln!(
+                f,
+                "  {name:<12} period {} ms: {:.1} polls/s of {:.1} due; interval p50 {} ms, p99 {} ms, max {} ms ({} intervals)",
+                period,
+                g.reads as f64 / secs,
+                g.devices as f64 / g.period.as_secs_f64(),
+                show(percentile(&sorted, 50.0)),
+                show(percentile(&sorted, 99.0)),
+                show(sorted.last().copied()),
+                sorted.len()
+            )?;
+        }
+        let busy: Vec<f64> = a
+            .busy
+            .iter()
+            .zip(&b.busy)
+            .map(|(x, y)| (x - y) / secs)
+            .collect();
+        let mean = busy.iter().sum::<f64>() / busy.len().max(1) as f64;
+        let max = busy.iter().copied().fold(0.0, f64::max);
+        writeln!(
+            f,
+            "  lines        busy {:.0} % on average, {:.0} % at most",
+            mean * 100.0,
+            max * 100.0
+        )?;
+        let cpu = |x: &ProcessUse, y: &ProcessUse| (x.cpu.saturating_sub(y.cpu)).as_secs_f64() / secs;
+        let g = cpu(&a.gateway, &b.gateway);
+        let s = cpu(&a.simulators, &b.simulators);
+        writeln!(
+            f,
+            "  gateway      CPU {:.2} cores ({:.0} % of the machine), peak RSS {:.1} MiB",
+            g,
+            g * 100.0 / self.cores as f64,
+            mib(a.gateway.peak_rss_kib)
+        )?;
+        writeln!(
+            f,
+            "  simulators   CPU {:.2} cores ({:.0} % of the machine), peak RSS {:.1} MiB (separate process)",
+            s,
+            s * 100.0 / self.cores as f64,
+            mib(a.simulators.peak_rss_kib)
+        )?;
+        for (path, status, size, took) in &self.scrapes {
+            writeln!(
+                f,
+                "  GET {path:<12} {status}, {:.0} kB in {:.1} ms",
+                *size as f64 / 1000.0,
+                took.as_secs_f64() * 1000.0
+            )?;
+        }
+        writeln!(
+            f,
+            "  stop         {:.0} ms (pollers stopped, history committed)",
+            self.stop_took.as_secs_f64() * 1000.0
+        )
+    }
+}
