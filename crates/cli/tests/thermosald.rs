@@ -686,3 +686,18 @@ fn the_simulator_serves_a_paced_pty_that_the_client_opens_as_a_serial_port() {
         "{text}"
     );
 }
+
+#[test]
+fn a_line_that_cannot_be_opened_exits_1_naming_it() {
+    let closed = {
+        let listener = TcpListener::bind("127.0.0.1:0").expect("a loopback port");
+        format!("tcp://{}", listener.local_addr().expect("bound"))
+    };
+    let out = run(&["thermosald", "--endpoint", &closed, "read", "runtime"]);
+    assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
+    assert!(
+        stderr(&out).contains(&format!("cannot connect to {closed}")),
+        "{}",
+        stderr(&out)
+    );
+}

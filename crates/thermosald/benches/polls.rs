@@ -67,6 +67,19 @@ fn main() {
         .build()
         .expect("a tokio runtime");
     println!("Thermosald polls on a simulated 9600 8N1 line, {seconds} s per case (real time)\n");
+    let timing = LineTiming::RS485_9600_8N1;
+    let char_ms = timing.char_time().as_secs_f64() * 1000.0;
+    for poll in [Poll::Item, Poll::Table] {
+        let cycle = timing.poll_cycle(9, poll.reply_len()).as_secs_f64() * 1000.0;
+        println!(
+            "limit, {}: 9 chars x {char_ms:.4} ms + 200 ms + {} chars x {char_ms:.4} ms + 40 ms \
+             = {cycle:.3} ms per poll = {:.3} polls/s",
+            poll.name(),
+            poll.reply_len(),
+            1000.0 / cycle
+        );
+    }
+    println!();
     println!(
         "{:<40} {:>6} {:>9} {:>9} {:>9} {:>9}",
         "case", "polls", "cycle ms", "polls/s", "limit", "of limit"
