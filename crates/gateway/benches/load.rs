@@ -978,6 +978,11 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     let integrity = store.handle().integrity_check()?;
     let rows_at_stop = store_rows(&data_dir)?;
     drop(store);
+    if after.polls_ok <= before.polls_ok {
+        bail!(
+            "no poll was answered in the measured window: the gateway or the simulators are stuck"
+        );
+    }
     let window = after.at.zip(before.at).map_or(args.seconds, |(a, b)| a - b);
     Ok(Report {
         args: args.clone(),
