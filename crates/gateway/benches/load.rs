@@ -861,12 +861,15 @@ impl Sampler {
         Self { measuring, task }
     }
 
+    /// Starts counting (at the start of the window).
     fn measure(&self) {
         self.measuring.store(true, Ordering::Relaxed);
     }
 
+    /// Stops counting (at the end of the window) and returns what was seen.
     async fn finish(self) -> anyhow::Result<Vec<(String, GroupSeen)>> {
         let Sampler { measuring, task } = self;
+        measuring.store(false, Ordering::Relaxed);
         drop(measuring);
         task.await.context("the sampler failed")
     }
@@ -878,7 +881,9 @@ async fn get(addr: std::net::SocketAddr, path: &str) -> anyhow::Result<(String, 
     let started = Instant::now();
     let mut stream = tokio::net::TcpStream::connect(addr).await?;
     stream
-        .write_all(format!("GET {path} HTTP/1.1\r\nHost: bench\r\nConnection: close\r\n\r\n").as_bytes())
+        .write_all(
+            format!("GET {path} HTTP/1.1\r\nHost: bench\r\nConnection: close\r\n\r\n").as_bytes(),
+        )
         .await?;
     let mut response = Vec::new();
     stream.read_to_end(&mut response).await?;
@@ -973,10 +978,12 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     let integrity = store.handle().integrity_check()?;
     let rows_at_stop = store_rows(&data_dir)?;
     drop(store);
-    let window = after
-        .at
-        .zip(before.at)
-        .map_or(args.seconds, |(a, b)| a - b);
+    if after.polls_ok <= before.polls_ok {
+        bail!(
+            "no poll was answered in the measured window: the gateway or the simulators are stuck"
+        );
+    }
+    let window = after.at.zip(before.at).map_or(args.seconds, |(a, b)| a - b);
     Ok(Report {
         args: args.clone(),
         plans,
@@ -1052,9 +1059,11 @@ impl std::fmt::Display for Report {
             } else {
                 format!("-{most}")
             },
-            self.args.baud.map_or("not paced (loopback speed)".to_owned(), |b| format!(
-                "paced at {b} baud"
-            )),
+            self.args
+                .baud
+                .map_or("not paced (loopback speed)".to_owned(), |b| format!(
+                    "paced at {b} baud"
+                )),
             humantime::format_duration(self.args.reply_delay),
         )?;
         writeln!(
@@ -1127,13 +1136,17 @@ impl std::fmt::Display for Report {
             .collect();
         let mean = busy.iter().sum::<f64>() / busy.len().max(1) as f64;
         let max = busy.iter().copied().fold(0.0, f64::max);
+        let polls_done = (a.polls_ok + a.polls_failed).saturating_sub(b.polls_ok + b.polls_failed);
+        let busy_total: f64 = busy.iter().sum::<f64>() * secs;
         writeln!(
             f,
-            "  lines        busy {:.0} % on average, {:.0} % at most",
+            "  lines        busy {:.0} % on average, {:.0} % at most; a poll of a group took {:.1} ms on average",
             mean * 100.0,
-            max * 100.0
+            max * 100.0,
+            busy_total * 1000.0 / polls_done.max(1) as f64
         )?;
-        let cpu = |x: &ProcessUse, y: &ProcessUse| (x.cpu.saturating_sub(y.cpu)).as_secs_f64() / secs;
+        let cpu =
+            |x: &ProcessUse, y: &ProcessUse| (x.cpu.saturating_sub(y.cpu)).as_secs_f64() / secs;
         let g = cpu(&a.gateway, &b.gateway);
         let s = cpu(&a.simulators, &b.simulators);
         writeln!(
