@@ -14,6 +14,7 @@ use std::fmt::Write as _;
 
 use wire::{Codec, Resync};
 
+use crate::rtu::request::counted;
 use crate::rtu::{
     BROADCAST_UNIT, DecodeError, FunctionCode, Request, RequestAdu, RequestPdu, Response,
     ResponseAdu, SniffCodec, Sniffed, find_frame, unpack_bits,
@@ -187,8 +188,8 @@ pub fn describe_response(adu: &ResponseAdu) -> String {
         }
         Response::ReadHoldingRegisters(values) | Response::ReadInputRegisters(values) => {
             format!(
-                "{from}, function {function}: {} registers: {}",
-                values.values().len(),
+                "{from}, function {function}: {}: {}",
+                counted(values.values().len(), "registers"),
                 word_text(values.values())
             )
         }
@@ -239,7 +240,8 @@ fn request_details(request: &Request) -> String {
 
 fn range_text(what: &str, address: u16, count: u16) -> String {
     let last = u32::from(address) + u32::from(count) - 1;
-    format!("{count} {what} from {address} (0x{address:04X}) to {last} (0x{last:04X})")
+    let count = counted(count, what);
+    format!("{count} from {address} (0x{address:04X}) to {last} (0x{last:04X})")
 }
 
 fn bit_text(bits: &[bool]) -> String {

@@ -933,7 +933,7 @@ mod tests {
         assert_eq!(started.elapsed(), DEFAULT_TIMEOUT * 3);
         assert_eq!(
             err.to_string(),
-            "no valid answer from unit 9 on test line to \"read 1 holding registers from 0 \
+            "no valid answer from unit 9 on test line to \"read 1 holding register from 0 \
              (0x0000)\" after 3 attempts of 500ms each (last: no answer)"
         );
         assert_eq!(b.requests(), 3);

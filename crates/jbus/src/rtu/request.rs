@@ -315,26 +315,39 @@ impl From<Write> for Request {
     }
 }
 
+/// `count` and a plural noun, made singular for one: `1 coil`, `2 coils`.
+pub(crate) fn counted(count: impl Into<usize>, plural: &str) -> String {
+    match count.into() {
+        1 => format!("1 {}", plural.strip_suffix('s').unwrap_or(plural)),
+        n => format!("{n} {plural}"),
+    }
+}
+
 impl fmt::Display for Request {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::ReadCoils(r) => write!(f, "read {} coils from {}", r.count, Addr(r.address)),
+            Self::ReadCoils(r) => write!(
+                f,
+                "read {} from {}",
+                counted(r.count.get(), "coils"),
+                Addr(r.address)
+            ),
             Self::ReadDiscreteInputs(r) => write!(
                 f,
-                "read {} discrete inputs from {}",
-                r.count,
+                "read {} from {}",
+                counted(r.count.get(), "discrete inputs"),
                 Addr(r.address)
             ),
             Self::ReadHoldingRegisters(r) => write!(
                 f,
-                "read {} holding registers from {}",
-                r.count,
+                "read {} from {}",
+                counted(r.count.get(), "holding registers"),
                 Addr(r.address)
             ),
             Self::ReadInputRegisters(r) => write!(
                 f,
-                "read {} input registers from {}",
-                r.count,
+                "read {} from {}",
+                counted(r.count.get(), "input registers"),
                 Addr(r.address)
             ),
             Self::WriteSingleCoil(w) => {
@@ -349,13 +362,18 @@ impl fmt::Display for Request {
                 write!(f, "write register {} = {}", Addr(w.address), w.value)
             }
             Self::WriteMultipleCoils(w) => {
-                write!(f, "write {} coils from {}", w.values.len(), Addr(w.address))
+                write!(
+                    f,
+                    "write {} from {}",
+                    counted(w.values.len(), "coils"),
+                    Addr(w.address)
+                )
             }
             Self::WriteMultipleRegisters(w) => {
                 write!(
                     f,
-                    "write {} registers from {}",
-                    w.values.len(),
+                    "write {} from {}",
+                    counted(w.values.len(), "registers"),
                     Addr(w.address)
                 )
             }

@@ -6,7 +6,7 @@
 
 use std::fmt;
 
-use super::request::{Addr, WriteCoil, WriteRegister, pack_bits, unpack_bits};
+use super::request::{Addr, WriteCoil, WriteRegister, counted, pack_bits, unpack_bits};
 use super::value::{Exception, ExceptionCode, FunctionCode, InvalidValue};
 
 /// The bits a read of coils or discrete inputs returns, 8 per byte, first bit in the
@@ -169,10 +169,20 @@ impl fmt::Display for Response {
                 write!(f, "wrote register {} = {}", Addr(w.address), w.value)
             }
             Self::WriteMultipleCoils { address, count } => {
-                write!(f, "wrote {count} coils from {}", Addr(*address))
+                write!(
+                    f,
+                    "wrote {} from {}",
+                    counted(*count, "coils"),
+                    Addr(*address)
+                )
             }
             Self::WriteMultipleRegisters { address, count } => {
-                write!(f, "wrote {count} registers from {}", Addr(*address))
+                write!(
+                    f,
+                    "wrote {} from {}",
+                    counted(*count, "registers"),
+                    Addr(*address)
+                )
             }
             Self::Exception(e) => write!(f, "{e}"),
         }
