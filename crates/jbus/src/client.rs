@@ -349,7 +349,7 @@ impl Client {
         let bytes = write.to_adu().to_bytes();
         let mut line = self.line.lock().await;
         let sent = async {
-            drop_stale_input(&mut line).await?;
+            line.discard_input().await?;
             line.send(&bytes).await
         }
         .await;
@@ -417,31 +417,6 @@ pub fn expected_answer_len(request: &Request) -> usize {
     }
 }
 
-/// Drops whatever has already arrived on `line` (a late answer to an earlier request), so
-/// the next request starts on a quiet line, without waiting: [`Line::discard_input`] waits
-/// for a deadline of "now", which tokio's timer rounds up to its next millisecond tick, a
-/// cost on every request.
-async fn drop_stale_input(line: &mut Line) -> Result<usize, LineError> {
-    // The runtime polls its I/O driver before it resumes a yielded task, so bytes that
-    // reached the socket or port since it last looked are seen below.
-    tokio::task::yield_now().await;
-    let mut dropped = 0;
-    let mut buf = [0u8; 256];
-    loop {
-        // Never reached: the read is polled once, then the ready branch wins.
-        let far = Instant::now() + Duration::from_secs(60);
-        tokio::select! {
-            biased;
-            read = line.recv(&mut buf, far) => match read {
-                Ok(n) => dropped += n,
-                Err(LineError::Timeout { .. }) => return Ok(dropped),
-                Err(e) => return Err(e),
-            },
-            () = std::future::ready(()) => return Ok(dropped),
-        }
-    }
-}
-
 /// Why one attempt ended without an answer.
 enum Failure {
     /// Retry.
@@ -490,7 +465,7 @@ async fn attempt_once(
     timeout: Duration,
     quiet_gap: Duration,
 ) -> Result<Answer, Failure> {
-    drop_stale_input(line).await?;
+    line.discard_input().await?;
     deframer.clear();
     line.send(bytes).await?;
     let deadline = Instant::now() + timeout;

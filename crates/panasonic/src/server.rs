@@ -266,9 +266,9 @@ impl TwinServer {
         machine: Machine,
     ) -> io::Result<TwinServer> {
         let bind = |addr: SocketAddr, port: Port| async move {
-            TcpListener::bind(addr)
-                .await
-                .map_err(|e| io::Error::new(e.kind(), format!("cannot listen on {addr} for {port}: {e}")))
+            TcpListener::bind(addr).await.map_err(|e| {
+                io::Error::new(e.kind(), format!("cannot listen on {addr} for {port}: {e}"))
+            })
         };
         let command = bind(command, Port::Command).await?;
         let event = bind(event, Port::Event).await?;
@@ -276,7 +276,11 @@ impl TwinServer {
     }
 
     /// Serves on listeners the caller bound.
-    pub fn from_listeners(command: TcpListener, event: TcpListener, machine: Machine) -> TwinServer {
+    pub fn from_listeners(
+        command: TcpListener,
+        event: TcpListener,
+        machine: Machine,
+    ) -> TwinServer {
         TwinServer {
             command,
             event,
