@@ -484,10 +484,14 @@ impl Client {
 
     /// `C2ST`: run, ready or error; online or remote.
     pub async fn status(&self) -> Result<MachineStatus, ClientError> {
-        self.typed(Command::Status, "a machine status", |outcome| match outcome {
-            Outcome::Status(status) => Ok(status),
-            other => Err(other),
-        })
+        self.typed(
+            Command::Status,
+            "a machine status",
+            |outcome| match outcome {
+                Outcome::Status(status) => Ok(status),
+                other => Err(other),
+            },
+        )
         .await
     }
 
@@ -506,10 +510,14 @@ impl Client {
 
     /// `C1RP`: the stored programs with their dates.
     pub async fn program_list(&self) -> Result<ProgramList, ClientError> {
-        self.typed(Command::ProgramList, "a program list", |outcome| match outcome {
-            Outcome::ProgramList(list) => Ok(list),
-            other => Err(other),
-        })
+        self.typed(
+            Command::ProgramList,
+            "a program list",
+            |outcome| match outcome {
+                Outcome::ProgramList(list) => Ok(list),
+                other => Err(other),
+            },
+        )
         .await
     }
 
@@ -531,12 +539,14 @@ impl Client {
 
     /// `C1`: a program, a library or the machine data, as the machine stores it.
     pub async fn upload(&self, target: Target) -> Result<Vec<u8>, ClientError> {
-        self.typed(Command::Upload { target }, "a data block", |outcome| {
-            match outcome {
+        self.typed(
+            Command::Upload { target },
+            "a data block",
+            |outcome| match outcome {
                 Outcome::Uploaded(data) => Ok(data),
                 other => Err(other),
-            }
-        })
+            },
+        )
         .await
     }
 
@@ -608,10 +618,14 @@ impl Client {
 
     /// A command whose exchange ends with the machine's `A2` (or the host's, for a download).
     async fn finished(&self, command: Command) -> Result<(), ClientError> {
-        self.typed(command, "the end of the exchange", |outcome| match outcome {
-            Outcome::Finished | Outcome::Downloaded => Ok(()),
-            other => Err(other),
-        })
+        self.typed(
+            command,
+            "the end of the exchange",
+            |outcome| match outcome {
+                Outcome::Finished | Outcome::Downloaded => Ok(()),
+                other => Err(other),
+            },
+        )
         .await
     }
 
@@ -1064,7 +1078,9 @@ async fn run_keep_alive(
                 match answered {
                     Ok(_) => schedule.port1_answered(),
                     // 3.5-2: A4E00 means the command was wrong but the port works.
-                    Err(ClientError::Refused(refusal)) if refusal.reply == Reply::OPERATION_ERROR => {
+                    Err(ClientError::Refused(refusal))
+                        if refusal.reply == Reply::OPERATION_ERROR =>
+                    {
                         schedule.port1_answered();
                     }
                     Err(error) => tracing::warn!(%error, "keep-alive: no answer on Port 1"),

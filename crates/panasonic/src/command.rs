@@ -708,7 +708,10 @@ mod tests {
         .filter(|command| command.is_repeatable())
         .map(Command::wire)
         .collect();
-        assert_eq!(repeatable, ["C2ST", "C3P", "C1RP", "C1PABC", "C2HB00000001", "C1M000"]);
+        assert_eq!(
+            repeatable,
+            ["C2ST", "C3P", "C1RP", "C1PABC", "C2HB00000001", "C1M000"]
+        );
     }
 
     fn arb_target() -> impl Strategy<Value = Target> {

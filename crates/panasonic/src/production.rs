@@ -293,7 +293,9 @@ impl Counter {
 
     /// The counter with this key, if the manual names it.
     pub fn from_key(key: &str) -> Option<Counter> {
-        Counter::ALL.into_iter().find(|counter| counter.key() == key)
+        Counter::ALL
+            .into_iter()
+            .find(|counter| counter.key() == key)
     }
 
     /// The section the manual puts it in.

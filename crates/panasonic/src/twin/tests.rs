@@ -1042,5 +1042,9 @@ fn requeued_events_obey_the_buffer_rule_while_nobody_listens() {
     }
     rig.machine.requeue_events(sent);
     assert_eq!(rig.machine.pending_events(), EVENT_BUFFER_LEN);
-    assert_eq!(rig.machine.dropped_events(), 1, "the requeued one was the oldest");
+    assert_eq!(
+        rig.machine.dropped_events(),
+        1,
+        "the requeued one was the oldest"
+    );
 }
