@@ -333,3 +333,51 @@ fn an_unreachable_machine_exits_1_naming_the_port() {
     assert!(text.contains("Port 1 (commands)"), "{text}");
     assert!(text.contains(&addr), "{text}");
 }
+
+#[test]
+fn events_running_before_a_remote_start_sees_r1st_arrive_live() {
+    let machine = Machine::start(&["--remote"]);
+    let mut events = cellbus()
+        .args([
+            "panasonic",
+            "--host",
+            &machine.command,
+            "--events-port",
+            &machine.events_port,
+            "events",
+            "--json",
+            "--count",
+            "1",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("cellbus runs");
+    // Its first notice (on stderr) says Port 2 is connected: then start the machine.
+    let mut notices = BufReader::new(events.stderr.take().expect("piped"));
+    let mut first = String::new();
+    notices.read_line(&mut first).expect("a notice");
+    assert!(
+        first.starts_with("cellbus: Port 2 (events) connected to tcp://"),
+        "{first}"
+    );
+    ok(machine.run(&["start"]));
+    let out = events
+        .wait_with_output()
+        .expect("events ends after one R message");
+    assert_eq!(code(&out), 0);
+    assert_eq!(
+        stdout(&out).trim_end(),
+        r#"{"event":"started","wire":"R1ST","text":"machine started"}"#
+    );
+}
+
+#[test]
+fn a_simulator_started_with_run_is_producing_without_a_host_command() {
+    let machine = Machine::start(&["--run"]);
+    assert_eq!(ok(machine.run(&["status"])), "state: run\nmode:  online\n");
+    assert_eq!(
+        ok(machine.run(&["events", "--count", "1"])),
+        "R1ST (machine started)\n"
+    );
+}
