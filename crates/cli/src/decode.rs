@@ -19,6 +19,9 @@ pub enum DecodeCommand {
     Modbus(Input),
     /// Thermosald ISC messages (% address message Q/R count data LF), as text or hex.
     Thermosald(crate::thermosald_cmd::DecodeInput),
+    /// Panasonic BM host-protocol messages (256-byte command field, size, data,
+    /// terminator): C commands, A/D replies and R messages in words.
+    Panasonic(Input),
 }
 
 /// Where the captured bytes come from.
@@ -33,7 +36,7 @@ pub struct Input {
 }
 
 impl Input {
-    fn bytes(&self) -> anyhow::Result<Vec<u8>> {
+    pub(crate) fn bytes(&self) -> anyhow::Result<Vec<u8>> {
         match &self.file {
             Some(path) => {
                 std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
@@ -60,6 +63,7 @@ pub fn run(command: DecodeCommand) -> anyhow::Result<ExitCode> {
             })
         }
         DecodeCommand::Thermosald(input) => crate::thermosald_cmd::decode(input),
+        DecodeCommand::Panasonic(input) => crate::panasonic_cmd::decode(input),
     }
 }
 

@@ -9,6 +9,7 @@ mod demo;
 mod jbc_cmd;
 mod jbus_cmd;
 mod output;
+mod panasonic_cmd;
 mod serve_cmd;
 mod sim;
 mod thermosald_cmd;
@@ -54,6 +55,10 @@ enum Command {
     /// Talk to Thermosald ISC impulse-sealer regulators on RS-485 (addresses 0-7): read and
     /// write their data, commands, scan, watch. Serial defaults: 9600 baud, 8N1.
     Thermosald(thermosald_cmd::ThermosaldArgs),
+    /// Talk to a Panasonic BM placement machine over its host computer protocol (TCP Port 1
+    /// for commands, Port 2 for its R messages): status, programs, production data,
+    /// remote start and reset, events.
+    Panasonic(panasonic_cmd::PanasonicArgs),
     /// Run a simulated device on a TCP port or a PTY.
     #[command(subcommand)]
     Sim(sim::SimCommand),
@@ -84,6 +89,7 @@ fn main() -> ExitCode {
             Command::Modbus(args) => jbus_cmd::run_modbus(args).await,
             Command::Cross(args) => jbus_cmd::run_cross(args).await,
             Command::Thermosald(args) => thermosald_cmd::run(args).await,
+            Command::Panasonic(args) => panasonic_cmd::run(args).await,
             Command::Sim(command) => sim::run(command).await,
             Command::Decode(command) => decode::run(command),
         }

@@ -27,6 +27,9 @@ pub enum SimCommand {
     /// Thermosald ISC regulators on one RS-485 line (address 0, or --addresses 0,1,2), each
     /// with its own sealing band, memory and faults; 9600 8N1, answers 200 ms after a question.
     Thermosald(crate::thermosald_cmd::SimThermosaldArgs),
+    /// A Panasonic BM placement machine (host computer protocol): Port 1 for C commands,
+    /// Port 2 for R messages; a demo program selected, boards every 22 s when running.
+    Panasonic(crate::panasonic_cmd::SimPanasonicArgs),
 }
 
 /// Where and how a simulator serves its device.
@@ -82,6 +85,7 @@ pub async fn run(command: SimCommand) -> anyhow::Result<ExitCode> {
         SimCommand::Cross(args) => crate::jbus_cmd::sim_cross(args).await,
         SimCommand::Modbus(args) => crate::jbus_cmd::sim_modbus(args).await,
         SimCommand::Thermosald(args) => crate::thermosald_cmd::sim(args).await,
+        SimCommand::Panasonic(args) => crate::panasonic_cmd::sim(args).await,
     }
 }
 

@@ -489,7 +489,7 @@ impl Client {
             "a machine status",
             |outcome| match outcome {
                 Outcome::Status(status) => Ok(status),
-                other => Err(other),
+                other => Err(outcome_name(&other)),
             },
         )
         .await
@@ -502,7 +502,7 @@ impl Client {
             "a program name",
             |outcome| match outcome {
                 Outcome::CurrentProgram(name) => Ok(name),
-                other => Err(other),
+                other => Err(outcome_name(&other)),
             },
         )
         .await
@@ -515,7 +515,7 @@ impl Client {
             "a program list",
             |outcome| match outcome {
                 Outcome::ProgramList(list) => Ok(list),
-                other => Err(other),
+                other => Err(outcome_name(&other)),
             },
         )
         .await
@@ -531,7 +531,7 @@ impl Client {
             "production management data",
             |outcome| match outcome {
                 Outcome::Production(data) => Ok(data),
-                other => Err(other),
+                other => Err(outcome_name(&other)),
             },
         )
         .await
@@ -544,7 +544,7 @@ impl Client {
             "a data block",
             |outcome| match outcome {
                 Outcome::Uploaded(data) => Ok(data),
-                other => Err(other),
+                other => Err(outcome_name(&other)),
             },
         )
         .await
@@ -623,18 +623,18 @@ impl Client {
             "the end of the exchange",
             |outcome| match outcome {
                 Outcome::Finished | Outcome::Downloaded => Ok(()),
-                other => Err(other),
+                other => Err(outcome_name(&other)),
             },
         )
         .await
     }
 
-    /// Runs `command` and takes the outcome it must give.
+    /// Runs `command` and takes the outcome it must give (`pick` names any other kind).
     async fn typed<T>(
         &self,
         command: Command,
         expected: &'static str,
-        pick: impl FnOnce(Outcome) -> Result<T, Outcome>,
+        pick: impl FnOnce(Outcome) -> Result<T, &'static str>,
     ) -> Result<T, ClientError> {
         let outcome = self.command(&command).await?;
         pick(outcome).map_err(|other| ClientError::Protocol {
@@ -642,7 +642,7 @@ impl Client {
             error: ConversationError::Unexpected {
                 command: command.wire(),
                 expected,
-                got: outcome_name(&other).to_owned(),
+                got: other.to_owned(),
             },
         })
     }

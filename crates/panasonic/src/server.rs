@@ -99,6 +99,31 @@ struct Shared {
     /// Wakes the Port 2 task: R messages may be due.
     wake: Notify,
     faults: watch::Sender<Faults>,
+    /// Whether a host is connected on Port 1 and on Port 2, as the server sees it.
+    hosts: watch::Sender<Hosts>,
+}
+
+/// Which ports have a host connection the server has accepted.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Hosts {
+    command: bool,
+    event: bool,
+}
+
+impl Hosts {
+    fn port(&self, port: Port) -> bool {
+        match port {
+            Port::Command => self.command,
+            Port::Event => self.event,
+        }
+    }
+
+    fn port_mut(&mut self, port: Port) -> &mut bool {
+        match port {
+            Port::Command => &mut self.command,
+            Port::Event => &mut self.event,
+        }
+    }
 }
 
 impl Shared {
@@ -107,6 +132,7 @@ impl Shared {
             machine: Mutex::new(machine),
             wake: Notify::new(),
             faults: watch::Sender::new(Faults::default()),
+            hosts: watch::Sender::new(Hosts::default()),
         }
     }
 
@@ -118,6 +144,14 @@ impl Shared {
 
     fn fault(&self, port: Port) -> Option<PortFault> {
         self.faults.borrow().port(port).fault
+    }
+
+    /// Records that the server accepted (`true`) or let go (`false`) a host on `port`.
+    fn host(&self, port: Port, connected: bool) {
+        self.hosts.send_if_modified(|hosts| {
+            let was = std::mem::replace(hosts.port_mut(port), connected);
+            was != connected
+        });
     }
 
     /// A new connection ends a [`PortFault::Silent`].
@@ -239,6 +273,23 @@ impl Control {
     /// The port's fault, if any.
     pub fn fault(&self, port: Port) -> Option<PortFault> {
         self.shared.fault(port)
+    }
+
+    /// Whether the server has a host connection on `port` (accepted and not yet gone).
+    pub fn is_connected(&self, port: Port) -> bool {
+        self.shared.hosts.borrow().port(port)
+    }
+
+    /// Waits until the server has accepted a host connection on `port`.
+    ///
+    /// A host's connection is complete (the host may send) before the server has accepted
+    /// it, so a test that breaks or cuts a port right after the host connected must wait
+    /// for this first: otherwise the fault acts on no connection, and the late accept ends
+    /// a [`PortFault::Silent`] before it began.
+    pub async fn connected(&self, port: Port) {
+        let mut hosts = self.shared.hosts.subscribe();
+        // The sender lives in `Shared`, which this handle keeps alive: never an error.
+        let _ = hosts.wait_for(|hosts| hosts.port(port)).await;
     }
 }
 
@@ -375,6 +426,7 @@ async fn serve_commands(listener: TcpListener, shared: Arc<Shared>) {
                 if let Err(error) = ended {
                     tracing::error!(%error, "the Port 1 connection task failed");
                     shared.machine().port1_closed();
+                    shared.host(Port::Command, false);
                 }
             }
             accepted = listener.accept() => {
@@ -402,6 +454,7 @@ async fn serve_commands(listener: TcpListener, shared: Arc<Shared>) {
                     tracing::warn!(%peer, "a second host on Port 1: closing its connection (the machine serves one host at a time)");
                 } else {
                     shared.new_connection(Port::Command);
+                    shared.host(Port::Command, true);
                     tracing::info!(%peer, "host connected on Port 1");
                     host.spawn(port1_connection(stream, peer, Arc::clone(&shared)));
                 }
@@ -449,6 +502,7 @@ async fn port1_connection(stream: TcpStream, peer: SocketAddr, shared: Arc<Share
         }
     };
     shared.machine().port1_closed();
+    shared.host(Port::Command, false);
     tracing::info!(%peer, "host left Port 1: {why}");
 }
 
@@ -485,6 +539,7 @@ async fn serve_events(listener: TcpListener, shared: Arc<Shared>) {
                     let cuts = faults.borrow().event.cuts;
                     host = Some(EventHost { reader, writer, peer, cuts });
                     shared.machine().host_connected_on_port2(true, now());
+                    shared.host(Port::Event, true);
                 }
                 Err(error) => {
                     tracing::warn!(%error, "Port 2: cannot accept a connection");
@@ -539,6 +594,7 @@ fn leave_port2(shared: &Shared, host: &mut Option<EventHost>, why: &str) {
         tracing::info!(peer = %old.peer, "host left Port 2: {why}");
     }
     shared.machine().host_connected_on_port2(false, now());
+    shared.host(Port::Event, false);
 }
 
 /// Sends the R messages due now to the Port 2 host.

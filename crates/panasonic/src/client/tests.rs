@@ -155,9 +155,8 @@ async fn machine_data_download_c0g_changes_the_condition_data() {
         .download(Target::MachineData, data)
         .await
         .expect("C0G accepted");
-    let condition = twin.control().with(|machine, _| machine.condition_data());
-    assert!(condition.pass_through && condition.offset_manual_mark);
-    assert!(!condition.evaluation_mode && !condition.evaluation_h_down);
+    // The machine stores a download when the host's closing A2 arrives, which the host
+    // cannot see; the next exchange on Port 1 (one at a time, in order) comes after it.
     let uploaded = client
         .upload(Target::MachineData)
         .await
@@ -166,6 +165,9 @@ async fn machine_data_download_c0g_changes_the_condition_data() {
         String::from_utf8_lossy(&uploaded).contains("1010001,1,0,1,0"),
         "{uploaded:?}"
     );
+    let condition = twin.control().with(|machine, _| machine.condition_data());
+    assert!(condition.pass_through && condition.offset_manual_mark);
+    assert!(!condition.evaluation_mode && !condition.evaluation_h_down);
 }
 
 #[tokio::test(start_paused = true)]
@@ -377,6 +379,7 @@ async fn a_silent_port_2_is_found_dead_by_the_keep_alive_and_reconnected() {
             ..
         }
     ));
+    twin.control().connected(Port::Event).await;
     twin.control().break_port(Port::Event, PortFault::Silent);
     let started = Instant::now();
     // The check at 30 s gets its A2 but no R1HB: dead at 40 s, reconnected at once.
@@ -424,6 +427,9 @@ async fn a_silent_port_2_is_found_dead_by_the_keep_alive_and_reconnected() {
 async fn a_silent_port_1_is_found_dead_by_the_keep_alive_and_reconnected() {
     let twin = twin(quiet(false)).await;
     let (client, mut events) = connect(config(&twin, Some(KeepAliveConfig::default()))).await;
+    // The host's connection is up before the server accepted it: a fault set earlier
+    // would act on no connection (and the late accept would end the silence).
+    twin.control().connected(Port::Command).await;
     twin.control().break_port(Port::Command, PortFault::Silent);
     let started = Instant::now();
     let mut seen = Vec::new();
@@ -542,6 +548,8 @@ async fn the_event_stream_survives_a_cut_port_2() {
     let twin = twin(quiet(true)).await;
     let (client, mut events) = connect(config(&twin, None)).await;
     notice(&mut events).await;
+    // Cut the connection the server holds, not one it has yet to accept.
+    twin.control().connected(Port::Event).await;
     twin.control().cut(Port::Event);
     assert!(matches!(
         notice(&mut events).await,
