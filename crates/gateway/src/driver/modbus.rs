@@ -202,28 +202,30 @@ impl ModbusDriver {
                 Err(e @ ClientError::Exception { .. }) => Err(classify(&e)),
                 Err(e) => return Err(classify(&e)),
             };
-            blocks.push((table, start, words));
+            blocks.push((table, start, count, words));
         }
         Ok(self
             .registers
             .iter()
             .map(|r| {
-                let value = blocks
-                    .iter()
-                    .find(|(table, start, words)| {
-                        *table == r.table
-                            && r.address >= *start
-                            && words.as_ref().map_or(0, Vec::len) > usize::from(r.address - *start)
-                            || (*table == r.table && r.address >= *start && words.is_err())
-                    })
-                    .map(|(_, start, words)| match words {
-                        Ok(words) => words
-                            .get(usize::from(r.address - *start))
-                            .map(|&w| Value::Number(r.value(w)))
-                            .ok_or_else(|| missing(r)),
-                        Err(e) => Err(e.clone()),
-                    })
-                    .unwrap_or_else(|| Err(missing(r)));
+                let covers = |(table, start, count, _): &&(
+                    RegisterTable,
+                    u16,
+                    u16,
+                    Result<Vec<u16>, DeviceError>,
+                )| {
+                    *table == r.table
+                        && (u32::from(*start)..u32::from(*start) + u32::from(*count))
+                            .contains(&u32::from(r.address))
+                };
+                let value = match blocks.iter().find(covers) {
+                    Some((_, start, _, Ok(words))) => words
+                        .get(usize::from(r.address - *start))
+                        .map(|&w| Value::Number(r.value(w)))
+                        .ok_or_else(|| missing(r)),
+                    Some((_, _, _, Err(e))) => Err(e.clone()),
+                    None => Err(missing(r)),
+                };
                 Reading {
                     point: self.point_id(r),
                     value,
