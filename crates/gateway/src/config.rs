@@ -18,6 +18,10 @@
 //! period = "2s"                         # for every poll group not listed in [poll]
 //! poll = { live = "1s", info = "5m" }   # per poll group
 //! event_port = 49153                    # panasonic only: Port 2 (the endpoint names Port 1)
+//!
+//! [[line.device.register]]              # modbus only: one table per register
+//! name = "supply_temperature"           # see `driver::modbus` for every field
+//! address = 0x10
 //! ```
 //!
 //! Every table refuses fields it does not know. A file that does not parse or does not make
@@ -34,6 +38,7 @@ use link::Endpoint;
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::driver::modbus::{RegisterConfig, RegisterTable};
 use crate::driver::{self, DriverConfig, Protocol};
 use crate::point::DeviceId;
 
@@ -208,7 +213,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
         let mut addresses = HashSet::new();
         for device in line.device {
             let this = protocol_of(&device.protocol).map_err(|m| at(device.protocol.span(), m))?;
-            if this != protocol {
+            if !this.shares_line_with(protocol) {
                 return Err(at(
                     device.protocol.span(),
                     format!(
@@ -223,7 +228,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 .address
                 .as_ref()
                 .map_or(id_span.clone(), Spanned::span);
-            let device = check_device(device, protocol, &endpoint, &at)?;
+            let device = check_device(device, this, &endpoint, &at)?;
             if let Some(address) = device.driver.address
                 && !addresses.insert(address)
             {
@@ -366,6 +371,7 @@ fn check_device(
                 })?,
         ),
     };
+    let registers = check_registers(&raw, protocol, at)?;
     let driver_config = DriverConfig {
         id: id.clone(),
         protocol,
@@ -374,6 +380,7 @@ fn check_device(
         retries,
         event_port,
         endpoint: protocol.owns_connections().then(|| endpoint.clone()),
+        registers,
     };
     let known: Vec<String> = driver::build(&driver_config)
         .map_err(|m| at(raw.id.span(), m))?
@@ -405,6 +412,113 @@ fn check_device(
         period,
         groups,
     })
+}
+
+/// The registers of a generic Modbus device.
+fn check_registers(
+    raw: &RawDevice,
+    protocol: Protocol,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Vec<RegisterConfig>, ConfigError> {
+    if protocol != Protocol::Modbus {
+        return match raw.register.first() {
+            Some(first) => Err(at(
+                first.name.span(),
+                format!(
+                    "registers are named for modbus devices only; {} devices have their points built in",
+                    protocol.as_str()
+                ),
+            )),
+            None => Ok(Vec::new()),
+        };
+    }
+    if raw.register.is_empty() {
+        return Err(at(
+            raw.id.span(),
+            "a modbus device needs its registers: add [[line.device.register]] tables with name and address"
+                .into(),
+        ));
+    }
+    let mut names = HashSet::new();
+    let mut registers = Vec::new();
+    for r in &raw.register {
+        let name = r.name.get_ref();
+        DeviceId::new(name).map_err(|e| {
+            at(
+                r.name.span(),
+                format!("register name {name:?} is not valid: {}", e.rule),
+            )
+        })?;
+        if !names.insert(name.clone()) {
+            return Err(at(
+                r.name.span(),
+                format!("register name {name:?} is used twice"),
+            ));
+        }
+        let address = u16::try_from(*r.address.get_ref()).map_err(|_| {
+            at(
+                r.address.span(),
+                format!(
+                    "register address {} is out of range: 0 to 65535",
+                    r.address.get_ref()
+                ),
+            )
+        })?;
+        let table = match &r.table {
+            None => RegisterTable::Holding,
+            Some(t) => RegisterTable::parse(t.get_ref()).ok_or_else(|| {
+                at(
+                    t.span(),
+                    format!(
+                        "table {:?} is not one a register can be in: write \"holding\" or \"input\"",
+                        t.get_ref()
+                    ),
+                )
+            })?,
+        };
+        let scale = match &r.scale {
+            None => 1.0,
+            Some(s) if s.get_ref().is_finite() && *s.get_ref() > 0.0 => *s.get_ref(),
+            Some(s) => {
+                return Err(at(
+                    s.span(),
+                    format!("scale {} must be a number above 0", s.get_ref()),
+                ));
+            }
+        };
+        let mut register = RegisterConfig {
+            name: name.clone(),
+            title: r.title.clone().unwrap_or_else(|| name.clone()),
+            table,
+            address,
+            scale,
+            unit: r.unit.clone(),
+            signed: r.signed.unwrap_or(false),
+            writable: None,
+        };
+        if let Some(w) = &r.writable {
+            if table != RegisterTable::Holding {
+                return Err(at(
+                    w.span(),
+                    "only holding registers can be written; input registers are read-only".into(),
+                ));
+            }
+            let (low, high) = register.representable();
+            let range = w.get_ref();
+            if !(range.min < range.max && range.min >= low && range.max <= high) {
+                return Err(at(
+                    w.span(),
+                    format!(
+                        "writable range {} to {} must be increasing and within what the register holds ({low} to {high})",
+                        range.min, range.max
+                    ),
+                ));
+            }
+            register.writable = Some((range.min, range.max));
+        }
+        registers.push(register);
+    }
+    Ok(registers)
 }
 
 fn duration(
@@ -496,6 +610,28 @@ struct RawDevice {
     #[serde(default)]
     poll: BTreeMap<String, Spanned<String>>,
     event_port: Option<Spanned<i64>>,
+    #[serde(default)]
+    register: Vec<RawRegister>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRegister {
+    name: Spanned<String>,
+    title: Option<String>,
+    table: Option<Spanned<String>>,
+    address: Spanned<i64>,
+    scale: Option<Spanned<f64>>,
+    unit: Option<String>,
+    signed: Option<bool>,
+    writable: Option<Spanned<RawRange>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRange {
+    min: f64,
+    max: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -622,7 +758,7 @@ protocol = "jbc"
             &ONE.replace("\"jbc\"", "\"profibus\""),
             8,
             12,
-            "known: jbc, thermosald, cross, panasonic",
+            "known: jbc, thermosald, cross, panasonic, modbus",
         );
         refused(
             &ONE.replace("serial:///dev/ttyUSB0", "serial:///dev/ttyUSB0?baud=fast"),
@@ -825,6 +961,88 @@ protocol = "panasonic"
             8,
             "each machine is its own TCP server and needs a [[line]] of its own",
         );
+    }
+
+    const CHILLER: &str = r#"
+[[line]]
+name = "utilities"
+endpoint = "tcp://192.0.2.60:4001"
+
+[[line.device]]
+id = "chiller1"
+protocol = "modbus"
+address = 17
+
+[[line.device.register]]
+name = "supply"
+table = "input"
+address = 0x10
+scale = 0.1
+unit = "°C"
+signed = true
+
+[[line.device.register]]
+name = "setpoint"
+address = 0x20
+scale = 0.1
+writable = { min = 5.0, max = 30.0 }
+"#;
+
+    #[test]
+    fn modbus_registers_are_read_from_their_tables() {
+        let config = parse(CHILLER).unwrap();
+        let driver = &config.lines[0].devices[0].driver;
+        assert_eq!(driver.address, Some(17));
+        assert_eq!(driver.registers.len(), 2);
+        let supply = &driver.registers[0];
+        assert_eq!(
+            (supply.table, supply.address, supply.scale, supply.signed),
+            (RegisterTable::Input, 0x10, 0.1, true)
+        );
+        assert_eq!(supply.unit.as_deref(), Some("°C"));
+        assert_eq!(driver.registers[1].writable, Some((5.0, 30.0)));
+    }
+
+    #[test]
+    fn modbus_register_mistakes_are_refused_where_they_are() {
+        refused(
+            &CHILLER.replace("table = \"input\"", "table = \"coils\""),
+            13,
+            9,
+            "write \"holding\" or \"input\"",
+        );
+        refused(
+            &CHILLER.replace("address = 0x20", "address = 70000"),
+            21,
+            11,
+            "register address 70000 is out of range: 0 to 65535",
+        );
+        refused(
+            &CHILLER.replace("name = \"setpoint\"", "name = \"supply\""),
+            20,
+            8,
+            "register name \"supply\" is used twice",
+        );
+        refused(
+            &CHILLER.replace("min = 5.0, max = 30.0", "min = 5.0, max = 9000.0"),
+            23,
+            12,
+            "within what the register holds",
+        );
+        refused(
+            &CHILLER.replace("scale = 0.1\nunit", "scale = 0.0\nunit"),
+            15,
+            9,
+            "scale 0 must be a number above 0",
+        );
+        refused(
+            &format!("{ONE}\n[[line.device.register]]\nname = \"x\"\naddress = 1\n"),
+            11,
+            8,
+            "registers are named for modbus devices only",
+        );
+        let bare = CHILLER.split("[[line.device.register]]").next().unwrap();
+        refused(bare, 7, 6, "needs its registers");
     }
 
     #[test]

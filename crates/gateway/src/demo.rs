@@ -137,6 +137,7 @@ fn device(id: DeviceId, protocol: Protocol, address: i64, name: &str) -> DeviceC
             retries: None,
             event_port: None,
             endpoint: None,
+            registers: Vec::new(),
         },
         name: name.to_owned(),
         period: None,

@@ -14,7 +14,8 @@
 //! - [`config`]: the TOML configuration, [`check_config`] and [`EXAMPLE_CONFIG`].
 //! - [`driver`]: one small module per protocol maps a device onto points: JBC,
 //!   Thermosald (several regulators on one line), CROSS (JBUS) and Panasonic (a TCP
-//!   machine whose client keeps its own connections and whose R messages become events).
+//!   machine whose client keeps its own connections and whose R messages become events)
+//!   and generic Modbus (registers named in the config).
 //!   Adding one: a module implementing [`driver::Driver`], a [`driver::Protocol`] variant
 //!   and a `start_*` function in [`demo`].
 //! - [`scheduler`]: one task per line, strict serialisation, exponential backoff of silent

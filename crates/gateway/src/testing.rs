@@ -59,6 +59,7 @@ pub fn device(id: &str, address: i64) -> DeviceConfig {
             retries: None,
             event_port: None,
             endpoint: None,
+            registers: Vec::new(),
         },
         name: format!("Station {id}"),
         period: None,

@@ -585,6 +585,7 @@ mod tests {
             retries: Some(1),
             event_port: None,
             endpoint: None,
+            registers: Vec::new(),
         }
     }
 

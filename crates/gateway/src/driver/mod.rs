@@ -8,7 +8,8 @@
 //!
 //! Protocols: [`jbc`] (JBC JTSE hot-air station), [`thermosald`] (ISC impulse-sealer
 //! regulators, several on one RS-485 line), [`cross`] (Chloride CROSS transfer switch over
-//! JBUS) and [`panasonic`] (placement machine over TCP). Adding a protocol: a module
+//! JBUS), [`panasonic`] (placement machine over TCP) and [`modbus`] (any Modbus RTU / JBUS
+//! device with its registers named in the config). Adding a protocol: a module
 //! implementing [`Driver`], a [`Protocol`] variant and its arms in [`Protocol::parse`],
 //! [`Protocol::check_address`] and [`build`].
 //!
@@ -35,6 +36,7 @@ use crate::store::EventKind;
 
 pub mod cross;
 pub mod jbc;
+pub mod modbus;
 pub mod panasonic;
 pub mod thermosald;
 
@@ -209,11 +211,13 @@ pub enum Protocol {
     Cross,
     /// Panasonic placement machine, PanaProtocol LAN (TCP, two ports, R events).
     Panasonic,
+    /// Any Modbus RTU / JBUS device, registers named in the config.
+    Modbus,
 }
 
 impl Protocol {
     /// Names accepted in the config.
-    pub const KNOWN: &'static str = "jbc, thermosald, cross, panasonic";
+    pub const KNOWN: &'static str = "jbc, thermosald, cross, panasonic, modbus";
 
     /// The protocol for its config name.
     pub fn parse(name: &str) -> Option<Self> {
@@ -222,6 +226,7 @@ impl Protocol {
             "thermosald" => Some(Protocol::Thermosald),
             "cross" => Some(Protocol::Cross),
             "panasonic" => Some(Protocol::Panasonic),
+            "modbus" => Some(Protocol::Modbus),
             _ => None,
         }
     }
@@ -233,6 +238,7 @@ impl Protocol {
             Protocol::Thermosald => "thermosald",
             Protocol::Cross => "cross",
             Protocol::Panasonic => "panasonic",
+            Protocol::Modbus => "modbus",
         }
     }
 
@@ -244,6 +250,7 @@ impl Protocol {
             Protocol::Cross => cross::DEFAULT_SERIAL,
             // Never used: a Panasonic line must be a tcp:// endpoint.
             Protocol::Panasonic => cross::DEFAULT_SERIAL,
+            Protocol::Modbus => modbus::DEFAULT_SERIAL,
         }
     }
 
@@ -254,6 +261,7 @@ impl Protocol {
             Protocol::Thermosald => Some(thermosald::DEFAULT_ADDRESS),
             Protocol::Cross => Some(cross::DEFAULT_UNIT),
             Protocol::Panasonic => None,
+            Protocol::Modbus => Some(modbus::DEFAULT_UNIT),
         }
     }
 
@@ -264,6 +272,16 @@ impl Protocol {
         matches!(self, Protocol::Panasonic)
     }
 
+    /// Whether devices of both protocols can share one line: the same protocol, or a CROSS
+    /// and other Modbus devices (both JBUS on one RS-485 pair, one client each).
+    pub fn shares_line_with(self, other: Protocol) -> bool {
+        self == other
+            || matches!(
+                (self, other),
+                (Protocol::Cross, Protocol::Modbus) | (Protocol::Modbus, Protocol::Cross)
+            )
+    }
+
     /// Checks a device address; `Err` says what the protocol accepts.
     pub fn check_address(self, address: Option<i64>) -> Result<(), String> {
         match self {
@@ -271,6 +289,7 @@ impl Protocol {
             Protocol::Thermosald => thermosald::check_address(address),
             Protocol::Cross => cross::check_address(address),
             Protocol::Panasonic => panasonic::check_address(address),
+            Protocol::Modbus => modbus::check_address(address),
         }
     }
 }
@@ -294,6 +313,8 @@ pub struct DriverConfig {
     /// The line's endpoint, for drivers whose client keeps its own connections
     /// ([`Protocol::owns_connections`]).
     pub endpoint: Option<link::Endpoint>,
+    /// Generic Modbus: the registers the config names (empty for other protocols).
+    pub registers: Vec<modbus::RegisterConfig>,
 }
 
 /// The driver for a device.
@@ -303,5 +324,6 @@ pub fn build(config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
         Protocol::Thermosald => Ok(Box::new(thermosald::ThermosaldDriver::new(config)?)),
         Protocol::Cross => Ok(Box::new(cross::CrossDriver::new(config)?)),
         Protocol::Panasonic => Ok(Box::new(panasonic::PanasonicDriver::new(config)?)),
+        Protocol::Modbus => Ok(Box::new(modbus::ModbusDriver::new(config)?)),
     }
 }

@@ -487,6 +487,7 @@ mod tests {
                 port: twin.command_addr().port(),
                 line: None,
             }),
+            registers: Vec::new(),
         })
         .unwrap();
         (driver, twin)
@@ -534,6 +535,7 @@ mod tests {
             retries: None,
             event_port: None,
             endpoint: None,
+            registers: Vec::new(),
         })
         .unwrap();
         let points = driver.points();
@@ -610,6 +612,7 @@ mod tests {
                 port,
                 line: None,
             }),
+            registers: Vec::new(),
         })
         .unwrap();
         let err = driver.poll(LIVE).await.unwrap_err();

@@ -43,6 +43,7 @@ fn device(id: &str, protocol: Protocol, address: i64) -> DeviceConfig {
             retries: None,
             event_port: None,
             endpoint: None,
+            registers: Vec::new(),
         },
         name: format!("Device {id}"),
         period: None,
