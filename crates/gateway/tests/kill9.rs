@@ -124,11 +124,14 @@ fn run_child(dir: &str) {
     let handle = store.handle();
     let started = Instant::now();
     let mut out = std::io::stdout().lock();
+    // Recent times: rows of 1970 would be the retention's to delete when the parent reopens
+    // the store, racing its query.
+    let base = Timestamp::now().0;
     let mut i: u64 = 0;
     while started.elapsed() < Duration::from_secs(120) {
         handle.sample(Sample {
             point: point(),
-            t: Timestamp(i as i64),
+            t: Timestamp(base + i as i64),
             value: Some(Value::Number(i as f64)),
             quality: Quality::Good,
         });
