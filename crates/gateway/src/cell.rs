@@ -217,7 +217,8 @@ pub struct DeviceSummary {
 /// A device as the API shows it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DeviceView {
-    /// Its id.
+    /// Its id (in JSON once, from the summary).
+    #[serde(skip)]
     pub id: DeviceId,
     /// Words.
     pub name: String,

@@ -144,6 +144,17 @@ async fn devices_show_points_with_value_unit_quality_and_time() {
     let (status, one) = get(&app, "/api/devices/jbc1").await;
     assert_eq!(status, StatusCode::OK);
     assert_eq!(one["id"], "jbc1");
+    // Each key once: a JSON parser may keep either of two duplicates.
+    let response = app
+        .clone()
+        .oneshot(Request::get("/api/devices/jbc1").body(Body::empty()).unwrap())
+        .await
+        .unwrap();
+    let raw = axum::body::to_bytes(response.into_body(), 16 << 20)
+        .await
+        .unwrap();
+    let raw = String::from_utf8(raw.to_vec()).unwrap();
+    assert_eq!(raw.matches("\"id\":\"jbc1\"").count(), 1, "{raw}");
     let (status, body) = get(&app, "/api/lines").await;
     assert_eq!(status, StatusCode::OK);
     assert_eq!(body["lines"][0]["name"], "bench");
