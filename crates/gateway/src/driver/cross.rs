@@ -353,7 +353,7 @@ impl CrossDriver {
         &mut self,
         area: Area,
     ) -> Result<Result<Vec<u16>, DeviceError>, DeviceError> {
-        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         match client
             .read_holding_registers(self.unit, area.start(), area.words())
             .await
@@ -450,16 +450,10 @@ impl Driver for CrossDriver {
     }
 
     fn groups(&self) -> Vec<PollGroup> {
-        [
+        PollGroup::list(&[
             (LIVE, Duration::from_secs(1)),
             (RATINGS, Duration::from_secs(60)),
-        ]
-        .into_iter()
-        .map(|(name, period)| PollGroup {
-            name: name.to_owned(),
-            period,
-        })
-        .collect()
+        ])
     }
 
     fn attach(&mut self, line: SharedLine) {
@@ -547,15 +541,8 @@ fn words<const N: usize>(words: &[u16], area: Area) -> Result<[u16; N], DeviceEr
     })
 }
 
-fn not_attached() -> DeviceError {
-    DeviceError::new(
-        ErrorKind::Disconnected,
-        "the line is not open yet (the gateway is connecting)",
-    )
-}
-
-/// The kind of a client error.
-fn classify(error: &ClientError) -> DeviceError {
+/// The kind of a JBUS client error (shared with the generic Modbus driver).
+pub(super) fn classify(error: &ClientError) -> DeviceError {
     let kind = match error {
         ClientError::Request(_) | ClientError::Exception { .. } => ErrorKind::Refused,
         ClientError::NoAnswer { last, .. } => match last {

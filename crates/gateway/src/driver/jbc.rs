@@ -23,9 +23,10 @@ use link::{SerialSettings, SharedLine};
 
 use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
+    enum_states,
 };
 use crate::point::{
-    AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
+    AlarmRule, DeviceId, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
 };
 
 /// A JTSE's line when the URL says nothing: 19200 baud, 8E1 (the manual's example).
@@ -400,12 +401,12 @@ impl JbcDriver {
             ),
             Meaning::Text => (PointKind::Text, None, None),
             OnOff => (
-                states([(0, "off".to_owned()), (1, "on".to_owned())]),
+                enum_states([(0, "off".to_owned()), (1, "on".to_owned())]),
                 None,
                 None,
             ),
             Meaning::ToolError => (
-                states(
+                enum_states(
                     ToolError::ALL
                         .iter()
                         .map(|e| (e.code(), e.words().to_owned())),
@@ -414,7 +415,7 @@ impl JbcDriver {
                 Some(AlarmRule::NotEqual(f64::from(ToolError::Ok.code()))),
             ),
             Meaning::StationError => (
-                states(
+                enum_states(
                     StationError::ALL
                         .iter()
                         .map(|e| (e.code(), e.words().to_owned())),
@@ -423,12 +424,12 @@ impl JbcDriver {
                 Some(AlarmRule::NotEqual(f64::from(StationError::Ok.code()))),
             ),
             Meaning::Tool => (
-                states(Tool::ALL.iter().map(|t| (t.number(), t.words().to_owned()))),
+                enum_states(Tool::ALL.iter().map(|t| (t.number(), t.words().to_owned()))),
                 None,
                 None,
             ),
             Meaning::WorkMode => (
-                states([
+                enum_states([
                     (0, "manual (profiles off)".to_owned()),
                     (1, "profile (profiles on)".to_owned()),
                 ]),
@@ -453,7 +454,7 @@ impl JbcDriver {
     }
 
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
-        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         let mut answers: HashMap<Code, Result<jbc::Reading, DeviceError>> = HashMap::new();
         let mut readings = Vec::new();
         for def in POINTS.iter().filter(|d| d.group == group) {
@@ -515,7 +516,7 @@ impl JbcDriver {
                     .unwrap_or_default(),
             }));
         }
-        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         client
             .write(def.code, number)
             .await
@@ -529,17 +530,11 @@ impl Driver for JbcDriver {
     }
 
     fn groups(&self) -> Vec<PollGroup> {
-        [
+        PollGroup::list(&[
             (LIVE, Duration::from_secs(1)),
             (SETTINGS, Duration::from_secs(10)),
             (INFO, Duration::from_secs(60)),
-        ]
-        .into_iter()
-        .map(|(name, period)| PollGroup {
-            name: name.to_owned(),
-            period,
-        })
-        .collect()
+        ])
     }
 
     fn attach(&mut self, line: SharedLine) {
@@ -559,18 +554,6 @@ impl Driver for JbcDriver {
     }
 }
 
-fn states(items: impl IntoIterator<Item = (i32, String)>) -> PointKind {
-    PointKind::Enum {
-        states: items
-            .into_iter()
-            .map(|(value, label)| EnumState {
-                value: i64::from(value),
-                label,
-            })
-            .collect(),
-    }
-}
-
 fn value_of(reading: &jbc::Reading, part: Part) -> Value {
     match (reading.value(), part) {
         (jbc::code::Value::Number(n), Part::Whole) => Value::Number(f64::from(n)),
@@ -579,13 +562,6 @@ fn value_of(reading: &jbc::Reading, part: Part) -> Value {
         }
         (jbc::code::Value::Text(t), _) => Value::Text(t),
     }
-}
-
-fn not_attached() -> DeviceError {
-    DeviceError::new(
-        ErrorKind::Disconnected,
-        "the line is not open yet (the gateway is connecting)",
-    )
 }
 
 /// Whether a failed read concerns one code only (the station answered, just not with a

@@ -99,6 +99,34 @@ pub struct PollGroup {
     pub period: Duration,
 }
 
+impl PollGroup {
+    /// The groups of a driver, from `(name, default period)` pairs.
+    pub(crate) fn list(groups: &[(&str, Duration)]) -> Vec<PollGroup> {
+        groups
+            .iter()
+            .map(|&(name, period)| PollGroup {
+                name: name.to_owned(),
+                period,
+            })
+            .collect()
+    }
+}
+
+/// An enumeration's states from `(value, label)` pairs.
+pub(crate) fn enum_states<V: Into<i64>>(
+    items: impl IntoIterator<Item = (V, String)>,
+) -> crate::point::PointKind {
+    crate::point::PointKind::Enum {
+        states: items
+            .into_iter()
+            .map(|(value, label)| crate::point::EnumState {
+                value: value.into(),
+                label,
+            })
+            .collect(),
+    }
+}
+
 /// One point's outcome in a poll.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Reading {
@@ -172,6 +200,14 @@ impl DeviceError {
             kind,
             message: error.to_string(),
         }
+    }
+
+    /// A request before the scheduler attached the line.
+    pub(crate) fn not_attached() -> Self {
+        Self::new(
+            ErrorKind::Disconnected,
+            "the line is not open yet (the gateway is connecting)",
+        )
     }
 }
 

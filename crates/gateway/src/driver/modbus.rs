@@ -31,7 +31,9 @@
 
 use std::time::Duration;
 
-use jbus::client::{Client, ClientConfig, ClientError, Trouble};
+use jbus::client::{Client, ClientConfig, ClientError};
+
+use super::cross::classify;
 use jbus::rtu::Unit;
 use link::{SerialSettings, SharedLine};
 
@@ -188,7 +190,7 @@ impl ModbusDriver {
     }
 
     async fn poll_live(&mut self) -> Result<Vec<Reading>, DeviceError> {
-        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         let mut blocks = Vec::new();
         for &(table, start, count) in &self.plan {
             let read = match table {
@@ -258,7 +260,7 @@ impl ModbusDriver {
             })
         })?;
         let (unit, address) = (self.unit, register.address);
-        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         client
             .write_single_register(unit, address, word)
             .await
@@ -353,27 +355,6 @@ fn missing(register: &RegisterConfig) -> DeviceError {
 /// Scaled register values as the nearest short decimal.
 fn round(value: f64) -> f64 {
     (value * 1e6).round() / 1e6
-}
-
-fn not_attached() -> DeviceError {
-    DeviceError::new(
-        ErrorKind::Disconnected,
-        "the line is not open yet (the gateway is connecting)",
-    )
-}
-
-/// The kind of a client error.
-fn classify(error: &ClientError) -> DeviceError {
-    let kind = match error {
-        ClientError::Request(_) | ClientError::Exception { .. } => ErrorKind::Refused,
-        ClientError::NoAnswer { last, .. } => match last {
-            Trouble::Silence => ErrorKind::Timeout,
-            _ => ErrorKind::Decode,
-        },
-        ClientError::Line { source, .. } if source.is_fatal() => ErrorKind::Disconnected,
-        _ => ErrorKind::Line,
-    };
-    DeviceError::new(kind, error)
 }
 
 #[cfg(test)]

@@ -401,17 +401,11 @@ impl Driver for PanasonicDriver {
     }
 
     fn groups(&self) -> Vec<PollGroup> {
-        [
+        PollGroup::list(&[
             (LIVE, Duration::from_secs(1)),
             (PROGRAM, Duration::from_secs(10)),
             (PRODUCTION, Duration::from_secs(10)),
-        ]
-        .into_iter()
-        .map(|(name, period)| PollGroup {
-            name: name.to_owned(),
-            period,
-        })
-        .collect()
+        ])
     }
 
     /// The machine's client keeps its own connections: the line is not used.

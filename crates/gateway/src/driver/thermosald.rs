@@ -33,9 +33,10 @@ use thermosald::{Address, Target};
 
 use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
+    enum_states,
 };
 use crate::point::{
-    AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
+    AlarmRule, DeviceId, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
 };
 
 /// A Thermosald line when the URL says nothing: 9600 baud, 8N1 (the spec's).
@@ -254,7 +255,7 @@ impl ThermosaldDriver {
         let (kind, unit, alarm) = match def.meaning {
             Meaning::Quantity => (PointKind::Numeric, unit, None),
             Meaning::Fault => (
-                states(
+                enum_states(
                     [
                         diagnostic::NONE,
                         diagnostic::CALIBRATION_REQUEST,
@@ -267,7 +268,11 @@ impl ThermosaldDriver {
                 None,
                 Some(AlarmRule::NotEqual(f64::from(diagnostic::NONE))),
             ),
-            Meaning::Switch => (states([(0, "off".into()), (1, "on".into())]), None, None),
+            Meaning::Switch => (
+                enum_states([(0, "off".into()), (1, "on".into())]),
+                None,
+                None,
+            ),
         };
         let step = item.scale().step();
         PointSpec {
@@ -293,7 +298,7 @@ impl ThermosaldDriver {
                 format_args!("Thermosald regulators have no poll group {group:?}"),
             )
         })?;
-        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         let values = client.read_table(table).await.map_err(|e| classify(&e))?;
         let mut readings = Vec::new();
         for def in POINTS.iter().filter(|d| d.table == table) {
@@ -358,7 +363,7 @@ impl ThermosaldDriver {
         let raw = item
             .to_raw(number)
             .map_err(|e| WriteError::Invalid(value_error(point, e)))?;
-        let client = self.client.as_mut().ok_or_else(not_attached)?;
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         client
             .write_raw(item, raw)
             .await
@@ -373,18 +378,12 @@ impl Driver for ThermosaldDriver {
     }
 
     fn groups(&self) -> Vec<PollGroup> {
-        [
+        PollGroup::list(&[
             (LIVE, Duration::from_secs(2)),
             (SETTINGS, Duration::from_secs(10)),
             (MACHINE, Duration::from_secs(60)),
             (SERVICE, Duration::from_secs(60)),
-        ]
-        .into_iter()
-        .map(|(name, period)| PollGroup {
-            name: name.to_owned(),
-            period,
-        })
-        .collect()
+        ])
     }
 
     fn attach(&mut self, line: SharedLine) {
@@ -401,18 +400,6 @@ impl Driver for ThermosaldDriver {
         value: &'a Value,
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(self.write_point(point, value))
-    }
-}
-
-fn states(items: impl IntoIterator<Item = (u16, String)>) -> PointKind {
-    PointKind::Enum {
-        states: items
-            .into_iter()
-            .map(|(value, label)| EnumState {
-                value: i64::from(value),
-                label,
-            })
-            .collect(),
     }
 }
 
@@ -459,13 +446,6 @@ fn value_error(point: &PointSpec, error: tables::ValueError) -> ValueError {
             got: other.to_string(),
         },
     }
-}
-
-fn not_attached() -> DeviceError {
-    DeviceError::new(
-        ErrorKind::Disconnected,
-        "the line is not open yet (the gateway is connecting)",
-    )
 }
 
 /// The kind of a client error.

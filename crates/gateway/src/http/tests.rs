@@ -147,7 +147,11 @@ async fn devices_show_points_with_value_unit_quality_and_time() {
     // Each key once: a JSON parser may keep either of two duplicates.
     let response = app
         .clone()
-        .oneshot(Request::get("/api/devices/jbc1").body(Body::empty()).unwrap())
+        .oneshot(
+            Request::get("/api/devices/jbc1")
+                .body(Body::empty())
+                .unwrap(),
+        )
         .await
         .unwrap();
     let raw = axum::body::to_bytes(response.into_body(), 16 << 20)
