@@ -484,6 +484,7 @@ pub async fn sim(args: SimPanasonicArgs) -> anyhow::Result<ExitCode> {
         control.status().state.describe(),
         panasonic::twin::DEMO_PROGRAM
     );
+    crate::sim_control::panasonic(control);
     tokio::select! {
         () = server.run() => {}
         _ = tokio::signal::ctrl_c() => {}

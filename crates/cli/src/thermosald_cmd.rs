@@ -653,7 +653,14 @@ pub async fn sim(args: SimThermosaldArgs) -> anyhow::Result<ExitCode> {
         twin = twin.paced(timing);
     }
     let model = SharedModel::new(twin);
-    crate::sim::serve(&args.serve, THERMOSALD_LINE, move || model.line()).await
+    let control = model.clone();
+    crate::sim::serve_then(
+        &args.serve,
+        THERMOSALD_LINE,
+        move || model.line(),
+        || crate::sim_control::thermosald(control),
+    )
+    .await
 }
 
 /// `cellbus decode thermosald`.
