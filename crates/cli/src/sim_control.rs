@@ -218,6 +218,19 @@ pub fn help<C: Commands>(about: Option<&'static Syntax>) -> String {
     }
 }
 
+/// The commands for a simulator's `--help`: one per line with what it does.
+pub fn long_help<C: Commands>() -> String {
+    let mut text = String::from(
+        "Control while it serves: type commands on stdin, one per line; each gets one line \
+         on stdout, `ok: …` or `error: …` (it never stops the simulator). End of input ends \
+         only the control channel.\n",
+    );
+    for syntax in C::TABLE.iter().chain([&HELP]) {
+        text.push_str(&format!("  {}\n      {}\n", syntax.usage(), syntax.help));
+    }
+    text
+}
+
 /// The answer to one typed line: `Some("ok: …" | "error: …")`, `None` for a blank line.
 pub fn answer<C: Commands>(
     line: &str,
@@ -310,7 +323,7 @@ impl Commands for PanasonicCommand {
         Syntax {
             name: "online",
             args: "",
-            help: "mode switch to Online: the host may transfer data, C5 start/reset are refused",
+            help: "mode switch to Online: the host may transfer data; C5 start/reset are refused",
         },
         Syntax {
             name: "remote",
@@ -321,7 +334,7 @@ impl Commands for PanasonicCommand {
             name: "start",
             args: "[bl|ep|ct]",
             help: "START at the panel (any mode), stopping after 1 block, at the end of the \
-                   program or never (default: the previous stop mode); R1ST follows",
+                   program or never (default: as before); R1ST follows",
         },
         Syntax {
             name: "stop",
@@ -500,21 +513,20 @@ impl Commands for ThermosaldCommand {
         Syntax {
             name: "fault",
             args: "ADDR open-band|short|over-current|not-reached",
-            help: "provokes the cause at regulator ADDR: the band breaks, 70 % of it is \
-                   bypassed, the supply gives too much voltage (latched when the band is \
-                   fired) or sags (latched after the next short sealing impulse)",
+            help: "provokes the cause at regulator ADDR: the band breaks or is partly \
+                   bypassed, the supply gives too much or too little voltage",
         },
         Syntax {
             name: "repair",
             args: "ADDR",
-            help: "removes every fault cause at regulator ADDR; the latched fault stays \
-                   until clear-faults (message 14)",
+            help: "removes every fault cause at regulator ADDR; clear-faults (message 14) \
+                   then clears its latched fault",
         },
         Syntax {
             name: "power-cycle",
             args: "ADDR",
             help: "switches regulator ADDR off and on: working data reload from EEPROM, \
-                   latched faults are forgotten (and found again if their cause remains)",
+                   latched faults go (and come back if their cause remains)",
         },
         Syntax {
             name: "status",

@@ -502,3 +502,17 @@ fn wrong_control_commands_answer_an_error_line_and_the_simulator_keeps_serving()
         "state: ready\nmode:  online\n"
     );
 }
+
+#[test]
+fn the_simulators_help_lists_its_control_commands() {
+    let help = ok(run(&["sim", "panasonic", "--help"]));
+    for command in [
+        "remote",
+        "start [bl|ep|ct]",
+        "pause-feeder N",
+        "error CODE",
+        "clear",
+    ] {
+        assert!(help.contains(command), "{help}");
+    }
+}

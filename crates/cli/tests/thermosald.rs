@@ -802,3 +802,16 @@ fn wrong_control_commands_answer_an_error_line_and_the_regulators_keep_answering
     assert_ok(&out);
     assert!(stdout(&out).contains("0 (ready)"), "{}", stdout(&out));
 }
+
+#[test]
+fn the_simulators_help_lists_its_control_commands() {
+    let out = run(&["sim", "thermosald", "--help"]);
+    assert_ok(&out);
+    for command in [
+        "fault ADDR open-band|short|over-current|not-reached",
+        "repair ADDR",
+        "power-cycle ADDR",
+    ] {
+        assert!(stdout(&out).contains(command), "{}", stdout(&out));
+    }
+}
