@@ -12,6 +12,7 @@ mod output;
 mod panasonic_cmd;
 mod serve_cmd;
 mod sim;
+mod sim_control;
 mod thermosald_cmd;
 
 use std::process::ExitCode;

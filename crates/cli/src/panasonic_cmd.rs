@@ -120,6 +120,7 @@ pub enum PanasonicAction {
 
 /// `cellbus sim panasonic`.
 #[derive(Debug, Args)]
+#[command(after_help = crate::sim_control::long_help::<crate::sim_control::PanasonicCommand>())]
 pub struct SimPanasonicArgs {
     /// Port 1 (commands). Prints `listening on tcp://IP:PORT` first. Port 0 picks a free port.
     #[arg(long, value_name = "IP:PORT", default_value = "127.0.0.1:49152")]
@@ -484,6 +485,7 @@ pub async fn sim(args: SimPanasonicArgs) -> anyhow::Result<ExitCode> {
         control.status().state.describe(),
         panasonic::twin::DEMO_PROGRAM
     );
+    crate::sim_control::panasonic(control);
     tokio::select! {
         () = server.run() => {}
         _ = tokio::signal::ctrl_c() => {}

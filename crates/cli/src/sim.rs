@@ -99,6 +99,21 @@ where
     D: Device,
     F: Fn() -> D + Send + 'static,
 {
+    serve_then(args, framing, make, || ()).await
+}
+
+/// Like [`serve`], calling `listening` right after the `listening on …` line is out (to
+/// start a control channel whose answers must come after it).
+pub async fn serve_then<D, F>(
+    args: &ServeArgs,
+    framing: SerialSettings,
+    make: F,
+    listening: impl FnOnce(),
+) -> anyhow::Result<ExitCode>
+where
+    D: Device,
+    F: Fn() -> D + Send + 'static,
+{
     if !(0.0..=1.0).contains(&args.fault_rate) {
         return Err(usage(format!(
             "--fault-rate {} is not between 0 and 1",
@@ -127,6 +142,7 @@ where
         let pty =
             Pty::create(path).with_context(|| format!("cannot serve on {}", path.display()))?;
         output::line(format!("listening on {}", pty.link().display()))?;
+        listening();
         tokio::select! {
             served = pty.serve(faulty(), pace) => served.context("the PTY failed"),
             _ = tokio::signal::ctrl_c() => Ok(()),
@@ -144,6 +160,7 @@ where
             anyhow::anyhow!("cannot listen on {addr}: {e}{hint}")
         })?;
         output::line(format!("listening on tcp://{}", listener.local_addr()?))?;
+        listening();
         tokio::select! {
             served = serve_tcp(listener, faulty, pace) => served.context("the listener failed"),
             _ = tokio::signal::ctrl_c() => Ok(()),

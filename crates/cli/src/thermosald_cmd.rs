@@ -107,6 +107,7 @@ pub enum ThermosaldAction {
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = crate::sim_control::long_help::<crate::sim_control::ThermosaldCommand>())]
 pub struct SimThermosaldArgs {
     #[command(flatten)]
     pub serve: ServeArgs,
@@ -653,7 +654,14 @@ pub async fn sim(args: SimThermosaldArgs) -> anyhow::Result<ExitCode> {
         twin = twin.paced(timing);
     }
     let model = SharedModel::new(twin);
-    crate::sim::serve(&args.serve, THERMOSALD_LINE, move || model.line()).await
+    let control = model.clone();
+    crate::sim::serve_then(
+        &args.serve,
+        THERMOSALD_LINE,
+        move || model.line(),
+        || crate::sim_control::thermosald(control),
+    )
+    .await
 }
 
 /// `cellbus decode thermosald`.

@@ -6,13 +6,13 @@ mod common;
 use std::io::{BufRead, BufReader};
 use std::process::{Child, ChildStdout, Stdio};
 
-use common::{cellbus, run, stderr, stdout};
+use common::{SimControl, cellbus, run, stderr, stdout};
 
 /// A running `cellbus sim panasonic`, killed when dropped.
 struct Machine {
     child: Child,
-    /// Kept open so the simulator's stdout stays writable.
-    _stdout: BufReader<ChildStdout>,
+    /// Kept open so the simulator's stdout stays writable (or handed to the control).
+    out: Option<BufReader<ChildStdout>>,
     /// `IP:PORT` of Port 1.
     command: String,
     /// Port 2's port number.
@@ -20,8 +20,21 @@ struct Machine {
 }
 
 impl Machine {
-    /// Starts the simulator with `extra` options and reads its first two lines.
+    /// Starts the simulator with `extra` options (stdin empty: no control channel) and
+    /// reads its first two lines.
     fn start(extra: &[&str]) -> Machine {
+        Machine::spawn(extra, Stdio::null())
+    }
+
+    /// Like [`Machine::start`], with a control channel to type commands into.
+    fn start_with_control(extra: &[&str]) -> (Machine, SimControl) {
+        let mut machine = Machine::spawn(extra, Stdio::piped());
+        let stdin = machine.child.stdin.take().expect("stdin is piped");
+        let stdout = machine.out.take().expect("stdout kept");
+        (machine, SimControl::new(stdin, stdout))
+    }
+
+    fn spawn(extra: &[&str], stdin: Stdio) -> Machine {
         let mut child = cellbus()
             .args([
                 "sim",
@@ -32,6 +45,7 @@ impl Machine {
                 "127.0.0.1:0",
             ])
             .args(extra)
+            .stdin(stdin)
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
@@ -51,7 +65,7 @@ impl Machine {
         let events_port = events.rsplit_once(':').expect("IP:PORT").1.to_owned();
         Machine {
             child,
-            _stdout: out,
+            out: Some(out),
             command,
             events_port,
         }
@@ -380,4 +394,125 @@ fn a_simulator_started_with_run_is_producing_without_a_host_command() {
         ok(machine.run(&["events", "--count", "1"])),
         "R1ST (machine started)\n"
     );
+}
+
+#[test]
+fn typed_remote_and_error_3_show_in_status_and_events_reports_r2e03_in_words() {
+    let (machine, mut control) = Machine::start_with_control(&[]);
+    assert_eq!(
+        control.ok("remote"),
+        "mode remote: the host may also start and reset the machine (C5)"
+    );
+    assert_eq!(
+        ok(machine.run(&["status"])),
+        "state: ready\nmode:  remote\n"
+    );
+    assert_eq!(
+        control.ok("error 3"),
+        "error stop with code 03: R2E03 goes out on Port 2"
+    );
+    assert_eq!(
+        ok(machine.run(&["status"])),
+        "state: error stop\nmode:  remote\n"
+    );
+    // No host listened on Port 2: the machine kept R2E03 for the next one.
+    let events = ok(machine.run(&["events", "--count", "1"]));
+    assert!(events.starts_with("R2E03"), "{events}");
+    assert!(events.contains("parts exhausted"), "{events}");
+    assert!(
+        control
+            .ok("status")
+            .starts_with("error stop, remote; program DEMO-BOARD"),
+        "the sim's own status agrees"
+    );
+    assert_eq!(
+        control.ok("clear"),
+        "error causes cleared and RESET pressed: ready"
+    );
+    assert_eq!(
+        control.ok("online"),
+        "mode online: the host may transfer data; C5 start/reset are refused"
+    );
+    assert_eq!(
+        ok(machine.run(&["status"])),
+        "state: ready\nmode:  online\n"
+    );
+}
+
+#[test]
+fn a_typed_operator_start_runs_the_machine_in_online_mode_and_stop_makes_it_ready() {
+    let (machine, mut control) = Machine::start_with_control(&[]);
+    assert_eq!(
+        control.ok("start ct"),
+        "started at the panel in continuous mode; R1ST goes out on Port 2"
+    );
+    assert_eq!(ok(machine.run(&["status"])), "state: run\nmode:  online\n");
+    assert_eq!(
+        ok(machine.run(&["events", "--count", "1"])),
+        "R1ST (machine started)\n"
+    );
+    assert_eq!(control.ok("stop"), "stopped at the panel: ready");
+    assert_eq!(
+        ok(machine.run(&["status"])),
+        "state: ready\nmode:  online\n"
+    );
+}
+
+#[test]
+fn wrong_control_commands_answer_an_error_line_and_the_simulator_keeps_serving() {
+    let (machine, mut control) = Machine::start_with_control(&[]);
+    assert_eq!(
+        control.send("pause-feeder 999"),
+        "error: feeder 999 does not exist: the machine has feeders 1 to 20"
+    );
+    assert_eq!(
+        control.send("pause-feeder two"),
+        "error: feeder number `two` is not a number from 1 to 65535"
+    );
+    assert_eq!(
+        control.send("launch"),
+        "error: unknown command `launch`; `help` lists the commands"
+    );
+    assert_eq!(
+        control.send("error 100"),
+        "error: error code `100` is not a number from 0 to 99"
+    );
+    let help = control.ok("help");
+    for command in [
+        "online",
+        "remote",
+        "start [bl|ep|ct]",
+        "pause-feeder N",
+        "error CODE",
+    ] {
+        assert!(help.contains(command), "{help}");
+    }
+    assert!(
+        control
+            .ok("refill-feeder 2")
+            .starts_with("feeder 2 refilled: ")
+    );
+    assert_eq!(
+        control.ok("pause-feeder 2"),
+        "feeder 2 paused: its next pick runs out (R2E03, error stop)"
+    );
+    assert_eq!(control.ok("resume-feeder 2"), "feeder 2 feeds again");
+    assert_eq!(
+        ok(machine.run(&["status"])),
+        "state: ready\nmode:  online\n"
+    );
+}
+
+#[test]
+fn the_simulators_help_lists_its_control_commands() {
+    let help = ok(run(&["sim", "panasonic", "--help"]));
+    for command in [
+        "remote",
+        "start [bl|ep|ct]",
+        "pause-feeder N",
+        "error CODE",
+        "clear",
+    ] {
+        assert!(help.contains(command), "{help}");
+    }
 }

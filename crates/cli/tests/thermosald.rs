@@ -701,3 +701,117 @@ fn a_line_that_cannot_be_opened_exits_1_naming_it() {
         stderr(&out)
     );
 }
+
+fn sim_with_control(addresses: &str) -> (Sim, common::SimControl) {
+    Sim::start_with_control(&[
+        "thermosald",
+        "--listen",
+        "127.0.0.1:0",
+        "--addresses",
+        addresses,
+    ])
+}
+
+#[test]
+fn a_typed_open_band_shows_in_words_and_clear_faults_clears_it_only_after_repair() {
+    let (sim, mut control) = sim_with_control("1");
+    let fault = || {
+        let out = thermosald(&sim, &["--address", "1", "read", "runtime", "--item", "2"]);
+        assert_ok(&out);
+        stdout(&out)
+    };
+    assert_eq!(
+        control.ok("fault 1 open-band"),
+        "regulator 1: cause of \"sealing band open\" provoked; fault number now 1 (sealing \
+         band open)"
+    );
+    let out = thermosald(&sim, &["--address", "1", "read", "runtime"]);
+    assert_ok(&out);
+    assert!(
+        stdout(&out).contains("Fault/warning number  1 (sealing band open)"),
+        "{}",
+        stdout(&out)
+    );
+    // The band is still broken: clearing does nothing.
+    assert_ok(&thermosald(&sim, &["--address", "1", "clear-faults"]));
+    assert!(fault().contains("1 (sealing band open)"), "{}", fault());
+    assert!(control.ok("repair 1").contains("every fault cause removed"));
+    // Repaired, but latched until cleared.
+    assert!(fault().contains("1 (sealing band open)"), "{}", fault());
+    assert_ok(&thermosald(&sim, &["--address", "1", "clear-faults"]));
+    assert!(fault().contains("0 (ready)"), "{}", fault());
+    assert!(
+        control.ok("status").starts_with("regulator 1: "),
+        "the sim's own status names the regulator"
+    );
+}
+
+#[test]
+fn a_typed_over_current_hits_only_its_regulator_and_a_power_cycle_reloads_the_eeprom() {
+    let (sim, mut control) = sim_with_control("1,2");
+    let at = |address: &str, args: &[&str]| {
+        let mut all = vec!["--address", address];
+        all.extend_from_slice(args);
+        let out = thermosald(&sim, &all);
+        assert_ok(&out);
+        stdout(&out)
+    };
+    control.ok("fault 2 over-current");
+    // Latched as soon as the band is fired: poll until it shows (generous deadline).
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let fault = at("2", &["read", "runtime", "--item", "2"]);
+        if fault.contains("3 (over-current)") {
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "over-current never latched: {fault}"
+        );
+    }
+    assert!(at("1", &["read", "runtime", "--item", "2"]).contains("0 (ready)"));
+    // A volatile write is lost at power-up; the repaired regulator comes back ready.
+    assert!(at("2", &["write", "settings", "15", "190"]).contains("= 190 °C"));
+    control.ok("repair 2");
+    assert!(
+        control
+            .ok("power-cycle 2")
+            .ends_with("working data reloaded from EEPROM; fault number now 0 (ready)")
+    );
+    assert!(at("2", &["read", "settings", "--item", "15"]).ends_with("180 °C\n"));
+    assert!(at("2", &["read", "runtime", "--item", "2"]).contains("0 (ready)"));
+}
+
+#[test]
+fn wrong_control_commands_answer_an_error_line_and_the_regulators_keep_answering() {
+    let (sim, mut control) = sim_with_control("1");
+    assert_eq!(
+        control.send("repair 5"),
+        "error: no regulator at address 5 on this line (addresses: 1)"
+    );
+    assert_eq!(
+        control.send("fault 1 melted"),
+        "error: `melted` is not a fault cause: use open-band, short, over-current or not-reached"
+    );
+    assert_eq!(
+        control.send("fault 9 short"),
+        "error: regulator address `9` is not a number from 0 to 7"
+    );
+    assert!(control.ok("help").contains("power-cycle ADDR"));
+    let out = thermosald(&sim, &["--address", "1", "read", "runtime", "--item", "2"]);
+    assert_ok(&out);
+    assert!(stdout(&out).contains("0 (ready)"), "{}", stdout(&out));
+}
+
+#[test]
+fn the_simulators_help_lists_its_control_commands() {
+    let out = run(&["sim", "thermosald", "--help"]);
+    assert_ok(&out);
+    for command in [
+        "fault ADDR open-band|short|over-current|not-reached",
+        "repair ADDR",
+        "power-cycle ADDR",
+    ] {
+        assert!(stdout(&out).contains(command), "{}", stdout(&out));
+    }
+}

@@ -4,7 +4,7 @@
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, ChildStdin, ChildStdout, Command, Output, Stdio};
 use std::time::Duration;
 
 /// The built `cellbus` binary.
@@ -20,18 +20,31 @@ pub struct Sim {
 }
 
 impl Sim {
-    /// Starts `cellbus sim ARGS…` and waits for its `listening on …` line.
+    /// Starts `cellbus sim ARGS…` (stdin empty: no control channel) and waits for its
+    /// `listening on …` line.
     pub fn start(args: &[&str]) -> Sim {
+        Sim::spawn(args, Stdio::null()).0
+    }
+
+    /// Like [`Sim::start`], with a control channel to type commands into.
+    pub fn start_with_control(args: &[&str]) -> (Sim, SimControl) {
+        let (mut sim, stdout) = Sim::spawn(args, Stdio::piped());
+        let stdin = sim.child.stdin.take().expect("stdin is piped");
+        (sim, SimControl { stdin, stdout })
+    }
+
+    fn spawn(args: &[&str], stdin: Stdio) -> (Sim, BufReader<ChildStdout>) {
         let mut child = cellbus()
             .arg("sim")
             .args(args)
+            .stdin(stdin)
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
             .expect("cellbus runs");
-        let stdout = child.stdout.take().expect("stdout is piped");
+        let mut stdout = BufReader::new(child.stdout.take().expect("stdout is piped"));
         let mut first = String::new();
-        BufReader::new(stdout)
+        stdout
             .read_line(&mut first)
             .expect("the simulator prints a line");
         let endpoint = first
@@ -39,7 +52,46 @@ impl Sim {
             .strip_prefix("listening on ")
             .unwrap_or_else(|| panic!("first line is `listening on …`, got {first:?}"))
             .to_owned();
-        Sim { child, endpoint }
+        (Sim { child, endpoint }, stdout)
+    }
+}
+
+/// A simulator's control channel: commands on its stdin, answers on its stdout.
+pub struct SimControl {
+    stdin: ChildStdin,
+    stdout: BufReader<ChildStdout>,
+}
+
+impl SimControl {
+    /// For a simulator whose stdin and stdout the caller piped (and read up to here).
+    pub fn new(stdin: ChildStdin, stdout: BufReader<ChildStdout>) -> SimControl {
+        SimControl { stdin, stdout }
+    }
+
+    /// Types `command` and returns the simulator's one-line answer (`ok: …` or
+    /// `error: …`), which comes once the command is carried out.
+    pub fn send(&mut self, command: &str) -> String {
+        writeln!(self.stdin, "{command}").expect("the simulator reads its stdin");
+        self.stdin.flush().expect("command sent");
+        let mut answer = String::new();
+        let n = self
+            .stdout
+            .read_line(&mut answer)
+            .expect("the simulator answers");
+        assert!(
+            n > 0,
+            "the simulator ended instead of answering {command:?}"
+        );
+        answer.trim_end().to_owned()
+    }
+
+    /// Like [`send`](Self::send), asserting an `ok: …` answer; returns the words after it.
+    pub fn ok(&mut self, command: &str) -> String {
+        let answer = self.send(command);
+        answer
+            .strip_prefix("ok: ")
+            .unwrap_or_else(|| panic!("{command:?} answered {answer:?}"))
+            .to_owned()
     }
 }
 
