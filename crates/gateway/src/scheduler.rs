@@ -2,7 +2,10 @@
 //!
 //! A [`LineTask`] owns its line and the drivers of the devices on it. It polls one group of
 //! one device at a time, always the one due first, so requests on a line are strictly
-//! serialised and each device keeps its periods while the line has time. Writes queued by
+//! serialised and each device keeps its periods while the line has time. When the line has
+//! not (more groups due than it carries), the group furthest behind relative to its period
+//! goes first, so every group slows by the same factor and a 1 s group keeps ten times the
+//! reads of a 10 s one. Writes queued by
 //! [`Cell::write`] go out between two polls. Separate lines run in parallel.
 //!
 //! A device that does not answer is marked down and backed off: it is tried again after
@@ -301,26 +304,29 @@ impl LineTask {
         }
     }
 
-    /// The device and group due first: `(slot, clock, when)`.
+    /// The device and group to poll next: `(slot, clock, when)` (see [`most_urgent`]).
     fn next_due(&self) -> Option<(usize, usize, Instant)> {
-        let mut best: Option<(usize, usize, Instant)> = None;
-        for (i, slot) in self.slots.iter().enumerate() {
-            let candidate = match slot.backoff {
-                Some(b) => Some((i, slot.probe, b.next)),
-                None => slot
-                    .clocks
-                    .iter()
-                    .enumerate()
-                    .min_by_key(|(_, c)| c.next)
-                    .map(|(g, c)| (i, g, c.next)),
-            };
-            if let Some(c) = candidate
-                && best.is_none_or(|b| c.2 < b.2)
-            {
-                best = Some(c);
-            }
-        }
-        best
+        let candidates = self.slots.iter().enumerate().flat_map(|(i, slot)| {
+            let backoff = slot.backoff.map(|b| Due {
+                slot: i,
+                clock: slot.probe,
+                at: b.next,
+                period: slot.clocks[slot.probe].period,
+            });
+            let clocks = slot
+                .clocks
+                .iter()
+                .enumerate()
+                .filter(move |_| slot.backoff.is_none())
+                .map(move |(g, c)| Due {
+                    slot: i,
+                    clock: g,
+                    at: c.next,
+                    period: c.period,
+                });
+            backoff.into_iter().chain(clocks)
+        });
+        most_urgent(candidates, Instant::now()).map(|d| (d.slot, d.clock, d.at))
     }
 
     /// Polls one group; returns the error if the line is lost.
@@ -517,6 +523,40 @@ impl LineTask {
 /// Resolves when shutdown is asked for (or nobody can ask any more).
 async fn stopped(shutdown: &mut watch::Receiver<bool>) {
     let _ = shutdown.wait_for(|stop| *stop).await;
+}
+
+/// A group (or a backed-off device's probe) waiting for its turn on the line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Due {
+    slot: usize,
+    clock: usize,
+    at: Instant,
+    period: Duration,
+}
+
+/// Which candidate to poll next. While the line keeps up, the one due first. When several
+/// are overdue (the line cannot keep every period), the one furthest behind relative to its
+/// period, ties to the earliest: an overloaded line then slows every group by the same
+/// factor, instead of giving a 1 s group the same share as a 60 s one.
+fn most_urgent(candidates: impl IntoIterator<Item = Due>, now: Instant) -> Option<Due> {
+    let behind = |d: &Due| {
+        now.saturating_duration_since(d.at).as_secs_f64() / d.period.as_secs_f64().max(1e-3)
+    };
+    let mut best: Option<Due> = None;
+    for candidate in candidates {
+        let better = match best {
+            None => true,
+            Some(b) if candidate.at <= now && b.at <= now => {
+                let (c, b_) = (behind(&candidate), behind(&b));
+                c > b_ || (c == b_ && candidate.at < b.at)
+            }
+            Some(b) => candidate.at < b.at,
+        };
+        if better {
+            best = Some(candidate);
+        }
+    }
+    best
 }
 
 /// The wait before try number `failures + 1` of a device that does not answer.

@@ -23,10 +23,13 @@ use crate::store::{Store, StoreOptions};
 /// Stations sharing one line; each can be unplugged (it then hears nothing).
 pub struct Bus {
     pub stations: Vec<(Arc<AtomicBool>, wire::device::ModelLine<Station>)>,
+    /// Every byte sent on the line.
+    pub heard: Arc<std::sync::Mutex<Vec<u8>>>,
 }
 
 impl Device for Bus {
     fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
+        self.heard.lock().unwrap().extend_from_slice(bytes);
         self.stations
             .iter_mut()
             .filter(|(plugged, _)| plugged.load(Ordering::SeqCst))
@@ -41,6 +44,8 @@ pub struct Rig {
     pub plugged: Vec<Arc<AtomicBool>>,
     pub line_available: Arc<AtomicBool>,
     pub opens: Arc<AtomicUsize>,
+    /// Every byte the gateway sent on the line.
+    pub heard: Arc<std::sync::Mutex<Vec<u8>>>,
     /// The serve loops of the lines opened so far (abort one to cut its line).
     pub servers: Arc<std::sync::Mutex<Vec<tokio::task::JoinHandle<std::io::Result<()>>>>>,
     pub shutdown: watch::Sender<bool>,
@@ -86,8 +91,10 @@ pub fn rig(count: u8) -> Rig {
     let line_available = Arc::new(AtomicBool::new(true));
     let opens = Arc::new(AtomicUsize::new(0));
     let servers = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let heard = Arc::new(std::sync::Mutex::new(Vec::new()));
     let opener: Opener = {
         let (models, plugged) = (models.clone(), plugged.clone());
+        let heard = Arc::clone(&heard);
         let (available, opens) = (Arc::clone(&line_available), Arc::clone(&opens));
         let servers = Arc::clone(&servers);
         Arc::new(move || {
@@ -100,6 +107,7 @@ pub fn rig(count: u8) -> Rig {
                         .cloned()
                         .zip(models.iter().map(SharedModel::line))
                         .collect(),
+                    heard: Arc::clone(&heard),
                 };
                 let server = tokio::spawn(link::serve::serve_stream(b, bus, None));
                 servers.lock().unwrap().push(server);
@@ -133,6 +141,7 @@ pub fn rig(count: u8) -> Rig {
         plugged,
         line_available,
         opens,
+        heard,
         servers,
         shutdown,
         task,

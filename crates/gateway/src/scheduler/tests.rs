@@ -362,3 +362,63 @@ async fn a_line_closed_by_the_other_end_is_reopened_and_polling_resumes() {
         "newest first: the poll fails, the line goes down, is reopened, the station answers"
     );
 }
+
+fn due(slot: usize, at: tokio::time::Instant, period_s: u64) -> Due {
+    Due {
+        slot,
+        clock: 0,
+        at,
+        period: Duration::from_secs(period_s),
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn while_the_line_keeps_up_the_group_due_first_goes_first() {
+    let now = tokio::time::Instant::now();
+    let soon = due(0, now + Duration::from_millis(300), 1);
+    let later = due(1, now + Duration::from_millis(200), 60);
+    let last = due(2, now + Duration::from_secs(5), 10);
+    assert_eq!(most_urgent([soon, later, last], now), Some(later));
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_overdue_group_goes_before_one_not_yet_due() {
+    let now = tokio::time::Instant::now() + Duration::from_secs(10);
+    let overdue = due(0, now - Duration::from_millis(1), 60);
+    let not_yet = due(1, now + Duration::from_millis(1), 1);
+    assert_eq!(most_urgent([not_yet, overdue], now), Some(overdue));
+}
+
+#[tokio::test(start_paused = true)]
+async fn on_an_overloaded_line_the_group_furthest_behind_its_period_goes_first() {
+    let now = tokio::time::Instant::now() + Duration::from_secs(100);
+    // Half a period behind a 1 s period outweighs two seconds behind a 10 s period.
+    let live = due(0, now - Duration::from_millis(500), 1);
+    let settings = due(1, now - Duration::from_secs(2), 10);
+    assert_eq!(most_urgent([settings, live], now), Some(live));
+    // Equally far behind: the earlier one.
+    let a = due(2, now - Duration::from_secs(20), 10);
+    let b = due(3, now - Duration::from_secs(2), 1);
+    assert_eq!(most_urgent([b, a], now), Some(a));
+    assert_eq!(most_urgent(std::iter::empty(), now), None);
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_overloaded_line_slows_every_group_by_the_same_factor() {
+    // Forty stations on one line: their live groups (1 s) alone ask for more than the line
+    // carries, so every group falls behind; the live group must keep the share its period
+    // gives it over the settings group (10 s), not be served in turn with it.
+    let rig = rig(40);
+    tokio::time::sleep(Duration::from_secs(120)).await;
+    let heard = rig.heard.lock().unwrap().clone();
+    let count = |code: &[u8]| heard.windows(code.len()).filter(|w| *w == code).count();
+    let (live, settings) = (count(b"RAT1"), count(b"RWM1"));
+    assert!(
+        live < 40 * 120 * 9 / 10,
+        "the line was not overloaded: {live} live reads of 4800 due"
+    );
+    assert!(
+        live >= 5 * settings.max(1),
+        "live read {live} times, settings {settings} times"
+    );
+}
