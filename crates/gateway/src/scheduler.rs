@@ -661,7 +661,7 @@ fn record_events(cell: &Cell, entry: &DeviceEntry, events: Vec<DeviceEvent>) {
             .and_then(|i| entry.points.get(i))
             .map(|spec| spec.id.clone());
         cell.emit(Event {
-            t: Timestamp::now(),
+            t: event.at.unwrap_or_else(Timestamp::now),
             kind: event.kind,
             line: Some(entry.line.clone()),
             device: Some(entry.id.clone()),

@@ -440,6 +440,7 @@ impl CrossDriver {
             kind: EventKind::StateChanged,
             point: Some("load_feed"),
             message,
+            at: None,
         });
     }
 }

@@ -88,6 +88,9 @@ pub struct DeviceEvent {
     /// What happened, in words, without the device's name (the scheduler puts it in
     /// front): `load transferred from source 1 (S1) to source 2 (S2)`.
     pub message: String,
+    /// When it happened, for an event that arrived on its own (a Panasonic R message);
+    /// `None`: when the scheduler collects it, right after the poll that saw it.
+    pub at: Option<crate::time::Timestamp>,
 }
 
 /// A group of points read together, at one period.

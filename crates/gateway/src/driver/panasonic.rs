@@ -16,8 +16,9 @@
 //! The driver connects on its first poll and forwards Port 2's notices from a small task
 //! into a queue, which the scheduler drains after every poll ([`Driver::take_events`]): R
 //! messages become `device_event` events (in words: `R2E03… (error stop: parts
-//! exhausted …)`), a lost Port 2 connection too; so an R message is recorded at most one
-//! `live` period (1 s) after it arrived. Keep-alive echoes (`R1HB`) are not recorded.
+//! exhausted …)`), a lost Port 2 connection too, stamped with the time they arrived (the
+//! log gets them at most one `live` period, 1 s, later). Keep-alive echoes (`R1HB`) are not
+//! recorded.
 //!
 //! Groups: `live` (1 s: C2ST, run state and control mode), `program` (10 s: C3P, the
 //! selected program), `production` (10 s: C1M, the grand total of the production
@@ -46,6 +47,7 @@ use crate::point::{
     AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value, ValueError,
 };
 use crate::store::EventKind;
+use crate::time::Timestamp;
 
 /// The status, every second.
 pub const LIVE: &str = "live";
@@ -102,7 +104,7 @@ pub struct PanasonicDriver {
     device: DeviceId,
     config: ClientConfig,
     client: Option<Client>,
-    notices: Option<mpsc::UnboundedReceiver<Notice>>,
+    notices: Option<mpsc::UnboundedReceiver<(Timestamp, Notice)>>,
     forward: Option<JoinHandle<()>>,
     state: Option<RunState>,
     events: Vec<DeviceEvent>,
@@ -182,7 +184,7 @@ impl PanasonicDriver {
             let (tx, rx) = mpsc::unbounded_channel();
             self.forward = Some(tokio::spawn(async move {
                 while let Some(notice) = events.next().await {
-                    if tx.send(notice).is_err() {
+                    if tx.send((Timestamp::now(), notice)).is_err() {
                         break;
                     }
                 }
@@ -297,6 +299,7 @@ impl PanasonicDriver {
                     old.describe(),
                     state.describe()
                 ),
+                at: None,
             });
         }
     }
@@ -310,14 +313,14 @@ impl PanasonicDriver {
         while let Ok(notice) = rx.try_recv() {
             notices.push(notice);
         }
-        for notice in notices {
-            self.record_notice(&notice);
+        for (at, notice) in notices {
+            self.record_notice(&notice, at);
         }
     }
 
     /// Turns a Port 2 notice into an event, unless it is routine (keep-alive echoes,
     /// connections made, reconnection attempts: the device's status shows those).
-    fn record_notice(&mut self, notice: &Notice) {
+    fn record_notice(&mut self, notice: &Notice, at: Timestamp) {
         let message = match notice {
             Notice::Event(Event::Heartbeat { .. })
             | Notice::Connected { .. }
@@ -329,6 +332,7 @@ impl PanasonicDriver {
             kind: EventKind::DeviceEvent,
             point: None,
             message,
+            at: Some(at),
         });
     }
 }
@@ -496,6 +500,24 @@ mod tests {
             .clone()
     }
 
+    #[tokio::test]
+    async fn a_port_2_notice_keeps_the_time_it_arrived_not_the_time_it_is_collected() {
+        let (mut driver, _twin) = rig().await;
+        let (tx, rx) = mpsc::unbounded_channel();
+        driver.notices = Some(rx);
+        let arrived = Timestamp(1_700_000_000_000);
+        let notice = Notice::Unreadable {
+            message: "R9XX".into(),
+            reason: "not an R message of the manual".into(),
+        };
+        tx.send((arrived, notice)).unwrap();
+        driver.drain_notices();
+        let events = driver.take_events();
+        assert_eq!(events.len(), 1, "{events:?}");
+        assert_eq!(events[0].at, Some(arrived));
+        assert_eq!(events[0].kind, EventKind::DeviceEvent);
+    }
+
     /// Polls `live` and waits for the next Port 2 notice until `done` holds for the
     /// collected events (real sockets: bounded generously, no sleeps).
     async fn events_until(
@@ -514,7 +536,7 @@ mod tests {
                 .await
                 .expect("a notice within 20 s")
                 .expect("the client runs");
-            driver.record_notice(&notice);
+            driver.record_notice(&notice.1, notice.0);
         }
         panic!("not seen in time: {events:?}");
     }
