@@ -217,9 +217,6 @@ pub struct DeviceSummary {
 /// A device as the API shows it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DeviceView {
-    /// Its id (in JSON once, from the summary).
-    #[serde(skip)]
-    pub id: DeviceId,
     /// Words.
     pub name: String,
     /// Its protocol.
@@ -228,7 +225,7 @@ pub struct DeviceView {
     pub line: String,
     /// Its address.
     pub address: Option<i64>,
-    /// Status.
+    /// Its id and status.
     #[serde(flatten)]
     pub summary: DeviceSummary,
     /// Milliseconds until the next try while backed off.
@@ -592,7 +589,6 @@ impl DeviceEntry {
         let state = self.read();
         let summary = summary_of(&self.id, &state);
         DeviceView {
-            id: self.id.clone(),
             name: self.name.clone(),
             protocol: self.protocol,
             line: self.line.clone(),
