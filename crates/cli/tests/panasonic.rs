@@ -4,13 +4,13 @@
 mod common;
 
 use std::io::{BufRead, BufReader};
-use std::process::{Child, ChildStdout, Stdio};
+use std::process::{ChildStdin, ChildStdout, Stdio};
 
-use common::{SimControl, cellbus, run, stderr, stdout};
+use common::{Sim, SimControl, cellbus, run, stderr, stdout};
 
 /// A running `cellbus sim panasonic`, killed when dropped.
 struct Machine {
-    child: Child,
+    _sim: Sim,
     /// Kept open so the simulator's stdout stays writable (or handed to the control).
     out: Option<BufReader<ChildStdout>>,
     /// `IP:PORT` of Port 1.
@@ -23,52 +23,56 @@ impl Machine {
     /// Starts the simulator with `extra` options (stdin empty: no control channel) and
     /// reads its first two lines.
     fn start(extra: &[&str]) -> Machine {
-        Machine::spawn(extra, Stdio::null())
+        Machine::spawn(extra, false).0
     }
 
     /// Like [`Machine::start`], with a control channel to type commands into.
     fn start_with_control(extra: &[&str]) -> (Machine, SimControl) {
-        let mut machine = Machine::spawn(extra, Stdio::piped());
-        let stdin = machine.child.stdin.take().expect("stdin is piped");
+        let (mut machine, stdin) = Machine::spawn(extra, true);
         let stdout = machine.out.take().expect("stdout kept");
-        (machine, SimControl::new(stdin, stdout))
+        (
+            machine,
+            SimControl::new(stdin.expect("stdin is piped"), stdout),
+        )
     }
 
-    fn spawn(extra: &[&str], stdin: Stdio) -> Machine {
-        let mut child = cellbus()
-            .args([
-                "sim",
-                "panasonic",
-                "--listen",
-                "127.0.0.1:0",
-                "--events-listen",
-                "127.0.0.1:0",
-            ])
-            .args(extra)
-            .stdin(stdin)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("cellbus runs");
-        let mut out = BufReader::new(child.stdout.take().expect("stdout is piped"));
-        let mut line = |prefix: &str| {
-            let mut text = String::new();
-            out.read_line(&mut text)
-                .expect("the simulator prints a line");
-            text.trim_end()
-                .strip_prefix(prefix)
-                .unwrap_or_else(|| panic!("expected `{prefix}…`, got {text:?}"))
-                .to_owned()
+    /// Starts the simulator; with `control`, its stdin is piped and handed back.
+    fn spawn(extra: &[&str], control: bool) -> (Machine, Option<ChildStdin>) {
+        let stdin = if control {
+            Stdio::piped()
+        } else {
+            Stdio::null()
         };
-        let command = line("listening on tcp://");
-        let events = line("events on tcp://");
+        let mut args = vec![
+            "panasonic",
+            "--listen",
+            "127.0.0.1:0",
+            "--events-listen",
+            "127.0.0.1:0",
+        ];
+        args.extend_from_slice(extra);
+        let (mut sim, mut out) = Sim::spawn(&args, stdin);
+        let command = sim
+            .endpoint
+            .strip_prefix("tcp://")
+            .unwrap_or_else(|| panic!("Port 1 is a tcp:// endpoint, got {}", sim.endpoint))
+            .to_owned();
+        let mut events = String::new();
+        out.read_line(&mut events)
+            .expect("the simulator prints a line");
+        let events = events
+            .trim_end()
+            .strip_prefix("events on tcp://")
+            .unwrap_or_else(|| panic!("expected `events on tcp://…`, got {events:?}"));
         let events_port = events.rsplit_once(':').expect("IP:PORT").1.to_owned();
-        Machine {
-            child,
+        let stdin = control.then(|| sim.take_stdin());
+        let machine = Machine {
+            _sim: sim,
             out: Some(out),
             command,
             events_port,
-        }
+        };
+        (machine, stdin)
     }
 
     /// Runs `cellbus panasonic --host … --events-port … ARGS…`.
@@ -82,13 +86,6 @@ impl Machine {
         ];
         all.extend_from_slice(args);
         run(&all)
-    }
-}
-
-impl Drop for Machine {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 

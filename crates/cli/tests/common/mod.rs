@@ -29,11 +29,13 @@ impl Sim {
     /// Like [`Sim::start`], with a control channel to type commands into.
     pub fn start_with_control(args: &[&str]) -> (Sim, SimControl) {
         let (mut sim, stdout) = Sim::spawn(args, Stdio::piped());
-        let stdin = sim.child.stdin.take().expect("stdin is piped");
+        let stdin = sim.take_stdin();
         (sim, SimControl { stdin, stdout })
     }
 
-    fn spawn(args: &[&str], stdin: Stdio) -> (Sim, BufReader<ChildStdout>) {
+    /// Starts `cellbus sim ARGS…` with `stdin`, waits for its `listening on …` line and
+    /// gives its stdout, for simulators that print more lines after it.
+    pub fn spawn(args: &[&str], stdin: Stdio) -> (Sim, BufReader<ChildStdout>) {
         let mut child = cellbus()
             .arg("sim")
             .args(args)
@@ -53,6 +55,13 @@ impl Sim {
             .unwrap_or_else(|| panic!("first line is `listening on …`, got {first:?}"))
             .to_owned();
         (Sim { child, endpoint }, stdout)
+    }
+}
+
+impl Sim {
+    /// The simulator's stdin, when it was started with a piped one.
+    pub fn take_stdin(&mut self) -> ChildStdin {
+        self.child.stdin.take().expect("stdin is piped")
     }
 }
 
