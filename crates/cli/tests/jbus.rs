@@ -508,9 +508,9 @@ fn decode_reads_a_capture_file_and_the_spec_crc_example() {
     assert!(stdout(&out).contains("CRC 0x1241 good"), "{}", stdout(&out));
 }
 
-// --- Interoperability with pymodbus (CI installs it: see .ci/run) ---
+// --- Interoperability with pymodbus (scripts/test installs it) ---
 
-/// The pinned pymodbus version, as .ci/run installs it.
+/// The pinned pymodbus version, as scripts/test installs it.
 const PYMODBUS: &str = "3.16.1";
 
 /// Where the Python halves of the interoperability tests are.
@@ -527,7 +527,7 @@ fn require_pymodbus() {
         .args(["-c", "import pymodbus; print(pymodbus.__version__)"])
         .output();
     let hint =
-        format!("run .ci/run, which installs it, or: python3 -m pip install pymodbus=={PYMODBUS}");
+        format!("run scripts/test, which installs it, or: python3 -m pip install pymodbus=={PYMODBUS}");
     match found {
         Err(e) => panic!("python3 is needed for the pymodbus interoperability tests ({e}); {hint}"),
         Ok(out) if !out.status.success() => panic!(

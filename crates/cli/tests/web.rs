@@ -1,5 +1,5 @@
 //! The gateway's web page in a real browser: headless Chromium, driven by playwright-core
-//! (both installed by `.ci/run`: Debian's `chromium`, and `npm install` in tests/web).
+//! (both installed by `scripts/test`: Debian's `chromium`, and `npm install` in tests/web).
 
 mod common;
 
@@ -13,13 +13,13 @@ fn the_page_shows_every_demo_device_and_a_value_changes_by_itself() {
     let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/web");
     assert!(
         web.join("node_modules/playwright-core").is_dir(),
-        "playwright-core is missing: run .ci/run once, or `npm install --prefix {}`",
+        "playwright-core is missing: run scripts/test once, or `npm install --prefix {}`",
         web.display()
     );
     let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".to_owned());
     assert!(
         Path::new(&chromium).exists(),
-        "no Chromium at {chromium}: run .ci/run once, or `apt-get install chromium`"
+        "no Chromium at {chromium}: run scripts/test once, or `apt-get install chromium`"
     );
 
     let data = tempfile::tempdir().unwrap();

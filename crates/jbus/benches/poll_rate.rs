@@ -12,7 +12,7 @@
 //! - **theory**: computed from the frames' lengths and printed with its arithmetic.
 //! - **pymodbus**: `benches/poll_rate_pymodbus.py`, pymodbus's synchronous client with the
 //!   RTU framer over TCP, the same reads against the same listener. Skipped with a message
-//!   when python3 or pymodbus is missing (`.ci/run` installs pymodbus 3.16.1).
+//!   when python3 or pymodbus is missing (`scripts/test` installs pymodbus 3.16.1).
 //!
 //! Rates are steady-state: cycles counted between the end of the first and the end of the
 //! last cycle. `cargo bench -p jbus --bench poll_rate` (about 25 s; `POLL_SECONDS=N` per
@@ -312,7 +312,7 @@ struct Pymodbus {
 
 /// Runs `benches/poll_rate_pymodbus.py` against the simulator; `Err` says why it could not.
 fn poll_with_pymodbus(port: u16, unit: Unit, seconds: u64) -> Result<Pymodbus, String> {
-    let hint = "python3 -m pip install pymodbus==3.16.1 (.ci/run does)";
+    let hint = "python3 -m pip install pymodbus==3.16.1 (scripts/test does)";
     let probe = Command::new("python3")
         .args(["-c", "import pymodbus"])
         .output()
