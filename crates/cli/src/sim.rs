@@ -10,7 +10,7 @@ use clap::{Args, Subcommand};
 use link::SerialSettings;
 use link::serve::{Pty, serve_tcp};
 use wire::Device;
-use wire::device::FaultInjector;
+use wire::device::{FaultInjector, WithFrameGap};
 
 use crate::output::{self, usage};
 
@@ -55,6 +55,11 @@ pub struct ServeArgs {
     /// character would have arrived and replies leave at the line's character rate.
     #[arg(long, value_name = "B")]
     pub baud: Option<u32>,
+    /// Silence after which a half-received frame is dropped, as a real device's receiver
+    /// does. Default: the protocol's gap at --baud (3.5 characters for Modbus RTU, 10 for
+    /// JBC, 40 ms for Thermosald), 5 ms on an unpaced line.
+    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
+    pub frame_gap: Option<std::time::Duration>,
 }
 
 #[derive(Debug, Args)]
@@ -131,12 +136,14 @@ where
         }
         None => None,
     };
-    let (seed, rate) = (args.seed, args.fault_rate);
+    let (seed, rate, frame_gap) = (args.seed, args.fault_rate, args.frame_gap);
     let connection = AtomicU64::new(0);
     // Each line gets its own fault sequence, reproducible from the seed and its order.
     let faulty = move || {
         let n = connection.fetch_add(1, Ordering::Relaxed);
-        FaultInjector::new(make(), seed.wrapping_add(n), rate).expect("fault rate checked above")
+        let device = FaultInjector::new(make(), seed.wrapping_add(n), rate)
+            .expect("fault rate checked above");
+        WithFrameGap::new(device, frame_gap)
     };
     let served = if let Some(path) = &args.pty {
         let pty =

@@ -431,6 +431,55 @@ fn the_generic_simulator_serves_a_pty_too() {
     assert_eq!(json_of(&out)["values"], json!([true, true, false]));
 }
 
+/// Sends `bytes` on a raw connection to the simulator, then (after `pause` of silence) a
+/// read of holding register 0 of unit 1, and returns what came back within 3 s.
+fn read_after_garbage(sim: &Sim, bytes: &[u8], pause: Duration) -> Vec<u8> {
+    use std::io::{Read, Write};
+    let addr = sim
+        .endpoint
+        .strip_prefix("tcp://")
+        .expect("a TCP simulator");
+    let mut stream = std::net::TcpStream::connect(addr).expect("the simulator accepts");
+    stream.set_nodelay(true).unwrap();
+    stream.write_all(bytes).unwrap();
+    // The silence a real line would have between a damaged request and the next one.
+    std::thread::sleep(pause);
+    stream
+        .write_all(&frame(&[0x01, 0x03, 0x00, 0x00, 0x00, 0x01]))
+        .unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(3)))
+        .unwrap();
+    let mut reply = vec![0u8; 7];
+    match stream.read_exact(&mut reply) {
+        Ok(()) => reply,
+        Err(_) => Vec::new(),
+    }
+}
+
+#[test]
+fn a_damaged_request_announcing_a_long_frame_does_not_stall_the_simulator() {
+    // A function-16 header announcing 246 data bytes that never come (the noisy-line
+    // report): after the line's silence the simulator drops it and answers the next read.
+    let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0"]);
+    let stuck = [0x01, 0x10, 0x00, 0x00, 0x00, 0x7B, 0xF6];
+    let reply = read_after_garbage(&sim, &stuck, Duration::from_millis(50));
+    assert_eq!(
+        reply.get(..3),
+        Some(&[0x01, 0x03, 0x02][..]),
+        "{reply:02X?}"
+    );
+}
+
+#[test]
+fn a_frame_gap_the_user_chose_keeps_a_half_frame_until_it_passes() {
+    // With a 10 s gap, the read sent 50 ms later is taken as the long frame's data.
+    let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0", "--frame-gap", "10s"]);
+    let stuck = [0x01, 0x10, 0x00, 0x00, 0x00, 0x7B, 0xF6];
+    let reply = read_after_garbage(&sim, &stuck, Duration::from_millis(50));
+    assert!(reply.is_empty(), "answered {reply:02X?}");
+}
+
 /// The CRC-16/MODBUS of `body` appended, low byte first.
 fn frame(body: &[u8]) -> Vec<u8> {
     let mut crc: u16 = 0xFFFF;
@@ -526,8 +575,9 @@ fn require_pymodbus() {
     let found = std::process::Command::new("python3")
         .args(["-c", "import pymodbus; print(pymodbus.__version__)"])
         .output();
-    let hint =
-        format!("run scripts/test, which installs it, or: python3 -m pip install pymodbus=={PYMODBUS}");
+    let hint = format!(
+        "run scripts/test, which installs it, or: python3 -m pip install pymodbus=={PYMODBUS}"
+    );
     match found {
         Err(e) => panic!("python3 is needed for the pymodbus interoperability tests ({e}); {hint}"),
         Ok(out) if !out.status.success() => panic!(

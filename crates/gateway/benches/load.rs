@@ -383,6 +383,12 @@ struct Bus {
 }
 
 impl Device for Bus {
+    fn set_timing(&mut self, timing: wire::LineTiming) {
+        for device in &mut self.devices {
+            device.set_timing(timing);
+        }
+    }
+
     fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
         self.devices
             .iter_mut()

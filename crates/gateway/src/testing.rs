@@ -28,6 +28,12 @@ pub struct Bus {
 }
 
 impl Device for Bus {
+    fn set_timing(&mut self, timing: wire::LineTiming) {
+        for (_, station) in &mut self.stations {
+            station.set_timing(timing);
+        }
+    }
+
     fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
         self.heard.lock().unwrap().extend_from_slice(bytes);
         self.stations

@@ -303,6 +303,10 @@ mod tests {
     }
 
     impl Device for Tricky {
+        fn set_timing(&mut self, timing: wire::LineTiming) {
+            self.station.set_timing(timing);
+        }
+
         fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
             let replies = self.station.receive(bytes, now);
             self.requests

@@ -567,6 +567,10 @@ mod tests {
     }
 
     impl<D: Device> Device for Tricky<D> {
+        fn set_timing(&mut self, timing: wire::LineTiming) {
+            self.inner.set_timing(timing);
+        }
+
         fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
             self.heard
                 .lock()
@@ -637,6 +641,12 @@ mod tests {
     struct Bus(Vec<Box<dyn Device>>);
 
     impl Device for Bus {
+        fn set_timing(&mut self, timing: wire::LineTiming) {
+            for device in &mut self.0 {
+                device.set_timing(timing);
+            }
+        }
+
         fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
             self.0
                 .iter_mut()

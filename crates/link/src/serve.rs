@@ -6,6 +6,11 @@
 //! character would have arrived, and a reply leaves at the line's character rate, never
 //! overlapping other traffic. Poll-rate measurements over loopback then mean what they
 //! would on the wire.
+//!
+//! Each device is told the line's timing before any input ([`Device::set_timing`]), so it
+//! drops a half frame after its protocol's silence on a paced line, or after
+//! [`wire::device::UNPACED_FRAME_GAP`] on an unpaced one: a damaged request can never leave
+//! a simulator waiting for bytes that do not come.
 
 use std::collections::VecDeque;
 use std::io;
@@ -15,7 +20,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 use tokio::time::Instant;
 use tokio_serial::{SerialPort, SerialStream};
-use wire::Device;
+use wire::{Device, LineTiming};
 
 use crate::endpoint::SerialSettings;
 use crate::line::Io;
@@ -26,6 +31,7 @@ pub async fn serve_stream<S: Io, D: Device>(
     mut device: D,
     pace: Option<SerialSettings>,
 ) -> io::Result<()> {
+    device.set_timing(LineTiming::paced(pace.map(|line| line.char_time())));
     let (mut reader, mut writer) = tokio::io::split(stream);
     let mut events = Schedule::default();
     let mut buf = vec![0u8; 4096];

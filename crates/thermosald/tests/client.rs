@@ -64,6 +64,10 @@ impl Tricky {
 }
 
 impl Device for Tricky {
+    fn set_timing(&mut self, timing: wire::LineTiming) {
+        self.twin.set_timing(timing);
+    }
+
     fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
         // A paced serve loop hands the question over when its last character arrived.
         let question = Message {

@@ -8,6 +8,13 @@
 //! each connection its own [`Deframer`] in front of the one shared model, so two
 //! connections to a simulator never mix their half frames. [`FaultInjector`] wraps any
 //! device with seeded, reproducible line trouble.
+//!
+//! A real serial device forgets a half-received frame once the line has been quiet for its
+//! inter-frame gap (3.5 characters for Modbus RTU), so one damaged request cannot make it
+//! wait forever for bytes that never come. A [`ModelLine`] does the same: input that
+//! arrives after a silence of [`Model::frame_gap`] (or the gap a user chose, see
+//! [`LineTiming`]) starts afresh. The serve loop tells each device its line's timing once,
+//! before any input ([`Device::set_timing`]).
 
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
@@ -42,6 +49,45 @@ impl Transmit {
 pub trait Device: Send + 'static {
     /// Takes bytes received from the line at `now` and returns what to send.
     fn receive(&mut self, bytes: &[u8], now: Instant) -> Vec<Transmit>;
+
+    /// The timing of the line the device is served on, told once before any input.
+    /// A device that frames by silence chooses its gap from it; others ignore it.
+    fn set_timing(&mut self, timing: LineTiming) {
+        let _ = timing;
+    }
+}
+
+/// How a device's line carries characters, for the gap after which a half frame is dropped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LineTiming {
+    /// The time one character takes on the line; `None` on an unpaced line (loopback TCP),
+    /// where a frame's bytes arrive together.
+    pub char_time: Option<Duration>,
+    /// A gap the user chose (`cellbus sim --frame-gap`), instead of the protocol's.
+    pub frame_gap: Option<Duration>,
+}
+
+impl LineTiming {
+    /// A line whose characters take `char_time` each (`None`: unpaced).
+    pub fn paced(char_time: Option<Duration>) -> Self {
+        Self {
+            char_time,
+            frame_gap: None,
+        }
+    }
+}
+
+/// The gap after which a device on an unpaced line (loopback TCP, where a frame's bytes
+/// arrive in one burst) drops a half-received frame, unless the user chose another.
+pub const UNPACED_FRAME_GAP: Duration = Duration::from_millis(5);
+
+/// Modbus RTU's inter-frame silence for a line whose characters take `char_time`: 3.5
+/// characters, and a fixed 1.75 ms above 19200 baud (where 3.5 characters would be shorter
+/// than UARTs and drivers can time), as the Modbus serial line guide says.
+pub fn silence_3_5_chars(char_time: Duration) -> Duration {
+    // 3.5 characters at 19200 baud and 11 bits per character.
+    const FLOOR: Duration = Duration::from_micros(1750);
+    (char_time * 7 / 2).max(FLOOR)
 }
 
 /// A device model that handles whole frames.
@@ -51,6 +97,13 @@ pub trait Model: Send + 'static {
 
     /// The codec for a new line.
     fn codec(&self) -> Self::Codec;
+
+    /// How long the line must be quiet before a half-received frame is dropped, on a line
+    /// whose characters take `char_time` (`None`: unpaced, see [`UNPACED_FRAME_GAP`]).
+    /// By default Modbus RTU's rule, 3.5 characters ([`silence_3_5_chars`]).
+    fn frame_gap(&self, char_time: Option<Duration>) -> Duration {
+        char_time.map_or(UNPACED_FRAME_GAP, silence_3_5_chars)
+    }
 
     /// Handles a decoded frame, or bytes the codec dropped, at `now`.
     fn handle(
@@ -77,12 +130,20 @@ impl<M: Model> SharedModel<M> {
         Self(Arc::new(Mutex::new(model)))
     }
 
-    /// A new line to the model, with its own deframer.
+    /// A new line to the model, with its own deframer, unpaced until told otherwise
+    /// ([`Device::set_timing`]).
     pub fn line(&self) -> ModelLine<M> {
-        let codec = self.lock().codec();
+        let (codec, gap) = {
+            let model = self.lock();
+            (model.codec(), model.frame_gap(None))
+        };
         ModelLine {
             model: self.clone(),
             deframer: Deframer::new(codec),
+            gap,
+            char_time: None,
+            last_input: None,
+            dropped_partial: 0,
         }
     }
 
@@ -98,6 +159,26 @@ impl<M: Model> SharedModel<M> {
 pub struct ModelLine<M: Model> {
     model: SharedModel<M>,
     deframer: Deframer<M::Codec>,
+    /// Silence after which a half frame is dropped.
+    gap: Duration,
+    /// The time a character takes on a paced line: input is handed over when its last
+    /// character has arrived, so its first one started this much earlier per byte.
+    char_time: Option<Duration>,
+    /// When the last input arrived.
+    last_input: Option<Instant>,
+    dropped_partial: u64,
+}
+
+impl<M: Model> ModelLine<M> {
+    /// The silence after which this line drops a half-received frame.
+    pub fn frame_gap(&self) -> Duration {
+        self.gap
+    }
+
+    /// How many half frames were dropped after a silence.
+    pub fn dropped_partial(&self) -> u64 {
+        self.dropped_partial
+    }
 }
 
 impl<M: Model> Device for ModelLine<M>
@@ -105,13 +186,63 @@ where
     <M::Codec as Codec>::Frame: Send,
     <M::Codec as Codec>::Error: Send,
 {
+    fn set_timing(&mut self, timing: LineTiming) {
+        self.char_time = timing.char_time;
+        self.gap = timing
+            .frame_gap
+            .unwrap_or_else(|| self.model.lock().frame_gap(timing.char_time));
+    }
+
     fn receive(&mut self, bytes: &[u8], now: Instant) -> Vec<Transmit> {
+        let wire = self.char_time.map_or(Duration::ZERO, |c| {
+            c.saturating_mul(u32::try_from(bytes.len()).unwrap_or(u32::MAX))
+        });
+        let first_char = now.checked_sub(wire).unwrap_or(now);
+        let quiet = self
+            .last_input
+            .is_some_and(|last| first_char.saturating_duration_since(last) >= self.gap);
+        self.last_input = Some(now);
+        if quiet && !self.deframer.buffered().is_empty() {
+            // The line fell silent inside a frame: as a real device, forget it and
+            // take what arrives now as the start of a new one.
+            self.dropped_partial += 1;
+            self.deframer.clear();
+        }
         self.deframer.push(bytes);
         let mut out = Vec::new();
         while let Some(input) = self.deframer.next_frame() {
             out.extend(self.model.lock().handle(input, now));
         }
         out
+    }
+}
+
+/// A device whose line drops half frames after a gap the user chose, whatever the line's
+/// pace (`cellbus sim --frame-gap`); with no gap chosen, the protocol's.
+#[derive(Debug, Clone)]
+pub struct WithFrameGap<D> {
+    inner: D,
+    gap: Option<Duration>,
+}
+
+impl<D> WithFrameGap<D> {
+    /// Wraps `inner`, whose half frames are then dropped after `gap` of silence (`None`:
+    /// the protocol's gap for the line's pace).
+    pub fn new(inner: D, gap: Option<Duration>) -> Self {
+        Self { inner, gap }
+    }
+}
+
+impl<D: Device> Device for WithFrameGap<D> {
+    fn set_timing(&mut self, timing: LineTiming) {
+        self.inner.set_timing(LineTiming {
+            frame_gap: self.gap.or(timing.frame_gap),
+            ..timing
+        });
+    }
+
+    fn receive(&mut self, bytes: &[u8], now: Instant) -> Vec<Transmit> {
+        self.inner.receive(bytes, now)
     }
 }
 
@@ -210,6 +341,10 @@ impl<D> FaultInjector<D> {
 }
 
 impl<D: Device> Device for FaultInjector<D> {
+    fn set_timing(&mut self, timing: LineTiming) {
+        self.inner.set_timing(timing);
+    }
+
     fn receive(&mut self, bytes: &[u8], now: Instant) -> Vec<Transmit> {
         let replies = self.inner.receive(bytes, now);
         replies
@@ -330,6 +465,78 @@ mod tests {
             self.frames += 1;
             vec![Transmit::now(frame)]
         }
+    }
+
+    #[test]
+    fn a_half_frame_is_dropped_after_the_line_falls_silent() {
+        let model = SharedModel::new(Counter { frames: 0 });
+        let mut line = model.line();
+        let start = Instant::now();
+        // A damaged request that never ends, then silence, then a good request.
+        assert!(
+            line.receive(b"long frame without its end", start)
+                .is_empty()
+        );
+        let later = start + UNPACED_FRAME_GAP;
+        assert_eq!(
+            line.receive(b"ask\n", later),
+            vec![Transmit::now(b"ask".to_vec())]
+        );
+        assert_eq!(line.dropped_partial(), 1);
+    }
+
+    #[test]
+    fn a_frame_split_by_less_than_the_gap_is_kept_whole() {
+        let model = SharedModel::new(Counter { frames: 0 });
+        let mut line = model.line();
+        let start = Instant::now();
+        assert!(line.receive(b"hel", start).is_empty());
+        let soon = start + UNPACED_FRAME_GAP / 2;
+        assert_eq!(
+            line.receive(b"lo\n", soon),
+            vec![Transmit::now(b"hello".to_vec())]
+        );
+        assert_eq!(line.dropped_partial(), 0);
+    }
+
+    #[test]
+    fn on_a_paced_line_the_gap_is_measured_from_the_first_character_of_new_input() {
+        let model = SharedModel::new(Counter { frames: 0 });
+        let mut line = model.line();
+        let char_time = Duration::from_millis(1);
+        line.set_timing(LineTiming::paced(Some(char_time)));
+        assert_eq!(line.frame_gap(), Duration::from_micros(3500));
+        let start = Instant::now();
+        assert!(line.receive(b"hel", start).is_empty());
+        // 20 characters arriving back to back: handed over 20 ms later, no silence.
+        let rest = b"lo, a long tail....\n";
+        assert_eq!(rest.len(), 20);
+        let out = line.receive(rest, start + char_time * 20);
+        assert_eq!(out.len(), 1);
+        assert_eq!(line.dropped_partial(), 0);
+    }
+
+    #[test]
+    fn a_gap_the_user_chose_replaces_the_protocols() {
+        let model = SharedModel::new(Counter { frames: 0 });
+        let mut line = model.line();
+        line.set_timing(LineTiming {
+            char_time: Some(Duration::from_millis(1)),
+            frame_gap: Some(Duration::from_millis(50)),
+        });
+        assert_eq!(line.frame_gap(), Duration::from_millis(50));
+    }
+
+    #[test]
+    fn the_modbus_silence_is_three_and_a_half_characters_and_at_least_1_75_ms() {
+        // 9600 baud, 11 bits: 1.146 ms a character.
+        let slow = Duration::from_micros(1146);
+        assert_eq!(silence_3_5_chars(slow), Duration::from_micros(4011));
+        // 115200 baud: 3.5 characters would be 0.33 ms.
+        assert_eq!(
+            silence_3_5_chars(Duration::from_micros(95)),
+            Duration::from_micros(1750)
+        );
     }
 
     #[test]

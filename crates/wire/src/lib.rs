@@ -18,4 +18,4 @@ pub mod device;
 pub mod scan;
 
 pub use codec::{Codec, Deframer, Resync};
-pub use device::{Device, Transmit};
+pub use device::{Device, LineTiming, Transmit};

@@ -212,6 +212,12 @@ impl Model for Line {
         FrameCodec
     }
 
+    /// A regulator restarts listening [`LISTEN_AFTER_MESSAGE`] after a message; the same
+    /// silence inside a message ends it (on an unpaced line, the short default).
+    fn frame_gap(&self, char_time: Option<std::time::Duration>) -> std::time::Duration {
+        char_time.map_or(wire::device::UNPACED_FRAME_GAP, |_| LISTEN_AFTER_MESSAGE)
+    }
+
     fn handle(&mut self, input: Result<Frame, DecodeError>, now: Instant) -> Vec<Transmit> {
         match input {
             Ok(frame) => self
