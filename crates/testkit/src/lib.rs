@@ -1,0 +1,16 @@
+//! Test and bench tools shared by the cellbus crates.
+//!
+//! - [`noise`]: [`Noise`], a seeded, sans-IO byte mangler with the trouble of a bad
+//!   serial line (flipped bits, lost, inserted and duplicated bytes, whole chunks lost,
+//!   bursts), and its counts.
+//! - [`proxy`]: a noisy line between two byte streams ([`noisy_pipe`]) or between a TCP
+//!   client and a server ([`NoisyProxy`]), in both directions, with an outage switch that
+//!   loses everything (a pulled cable).
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod noise;
+pub mod proxy;
+
+pub use noise::{Noise, NoiseConfig, NoiseCounts};
+pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
