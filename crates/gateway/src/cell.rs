@@ -115,6 +115,9 @@ pub struct LineEntry {
     pub endpoint: String,
     /// Devices on it, in poll order.
     pub devices: Vec<DeviceId>,
+    /// Close and reopen it when every device on it has timed out this many times in a row
+    /// (0: never; never either for a line of a device that keeps its own connections).
+    pub reopen_after_timeouts: u32,
     state: RwLock<LineState>,
 }
 
@@ -283,11 +286,7 @@ pub struct WriteOutcome {
 /// its own connections ([`Protocol::owns_connections`]), not at all: the line task then
 /// gets a line that carries nothing and only schedules the device's polls.
 pub fn line_opener(line: &crate::config::LineConfig) -> Opener {
-    let own = line
-        .devices
-        .first()
-        .is_some_and(|d| d.driver.protocol.owns_connections());
-    if !own {
+    if !owns_connections(line) {
         return endpoint_opener(line.endpoint.clone());
     }
     let name = line.endpoint.to_string();
@@ -295,6 +294,13 @@ pub fn line_opener(line: &crate::config::LineConfig) -> Opener {
         let line = link::Line::from_stream(tokio::io::empty(), name.clone(), None);
         Box::pin(async move { Ok(line) })
     })
+}
+
+/// Whether the line's device keeps its own connections (the line itself carries nothing).
+fn owns_connections(line: &crate::config::LineConfig) -> bool {
+    line.devices
+        .first()
+        .is_some_and(|d| d.driver.protocol.owns_connections())
 }
 
 /// Opens lines by their endpoint URL.
@@ -384,6 +390,11 @@ impl Cell {
                 name: line.name.clone(),
                 endpoint: line.endpoint.to_string(),
                 devices: slots.iter().map(|(d, _)| d.id.clone()).collect(),
+                reopen_after_timeouts: if owns_connections(line) {
+                    0
+                } else {
+                    line.reopen_after_timeouts
+                },
                 state: RwLock::new(LineState::default()),
             });
             lines.push(Arc::clone(&entry));

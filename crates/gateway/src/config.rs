@@ -6,6 +6,8 @@
 //! [[line]]
 //! name = "rework"                       # unique; a-z, 0-9, _ and -
 //! endpoint = "serial:///dev/ttyUSB0?baud=19200&framing=8E1"
+//! reopen_after_timeouts = 3             # every device timed out this often in a row:
+//!                                       # close and reopen the line (0: never)
 //!
 //! [[line.device]]
 //! id = "jbc1"                           # unique in the cell; used in URLs and point ids
@@ -54,6 +56,11 @@ pub const MAX_PERIOD: Duration = Duration::from_secs(24 * 3600);
 pub const MAX_TIMEOUT: Duration = Duration::from_secs(60);
 /// Most retries accepted.
 pub const MAX_RETRIES: u8 = 10;
+/// A line is closed and reopened when every device on it has timed out this many times in
+/// a row (a serial server's session or an adapter can hang while the devices are fine).
+pub const DEFAULT_REOPEN_AFTER_TIMEOUTS: u32 = 3;
+/// Largest `reopen_after_timeouts` accepted.
+pub const MAX_REOPEN_AFTER_TIMEOUTS: u32 = 1000;
 
 /// A checked configuration.
 #[derive(Debug, Clone, PartialEq)]
@@ -75,6 +82,9 @@ pub struct LineConfig {
     pub endpoint: Endpoint,
     /// The devices on it, polled in turn.
     pub devices: Vec<DeviceConfig>,
+    /// Close and reopen the line when every device on it has timed out this many times in
+    /// a row (0: never).
+    pub reopen_after_timeouts: u32,
 }
 
 /// One device on a line.
@@ -260,10 +270,26 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 ),
             ));
         }
+        let reopen_after_timeouts = match &line.reopen_after_timeouts {
+            None => DEFAULT_REOPEN_AFTER_TIMEOUTS,
+            Some(k) => u32::try_from(*k.get_ref())
+                .ok()
+                .filter(|k| *k <= MAX_REOPEN_AFTER_TIMEOUTS)
+                .ok_or_else(|| {
+                    at(
+                        k.span(),
+                        format!(
+                            "reopen_after_timeouts {} is out of range: 0 (never) to {MAX_REOPEN_AFTER_TIMEOUTS}",
+                            k.get_ref()
+                        ),
+                    )
+                })?,
+        };
         lines.push(LineConfig {
             name: name.clone(),
             endpoint,
             devices,
+            reopen_after_timeouts,
         });
     }
     if let Some(token) = &raw.token
@@ -593,6 +619,7 @@ struct RawConfig {
 struct RawLine {
     name: Spanned<String>,
     endpoint: Spanned<String>,
+    reopen_after_timeouts: Option<Spanned<i64>>,
     #[serde(default)]
     device: Vec<RawDevice>,
 }

@@ -154,6 +154,7 @@ pub async fn start_jbc_station(demo: &mut DemoCell, id: &str, name: &str) -> std
     demo.stations.push(model);
     let id = device_id(id)?;
     demo.config.lines.push(LineConfig {
+        reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
         name: format!("{id}-rs232"),
         endpoint,
         devices: vec![device(
@@ -204,6 +205,7 @@ pub async fn start_thermosald_line(demo: &mut DemoCell, line: &str) -> std::io::
         .push(tokio::spawn(operate_sealers(model.clone())));
     demo.regulators.push(model);
     demo.config.lines.push(LineConfig {
+        reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
         name: line.to_owned(),
         endpoint,
         devices,
@@ -244,6 +246,7 @@ pub async fn start_cross(demo: &mut DemoCell, id: &str, name: &str) -> std::io::
     demo.crosses.push(model);
     let id = device_id(id)?;
     demo.config.lines.push(LineConfig {
+        reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
         name: format!("{id}-rs485"),
         endpoint,
         devices: vec![device(id, Protocol::Cross, 1, name)],
@@ -275,6 +278,7 @@ pub async fn start_panasonic(demo: &mut DemoCell, id: &str, name: &str) -> std::
     device.driver.event_port = Some(event.port());
     device.driver.endpoint = Some(endpoint.clone());
     demo.config.lines.push(LineConfig {
+        reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
         name: format!("{id}-lan"),
         endpoint,
         devices: vec![device],

@@ -94,6 +94,8 @@ pub struct Metrics {
     pub line_utilisation: Family<LineLabels, Gauge<f64, AtomicU64>>,
     /// 1 while the line is open.
     pub line_open: Family<LineLabels, Gauge>,
+    /// Lines reopened because every device on them stopped answering.
+    pub line_reopens_for_silence: Family<LineLabels, Counter>,
     /// Value changes seen.
     pub value_changes: Counter,
     /// Events emitted.
@@ -131,6 +133,7 @@ impl Metrics {
         let line_busy_seconds = Family::<LineLabels, Counter<f64, AtomicU64>>::default();
         let line_utilisation = Family::<LineLabels, Gauge<f64, AtomicU64>>::default();
         let line_open = Family::<LineLabels, Gauge>::default();
+        let line_reopens_for_silence = Family::<LineLabels, Counter>::default();
         let value_changes = Counter::default();
         let events = Counter::default();
         let writes = Family::<WriteLabels, Counter>::default();
@@ -166,6 +169,11 @@ impl Metrics {
         );
         registry.register("line_open", "1 while the line is open", line_open.clone());
         registry.register(
+            "line_reopens_for_silence",
+            "Times the line was closed and reopened because every device on it timed out several times in a row",
+            line_reopens_for_silence.clone(),
+        );
+        registry.register(
             "value_changes",
             "Point value or quality changes seen",
             value_changes.clone(),
@@ -197,6 +205,7 @@ impl Metrics {
             line_busy_seconds,
             line_utilisation,
             line_open,
+            line_reopens_for_silence,
             value_changes,
             events,
             writes,

@@ -9,15 +9,22 @@
 //! [`Cell::write`] go out between two polls. Separate lines run in parallel.
 //!
 //! A device that does not answer is marked down and backed off: it is tried again after
-//! [`BACKOFF_FIRST`], then twice as long each time up to [`BACKOFF_MAX`], with only its
-//! fastest group as a probe, so the others on the line keep their rate. The time of the
-//! next try is in the device's state (`next_try_at` in the API). When it answers it is
-//! promoted back at once: every group is read straight away and polling resumes at the
-//! configured periods.
+//! [`BACKOFF_FIRST`], then twice as long each time up to the larger of its fastest period
+//! and [`BACKOFF_CAP`], with only its fastest group as a probe, so the others on the line
+//! keep their rate, and a device whose line recovers is read again within that time. The
+//! time of the next try is in the device's state (`next_try_at` in the API). When it
+//! answers it is promoted back at once: every group is read straight away and polling
+//! resumes at the configured periods.
 //!
 //! When the line itself fails (a TCP serial server closes, a USB adapter is pulled), every
 //! device on it goes down and the task reopens the line, waiting [`REOPEN_FIRST`] doubling
-//! to [`REOPEN_MAX`] between attempts.
+//! to [`REOPEN_MAX`] between attempts. A line can also hang while it stays open (a serial
+//! server's session stuck, an adapter wedged): when every device on it has timed out
+//! `reopen_after_timeouts` times in a row, the task closes and reopens it at once, and
+//! records a `line_reopened` event and `cellbus_line_reopens_for_silence_total`. If no
+//! device answered since the last such reopen, the next needs twice as many timeouts (up
+//! to [`SILENCE_THRESHOLD_GROWTH`] times the setting), so a cell whose devices are merely
+//! switched off is not reopened every few seconds.
 //!
 //! Value changes become history samples and live messages; a point crossing into or out
 //! of alarm and a device going down or up become events, and so do the events a driver
@@ -43,8 +50,12 @@ use crate::time::Timestamp;
 
 /// First wait before a device that stopped answering is tried again.
 pub const BACKOFF_FIRST: Duration = Duration::from_secs(2);
-/// Longest wait between tries of a device that does not answer.
-pub const BACKOFF_MAX: Duration = Duration::from_secs(60);
+/// Longest wait between tries of a device that does not answer, unless its fastest period
+/// is longer: a device whose line recovers is read again within the larger of the two.
+pub const BACKOFF_CAP: Duration = Duration::from_secs(10);
+/// How far the timeouts needed before a reopen for silence grow while reopening does not
+/// help: up to this many times the line's `reopen_after_timeouts`.
+pub const SILENCE_THRESHOLD_GROWTH: u32 = 16;
 /// First wait before a line that failed is reopened.
 pub const REOPEN_FIRST: Duration = Duration::from_secs(1);
 /// Longest wait between attempts to reopen a line.
@@ -70,6 +81,10 @@ pub struct LineTask {
     busy_seconds: prometheus_client::metrics::counter::Counter<f64, std::sync::atomic::AtomicU64>,
     utilisation: Gauge<f64, std::sync::atomic::AtomicU64>,
     open_gauge: Gauge,
+    reopens_for_silence: Counter,
+    /// Timeouts in a row every device must reach before the line is reopened for silence
+    /// (0: never); doubles while reopening does not help.
+    silence_threshold: u32,
 }
 
 impl std::fmt::Debug for LineTask {
@@ -89,6 +104,8 @@ struct Slot {
     /// The group used to probe a backed-off device (the fastest).
     probe: usize,
     backoff: Option<Backoff>,
+    /// Polls in a row that got no answer in time.
+    timeouts_in_a_row: u32,
     m: SlotMetrics,
 }
 
@@ -124,6 +141,16 @@ struct Window {
 enum Ended {
     Stop,
     LineLost(String),
+    /// Every device on the line timed out often enough in a row: reopen it.
+    Silent,
+}
+
+/// Why a poll or a write ends the poll loop.
+enum Lost {
+    /// The line failed.
+    Line(String),
+    /// The line is open but nothing on it answers.
+    Silent,
 }
 
 impl LineTask {
@@ -195,6 +222,7 @@ impl LineTask {
                     clocks,
                     probe,
                     backoff: None,
+                    timeouts_in_a_row: 0,
                     m,
                 }
             })
@@ -206,6 +234,11 @@ impl LineTask {
             busy_seconds: metrics.line_busy_seconds.get_or_create(&labels).clone(),
             utilisation: metrics.line_utilisation.get_or_create(&labels).clone(),
             open_gauge: metrics.line_open.get_or_create(&labels).clone(),
+            reopens_for_silence: metrics
+                .line_reopens_for_silence
+                .get_or_create(&labels)
+                .clone(),
+            silence_threshold: line.reopen_after_timeouts,
             cell,
             line,
             opener,
@@ -261,8 +294,15 @@ impl LineTask {
                     clock.next = now;
                 }
             }
-            match self.poll_loop(&mut shutdown).await {
+            let ended = self.poll_loop(&mut shutdown).await;
+            // Close the line before opening it again (a serial port opens only once).
+            drop(shared);
+            for slot in &mut self.slots {
+                slot.driver.attach(closed_line(&self.line.endpoint));
+            }
+            match ended {
                 Ended::Stop => return,
+                Ended::Silent => self.reopen_for_silence(),
                 Ended::LineLost(error) => {
                     self.line_failed(&error, REOPEN_FIRST);
                     let until = Instant::now() + REOPEN_FIRST;
@@ -296,8 +336,10 @@ impl LineTask {
                         () = stopped(shutdown) => return Ended::Stop,
                         lost = self.poll(slot, group) => lost,
                     };
-                    if let Some(lost) = lost {
-                        return Ended::LineLost(lost);
+                    match lost {
+                        None => {}
+                        Some(Lost::Line(error)) => return Ended::LineLost(error),
+                        Some(Lost::Silent) => return Ended::Silent,
                     }
                 }
             }
@@ -329,8 +371,8 @@ impl LineTask {
         most_urgent(candidates, Instant::now()).map(|d| (d.slot, d.clock, d.at))
     }
 
-    /// Polls one group; returns the error if the line is lost.
-    async fn poll(&mut self, index: usize, clock: usize) -> Option<String> {
+    /// Polls one group; says whether the line is lost or silent.
+    async fn poll(&mut self, index: usize, clock: usize) -> Option<Lost> {
         let slot = &mut self.slots[index];
         let group = slot.clocks[clock].group.clone();
         let started = Instant::now();
@@ -345,6 +387,8 @@ impl LineTask {
         match result {
             Ok(readings) => {
                 slot.m.ok.inc();
+                slot.timeouts_in_a_row = 0;
+                self.silence_threshold = self.line.reopen_after_timeouts;
                 let was_up = slot.backoff.is_none() && slot.entry.read().status == DeviceStatus::Up;
                 slot.backoff = None;
                 let c = &mut slot.clocks[clock];
@@ -368,20 +412,27 @@ impl LineTask {
                 self.window.errors += 1;
                 if error.kind == ErrorKind::Timeout {
                     slot.m.timeouts.inc();
+                    slot.timeouts_in_a_row += 1;
+                } else {
+                    // An answer, even a refusal or a damaged one: the line carries bytes.
+                    slot.timeouts_in_a_row = 0;
                 }
                 if let Some((_, counter)) = slot.m.errors.iter().find(|(k, _)| *k == error.kind) {
                     counter.inc();
                 }
                 slot.m.up.set(0);
                 let failures = slot.entry.read().failures + 1;
-                let delay = backoff_delay(failures);
+                let delay = backoff_delay(failures, slot.clocks[slot.probe].period);
                 slot.backoff = Some(Backoff { next: now + delay });
                 let entry = Arc::clone(&slot.entry);
                 mark_down(&self.cell, &entry, &error, delay);
                 if error.kind == ErrorKind::Disconnected {
-                    lost = Some(error.message);
+                    lost = Some(Lost::Line(error.message));
                 }
             }
+        }
+        if lost.is_none() && self.is_silent() {
+            lost = Some(Lost::Silent);
         }
         self.roll_window(now);
         if now - self.last_sweep >= STALE_SWEEP {
@@ -391,6 +442,37 @@ impl LineTask {
             }
         }
         lost
+    }
+
+    /// Whether every device on the line has timed out often enough in a row to reopen it.
+    fn is_silent(&self) -> bool {
+        self.silence_threshold > 0
+            && self
+                .slots
+                .iter()
+                .all(|s| s.timeouts_in_a_row >= self.silence_threshold)
+    }
+
+    /// Records a reopen for silence; the next needs more timeouts unless a device answers.
+    fn reopen_for_silence(&mut self) {
+        self.reopens_for_silence.inc();
+        let threshold = self.silence_threshold;
+        self.cell.line_event(
+            &self.line,
+            EventKind::LineReopened,
+            format!(
+                "line {} reopened: every device on it timed out {threshold} times in a row ({})",
+                self.line.name, self.line.endpoint
+            ),
+        );
+        for slot in &mut self.slots {
+            slot.timeouts_in_a_row = 0;
+        }
+        let ceiling = self
+            .line
+            .reopen_after_timeouts
+            .saturating_mul(SILENCE_THRESHOLD_GROWTH);
+        self.silence_threshold = threshold.saturating_mul(2).min(ceiling);
     }
 
     /// Writes between polls; returns the error if the line is lost.
@@ -559,10 +641,17 @@ fn most_urgent(candidates: impl IntoIterator<Item = Due>, now: Instant) -> Optio
     best
 }
 
-/// The wait before try number `failures + 1` of a device that does not answer.
-pub fn backoff_delay(failures: u32) -> Duration {
+/// The wait before try number `failures + 1` of a device that does not answer, whose
+/// fastest group has `period`: doubling from [`BACKOFF_FIRST`] up to the larger of
+/// `period` and [`BACKOFF_CAP`].
+pub fn backoff_delay(failures: u32, period: Duration) -> Duration {
     let doublings = failures.saturating_sub(1).min(16);
-    (BACKOFF_FIRST * 2u32.pow(doublings)).min(BACKOFF_MAX)
+    (BACKOFF_FIRST * 2u32.pow(doublings)).min(period.max(BACKOFF_CAP))
+}
+
+/// A line that carries nothing, held by the drivers while their real line is closed.
+fn closed_line(name: &str) -> SharedLine {
+    SharedLine::new(Line::from_stream(tokio::io::empty(), name.to_owned(), None))
 }
 
 /// Stores and publishes what changed in a poll's readings.

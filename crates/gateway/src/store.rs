@@ -123,6 +123,8 @@ pub enum EventKind {
     LineUp,
     /// A line failed or could not be opened.
     LineDown,
+    /// A line was closed and reopened because every device on it stopped answering.
+    LineReopened,
     /// A device answered again.
     DeviceUp,
     /// A device stopped answering.
@@ -142,11 +144,12 @@ pub enum EventKind {
 
 impl EventKind {
     /// Every kind, for filters and the API description.
-    pub const ALL: [EventKind; 11] = [
+    pub const ALL: [EventKind; 12] = [
         EventKind::GatewayStarted,
         EventKind::GatewayStopped,
         EventKind::LineUp,
         EventKind::LineDown,
+        EventKind::LineReopened,
         EventKind::DeviceUp,
         EventKind::DeviceDown,
         EventKind::AlarmRaised,
@@ -163,6 +166,7 @@ impl EventKind {
             EventKind::GatewayStopped => "gateway_stopped",
             EventKind::LineUp => "line_up",
             EventKind::LineDown => "line_down",
+            EventKind::LineReopened => "line_reopened",
             EventKind::DeviceUp => "device_up",
             EventKind::DeviceDown => "device_down",
             EventKind::AlarmRaised => "alarm_raised",

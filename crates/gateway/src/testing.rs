@@ -25,6 +25,9 @@ pub struct Bus {
     pub stations: Vec<(Arc<AtomicBool>, wire::device::ModelLine<Station>)>,
     /// Every byte sent on the line.
     pub heard: Arc<std::sync::Mutex<Vec<u8>>>,
+    /// Set when this session of the line hangs (a serial server's session stuck): nothing
+    /// on it is heard any more, though a new session works.
+    pub hung: Arc<AtomicBool>,
 }
 
 impl Device for Bus {
@@ -36,6 +39,9 @@ impl Device for Bus {
 
     fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
         self.heard.lock().unwrap().extend_from_slice(bytes);
+        if self.hung.load(Ordering::SeqCst) {
+            return Vec::new();
+        }
         self.stations
             .iter_mut()
             .filter(|(plugged, _)| plugged.load(Ordering::SeqCst))
@@ -52,6 +58,8 @@ pub struct Rig {
     pub opens: Arc<AtomicUsize>,
     /// Every byte the gateway sent on the line.
     pub heard: Arc<std::sync::Mutex<Vec<u8>>>,
+    /// Per line session opened so far, its switch to make that session hang.
+    pub sessions: Arc<std::sync::Mutex<Vec<Arc<AtomicBool>>>>,
     /// The serve loops of the lines opened so far (abort one to cut its line).
     pub servers: Arc<std::sync::Mutex<Vec<tokio::task::JoinHandle<std::io::Result<()>>>>>,
     pub shutdown: watch::Sender<bool>,
@@ -98,16 +106,21 @@ pub fn rig(count: u8) -> Rig {
     let opens = Arc::new(AtomicUsize::new(0));
     let servers = Arc::new(std::sync::Mutex::new(Vec::new()));
     let heard = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let sessions = Arc::new(std::sync::Mutex::new(Vec::new()));
     let opener: Opener = {
         let (models, plugged) = (models.clone(), plugged.clone());
         let heard = Arc::clone(&heard);
+        let sessions = Arc::clone(&sessions);
         let (available, opens) = (Arc::clone(&line_available), Arc::clone(&opens));
         let servers = Arc::clone(&servers);
         Arc::new(move || {
             opens.fetch_add(1, Ordering::SeqCst);
             let result = if available.load(Ordering::SeqCst) {
                 let (a, b) = tokio::io::duplex(4096);
+                let hung = Arc::new(AtomicBool::new(false));
+                sessions.lock().unwrap().push(Arc::clone(&hung));
                 let bus = Bus {
+                    hung,
                     stations: plugged
                         .iter()
                         .cloned()
@@ -128,6 +141,7 @@ pub fn rig(count: u8) -> Rig {
         source: None,
         token: None,
         lines: vec![LineConfig {
+            reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
             name: "bench".into(),
             endpoint: Endpoint::parse("tcp://127.0.0.1:9", crate::driver::jbc::DEFAULT_SERIAL)
                 .unwrap(),
@@ -148,6 +162,7 @@ pub fn rig(count: u8) -> Rig {
         line_available,
         opens,
         heard,
+        sessions,
         servers,
         shutdown,
         task,

@@ -151,8 +151,7 @@ impl NoisyProxy {
                         Ok(server) => {
                             let _ = client.set_nodelay(true);
                             let _ = server.set_nodelay(true);
-                            noisy_pipe(client, server, config, seed.wrapping_add(n), control)
-                                .await;
+                            noisy_pipe(client, server, config, seed.wrapping_add(n), control).await;
                         }
                         Err(e) => tracing::warn!("noisy proxy: cannot reach {upstream}: {e}"),
                     }
@@ -215,7 +214,13 @@ mod tests {
         let (client, mut near) = tokio::io::duplex(256);
         let (far, mut device) = tokio::io::duplex(256);
         let control = LineControl::default();
-        tokio::spawn(noisy_pipe(client, far, NoiseConfig::CLEAN, 1, control.clone()));
+        tokio::spawn(noisy_pipe(
+            client,
+            far,
+            NoiseConfig::CLEAN,
+            1,
+            control.clone(),
+        ));
         control.set_outage(true);
         near.write_all(b"lost").await.unwrap();
         tokio::time::sleep(std::time::Duration::from_millis(10)).await;

@@ -78,6 +78,7 @@ fn rig() -> Rig {
         token: None,
         lines: vec![
             LineConfig {
+                reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
                 name: "sealers".into(),
                 endpoint: Endpoint::parse("tcp://127.0.0.1:9", sealing).unwrap(),
                 devices: (0..3)
@@ -85,6 +86,7 @@ fn rig() -> Rig {
                     .collect(),
             },
             LineConfig {
+                reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
                 name: "mains".into(),
                 endpoint: Endpoint::parse("tcp://127.0.0.1:9", jbus_line).unwrap(),
                 devices: vec![device("cross1", Protocol::Cross, 1)],

@@ -40,10 +40,22 @@ fn value(cell: &Cell, id: &str) -> Option<Value> {
 }
 
 #[test]
-fn backoff_doubles_from_two_seconds_up_to_a_minute() {
-    let delays: Vec<u64> = (1..=8).map(|f| backoff_delay(f).as_secs()).collect();
-    assert_eq!(delays, vec![2, 4, 8, 16, 32, 60, 60, 60]);
-    assert_eq!(backoff_delay(u32::MAX), BACKOFF_MAX);
+fn backoff_doubles_from_two_seconds_up_to_ten() {
+    let second = Duration::from_secs(1);
+    let delays: Vec<u64> = (1..=6)
+        .map(|f| backoff_delay(f, second).as_secs())
+        .collect();
+    assert_eq!(delays, vec![2, 4, 8, 10, 10, 10]);
+    assert_eq!(backoff_delay(u32::MAX, second), BACKOFF_CAP);
+}
+
+#[test]
+fn a_device_polled_less_often_than_the_cap_is_backed_off_up_to_its_period() {
+    let minute = Duration::from_secs(60);
+    let delays: Vec<u64> = (1..=7)
+        .map(|f| backoff_delay(f, minute).as_secs())
+        .collect();
+    assert_eq!(delays, vec![2, 4, 8, 16, 32, 60, 60]);
 }
 
 #[tokio::test(start_paused = true)]
@@ -56,13 +68,13 @@ async fn a_silent_device_is_backed_off_while_its_neighbour_keeps_its_rate() {
     let ok = polls(&rig.cell, "jbc1", PollResult::ok);
     assert!((60..=70).contains(&ok), "jbc1 polled {ok} times in 60 s");
     assert_eq!(polls(&rig.cell, "jbc1", PollResult::error), 0);
-    // jbc2 is tried at 0, then after 2, 4, 8, 16 and 32 s (plus 1.5 s per failed try).
+    // jbc2 is tried at 0, then after 2, 4, 8, 10, 10 and 10 s (plus 1.5 s per failed try).
     let failed = polls(&rig.cell, "jbc2", PollResult::error);
-    assert!((4..=6).contains(&failed), "jbc2 tried {failed} times");
+    assert!((6..=8).contains(&failed), "jbc2 tried {failed} times");
     assert_eq!(status(&rig.cell, "jbc2"), DeviceStatus::Down);
     let view = rig.cell.device("jbc2").unwrap();
     assert!(view.summary.next_try_at.is_some());
-    assert!(view.next_try_in_ms.is_some_and(|ms| ms <= 60_000));
+    assert!(view.next_try_in_ms.is_some_and(|ms| ms <= 10_000));
     assert_eq!(view.summary.error.unwrap().kind, ErrorKind::Timeout);
     assert!(
         view.points
@@ -72,7 +84,7 @@ async fn a_silent_device_is_backed_off_while_its_neighbour_keeps_its_rate() {
 
     // Plugged back in: answered at its next try and promoted at once (every group read).
     rig.plugged[1].store(true, Ordering::SeqCst);
-    tokio::time::sleep(BACKOFF_MAX + Duration::from_secs(3)).await;
+    tokio::time::sleep(BACKOFF_CAP + Duration::from_secs(3)).await;
     assert_eq!(status(&rig.cell, "jbc2"), DeviceStatus::Up);
     assert!(
         rig.cell
@@ -256,6 +268,63 @@ async fn a_line_that_cannot_be_opened_marks_its_devices_down_and_is_retried() {
     rig.line_available.store(true, Ordering::SeqCst);
     tokio::time::sleep(REOPEN_MAX + Duration::from_secs(2)).await;
     assert!(rig.cell.lines()[0].state.open);
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_hung_line_session_is_reopened_after_every_device_timed_out_three_times() {
+    let rig = rig(2);
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+    // The session hangs: the line stays open but nothing on it is heard.
+    rig.sessions.lock().unwrap()[0].store(true, Ordering::SeqCst);
+    tokio::time::sleep(Duration::from_secs(40)).await;
+    assert_eq!(rig.opens.load(Ordering::SeqCst), 2, "reopened once");
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+    assert_eq!(status(&rig.cell, "jbc2"), DeviceStatus::Up);
+    let reopens = rig
+        .cell
+        .metrics()
+        .line_reopens_for_silence
+        .get_or_create(&crate::metrics::LineLabels {
+            line: "bench".into(),
+        })
+        .get();
+    assert_eq!(reopens, 1);
+    rig.cell.store().flush().await.unwrap();
+    let events = rig
+        .cell
+        .store()
+        .events(&EventFilter {
+            limit: 50,
+            ..EventFilter::default()
+        })
+        .unwrap();
+    let reopened: Vec<&str> = events
+        .iter()
+        .filter(|e| e.kind == "line_reopened")
+        .map(|e| e.message.as_str())
+        .collect();
+    assert_eq!(reopened.len(), 1, "{events:?}");
+    assert!(
+        reopened[0].contains("every device on it timed out 3 times in a row"),
+        "{}",
+        reopened[0]
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_line_whose_devices_are_all_off_is_reopened_less_and_less_often() {
+    let rig = rig(1);
+    rig.plugged[0].store(false, Ordering::SeqCst);
+    tokio::time::sleep(Duration::from_secs(600)).await;
+    let opens = rig.opens.load(Ordering::SeqCst);
+    // Tries every 10 s at most: about 60 in 10 minutes. Reopens after 3, then 6, 12, 24
+    // and 48 timeouts: 5 to 7 opens in all, not 20.
+    assert!((4..=8).contains(&opens), "{opens} opens");
+    // Back on: read again within the backoff cap (plus a try's timeouts).
+    rig.plugged[0].store(true, Ordering::SeqCst);
+    tokio::time::sleep(BACKOFF_CAP + Duration::from_secs(5)).await;
     assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
 }
 
