@@ -20,16 +20,46 @@
 //! the machine table (not the address or the serial switch, which would cut the gateway
 //! off). Each is checked against the item's range and step before the wire (a tenths item
 //! takes 12.5, not 12.55), and the sealing and pre-heating set points also against the
-//! maximum working temperature as last read. Writes go to the regulator's working memory;
-//! saving them to EEPROM is left to `cellbus thermosald`, on purpose.
+//! maximum working temperature as confirmed (below). Writes go to the regulator's working
+//! memory; saving them to EEPROM is left to `cellbus thermosald`, on purpose.
+//!
+//! # Damaged digits: range check and confirmation
+//!
+//! Thermosald messages carry no checksum, and 30 of the 80 single-bit flips of an ASCII
+//! digit give another digit, so a reply damaged on the line can decode as a plausible wrong
+//! value. The driver defends in two ways:
+//!
+//! - A value outside its item's range ([`tables::Reading::in_range`]: 50–60 Hz, a `1 = …`
+//!   switch, an address 0–7) is a bad point for this poll, with an error naming the item,
+//!   the value and the range; it is never recorded as good.
+//! - Settings, machine and service values, and the fault/warning number, are *confirmed*:
+//!   a value is recorded (published, stored, used as the write limit) only when it equals
+//!   the last confirmed value of its item, or when a second read right away, in the same
+//!   poll, gives the same digits. The first value after start is confirmed the same way.
+//!   The second read is one item (one changed item) or the table again (several, as on the
+//!   first poll). When the reads disagree, or the second read fails, the point keeps its
+//!   last confirmed value (or, with none yet, is bad for this poll) and the next poll tries
+//!   again. A write whose echo matched is confirmed by it, and a set-point write before
+//!   the maximum working temperature is confirmed reads that limit twice first. In a steady
+//!   state no second read is needed: each changed value costs one extra exchange (about
+//!   250 ms), once.
+//! - The other run-time values (temperature, current, resistance, voltage, power) change
+//!   too fast to compare two reads and are only range-checked: a digit damaged into another
+//!   digit gives a wrong value until the next `live` poll.
+//!
+//! Confirmed values are kept while a regulator is silent: a value read again that equals
+//! one of them is accepted (a damaged digit would have to land exactly on it), and any
+//! other value is confirmed anew.
 
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 use link::{SerialSettings, SharedLine};
 use thermosald::client::{Client, ClientConfig, ClientError, Trouble};
 use thermosald::diagnostic::{self, Fault};
+use thermosald::exchange::Values;
 use thermosald::tables::{self, Item, Table, machine, runtime, service, settings};
-use thermosald::{Address, Target};
+use thermosald::{Address, RawValue, Read, Target};
 
 use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
@@ -198,6 +228,20 @@ impl Def {
     fn group(&self) -> &'static str {
         group_of(self.table)
     }
+
+    /// Whether a changed value must be read twice before it is recorded: every settings,
+    /// machine and service value, and the fault/warning number (see the module doc).
+    fn confirmed(&self) -> bool {
+        self.table != Table::Runtime || self.meaning == Meaning::Fault
+    }
+
+    /// The point's value for an item's reading.
+    fn value(&self, reading: tables::Reading) -> Value {
+        Value::Number(match self.meaning {
+            Meaning::Quantity => reading.value(),
+            Meaning::Fault | Meaning::Switch => f64::from(reading.raw().get()),
+        })
+    }
 }
 
 fn group_of(table: Table) -> &'static str {
@@ -218,8 +262,9 @@ pub struct ThermosaldDriver {
     device: DeviceId,
     config: ClientConfig,
     client: Option<Client>,
-    /// The maximum working temperature as last read, °C.
-    max_working: Option<f64>,
+    /// The last confirmed raw value of each confirmed item (see the module doc), by table
+    /// and index; the maximum working temperature among them is the write limit.
+    confirmed: BTreeMap<(Table, u8), RawValue>,
 }
 
 impl ThermosaldDriver {
@@ -240,7 +285,7 @@ impl ThermosaldDriver {
             device: config.id.clone(),
             config: client,
             client: None,
-            max_working: None,
+            confirmed: BTreeMap::new(),
         })
     }
 
@@ -299,32 +344,122 @@ impl ThermosaldDriver {
             )
         })?;
         let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
-        let values = client.read_table(table).await.map_err(|e| classify(&e))?;
-        let mut readings = Vec::new();
-        for def in POINTS.iter().filter(|d| d.table == table) {
-            let item = def.item();
-            let value = match values.get(item) {
-                Some(reading) => Ok(Value::Number(match def.meaning {
-                    Meaning::Quantity => reading.value(),
-                    Meaning::Fault | Meaning::Switch => f64::from(reading.raw().get()),
-                })),
-                None => Err(DeviceError::new(
-                    ErrorKind::Decode,
-                    format_args!("the answer carries no {}", item.name()),
-                )),
+        let first = client.read_table(table).await.map_err(|e| classify(&e))?;
+        let defs: Vec<&'static Def> = POINTS.iter().filter(|d| d.table == table).collect();
+        // What the first read settles, and the readings that need a second read.
+        let mut outcomes: Vec<Option<Result<Value, DeviceError>>> = Vec::new();
+        let mut changed: Vec<(usize, tables::Reading)> = Vec::new();
+        for (i, def) in defs.iter().enumerate() {
+            let outcome = match checked(def, &first) {
+                Ok(reading)
+                    if def.confirmed()
+                        && self.confirmed.get(&(table, def.index)) != Some(&reading.raw()) =>
+                {
+                    changed.push((i, reading));
+                    None
+                }
+                Ok(reading) => Some(Ok(def.value(reading))),
+                Err(bad) => Some(Err(bad)),
             };
-            if def.index == settings::MAXIMUM_WORKING_TEMPERATURE
-                && table == Table::Settings
-                && let Ok(Value::Number(n)) = value
-            {
-                self.max_working = Some(n);
-            }
-            readings.push(Reading {
-                point: self.point_id(def),
-                value,
-            });
+            outcomes.push(outcome);
         }
-        Ok(readings)
+        if !changed.is_empty() {
+            let second = match changed.as_slice() {
+                [(_, reading)] => client.read(Read::item(reading.item())).await,
+                _ => client.read_table(table).await,
+            };
+            for (i, reading) in changed {
+                let def = defs[i];
+                let confirmation = match &second {
+                    Ok(values) => self.confirm(reading, values),
+                    Err(e) => Err(unconfirmed_after_failure(reading, e)),
+                };
+                outcomes[i] = Some(match confirmation {
+                    Ok(()) => Ok(def.value(reading)),
+                    Err(why) => self.last_confirmed(def, why),
+                });
+            }
+        }
+        Ok(defs
+            .iter()
+            .zip(outcomes)
+            .map(|(def, outcome)| Reading {
+                point: self.point_id(def),
+                value: outcome.expect("every point's outcome is settled by one of the two reads"),
+            })
+            .collect())
+    }
+
+    /// Records `first` as its item's confirmed value when the `second` read agrees; else
+    /// says how they differ.
+    fn confirm(&mut self, first: tables::Reading, second: &Values) -> Result<(), DeviceError> {
+        let item = first.item();
+        match second.get(item) {
+            Some(again) if again.raw() == first.raw() => {
+                self.confirmed.insert((item.table(), item.index()), first.raw());
+                Ok(())
+            }
+            again => {
+                let again = again.map_or_else(|| "nothing".to_owned(), |r| r.to_string());
+                tracing::warn!(
+                    device = %self.device,
+                    table = %item.table(),
+                    item = item.name(),
+                    first = %first,
+                    second = %again,
+                    "two reads disagree (damaged on the line?); the value is not recorded"
+                );
+                Err(DeviceError::new(
+                    ErrorKind::Decode,
+                    format_args!(
+                        "{} item {:?}: two reads disagree ({first}, then {again}; damaged on \
+                         the line?); not recorded until two reads agree",
+                        item.table(),
+                        item.name()
+                    ),
+                ))
+            }
+        }
+    }
+
+    /// The point's last confirmed value, or `why` there is none.
+    fn last_confirmed(&self, def: &Def, why: DeviceError) -> Result<Value, DeviceError> {
+        let item = def.item();
+        match self.confirmed.get(&(def.table, def.index)) {
+            Some(raw) => Ok(def.value(item.reading(*raw))),
+            None => Err(why),
+        }
+    }
+
+    /// The maximum working temperature as last confirmed, °C: the limit of the set points.
+    fn max_working(&self) -> Option<f64> {
+        let item = max_working_item();
+        self.confirmed
+            .get(&(item.table(), item.index()))
+            .map(|raw| item.from_raw(*raw))
+    }
+
+    /// The confirmed maximum working temperature; when none is confirmed yet (no settings
+    /// poll since start, or its reads disagreed), reads it twice now.
+    async fn confirmed_max_working(&mut self) -> Result<f64, DeviceError> {
+        if let Some(max) = self.max_working() {
+            return Ok(max);
+        }
+        let item = max_working_item();
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
+        let first = client.read(Read::item(item)).await.map_err(|e| classify(&e))?;
+        let first = first
+            .get(item)
+            .filter(tables::Reading::in_range)
+            .ok_or_else(|| {
+                DeviceError::new(
+                    ErrorKind::Decode,
+                    format_args!("the answer carries no valid {}", item.name()),
+                )
+            })?;
+        let second = client.read(Read::item(item)).await.map_err(|e| classify(&e))?;
+        self.confirm(first, &second)?;
+        Ok(first.value())
     }
 
     async fn write_point(&mut self, point: &PointSpec, value: &Value) -> Result<(), WriteError> {
@@ -339,8 +474,16 @@ impl ThermosaldDriver {
             .as_number()
             .expect("check_write gives numbers for numeric and enumerated points");
         let item = def.item();
-        if def.below_max_working
-            && let Some(max) = self.max_working
+        let limit = if def.below_max_working {
+            Some(
+                self.confirmed_max_working()
+                    .await
+                    .map_err(|why| WriteError::Device(limit_unknown(why)))?,
+            )
+        } else {
+            None
+        };
+        if let Some(max) = limit
             && number > max
         {
             return Err(WriteError::Invalid(ValueError::OutOfRange {
@@ -367,8 +510,10 @@ impl ThermosaldDriver {
         client
             .write_raw(item, raw)
             .await
-            .map(drop)
-            .map_err(|e| WriteError::Device(classify(&e)))
+            .map_err(|e| WriteError::Device(classify(&e)))?;
+        // The regulator echoed exactly what was sent: the value is confirmed.
+        self.confirmed.insert((item.table(), item.index()), raw);
+        Ok(())
     }
 }
 
@@ -401,6 +546,69 @@ impl Driver for ThermosaldDriver {
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(self.write_point(point, value))
     }
+}
+
+/// The reading of `def`'s item in `values`, if the answer carries it and it is within the
+/// item's range; else why the point is bad.
+fn checked(def: &Def, values: &Values) -> Result<tables::Reading, DeviceError> {
+    let item = def.item();
+    let reading = values.get(item).ok_or_else(|| {
+        DeviceError::new(
+            ErrorKind::Decode,
+            format_args!("the answer carries no {}", item.name()),
+        )
+    })?;
+    if reading.in_range() {
+        return Ok(reading);
+    }
+    let bound = |raw| {
+        RawValue::new(raw).map_or_else(|_| raw.to_string(), |raw| item.reading(raw).to_string())
+    };
+    Err(DeviceError::new(
+        ErrorKind::Decode,
+        format_args!(
+            "{} item {:?} read as {reading} (digits {:03}), outside its range {} to {}: \
+             damaged on the line?",
+            item.table(),
+            item.name(),
+            reading.raw().get(),
+            bound(item.raw_min()),
+            bound(item.raw_max()),
+        ),
+    ))
+}
+
+/// Why a changed value is not recorded when its second read failed.
+fn unconfirmed_after_failure(first: tables::Reading, error: &ClientError) -> DeviceError {
+    let item = first.item();
+    let cause = classify(error);
+    DeviceError::new(
+        cause.kind,
+        format_args!(
+            "{} item {:?} read as {first}, not recorded: the confirming read failed: {}",
+            item.table(),
+            item.name(),
+            cause.message
+        ),
+    )
+}
+
+/// A set-point write refused because the limit could not be confirmed.
+fn limit_unknown(why: DeviceError) -> DeviceError {
+    DeviceError::new(
+        why.kind,
+        format_args!(
+            "not written: the regulator's maximum working temperature, which limits the set \
+             points, could not be confirmed ({why})"
+        ),
+    )
+}
+
+/// Settings item 11, the limit of the sealing and pre-heating set points.
+fn max_working_item() -> &'static Item {
+    Table::Settings
+        .item(settings::MAXIMUM_WORKING_TEMPERATURE)
+        .expect("settings data has item 11")
 }
 
 /// The crate's refusal of a value, as the gateway's.
@@ -626,7 +834,7 @@ mod tests {
             matches!(err, WriteError::Invalid(ValueError::OutOfRange { .. })),
             "{err}"
         );
-        let max = driver.max_working.expect("read with the settings");
+        let max = driver.max_working().expect("confirmed by the settings poll");
         let err = driver
             .write(&sealing, &Value::Number(max + 1.0))
             .await
