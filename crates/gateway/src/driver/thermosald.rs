@@ -1290,4 +1290,59 @@ mod tests {
         assert!(checked > 1000, "{checked}");
         assert_eq!(wrong, 0);
     }
+
+    #[test]
+    fn a_bit_flip_in_a_run_time_answer_passes_as_another_measurement_in_at_most_a_quarter_of_its_bits()
+     {
+        // A run-time answer while sealing, as the twin gives it 1.5 s into its first impulse.
+        let t0 = std::time::Instant::now();
+        let mut twin = Twin::new(&[address(0)], t0).unwrap();
+        let data = twin.regulators_mut()[0].table(Table::Runtime, t0 + Duration::from_millis(3500));
+        let digits: String = data.iter().map(|raw| format!("{:03}", raw.get())).collect();
+        let answer = format!("%053R990{digits}\n").into_bytes();
+        let read = thermosald::Exchange::new(
+            Target::Address(address(0)),
+            Read::all(Table::Runtime).into(),
+        )
+        .unwrap();
+        // For each single-bit flip: the items whose value changed in an answer the client
+        // takes.
+        let mut changed_by_item = [0usize; tables::RUNTIME_ITEMS];
+        let bits = answer.len() * 8;
+        for bit in 0..bits {
+            let mut damaged = answer.clone();
+            damaged[bit / 8] ^= 1 << (bit % 8);
+            let mut deframer = wire::Deframer::new(thermosald::FrameCodec);
+            deframer.push(&damaged);
+            while let Some(input) = deframer.next_frame() {
+                let Ok(frame) = input else { continue };
+                if let thermosald::exchange::Classified::Answer(
+                    thermosald::exchange::Answer::Values(values),
+                ) = read.classify(&frame)
+                {
+                    let differing: Vec<usize> = (0..data.len())
+                        .filter(|&i| values.raw().get(i) != data.get(i))
+                        .collect();
+                    assert!(differing.len() <= 1, "one flip, one digit: {differing:?}");
+                    for i in differing {
+                        changed_by_item[i] += 1;
+                    }
+                }
+            }
+        }
+        let fault = changed_by_item[usize::from(runtime::FAULT)];
+        let measured: usize = POINTS
+            .iter()
+            .filter(|d| d.table == Table::Runtime && d.meaning == Meaning::Quantity)
+            .map(|d| changed_by_item[usize::from(d.index)])
+            .sum();
+        eprintln!(
+            "run-time answer {:?}: of its {bits} single-bit flips, {measured} pass as another \
+             measurement, {fault} as another fault number (confirmed by a second read)",
+            String::from_utf8_lossy(&answer)
+        );
+        // 2 to 4 of a digit's 8 bits give another digit; 15 measurement digits in 240 bits.
+        assert_eq!(fault, 12, "000: each digit has 4 flips to another digit");
+        assert!(measured * 4 <= bits, "{measured} of {bits}");
+    }
 }
