@@ -41,10 +41,10 @@
 //!   reading for the point, so it keeps its last recorded value and time (and turns stale
 //!   if that lasts, like any point not refreshed); with no confirmed value yet, the point
 //!   is bad for this poll. The next poll tries again. The write limit stays the last
-//!   confirmed maximum working temperature. A write whose echo matched is confirmed by it, and a set-point write before
-//!   the maximum working temperature is confirmed reads that limit twice first. In a steady
-//!   state no second read is needed: each changed value costs one extra exchange (about
-//!   250 ms), once.
+//!   confirmed maximum working temperature. A write whose echo matched is confirmed by
+//!   it, and a set-point write before the maximum working temperature is confirmed reads
+//!   that limit twice first. In a steady state no second read is needed: each changed
+//!   value costs one extra exchange (about 250 ms), once.
 //! - The other run-time values (temperature, current, resistance, voltage, power) change
 //!   too fast to compare two reads and are only range-checked: a digit damaged into another
 //!   digit gives a wrong value until the next `live` poll.
