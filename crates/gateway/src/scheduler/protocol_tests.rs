@@ -63,7 +63,34 @@ where
     })
 }
 
+/// Like [`opener`], with every line's answers damaged at random by a
+/// [`wire::device::FaultInjector`].
+fn faulty_opener<M>(
+    model: SharedModel<M>,
+    settings: link::SerialSettings,
+    seed: u64,
+    rate: f64,
+) -> Opener
+where
+    M: wire::device::Model + Send + 'static,
+    wire::device::ModelLine<M>: wire::device::Device + Send + 'static,
+{
+    Arc::new(move || {
+        let (a, b) = tokio::io::duplex(4096);
+        let injector = wire::device::FaultInjector::new(model.line(), seed, rate)
+            .expect("the tests give a rate between 0 and 1");
+        tokio::spawn(link::serve::serve_stream(b, injector, None));
+        Box::pin(async move { Ok(Line::from_stream(a, "memory", Some(settings))) })
+    })
+}
+
 fn rig() -> Rig {
+    rig_with(None)
+}
+
+/// The rig, with the regulators' answers damaged at random (`(seed, rate)`, as
+/// `cellbus sim thermosald --fault-rate`) when asked.
+fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
     let addresses: Vec<Address> = (0..3).map(|a| Address::new(a).unwrap()).collect();
@@ -98,7 +125,10 @@ fn rig() -> Rig {
         store.handle(),
         Arc::new(Metrics::new()),
         |line| match line.name.as_str() {
-            "sealers" => opener(regulators.clone(), sealing),
+            "sealers" => match regulator_faults {
+                Some((seed, rate)) => faulty_opener(regulators.clone(), sealing, seed, rate),
+                None => opener(regulators.clone(), sealing),
+            },
             _ => opener(cross.clone(), jbus_line),
         },
     )
@@ -413,4 +443,49 @@ async fn a_panasonic_machines_r_messages_and_state_changes_are_recorded_as_event
     let entry = cell.device_entry("placer1").unwrap();
     assert_eq!(entry.read().status, DeviceStatus::Up);
     assert_eq!(value(&cell, "placer1.state"), Some(Value::Number(2.0)));
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_line_that_damages_half_the_answers_raises_no_false_alarm_and_stores_no_wrong_setting() {
+    let rig = rig_with(Some((20261, 0.5)));
+    tokio::time::sleep(Duration::from_secs(600)).await;
+    let mut checked = 0;
+    for a in 0..3u8 {
+        let device = format!("sealer{a}");
+        let alarms: Vec<_> = events(&rig.cell, &device)
+            .await
+            .into_iter()
+            .filter(|(kind, _)| kind == "alarm_raised")
+            .collect();
+        assert!(alarms.is_empty(), "{device}: {alarms:?}");
+        let entry = rig.cell.device_entry(&device).unwrap();
+        for spec in entry.points.iter().filter(|p| p.group != "live") {
+            let table: Table = spec.group.parse().unwrap();
+            let item = Table::find(table, &spec.name).unwrap();
+            let raw = rig.regulators.lock().regulators_mut()[usize::from(a)]
+                .table(table, tokio::time::Instant::now().into_std())[usize::from(item.index())];
+            let truth = match spec.kind {
+                crate::point::PointKind::Numeric => item.from_raw(raw),
+                _ => f64::from(raw.get()),
+            };
+            let history = rig
+                .cell
+                .store()
+                .history(
+                    &spec.id,
+                    crate::time::Timestamp::now().minus(Duration::from_secs(86_400)),
+                    crate::time::Timestamp::now().plus(Duration::from_secs(86_400)),
+                    None,
+                )
+                .unwrap();
+            let crate::store::Series::Samples(samples) = history.series else {
+                panic!("raw samples asked");
+            };
+            for sample in samples.iter().filter(|s| s.quality == Quality::Good) {
+                checked += 1;
+                assert_eq!(sample.value, Some(Value::Number(truth)), "{}", spec.id);
+            }
+        }
+    }
+    assert!(checked > 100, "{checked}");
 }
