@@ -26,7 +26,15 @@ pub struct LineControl {
 struct Shared {
     quiet: AtomicBool,
     outage: AtomicBool,
-    counts: Mutex<NoiseCounts>,
+    /// Client to device, device to client.
+    counts: [Mutex<NoiseCounts>; 2],
+}
+
+/// Which way bytes cross a line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Direction {
+    ToDevice = 0,
+    ToClient = 1,
 }
 
 impl LineControl {
@@ -42,15 +50,27 @@ impl LineControl {
 
     /// What the lines did so far, both directions added up.
     pub fn counts(&self) -> NoiseCounts {
-        *self
-            .shared
-            .counts
+        self.to_device().plus(self.to_client())
+    }
+
+    /// What the lines did to what clients sent (requests).
+    pub fn to_device(&self) -> NoiseCounts {
+        self.count(Direction::ToDevice)
+    }
+
+    /// What the lines did to what devices sent (answers).
+    pub fn to_client(&self) -> NoiseCounts {
+        self.count(Direction::ToClient)
+    }
+
+    fn count(&self, direction: Direction) -> NoiseCounts {
+        *self.shared.counts[direction as usize]
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
     }
 
     /// Carries one chunk through `noise`, as the switches say.
-    fn carry(&self, noise: &mut Noise, chunk: &[u8]) -> Vec<u8> {
+    fn carry(&self, direction: Direction, noise: &mut Noise, chunk: &[u8]) -> Vec<u8> {
         let before = noise.counts();
         let out = if self.shared.outage.load(Ordering::SeqCst) {
             noise.lose(chunk);
@@ -62,9 +82,7 @@ impl LineControl {
             noise.apply(chunk)
         };
         let delta = noise.counts().minus(before);
-        let mut counts = self
-            .shared
-            .counts
+        let mut counts = self.shared.counts[direction as usize]
             .lock()
             .unwrap_or_else(PoisonError::into_inner);
         *counts = counts.plus(delta);
@@ -72,17 +90,34 @@ impl LineControl {
     }
 }
 
-/// Carries bytes both ways between `a` and `b` through a noisy line until either end
-/// closes or fails. Each direction's noise is seeded from `seed`.
-pub async fn noisy_pipe<A, B>(a: A, b: B, config: NoiseConfig, seed: u64, control: LineControl)
-where
+/// Carries bytes both ways between `client` and `device` through a noisy line until
+/// either end closes or fails. Each direction's noise is seeded from `seed`.
+pub async fn noisy_pipe<A, B>(
+    client: A,
+    device: B,
+    config: NoiseConfig,
+    seed: u64,
+    control: LineControl,
+) where
     A: AsyncRead + AsyncWrite + Send + 'static,
     B: AsyncRead + AsyncWrite + Send + 'static,
 {
-    let (a_read, a_write) = tokio::io::split(a);
-    let (b_read, b_write) = tokio::io::split(b);
-    let forward = carry(a_read, b_write, Noise::new(config, seed), control.clone());
-    let backward = carry(b_read, a_write, Noise::new(config, seed ^ 0x5eed), control);
+    let (a_read, a_write) = tokio::io::split(client);
+    let (b_read, b_write) = tokio::io::split(device);
+    let forward = carry(
+        a_read,
+        b_write,
+        Direction::ToDevice,
+        Noise::new(config, seed),
+        control.clone(),
+    );
+    let backward = carry(
+        b_read,
+        a_write,
+        Direction::ToClient,
+        Noise::new(config, seed ^ 0x5eed),
+        control,
+    );
     // The line is over when either direction ends: a closed end closes both.
     tokio::select! {
         () = forward => {}
@@ -90,8 +125,13 @@ where
     }
 }
 
-async fn carry<R, W>(mut from: R, mut to: W, mut noise: Noise, control: LineControl)
-where
+async fn carry<R, W>(
+    mut from: R,
+    mut to: W,
+    direction: Direction,
+    mut noise: Noise,
+    control: LineControl,
+) where
     R: AsyncRead + Unpin,
     W: AsyncWrite + Unpin,
 {
@@ -101,7 +141,7 @@ where
             Ok(0) | Err(_) => break,
             Ok(n) => n,
         };
-        let out = control.carry(&mut noise, &buf[..n]);
+        let out = control.carry(direction, &mut noise, &buf[..n]);
         if !out.is_empty() && to.write_all(&out).await.is_err() {
             break;
         }
