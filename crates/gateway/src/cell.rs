@@ -15,10 +15,11 @@ use tokio::sync::{broadcast, mpsc, oneshot};
 
 use crate::config::CellConfig;
 use crate::driver::{self, DeviceError, Driver, PollGroup, Protocol, WriteError};
+use crate::event::{Event, EventKind};
 use crate::metrics::Metrics;
 use crate::point::{DeviceId, PointId, PointKind, PointSpec, Quality, Value};
 use crate::scheduler::{LineTask, Opener};
-use crate::store::{Event, EventKind, StoreHandle};
+use crate::store::StoreHandle;
 use crate::time::{Timestamp, duration_millis};
 
 /// Messages kept for slow event-stream clients before they miss some.

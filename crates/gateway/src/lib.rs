@@ -33,6 +33,7 @@ pub mod cell;
 pub mod config;
 pub mod demo;
 pub mod driver;
+pub mod event;
 pub mod http;
 pub mod metrics;
 pub mod point;

@@ -43,9 +43,10 @@ use tokio::time::Instant;
 
 use crate::cell::{Cell, DeviceEntry, DeviceStatus, LineEntry, LiveMessage, WriteRequest};
 use crate::driver::{BoxFuture, DeviceError, DeviceEvent, Driver, ErrorKind, Reading, WriteError};
+use crate::event::{Event, EventKind};
 use crate::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
 use crate::point::{Quality, Value};
-use crate::store::{Event, EventKind, Sample};
+use crate::store::Sample;
 use crate::time::Timestamp;
 
 /// First wait before a device that stopped answering is tried again.

@@ -14,9 +14,10 @@ use tokio::task::JoinHandle;
 use crate::cell::Cell;
 use crate::config::{CellConfig, check_config};
 use crate::demo::DemoCell;
+use crate::event::{Event, EventKind};
 use crate::http::{self, WritePolicy};
 use crate::metrics::Metrics;
-use crate::store::{Event, EventKind, Store, StoreOptions};
+use crate::store::{Store, StoreOptions};
 use crate::time::Timestamp;
 
 /// Address the gateway listens on by default: loopback only.

@@ -31,8 +31,8 @@ use super::{
     BoxFuture, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
     WriteError,
 };
+use crate::event::EventKind;
 use crate::point::{AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value};
-use crate::store::EventKind;
 
 /// A CROSS line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);

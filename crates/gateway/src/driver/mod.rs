@@ -31,8 +31,8 @@ use std::time::Duration;
 use link::{SerialSettings, SharedLine};
 use serde::Serialize;
 
+use crate::event::EventKind;
 use crate::point::{DeviceId, PointId, PointSpec, Value, ValueError};
-use crate::store::EventKind;
 
 pub mod cross;
 pub mod jbc;

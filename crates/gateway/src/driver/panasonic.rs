@@ -43,10 +43,10 @@ use super::{
     BoxFuture, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
     WriteError,
 };
+use crate::event::EventKind;
 use crate::point::{
     AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value, ValueError,
 };
-use crate::store::EventKind;
 use crate::time::Timestamp;
 
 /// The status, every second.

@@ -25,8 +25,9 @@ use tokio_stream::{Stream, StreamExt};
 
 use crate::cell::{Cell, DeviceStatus, LiveMessage};
 use crate::driver::{ErrorKind, WriteError};
+use crate::event::{Event, EventKind};
 use crate::point::{PointId, Value};
-use crate::store::{AuditEntry, AuditResult, Event, EventFilter, EventKind};
+use crate::store::{AuditEntry, AuditResult, EventFilter};
 use crate::time::Timestamp;
 
 pub mod web;

@@ -20,9 +20,10 @@ use super::*;
 use crate::cell::{Cell, DeviceStatus};
 use crate::config::{CellConfig, DeviceConfig, LineConfig};
 use crate::driver::{DriverConfig, Protocol};
+use crate::event::EventKind;
 use crate::metrics::Metrics;
 use crate::point::{DeviceId, PointId, ValueError};
-use crate::store::{EventFilter, EventKind, Store, StoreOptions};
+use crate::store::{EventFilter, Store, StoreOptions};
 
 struct Rig {
     cell: Arc<Cell>,
@@ -370,8 +371,8 @@ async fn panasonic_rig() -> (
 /// Waits (generously, on the live stream: no sleeps) for an event `matches` accepts.
 async fn wait_for_event(
     live: &mut tokio::sync::broadcast::Receiver<crate::cell::LiveMessage>,
-    matches: impl Fn(&crate::store::Event) -> bool,
-) -> crate::store::Event {
+    matches: impl Fn(&crate::event::Event) -> bool,
+) -> crate::event::Event {
     let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
     loop {
         let message = tokio::time::timeout_at(deadline, live.recv())
@@ -410,7 +411,7 @@ async fn a_panasonic_machines_r_messages_and_state_changes_are_recorded_as_event
     let mut seen = Vec::new();
     while !(seen
         .iter()
-        .any(|e: &crate::store::Event| e.kind == EventKind::StateChanged)
+        .any(|e: &crate::event::Event| e.kind == EventKind::StateChanged)
         && seen
             .iter()
             .any(|e| e.kind == EventKind::DeviceEvent && e.message.contains("R1ST")))

@@ -1,0 +1,96 @@
+//! Events: what happened in the cell, for the event log (drivers, the scheduler and the
+//! gateway make them; the store keeps them).
+
+use serde::Serialize;
+
+use crate::point::{DeviceId, PointId};
+use crate::time::Timestamp;
+
+/// What happened, for the event log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EventKind {
+    /// The gateway started.
+    GatewayStarted,
+    /// The gateway stopped.
+    GatewayStopped,
+    /// A line was opened.
+    LineUp,
+    /// A line failed or could not be opened.
+    LineDown,
+    /// A line was closed and reopened because every device on it stopped answering.
+    LineReopened,
+    /// A device answered again.
+    DeviceUp,
+    /// A device stopped answering.
+    DeviceDown,
+    /// A point went into alarm (a tool error appeared, a limit was crossed).
+    AlarmRaised,
+    /// A point came out of alarm.
+    AlarmCleared,
+    /// A write was made.
+    Write,
+    /// A device changed state on its own: a CROSS transferred its load, a machine went
+    /// from run to error.
+    StateChanged,
+    /// A device reported something unsolicited (a Panasonic R message).
+    DeviceEvent,
+}
+
+impl EventKind {
+    /// Every kind, for filters and the API description.
+    pub const ALL: [EventKind; 12] = [
+        EventKind::GatewayStarted,
+        EventKind::GatewayStopped,
+        EventKind::LineUp,
+        EventKind::LineDown,
+        EventKind::LineReopened,
+        EventKind::DeviceUp,
+        EventKind::DeviceDown,
+        EventKind::AlarmRaised,
+        EventKind::AlarmCleared,
+        EventKind::Write,
+        EventKind::StateChanged,
+        EventKind::DeviceEvent,
+    ];
+
+    /// The name stored and printed (`device_down`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EventKind::GatewayStarted => "gateway_started",
+            EventKind::GatewayStopped => "gateway_stopped",
+            EventKind::LineUp => "line_up",
+            EventKind::LineDown => "line_down",
+            EventKind::LineReopened => "line_reopened",
+            EventKind::DeviceUp => "device_up",
+            EventKind::DeviceDown => "device_down",
+            EventKind::AlarmRaised => "alarm_raised",
+            EventKind::AlarmCleared => "alarm_cleared",
+            EventKind::Write => "write",
+            EventKind::StateChanged => "state_changed",
+            EventKind::DeviceEvent => "device_event",
+        }
+    }
+
+    /// The kind for a stored name.
+    pub fn parse(text: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.as_str() == text)
+    }
+}
+
+/// An event to record.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Event {
+    /// When.
+    pub t: Timestamp,
+    /// What kind.
+    pub kind: EventKind,
+    /// The line, if it concerns one.
+    pub line: Option<String>,
+    /// The device, if it concerns one.
+    pub device: Option<DeviceId>,
+    /// The point, if it concerns one.
+    pub point: Option<PointId>,
+    /// Words for the event log.
+    pub message: String,
+}

@@ -1,0 +1,213 @@
+//! The read side: a small pool of read connections, which WAL lets read while the writer
+//! writes, and the queries the API runs.
+
+use std::path::PathBuf;
+use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
+
+use rusqlite::{Connection, OptionalExtension, params};
+
+use crate::point::PointId;
+use crate::time::{Timestamp, duration_millis};
+
+use super::*;
+
+impl StoreHandle {
+    /// Stored changes of `point` in `[from, to)`, raw or in buckets of `step`.
+    pub fn history(
+        &self,
+        point: &PointId,
+        from: Timestamp,
+        to: Timestamp,
+        step: Option<Duration>,
+    ) -> Result<History, StoreError> {
+        self.readers.with(|conn| {
+            let id: Option<i64> = conn
+                .query_row(
+                    "SELECT id FROM points WHERE name = ?1",
+                    [point.as_str()],
+                    |r| r.get(0),
+                )
+                .optional()?;
+            let step_ms = step.map(duration_millis).filter(|s| *s > 0);
+            let empty = match step_ms {
+                Some(_) => Series::Buckets(Vec::new()),
+                None => Series::Samples(Vec::new()),
+            };
+            let mut history = History {
+                point: point.clone(),
+                from,
+                to,
+                step_ms,
+                before: None,
+                series: empty,
+                truncated: false,
+            };
+            let Some(id) = id else {
+                return Ok(history);
+            };
+            history.before = conn
+                .query_row(
+                    "SELECT t, value, text, quality FROM samples WHERE point = ?1 AND t < ?2 \
+                     ORDER BY t DESC LIMIT 1",
+                    params![id, from.0],
+                    read_sample,
+                )
+                .optional()?;
+            match step_ms {
+                Some(step) => {
+                    let mut stmt = conn.prepare_cached(
+                        "SELECT (t / ?4) * ?4 AS b, avg(value), min(value), max(value), count(*) \
+                         FROM samples WHERE point = ?1 AND t >= ?2 AND t < ?3 \
+                         AND quality = 0 AND value IS NOT NULL GROUP BY b ORDER BY b",
+                    )?;
+                    let buckets = stmt
+                        .query_map(params![id, from.0, to.0, step], |r| {
+                            Ok(Bucket {
+                                t: Timestamp(r.get(0)?),
+                                avg: r.get(1)?,
+                                min: r.get(2)?,
+                                max: r.get(3)?,
+                                count: r.get::<_, i64>(4)?.unsigned_abs(),
+                            })
+                        })?
+                        .collect::<Result<Vec<_>, _>>()?;
+                    history.series = Series::Buckets(buckets);
+                }
+                None => {
+                    let mut stmt = conn.prepare_cached(
+                        "SELECT t, value, text, quality FROM samples \
+                         WHERE point = ?1 AND t >= ?2 AND t < ?3 ORDER BY t LIMIT ?4",
+                    )?;
+                    let limit = i64::try_from(MAX_RAW_SAMPLES + 1).unwrap_or(i64::MAX);
+                    let mut samples = stmt
+                        .query_map(params![id, from.0, to.0, limit], read_sample)?
+                        .collect::<Result<Vec<_>, _>>()?;
+                    if samples.len() > MAX_RAW_SAMPLES {
+                        samples.truncate(MAX_RAW_SAMPLES);
+                        history.truncated = true;
+                    }
+                    history.series = Series::Samples(samples);
+                }
+            }
+            Ok(history)
+        })
+    }
+
+    /// Stored events, newest first.
+    pub fn events(&self, filter: &EventFilter) -> Result<Vec<EventRecord>, StoreError> {
+        self.readers.with(|conn| {
+            let mut stmt = conn.prepare_cached(
+                "SELECT id, t, kind, line, device, point, message FROM events \
+                 WHERE t >= ?1 AND t < ?2 AND (?3 IS NULL OR device = ?3) \
+                 AND (?4 IS NULL OR kind = ?4) ORDER BY id DESC LIMIT ?5",
+            )?;
+            let rows = stmt.query_map(
+                params![
+                    filter.from.map_or(i64::MIN, |t| t.0),
+                    filter.to.map_or(i64::MAX, |t| t.0),
+                    filter.device,
+                    filter.kind.map(EventKind::as_str),
+                    i64::try_from(filter.limit).unwrap_or(i64::MAX),
+                ],
+                |r| {
+                    Ok(EventRecord {
+                        id: r.get(0)?,
+                        t: Timestamp(r.get(1)?),
+                        kind: r.get(2)?,
+                        line: r.get(3)?,
+                        device: r.get(4)?,
+                        point: r.get(5)?,
+                        message: r.get(6)?,
+                    })
+                },
+            )?;
+            rows.collect()
+        })
+    }
+
+    /// Stored write attempts, newest first.
+    pub fn audit_log(
+        &self,
+        device: Option<&str>,
+        limit: usize,
+    ) -> Result<Vec<AuditRecord>, StoreError> {
+        self.readers.with(|conn| {
+            let mut stmt = conn.prepare_cached(
+                "SELECT id, t, client, device, point, old_value, new_value, result, detail \
+                 FROM audit WHERE (?1 IS NULL OR device = ?1) ORDER BY id DESC LIMIT ?2",
+            )?;
+            let json = |text: Option<String>| {
+                text.and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            };
+            let rows = stmt.query_map(
+                params![device, i64::try_from(limit).unwrap_or(i64::MAX)],
+                |r| {
+                    Ok(AuditRecord {
+                        id: r.get(0)?,
+                        t: Timestamp(r.get(1)?),
+                        client: r.get(2)?,
+                        device: r.get(3)?,
+                        point: r.get(4)?,
+                        old_value: json(r.get(5)?),
+                        new_value: json(r.get(6)?).unwrap_or(serde_json::Value::Null),
+                        result: r.get(7)?,
+                        detail: r.get(8)?,
+                    })
+                },
+            )?;
+            rows.collect()
+        })
+    }
+
+    /// The database's own consistency check (`PRAGMA integrity_check`): `ok` or the faults.
+    pub fn integrity_check(&self) -> Result<String, StoreError> {
+        self.readers.with(|conn| {
+            let mut stmt = conn.prepare("PRAGMA integrity_check")?;
+            let lines = stmt
+                .query_map([], |r| r.get::<_, String>(0))?
+                .collect::<Result<Vec<_>, _>>()?;
+            Ok(lines.join("; "))
+        })
+    }
+}
+
+/// Read connections, reused.
+#[derive(Debug)]
+pub(super) struct ReaderPool {
+    pub(super) path: PathBuf,
+    pub(super) idle: Mutex<Vec<Connection>>,
+}
+
+impl ReaderPool {
+    pub(super) fn with<T>(
+        &self,
+        f: impl FnOnce(&Connection) -> rusqlite::Result<T>,
+    ) -> Result<T, StoreError> {
+        let sqlite = |source| StoreError::Sqlite {
+            path: self.path.clone(),
+            source,
+        };
+        let taken = self
+            .idle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .pop();
+        let conn = match taken {
+            Some(conn) => conn,
+            None => {
+                let conn = Connection::open(&self.path).map_err(sqlite)?;
+                conn.busy_timeout(Duration::from_secs(5)).map_err(sqlite)?;
+                conn.pragma_update(None, "query_only", true)
+                    .map_err(sqlite)?;
+                conn
+            }
+        };
+        let result = f(&conn).map_err(sqlite);
+        self.idle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(conn);
+        result
+    }
+}

@@ -1,0 +1,206 @@
+//! What the history stores and what its queries return.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use serde::Serialize;
+
+use crate::event::EventKind;
+use crate::point::{PointId, Quality, Value};
+use crate::time::Timestamp;
+
+/// A value change of a point, as stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// The point.
+    pub point: PointId,
+    /// When it was read.
+    pub t: Timestamp,
+    /// The value; `None` when the read failed.
+    pub value: Option<Value>,
+    /// Its quality.
+    pub quality: Quality,
+}
+
+/// An event as stored, with its id.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EventRecord {
+    /// Increasing id.
+    pub id: i64,
+    /// When.
+    pub t: Timestamp,
+    /// What kind (`device_down`).
+    pub kind: String,
+    /// The line, if any.
+    pub line: Option<String>,
+    /// The device, if any.
+    pub device: Option<String>,
+    /// The point, if any.
+    pub point: Option<String>,
+    /// Words.
+    pub message: String,
+}
+
+/// How a write attempt ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AuditResult {
+    /// The device took the value.
+    Accepted,
+    /// Refused before the wire (bad token, writes off, bad value) or by the device.
+    Refused,
+    /// The device did not answer or the line failed.
+    Failed,
+}
+
+impl AuditResult {
+    pub(super) fn as_str(self) -> &'static str {
+        match self {
+            AuditResult::Accepted => "accepted",
+            AuditResult::Refused => "refused",
+            AuditResult::Failed => "failed",
+        }
+    }
+}
+
+/// One write attempt.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AuditEntry {
+    /// When.
+    pub t: Timestamp,
+    /// The client's address.
+    pub client: String,
+    /// The device named in the request.
+    pub device: String,
+    /// The point named in the request.
+    pub point: String,
+    /// The point's value before the write, if known.
+    pub old: Option<Value>,
+    /// The value asked for, as given.
+    pub new: serde_json::Value,
+    /// How it ended.
+    pub result: AuditResult,
+    /// Why, in words.
+    pub detail: String,
+}
+
+/// A write attempt as stored.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AuditRecord {
+    /// Increasing id.
+    pub id: i64,
+    /// When.
+    pub t: Timestamp,
+    /// The client's address.
+    pub client: String,
+    /// The device named.
+    pub device: String,
+    /// The point named.
+    pub point: String,
+    /// The value before, if known.
+    pub old_value: Option<serde_json::Value>,
+    /// The value asked for.
+    pub new_value: serde_json::Value,
+    /// `accepted`, `refused` or `failed`.
+    pub result: String,
+    /// Why.
+    pub detail: String,
+}
+
+/// One stored sample in a history answer.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HistorySample {
+    /// When.
+    pub t: Timestamp,
+    /// The value, `null` when the read failed.
+    pub value: Option<Value>,
+    /// Its quality.
+    pub quality: Quality,
+}
+
+/// Statistics of the good numeric samples in one time bucket.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Bucket {
+    /// Start of the bucket (aligned to multiples of the step since the epoch).
+    pub t: Timestamp,
+    /// Mean of the changes stored in the bucket.
+    pub avg: f64,
+    /// Lowest.
+    pub min: f64,
+    /// Highest.
+    pub max: f64,
+    /// How many changes.
+    pub count: u64,
+}
+
+/// Raw samples or buckets.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Series {
+    /// Every stored change.
+    Samples(Vec<HistorySample>),
+    /// Downsampled; buckets without a change are left out (the value held).
+    Buckets(Vec<Bucket>),
+}
+
+/// The answer to a history query.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct History {
+    /// The point.
+    pub point: PointId,
+    /// Start of the range (inclusive).
+    pub from: Timestamp,
+    /// End of the range (exclusive).
+    pub to: Timestamp,
+    /// Bucket width in milliseconds, when downsampled.
+    pub step_ms: Option<i64>,
+    /// The last change before `from`: the value held at the start of the range.
+    pub before: Option<HistorySample>,
+    /// Samples or buckets.
+    #[serde(flatten)]
+    pub series: Series,
+    /// Whether raw samples were cut at [`MAX_RAW_SAMPLES`].
+    pub truncated: bool,
+}
+
+/// Which events to list.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EventFilter {
+    /// From (inclusive).
+    pub from: Option<Timestamp>,
+    /// To (exclusive).
+    pub to: Option<Timestamp>,
+    /// Only this device.
+    pub device: Option<String>,
+    /// Only this kind.
+    pub kind: Option<EventKind>,
+    /// At most this many, newest first.
+    pub limit: usize,
+}
+
+/// Counters of the writer, for the metrics.
+#[derive(Debug, Default)]
+pub struct StoreStats {
+    /// Samples committed.
+    pub samples_written: AtomicU64,
+    /// Events committed.
+    pub events_written: AtomicU64,
+    /// Audit rows committed.
+    pub audit_written: AtomicU64,
+    /// Commits made.
+    pub commits: AtomicU64,
+    /// Commits that failed.
+    pub commit_errors: AtomicU64,
+    /// Rows dropped because the disk refused writes for too long.
+    pub rows_dropped: AtomicU64,
+    /// Rows deleted by retention.
+    pub rows_pruned: AtomicU64,
+}
+
+impl StoreStats {
+    /// Every row committed so far.
+    pub fn rows_written(&self) -> u64 {
+        self.samples_written.load(Ordering::Relaxed)
+            + self.events_written.load(Ordering::Relaxed)
+            + self.audit_written.load(Ordering::Relaxed)
+    }
+}
