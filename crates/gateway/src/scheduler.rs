@@ -40,6 +40,7 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::Histogram;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
+use wire::backoff::Backoff;
 
 use crate::cell::{Cell, DeviceEntry, DeviceStatus, LineEntry, LiveMessage, WriteRequest};
 use crate::driver::{BoxFuture, DeviceError, DeviceEvent, Driver, ErrorKind, Reading, WriteError};
@@ -104,7 +105,7 @@ struct Slot {
     clocks: Vec<Clock>,
     /// The group used to probe a backed-off device (the fastest).
     probe: usize,
-    backoff: Option<Backoff>,
+    backoff: Option<BackedOff>,
     /// Polls in a row that got no answer in time.
     timeouts_in_a_row: u32,
     m: SlotMetrics,
@@ -117,7 +118,7 @@ struct Clock {
 }
 
 #[derive(Debug, Clone, Copy)]
-struct Backoff {
+struct BackedOff {
     next: Instant,
 }
 
@@ -262,7 +263,7 @@ impl LineTask {
 
     /// Polls until `shutdown` turns true (or its sender is dropped).
     pub async fn run(mut self, mut shutdown: watch::Receiver<bool>) {
-        let mut reopen = REOPEN_FIRST;
+        let mut reopen = Backoff::new(REOPEN_FIRST, REOPEN_MAX).timer();
         loop {
             let opened = tokio::select! {
                 biased;
@@ -272,9 +273,9 @@ impl LineTask {
             let line = match opened {
                 Ok(line) => line,
                 Err(error) => {
-                    self.line_failed(&error, reopen);
-                    let until = Instant::now() + reopen;
-                    reopen = (reopen * 2).min(REOPEN_MAX);
+                    let wait = reopen.next();
+                    self.line_failed(&error, wait);
+                    let until = Instant::now() + wait;
                     if !self
                         .wait_refusing_writes(until, &error, &mut shutdown)
                         .await
@@ -284,7 +285,7 @@ impl LineTask {
                     continue;
                 }
             };
-            reopen = REOPEN_FIRST;
+            reopen.reset();
             self.line_opened();
             let shared = SharedLine::new(line);
             let now = Instant::now();
@@ -424,7 +425,7 @@ impl LineTask {
                 slot.m.up.set(0);
                 let failures = slot.entry.read().failures + 1;
                 let delay = backoff_delay(failures, slot.clocks[slot.probe].period);
-                slot.backoff = Some(Backoff { next: now + delay });
+                slot.backoff = Some(BackedOff { next: now + delay });
                 let entry = Arc::clone(&slot.entry);
                 mark_down(&self.cell, &entry, &error, delay);
                 if error.kind == ErrorKind::Disconnected {
@@ -646,8 +647,7 @@ fn most_urgent(candidates: impl IntoIterator<Item = Due>, now: Instant) -> Optio
 /// fastest group has `period`: doubling from [`BACKOFF_FIRST`] up to the larger of
 /// `period` and [`BACKOFF_CAP`].
 pub fn backoff_delay(failures: u32, period: Duration) -> Duration {
-    let doublings = failures.saturating_sub(1).min(16);
-    (BACKOFF_FIRST * 2u32.pow(doublings)).min(period.max(BACKOFF_CAP))
+    Backoff::new(BACKOFF_FIRST, period.max(BACKOFF_CAP)).after(failures)
 }
 
 /// A line that carries nothing, held by the drivers while their real line is closed.

@@ -38,6 +38,8 @@ use tokio::sync::{Mutex, broadcast, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use wire::Deframer;
+pub use wire::backoff::Backoff;
+use wire::backoff::BackoffTimer;
 
 use crate::Port;
 use crate::command::{Command, KeepAliveId, ProductionRequest};
@@ -58,10 +60,8 @@ pub const DEFAULT_RETRIES: u8 = 1;
 /// Time to wait for a TCP connection \[?\].
 pub const DEFAULT_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 /// Waits between reconnection attempts \[?\]: 0.5 s, doubling up to 30 s.
-pub const DEFAULT_BACKOFF: Backoff = Backoff {
-    first: Duration::from_millis(500),
-    max: Duration::from_secs(30),
-};
+pub const DEFAULT_BACKOFF: Backoff =
+    Backoff::new(Duration::from_millis(500), Duration::from_secs(30));
 /// A connection that lasted this long resets the backoff to its first wait.
 pub const STABLE_CONNECTION: Duration = Duration::from_secs(10);
 /// Notices an [`Events`] stream holds before a slow reader misses some ([`Notice::Missed`]).
@@ -71,15 +71,6 @@ pub const EVENT_CAPACITY: usize = 1024;
 const READ_BUFFER: usize = 64 * 1024;
 /// Bound of one idle read on Port 2 (the loop simply reads again).
 const IDLE_READ: Duration = Duration::from_secs(3600);
-
-/// Waits between reconnection attempts: `first`, doubling up to `max`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Backoff {
-    /// The first wait after a connection is lost.
-    pub first: Duration,
-    /// The longest wait.
-    pub max: Duration,
-}
 
 /// How the client reaches the machine.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -944,41 +935,9 @@ impl Inner {
     }
 }
 
-/// Waits between reconnection attempts.
-#[derive(Debug, Clone, Copy)]
-struct BackoffTimer {
-    config: Backoff,
-    next: Duration,
-}
-
-impl BackoffTimer {
-    fn new(config: Backoff) -> BackoffTimer {
-        BackoffTimer {
-            config,
-            next: config.first,
-        }
-    }
-
-    /// The wait before the next attempt; the one after is twice as long (up to the max).
-    fn next(&mut self) -> Duration {
-        let wait = self.next;
-        self.next = (wait * 2).min(self.config.max).max(self.config.first);
-        wait
-    }
-
-    /// The wait the next [`next`](Self::next) gives.
-    fn peek(&self) -> Duration {
-        self.next
-    }
-
-    fn reset(&mut self) {
-        self.next = self.config.first;
-    }
-}
-
 /// Reads Port 2 for the life of the client, reconnecting with backoff.
 async fn run_port2(inner: Arc<Inner>, endpoint: Endpoint, first: Line) {
-    let mut backoff = BackoffTimer::new(inner.config.backoff);
+    let mut backoff = inner.config.backoff.timer();
     let mut dead = inner.port2_dead.subscribe();
     let mut line = Some(first);
     loop {
@@ -1055,7 +1014,7 @@ async fn run_keep_alive(
     mut schedule: KeepAlive,
     mut echoes: broadcast::Receiver<Notice>,
 ) {
-    let mut backoff = BackoffTimer::new(inner.config.backoff);
+    let mut backoff = inner.config.backoff.timer();
     let mut probed_generation = 0;
     loop {
         let wake = Instant::from_std(schedule.poll_timeout());

@@ -6,12 +6,14 @@
 //! - [`scan`]: a scanner for streams framed by a start and an end byte (`STX … ETX`,
 //!   `% … LF`).
 //! - [`ascii`]: fixed-width ASCII numbers as the serial protocols carry them.
+//! - [`backoff`]: waits that double after each failure, up to a cap.
 //! - [`device`]: the interface between a simulated device and the line that serves it,
 //!   and seeded [`device::FaultInjector`] for realistic line trouble.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod ascii;
+pub mod backoff;
 pub mod checksum;
 pub mod codec;
 pub mod device;
