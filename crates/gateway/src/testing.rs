@@ -65,7 +65,7 @@ pub struct Rig {
     pub shutdown: watch::Sender<bool>,
     pub task: tokio::task::JoinHandle<()>,
     _store: Store,
-    _dir: tempfile::TempDir,
+    pub dir: tempfile::TempDir,
 }
 
 pub fn device(id: &str, address: i64) -> DeviceConfig {
@@ -167,6 +167,6 @@ pub fn rig(count: u8) -> Rig {
         shutdown,
         task,
         _store: store,
-        _dir: dir,
+        dir,
     }
 }

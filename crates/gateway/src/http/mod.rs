@@ -11,9 +11,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use axum::extract::rejection::{JsonRejection, QueryRejection};
-use axum::extract::{ConnectInfo, FromRequestParts, Path, Query, State};
+use axum::extract::{ConnectInfo, DefaultBodyLimit, FromRequestParts, Path, Query, State};
 use axum::http::request::Parts;
-use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, Uri, header};
+use axum::http::{HeaderValue, Method, StatusCode, Uri, header};
 use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
@@ -24,13 +24,15 @@ use tokio::sync::watch;
 use tokio_stream::{Stream, StreamExt};
 
 use crate::cell::{Cell, DeviceStatus, LiveMessage};
-use crate::driver::{ErrorKind, WriteError};
-use crate::event::{Event, EventKind};
-use crate::point::{PointId, Value};
-use crate::store::{AuditEntry, AuditResult, EventFilter};
+use crate::event::EventKind;
+use crate::point::PointId;
+use crate::store::EventFilter;
 use crate::time::Timestamp;
 
 pub mod web;
+mod write;
+
+pub use write::{BODY_LIMIT, FAILURE_WINDOW, MAX_TOKEN_FAILURES};
 
 /// The API's routes: method and path as axum writes them.
 pub const API_ROUTES: &[(&str, &str)] = &[
@@ -72,6 +74,7 @@ pub struct AppState {
     writes: Arc<WritePolicy>,
     started: Timestamp,
     shutdown: watch::Receiver<bool>,
+    guard: Arc<write::Guard>,
 }
 
 /// The router over `cell`; event streams end when `shutdown` turns true.
@@ -81,13 +84,17 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
         writes: Arc::new(writes),
         started: Timestamp::now(),
         shutdown,
+        guard: Arc::default(),
     };
     Router::new()
         .route("/healthz", get(healthz))
         .route("/metrics", get(metrics))
         .route("/api/devices", get(devices))
         .route("/api/devices/{id}", get(device))
-        .route("/api/devices/{id}/write", post(write))
+        .route(
+            "/api/devices/{id}/write",
+            post(write::write).layer(DefaultBodyLimit::max(BODY_LIMIT)),
+        )
         .route("/api/lines", get(lines))
         .route("/api/history", get(history))
         .route("/api/events", get(events))
@@ -146,6 +153,12 @@ impl From<QueryRejection> for ApiError {
 
 impl From<JsonRejection> for ApiError {
     fn from(rejection: JsonRejection) -> Self {
+        if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            return Self::new(
+                StatusCode::PAYLOAD_TOO_LARGE,
+                format!("the request body is larger than {BODY_LIMIT} bytes"),
+            );
+        }
         Self::bad_request(format!(
             "bad request body: {}; send JSON like {{\"point\": \"air_temperature_setpoint\", \"value\": 350}}",
             rejection.body_text()
@@ -467,241 +480,6 @@ impl<S: Send + Sync> FromRequestParts<S> for ClientAddr {
                 .map_or_else(|| "unknown".to_owned(), |c| c.0.to_string()),
         ))
     }
-}
-
-/// Body of a write.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct WriteBody {
-    point: String,
-    value: serde_json::Value,
-}
-
-async fn write(
-    State(s): State<AppState>,
-    ClientAddr(client): ClientAddr,
-    Path(id): Path<String>,
-    headers: HeaderMap,
-    body: Result<Json<WriteBody>, JsonRejection>,
-) -> ApiResult<Response> {
-    let (point_text, new) = match &body {
-        Ok(Json(b)) => (b.point.clone(), b.value.clone()),
-        Err(_) => (String::new(), serde_json::Value::Null),
-    };
-    let mut attempt = Attempt {
-        state: &s,
-        client,
-        device: id.clone(),
-        point: point_text.clone(),
-        new,
-    };
-    // The order says what a caller learns: unknown device, writes off, token, body, value.
-    let Some(device) = s.cell.device_entry(&id) else {
-        return Err(attempt.refuse(unknown_device(&s.cell, &id), None).await);
-    };
-    if !s.writes.enabled {
-        let error = ApiError::new(
-            StatusCode::FORBIDDEN,
-            "writes are disabled on this gateway; start it with --allow-writes (and a token)",
-        );
-        return Err(attempt.refuse(error, None).await);
-    }
-    if let Err(error) = check_token(&headers, s.writes.token.as_deref()) {
-        return Err(attempt.refuse(error, None).await);
-    }
-    let Json(body) = match body {
-        Ok(body) => body,
-        Err(rejection) => return Err(attempt.refuse(rejection.into(), None).await),
-    };
-    // Accept the point's own name or its full id.
-    let name = body
-        .point
-        .strip_prefix(&format!("{}.", device.id))
-        .unwrap_or(&body.point)
-        .to_owned();
-    let point = match PointId::new(&device.id, &name) {
-        Ok(p) if device.point_index(&name).is_some() => p,
-        _ => {
-            let error = ApiError::not_found(format!(
-                "device {} has no point {:?}; writable points: {}",
-                device.id,
-                body.point,
-                device
-                    .points
-                    .iter()
-                    .filter(|p| p.writable.is_some())
-                    .map(|p| p.id.name())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ));
-            return Err(attempt.refuse(error, None).await);
-        }
-    };
-    attempt.point = point.to_string();
-    let value = match serde_json::from_value::<Value>(body.value.clone()) {
-        Ok(v) => v,
-        Err(_) => {
-            let error = ApiError::bad_request(format!(
-                "value must be a number or a string, not {}",
-                body.value
-            ));
-            return Err(attempt.refuse(error, None).await);
-        }
-    };
-    let old = device
-        .point_index(&name)
-        .and_then(|i| device.read().points.get(i).and_then(|p| p.value.clone()));
-    match s.cell.write(&point, &value).await {
-        Ok(outcome) => {
-            let spec = s.cell.point(&point);
-            let shown = |v: &Value| {
-                let label = spec.and_then(|p| p.label(v)).map(str::to_owned);
-                let unit = spec.and_then(|p| p.unit.clone());
-                label.unwrap_or_else(|| match unit {
-                    Some(u) => format!("{v} {u}"),
-                    None => v.to_string(),
-                })
-            };
-            let detail = format!(
-                "{point} set to {}{} by {}",
-                shown(&outcome.new),
-                outcome
-                    .old
-                    .as_ref()
-                    .map(|o| format!(" (was {})", shown(o)))
-                    .unwrap_or_default(),
-                attempt.client
-            );
-            s.cell.emit(Event {
-                t: Timestamp::now(),
-                kind: EventKind::Write,
-                line: Some(device.line.clone()),
-                device: Some(device.id.clone()),
-                point: Some(point.clone()),
-                message: detail.clone(),
-            });
-            attempt
-                .record(AuditResult::Accepted, outcome.old.clone(), &detail)
-                .await;
-            Ok(Json(json!({
-                "device": device.id,
-                "point": point,
-                "old": outcome.old,
-                "new": outcome.new,
-                "result": "accepted",
-                "detail": detail,
-            }))
-            .into_response())
-        }
-        Err(error) => {
-            let (status, result) = match &error {
-                WriteError::Invalid(_) => (StatusCode::BAD_REQUEST, AuditResult::Refused),
-                WriteError::UnknownPoint { .. } => (StatusCode::NOT_FOUND, AuditResult::Refused),
-                WriteError::Device(e) if e.kind == ErrorKind::Refused => {
-                    (StatusCode::BAD_GATEWAY, AuditResult::Refused)
-                }
-                WriteError::Device(e) if e.kind == ErrorKind::Timeout => {
-                    (StatusCode::GATEWAY_TIMEOUT, AuditResult::Failed)
-                }
-                WriteError::Device(_) => (StatusCode::BAD_GATEWAY, AuditResult::Failed),
-                _ => (StatusCode::SERVICE_UNAVAILABLE, AuditResult::Failed),
-            };
-            let error = ApiError::new(status, error.to_string());
-            attempt.record(result, old, &error.message).await;
-            Err(error)
-        }
-    }
-}
-
-/// A write attempt on its way to the audit table.
-struct Attempt<'a> {
-    state: &'a AppState,
-    client: String,
-    device: String,
-    point: String,
-    new: serde_json::Value,
-}
-
-impl Attempt<'_> {
-    /// Records a refusal before the wire and returns the error to answer with.
-    async fn refuse(&self, error: ApiError, old: Option<Value>) -> ApiError {
-        self.record(AuditResult::Refused, old, &error.message).await;
-        error
-    }
-
-    /// Writes the audit row and waits for its commit, so an answered request is on disk.
-    async fn record(&self, result: AuditResult, old: Option<Value>, detail: &str) {
-        let store = self.state.cell.store();
-        store.audit(AuditEntry {
-            t: Timestamp::now(),
-            client: self.client.clone(),
-            device: self.device.clone(),
-            point: self.point.clone(),
-            old,
-            new: self.new.clone(),
-            result,
-            detail: detail.to_owned(),
-        });
-        self.state
-            .cell
-            .metrics()
-            .writes
-            .get_or_create(&crate::metrics::WriteLabels {
-                result: match result {
-                    AuditResult::Accepted => "accepted",
-                    AuditResult::Refused => "refused",
-                    AuditResult::Failed => "failed",
-                }
-                .to_owned(),
-            })
-            .inc();
-        if let Err(e) = store.flush().await {
-            tracing::error!("audit row not committed: {e}");
-        }
-    }
-}
-
-/// Checks `Authorization: Bearer <token>`.
-fn check_token(headers: &HeaderMap, token: Option<&str>) -> ApiResult<()> {
-    let Some(expected) = token else {
-        return Err(ApiError::new(
-            StatusCode::FORBIDDEN,
-            "writes need a token and none is configured; set CELLBUS_TOKEN or token in the config",
-        ));
-    };
-    let Some(value) = headers.get(header::AUTHORIZATION) else {
-        return Err(ApiError::new(
-            StatusCode::UNAUTHORIZED,
-            "missing Authorization header; send Authorization: Bearer <token>",
-        ));
-    };
-    let given = value
-        .to_str()
-        .ok()
-        .and_then(|v| {
-            let (scheme, rest) = v.trim().split_once(' ')?;
-            scheme.eq_ignore_ascii_case("bearer").then(|| rest.trim())
-        })
-        .ok_or_else(|| {
-            ApiError::new(
-                StatusCode::UNAUTHORIZED,
-                "the Authorization header must be Bearer <token>",
-            )
-        })?;
-    if constant_time_eq(given.as_bytes(), expected.as_bytes()) {
-        Ok(())
-    } else {
-        Err(ApiError::new(StatusCode::UNAUTHORIZED, "wrong token"))
-    }
-}
-
-/// Compares without stopping at the first difference, so timing does not leak the token.
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    let mut diff = a.len() ^ b.len();
-    for (i, x) in a.iter().enumerate() {
-        diff |= usize::from(x ^ b.get(i % b.len().max(1)).copied().unwrap_or(0));
-    }
-    diff == 0
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@ use serde_json::{Value as Json, json};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tower::ServiceExt;
 
+use super::write::constant_time_eq;
 use super::*;
 use crate::testing::{Rig, rig};
 
@@ -401,23 +402,41 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
     assert_eq!(status, StatusCode::OK);
     let rows = audit["audit"].as_array().unwrap();
     let results: Vec<&str> = rows.iter().map(|r| r["result"].as_str().unwrap()).collect();
+    // Refusals without a valid token are counted, not stored; each valid write is
+    // recorded as attempted before the wire, then with its result.
     assert_eq!(
         results,
         vec![
-            "accepted", "accepted", "refused", "refused", "refused", "refused", "refused",
-            "refused", "refused"
+            "accepted",
+            "attempted",
+            "accepted",
+            "attempted",
+            "refused",
+            "refused",
+            "refused",
+            "refused"
         ]
     );
-    let accepted = &rows[1];
+    let accepted = &rows[2];
     assert_eq!(accepted["point"], "jbc1.air_temperature_setpoint");
     assert_eq!(accepted["new_value"], 333);
     assert!(accepted["old_value"].is_number());
+    assert_eq!(rows[3]["point"], "jbc1.air_temperature_setpoint");
     let (_, all) = get(&on, "/api/audit").await;
     assert_eq!(
         all["audit"].as_array().unwrap().len(),
-        10,
-        "the unknown device is audited too"
+        9,
+        "an authorised write to an unknown device is audited too"
     );
+    let unauthorised = rig
+        .cell
+        .metrics()
+        .writes
+        .get_or_create(&crate::metrics::WriteLabels {
+            result: "unauthorised".into(),
+        })
+        .get();
+    assert_eq!(unauthorised, 3, "writes off, no token, wrong token");
     let (_, events) = get(&on, "/api/events?kind=write").await;
     assert_eq!(events["events"].as_array().unwrap().len(), 2);
 }
@@ -502,8 +521,30 @@ async fn the_audit_names_the_client_address_over_a_socket() {
         response.contains("{\"error\":\"writes are disabled"),
         "{response}"
     );
+    assert!(
+        rig.cell
+            .store()
+            .audit_log(Some("jbc1"), 10)
+            .unwrap()
+            .is_empty(),
+        "a write refused before its token is checked is not stored"
+    );
+    // An authorised one names the client's address.
+    let app = app(&rig, true);
+    let addr = serve_on_loopback(app).await;
+    let response = raw_http(
+        addr,
+        &format!(
+            "POST /api/devices/jbc1/write HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\
+             Authorization: Bearer {TOKEN}\r\nContent-Type: application/json\r\n\
+             Content-Length: {}\r\n\r\n{body}",
+            body.len()
+        ),
+    )
+    .await;
+    assert!(response.starts_with("HTTP/1.1 "), "{response}");
     let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
-    assert_eq!(rows.len(), 1);
+    assert!(!rows.is_empty());
     assert!(
         rows[0].client.starts_with("127.0.0.1:"),
         "{}",
@@ -577,4 +618,93 @@ async fn a_write_the_device_does_not_answer_is_a_504_and_audited_as_failed() {
     let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
     assert_eq!(rows[0].result, "failed");
     assert_eq!(rows[0].point, "jbc1.air_flow_setpoint");
+    assert_eq!(rows[1].result, "attempted");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_write_whose_client_left_is_still_carried_out_and_audited() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let on = app(&rig, true);
+    let request = write_request(
+        "jbc1",
+        Some(TOKEN),
+        r#"{"point": "air_temperature_setpoint", "value": 400}"#,
+    );
+    // The client gives up after 1 ms, before the station has answered.
+    let gave_up = tokio::time::timeout(Duration::from_millis(1), on.clone().oneshot(request)).await;
+    assert!(gave_up.is_err(), "the client left before the answer");
+    // The write goes on without the client: its second audit row comes within seconds of
+    // the clock (the history writer is a real thread, so look a bounded number of times).
+    let mut rows = Vec::new();
+    for _ in 0..50 {
+        rig.cell.store().flush().await.unwrap();
+        rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
+        if rows.len() >= 2 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    assert_eq!(rig.models[0].lock().settings().air_temp, 400);
+    let results: Vec<&str> = rows.iter().map(|r| r.result.as_str()).collect();
+    assert_eq!(results, vec!["accepted", "attempted"]);
+}
+
+#[tokio::test(start_paused = true)]
+async fn refused_writes_with_huge_bodies_do_not_grow_the_database() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let huge = format!(
+        r#"{{"point": "air_temperature_setpoint", "value": "{}"}}"#,
+        "x".repeat(2 << 20)
+    );
+    let db = rig.dir.path().join(crate::store::DB_FILE);
+    rig.cell.store().flush().await.unwrap();
+    let before = std::fs::metadata(&db).unwrap().len()
+        + std::fs::metadata(db.with_extension("db-wal")).map_or(0, |m| m.len());
+    for app in [app(&rig, false), app(&rig, true)] {
+        for token in [None, Some("guess"), Some(TOKEN)] {
+            for _ in 0..17 {
+                let (status, _) = call(&app, write_request("jbc1", token, &huge)).await;
+                assert!(status.is_client_error(), "{status}");
+            }
+        }
+    }
+    rig.cell.store().flush().await.unwrap();
+    let size = |path: &std::path::Path| std::fs::metadata(path).map_or(0, |m| m.len());
+    let wal = db.with_extension("db-wal");
+    let after = size(&db) + size(&wal);
+    assert!(
+        after < before + 100_000,
+        "the database and its WAL grew from {before} to {after} bytes"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_client_that_guesses_tokens_is_told_to_wait_and_nothing_is_stored() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let addr = serve_on_loopback(app(&rig, true)).await;
+    let body = r#"{"point": "air_temperature_setpoint", "value": 333}"#;
+    let request = |token: &str| {
+        format!(
+            "POST /api/devices/jbc1/write HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\nauthorization: Bearer {token}\r\ncontent-length: {}\r\nconnection: close\r\n\r\n{body}",
+            body.len()
+        )
+    };
+    for _ in 0..MAX_TOKEN_FAILURES {
+        let answer = raw_http(addr, &request("guess")).await;
+        assert!(answer.starts_with("HTTP/1.1 401"), "{answer}");
+    }
+    let answer = raw_http(addr, &request("guess")).await;
+    assert!(answer.starts_with("HTTP/1.1 429"), "{answer}");
+    assert!(answer.to_lowercase().contains("retry-after:"), "{answer}");
+    // Even the right token waits until the window has passed.
+    let answer = raw_http(addr, &request(TOKEN)).await;
+    assert!(answer.starts_with("HTTP/1.1 429"), "{answer}");
+    tokio::time::sleep(FAILURE_WINDOW).await;
+    let answer = raw_http(addr, &request(TOKEN)).await;
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+    let rows = rig.cell.store().audit_log(None, 100).unwrap();
+    assert_eq!(rows.len(), 2, "only the authorised write: {rows:?}");
 }

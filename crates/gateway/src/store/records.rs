@@ -44,17 +44,22 @@ pub struct EventRecord {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AuditResult {
+    /// An authorised, valid write is about to go to the line (a second row says how it
+    /// ended).
+    Attempted,
     /// The device took the value.
     Accepted,
-    /// Refused before the wire (bad token, writes off, bad value) or by the device.
+    /// Refused before the wire (unknown point, bad value) or by the device.
     Refused,
     /// The device did not answer or the line failed.
     Failed,
 }
 
 impl AuditResult {
-    pub(super) fn as_str(self) -> &'static str {
+    /// The name stored and shown (`accepted`).
+    pub fn as_str(self) -> &'static str {
         match self {
+            AuditResult::Attempted => "attempted",
             AuditResult::Accepted => "accepted",
             AuditResult::Refused => "refused",
             AuditResult::Failed => "failed",
