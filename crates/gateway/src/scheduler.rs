@@ -273,7 +273,7 @@ impl LineTask {
             let line = match opened {
                 Ok(line) => line,
                 Err(error) => {
-                    let wait = reopen.next();
+                    let wait = reopen.next_wait();
                     self.line_failed(&error, wait);
                     let until = Instant::now() + wait;
                     if !self

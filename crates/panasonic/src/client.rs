@@ -891,7 +891,7 @@ impl Inner {
             );
         }
         loop {
-            tokio::time::sleep(backoff.next()).await;
+            tokio::time::sleep(backoff.next_wait()).await;
             let mut port1 = self.port1.lock().await;
             if port1.line.is_some() {
                 return;
@@ -944,7 +944,7 @@ async fn run_port2(inner: Arc<Inner>, endpoint: Endpoint, first: Line) {
         let current = match line.take() {
             Some(current) => current,
             None => {
-                tokio::time::sleep(backoff.next()).await;
+                tokio::time::sleep(backoff.next_wait()).await;
                 match inner.open(&endpoint, Port::Event).await {
                     Ok(current) => {
                         inner.notify(Notice::Connected {

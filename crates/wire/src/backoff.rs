@@ -37,7 +37,7 @@ impl Backoff {
     }
 }
 
-/// A running backoff: each [`next`](Self::next) gives a wait and doubles the one after.
+/// A running backoff: each [`next_wait`](Self::next_wait) gives a wait and doubles the one after.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BackoffTimer {
     config: Backoff,
@@ -46,7 +46,7 @@ pub struct BackoffTimer {
 
 impl BackoffTimer {
     /// The wait before the next attempt; the one after is twice as long (up to the cap).
-    pub fn next(&mut self) -> Duration {
+    pub fn next_wait(&mut self) -> Duration {
         let wait = self.next;
         self.next = wait
             .saturating_mul(2)
@@ -55,7 +55,7 @@ impl BackoffTimer {
         wait
     }
 
-    /// The wait the next [`next`](Self::next) gives.
+    /// The wait the next [`next_wait`](Self::next_wait) gives.
     pub fn peek(&self) -> Duration {
         self.next
     }
@@ -85,17 +85,17 @@ mod tests {
     fn a_timer_gives_the_same_waits_and_starts_over_when_reset() {
         let b = Backoff::new(S / 2, 3 * S);
         let mut timer = b.timer();
-        let waits: Vec<Duration> = (0..5).map(|_| timer.next()).collect();
+        let waits: Vec<Duration> = (0..5).map(|_| timer.next_wait()).collect();
         assert_eq!(waits, vec![S / 2, S, 2 * S, 3 * S, 3 * S]);
         assert_eq!(timer.peek(), 3 * S);
         timer.reset();
-        assert_eq!(timer.next(), S / 2);
+        assert_eq!(timer.next_wait(), S / 2);
     }
 
     #[test]
     fn a_cap_below_the_first_wait_wins() {
         let b = Backoff::new(5 * S, 2 * S);
         assert_eq!(b.after(1), 2 * S);
-        assert_eq!(b.timer().next(), 2 * S);
+        assert_eq!(b.timer().next_wait(), 2 * S);
     }
 }

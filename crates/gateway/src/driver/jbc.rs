@@ -9,6 +9,24 @@
 //! as the port status `00001`/`00000`). Ranges are the JTSE's ([`jbc::device`]'s constants);
 //! set points are also checked against the station's own limits (`MIT`/`MAT`, `MIF`/`MAF`,
 //! `MIE`/`MAE`) as last read, so a value the station would refuse with NAK 3 never goes out.
+//!
+//! # Damaged frames the block check misses
+//!
+//! The frame's block check is an XOR of its bytes, so two flipped bits in the same place of
+//! two characters cancel out (`00000` → `80800` passes): the noise soak met one in a
+//! million requests. So:
+//!
+//! - A value outside what the station can show (a writable point's range, -50 to 999 °C,
+//!   0 to 100 %, 0 to 1000 ‰) is bad, not good.
+//! - A changed value of any code except the live measurements (air and external
+//!   temperature, power) is *confirmed* before it is recorded or used as a write limit:
+//!   it is accepted when it equals the last confirmed value of its code, or when a second
+//!   read right away gives the same. When the two disagree, the poll gives no reading for
+//!   the code's points (they keep their last value, and turn stale if this lasts), or a
+//!   bad one when there is no confirmed value yet. An acknowledged write confirms the
+//!   value written. A steady station costs no extra request.
+//! - The live measurements change between two reads and are only range-checked: the
+//!   README states the residual risk.
 
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
@@ -125,6 +143,64 @@ const fn limited(mut d: Def, low: Code, high: Code) -> Def {
 const fn digit(mut d: Def, place: i32) -> Def {
     d.part = Part::StatusDigit(place);
     d
+}
+
+/// Temperatures a JTSE can show at all, °C; a reading outside was damaged on the line.
+const PLAUSIBLE_TEMP: RangeInclusive<i32> = -50..=999;
+
+/// A code's answer in one poll.
+enum Answer {
+    /// Plausible and, where needed, confirmed.
+    Good(jbc::Reading),
+    /// Two reads disagreed and the points keep their confirmed value: no reading.
+    Unconfirmed,
+    /// Why the points are bad.
+    Bad(DeviceError),
+}
+
+impl Def {
+    /// The values the station can show for this point, where that is known.
+    fn plausible(&self) -> Option<RangeInclusive<i32>> {
+        if let Some(range) = &self.range {
+            return Some(range.clone());
+        }
+        if self.part != Part::Whole || self.meaning != Quantity {
+            return None;
+        }
+        match self.code.unit()? {
+            jbc::code::Unit::Celsius => Some(PLAUSIBLE_TEMP),
+            jbc::code::Unit::Percent => Some(0..=100),
+            jbc::code::Unit::Permille => Some(0..=1000),
+            jbc::code::Unit::Hours | jbc::code::Unit::Cycles => None,
+        }
+    }
+
+    /// A value outside what the station can show is damage, not a reading.
+    fn check_plausible(&self, value: &Value) -> Result<(), DeviceError> {
+        let (Some(range), Some(n)) = (self.plausible(), value.as_number()) else {
+            return Ok(());
+        };
+        if n >= f64::from(*range.start()) && n <= f64::from(*range.end()) {
+            return Ok(());
+        }
+        Err(DeviceError::new(
+            ErrorKind::Decode,
+            format_args!(
+                "{} ({}) read as {n}, outside what the station can show ({} to {}): damaged \
+                 on the line?",
+                self.title,
+                self.code,
+                range.start(),
+                range.end()
+            ),
+        ))
+    }
+
+    /// Whether a changed value is confirmed by a second read: all but the live
+    /// measurements, which change between two reads.
+    fn confirmed(&self) -> bool {
+        !(self.group == LIVE && self.meaning == Quantity && self.range.is_none())
+    }
 }
 
 /// Every point, in the order a person reads them.
@@ -356,6 +432,8 @@ pub struct JbcDriver {
     client: Option<Client>,
     /// Last values read of the limit codes, for checking set points before the wire.
     limits: HashMap<Code, i32>,
+    /// The last confirmed value of each code that is confirmed (see the module doc).
+    confirmed: HashMap<Code, jbc::code::Value>,
 }
 
 impl JbcDriver {
@@ -385,6 +463,7 @@ impl JbcDriver {
             },
             client: None,
             limits: HashMap::new(),
+            confirmed: HashMap::new(),
         })
     }
 
@@ -454,21 +533,20 @@ impl JbcDriver {
     }
 
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
-        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
-        let mut answers: HashMap<Code, Result<jbc::Reading, DeviceError>> = HashMap::new();
+        let mut answers: HashMap<Code, Answer> = HashMap::new();
         let mut readings = Vec::new();
         for def in POINTS.iter().filter(|d| d.group == group) {
             let answer = match answers.entry(def.code) {
                 Entry::Occupied(known) => known.into_mut(),
-                Entry::Vacant(slot) => slot.insert(match client.read(def.code).await {
-                    Ok(reading) => Ok(reading),
-                    Err(e) if point_level(&e) => Err(classify(&e)),
-                    Err(e) => return Err(classify(&e)),
-                }),
+                Entry::Vacant(slot) => slot.insert(self.read_code(def.code, group).await?),
             };
             let value = match answer {
-                Ok(reading) => Ok(value_of(reading, def.part)),
-                Err(e) => Err(e.clone()),
+                Answer::Good(reading) => {
+                    let value = value_of(reading, def.part);
+                    def.check_plausible(&value).map(|()| value)
+                }
+                Answer::Unconfirmed => continue,
+                Answer::Bad(e) => Err(e.clone()),
             };
             readings.push(Reading {
                 point: PointId::new(&self.device, def.name)
@@ -477,13 +555,58 @@ impl JbcDriver {
             });
         }
         for (code, answer) in &answers {
-            if let Ok(reading) = answer
+            if let Answer::Good(reading) = answer
                 && let jbc::code::Value::Number(n) = reading.value()
             {
                 self.limits.insert(*code, n);
             }
         }
         Ok(readings)
+    }
+
+    /// Reads `code` for the points of `group`, checks its value is plausible for each of
+    /// them, and confirms a changed value by a second read (see the module doc). `Err`
+    /// only when the station cannot be reached at all.
+    async fn read_code(&mut self, code: Code, group: &str) -> Result<Answer, DeviceError> {
+        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
+        let first = match client.read(code).await {
+            Ok(reading) => reading,
+            Err(e) if point_level(&e) => return Ok(Answer::Bad(classify(&e))),
+            Err(e) => return Err(classify(&e)),
+        };
+        let defs = || {
+            POINTS
+                .iter()
+                .filter(move |d| d.code == code && d.group == group)
+        };
+        if let Some(error) = defs().find_map(|d| d.check_plausible(&value_of(&first, d.part)).err())
+        {
+            return Ok(Answer::Bad(error));
+        }
+        let value = first.value();
+        if !defs().any(Def::confirmed) || self.confirmed.get(&code) == Some(&value) {
+            return Ok(Answer::Good(first));
+        }
+        let second = client.read(code).await;
+        let agree = matches!(&second, Ok(again) if again.value() == value);
+        if agree {
+            self.confirmed.insert(code, value);
+            return Ok(Answer::Good(first));
+        }
+        let why = match second {
+            Ok(again) => format!("read as {first}, then as {again}"),
+            Err(e) if point_level(&e) => format!("read as {first}, then {}", classify(&e)),
+            Err(e) => return Err(classify(&e)),
+        };
+        tracing::warn!(device = %self.device, %code, "two reads disagree, not recorded: {why}");
+        if self.confirmed.contains_key(&code) {
+            Ok(Answer::Unconfirmed)
+        } else {
+            Ok(Answer::Bad(DeviceError::new(
+                ErrorKind::Decode,
+                format_args!("{code} {why}: not recorded until two reads agree"),
+            )))
+        }
     }
 
     async fn write_point(&mut self, point: &PointSpec, value: &Value) -> Result<(), WriteError> {
@@ -520,7 +643,11 @@ impl JbcDriver {
         client
             .write(def.code, number)
             .await
-            .map_err(|e| WriteError::Device(classify(&e)))
+            .map_err(|e| WriteError::Device(classify(&e)))?;
+        // Acknowledged: the station holds what was written.
+        self.confirmed
+            .insert(def.code, jbc::code::Value::Number(number));
+        Ok(())
     }
 }
 
@@ -593,6 +720,8 @@ fn classify(error: &ClientError) -> DeviceError {
 mod tests {
     use super::*;
     use jbc::device::{Station, StationConfig};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicUsize, Ordering};
     use wire::device::SharedModel;
 
     fn config(address: Option<i64>) -> DriverConfig {
@@ -625,6 +754,145 @@ mod tests {
             .unwrap_or_else(|| panic!("no reading for {name}"))
             .value
             .clone()
+    }
+
+    /// A station whose answers to one code can be damaged past the block check: bit
+    /// `mask` flipped in two characters of the data field (`at`, counted from its first),
+    /// which leaves the XOR unchanged.
+    struct Damaging {
+        station: wire::device::ModelLine<Station>,
+        code: [u8; 3],
+        mask: u8,
+        at: [usize; 2],
+        damage: Arc<AtomicUsize>,
+        requests: Arc<AtomicUsize>,
+    }
+
+    impl wire::Device for Damaging {
+        fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<wire::Transmit> {
+            self.requests.fetch_add(1, Ordering::SeqCst);
+            let asks = bytes.windows(3).any(|w| w == self.code);
+            let mut replies = self.station.receive(bytes, now);
+            if asks && self.damage.load(Ordering::SeqCst) > 0 {
+                self.damage.fetch_sub(1, Ordering::SeqCst);
+                for reply in &mut replies {
+                    // ... data(5) ETX BCC
+                    let data = reply.bytes.len() - 7;
+                    for at in self.at {
+                        reply.bytes[data + at] ^= self.mask;
+                    }
+                }
+            }
+            replies
+        }
+    }
+
+    struct DamageRig {
+        driver: JbcDriver,
+        model: SharedModel<Station>,
+        damage: Arc<AtomicUsize>,
+        requests: Arc<AtomicUsize>,
+    }
+
+    fn damaging_rig(code: Code, mask: u8, at: [usize; 2]) -> DamageRig {
+        let model = SharedModel::new(Station::new(StationConfig::default()));
+        let (damage, requests) = (Arc::new(AtomicUsize::new(0)), Arc::new(AtomicUsize::new(0)));
+        let device = Damaging {
+            station: model.line(),
+            code: *code.raw().as_bytes(),
+            mask,
+            at,
+            damage: Arc::clone(&damage),
+            requests: Arc::clone(&requests),
+        };
+        let (a, b) = tokio::io::duplex(1024);
+        tokio::spawn(link::serve::serve_stream(b, device, None));
+        let mut driver = JbcDriver::new(&config(Some(1))).unwrap();
+        driver.attach(SharedLine::new(link::Line::from_stream(a, "test", None)));
+        DamageRig {
+            driver,
+            model,
+            damage,
+            requests,
+        }
+    }
+
+    /// Another master sets `code` on the station, over a line of its own.
+    async fn another_master_writes(model: &SharedModel<Station>, code: Code, value: i32) {
+        let (a, b) = tokio::io::duplex(1024);
+        tokio::spawn(link::serve::serve_stream(b, model.line(), None));
+        let mut client = Client::new(
+            SharedLine::new(link::Line::from_stream(a, "other", None)),
+            ClientConfig::default(),
+        );
+        client.write(code, value).await.unwrap();
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_set_point_damaged_past_the_block_check_is_not_recorded() {
+        let set_point = Code::SelectAirTemp(PORT);
+        let mut rig = damaging_rig(set_point, 0x01, [2, 3]);
+        let first = rig.driver.poll(LIVE).await.unwrap();
+        assert_eq!(
+            value(&first, "air_temperature_setpoint"),
+            Ok(Value::Number(350.0))
+        );
+        // 00350 arrives as 00240: plausible, and its block check still holds.
+        rig.damage.store(1, Ordering::SeqCst);
+        let damaged = rig.driver.poll(LIVE).await.unwrap();
+        assert!(
+            damaged
+                .iter()
+                .all(|r| r.point.name() != "air_temperature_setpoint"),
+            "the damaged set point is not recorded: {damaged:?}"
+        );
+        let after = rig.driver.poll(LIVE).await.unwrap();
+        assert_eq!(
+            value(&after, "air_temperature_setpoint"),
+            Ok(Value::Number(350.0))
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_damaged_value_outside_what_the_station_can_show_is_bad() {
+        let adjust = Code::AdjustTemp(PORT, Tool::Jt);
+        let mut rig = damaging_rig(adjust, 0x08, [0, 2]);
+        // 00000 arrives as 80800, the soak's find.
+        rig.damage.store(1, Ordering::SeqCst);
+        let readings = rig.driver.poll(SETTINGS).await.unwrap();
+        let error = value(&readings, "adjust_jt").unwrap_err();
+        assert_eq!(error.kind, ErrorKind::Decode);
+        assert!(error.message.contains("80800"), "{error}");
+        assert!(error.message.contains("damaged"), "{error}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_real_change_is_recorded_after_one_confirming_read_and_a_steady_station_costs_none() {
+        let set_point = Code::SelectAirTemp(PORT);
+        let mut rig = damaging_rig(set_point, 0x01, [2, 3]);
+        rig.driver.poll(LIVE).await.unwrap();
+        let codes = {
+            let mut codes: Vec<Code> = POINTS
+                .iter()
+                .filter(|d| d.group == LIVE)
+                .map(|d| d.code)
+                .collect();
+            codes.dedup();
+            codes.len()
+        };
+        let before = rig.requests.load(Ordering::SeqCst);
+        for _ in 0..5 {
+            rig.driver.poll(LIVE).await.unwrap();
+        }
+        assert_eq!(rig.requests.load(Ordering::SeqCst) - before, 5 * codes);
+        another_master_writes(&rig.model, set_point, 300).await;
+        let before = rig.requests.load(Ordering::SeqCst);
+        let changed = rig.driver.poll(LIVE).await.unwrap();
+        assert_eq!(
+            value(&changed, "air_temperature_setpoint"),
+            Ok(Value::Number(300.0))
+        );
+        assert_eq!(rig.requests.load(Ordering::SeqCst) - before, codes + 1);
     }
 
     #[test]

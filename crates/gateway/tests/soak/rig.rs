@@ -14,8 +14,11 @@
 //! phase (no noise) first finds the points that keep one value (settings, counters, the
 //! fault number, registers), the noisy phase then must never publish another value as
 //! good for them, and a clean phase at the end checks that the truth still holds (a point
-//! that changed on its own is left out, and counted). Thermosald run-time measurements
-//! change all the time and carry no checksum: they are not judged, and the README says so.
+//! that changed on its own is left out, and counted). Measurements the drivers do not
+//! confirm by a second read because they change between reads are the residual risk the
+//! README states: an idle JBC station's temperatures and power keep one value and are
+//! counted apart; Thermosald run-time values move with every sealing cycle and are not
+//! judged. Every other wrong value fails the soak.
 
 #![allow(dead_code)] // each of the test and the bench uses part of it
 
@@ -112,6 +115,10 @@ pub struct SoakReport {
     pub wrong: BTreeMap<&'static str, u64>,
     /// Up to ten wrong values, `point: truth -> published`.
     pub wrong_examples: Vec<String>,
+    /// Measurements (not confirmed by a second read) judged, by protocol.
+    pub measurement_points: BTreeMap<&'static str, usize>,
+    /// Wrong measurements published as good, by protocol: the residual risk.
+    pub measurement_wrong: BTreeMap<&'static str, u64>,
     /// Points that kept one value in the calm phase but changed on their own by the end.
     pub drifted_points: usize,
     /// Live messages the soak missed (it fell behind the change stream): must be 0 for
@@ -171,6 +178,12 @@ impl SoakReport {
                 "{protocol}: {points} points judged, {} good values published, {} wrong",
                 self.judged_values.get(protocol).copied().unwrap_or(0),
                 self.wrong.get(protocol).copied().unwrap_or(0)
+            ));
+        }
+        for (protocol, points) in &self.measurement_points {
+            out.push(format!(
+                "{protocol} measurements (not confirmed, residual risk): {points} points judged, {} wrong",
+                self.measurement_wrong.get(protocol).copied().unwrap_or(0)
             ));
         }
         for example in &self.wrong_examples {
@@ -300,7 +313,12 @@ pub async fn run(options: SoakOptions) -> Result<SoakReport, SoakError> {
         if drifted.contains(point) {
             continue;
         }
-        *report.judged_points.entry(truth.protocol).or_default() += 1;
+        let points = if truth.measurement {
+            &mut report.measurement_points
+        } else {
+            &mut report.judged_points
+        };
+        *points.entry(truth.protocol).or_default() += 1;
     }
     for (point, published) in &watcher.published {
         if drifted.contains(point) {
@@ -309,14 +327,27 @@ pub async fn run(options: SoakOptions) -> Result<SoakReport, SoakError> {
         let Some(truth) = watcher.truth.get(point) else {
             continue;
         };
-        *report.judged_values.entry(truth.protocol).or_default() += published.len() as u64;
+        if !truth.measurement {
+            *report.judged_values.entry(truth.protocol).or_default() += published.len() as u64;
+        }
         for value in published {
             if *value != truth.value {
-                *report.wrong.entry(truth.protocol).or_default() += 1;
+                let wrong = if truth.measurement {
+                    &mut report.measurement_wrong
+                } else {
+                    &mut report.wrong
+                };
+                *wrong.entry(truth.protocol).or_default() += 1;
                 if report.wrong_examples.len() < 10 {
-                    report
-                        .wrong_examples
-                        .push(format!("{point}: {:?} -> {value:?}", truth.value));
+                    report.wrong_examples.push(format!(
+                        "{point}{}: {:?} -> {value:?}",
+                        if truth.measurement {
+                            " (measurement)"
+                        } else {
+                            ""
+                        },
+                        truth.value
+                    ));
                 }
             }
         }
@@ -570,14 +601,23 @@ enum Phase {
 
 struct Truth {
     protocol: &'static str,
+    /// Not confirmed by a second read (it changes between reads).
+    measurement: bool,
     value: Value,
+}
+
+/// What the soak knows of a point.
+#[derive(Debug, Clone, Copy)]
+struct Judged {
+    protocol: &'static str,
+    measurement: bool,
 }
 
 /// Follows the gateway's change stream through the phases.
 struct Watcher {
     live: broadcast::Receiver<LiveMessage>,
     phase: Phase,
-    protocols: HashMap<PointId, &'static str>,
+    protocols: HashMap<PointId, Judged>,
     /// Good values seen in the calm phase, per point.
     calm: HashMap<PointId, Vec<Value>>,
     truth: HashMap<PointId, Truth>,
@@ -600,17 +640,31 @@ impl Watcher {
                 continue;
             };
             for point in &entry.points {
-                // Thermosald measurements change all the time and carry no checksum.
-                let judged = match entry.protocol {
-                    Protocol::Thermosald => {
-                        point.group != gateway::driver::thermosald::LIVE
-                            || point.id.name() == "fault"
-                    }
-                    _ => true,
-                };
-                if judged {
-                    protocols.insert(point.id.clone(), entry.protocol.as_str());
+                // Thermosald run-time values move with every sealing cycle: no truth.
+                if entry.protocol == Protocol::Thermosald
+                    && point.group == gateway::driver::thermosald::LIVE
+                    && point.id.name() != "fault"
+                {
+                    continue;
                 }
+                // What the drivers do not confirm: values that change between two reads
+                // (an idle station's temperatures and power keep one value, so they can be
+                // judged, apart).
+                let measurement = match entry.protocol {
+                    Protocol::Jbc => {
+                        point.group == gateway::driver::jbc::LIVE
+                            && point.writable.is_none()
+                            && point.kind == gateway::point::PointKind::Numeric
+                    }
+                    _ => false,
+                };
+                protocols.insert(
+                    point.id.clone(),
+                    Judged {
+                        protocol: entry.protocol.as_str(),
+                        measurement,
+                    },
+                );
             }
         }
         Self {
@@ -701,12 +755,13 @@ impl Watcher {
                 continue;
             };
             if values.iter().all(|v| v == first)
-                && let Some(protocol) = self.protocols.get(point)
+                && let Some(judged) = self.protocols.get(point)
             {
                 self.truth.insert(
                     point.clone(),
                     Truth {
-                        protocol,
+                        protocol: judged.protocol,
+                        measurement: judged.measurement,
                         value: first.clone(),
                     },
                 );
