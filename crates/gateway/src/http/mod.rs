@@ -55,6 +55,18 @@ pub const OPENAPI: &str = include_str!("openapi.json");
 /// Most rows one event or audit listing returns.
 pub const MAX_LIMIT: usize = 10_000;
 
+/// Most buckets one history query returns; a smaller `step` over the span is refused.
+pub const MAX_BUCKETS: usize = 10_000;
+
+/// Most bytes of rows one audit listing returns (`truncated` says when it stopped).
+pub const MAX_AUDIT_BYTES: usize = 4 << 20;
+
+/// History, event and audit queries running at once; more wait their turn.
+pub const MAX_CONCURRENT_QUERIES: usize = 4;
+
+/// How long a query waits for its turn before the answer is 503.
+const QUERY_WAIT: Duration = Duration::from_secs(10);
+
 /// Default length of a history query without `from`.
 const DEFAULT_HISTORY: Duration = Duration::from_secs(3600);
 
@@ -75,6 +87,7 @@ pub struct AppState {
     started: Timestamp,
     shutdown: watch::Receiver<bool>,
     guard: Arc<write::Guard>,
+    queries: Arc<tokio::sync::Semaphore>,
 }
 
 /// The router over `cell`; event streams end when `shutdown` turns true.
@@ -85,6 +98,7 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
         started: Timestamp::now(),
         shutdown,
         guard: Arc::default(),
+        queries: Arc::new(tokio::sync::Semaphore::new(MAX_CONCURRENT_QUERIES)),
     };
     Router::new()
         .route("/healthz", get(healthz))
@@ -310,10 +324,22 @@ async fn history(
             ))),
         })
         .transpose()?;
-    let store = s.cell.store().clone();
-    let history = tokio::task::spawn_blocking(move || store.history(&point, from, to, step))
-        .await
-        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))??;
+    if let Some(step) = step {
+        let span = u128::try_from(to.millis().saturating_sub(from.millis())).unwrap_or(0);
+        let buckets = span.div_ceil(step.as_millis().max(1));
+        if buckets > MAX_BUCKETS as u128 {
+            let least = Duration::from_millis(
+                u64::try_from(span.div_ceil(MAX_BUCKETS as u128)).unwrap_or(u64::MAX),
+            );
+            return Err(ApiError::bad_request(format!(
+                "from {from} to {to} in steps of {} would be {buckets} buckets; the most is \
+                 {MAX_BUCKETS}: use a step of {} or more, or a shorter span",
+                humantime::format_duration(step),
+                humantime::format_duration(round_up_to_second(least))
+            )));
+        }
+    }
+    let history = run_query(&s, move |store| store.history(&point, from, to, step)).await?;
     Ok(Json(history).into_response())
 }
 
@@ -326,6 +352,35 @@ struct EventsQuery {
     device: Option<String>,
     kind: Option<String>,
     limit: Option<usize>,
+}
+
+/// Runs a query of the history on a blocking thread, at most [`MAX_CONCURRENT_QUERIES`] at once.
+async fn run_query<T: Send + 'static>(
+    s: &AppState,
+    run: impl FnOnce(crate::store::StoreHandle) -> Result<T, crate::store::StoreError> + Send + 'static,
+) -> ApiResult<T> {
+    let busy = || {
+        ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!(
+                "the history is busy with {MAX_CONCURRENT_QUERIES} other queries; try again shortly"
+            ),
+        )
+    };
+    let _turn = tokio::time::timeout(QUERY_WAIT, Arc::clone(&s.queries).acquire_owned())
+        .await
+        .map_err(|_| busy())?
+        .map_err(|_| busy())?;
+    let store = s.cell.store().clone();
+    tokio::task::spawn_blocking(move || run(store))
+        .await
+        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?
+        .map_err(ApiError::from)
+}
+
+/// `d` rounded up to whole seconds (at least one), for a step to suggest.
+fn round_up_to_second(d: Duration) -> Duration {
+    Duration::from_secs(d.as_secs() + u64::from(d.subsec_nanos() > 0)).max(Duration::from_secs(1))
 }
 
 fn check_limit(limit: Option<usize>) -> ApiResult<usize> {
@@ -368,10 +423,7 @@ async fn events(
         kind,
         limit: check_limit(q.limit)?,
     };
-    let store = s.cell.store().clone();
-    let events = tokio::task::spawn_blocking(move || store.events(&filter))
-        .await
-        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))??;
+    let events = run_query(&s, move |store| store.events(&filter)).await?;
     Ok(Json(json!({ "events": events })).into_response())
 }
 
@@ -389,11 +441,22 @@ async fn audit(
 ) -> ApiResult<Response> {
     let Query(q) = query?;
     let limit = check_limit(q.limit)?;
-    let store = s.cell.store().clone();
-    let rows = tokio::task::spawn_blocking(move || store.audit_log(q.device.as_deref(), limit))
-        .await
-        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))??;
-    Ok(Json(json!({ "audit": rows })).into_response())
+    let rows = run_query(&s, move |store| store.audit_log(q.device.as_deref(), limit)).await?;
+    // Bounded by bytes as well as rows: a listing stops before MAX_AUDIT_BYTES.
+    let mut kept = Vec::with_capacity(rows.len());
+    let mut bytes = 0;
+    let mut truncated = false;
+    for row in rows {
+        let row = serde_json::to_value(row)
+            .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
+        bytes += row.to_string().len();
+        if bytes > MAX_AUDIT_BYTES {
+            truncated = true;
+            break;
+        }
+        kept.push(row);
+    }
+    Ok(Json(json!({ "audit": kept, "truncated": truncated })).into_response())
 }
 
 async fn openapi() -> Response {

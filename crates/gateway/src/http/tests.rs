@@ -708,3 +708,29 @@ async fn a_client_that_guesses_tokens_is_told_to_wait_and_nothing_is_stored() {
     let rows = rig.cell.store().audit_log(None, 100).unwrap();
     assert_eq!(rows.len(), 2, "only the authorised write: {rows:?}");
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_history_query_for_too_many_buckets_is_refused_with_the_smallest_step_allowed() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let on = app(&rig, false);
+    let (status, reply) = get(
+        &on,
+        "/api/history?point=jbc1.air_temperature&from=-30d&step=1ms",
+    )
+    .await;
+    assert_eq!(status, StatusCode::BAD_REQUEST, "{reply}");
+    let error = error_of(&reply);
+    assert!(error.contains("2592000000 buckets"), "{error}");
+    assert!(error.contains("the most is 10000"), "{error}");
+    assert!(error.contains("use a step of 4m 20s or more"), "{error}");
+    let (status, reply) = get(
+        &on,
+        "/api/history?point=jbc1.air_temperature&from=-30d&step=5m",
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{reply}");
+    let (status, reply) = get(&on, "/api/audit").await;
+    assert_eq!(status, StatusCode::OK, "{reply}");
+    assert_eq!(reply["truncated"], false);
+}

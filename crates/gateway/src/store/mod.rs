@@ -45,6 +45,9 @@ mod writer;
 
 pub use records::*;
 
+/// Longest text of one audit field an audit query returns, in characters.
+pub const AUDIT_FIELD_MAX: i64 = 2048;
+
 use crate::event::{Event, EventKind};
 use query::*;
 use schema::*;

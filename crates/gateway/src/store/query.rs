@@ -126,7 +126,9 @@ impl StoreHandle {
         })
     }
 
-    /// Stored write attempts, newest first.
+    /// Stored write attempts, newest first. Each text field is cut to
+    /// [`AUDIT_FIELD_MAX`] characters as it is read (rows stored before fields were cut
+    /// on writing can be large), and a value cut that way is shown as text.
     pub fn audit_log(
         &self,
         device: Option<&str>,
@@ -134,14 +136,23 @@ impl StoreHandle {
     ) -> Result<Vec<AuditRecord>, StoreError> {
         self.readers.with(|conn| {
             let mut stmt = conn.prepare_cached(
-                "SELECT id, t, client, device, point, old_value, new_value, result, detail \
+                "SELECT id, t, substr(client, 1, ?3), substr(device, 1, ?3), \
+                 substr(point, 1, ?3), substr(old_value, 1, ?3), substr(new_value, 1, ?3), \
+                 result, substr(detail, 1, ?3) \
                  FROM audit WHERE (?1 IS NULL OR device = ?1) ORDER BY id DESC LIMIT ?2",
             )?;
             let json = |text: Option<String>| {
-                text.and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                text.map(|t| {
+                    serde_json::from_str::<serde_json::Value>(&t)
+                        .unwrap_or(serde_json::Value::String(t))
+                })
             };
             let rows = stmt.query_map(
-                params![device, i64::try_from(limit).unwrap_or(i64::MAX)],
+                params![
+                    device,
+                    i64::try_from(limit).unwrap_or(i64::MAX),
+                    AUDIT_FIELD_MAX
+                ],
                 |r| {
                     Ok(AuditRecord {
                         id: r.get(0)?,
