@@ -1,6 +1,6 @@
 //! `cellbus serve`: the whole gateway, from options to a graceful stop.
 
-use std::future::{Future, IntoFuture};
+use std::future::Future;
 use std::io::Write;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -187,15 +187,12 @@ impl Gateway {
             ..
         } = self;
         let app = http::router(Arc::clone(&cell), writes, stop.subscribe());
-        let mut stopping = stop.subscribe();
-        let server = axum::serve(
+        let server = http::server::serve(
             listener,
-            app.into_make_service_with_connect_info::<SocketAddr>(),
-        )
-        .with_graceful_shutdown(async move {
-            let _ = stopping.wait_for(|stop| *stop).await;
-        })
-        .into_future();
+            app,
+            http::server::Limits::default(),
+            stop.subscribe(),
+        );
         tokio::pin!(server);
         let served = tokio::select! {
             served = &mut server => served,

@@ -29,6 +29,7 @@ use crate::point::PointId;
 use crate::store::EventFilter;
 use crate::time::Timestamp;
 
+pub mod server;
 pub mod web;
 mod write;
 
