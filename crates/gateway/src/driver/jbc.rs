@@ -15,15 +15,14 @@ use std::collections::hash_map::Entry;
 use std::ops::RangeInclusive;
 use std::time::Duration;
 
-use jbc::client::{Client, ClientConfig, ClientError, Trouble};
+use jbc::client::{Client, ClientConfig, ClientError, ExchangeError};
 use jbc::code::{Code, Port, StationError, Tool, ToolError};
 use jbc::device::{ADJUST_TEMP_RANGE, AIR_FLOW_RANGE, AIR_TEMP_RANGE, EXTERNAL_TEMP_RANGE};
 use jbc::frame::{Address, Route};
 use link::{SerialSettings, SharedLine};
 
 use super::{
-    BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
-    enum_states,
+    BoxFuture, DeviceError, Driver, DriverConfig, PollGroup, Reading, WriteError, enum_states,
 };
 use crate::point::{
     AlarmRule, DeviceId, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
@@ -462,8 +461,8 @@ impl JbcDriver {
                 Entry::Occupied(known) => known.into_mut(),
                 Entry::Vacant(slot) => slot.insert(match client.read(def.code).await {
                     Ok(reading) => Ok(reading),
-                    Err(e) if point_level(&e) => Err(classify(&e)),
-                    Err(e) => return Err(classify(&e)),
+                    Err(e) if point_level(&e) => Err(DeviceError::of(&e)),
+                    Err(e) => return Err(DeviceError::of(&e)),
                 }),
             };
             let value = match answer {
@@ -520,7 +519,7 @@ impl JbcDriver {
         client
             .write(def.code, number)
             .await
-            .map_err(|e| WriteError::Device(classify(&e)))
+            .map_err(|e| WriteError::Device(DeviceError::of(&e)))
     }
 }
 
@@ -569,29 +568,15 @@ fn value_of(reading: &jbc::Reading, part: Part) -> Value {
 fn point_level(error: &ClientError) -> bool {
     matches!(
         error,
-        ClientError::Refused { .. } | ClientError::BadValue { .. } | ClientError::Request(_)
+        ClientError::BadValue { .. }
+            | ClientError::Exchange(ExchangeError::Refused { .. } | ExchangeError::Request(_))
     )
-}
-
-/// The kind of a client error.
-fn classify(error: &ClientError) -> DeviceError {
-    let kind = match error {
-        ClientError::Request(_) | ClientError::Refused { .. } => ErrorKind::Refused,
-        ClientError::BadValue { .. } => ErrorKind::Decode,
-        ClientError::NoAnswer { last, .. } => match last {
-            Trouble::Silence => ErrorKind::Timeout,
-            Trouble::Damaged(_) => ErrorKind::Decode,
-            _ => ErrorKind::Line,
-        },
-        ClientError::Line { source, .. } if source.is_fatal() => ErrorKind::Disconnected,
-        _ => ErrorKind::Line,
-    };
-    DeviceError::new(kind, error)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::driver::ErrorKind;
     use jbc::device::{Station, StationConfig};
     use wire::device::SharedModel;
 

@@ -595,6 +595,10 @@ async fn write(
         Err(error) => {
             let (status, result) = match &error {
                 WriteError::Invalid(_) => (StatusCode::BAD_REQUEST, AuditResult::Refused),
+                // The protocol crate refused to build the request: never reached the device.
+                WriteError::Device(e) if e.kind == ErrorKind::Usage => {
+                    (StatusCode::BAD_REQUEST, AuditResult::Refused)
+                }
                 WriteError::UnknownPoint { .. } => (StatusCode::NOT_FOUND, AuditResult::Refused),
                 WriteError::Device(e) if e.kind == ErrorKind::Refused => {
                     (StatusCode::BAD_GATEWAY, AuditResult::Refused)
