@@ -115,18 +115,8 @@ impl Action {
     }
 }
 
-/// A client error is the device's doing (exit 1), except a request refused before the wire
-/// (exit 2: the arguments were wrong).
-fn device_error(err: jbc::client::ClientError) -> anyhow::Error {
-    if err.is_device_error() {
-        err.into()
-    } else {
-        usage(err)
-    }
-}
-
 async fn read(client: &mut Client, code: Code, json: bool) -> anyhow::Result<ExitCode> {
-    let reading = client.read(code).await.map_err(device_error)?;
+    let reading = client.read(code).await.map_err(output::failure)?;
     if json {
         output::line(reading_json(code, &reading))?;
     } else {
@@ -141,7 +131,7 @@ async fn write(
     value: i32,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    client.write(code, value).await.map_err(device_error)?;
+    client.write(code, value).await.map_err(output::failure)?;
     if json {
         output::line(json!({ "code": code.to_string(), "value": value, "ok": true }))?;
     } else {
@@ -187,7 +177,10 @@ async fn status(client: &mut Client, json: bool) -> anyhow::Result<ExitCode> {
             failures += 1;
             if matches!(
                 e,
-                jbc::client::ClientError::NoAnswer { .. } | jbc::client::ClientError::Line { .. }
+                jbc::client::ClientError::Exchange(
+                    jbc::client::ExchangeError::NoAnswer { .. }
+                        | jbc::client::ExchangeError::Line { .. }
+                )
             ) {
                 // A station that does not answer one read will not answer the others.
                 return Err(e).context("reading the station's status");
@@ -226,7 +219,7 @@ async fn watch(client: &mut Client, interval: Duration, json: bool) -> anyhow::R
         }
         let mut readings = Vec::with_capacity(codes.len());
         for &code in &codes {
-            readings.push(client.read(code).await.map_err(device_error)?);
+            readings.push(client.read(code).await.map_err(output::failure)?);
         }
         let elapsed = format!("{:.1} s", started.elapsed().as_secs_f64());
         if json {

@@ -8,7 +8,9 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use jbus::client::{Client, ClientConfig, ClientError, DEFAULT_RETRIES, DEFAULT_TURNAROUND};
+use jbus::client::{
+    Client, ClientConfig, ClientError, DEFAULT_RETRIES, DEFAULT_TURNAROUND, UnitRefusal,
+};
 use jbus::cross::device::CrossTwin;
 use jbus::cross::{CrossState, NamedBit, Phases, Source};
 use jbus::rtu::{Addressed, Answer, Broadcast, Request, Unit, Write};
@@ -230,7 +232,7 @@ fn modbus_request(action: &ModbusAction) -> Result<Request, jbus::rtu::InvalidVa
 
 /// An exception also goes to stdout as JSON when asked, so scripts see its number.
 fn refusal(err: ClientError, request: &Addressed, json: bool) -> anyhow::Result<anyhow::Error> {
-    if let (true, ClientError::Exception { exception, .. }) = (json, &err) {
+    if let (true, Some(UnitRefusal { exception, .. })) = (json, err.refusal()) {
         output::line(json!({
             "unit": request.unit.get(),
             "address": request.request.address(),
@@ -240,17 +242,7 @@ fn refusal(err: ClientError, request: &Addressed, json: bool) -> anyhow::Result<
             },
         }))?;
     }
-    Ok(device_error(err))
-}
-
-/// A client error is the device's doing (exit 1), except a request refused before the wire
-/// (exit 2: the arguments were wrong).
-fn device_error(err: ClientError) -> anyhow::Error {
-    if err.is_device_error() {
-        err.into()
-    } else {
-        usage(err)
-    }
+    Ok(output::failure(err))
 }
 
 fn print_answer(request: &Addressed, answer: &Answer, json: bool) -> anyhow::Result<()> {
@@ -388,7 +380,7 @@ pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
             let state = client
                 .read_cross(unit)
                 .await
-                .map_err(device_error)
+                .map_err(output::failure)
                 .with_context(|| format!("reading the CROSS at unit {unit} on {endpoint}"))?;
             if args.line.json {
                 output::line(cross_json(unit, &state))?;

@@ -3,6 +3,8 @@
 use std::io::Write;
 use std::process::ExitCode;
 
+use wire::{Failure, FailureKind};
+
 /// A mistake in what the user asked (exit code 2), as opposed to a device or line failure
 /// (exit code 1).
 #[derive(Debug, thiserror::Error)]
@@ -12,6 +14,16 @@ pub struct UsageError(pub String);
 /// Makes a usage error (exit code 2) from anything printable.
 pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
     UsageError(message.to_string()).into()
+}
+
+/// A client's error as the command's error, classified by its [`Failure::kind`]: our own
+/// bad request is a usage error (exit 2), anything the device or its line did exits 1.
+pub fn failure<E: Failure + Send + Sync + 'static>(error: E) -> anyhow::Error {
+    if error.kind() == FailureKind::Usage {
+        usage(error)
+    } else {
+        error.into()
+    }
 }
 
 /// 2 for usage errors, 1 for everything else (the device refused, timed out, the line failed).
@@ -123,6 +135,38 @@ mod tests {
                 .unwrap_err()
                 .to_string()
                 .contains("odd number")
+        );
+    }
+
+    #[test]
+    fn a_request_the_client_refused_to_build_exits_2_not_as_a_device_refusal() {
+        let request = jbc::message::Request::write("AT1".parse().expect("a code"), 100)
+            .expect_err("AT1 is read-only");
+        let err = failure(jbc::client::ClientError::from(request));
+        assert_eq!(exit_code_for(&err), ExitCode::from(2));
+
+        let count = jbus::rtu::Request::read_holding_registers(0, 126).expect_err("too many");
+        let err = failure(jbus::client::ClientError::from(count));
+        assert_eq!(exit_code_for(&err), ExitCode::from(2));
+    }
+
+    #[test]
+    fn a_device_refusal_exits_1() {
+        let refusal = jbc::client::Refusal {
+            request: "WST1 00900".to_owned(),
+            reason: jbc::code::NakReason::OutOfRange,
+            number: 3,
+        };
+        let err = failure(jbc::client::ClientError::Exchange(
+            wire::ExchangeError::Refused {
+                endpoint: "tcp://127.0.0.1:1".to_owned(),
+                refusal,
+            },
+        ));
+        assert_eq!(exit_code_for(&err), ExitCode::from(1));
+        assert_eq!(
+            err.to_string(),
+            "station refused WST1 00900: out of range (00003)"
         );
     }
 

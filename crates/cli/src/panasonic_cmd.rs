@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use panasonic::client::{Client, ClientConfig, ClientError, DEFAULT_RETRIES, Notice};
+use panasonic::client::{Client, ClientConfig, DEFAULT_RETRIES, Notice};
 use panasonic::message::{COMMAND_LEN, HEADER_LEN, TERMINATOR_LEN};
 use panasonic::packet::{Annotated, Packet, annotate};
 use panasonic::server::TwinServer;
@@ -163,10 +163,10 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
         config.event_port = Some(events_port);
         return events(config, json, count).await;
     }
-    let (client, _events) = Client::connect(config).await.map_err(device)?;
+    let (client, _events) = Client::connect(config).await.map_err(output::failure)?;
     match action {
         Action::Status { json } => {
-            let status = client.status().await.map_err(device)?;
+            let status = client.status().await.map_err(output::failure)?;
             if json {
                 output::line(serde_json::to_string(&status)?)?;
             } else {
@@ -175,7 +175,7 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
             }
         }
         Action::Program { json } => {
-            let name = client.current_program().await.map_err(device)?;
+            let name = client.current_program().await.map_err(output::failure)?;
             if json {
                 output::line(json!({ "program": name }))?;
             } else {
@@ -183,7 +183,7 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
             }
         }
         Action::Programs { json } => {
-            let list = client.program_list().await.map_err(device)?;
+            let list = client.program_list().await.map_err(output::failure)?;
             if json {
                 output::line(serde_json::to_string(&list)?)?;
             } else {
@@ -197,7 +197,7 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
                 scope: ProductionScope::GrandTotal,
                 clear,
             };
-            let data = client.production(request).await.map_err(device)?;
+            let data = client.production(request).await.map_err(output::failure)?;
             if json {
                 output::line(serde_json::to_string(&data)?)?;
             } else {
@@ -208,7 +208,10 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
             }
         }
         Action::Upload { name, out } => {
-            let data = client.upload(Target::Product(name)).await.map_err(device)?;
+            let data = client
+                .upload(Target::Product(name))
+                .await
+                .map_err(output::failure)?;
             match out {
                 Some(path) => {
                     std::fs::write(&path, &data)
@@ -232,7 +235,7 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
             client
                 .download(Target::Product(name.clone()), data)
                 .await
-                .map_err(device)?;
+                .map_err(output::failure)?;
             output::line(format!(
                 "program {name} stored on the machine ({len} bytes)"
             ))?;
@@ -241,11 +244,11 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
             client
                 .delete(Target::Product(name.clone()))
                 .await
-                .map_err(device)?;
+                .map_err(output::failure)?;
             output::line(format!("program {name} deleted"))?;
         }
         Action::Start { mode } => {
-            client.start(mode).await.map_err(device)?;
+            client.start(mode).await.map_err(output::failure)?;
             let how = mode.map_or_else(
                 || "in the previous stop mode".to_owned(),
                 |m| format!("in {} mode", m.describe()),
@@ -255,7 +258,7 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
             ))?;
         }
         Action::Reset => {
-            client.reset().await.map_err(device)?;
+            client.reset().await.map_err(output::failure)?;
             output::line("reset accepted (A2); R1RE follows on Port 2 when done")?;
         }
         Action::Events { .. } => unreachable!("handled above"),
@@ -368,15 +371,6 @@ fn split_host(text: &str) -> anyhow::Result<(String, u16)> {
     Ok((host.to_owned(), port))
 }
 
-/// The machine's refusals, silences and lost connections exit 1; our own mistakes 2.
-fn device(err: ClientError) -> anyhow::Error {
-    if err.is_device_error() {
-        anyhow::Error::new(err)
-    } else {
-        usage(err)
-    }
-}
-
 /// Production data as sections of `KEY  value` lines.
 fn print_production(data: &panasonic::ProductionData) -> anyhow::Result<()> {
     let header = &data.header;
@@ -397,7 +391,7 @@ fn print_production(data: &panasonic::ProductionData) -> anyhow::Result<()> {
 
 /// Prints R messages from Port 2 until interrupted (or `count` of them).
 async fn events(config: ClientConfig, json: bool, count: Option<u64>) -> anyhow::Result<ExitCode> {
-    let (client, mut stream) = Client::connect(config).await.map_err(device)?;
+    let (client, mut stream) = Client::connect(config).await.map_err(output::failure)?;
     let printed = async {
         let mut seen = 0;
         while count.is_none_or(|n| seen < n) {

@@ -283,16 +283,6 @@ fn parse_targets(text: &str) -> anyhow::Result<Vec<Target>> {
     Ok(targets)
 }
 
-/// A client error is the regulator's doing (exit 1), except a request refused before the
-/// wire (exit 2: the arguments were wrong).
-fn device_error(err: ClientError) -> anyhow::Error {
-    if err.is_device_error() {
-        err.into()
-    } else {
-        usage(err)
-    }
-}
-
 /// `regulator 3`, or `every regulator listening to '$'`.
 fn who(target: Target) -> String {
     match target {
@@ -306,7 +296,7 @@ async fn read_cmd(
     read: thermosald::Read,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    let values = client.read(read).await.map_err(device_error)?;
+    let values = client.read(read).await.map_err(output::failure)?;
     let readings: Vec<Reading> = values.readings().collect();
     if json {
         let mut object = Map::new();
@@ -352,7 +342,7 @@ async fn write_cmd(
     value: f64,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    let echoed = client.write(item, value).await.map_err(device_error)?;
+    let echoed = client.write(item, value).await.map_err(output::failure)?;
     if json {
         let mut object = json!({
             "table": item.table().name(),
@@ -393,7 +383,7 @@ async fn request_cmd(
         Some(new) => client.set_address(new).await,
         None => client.request(request.clone()).await.map(drop),
     }
-    .map_err(device_error)?;
+    .map_err(output::failure)?;
     if json {
         let mut object = json!({
             "message": message.number().get(),

@@ -9,8 +9,9 @@
 
 use std::time::Duration;
 
-use link::{LineError, SharedLine, Step};
-use wire::Deframer;
+use link::{LineError, SharedLine};
+use wire::exchange::{Matcher, Policy, Verdict, VerdictOf};
+use wire::{Exchange, Failure, FailureKind};
 
 use crate::code::{Code, NakReason, Reading, interpret};
 use crate::frame::{Address, Data, DecodeError, Frame, FrameCodec, Route};
@@ -50,47 +51,14 @@ impl Default for ClientConfig {
     }
 }
 
-/// Why a request did not get its answer.
+/// Why a request did not get its answer: the exchange's own failures (our request, the
+/// station's refusal, no answer, the line), or an answer that means nothing.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ClientError {
-    /// The request was refused before reaching the wire.
+    /// The request, the station or the line failed the exchange.
     #[error(transparent)]
-    Request(#[from] RequestError),
-    /// The station understood the request and refused it.
-    #[error("station refused {request}: {} ({number:05})", reason.brief())]
-    Refused {
-        /// The request as on the wire, e.g. `WST1 00900`.
-        request: String,
-        /// Why, as the station said it.
-        reason: NakReason,
-        /// The NAK number.
-        number: i32,
-    },
-    /// No valid answer within the attempts.
-    #[error(
-        "no valid reply from station {station} on {endpoint} after {attempts} attempts of {timeout:?} each (last: {last})"
-    )]
-    NoAnswer {
-        /// The line.
-        endpoint: String,
-        /// The station's address, or "(no address)".
-        station: String,
-        /// Attempts made.
-        attempts: u8,
-        /// Time waited in each.
-        timeout: Duration,
-        /// What went wrong on the last attempt.
-        last: Trouble,
-    },
-    /// The line itself failed (closed, I/O error).
-    #[error("line {endpoint} failed: {source}")]
-    Line {
-        /// The line.
-        endpoint: String,
-        /// What happened.
-        source: LineError,
-    },
+    Exchange(#[from] ExchangeError),
     /// The station's answer does not mean anything for this code.
     #[error("station answered {code} with {data:?}, which is not a valid value")]
     BadValue {
@@ -101,26 +69,68 @@ pub enum ClientError {
     },
 }
 
-impl ClientError {
-    /// Whether the station (or its absence) is the cause, rather than our request.
-    pub fn is_device_error(&self) -> bool {
-        !matches!(self, Self::Request(_))
+/// The exchange's failures, with JBC's refusal and trouble.
+pub type ExchangeError = wire::ExchangeError<RequestError, Refusal, Trouble, LineError>;
+
+/// Line trouble on one attempt: silence, a damaged reply (bad BCC, wrong length), or the
+/// station reporting that it saw our frame damaged (NAK 1 or 2).
+pub type Trouble = wire::Trouble<DecodeError, Transmission>;
+
+impl From<RequestError> for ClientError {
+    fn from(error: RequestError) -> Self {
+        Self::Exchange(error.into())
     }
 }
 
-/// Line trouble on one attempt.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[non_exhaustive]
-pub enum Trouble {
-    /// Nothing came.
-    #[error("no reply")]
-    Silence,
-    /// A damaged reply came (bad BCC, wrong length).
-    #[error("damaged reply: {0}")]
-    Damaged(DecodeError),
-    /// The station saw our frame damaged (NAK 1 or 2).
-    #[error("station reported a transmission error: {0}")]
-    Transmission(NakReason),
+impl ClientError {
+    /// Whether the station (or its absence) is the cause, rather than our request.
+    pub fn is_device_error(&self) -> bool {
+        self.kind().is_device_side()
+    }
+}
+
+impl Failure for ClientError {
+    fn kind(&self) -> FailureKind {
+        match self {
+            Self::Exchange(e) => e.kind(),
+            Self::BadValue { .. } => FailureKind::Damaged,
+        }
+    }
+}
+
+/// The station understood the request and refused it (NAK 3–6 and numbers the spec does
+/// not list).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Refusal {
+    /// The request as on the wire, e.g. `WST1 00900`.
+    pub request: String,
+    /// Why, as the station said it.
+    pub reason: NakReason,
+    /// The NAK number.
+    pub number: i32,
+}
+
+impl wire::exchange::Refusal for Refusal {
+    fn describe(&self, _endpoint: &str, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "station refused {}: {} ({:05})",
+            self.request,
+            self.reason.brief(),
+            self.number
+        )
+    }
+}
+
+/// The station saw our frame damaged (NAK 1 or 2): line trouble, retried.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("station reported a transmission error: {0}")]
+pub struct Transmission(pub NakReason);
+
+impl Failure for Transmission {
+    fn kind(&self) -> FailureKind {
+        FailureKind::Line
+    }
 }
 
 /// A client for one station on a (possibly shared) line.
@@ -128,17 +138,12 @@ pub enum Trouble {
 pub struct Client {
     line: SharedLine,
     config: ClientConfig,
-    deframer: Deframer<FrameCodec>,
 }
 
 impl Client {
     /// A client for the station `config` names on `line`.
     pub fn new(line: SharedLine, config: ClientConfig) -> Self {
-        Self {
-            line,
-            config,
-            deframer: Deframer::new(FrameCodec),
-        }
+        Self { line, config }
     }
 
     /// The client's settings.
@@ -176,85 +181,61 @@ impl Client {
         let frame = request.to_frame(self.config.route);
         let mut bytes = Vec::new();
         wire::Codec::encode(&FrameCodec, &frame, &mut bytes);
-        let route = self.config.route;
+        let matcher = Reply {
+            request: *request,
+            route: self.config.route,
+            wire_text: wire_text(&frame),
+        };
+        let policy = Policy::new(self.config.retries, self.config.timeout);
+        let mut exchange = Exchange::new(matcher, FrameCodec, bytes, policy);
         let mut line = self.line.lock().await;
-        let attempts = self.config.retries.saturating_add(1);
-        let mut last = Trouble::Silence;
-        for _ in 0..attempts {
-            let outcome = link::exchange(
-                &mut line,
-                &mut self.deframer,
-                &bytes,
-                self.config.timeout,
-                |input| judge(request, route, input),
-            )
-            .await;
-            match outcome {
-                Ok(Attempt::Answer(data)) => return Ok(data),
-                Ok(Attempt::Refused(reason)) if reason.is_transmission_error() => {
-                    last = Trouble::Transmission(reason);
-                }
-                Ok(Attempt::Refused(reason)) => {
-                    return Err(ClientError::Refused {
-                        request: wire_text(&frame),
-                        reason,
-                        number: reason.code(),
-                    });
-                }
-                Ok(Attempt::Damaged(damage)) => last = Trouble::Damaged(damage),
-                Err(LineError::Timeout { .. }) => last = Trouble::Silence,
-                Err(source) => {
-                    return Err(ClientError::Line {
-                        endpoint: line.name().to_owned(),
-                        source,
-                    });
-                }
-            }
-            tracing::debug!(%last, "retrying");
-        }
-        Err(self.no_answer(&line, attempts, last))
-    }
-
-    fn no_answer(&self, line: &link::Line, attempts: u8, last: Trouble) -> ClientError {
-        ClientError::NoAnswer {
-            endpoint: line.name().to_owned(),
-            station: self
-                .config
-                .route
-                .map_or_else(|| "(no address)".to_owned(), |r| r.target.to_string()),
-            attempts,
-            timeout: self.config.timeout,
-            last,
-        }
+        Ok(link::exchange::run(&mut line, &mut exchange).await?)
     }
 }
 
-/// The outcome of one attempt.
-enum Attempt {
-    Answer(Option<Data>),
-    Refused(NakReason),
-    Damaged(DecodeError),
-}
-
-/// What one decoded frame (or dropped run of bytes) means for `request`.
-fn judge(
-    request: &Request,
+/// What answers one request: an acknowledgement of its code on the route back.
+struct Reply {
+    request: Request,
     route: Option<Route>,
-    input: Result<Frame, DecodeError>,
-) -> Step<Attempt> {
-    match input {
-        Ok(reply) => match match_reply(request, route, &reply) {
-            Match::Answer(data) => Step::Done(Attempt::Answer(data)),
-            Match::Refused(reason) => Step::Done(Attempt::Refused(reason)),
-            Match::NotOurs => {
-                tracing::debug!(?reply, "skipping a frame that does not answer the request");
-                Step::Continue
-            }
-        },
-        // Noise between frames: the answer may still come.
-        Err(DecodeError::Garbage { .. }) => Step::Continue,
-        // A damaged frame is probably the answer: retry rather than wait for the timeout.
-        Err(damage) => Step::Done(Attempt::Damaged(damage)),
+    wire_text: String,
+}
+
+impl Matcher for Reply {
+    type Codec = FrameCodec;
+    type Answer = Option<Data>;
+    type Refusal = Refusal;
+    type Mismatch = Transmission;
+
+    fn judge(&mut self, input: Result<Frame, DecodeError>) -> VerdictOf<Self> {
+        match input {
+            Ok(reply) => match match_reply(&self.request, self.route, &reply) {
+                Match::Answer(data) => Verdict::Answer(data),
+                // The station saw our frame damaged: line trouble, retried.
+                Match::Refused(reason) if reason.is_transmission_error() => {
+                    Verdict::Retry(Trouble::Mismatch(Transmission(reason)))
+                }
+                Match::Refused(reason) => Verdict::Refused(Refusal {
+                    request: self.wire_text.clone(),
+                    reason,
+                    number: reason.code(),
+                }),
+                Match::NotOurs => {
+                    tracing::debug!(?reply, "skipping a frame that does not answer the request");
+                    Verdict::Skip
+                }
+            },
+            // Noise between frames: the answer may still come.
+            Err(DecodeError::Garbage { .. }) => Verdict::Noise,
+            // A damaged frame is probably the answer: retry rather than wait for the timeout.
+            Err(damage) => Verdict::Retry(Trouble::Damaged(damage)),
+        }
+    }
+
+    fn device(&self) -> String {
+        self.route.map_or_else(
+            || "(no address)".to_owned(),
+            |r| format!("station {}", r.target),
+        )
     }
 }
 
@@ -270,107 +251,57 @@ fn wire_text(frame: &Frame) -> String {
 
 #[cfg(test)]
 mod tests {
-    use std::collections::VecDeque;
-    use std::time::Instant as StdInstant;
-
     use link::Line;
+    use testkit::{Tap, Trick, Tricky};
     use tokio::time::Instant;
-    use wire::Transmit;
-    use wire::device::{Device, SharedModel};
+    use wire::device::SharedModel;
 
     use super::*;
     use crate::device::{Station, StationConfig};
-    use crate::message::Reply;
+    use crate::message::Reply as StationReply;
 
-    /// What the line does to the station's next reply.
-    #[derive(Debug, Clone, Copy)]
-    enum Trick {
-        /// Swallow it.
-        Drop,
-        /// Flip a bit in its last byte (the BCC).
-        Corrupt,
-        /// Answer NAK 1 instead (as if our frame had arrived damaged).
-        NakBcc,
-        /// Send an unrelated answer (another code) before it.
-        StrayFirst,
+    /// A reply from station 01 to the robot, as bytes.
+    fn reply_bytes(reply: StationReply) -> Vec<u8> {
+        reply
+            .to_frame(ClientConfig::default().route.map(Route::reversed))
+            .to_bytes()
     }
 
-    /// A station behind a line that plays tricks on its replies, counting requests.
-    struct Tricky {
-        station: wire::device::ModelLine<Station>,
-        tricks: VecDeque<Trick>,
-        requests: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+    /// NAK 1 for `ST1`, as if our frame had arrived damaged.
+    fn nak_bcc() -> Trick {
+        let code: Code = "ST1".parse().expect("valid code");
+        Trick::Replace(reply_bytes(StationReply::Nak {
+            code: code.raw(),
+            reason: NakReason::Bcc,
+        }))
     }
 
-    impl Device for Tricky {
-        fn set_timing(&mut self, timing: wire::LineTiming) {
-            self.station.set_timing(timing);
-        }
-
-        fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
-            let replies = self.station.receive(bytes, now);
-            self.requests
-                .fetch_add(replies.len(), std::sync::atomic::Ordering::SeqCst);
-            replies
-                .into_iter()
-                .flat_map(|mut tx| match self.tricks.pop_front() {
-                    None => vec![tx],
-                    Some(Trick::Drop) => vec![],
-                    Some(Trick::Corrupt) => {
-                        if let Some(last) = tx.bytes.last_mut() {
-                            *last ^= 0x01;
-                        }
-                        vec![tx]
-                    }
-                    Some(Trick::NakBcc) => {
-                        let code: Code = "ST1".parse().expect("valid code");
-                        let nak = Reply::Nak {
-                            code: code.raw(),
-                            reason: NakReason::Bcc,
-                        };
-                        vec![Transmit::after(
-                            tx.delay,
-                            nak.to_frame(ClientConfig::default().route.map(Route::reversed))
-                                .to_bytes(),
-                        )]
-                    }
-                    Some(Trick::StrayFirst) => {
-                        let code: Code = "MAT".parse().expect("valid code");
-                        let stray = Reply::Ack {
-                            code: code.raw(),
-                            data: Some(Data::number(450).expect("fits")),
-                        };
-                        let stray = stray
-                            .to_frame(ClientConfig::default().route.map(Route::reversed))
-                            .to_bytes();
-                        vec![Transmit::after(tx.delay, stray), tx]
-                    }
-                })
-                .collect()
-        }
+    /// An unrelated answer (to `MAT`) before the reply.
+    fn stray_first() -> Trick {
+        let code: Code = "MAT".parse().expect("valid code");
+        Trick::Before(reply_bytes(StationReply::Ack {
+            code: code.raw(),
+            data: Some(Data::number(450).expect("fits")),
+        }))
     }
 
     struct Bench {
         client: Client,
         station: SharedModel<Station>,
-        requests: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+        tap: Tap,
     }
 
-    fn bench(tricks: &[Trick], config: ClientConfig) -> Bench {
+    fn bench(tricks: Vec<Trick>, config: ClientConfig) -> Bench {
         let station = SharedModel::new(Station::new(StationConfig::default()));
-        let requests = std::sync::Arc::default();
-        let device = Tricky {
-            station: station.line(),
-            tricks: tricks.iter().copied().collect(),
-            requests: std::sync::Arc::clone(&requests),
-        };
+        let device = Tricky::new(station.line(), tricks);
+        let tap = device.tap();
         let (ours, theirs) = tokio::io::duplex(1024);
         tokio::spawn(link::serve::serve_stream(theirs, device, None));
         let line = SharedLine::new(Line::from_stream(ours, "test line", None));
         Bench {
             client: Client::new(line, config),
             station,
-            requests,
+            tap,
         }
     }
 
@@ -379,12 +310,12 @@ mod tests {
     }
 
     fn answered(b: &Bench) -> usize {
-        b.requests.load(std::sync::atomic::Ordering::SeqCst)
+        b.tap.replies()
     }
 
     #[tokio::test(start_paused = true)]
     async fn a_write_then_a_read_go_through_the_station() {
-        let mut b = bench(&[], ClientConfig::default());
+        let mut b = bench(vec![], ClientConfig::default());
         b.client.write(code("ST1"), 380).await.expect("accepted");
         let reading = b.client.read(code("ST1")).await.expect("answered");
         assert_eq!(reading.to_string(), "380 °C");
@@ -392,7 +323,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn a_lost_reply_is_retried_after_the_timeout() {
-        let mut b = bench(&[Trick::Drop], ClientConfig::default());
+        let mut b = bench(vec![Trick::Drop], ClientConfig::default());
         let started = Instant::now();
         let reading = b
             .client
@@ -420,7 +351,7 @@ mod tests {
             target: Address::new(7).expect("valid"),
         });
         let mut b = bench(
-            &[],
+            vec![],
             ClientConfig {
                 route,
                 ..ClientConfig::default()
@@ -442,17 +373,18 @@ mod tests {
         );
         assert!(matches!(
             err,
-            ClientError::NoAnswer {
+            ClientError::Exchange(ExchangeError::NoAnswer {
                 attempts: 3,
                 last: Trouble::Silence,
                 ..
-            }
+            })
         ));
+        assert_eq!(err.kind(), FailureKind::Timeout);
     }
 
     #[tokio::test(start_paused = true)]
     async fn a_damaged_reply_is_retried_at_once_without_waiting_for_the_timeout() {
-        let mut b = bench(&[Trick::Corrupt], ClientConfig::default());
+        let mut b = bench(vec![Trick::corrupt_last()], ClientConfig::default());
         let started = Instant::now();
         b.client
             .read(code("MAT"))
@@ -468,7 +400,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn nak_1_is_a_transmission_error_and_is_retried() {
-        let mut b = bench(&[Trick::NakBcc], ClientConfig::default());
+        let mut b = bench(vec![nak_bcc()], ClientConfig::default());
         b.client
             .read(code("ST1"))
             .await
@@ -479,7 +411,7 @@ mod tests {
     #[tokio::test(start_paused = true)]
     async fn damage_on_every_attempt_is_reported_as_the_last_trouble() {
         let mut b = bench(
-            &[Trick::NakBcc, Trick::NakBcc, Trick::NakBcc],
+            vec![nak_bcc(), nak_bcc(), nak_bcc()],
             ClientConfig::default(),
         );
         let err = b
@@ -490,10 +422,10 @@ mod tests {
         assert!(
             matches!(
                 err,
-                ClientError::NoAnswer {
-                    last: Trouble::Transmission(NakReason::Bcc),
+                ClientError::Exchange(ExchangeError::NoAnswer {
+                    last: Trouble::Mismatch(Transmission(NakReason::Bcc)),
                     ..
-                }
+                })
             ),
             "{err}"
         );
@@ -501,7 +433,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn a_refusal_is_reported_at_once_in_words_and_never_retried() {
-        let mut b = bench(&[], ClientConfig::default());
+        let mut b = bench(vec![], ClientConfig::default());
         let err = b
             .client
             .write(code("ST1"), 900)
@@ -511,12 +443,13 @@ mod tests {
             err.to_string(),
             "station refused WST1 00900: out of range (00003)"
         );
+        assert_eq!(err.kind(), FailureKind::Refused);
         assert_eq!(answered(&b), 1);
     }
 
     #[tokio::test(start_paused = true)]
     async fn a_station_out_of_robot_mode_refuses_with_nak_5() {
-        let mut b = bench(&[], ClientConfig::default());
+        let mut b = bench(vec![], ClientConfig::default());
         b.station.lock().set_robot_mode(false);
         let err = b
             .client
@@ -526,11 +459,14 @@ mod tests {
         assert!(
             matches!(
                 err,
-                ClientError::Refused {
-                    reason: NakReason::NotInRobotMode,
-                    number: 5,
+                ClientError::Exchange(ExchangeError::Refused {
+                    refusal: Refusal {
+                        reason: NakReason::NotInRobotMode,
+                        number: 5,
+                        ..
+                    },
                     ..
-                }
+                })
             ),
             "{err}"
         );
@@ -538,7 +474,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn an_answer_to_another_code_is_not_taken_for_the_answer() {
-        let mut b = bench(&[Trick::StrayFirst], ClientConfig::default());
+        let mut b = bench(vec![stray_first()], ClientConfig::default());
         b.client.write(code("ST1"), 300).await.expect("accepted");
         assert_eq!(
             b.client
@@ -552,14 +488,18 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn an_invalid_write_never_reaches_the_wire() {
-        let mut b = bench(&[], ClientConfig::default());
+        let mut b = bench(vec![], ClientConfig::default());
         let err = b
             .client
             .write(code("AT1"), 100)
             .await
             .expect_err("AT1 is read-only");
-        assert!(matches!(err, ClientError::Request(_)), "{err}");
+        assert!(
+            matches!(err, ClientError::Exchange(ExchangeError::Request(_))),
+            "{err}"
+        );
         assert!(!err.is_device_error());
+        assert_eq!(err.kind(), FailureKind::Usage, "our mistake, not a refusal");
         assert_eq!(answered(&b), 0);
     }
 }

@@ -18,6 +18,7 @@
 #![warn(missing_docs)]
 
 pub mod annotate;
+#[cfg(feature = "io")]
 pub mod client;
 pub mod code;
 pub mod device;

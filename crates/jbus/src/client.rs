@@ -29,7 +29,8 @@ use std::time::Duration;
 
 use link::{Line, LineError, SharedLine};
 use tokio::time::Instant;
-use wire::Deframer;
+use wire::exchange::{AttemptEnd, Matcher, Policy, Verdict, VerdictOf};
+use wire::{Exchange, Failure, FailureKind};
 
 use crate::cross::{CrossState, read_plan};
 use crate::rtu::{
@@ -77,86 +78,47 @@ impl Default for ClientConfig {
     }
 }
 
-/// Why a request did not get its answer.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum ClientError {
-    /// The request was refused before reaching the wire (a count out of range, a block
-    /// past the last address).
-    #[error(transparent)]
-    Request(#[from] InvalidValue),
-    /// The unit understood the request and refused it.
-    #[error("unit {unit} refused \"{request}\": {}", exception.code)]
-    Exception {
-        /// The unit that answered.
-        unit: u8,
-        /// The request, in words.
-        request: String,
-        /// The function refused and why.
-        exception: Exception,
-    },
-    /// No valid answer within the attempts.
-    #[error(
-        "no valid answer from unit {unit} on {endpoint} to \"{request}\" after {attempts} attempts of {timeout:?} each (last: {last})"
-    )]
-    NoAnswer {
-        /// The line.
-        endpoint: String,
-        /// The unit asked.
-        unit: u8,
-        /// The request, in words.
-        request: String,
-        /// Attempts made.
-        attempts: u8,
-        /// Time waited in each (the configured timeout plus wire time).
-        timeout: Duration,
-        /// What went wrong on the last attempt.
-        last: Trouble,
-    },
-    /// The line itself failed (closed, I/O error).
-    #[error("line {endpoint} failed: {source}")]
-    Line {
-        /// The line.
-        endpoint: String,
-        /// What happened.
-        source: LineError,
-    },
+/// Why a request did not get its answer: our request (refused before the wire), the
+/// unit's exception ([`UnitRefusal`]), no valid answer within the attempts, or the line.
+pub type ClientError = wire::ExchangeError<InvalidValue, UnitRefusal, Trouble, LineError>;
+
+/// Line trouble on one attempt, what makes the client retry: silence, a damaged frame (bad
+/// CRC, or a good CRC around invalid content), bytes the line's silence cut short, or
+/// well-formed frames none of which answers the request.
+pub type Trouble = wire::Trouble<DecodeError, Mismatch>;
+
+/// A unit understood the request and refused it with an exception.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnitRefusal {
+    /// The unit that answered.
+    pub unit: u8,
+    /// The request, in words.
+    pub request: String,
+    /// The function refused and why.
+    pub exception: Exception,
 }
 
-impl ClientError {
-    /// Whether the device, its absence or the line is the cause, rather than our request.
-    pub fn is_device_error(&self) -> bool {
-        !matches!(self, Self::Request(_))
-    }
-
-    /// The exception code, when the unit refused the request.
-    pub fn exception_code(&self) -> Option<ExceptionCode> {
-        match self {
-            Self::Exception { exception, .. } => Some(exception.code),
-            _ => None,
-        }
+impl wire::exchange::Refusal for UnitRefusal {
+    fn describe(&self, _endpoint: &str, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "unit {} refused \"{}\": {}",
+            self.unit, self.request, self.exception.code
+        )
     }
 }
 
-/// Line trouble on one attempt: what makes the client retry.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[non_exhaustive]
-pub enum Trouble {
-    /// Nothing came.
-    #[error("no answer")]
-    Silence,
-    /// A damaged frame came (bad CRC, or a good CRC around invalid content).
-    #[error("damaged answer: {0}")]
-    Damaged(DecodeError),
-    /// The line fell quiet after bytes that make no frame.
-    #[error("the line fell quiet after {bytes} bytes that make no frame")]
-    Incomplete {
-        /// How many bytes were left undecoded.
-        bytes: usize,
-    },
-    /// Well-formed frames came, but none answers the request.
-    #[error("an answer that does not match the request: {0}")]
-    Mismatch(Mismatch),
+impl Failure for Mismatch {
+    /// An answer that does not fit the request: a frame damaged in a way the CRC let
+    /// through, or another master's traffic.
+    fn kind(&self) -> FailureKind {
+        FailureKind::Damaged
+    }
+}
+
+/// The exception code of `error`, when the unit refused the request.
+pub fn exception_code(error: &ClientError) -> Option<ExceptionCode> {
+    error.refusal().map(|refusal| refusal.exception.code)
 }
 
 /// A Modbus RTU master on one (possibly shared) line. Clone it to give each task its own
@@ -165,17 +127,12 @@ pub enum Trouble {
 pub struct Client {
     line: SharedLine,
     config: ClientConfig,
-    deframer: Deframer<ResponseCodec>,
 }
 
 impl Client {
     /// A client on `line`.
     pub fn new(line: SharedLine, config: ClientConfig) -> Self {
-        Self {
-            line,
-            config,
-            deframer: Deframer::new(ResponseCodec),
-        }
+        Self { line, config }
     }
 
     /// The client's settings.
@@ -296,51 +253,14 @@ impl Client {
         let silence = inter_frame_silence(&line);
         let timeout = self.config.timeout
             + line.wire_time(bytes.len() + expected_answer_len(&request.request));
-        let quiet_gap = MIN_QUIET_GAP.max(silence);
-        let attempts = self.config.retries.saturating_add(1);
-        let mut last = Trouble::Silence;
-        for attempt in 1..=attempts {
-            let outcome = attempt_once(
-                &mut line,
-                &mut self.deframer,
-                request,
-                &bytes,
-                timeout,
-                quiet_gap,
-            )
-            .await;
-            // Whatever happened, the next frame on this line waits for the silence (a zero
-            // wait would still cost a timer tick: tokio rounds deadlines up to 1 ms).
-            if !silence.is_zero() {
-                line.keep_quiet_until(Instant::now() + silence);
-            }
-            match outcome {
-                Ok(Answer::Exception(exception)) => {
-                    return Err(ClientError::Exception {
-                        unit: request.unit.get(),
-                        request: request.request.to_string(),
-                        exception,
-                    });
-                }
-                Ok(answer) => return Ok(answer),
-                Err(Failure::Trouble(trouble)) => last = trouble,
-                Err(Failure::Line(source)) => {
-                    return Err(ClientError::Line {
-                        endpoint: line.name().to_owned(),
-                        source,
-                    });
-                }
-            }
-            tracing::debug!(%request, attempt, %last, "retrying");
-        }
-        Err(ClientError::NoAnswer {
-            endpoint: line.name().to_owned(),
-            unit: request.unit.get(),
-            request: request.request.to_string(),
-            attempts,
-            timeout,
-            last,
-        })
+        let policy =
+            Policy::new(self.config.retries, timeout).with_quiet_gap(MIN_QUIET_GAP.max(silence));
+        let matcher = Answering {
+            request: request.clone(),
+            silence,
+        };
+        let mut exchange = Exchange::new(matcher, ResponseCodec, bytes, policy);
+        link::exchange::run(&mut line, &mut exchange).await
     }
 
     /// Sends a write to every unit on the line (unit 0). Nobody answers; the line is then
@@ -390,6 +310,10 @@ impl Client {
 }
 
 /// `check_response` gives a read's kind of answer for a read: another kind cannot come.
+#[allow(
+    clippy::result_large_err,
+    reason = "it never returns: typed as the client's result so it fits the match arms"
+)]
 fn unreachable_answer<T>(answer: Answer) -> Result<T, ClientError> {
     unreachable!("check_response answers a read with its own kind of values, not {answer:?}")
 }
@@ -417,121 +341,75 @@ pub fn expected_answer_len(request: &Request) -> usize {
     }
 }
 
-/// Why one attempt ended without an answer.
-enum Failure {
-    /// Retry.
-    Trouble(Trouble),
-    /// Give up: the line is gone.
-    Line(LineError),
+/// What answers one request: a frame [`check_response`] accepts.
+struct Answering {
+    request: Addressed,
+    /// The inter-frame silence kept after every attempt.
+    silence: Duration,
 }
 
-impl From<LineError> for Failure {
-    fn from(e: LineError) -> Self {
-        Self::Line(e)
-    }
-}
-
-/// What one decoded frame (or run of dropped bytes) means for the request in flight.
-enum Judged {
-    /// The answer (maybe an exception).
-    Answer(Answer),
-    /// Not the answer, but a sign of trouble.
-    Trouble(Trouble),
-    /// A byte that starts no frame: noise between frames.
-    Noise,
-}
-
-fn judge(request: &Addressed, input: Result<ResponseAdu, DecodeError>) -> Judged {
-    match input {
-        Ok(adu) => match check_response(request, &adu) {
-            Ok(answer) => Judged::Answer(answer),
+impl Answering {
+    fn verdict(&self, adu: &ResponseAdu) -> VerdictOf<Self> {
+        match check_response(&self.request, adu) {
+            Ok(Answer::Exception(exception)) => Verdict::Refused(UnitRefusal {
+                unit: self.request.unit.get(),
+                request: self.request.request.to_string(),
+                exception,
+            }),
+            Ok(answer) => Verdict::Answer(answer),
             Err(mismatch) => {
                 tracing::debug!(%mismatch, "skipping a frame that does not answer the request");
-                Judged::Trouble(Trouble::Mismatch(mismatch))
+                Verdict::Note(Trouble::Mismatch(mismatch))
             }
-        },
-        Err(DecodeError::UnknownFunction { .. }) => Judged::Noise,
-        Err(damage) => Judged::Trouble(Trouble::Damaged(damage)),
+        }
     }
 }
 
-/// One attempt: clean line, send, listen until the answer, the deadline, or (after
-/// damage) the line falling quiet.
-async fn attempt_once(
-    line: &mut Line,
-    deframer: &mut Deframer<ResponseCodec>,
-    request: &Addressed,
-    bytes: &[u8],
-    timeout: Duration,
-    quiet_gap: Duration,
-) -> Result<Answer, Failure> {
-    line.discard_input().await?;
-    deframer.clear();
-    line.send(bytes).await?;
-    let deadline = Instant::now() + timeout;
-    let mut trouble: Option<Trouble> = None;
-    let mut buf = [0u8; 512];
-    loop {
-        let damaged = matches!(trouble, Some(Trouble::Damaged(_)));
-        let listen_until = if damaged || !deframer.buffered().is_empty() {
-            deadline.min(Instant::now() + quiet_gap)
-        } else {
-            deadline
-        };
-        match line.recv(&mut buf, listen_until).await {
-            Ok(n) => {
-                deframer.push(buf.get(..n).unwrap_or_default());
-                while let Some(input) = deframer.next_frame() {
-                    match judge(request, input) {
-                        Judged::Answer(answer) => return Ok(answer),
-                        Judged::Trouble(t) => trouble = Some(t),
-                        Judged::Noise => {}
-                    }
-                }
-            }
-            Err(LineError::Timeout { .. }) => {
-                // Quiet line, bytes left: the silence ended a frame; look past its head.
-                let left = deframer.buffered().len();
-                if let Some((offset, adu, len)) = find_frame(&ResponseCodec, deframer.buffered()) {
-                    let rest = deframer
-                        .buffered()
-                        .get(offset + len..)
-                        .unwrap_or_default()
-                        .to_vec();
-                    deframer.clear();
-                    deframer.push(&rest);
-                    match check_response(request, &adu) {
-                        Ok(answer) => return Ok(answer),
-                        Err(mismatch) => trouble = Some(Trouble::Mismatch(mismatch)),
-                    }
-                    continue;
-                }
-                if left > 0 {
-                    deframer.clear();
-                    trouble = Some(Trouble::Incomplete { bytes: left });
-                }
-                let retry_now = matches!(
-                    trouble,
-                    Some(Trouble::Damaged(_) | Trouble::Incomplete { .. })
-                );
-                if retry_now || Instant::now() >= deadline {
-                    return Err(Failure::Trouble(trouble.unwrap_or(Trouble::Silence)));
-                }
-            }
-            Err(e) => return Err(Failure::Line(e)),
+impl Matcher for Answering {
+    type Codec = ResponseCodec;
+    type Answer = Answer;
+    type Refusal = UnitRefusal;
+    type Mismatch = Mismatch;
+
+    fn judge(&mut self, input: Result<ResponseAdu, DecodeError>) -> VerdictOf<Self> {
+        match input {
+            Ok(adu) => self.verdict(&adu),
+            // A byte that starts no frame: noise between frames.
+            Err(DecodeError::UnknownFunction { .. }) => Verdict::Noise,
+            // Probably the answer, damaged: retry as soon as the line falls quiet.
+            Err(damage) => Verdict::RetryWhenQuiet(Trouble::Damaged(damage)),
         }
+    }
+
+    /// The silence ended a frame: look past its head.
+    fn look_past(&mut self, buffered: &[u8]) -> Option<(usize, VerdictOf<Self>)> {
+        let (offset, adu, len) = find_frame(&ResponseCodec, buffered)?;
+        Some((offset + len, self.verdict(&adu)))
+    }
+
+    /// Whatever happened, the next frame on this line waits for the silence (a zero wait
+    /// would still cost a timer tick: tokio rounds deadlines up to 1 ms).
+    fn quiet_after(&mut self, attempt: &AttemptEnd) -> Option<std::time::Instant> {
+        (!self.silence.is_zero()).then(|| attempt.ended + self.silence)
+    }
+
+    fn device(&self) -> String {
+        format!("unit {}", self.request.unit.get())
+    }
+
+    fn request_in_words(&self) -> Option<String> {
+        Some(self.request.request.to_string())
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use std::collections::VecDeque;
-    use std::sync::{Arc, Mutex};
     use std::time::Instant as StdInstant;
 
     use link::SerialSettings;
+    use testkit::{Tap, Trick, Tricky};
+    use wire::Transmit;
     use wire::device::{Device, SharedModel};
-    use wire::{Codec, Transmit};
 
     use super::*;
     use crate::cross::device::{CrossTwin, REPLY_DELAY};
@@ -539,102 +417,32 @@ mod tests {
     use crate::rtu::{FunctionCode, RegisterValues, Response, Write, WriteRegister};
     use crate::slave::{DEFAULT_REPLY_DELAY, Slave, SlaveMap, Table};
 
-    /// What the line does to the device's next answer.
-    #[derive(Debug, Clone, Copy)]
-    enum Trick {
-        /// Swallow it.
-        Drop,
-        /// Flip a bit of its CRC.
-        Corrupt,
-        /// Put bytes before it that look like the head of a 255-byte answer.
-        LongHead,
-        /// Put another unit's answer before it.
-        StrayFirst,
-        /// Send it with another unit number (and a good CRC).
-        WrongUnit,
-        /// Answer with this exception code instead.
-        Refuse(u8),
+    /// Bytes before the answer that look like the head of a 255-byte answer.
+    fn long_head() -> Trick {
+        Trick::Before(vec![0x07, 0x03, 0xFA])
     }
 
-    /// When each request arrived, and the bytes.
-    type Heard = Arc<Mutex<Vec<(StdInstant, Vec<u8>)>>>;
-
-    /// A device behind a line that plays tricks on its answers and notes what it hears.
-    struct Tricky<D> {
-        inner: D,
-        tricks: VecDeque<Trick>,
-        heard: Heard,
+    /// Another unit's answer before the answer.
+    fn stray_first() -> Trick {
+        let stray = ResponseAdu {
+            unit: 99,
+            response: Response::ReadHoldingRegisters(
+                RegisterValues::new(vec![1, 2]).expect("2 values"),
+            ),
+        };
+        Trick::Before(stray.to_bytes())
     }
 
-    impl<D: Device> Device for Tricky<D> {
-        fn set_timing(&mut self, timing: wire::LineTiming) {
-            self.inner.set_timing(timing);
-        }
-
-        fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
-            self.heard
-                .lock()
-                .expect("not poisoned")
-                .push((now, bytes.to_vec()));
-            let answers = self.inner.receive(bytes, now);
-            answers
-                .into_iter()
-                .flat_map(|mut tx| match self.tricks.pop_front() {
-                    None => vec![tx],
-                    Some(Trick::Drop) => vec![],
-                    Some(Trick::Corrupt) => {
-                        if let Some(last) = tx.bytes.last_mut() {
-                            *last ^= 0x01;
-                        }
-                        vec![tx]
-                    }
-                    Some(Trick::LongHead) => {
-                        let mut bytes = vec![0x07, 0x03, 0xFA];
-                        bytes.append(&mut tx.bytes);
-                        tx.bytes = bytes;
-                        vec![tx]
-                    }
-                    Some(Trick::StrayFirst) => {
-                        let stray = ResponseAdu {
-                            unit: 99,
-                            response: Response::ReadHoldingRegisters(
-                                RegisterValues::new(vec![1, 2]).expect("2 values"),
-                            ),
-                        };
-                        let mut bytes = stray.to_bytes();
-                        bytes.append(&mut tx.bytes);
-                        tx.bytes = bytes;
-                        vec![tx]
-                    }
-                    Some(Trick::WrongUnit) => {
-                        let mut adu = decode(&tx.bytes);
-                        adu.unit = adu.unit.wrapping_add(1);
-                        tx.bytes = adu.to_bytes();
-                        vec![tx]
-                    }
-                    Some(Trick::Refuse(code)) => {
-                        let adu = decode(&tx.bytes);
-                        let refusal = ResponseAdu {
-                            unit: adu.unit,
-                            response: Response::exception(
-                                adu.response.function(),
-                                ExceptionCode::new(code).expect("test codes are 1-255"),
-                            ),
-                        };
-                        tx.bytes = refusal.to_bytes();
-                        vec![tx]
-                    }
-                })
-                .collect()
-        }
-    }
-
-    fn decode(bytes: &[u8]) -> ResponseAdu {
-        ResponseCodec
-            .decode(bytes)
-            .expect("our devices send valid frames")
-            .expect("whole frame")
-            .0
+    /// `unit` answers function 3 with exception `code` instead.
+    fn refuse(unit: u8, code: u8) -> Trick {
+        let refusal = ResponseAdu {
+            unit,
+            response: Response::exception(
+                FunctionCode::READ_HOLDING_REGISTERS,
+                ExceptionCode::new(code).expect("test codes are 1-255"),
+            ),
+        };
+        Trick::Replace(refusal.to_bytes())
     }
 
     /// Every device on one RS-485 pair hears every frame.
@@ -657,38 +465,34 @@ mod tests {
 
     struct Bench {
         client: Client,
-        heard: Heard,
+        tap: Tap,
     }
 
     impl Bench {
         fn requests(&self) -> usize {
-            self.heard.lock().expect("not poisoned").len()
+            self.tap.requests()
         }
 
         fn heard_at(&self, index: usize) -> StdInstant {
-            self.heard.lock().expect("not poisoned")[index].0
+            self.tap.request_at(index).expect("heard")
         }
     }
 
     /// A client on a line (`settings` if it has a speed) to `device`, with `tricks`.
     fn bench<D: Device>(
         device: D,
-        tricks: &[Trick],
+        tricks: Vec<Trick>,
         settings: Option<SerialSettings>,
         config: ClientConfig,
     ) -> Bench {
-        let heard = Heard::default();
-        let device = Tricky {
-            inner: device,
-            tricks: tricks.iter().copied().collect(),
-            heard: Arc::clone(&heard),
-        };
+        let device = Tricky::new(device, tricks);
+        let tap = device.tap();
         let (ours, theirs) = tokio::io::duplex(4096);
         tokio::spawn(link::serve::serve_stream(theirs, device, None));
         let line = SharedLine::new(Line::from_stream(ours, "test line", settings));
         Bench {
             client: Client::new(line, config),
-            heard,
+            tap,
         }
     }
 
@@ -711,7 +515,7 @@ mod tests {
     #[tokio::test(start_paused = true)]
     async fn every_function_reads_and_writes_a_generic_server() {
         let server = slave();
-        let mut b = bench(server.line(), &[], None, ClientConfig::default());
+        let mut b = bench(server.line(), vec![], None, ClientConfig::default());
         let c = &mut b.client;
         c.write_single_coil(unit(1), 3, true)
             .await
@@ -756,7 +560,7 @@ mod tests {
     #[tokio::test(start_paused = true)]
     async fn read_cross_decodes_the_twin_in_four_requests_and_sees_a_transfer() {
         let cross = twin();
-        let mut b = bench(cross.line(), &[], at_9600(), ClientConfig::default());
+        let mut b = bench(cross.line(), vec![], at_9600(), ClientConfig::default());
         let state = b.client.read_cross(unit(2)).await.expect("read");
         assert_eq!(state.feed(), Feed::StaticSwitch(Source::S1));
         assert!(state.alarms().is_empty(), "{:?}", state.alarms());
@@ -773,7 +577,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn an_exception_is_reported_at_once_in_words_and_never_retried() {
-        let mut b = bench(twin().line(), &[], None, ClientConfig::default());
+        let mut b = bench(twin().line(), vec![], None, ClientConfig::default());
         let started = Instant::now();
         let err = b
             .client
@@ -781,7 +585,7 @@ mod tests {
             .await
             .expect_err("0x12 is undefined");
         assert_eq!(
-            err.exception_code(),
+            exception_code(&err),
             Some(ExceptionCode::ILLEGAL_DATA_ADDRESS)
         );
         assert_eq!(
@@ -790,13 +594,14 @@ mod tests {
              (illegal data address: the request touches an address the device does not have)"
         );
         assert!(err.is_device_error());
+        assert_eq!(err.kind(), FailureKind::Refused);
         assert_eq!(b.requests(), 1);
         assert_eq!(started.elapsed(), REPLY_DELAY);
     }
 
     #[tokio::test(start_paused = true)]
     async fn the_cross_refuses_any_function_but_3_with_exception_1() {
-        let mut b = bench(twin().line(), &[], None, ClientConfig::default());
+        let mut b = bench(twin().line(), vec![], None, ClientConfig::default());
         let err = b
             .client
             .read_input_registers(unit(2), 0, 1)
@@ -805,11 +610,14 @@ mod tests {
         assert!(
             matches!(
                 err,
-                ClientError::Exception {
-                    unit: 2,
-                    exception: Exception {
-                        function: FunctionCode::READ_INPUT_REGISTERS,
-                        code: ExceptionCode::ILLEGAL_FUNCTION
+                ClientError::Refused {
+                    refusal: UnitRefusal {
+                        unit: 2,
+                        exception: Exception {
+                            function: FunctionCode::READ_INPUT_REGISTERS,
+                            code: ExceptionCode::ILLEGAL_FUNCTION
+                        },
+                        ..
                     },
                     ..
                 }
@@ -823,7 +631,7 @@ mod tests {
     async fn exception_3_is_reported_with_its_number_and_meaning() {
         let mut b = bench(
             slave().line(),
-            &[Trick::Refuse(3)],
+            vec![refuse(1, 3)],
             None,
             ClientConfig::default(),
         );
@@ -833,7 +641,7 @@ mod tests {
             .await
             .expect_err("refused");
         assert_eq!(
-            err.exception_code(),
+            exception_code(&err),
             Some(ExceptionCode::ILLEGAL_DATA_VALUE)
         );
         assert!(
@@ -847,7 +655,7 @@ mod tests {
     async fn an_address_missing_from_a_slave_map_is_exception_2() {
         let map = SlaveMap::parse("unit 5\nholding 0 = 1 2 3\n").expect("valid map");
         let server = SharedModel::new(Slave::new(map));
-        let mut b = bench(server.line(), &[], None, ClientConfig::default());
+        let mut b = bench(server.line(), vec![], None, ClientConfig::default());
         assert_eq!(
             b.client
                 .read_holding_registers(unit(5), 0, 3)
@@ -861,7 +669,7 @@ mod tests {
             .await
             .expect_err("3 is not in the map");
         assert_eq!(
-            err.exception_code(),
+            exception_code(&err),
             Some(ExceptionCode::ILLEGAL_DATA_ADDRESS)
         );
     }
@@ -896,7 +704,12 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn a_lost_answer_is_retried_after_the_timeout() {
-        let mut b = bench(twin().line(), &[Trick::Drop], None, ClientConfig::default());
+        let mut b = bench(
+            twin().line(),
+            vec![Trick::Drop],
+            None,
+            ClientConfig::default(),
+        );
         let started = Instant::now();
         b.client
             .read_holding_registers(unit(2), 0x46, 20)
@@ -908,7 +721,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn a_dead_unit_gives_up_after_every_attempt_naming_endpoint_unit_and_attempts() {
-        let mut b = bench(twin().line(), &[], None, ClientConfig::default());
+        let mut b = bench(twin().line(), vec![], None, ClientConfig::default());
         let started = Instant::now();
         let err = b
             .client
@@ -919,14 +732,14 @@ mod tests {
         assert_eq!(
             err.to_string(),
             "no valid answer from unit 9 on test line to \"read 1 holding register from 0 \
-             (0x0000)\" after 3 attempts of 500ms each (last: no answer)"
+             (0x0000)\" after 3 attempts of 500 ms each (last: no reply)"
         );
         assert_eq!(b.requests(), 3);
     }
 
     #[tokio::test(start_paused = true)]
     async fn the_timeout_counts_the_wire_time_of_request_and_answer() {
-        let mut b = bench(twin().line(), &[], at_9600(), ClientConfig::default());
+        let mut b = bench(twin().line(), vec![], at_9600(), ClientConfig::default());
         let err = b
             .client
             .read_holding_registers(unit(9), 0, 125)
@@ -943,7 +756,7 @@ mod tests {
     async fn a_damaged_answer_is_retried_when_the_line_falls_quiet_not_after_the_timeout() {
         let mut b = bench(
             twin().line(),
-            &[Trick::Corrupt],
+            vec![Trick::corrupt_last()],
             None,
             ClientConfig::default(),
         );
@@ -960,7 +773,7 @@ mod tests {
     async fn damage_on_every_attempt_is_reported_as_the_last_trouble() {
         let mut b = bench(
             twin().line(),
-            &[Trick::Corrupt; 3],
+            vec![Trick::corrupt_last(); 3],
             None,
             ClientConfig::default(),
         );
@@ -986,7 +799,7 @@ mod tests {
     async fn bytes_that_look_like_a_long_frame_do_not_hold_the_answer_back() {
         let mut b = bench(
             twin().line(),
-            &[Trick::LongHead],
+            vec![long_head()],
             None,
             ClientConfig::default(),
         );
@@ -1006,7 +819,7 @@ mod tests {
     async fn an_answer_that_does_not_match_is_skipped() {
         let mut b = bench(
             twin().line(),
-            &[Trick::StrayFirst],
+            vec![stray_first()],
             None,
             ClientConfig::default(),
         );
@@ -1021,9 +834,20 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn an_answer_from_another_unit_is_never_accepted() {
+        // The answer to the read below, from unit 3 (with a good CRC).
+        let wrong_unit = Trick::Replace(
+            ResponseAdu {
+                unit: 3,
+                response: Response::ReadHoldingRegisters(
+                    RegisterValues::new(vec![crate::cross::device::PROTOCOL_REVISION])
+                        .expect("1 value"),
+                ),
+            }
+            .to_bytes(),
+        );
         let mut b = bench(
             twin().line(),
-            &[Trick::WrongUnit; 3],
+            vec![wrong_unit; 3],
             None,
             ClientConfig::default(),
         );
@@ -1050,7 +874,7 @@ mod tests {
 
     /// Time from the end of the first answer to the second request.
     async fn gap_between_exchanges(settings: Option<SerialSettings>) -> Duration {
-        let mut b = bench(slave().line(), &[], settings, ClientConfig::default());
+        let mut b = bench(slave().line(), vec![], settings, ClientConfig::default());
         b.client
             .read_holding_registers(unit(1), 0, 1)
             .await
@@ -1092,7 +916,7 @@ mod tests {
     #[tokio::test(start_paused = true)]
     async fn a_broadcast_is_never_answered_and_the_line_stays_quiet_for_the_turnaround() {
         let server = slave();
-        let mut b = bench(server.line(), &[], at_9600(), ClientConfig::default());
+        let mut b = bench(server.line(), vec![], at_9600(), ClientConfig::default());
         let started = Instant::now();
         let write = Broadcast(Write::SingleRegister(WriteRegister {
             address: 4,
@@ -1123,7 +947,7 @@ mod tests {
         let cross = twin();
         let server = slave();
         let bus = Bus(vec![Box::new(cross.line()), Box::new(server.line())]);
-        let b = bench(bus, &[], None, ClientConfig::default());
+        let b = bench(bus, vec![], None, ClientConfig::default());
         let mut dead = b.client.clone();
         let mut alive = b.client.clone();
         let started = Instant::now();
@@ -1140,7 +964,7 @@ mod tests {
         let (state, first, words) = alive_task.await.expect("task ran");
         assert!(matches!(
             dead_result,
-            Err(ClientError::NoAnswer { unit: 9, .. })
+            Err(ClientError::NoAnswer { ref device, .. }) if device == "unit 9"
         ));
         assert_eq!(state.expect("read").feed(), Feed::StaticSwitch(Source::S1));
         assert_eq!(words.expect("read"), [0, 0]);
@@ -1170,7 +994,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn an_invalid_request_never_reaches_the_wire() {
-        let mut b = bench(slave().line(), &[], None, ClientConfig::default());
+        let mut b = bench(slave().line(), vec![], None, ClientConfig::default());
         let err = b
             .client
             .read_holding_registers(unit(1), 0, 126)
@@ -1178,6 +1002,7 @@ mod tests {
             .expect_err("126 registers is too many");
         assert!(matches!(err, ClientError::Request(_)), "{err}");
         assert!(!err.is_device_error());
+        assert_eq!(err.kind(), FailureKind::Usage, "our mistake, not a refusal");
         assert_eq!(b.requests(), 0);
     }
 }

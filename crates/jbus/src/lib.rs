@@ -19,6 +19,7 @@
 #![warn(missing_docs)]
 
 pub mod annotate;
+#[cfg(feature = "io")]
 pub mod client;
 pub mod cross;
 pub mod rtu;

@@ -5,8 +5,8 @@
 //!   settings and RS-485 options.
 //! - [`Line`]: an open line to send and receive bytes, with RS-485 direction control and
 //!   local-echo discarding; [`SharedLine`] queues the devices that share one line.
-//! - [`exchange`]: one request/response attempt over a line with a deadline, deframing
-//!   with a protocol's [`wire::Codec`].
+//! - [`exchange`]: drives a sans-IO [`wire::Exchange`] (request, answer, retries) on a
+//!   line.
 //! - [`serve`]: puts a simulated [`wire::Device`] on a TCP listener or a PTY, optionally at
 //!   the speed of a real serial line.
 #![forbid(unsafe_code)]
@@ -18,5 +18,5 @@ pub mod line;
 pub mod serve;
 
 pub use endpoint::{DataBits, Endpoint, EndpointError, Parity, SerialSettings, StopBits};
-pub use exchange::{Step, exchange};
+pub use exchange::LineExchangeError;
 pub use line::{Line, LineError, OpenError, SharedLine};

@@ -214,7 +214,7 @@ impl ClientError {
     /// Whether the machine (or its absence) is the cause, rather than our request or
     /// settings.
     pub fn is_device_error(&self) -> bool {
-        !matches!(self, ClientError::Request { .. } | ClientError::Config(_))
+        wire::Failure::kind(self).is_device_side()
     }
 
     /// The refusal, when the machine said no.
@@ -222,6 +222,27 @@ impl ClientError {
         match self {
             ClientError::Refused(refusal) => Some(refusal),
             _ => None,
+        }
+    }
+}
+
+impl wire::Failure for ClientError {
+    /// A lost connection is a timeout of the machine: the client reconnects by itself.
+    fn kind(&self) -> wire::FailureKind {
+        use wire::FailureKind;
+        match self {
+            ClientError::Request { .. } | ClientError::Config(_) => FailureKind::Usage,
+            ClientError::Refused(_) => FailureKind::Refused,
+            ClientError::NoAnswer { last, .. } => match last {
+                Trouble::Silence => FailureKind::Timeout,
+                Trouble::Damaged(_) => FailureKind::Damaged,
+                Trouble::Closed | Trouble::Io(_) => FailureKind::Line,
+            },
+            ClientError::Protocol { .. } => FailureKind::Damaged,
+            ClientError::ConnectTimeout { .. } | ClientError::Connect { .. } => {
+                FailureKind::Timeout
+            }
+            ClientError::NoEcho { .. } => FailureKind::Line,
         }
     }
 }

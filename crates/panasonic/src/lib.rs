@@ -30,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod calendar;
+#[cfg(feature = "io")]
 pub mod client;
 pub mod command;
 pub mod conversation;
@@ -40,6 +41,7 @@ pub mod packet;
 pub mod production;
 pub mod program;
 pub mod reply;
+#[cfg(feature = "io")]
 pub mod server;
 pub mod status;
 pub mod twin;

@@ -36,7 +36,7 @@
 //! - A read answer of the wrong shape (count or number of items): retried.
 //! - An echo that differs from what was sent: retried **once**, because without a checksum
 //!   a digit damaged on the line looks exactly like a regulator that kept another value; a
-//!   second differing echo is reported at once as [`ClientError::EchoMismatch`] (what was
+//!   second differing echo is reported at once as the regulator's refusal, [`EchoMismatch`] (what was
 //!   sent and what came back). Writes and commands are safe to repeat: a write sets a
 //!   value, and repeating a command leaves the regulator where one would.
 //! - Noise and half messages are skipped: the answer may still follow.
@@ -48,9 +48,12 @@
 
 use std::time::Duration;
 
-use link::{Line, LineError, SharedLine, Step};
+use std::time::Instant as StdInstant;
+
+use link::{Line, LineError, SharedLine};
 use tokio::time::Instant;
-use wire::Deframer;
+use wire::exchange::{AttemptEnd, Ending, Matcher, Policy, Verdict, VerdictOf};
+use wire::{Exchange as Engine, Failure, FailureKind};
 
 use crate::exchange::{
     Answer, Classified, DEFAULT_REPLY_TIMEOUT, Exchange, ExchangeError, LineActivity, LineTiming,
@@ -106,81 +109,45 @@ impl Default for ClientConfig {
     }
 }
 
-/// Why a request did not get its answer.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum ClientError {
-    /// The request was refused before reaching the wire (a value out of range, a read-only
-    /// item, `$` with another message than 10).
-    #[error(transparent)]
-    Request(#[from] RequestError),
-    /// No valid answer within the attempts.
-    #[error(
-        "no valid answer from {} on {endpoint} after {} of {} each (last: {last})",
-        regulator(target),
-        attempts_in_words(*attempts),
-        millis(*timeout)
-    )]
-    NoAnswer {
-        /// The line.
-        endpoint: String,
-        /// Whom we asked.
-        target: Target,
-        /// Attempts made.
-        attempts: u8,
-        /// Time waited in each.
-        timeout: Duration,
-        /// What went wrong on the last attempt.
-        last: Trouble,
-    },
-    /// The regulator echoed a write or command differently from what was sent, again after a
-    /// retry: it kept another value (or something on the line changes the message).
-    #[error(
-        "echo mismatch from {} on {endpoint}: sent {sent}, it echoed {received}{}",
-        regulator(target),
-        differences(sent, received)
-    )]
-    EchoMismatch {
-        /// The line.
-        endpoint: String,
-        /// Whom we asked.
-        target: Target,
-        /// The question as sent.
-        sent: Frame,
-        /// The (last) echo as received.
-        received: Frame,
-    },
-    /// The line itself failed (closed, I/O error, an adapter echo that does not match).
-    #[error("line {endpoint} failed: {source}")]
-    Line {
-        /// The line.
-        endpoint: String,
-        /// What happened.
-        source: LineError,
-    },
+/// Why a request did not get its answer: our request (refused before the wire), the
+/// regulator's echo of another value ([`EchoMismatch`]), no valid answer within the
+/// attempts, or the line.
+pub type ClientError = wire::ExchangeError<RequestError, EchoMismatch, Trouble, LineError>;
+
+/// Line trouble on one attempt: silence, a damaged message where the answer should be, or
+/// an answer of the wrong shape or echo ([`ExchangeError`]).
+pub type Trouble = wire::Trouble<DecodeError, ExchangeError>;
+
+/// The regulator echoed a write or command differently from what was sent, again after a
+/// retry: it kept another value (or something on the line changes the message).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EchoMismatch {
+    /// Whom we asked.
+    pub target: Target,
+    /// The question as sent.
+    pub sent: Frame,
+    /// The (last) echo as received.
+    pub received: Frame,
 }
 
-impl ClientError {
-    /// Whether the regulator (or its absence, or the line) is the cause, rather than our
-    /// request.
-    pub fn is_device_error(&self) -> bool {
-        !matches!(self, Self::Request(_))
+impl wire::exchange::Refusal for EchoMismatch {
+    fn describe(&self, endpoint: &str, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "echo mismatch from {} on {endpoint}: sent {}, it echoed {}{}",
+            regulator(&self.target),
+            self.sent,
+            self.received,
+            differences(&self.sent, &self.received)
+        )
     }
 }
 
-/// Line trouble on one attempt.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[non_exhaustive]
-pub enum Trouble {
-    /// Nothing came.
-    #[error("no reply")]
-    Silence,
-    /// A damaged message came where the answer should be.
-    #[error("damaged reply: {0}")]
-    Damaged(DecodeError),
-    /// The answer had the wrong shape or echoed something else.
-    #[error("{0}")]
-    Mismatch(ExchangeError),
+impl Failure for ExchangeError {
+    /// A regulator's answer of the wrong shape or echo: damage the protocol cannot check.
+    fn kind(&self) -> FailureKind {
+        FailureKind::Damaged
+    }
 }
 
 /// A client for one regulator on a (possibly shared) line.
@@ -188,17 +155,12 @@ pub enum Trouble {
 pub struct Client {
     line: SharedLine,
     config: ClientConfig,
-    deframer: Deframer<FrameCodec>,
 }
 
 impl Client {
     /// A client for the regulator `config` names on `line`.
     pub fn new(line: SharedLine, config: ClientConfig) -> Self {
-        Self {
-            line,
-            config,
-            deframer: Deframer::new(FrameCodec),
-        }
+        Self { line, config }
     }
 
     /// The client's settings.
@@ -304,66 +266,29 @@ impl Client {
     pub async fn request(&mut self, request: Request) -> Result<Answer, ClientError> {
         let exchange = Exchange::new(self.config.target, request)?;
         let query = exchange.query_bytes();
-        let attempts = self.config.retries.saturating_add(1);
-        let mut last = Trouble::Silence;
-        let mut mismatches = 0u8;
-        let mut timeout = DEFAULT_TIMEOUT;
-        let mut endpoint = String::new();
-        for attempt in 1..=attempts {
+        let matcher = Answering {
+            target: self.config.target,
+            query_len: query.len(),
+            timing: LineTiming::default(),
+            mismatches: 0,
+            exchange,
+        };
+        let policy = Policy::new(self.config.retries, DEFAULT_TIMEOUT);
+        let mut engine = Engine::new(matcher, FrameCodec, query, policy);
+        loop {
             // One attempt at a time: other regulators' clients may use the line in between.
             let mut line = self.line.lock().await;
             let timing = self.timing(&line);
-            timeout = self
+            let timeout = self
                 .config
                 .timeout
-                .unwrap_or_else(|| exchange.reply_timeout(&timing));
-            endpoint = line.name().to_owned();
-            let outcome = attempt_once(
-                &mut line,
-                &mut self.deframer,
-                &exchange,
-                &query,
-                timeout,
-                &timing,
-            )
-            .await;
-            drop(line);
-            last = match outcome {
-                Ok(Outcome::Answer(answer)) => return Ok(answer),
-                Ok(Outcome::Mismatch(ExchangeError::EchoMismatch { sent, received })) => {
-                    mismatches += 1;
-                    if mismatches > ECHO_MISMATCHES_TOLERATED {
-                        return Err(ClientError::EchoMismatch {
-                            endpoint,
-                            target: self.config.target,
-                            sent,
-                            received,
-                        });
-                    }
-                    Trouble::Mismatch(ExchangeError::EchoMismatch { sent, received })
-                }
-                Ok(Outcome::Mismatch(other)) => Trouble::Mismatch(other),
-                Ok(Outcome::Damaged(damage)) => Trouble::Damaged(damage),
-                Err(LineError::Timeout { .. }) => Trouble::Silence,
-                Err(source) => return Err(ClientError::Line { endpoint, source }),
-            };
-            tracing::debug!(target = %self.config.target, attempt, %last, "retrying");
+                .unwrap_or_else(|| engine.matcher().exchange.reply_timeout(&timing));
+            engine.set_timeout(timeout);
+            engine.matcher_mut().timing = timing;
+            if let Some(answer) = link::exchange::step(&mut line, &mut engine).await? {
+                return Ok(answer);
+            }
         }
-        if let Trouble::Mismatch(ExchangeError::EchoMismatch { sent, received }) = last {
-            return Err(ClientError::EchoMismatch {
-                endpoint,
-                target: self.config.target,
-                sent,
-                received,
-            });
-        }
-        Err(ClientError::NoAnswer {
-            endpoint,
-            target: self.config.target,
-            attempts,
-            timeout,
-            last,
-        })
     }
 
     /// The configured timing, else the line's, else the spec's 9600 8N1.
@@ -402,7 +327,7 @@ impl Probe {
     /// regulator is there).
     pub fn answered(&self) -> bool {
         match &self.outcome {
-            Ok(_) | Err(ClientError::EchoMismatch { .. }) => true,
+            Ok(_) | Err(ClientError::Refused { .. }) => true,
             Err(ClientError::NoAnswer { last, .. }) => *last != Trouble::Silence,
             Err(_) => false,
         }
@@ -451,99 +376,97 @@ pub async fn scan(line: &SharedLine, timeout: Option<Duration>) -> Result<Vec<Pr
     Ok(probes)
 }
 
-/// The outcome of one attempt that heard something.
-enum Outcome {
-    Answer(Answer),
-    Mismatch(ExchangeError),
-    Damaged(DecodeError),
+/// What answers one question: the regulator's answer or echo, with the line's windows.
+struct Answering {
+    exchange: Exchange,
+    target: Target,
+    query_len: usize,
+    /// The line's timing, for the quiet time after each attempt.
+    timing: LineTiming,
+    /// Echoes that differed so far.
+    mismatches: u8,
 }
 
-/// One question and its answer (or timeout); leaves the line quiet for as long as the
-/// regulators need.
-async fn attempt_once(
-    line: &mut Line,
-    deframer: &mut Deframer<FrameCodec>,
-    exchange: &Exchange,
-    query: &[u8],
-    timeout: Duration,
-    timing: &LineTiming,
-) -> Result<Outcome, LineError> {
-    // The end of the last message heard that was not the answer.
-    let mut traffic: Option<Instant> = None;
-    let result = link::exchange(line, deframer, query, timeout, |input| {
-        judge(exchange, input, &mut traffic)
-    })
-    .await;
-    let now = Instant::now();
-    let activity = match &result {
-        Ok(Outcome::Answer(_) | Outcome::Mismatch(_)) => Some(LineActivity::Answered {
-            ended: now.into_std(),
-        }),
-        Ok(Outcome::Damaged(_)) => Some(LineActivity::Traffic {
-            ended: now.into_std(),
-        }),
-        // The question was handed to the line `timeout` ago and ended its wire time later.
-        Err(LineError::Timeout { .. }) => Some(LineActivity::Unanswered {
-            ended: now
-                .checked_sub(timeout)
-                .map_or(now, |sent| sent + timing.wire_time(query.len()))
-                .into_std(),
-            reply_len: exchange.reply_len(),
-        }),
-        Err(_) => None,
-    };
-    let activities = activity
-        .into_iter()
-        .chain(traffic.map(|ended| LineActivity::Traffic {
-            ended: ended.into_std(),
-        }));
-    for activity in activities {
-        line.keep_quiet_until(Instant::from_std(earliest_next_send(activity, timing)));
-    }
-    result
-}
+impl Matcher for Answering {
+    type Codec = FrameCodec;
+    type Answer = Answer;
+    type Refusal = EchoMismatch;
+    type Mismatch = ExchangeError;
 
-/// What one decoded message (or dropped run of bytes) means for the waiting exchange.
-fn judge(
-    exchange: &Exchange,
-    input: Result<Frame, DecodeError>,
-    traffic: &mut Option<Instant>,
-) -> Step<Outcome> {
-    match input {
-        Ok(frame) => match exchange.classify(&frame) {
-            Classified::Answer(answer) => Step::Done(Outcome::Answer(answer)),
-            Classified::Mismatch(mismatch) => Step::Done(Outcome::Mismatch(mismatch)),
-            Classified::NotOurs(why) => {
-                tracing::debug!(%frame, ?why, "skipping a message that is not the answer");
-                *traffic = Some(Instant::now());
-                Step::Continue
+    fn judge(&mut self, input: Result<Frame, DecodeError>) -> VerdictOf<Self> {
+        match input {
+            Ok(frame) => match self.exchange.classify(&frame) {
+                Classified::Answer(answer) => Verdict::Answer(answer),
+                Classified::Mismatch(ExchangeError::EchoMismatch { sent, received }) => {
+                    self.mismatches += 1;
+                    if self.mismatches > ECHO_MISMATCHES_TOLERATED {
+                        Verdict::Refused(EchoMismatch {
+                            target: self.target,
+                            sent,
+                            received,
+                        })
+                    } else {
+                        Verdict::Retry(Trouble::Mismatch(ExchangeError::EchoMismatch {
+                            sent,
+                            received,
+                        }))
+                    }
+                }
+                Classified::Mismatch(other) => Verdict::Retry(Trouble::Mismatch(other)),
+                Classified::NotOurs(why) => {
+                    tracing::debug!(%frame, ?why, "skipping a message that is not the answer");
+                    Verdict::Skip
+                }
+            },
+            // A damaged whole message where the answer should be: retry once the line is free.
+            Err(damage) if damage.is_whole_message() => Verdict::Retry(Trouble::Damaged(damage)),
+            // Noise or a half message: the answer may still come.
+            Err(noise) => {
+                tracing::debug!(%noise, "skipping noise while waiting for the answer");
+                Verdict::Noise
             }
-        },
-        // A damaged whole message where the answer should be: retry once the line is free.
-        Err(damage) if damage.is_whole_message() => Step::Done(Outcome::Damaged(damage)),
-        // Noise or a half message: the answer may still come.
-        Err(noise) => {
-            tracing::debug!(%noise, "skipping noise while waiting for the answer");
-            Step::Continue
         }
     }
-}
 
-/// `1 attempt`, `3 attempts`.
-fn attempts_in_words(attempts: u8) -> String {
-    match attempts {
-        1 => "1 attempt".to_owned(),
-        n => format!("{n} attempts"),
+    /// An echo that differs on the last attempt is the regulator's answer: it kept another
+    /// value.
+    fn last_word(&mut self, last: &Trouble) -> Option<EchoMismatch> {
+        match last {
+            Trouble::Mismatch(ExchangeError::EchoMismatch { sent, received }) => {
+                Some(EchoMismatch {
+                    target: self.target,
+                    sent: sent.clone(),
+                    received: received.clone(),
+                })
+            }
+            _ => None,
+        }
     }
-}
 
-/// A timeout as a plant engineer reads it: `500 ms`, `422 ms`, `1.5 s`.
-fn millis(duration: Duration) -> String {
-    let ms = duration.as_secs_f64() * 1000.0;
-    if ms < 1000.0 {
-        format!("{ms:.0} ms")
-    } else {
-        format!("{:.1} s", ms / 1000.0)
+    /// The regulators' windows: 40 ms after an answer or any other message; after a
+    /// question left unanswered, the whole window in which its answer could still come.
+    fn quiet_after(&mut self, attempt: &AttemptEnd) -> Option<StdInstant> {
+        let activity = match attempt.ending {
+            Ending::Answered => LineActivity::Answered {
+                ended: attempt.ended,
+            },
+            Ending::Damaged => LineActivity::Traffic {
+                ended: attempt.ended,
+            },
+            // The question ended its wire time after it was handed to the line.
+            Ending::TimedOut => LineActivity::Unanswered {
+                ended: attempt.sent + self.timing.wire_time(self.query_len),
+                reply_len: self.exchange.reply_len(),
+            },
+        };
+        let after_traffic = attempt
+            .skipped
+            .map(|ended| earliest_next_send(LineActivity::Traffic { ended }, &self.timing));
+        Some(earliest_next_send(activity, &self.timing).max(after_traffic.unwrap_or(attempt.ended)))
+    }
+
+    fn device(&self) -> String {
+        regulator(&self.target)
     }
 }
 

@@ -55,6 +55,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+#[cfg(feature = "io")]
 pub mod client;
 pub mod device;
 pub mod diagnostic;

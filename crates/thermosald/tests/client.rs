@@ -1,42 +1,51 @@
 //! The async client against the twin over an in-memory line, in paused (virtual) time: the
 //! line's timing windows, retries, echo checks, and several regulators on one line.
 
-use std::collections::VecDeque;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant as StdInstant};
 
 use link::{Line, SerialSettings, SharedLine};
+use testkit::{At, Tap, Trick, Tricky};
 use thermosald::client::{
     Client, ClientConfig, ClientError, DEFAULT_TIMEOUT, Trouble, probe_timeout, scan,
 };
 use thermosald::device::Line as Twin;
 use thermosald::diagnostic::{self, Fault};
 use thermosald::exchange::{LineTiming, RELEASE_AFTER_ANSWER};
-use thermosald::frame::{Address, RawValue, Target};
+use thermosald::frame::{Address, Direction, Frame, RawValue, Target};
+use thermosald::request::Read;
 use thermosald::tables::{Table, runtime, settings};
 use tokio::time::Instant;
-use wire::Transmit;
-use wire::device::{Device, ModelLine, SharedModel};
+use wire::device::SharedModel;
+use wire::{Failure, FailureKind};
 
 use crate::common::{addr, ms};
 
-/// What the line does to the twin's next answer.
-#[derive(Debug, Clone, Copy)]
-enum Trick {
-    /// Swallow it.
-    Drop,
-    /// Turn a digit of its message number into `X`: a damaged whole message.
-    Damage,
-    /// Change its last data digit into another digit: still a valid message, but not what
-    /// the regulator said (the protocol has no checksum).
-    FlipDigit,
-    /// Line noise before it.
-    Noise,
-    /// An answer from address 7 before it.
-    StrayFirst,
-    /// The adapter's local echo of the question before it (no `echo=discard`).
-    LocalEcho,
+/// A damaged whole message: a digit of its message number turned into a letter.
+fn damage() -> Trick {
+    Trick::Flip {
+        at: At::Start(2),
+        mask: 0x40,
+    }
+}
+
+/// Line noise before the answer.
+fn noise() -> Trick {
+    Trick::Before(b"\xFF\x00~~".to_vec())
+}
+
+/// An answer from address 7 to the same read before the answer.
+fn stray_first(read: Read) -> Trick {
+    let query = thermosald::Exchange::new(addr(7).into(), read.into()).expect("a valid read");
+    let query = query.query();
+    let stray = Frame::new(
+        query.target(),
+        query.message(),
+        Direction::Reply,
+        query.count(),
+        vec![RawValue::new(123).expect("3 digits"); read.items().len()],
+    )
+    .expect("a valid answer");
+    Trick::Before(stray.to_bytes())
 }
 
 /// One message on the simulated wire.
@@ -47,106 +56,26 @@ struct Message {
     end: StdInstant,
 }
 
-/// The twin behind a line that plays tricks on its answers and logs every message with the
-/// time it took the wire.
-struct Tricky {
-    twin: ModelLine<Twin>,
-    tricks: VecDeque<Trick>,
-    pace: Option<LineTiming>,
-    log: Arc<Mutex<Vec<Message>>>,
-    answered: Arc<AtomicUsize>,
-}
-
-impl Tricky {
-    fn wire(&self, len: usize) -> Duration {
-        self.pace.map_or(Duration::ZERO, |t| t.wire_time(len))
-    }
-}
-
-impl Device for Tricky {
-    fn set_timing(&mut self, timing: wire::LineTiming) {
-        self.twin.set_timing(timing);
-    }
-
-    fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
-        // A paced serve loop hands the question over when its last character arrived.
-        let question = Message {
-            question: true,
-            start: now - self.wire(bytes.len()),
-            end: now,
-        };
-        self.log.lock().unwrap().push(question);
-        let answers = self.twin.receive(bytes, now);
-        self.answered.fetch_add(answers.len(), Ordering::SeqCst);
-        let mut out = Vec::new();
-        for mut tx in answers {
-            match self.tricks.pop_front() {
-                None => out.push(tx),
-                Some(Trick::Drop) => continue,
-                Some(Trick::Damage) => {
-                    tx.bytes[2] = b'X';
-                    out.push(tx);
-                }
-                Some(Trick::FlipDigit) => {
-                    let last = tx.bytes.len() - 2;
-                    tx.bytes[last] = if tx.bytes[last] == b'0' { b'1' } else { b'0' };
-                    out.push(tx);
-                }
-                Some(Trick::Noise) => {
-                    let mut bytes = b"\xFF\x00~~".to_vec();
-                    bytes.append(&mut tx.bytes);
-                    tx.bytes = bytes;
-                    out.push(tx);
-                }
-                Some(Trick::LocalEcho) => {
-                    out.push(Transmit::now(bytes.to_vec()));
-                    out.push(tx);
-                }
-                Some(Trick::StrayFirst) => {
-                    let mut stray = tx.bytes.clone();
-                    stray[1] = b'7';
-                    out.push(Transmit::after(tx.delay, stray));
-                    out.push(tx);
-                }
-            }
-        }
-        let mut log = self.log.lock().unwrap();
-        let mut start = now;
-        for tx in &out {
-            // Replies sent back to back follow each other on the wire.
-            start = start.max(now + tx.delay);
-            let end = start + self.wire(tx.bytes.len());
-            log.push(Message {
-                question: false,
-                start,
-                end,
-            });
-            start = end;
-        }
-        out
-    }
-}
-
 struct Bench {
     line: SharedLine,
     twin: SharedModel<Twin>,
-    log: Arc<Mutex<Vec<Message>>>,
-    answered: Arc<AtomicUsize>,
+    tap: Tap,
+    pace: Option<LineTiming>,
 }
 
 impl Bench {
     /// Regulators at `addresses` behind an unpaced in-memory line (answers arrive exactly
     /// 200 ms after the question).
-    fn new(addresses: &[u8], tricks: &[Trick]) -> Bench {
+    fn new(addresses: &[u8], tricks: Vec<Trick>) -> Bench {
         Self::build(addresses, tricks, None)
     }
 
     /// The same on a 9600-baud line: the serve loop and the twin both count wire time.
     fn paced(addresses: &[u8]) -> Bench {
-        Self::build(addresses, &[], Some(SerialSettings::new_8n1(9600)))
+        Self::build(addresses, vec![], Some(SerialSettings::new_8n1(9600)))
     }
 
-    fn build(addresses: &[u8], tricks: &[Trick], pace: Option<SerialSettings>) -> Bench {
+    fn build(addresses: &[u8], tricks: Vec<Trick>, pace: Option<SerialSettings>) -> Bench {
         let addresses: Vec<Address> = addresses.iter().map(|a| addr(*a)).collect();
         let timing = pace.map(|_| LineTiming::RS485_9600_8N1);
         let mut twin = Twin::new(&addresses, Instant::now().into_std()).expect("distinct");
@@ -154,22 +83,15 @@ impl Bench {
             twin = twin.paced(timing);
         }
         let twin = SharedModel::new(twin);
-        let log = Arc::default();
-        let answered = Arc::default();
-        let device = Tricky {
-            twin: twin.line(),
-            tricks: tricks.iter().copied().collect(),
-            pace: timing,
-            log: Arc::clone(&log),
-            answered: Arc::clone(&answered),
-        };
+        let device = Tricky::new(twin.line(), tricks);
+        let tap = device.tap();
         let (ours, theirs) = tokio::io::duplex(1024);
         tokio::spawn(link::serve::serve_stream(theirs, device, pace));
         Bench {
             line: SharedLine::new(Line::from_stream(ours, "test line", pace)),
             twin,
-            log,
-            answered,
+            tap,
+            pace: timing,
         }
     }
 
@@ -178,22 +100,48 @@ impl Bench {
     }
 
     fn questions(&self) -> usize {
-        self.log
-            .lock()
-            .unwrap()
-            .iter()
-            .filter(|m| m.question)
-            .count()
+        self.tap.requests()
     }
 
     fn answered(&self) -> usize {
-        self.answered.load(Ordering::SeqCst)
+        self.tap.replies()
+    }
+
+    fn wire(&self, len: usize) -> Duration {
+        self.pace.map_or(Duration::ZERO, |t| t.wire_time(len))
+    }
+
+    /// Every message with the time it took the wire: a paced serve loop hands a question
+    /// over when its last character arrived; answers sent back to back follow each other.
+    fn log(&self) -> Vec<Message> {
+        let mut log = Vec::new();
+        let mut free = None;
+        for traffic in self.tap.traffic() {
+            if traffic.from_device {
+                let start = free.map_or(traffic.at, |f: StdInstant| f.max(traffic.at));
+                let end = start + self.wire(traffic.bytes.len());
+                log.push(Message {
+                    question: false,
+                    start,
+                    end,
+                });
+                free = Some(end);
+            } else {
+                log.push(Message {
+                    question: true,
+                    start: traffic.at - self.wire(traffic.bytes.len()),
+                    end: traffic.at,
+                });
+                free = Some(traffic.at);
+            }
+        }
+        log
     }
 
     /// No message starts inside the 40 ms after the end of the previous one; no question
     /// while an answer is pending.
     fn assert_line_discipline(&self) {
-        let mut log = self.log.lock().unwrap().clone();
+        let mut log = self.log();
         log.sort_by_key(|m| m.start);
         for pair in log.windows(2) {
             let (before, next) = (pair[0], pair[1]);
@@ -215,7 +163,7 @@ fn item(table: Table, index: u8) -> &'static thermosald::Item {
 
 #[tokio::test(start_paused = true)]
 async fn a_write_then_a_read_go_through_the_regulator() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let mut client = b.client(0);
     let sealing = Table::Settings.find("sealing temperature").unwrap();
     let echoed = client.write(sealing, 175.0).await.expect("echoed");
@@ -227,7 +175,7 @@ async fn a_write_then_a_read_go_through_the_regulator() {
 
 #[tokio::test(start_paused = true)]
 async fn a_whole_table_read_gives_every_item_named_and_scaled() {
-    let b = Bench::new(&[2], &[]);
+    let b = Bench::new(&[2], vec![]);
     let values = b.client(2).read_table(Table::Service).await.expect("read");
     assert_eq!(values.raw().len(), Table::Service.len());
     let width = values
@@ -238,7 +186,7 @@ async fn a_whole_table_read_gives_every_item_named_and_scaled() {
 
 #[tokio::test(start_paused = true)]
 async fn polls_follow_each_other_40_ms_after_each_answer_and_never_sooner() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let mut client = b.client(0);
     let started = Instant::now();
     for _ in 0..10 {
@@ -297,7 +245,7 @@ async fn every_client_on_a_shared_line_respects_the_windows_the_others_opened() 
 
 #[tokio::test(start_paused = true)]
 async fn a_lost_answer_is_retried_after_the_timeout() {
-    let b = Bench::new(&[0], &[Trick::Drop]);
+    let b = Bench::new(&[0], vec![Trick::Drop]);
     let started = Instant::now();
     b.client(0)
         .read_table(Table::Runtime)
@@ -310,7 +258,7 @@ async fn a_lost_answer_is_retried_after_the_timeout() {
 
 #[tokio::test(start_paused = true)]
 async fn a_silent_address_gives_up_after_every_attempt_with_the_facts() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let started = Instant::now();
     let err = b
         .client(5)
@@ -335,7 +283,7 @@ async fn a_silent_address_gives_up_after_every_attempt_with_the_facts() {
 
 #[tokio::test(start_paused = true)]
 async fn a_damaged_answer_is_retried_once_the_line_is_free_without_waiting_for_the_timeout() {
-    let b = Bench::new(&[0], &[Trick::Damage]);
+    let b = Bench::new(&[0], vec![damage()]);
     let started = Instant::now();
     b.client(0)
         .read_table(Table::Settings)
@@ -349,7 +297,7 @@ async fn a_damaged_answer_is_retried_once_the_line_is_free_without_waiting_for_t
 
 #[tokio::test(start_paused = true)]
 async fn damage_on_every_attempt_is_reported_as_the_last_trouble() {
-    let b = Bench::new(&[0], &[Trick::Damage; 3]);
+    let b = Bench::new(&[0], vec![damage(), damage(), damage()]);
     let err = b
         .client(0)
         .read_table(Table::Settings)
@@ -370,9 +318,9 @@ async fn damage_on_every_attempt_is_reported_as_the_last_trouble() {
 
 #[tokio::test(start_paused = true)]
 async fn noise_and_other_addresses_answers_are_skipped_never_taken_for_the_answer() {
-    let b = Bench::new(&[0], &[Trick::Noise, Trick::StrayFirst]);
-    let mut client = b.client(0);
     let sealing = item(Table::Settings, settings::SEALING_TEMPERATURE);
+    let b = Bench::new(&[0], vec![noise(), stray_first(Read::item(sealing))]);
+    let mut client = b.client(0);
     client.write(sealing, 190.0).await.expect("echoed");
     let reading = client.read_item(sealing).await.expect("answered");
     assert_eq!(reading.to_string(), "190 °C");
@@ -382,7 +330,7 @@ async fn noise_and_other_addresses_answers_are_skipped_never_taken_for_the_answe
 
 #[tokio::test(start_paused = true)]
 async fn the_adapters_local_echo_of_the_question_is_not_taken_for_the_answer() {
-    let b = Bench::new(&[0], &[Trick::LocalEcho, Trick::LocalEcho]);
+    let b = Bench::new(&[0], vec![Trick::EchoFirst, Trick::EchoFirst]);
     let mut client = b.client(0);
     let sealing = item(Table::Settings, settings::SEALING_TEMPERATURE);
     client
@@ -396,7 +344,12 @@ async fn the_adapters_local_echo_of_the_question_is_not_taken_for_the_answer() {
 
 #[tokio::test(start_paused = true)]
 async fn an_echo_damaged_once_on_the_line_is_retried_and_the_write_succeeds() {
-    let b = Bench::new(&[0], &[Trick::FlipDigit]);
+    // 185 becomes 180: still a valid message, but not what the regulator said.
+    let flip_digit = Trick::Flip {
+        at: At::End(2),
+        mask: b'5' ^ b'0',
+    };
+    let b = Bench::new(&[0], vec![flip_digit]);
     let sealing = item(Table::Settings, settings::SEALING_TEMPERATURE);
     b.client(0)
         .write(sealing, 185.0)
@@ -407,7 +360,7 @@ async fn an_echo_damaged_once_on_the_line_is_retried_and_the_write_succeeds() {
 
 #[tokio::test(start_paused = true)]
 async fn an_echo_that_differs_twice_is_reported_with_what_was_sent_and_what_came_back() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     // 300 °C is within the item's range, but above the maximum working temperature
     // (250 °C): the regulator keeps 180 °C and echoes it.
     let sealing = item(Table::Settings, settings::SEALING_TEMPERATURE);
@@ -421,13 +374,14 @@ async fn an_echo_that_differs_twice_is_reported_with_what_was_sent_and_what_came
         "echo mismatch from regulator 0 on test line: sent %012Q150300, it echoed %012R150180; \
          it kept Set sealing temperature = 180 °C, not 300 °C"
     );
-    assert!(matches!(err, ClientError::EchoMismatch { .. }));
+    assert!(matches!(err, ClientError::Refused { .. }));
+    assert_eq!(err.kind(), FailureKind::Refused);
     assert_eq!(b.questions(), 2, "retried once, then reported");
 }
 
 #[tokio::test(start_paused = true)]
 async fn with_no_retries_an_echo_mismatch_is_reported_at_once() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let config = ClientConfig {
         retries: 0,
         ..ClientConfig::new(addr(0))
@@ -435,13 +389,13 @@ async fn with_no_retries_an_echo_mismatch_is_reported_at_once() {
     let mut client = Client::new(b.line.clone(), config);
     let sealing = item(Table::Settings, settings::SEALING_TEMPERATURE);
     let err = client.write(sealing, 300.0).await.expect_err("kept 180");
-    assert!(matches!(err, ClientError::EchoMismatch { .. }), "{err}");
+    assert!(matches!(err, ClientError::Refused { .. }), "{err}");
     assert_eq!(b.questions(), 1);
 }
 
 #[tokio::test(start_paused = true)]
 async fn an_invalid_write_never_reaches_the_wire() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let mut client = b.client(0);
     let sealing = item(Table::Settings, settings::SEALING_TEMPERATURE);
     let err = client
@@ -450,6 +404,7 @@ async fn an_invalid_write_never_reaches_the_wire() {
         .expect_err("four digits");
     assert!(matches!(err, ClientError::Request(_)), "{err}");
     assert!(!err.is_device_error());
+    assert_eq!(err.kind(), FailureKind::Usage, "our mistake, not a refusal");
     let kint = Table::Machine.find("KINT gain").unwrap();
     assert!(
         client.write(kint, 12.55).await.is_err(),
@@ -462,7 +417,7 @@ async fn an_invalid_write_never_reaches_the_wire() {
 
 #[tokio::test(start_paused = true)]
 async fn a_dead_regulator_delays_the_others_by_at_most_its_own_timeout() {
-    let b = Bench::new(&[0, 1], &[]);
+    let b = Bench::new(&[0, 1], vec![]);
     let (mut dead, live0, live1) = (b.client(5), b.client(0), b.client(1));
     let dead_run = async {
         let started = Instant::now();
@@ -495,7 +450,7 @@ async fn a_dead_regulator_delays_the_others_by_at_most_its_own_timeout() {
 
 #[tokio::test(start_paused = true)]
 async fn clear_faults_clears_a_fault_once_its_cause_is_gone() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let mut client = b.client(0);
     let fault = item(Table::Runtime, runtime::FAULT);
     b.twin
@@ -525,7 +480,7 @@ async fn clear_faults_clears_a_fault_once_its_cause_is_gone() {
 
 #[tokio::test(start_paused = true)]
 async fn writes_are_volatile_until_saved_to_eeprom() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let mut client = b.client(0);
     let preheat = item(Table::Settings, settings::PRE_HEATING_TEMPERATURE);
     client.write(preheat, 95.0).await.unwrap();
@@ -546,7 +501,7 @@ async fn writes_are_volatile_until_saved_to_eeprom() {
 
 #[tokio::test(start_paused = true)]
 async fn after_a_master_reset_an_address_is_assigned_with_dollar_and_balancing_clears_35() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let mut client = b.client(0);
     let fault = item(Table::Runtime, runtime::FAULT);
     client.master_reset().await.expect("echoed");
@@ -573,7 +528,7 @@ async fn after_a_master_reset_an_address_is_assigned_with_dollar_and_balancing_c
 
 #[tokio::test(start_paused = true)]
 async fn dollar_carries_only_address_assignment() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let mut client = Client::new(b.line.clone(), ClientConfig::new(Target::Assign));
     let err = client.clear_faults().await.expect_err("refused");
     assert!(matches!(err, ClientError::Request(_)), "{err}");
@@ -582,7 +537,7 @@ async fn dollar_carries_only_address_assignment() {
 
 #[tokio::test(start_paused = true)]
 async fn a_scan_finds_the_regulators_with_one_attempt_per_address() {
-    let b = Bench::new(&[0, 2, 5], &[]);
+    let b = Bench::new(&[0, 2, 5], vec![]);
     let started = Instant::now();
     let probes = scan(&b.line, None).await.expect("the line works");
     let elapsed = started.elapsed();
@@ -614,7 +569,7 @@ fn second_line(b: &Bench) -> Line {
 
 #[tokio::test(start_paused = true)]
 async fn a_line_just_opened_waits_the_release_time_so_its_first_question_is_heard() {
-    let b = Bench::new(&[0], &[]);
+    let b = Bench::new(&[0], vec![]);
     let temperature = item(Table::Runtime, runtime::TEMPERATURE);
     b.client(0).read_item(temperature).await.expect("answered");
 

@@ -1,5 +1,6 @@
 //! Integration tests of the thermosald crate: one test binary (see Cargo.toml).
 
+#[cfg(feature = "io")]
 mod client;
 mod common;
 mod exchange;

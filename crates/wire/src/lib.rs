@@ -7,6 +7,9 @@
 //!   `% … LF`).
 //! - [`ascii`]: fixed-width ASCII numbers as the serial protocols carry them.
 //! - [`backoff`]: waits that double after each failure, up to a cap.
+//! - [`exchange`]: one request/response exchange with retries as a sans-IO state machine,
+//!   judged by a protocol's [`exchange::Matcher`]; `link` drives it on a line.
+//! - [`failure`]: the kinds of failure every client error reports ([`FailureKind`]).
 //! - [`device`]: the interface between a simulated device and the line that serves it,
 //!   and seeded [`device::FaultInjector`] for realistic line trouble.
 #![forbid(unsafe_code)]
@@ -17,7 +20,11 @@ pub mod backoff;
 pub mod checksum;
 pub mod codec;
 pub mod device;
+pub mod exchange;
+pub mod failure;
 pub mod scan;
 
 pub use codec::{Codec, Deframer, Resync};
 pub use device::{Device, LineTiming, Transmit};
+pub use exchange::{Exchange, ExchangeError, Matcher, Policy, Trouble, Verdict};
+pub use failure::{Failure, FailureKind};

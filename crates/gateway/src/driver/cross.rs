@@ -22,7 +22,7 @@
 
 use std::time::Duration;
 
-use jbus::client::{Client, ClientConfig, ClientError, Trouble};
+use jbus::client::{Client, ClientConfig, ClientError};
 use jbus::cross::{Area, CrossState, Feed, InternalState, Measures, Ratings, Source};
 use jbus::rtu::Unit;
 use link::{SerialSettings, SharedLine};
@@ -359,8 +359,8 @@ impl CrossDriver {
             .await
         {
             Ok(words) => Ok(Ok(words)),
-            Err(e @ ClientError::Exception { .. }) => Ok(Err(classify(&e))),
-            Err(e) => Err(classify(&e)),
+            Err(e @ ClientError::Refused { .. }) => Ok(Err(DeviceError::of(&e))),
+            Err(e) => Err(DeviceError::of(&e)),
         }
     }
 
@@ -540,20 +540,6 @@ fn words<const N: usize>(words: &[u16], area: Area) -> Result<[u16; N], DeviceEr
             format_args!("the {area} area came with {} words, not {N}", words.len()),
         )
     })
-}
-
-/// The kind of a JBUS client error (shared with the generic Modbus driver).
-pub(super) fn classify(error: &ClientError) -> DeviceError {
-    let kind = match error {
-        ClientError::Request(_) | ClientError::Exception { .. } => ErrorKind::Refused,
-        ClientError::NoAnswer { last, .. } => match last {
-            Trouble::Silence => ErrorKind::Timeout,
-            _ => ErrorKind::Decode,
-        },
-        ClientError::Line { source, .. } if source.is_fatal() => ErrorKind::Disconnected,
-        _ => ErrorKind::Line,
-    };
-    DeviceError::new(kind, error)
 }
 
 #[cfg(test)]

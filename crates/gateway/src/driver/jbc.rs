@@ -33,7 +33,7 @@ use std::collections::hash_map::Entry;
 use std::ops::RangeInclusive;
 use std::time::Duration;
 
-use jbc::client::{Client, ClientConfig, ClientError, Trouble};
+use jbc::client::{Client, ClientConfig, ClientError, ExchangeError};
 use jbc::code::{Code, Port, StationError, Tool, ToolError};
 use jbc::device::{ADJUST_TEMP_RANGE, AIR_FLOW_RANGE, AIR_TEMP_RANGE, EXTERNAL_TEMP_RANGE};
 use jbc::frame::{Address, Route};
@@ -571,8 +571,8 @@ impl JbcDriver {
         let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         let first = match client.read(code).await {
             Ok(reading) => reading,
-            Err(e) if point_level(&e) => return Ok(Answer::Bad(classify(&e))),
-            Err(e) => return Err(classify(&e)),
+            Err(e) if point_level(&e) => return Ok(Answer::Bad(DeviceError::of(&e))),
+            Err(e) => return Err(DeviceError::of(&e)),
         };
         let defs = || {
             POINTS
@@ -595,8 +595,8 @@ impl JbcDriver {
         }
         let why = match second {
             Ok(again) => format!("read as {first}, then as {again}"),
-            Err(e) if point_level(&e) => format!("read as {first}, then {}", classify(&e)),
-            Err(e) => return Err(classify(&e)),
+            Err(e) if point_level(&e) => format!("read as {first}, then {}", DeviceError::of(&e)),
+            Err(e) => return Err(DeviceError::of(&e)),
         };
         tracing::warn!(device = %self.device, %code, "two reads disagree, not recorded: {why}");
         if self.confirmed.contains_key(&code) {
@@ -643,7 +643,7 @@ impl JbcDriver {
         client
             .write(def.code, number)
             .await
-            .map_err(|e| WriteError::Device(classify(&e)))?;
+            .map_err(|e| WriteError::Device(DeviceError::of(&e)))?;
         // Acknowledged: the station holds what was written.
         self.confirmed
             .insert(def.code, jbc::code::Value::Number(number));
@@ -696,29 +696,15 @@ fn value_of(reading: &jbc::Reading, part: Part) -> Value {
 fn point_level(error: &ClientError) -> bool {
     matches!(
         error,
-        ClientError::Refused { .. } | ClientError::BadValue { .. } | ClientError::Request(_)
+        ClientError::BadValue { .. }
+            | ClientError::Exchange(ExchangeError::Refused { .. } | ExchangeError::Request(_))
     )
-}
-
-/// The kind of a client error.
-fn classify(error: &ClientError) -> DeviceError {
-    let kind = match error {
-        ClientError::Request(_) | ClientError::Refused { .. } => ErrorKind::Refused,
-        ClientError::BadValue { .. } => ErrorKind::Decode,
-        ClientError::NoAnswer { last, .. } => match last {
-            Trouble::Silence => ErrorKind::Timeout,
-            Trouble::Damaged(_) => ErrorKind::Decode,
-            _ => ErrorKind::Line,
-        },
-        ClientError::Line { source, .. } if source.is_fatal() => ErrorKind::Disconnected,
-        _ => ErrorKind::Line,
-    };
-    DeviceError::new(kind, error)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::driver::ErrorKind;
     use jbc::device::{Station, StationConfig};
     use std::sync::Arc;
     use std::sync::atomic::{AtomicUsize, Ordering};

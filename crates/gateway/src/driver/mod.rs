@@ -3,8 +3,9 @@
 //! A [`Driver`] describes its device's points and poll groups, reads a group when the
 //! scheduler asks, and writes a point. It talks through its protocol crate's client over
 //! a [`link::SharedLine`] the scheduler attaches; it never opens lines, keeps no history
-//! and reads no clock. Errors are classified ([`ErrorKind`]) so the metrics can count
-//! timeouts apart from refusals and line trouble.
+//! and reads no clock. Errors are classified by the client errors' own
+//! [`wire::Failure::kind`] ([`DeviceError::of`], mapped to [`ErrorKind`]) so the metrics can
+//! count timeouts apart from refusals, line trouble and our own bad requests.
 //!
 //! Protocols: [`jbc`] (JBC JTSE hot-air station), [`thermosald`] (ISC impulse-sealer
 //! regulators, several on one RS-485 line), [`cross`] (Chloride CROSS transfer switch over
@@ -30,6 +31,7 @@ use std::time::Duration;
 
 use link::{SerialSettings, SharedLine};
 use serde::Serialize;
+use wire::{Failure, FailureKind};
 
 use crate::event::EventKind;
 use crate::point::{DeviceId, PointId, PointSpec, Value, ValueError};
@@ -139,10 +141,14 @@ pub struct Reading {
     pub value: Result<Value, DeviceError>,
 }
 
-/// How a request to a device failed, for metrics and for what the scheduler does next.
+/// How a request to a device failed, for metrics and for what the scheduler does next:
+/// the clients' [`FailureKind`], mapped one to one ([`From<FailureKind>`]) under the
+/// labels the metrics and the API have always used.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ErrorKind {
+    /// Our own request was wrong: refused before the wire, never the device's doing.
+    Usage,
     /// No answer in time.
     Timeout,
     /// The device answered no (a NAK, an exception).
@@ -158,7 +164,8 @@ pub enum ErrorKind {
 
 impl ErrorKind {
     /// Every kind, for metric labels.
-    pub const ALL: [ErrorKind; 5] = [
+    pub const ALL: [ErrorKind; 6] = [
+        ErrorKind::Usage,
         ErrorKind::Timeout,
         ErrorKind::Refused,
         ErrorKind::Decode,
@@ -169,11 +176,28 @@ impl ErrorKind {
     /// The label (`timeout`).
     pub fn as_str(self) -> &'static str {
         match self {
+            ErrorKind::Usage => "usage",
             ErrorKind::Timeout => "timeout",
             ErrorKind::Refused => "refused",
             ErrorKind::Decode => "decode",
             ErrorKind::Line => "line",
             ErrorKind::Disconnected => "disconnected",
+        }
+    }
+}
+
+impl From<FailureKind> for ErrorKind {
+    /// The one place a client's failure becomes a gateway error kind.
+    fn from(kind: FailureKind) -> Self {
+        match kind {
+            FailureKind::Usage => ErrorKind::Usage,
+            FailureKind::Refused => ErrorKind::Refused,
+            FailureKind::Timeout => ErrorKind::Timeout,
+            FailureKind::Damaged => ErrorKind::Decode,
+            FailureKind::Line => ErrorKind::Line,
+            FailureKind::Disconnected => ErrorKind::Disconnected,
+            // A kind added to the taxonomy later is line trouble until mapped here.
+            _ => ErrorKind::Line,
         }
     }
 }
@@ -203,6 +227,11 @@ impl DeviceError {
             kind,
             message: error.to_string(),
         }
+    }
+
+    /// A client's failure, classified by its own [`Failure::kind`]: the only classifier.
+    pub fn of(error: &impl Failure) -> Self {
+        Self::new(error.kind().into(), error)
     }
 
     /// A request before the scheduler attached the line.
@@ -364,5 +393,46 @@ pub fn build(config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
         Protocol::Cross => Ok(Box::new(cross::CrossDriver::new(config)?)),
         Protocol::Panasonic => Ok(Box::new(panasonic::PanasonicDriver::new(config)?)),
         Protocol::Modbus => Ok(Box::new(modbus::ModbusDriver::new(config)?)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_request_a_client_refused_to_build_is_usage_never_a_device_refusal() {
+        let jbc = ::jbc::message::Request::write("AT1".parse().expect("a code"), 100)
+            .expect_err("AT1 is read-only");
+        let jbc = DeviceError::of(&::jbc::client::ClientError::from(jbc));
+        assert_eq!(jbc.kind, ErrorKind::Usage, "{jbc}");
+
+        let sealing = ::thermosald::Table::Settings
+            .find("sealing temperature")
+            .expect("an item");
+        let thermosald = ::thermosald::Write::value(sealing, 1000.0).expect_err("four digits");
+        let thermosald = DeviceError::of(&::thermosald::client::ClientError::from(thermosald));
+        assert_eq!(thermosald.kind, ErrorKind::Usage, "{thermosald}");
+
+        let jbus = ::jbus::rtu::Request::read_holding_registers(0, 126).expect_err("too many");
+        let jbus = DeviceError::of(&::jbus::client::ClientError::from(jbus));
+        assert_eq!(jbus.kind, ErrorKind::Usage, "{jbus}");
+
+        let panasonic = ::panasonic::client::ClientError::Config(
+            ::panasonic::keepalive::KeepAliveConfigError::IntervalTooShort {
+                interval: Duration::from_millis(1),
+                min: Duration::from_secs(1),
+            },
+        );
+        assert_eq!(DeviceError::of(&panasonic).kind, ErrorKind::Usage);
+    }
+
+    #[test]
+    fn every_failure_kind_maps_to_its_own_error_kind() {
+        let mut kinds: Vec<ErrorKind> = FailureKind::ALL.into_iter().map(Into::into).collect();
+        kinds.sort_by_key(|k| k.as_str());
+        kinds.dedup();
+        assert_eq!(kinds.len(), FailureKind::ALL.len());
+        assert_eq!(kinds.len(), ErrorKind::ALL.len());
     }
 }

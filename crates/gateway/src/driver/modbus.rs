@@ -33,7 +33,6 @@ use std::time::Duration;
 
 use jbus::client::{Client, ClientConfig, ClientError};
 
-use super::cross::classify;
 use jbus::rtu::Unit;
 use link::{SerialSettings, SharedLine};
 
@@ -201,8 +200,8 @@ impl ModbusDriver {
             };
             let words = match read {
                 Ok(words) => Ok(words),
-                Err(e @ ClientError::Exception { .. }) => Err(classify(&e)),
-                Err(e) => return Err(classify(&e)),
+                Err(e @ ClientError::Refused { .. }) => Err(DeviceError::of(&e)),
+                Err(e) => return Err(DeviceError::of(&e)),
             };
             blocks.push((table, start, count, words));
         }
@@ -264,7 +263,7 @@ impl ModbusDriver {
         client
             .write_single_register(unit, address, word)
             .await
-            .map_err(|e| WriteError::Device(classify(&e)))
+            .map_err(|e| WriteError::Device(DeviceError::of(&e)))
     }
 }
 

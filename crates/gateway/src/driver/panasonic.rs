@@ -31,7 +31,7 @@
 use std::time::Duration;
 
 use link::{Endpoint, SharedLine};
-use panasonic::client::{Client, ClientConfig, ClientError, Notice, Trouble};
+use panasonic::client::{Client, ClientConfig, ClientError, Notice};
 use panasonic::command::{ProductionRequest, ProductionScope};
 use panasonic::event::Event;
 use panasonic::production::{Counter, RateKind};
@@ -180,7 +180,7 @@ impl PanasonicDriver {
         if self.client.is_none() {
             let (client, mut events) = Client::connect(self.config.clone())
                 .await
-                .map_err(|e| classify(&e))?;
+                .map_err(|e| DeviceError::of(&e))?;
             let (tx, rx) = mpsc::unbounded_channel();
             self.forward = Some(tokio::spawn(async move {
                 while let Some(notice) = events.next().await {
@@ -203,7 +203,7 @@ impl PanasonicDriver {
                     .await?
                     .status()
                     .await
-                    .map_err(|e| classify(&e))?;
+                    .map_err(|e| DeviceError::of(&e))?;
                 self.note_state(status.state);
                 vec![
                     Reading {
@@ -222,8 +222,8 @@ impl PanasonicDriver {
             PROGRAM => {
                 let value = match self.client().await?.current_program().await {
                     Ok(name) => Ok(Value::Text(name.to_string())),
-                    Err(e @ ClientError::Refused(_)) => Err(classify(&e)),
-                    Err(e) => return Err(classify(&e)),
+                    Err(e @ ClientError::Refused(_)) => Err(DeviceError::of(&e)),
+                    Err(e) => return Err(DeviceError::of(&e)),
                 };
                 vec![Reading {
                     point: self.id("program"),
@@ -237,8 +237,8 @@ impl PanasonicDriver {
                 };
                 let data = match self.client().await?.production(request).await {
                     Ok(data) => Ok(data),
-                    Err(e @ ClientError::Refused(_)) => Err(classify(&e)),
-                    Err(e) => return Err(classify(&e)),
+                    Err(e @ ClientError::Refused(_)) => Err(DeviceError::of(&e)),
+                    Err(e) => return Err(DeviceError::of(&e)),
                 };
                 let missing = |what: &str| {
                     DeviceError::new(
@@ -436,25 +436,6 @@ impl Driver for PanasonicDriver {
         self.drain_notices();
         std::mem::take(&mut self.events)
     }
-}
-
-/// The kind of a client error. A lost connection is a timeout of the device, not of a
-/// line: the client reconnects by itself, the scheduler only backs the machine off.
-fn classify(error: &ClientError) -> DeviceError {
-    let kind = match error {
-        ClientError::Refused(_) | ClientError::Request { .. } | ClientError::Config(_) => {
-            ErrorKind::Refused
-        }
-        ClientError::NoAnswer { last, .. } => match last {
-            Trouble::Silence => ErrorKind::Timeout,
-            Trouble::Damaged(_) => ErrorKind::Decode,
-            _ => ErrorKind::Line,
-        },
-        ClientError::Protocol { .. } => ErrorKind::Decode,
-        ClientError::ConnectTimeout { .. } | ClientError::Connect { .. } => ErrorKind::Timeout,
-        _ => ErrorKind::Line,
-    };
-    DeviceError::new(kind, error)
 }
 
 #[cfg(test)]

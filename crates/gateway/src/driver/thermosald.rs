@@ -57,7 +57,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use link::{SerialSettings, SharedLine};
-use thermosald::client::{Client, ClientConfig, ClientError, Trouble};
+use thermosald::client::{Client, ClientConfig, ClientError};
 use thermosald::diagnostic::{self, Fault};
 use thermosald::exchange::Values;
 use thermosald::tables::{self, Item, Table, machine, runtime, service, settings};
@@ -346,7 +346,10 @@ impl ThermosaldDriver {
             )
         })?;
         let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
-        let first = client.read_table(table).await.map_err(|e| classify(&e))?;
+        let first = client
+            .read_table(table)
+            .await
+            .map_err(|e| DeviceError::of(&e))?;
         let defs: Vec<&'static Def> = POINTS.iter().filter(|d| d.table == table).collect();
         // What the first read settles (`None`: nothing to record this poll), and the
         // readings that need a second read.
@@ -449,7 +452,7 @@ impl ThermosaldDriver {
         let first = client
             .read(Read::item(item))
             .await
-            .map_err(|e| classify(&e))?;
+            .map_err(|e| DeviceError::of(&e))?;
         let first = first
             .get(item)
             .filter(tables::Reading::in_range)
@@ -462,7 +465,7 @@ impl ThermosaldDriver {
         let second = client
             .read(Read::item(item))
             .await
-            .map_err(|e| classify(&e))?;
+            .map_err(|e| DeviceError::of(&e))?;
         self.confirm(first, &second)?;
         Ok(first.value())
     }
@@ -515,7 +518,7 @@ impl ThermosaldDriver {
         client
             .write_raw(item, raw)
             .await
-            .map_err(|e| WriteError::Device(classify(&e)))?;
+            .map_err(|e| WriteError::Device(DeviceError::of(&e)))?;
         // The regulator echoed exactly what was sent: the value is confirmed.
         self.confirmed.insert((item.table(), item.index()), raw);
         Ok(())
@@ -586,7 +589,7 @@ fn checked(def: &Def, values: &Values) -> Result<tables::Reading, DeviceError> {
 /// Why a changed value is not recorded when its second read failed.
 fn unconfirmed_after_failure(first: tables::Reading, error: &ClientError) -> DeviceError {
     let item = first.item();
-    let cause = classify(error);
+    let cause = DeviceError::of(error);
     DeviceError::new(
         cause.kind,
         format_args!(
@@ -659,20 +662,6 @@ fn value_error(point: &PointSpec, error: tables::ValueError) -> ValueError {
             got: other.to_string(),
         },
     }
-}
-
-/// The kind of a client error.
-fn classify(error: &ClientError) -> DeviceError {
-    let kind = match error {
-        ClientError::Request(_) | ClientError::EchoMismatch { .. } => ErrorKind::Refused,
-        ClientError::NoAnswer { last, .. } => match last {
-            Trouble::Silence => ErrorKind::Timeout,
-            _ => ErrorKind::Decode,
-        },
-        ClientError::Line { source, .. } if source.is_fatal() => ErrorKind::Disconnected,
-        _ => ErrorKind::Line,
-    };
-    DeviceError::new(kind, error)
 }
 
 #[cfg(test)]

@@ -614,7 +614,7 @@ async fn a_write_the_device_does_not_answer_is_a_504_and_audited_as_failed() {
     )
     .await;
     assert_eq!(status, StatusCode::GATEWAY_TIMEOUT, "{reply}");
-    assert!(error_of(&reply).contains("no valid reply"), "{reply}");
+    assert!(error_of(&reply).contains("no valid answer"), "{reply}");
     let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
     assert_eq!(rows[0].result, "failed");
     assert_eq!(rows[0].point, "jbc1.air_flow_setpoint");

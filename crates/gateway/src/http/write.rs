@@ -268,6 +268,8 @@ impl From<WriteError> for ApiError {
     fn from(error: WriteError) -> Self {
         let status = match &error {
             WriteError::Invalid(_) => StatusCode::BAD_REQUEST,
+            // The protocol crate refused to build the request: it never reached the device.
+            WriteError::Device(e) if e.kind == ErrorKind::Usage => StatusCode::BAD_REQUEST,
             WriteError::UnknownPoint { .. } => StatusCode::NOT_FOUND,
             WriteError::Device(e) if e.kind == ErrorKind::Timeout => StatusCode::GATEWAY_TIMEOUT,
             WriteError::Device(_) => StatusCode::BAD_GATEWAY,
@@ -350,6 +352,7 @@ impl Attempt {
                     WriteError::Invalid(_) | WriteError::UnknownPoint { .. } => {
                         AuditResult::Refused
                     }
+                    WriteError::Device(e) if e.kind == ErrorKind::Usage => AuditResult::Refused,
                     WriteError::Device(e) if e.kind == ErrorKind::Refused => AuditResult::Refused,
                     _ => AuditResult::Failed,
                 };
