@@ -8,6 +8,8 @@
 //! - [`ascii`]: fixed-width ASCII numbers as the serial protocols carry them.
 //! - [`device`]: the interface between a simulated device and the line that serves it,
 //!   and seeded [`device::FaultInjector`] for realistic line trouble.
+//! - [`operator`]: the operator commands a simulated device takes while it serves (a
+//!   command table, one parser, `help`), each device's set defined next to its twin.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -15,6 +17,7 @@ pub mod ascii;
 pub mod checksum;
 pub mod codec;
 pub mod device;
+pub mod operator;
 pub mod scan;
 
 pub use codec::{Codec, Deframer, Resync};
