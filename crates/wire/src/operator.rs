@@ -90,6 +90,32 @@ pub enum ParseError {
     },
 }
 
+impl ParseError {
+    /// A name `from_words` does not know: refused as an unknown command (a table entry
+    /// without its parse is a slip that each device's tests catch).
+    pub fn unknown(word: &str) -> Self {
+        ParseError::Unknown {
+            word: word.to_owned(),
+        }
+    }
+}
+
+/// Implements `FromStr` for a [`CommandSet`] through [`parse`], so the command is parsed
+/// with `line.parse()`.
+#[macro_export]
+macro_rules! operator_from_str {
+    ($command:ty) => {
+        impl ::std::str::FromStr for $command {
+            type Err = $crate::operator::ParseError;
+
+            /// A command as typed, in any case; `help [COMMAND]` is every device's.
+            fn from_str(line: &str) -> ::std::result::Result<Self, Self::Err> {
+                $crate::operator::parse(line)
+            }
+        }
+    };
+}
+
 /// A device's operator command set.
 pub trait CommandSet: Sized {
     /// Every command but `help`, in the order `help` lists them.
@@ -125,17 +151,21 @@ impl Words<'_> {
         self.rest.next()
     }
 
-    /// The next word as a number from `min` to `max`.
-    pub fn number(&mut self, what: &'static str, min: u32, max: u32) -> Result<u32, ParseError> {
+    /// The next word as a number from `min` to `max` (decimal, any unsigned type).
+    pub fn number<T>(&mut self, what: &'static str, min: T, max: T) -> Result<T, ParseError>
+    where
+        T: Copy + Into<u32> + TryFrom<u32>,
+    {
         let text = self.word(what)?;
         text.parse::<u32>()
             .ok()
-            .filter(|n| (min..=max).contains(n))
+            .filter(|n| (min.into()..=max.into()).contains(n))
+            .and_then(|n| T::try_from(n).ok())
             .ok_or_else(|| ParseError::BadNumber {
                 what,
                 text: text.to_owned(),
-                min,
-                max,
+                min: min.into(),
+                max: max.into(),
             })
     }
 
@@ -161,9 +191,7 @@ pub fn parse<C: CommandSet>(line: &str) -> Result<C, ParseError> {
         C::TABLE
             .iter()
             .find(|s| s.name.eq_ignore_ascii_case(word))
-            .ok_or_else(|| ParseError::Unknown {
-                word: word.to_owned(),
-            })
+            .ok_or_else(|| ParseError::unknown(word))
     };
     if first.eq_ignore_ascii_case(HELP.name) || first == "?" {
         let mut words = Words {
@@ -198,6 +226,16 @@ pub fn help_line<C: CommandSet>(about: Option<&'static Syntax>) -> String {
     }
 }
 
+/// The table entries of `C` its `from_words` does not know (each typed alone parses or
+/// asks for its argument, never "unknown"): empty for a consistent command set.
+pub fn unparsed_entries<C: CommandSet>() -> Vec<&'static str> {
+    C::TABLE
+        .iter()
+        .filter(|syntax| matches!(parse::<C>(syntax.name), Err(ParseError::Unknown { .. })))
+        .map(|syntax| syntax.name)
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -227,10 +265,8 @@ mod tests {
         fn from_words(syntax: &'static Syntax, words: &mut Words<'_>) -> Result<Self, ParseError> {
             match syntax.name {
                 "on" => Ok(Lamp::On),
-                "dim" => Ok(Lamp::Dim(words.number("a percentage", 0, 100)?)),
-                other => Err(ParseError::Unknown {
-                    word: other.to_owned(),
-                }),
+                "dim" => Ok(Lamp::Dim(words.number("a percentage", 0u32, 100)?)),
+                other => Err(ParseError::unknown(other)),
             }
         }
 
@@ -239,9 +275,11 @@ mod tests {
         }
     }
 
+    crate::operator_from_str!(Lamp);
+
     #[test]
     fn a_command_is_found_whatever_its_case_and_spacing() {
-        assert_eq!(parse::<Lamp>("  ON \r\n"), Ok(Lamp::On));
+        assert_eq!("  ON \r\n".parse::<Lamp>(), Ok(Lamp::On));
         assert_eq!(parse::<Lamp>("dim\t40"), Ok(Lamp::Dim(40)));
     }
 
@@ -263,6 +301,7 @@ mod tests {
         );
         let rows: Vec<&str> = help_rows::<Lamp>().map(|s| s.name).collect();
         assert_eq!(rows, ["on", "dim", "help"]);
+        assert!(unparsed_entries::<Lamp>().is_empty());
     }
 
     #[test]
