@@ -1,7 +1,6 @@
 //! `cellbus modbus …`, `cellbus cross …`, `cellbus sim cross|modbus` and `cellbus decode
 //! modbus`: JBUS / Modbus RTU devices and the Chloride CROSS static transfer switch.
 
-use std::collections::BTreeSet;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -12,7 +11,7 @@ use jbus::client::{
     Client, ClientConfig, ClientError, DEFAULT_RETRIES, DEFAULT_TURNAROUND, UnitRefusal,
 };
 use jbus::cross::device::CrossTwin;
-use jbus::cross::{CrossState, NamedBit, Phases, Source};
+use jbus::cross::{Amount, CrossState, Discrete, MEASURES, NamedBit, Quantity, RATINGS, Source};
 use jbus::rtu::{Addressed, Answer, Broadcast, Request, Unit, Write};
 use jbus::slave::{Slave, SlaveMap};
 use link::{Endpoint, Line, SerialSettings, SharedLine};
@@ -377,8 +376,7 @@ pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
     let mut client = open(&endpoint, args.line.config()).await?;
     match args.action {
         CrossAction::Status => {
-            let state = client
-                .read_cross(unit)
+            let state = jbus::cross::read(&mut client, unit)
                 .await
                 .map_err(output::failure)
                 .with_context(|| format!("reading the CROSS at unit {unit} on {endpoint}"))?;
@@ -393,60 +391,6 @@ pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
         CrossAction::Watch { interval, changes } => {
             watch(&mut client, unit, interval, changes, args.line.json).await
         }
-    }
-}
-
-/// The parts of a state whose change `watch` reports.
-#[derive(Debug, Clone, PartialEq, Eq)]
-struct Discrete {
-    load: String,
-    alarms: BTreeSet<&'static str>,
-    states: BTreeSet<&'static str>,
-}
-
-impl Discrete {
-    fn of(state: &CrossState) -> Self {
-        let reserve = if state.on_reserve_line() {
-            " (reserve line)"
-        } else {
-            ""
-        };
-        Self {
-            load: format!("{}{reserve}", state.feed()),
-            alarms: state.alarms().into_iter().collect(),
-            states: state.conditions().into_iter().collect(),
-        }
-    }
-
-    /// What changed from `before` to `self`, in words.
-    fn changes_from(&self, before: &Self) -> Vec<String> {
-        let mut out = Vec::new();
-        if self.load != before.load {
-            out.push(format!("load {}", self.load));
-        }
-        out.extend(
-            self.alarms
-                .difference(&before.alarms)
-                .map(|a| format!("alarm raised: {a}")),
-        );
-        out.extend(
-            before
-                .alarms
-                .difference(&self.alarms)
-                .map(|a| format!("alarm cleared: {a}")),
-        );
-        out.extend(
-            self.states
-                .difference(&before.states)
-                .map(|s| format!("now: {s}")),
-        );
-        out.extend(
-            before
-                .states
-                .difference(&self.states)
-                .map(|s| format!("no longer: {s}")),
-        );
-        out
     }
 }
 
@@ -469,9 +413,9 @@ async fn watch(
             _ = tokio::signal::ctrl_c() => return Ok(ExitCode::SUCCESS),
         }
         let elapsed = started.elapsed();
-        match client.read_cross(unit).await {
+        match jbus::cross::read(client, unit).await {
             Ok(state) => {
-                let now = Discrete::of(&state);
+                let now = Discrete::of(&state.internal);
                 let mut events = Vec::new();
                 if std::mem::take(&mut lost) {
                     events.push("contact restored".to_owned());
@@ -479,8 +423,8 @@ async fn watch(
                 match &last {
                     // The state at the start is not a change.
                     None => {
-                        events.push(format!("load {}", now.load));
-                        let alarms: Vec<&str> = now.alarms.iter().copied().collect();
+                        events.push(format!("load {}", now.load()));
+                        let alarms: Vec<&str> = now.alarms().collect();
                         events.push(if alarms.is_empty() {
                             "alarms: none".to_owned()
                         } else {
@@ -489,7 +433,7 @@ async fn watch(
                         print_watch(elapsed, &events, Some(&state), json)?;
                     }
                     Some(before) => {
-                        events.extend(now.changes_from(before));
+                        events.extend(now.changes_since(before).iter().map(ToString::to_string));
                         if !events.is_empty() {
                             print_watch(elapsed, &events, Some(&state), json)?;
                             seen += 1;
@@ -560,18 +504,15 @@ fn cross_json(unit: Unit, state: &CrossState) -> Value {
     Value::Object(object)
 }
 
-/// The state as JSON: words for the discrete parts, `{"value":…,"unit":…}` for quantities.
+/// The state as JSON: words for the discrete parts; each measure and rating of
+/// `jbus::cross::points` under its name, as `{"value":…,"unit":…}` or `{"u":…,"v":…,"w":…,
+/// "unit":…}` (a plain number when it has no unit).
 fn state_json(state: &CrossState) -> Value {
     let feed = state.feed();
-    let source = match feed {
-        jbus::cross::Feed::StaticSwitch(s) | jbus::cross::Feed::Bypass(s) => Some(match s {
-            Source::S1 => "S1",
-            Source::S2 => "S2",
-        }),
-        _ => None,
-    };
-    let m = &state.measures;
-    let r = &state.ratings;
+    let source = feed.source().map(|s| match s {
+        Source::S1 => "S1",
+        Source::S2 => "S2",
+    });
     let mimic: Map<String, Value> = jbus::cross::Element::ALL
         .iter()
         .map(|&e| (e.to_string(), json!(state.mimic.lamps(e).to_string())))
@@ -586,40 +527,30 @@ fn state_json(state: &CrossState) -> Value {
             "lamps": mimic,
             "segments_lit": state.mimic.segments.lit().map(|s| s.number()).collect::<Vec<_>>(),
         },
-        "measures": {
-            "s1_voltage": phases(m.s1_voltage, |v| v.value(), "V"),
-            "s1_frequency": quantity(m.s1_frequency.value(), "Hz"),
-            "s2_voltage": phases(m.s2_voltage, |v| v.value(), "V"),
-            "s2_frequency": quantity(m.s2_frequency.value(), "Hz"),
-            "output_voltage": phases(m.output_voltage, |v| v.value(), "V"),
-            "output_current": phases(m.output_current, |a| a.value(), "A"),
-            "neutral_current": quantity(m.neutral_current.value(), "A"),
-            "neutral_voltage": quantity(m.neutral_voltage.value(), "V"),
-            "output_frequency": quantity(m.output_frequency.value(), "Hz"),
-            "load_power": quantity(m.load_power.value(), "kVA"),
-            "phase_error": quantity(m.phase_error.value(), "°"),
-            "inlet_air": quantity(m.inlet_air.value(), "°C"),
-        },
-        "ratings": {
-            "rated_current": quantity(r.rated_current.value(), "A"),
-            "s1_voltage_full_scale": phases(r.s1_voltage_full_scale, |v| v.value(), "V"),
-            "s2_voltage_full_scale": phases(r.s2_voltage_full_scale, |v| v.value(), "V"),
-            "output_voltage_full_scale": phases(r.output_voltage_full_scale, |v| v.value(), "V"),
-            "output_current_full_scale": phases(r.output_current_full_scale, |a| a.value(), "A"),
-            "neutral_current_full_scale": quantity(r.neutral_current_full_scale.value(), "A"),
-            "neutral_voltage_full_scale": quantity(r.neutral_voltage_full_scale.value(), "V"),
-            "inlet_air_full_scale": quantity(r.inlet_air_full_scale.value(), "°C"),
-            "protocol_revision": r.protocol_revision,
-        },
+        "measures": quantities_json(MEASURES, &state.measures),
+        "ratings": quantities_json(RATINGS, &state.ratings),
     })
 }
 
-fn quantity(value: f64, unit: &str) -> Value {
-    json!({ "value": value, "unit": unit })
+/// `{name: amount}` for every quantity of an area.
+fn quantities_json<A>(quantities: &[Quantity<A>], area: &A) -> Value {
+    let object: Map<String, Value> = quantities
+        .iter()
+        .map(|q| (q.name.to_owned(), amount_json((q.read)(area), q.unit)))
+        .collect();
+    Value::Object(object)
 }
 
-fn phases<T: Copy>(p: Phases<T>, value: impl Fn(T) -> f64, unit: &str) -> Value {
-    json!({ "u": value(p.u), "v": value(p.v), "w": value(p.w), "unit": unit })
+fn amount_json(amount: Amount, unit: Option<&str>) -> Value {
+    let mut object = match amount {
+        Amount::Count(count) => return json!(count),
+        Amount::One(value) => json!({ "value": value }),
+        Amount::Phases(phases) => json!({ "u": phases.u, "v": phases.v, "w": phases.w }),
+    };
+    if let (Some(unit), Value::Object(fields)) = (unit, &mut object) {
+        fields.insert("unit".into(), json!(unit));
+    }
+    object
 }
 
 // --- cellbus sim cross | modbus ---
@@ -731,28 +662,5 @@ mod tests {
         assert!(parse_on_off("maybe").is_err());
         assert_eq!(parse_bit_value("1"), Ok(true));
         assert!(parse_bit_value("2").is_err());
-    }
-
-    #[test]
-    fn watch_names_what_changed() {
-        let before = Discrete {
-            load: "supplied by S1".into(),
-            alarms: BTreeSet::new(),
-            states: ["S1 normal"].into_iter().collect(),
-        };
-        let after = Discrete {
-            load: "supplied by S2".into(),
-            alarms: ["S1 failure"].into_iter().collect(),
-            states: BTreeSet::new(),
-        };
-        assert_eq!(
-            after.changes_from(&before),
-            [
-                "load supplied by S2",
-                "alarm raised: S1 failure",
-                "no longer: S1 normal"
-            ]
-        );
-        assert!(before.changes_from(&before).is_empty());
     }
 }

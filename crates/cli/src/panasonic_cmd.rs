@@ -120,7 +120,7 @@ pub enum PanasonicAction {
 
 /// `cellbus sim panasonic`.
 #[derive(Debug, Args)]
-#[command(after_help = crate::sim_control::long_help::<crate::sim_control::PanasonicCommand>())]
+#[command(after_help = crate::sim_control::long_help::<panasonic::operator::Command>())]
 pub struct SimPanasonicArgs {
     /// Port 1 (commands). Prints `listening on tcp://IP:PORT` first. Port 0 picks a free port.
     #[arg(long, value_name = "IP:PORT", default_value = "127.0.0.1:49152")]

@@ -107,7 +107,7 @@ pub enum ThermosaldAction {
 }
 
 #[derive(Debug, Args)]
-#[command(after_help = crate::sim_control::long_help::<crate::sim_control::ThermosaldCommand>())]
+#[command(after_help = crate::sim_control::long_help::<thermosald::device::operator::Command>())]
 pub struct SimThermosaldArgs {
     #[command(flatten)]
     pub serve: ServeArgs,

@@ -7,7 +7,9 @@
 //! a serial server gets: nothing short-cuts the protocol.
 //!
 //! The cell is alive, driven by scripted operators on timers through each twin's own
-//! provocation API (never through the gateway):
+//! provocation API (never through the gateway); the sealers' and the placement machine's
+//! operators give the same commands `cellbus sim` takes on its stdin
+//! (`thermosald::device::operator`, `panasonic::operator`):
 //!
 //! - one JBC JTSE station ([`start_jbc_station`]): set points, tool on and off through a
 //!   second connection, as a cell controller would; the suction pedal and an occasional
@@ -33,10 +35,12 @@ use jbc::device::{Station, StationConfig};
 use jbus::cross::Source;
 use jbus::cross::device::{CrossTwin, SourceFault};
 use link::{Endpoint, Line, SerialSettings, SharedLine};
+use panasonic::operator::Command as PanelCommand;
 use panasonic::server::{Control, RunningTwin, TwinServer};
 use panasonic::status::StopMode;
 use panasonic::{Machine, MachineConfig};
 use thermosald::Address;
+use thermosald::device::operator::{self as sealer, Command as SealerCommand};
 use thermosald::device::{Line as RegulatorLine, Regulator, RegulatorConfig};
 use thermosald::diagnostic::Fault;
 use thermosald::exchange::LineTiming;
@@ -214,22 +218,27 @@ pub async fn start_thermosald_line(demo: &mut DemoCell, line: &str) -> std::io::
 }
 
 /// The sealers' supply trouble, repeated: every 3 minutes regulator 2's supply sags for
-/// half a minute.
+/// half a minute; then the operator repairs it and switches it off and on, with the same
+/// commands `cellbus sim thermosald` takes on its stdin.
 async fn operate_sealers(model: SharedModel<RegulatorLine>) {
     let Ok(address) = Address::new(2) else {
         return;
     };
-    let now = || tokio::time::Instant::now().into_std();
+    let act = |command: SealerCommand| {
+        let now = tokio::time::Instant::now().into_std();
+        if let Err(e) = sealer::apply(&mut model.lock(), command, now) {
+            tracing::warn!("demo sealer operator: {e}");
+        }
+    };
     loop {
         tokio::time::sleep(Duration::from_secs(60)).await;
-        if let Some(r) = model.lock().regulator_mut(address) {
-            r.provoke(Fault::TemperatureNotReached, now());
-        }
+        act(SealerCommand::Fault {
+            address,
+            kind: Fault::TemperatureNotReached,
+        });
         tokio::time::sleep(Duration::from_secs(30)).await;
-        if let Some(r) = model.lock().regulator_mut(address) {
-            r.remove_cause(Fault::TemperatureNotReached, now());
-            r.power_cycle(now());
-        }
+        act(SealerCommand::Repair { address });
+        act(SealerCommand::PowerCycle { address });
         tokio::time::sleep(Duration::from_secs(90)).await;
     }
 }
@@ -289,25 +298,23 @@ pub async fn start_panasonic(demo: &mut DemoCell, id: &str, name: &str) -> std::
 /// The feeder the demo operator lets run out.
 const EMPTY_FEEDER: u16 = 7;
 
-/// The placement operator's routine, forever: about 50 s running, 15 s in error, 10 s ready.
+/// The placement operator's routine, forever: about 50 s running, 15 s in error, 10 s
+/// ready; the same commands `cellbus sim panasonic` takes on its stdin.
 async fn operate_panasonic(control: Control) {
+    let act = |command: PanelCommand| {
+        if let Err(e) = control.apply(command) {
+            tracing::warn!("demo placement operator: {e}");
+        }
+    };
     loop {
         tokio::time::sleep(Duration::from_secs(10)).await;
-        if let Err(e) = control.operator_start(Some(StopMode::Continuous)) {
-            tracing::warn!("demo placement operator cannot start: {e}");
-        }
+        act(PanelCommand::Start(Some(StopMode::Continuous)));
         tokio::time::sleep(Duration::from_secs(50)).await;
-        if let Err(e) = control.pause_feeder(EMPTY_FEEDER) {
-            tracing::warn!("demo placement operator: {e}");
-        }
+        act(PanelCommand::PauseFeeder(EMPTY_FEEDER));
         tokio::time::sleep(Duration::from_secs(15)).await;
-        let refilled = control
-            .resume_feeder(EMPTY_FEEDER)
-            .and_then(|()| control.refill_feeder(EMPTY_FEEDER));
-        if let Err(e) = refilled {
-            tracing::warn!("demo placement operator: {e}");
-        }
-        control.clear();
+        act(PanelCommand::ResumeFeeder(EMPTY_FEEDER));
+        act(PanelCommand::RefillFeeder(EMPTY_FEEDER));
+        act(PanelCommand::Clear);
     }
 }
 

@@ -1,13 +1,13 @@
 //! Poll cycles per second reading a Chloride CROSS over a simulated 9600-baud line, in real
 //! time: our client against the theoretical limit of the line and against pymodbus.
 //!
-//! One poll cycle is what `Client::read_cross` does: one function-3 read per area of
+//! One poll cycle is what `jbus::cross::read` does: one function-3 read per area of
 //! `cross::read_plan` (four reads). The twin runs in-process behind `link`'s serve loop on
 //! loopback TCP, paced at the CROSS's 9600 8N1 (requests heard when their last character
 //! arrives, answers leaving at the line's character rate): exactly what
 //! `cellbus sim cross --listen 127.0.0.1:0 --baud 9600` serves.
 //!
-//! - **ours**: `Client::read_cross` over `tcp://127.0.0.1:PORT?baud=9600`, so the client
+//! - **ours**: `jbus::cross::read` over `tcp://127.0.0.1:PORT?baud=9600`, so the client
 //!   keeps the 3.5-character silence before every request, as on the wire.
 //! - **theory**: computed from the frames' lengths and printed with its arithmetic.
 //! - **pymodbus**: `benches/poll_rate_pymodbus.py`, pymodbus's synchronous client with the
@@ -233,7 +233,7 @@ impl Theory {
             ms(self.timing.char_time()),
             ms(silence)
         );
-        println!("one cycle = read_cross = {n} function-3 reads (the read plan):");
+        println!("one cycle = cross::read = {n} function-3 reads (the read plan):");
         for request in plan {
             let asked = Addressed::new(unit, request.clone())
                 .to_adu()
@@ -295,7 +295,7 @@ async fn poll_with_ours(url: &str, unit: Unit, duration: Duration) -> Vec<Instan
     let until = Instant::now() + duration;
     let mut ends = Vec::new();
     while Instant::now() < until {
-        match client.read_cross(unit).await {
+        match jbus::cross::read(&mut client, unit).await {
             Ok(_) => ends.push(Instant::now()),
             Err(e) => println!("  ours: a cycle failed: {e}"),
         }
@@ -321,7 +321,7 @@ fn poll_with_pymodbus(port: u16, unit: Unit, seconds: u64) -> Result<Pymodbus, S
         return Err(format!("pymodbus is not installed for python3; {hint}"));
     }
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/poll_rate_pymodbus.py");
-    // The same reads as `read_cross`: the plan's blocks, as ADDRESS:COUNT.
+    // The same reads as `cross::read`: the plan's blocks, as ADDRESS:COUNT.
     let blocks = read_plan()
         .into_iter()
         .map(|(address, count)| format!("{address}:{count}"));

@@ -32,7 +32,6 @@ use tokio::time::Instant;
 use wire::exchange::{AttemptEnd, Matcher, Policy, Verdict, VerdictOf};
 use wire::{Exchange, Failure, FailureKind};
 
-use crate::cross::{CrossState, read_plan};
 use crate::rtu::{
     Addressed, Answer, Broadcast, DecodeError, Exception, ExceptionCode, InvalidValue, LineTiming,
     Mismatch, Request, ResponseAdu, ResponseCodec, Unit, check_response, find_frame,
@@ -231,18 +230,6 @@ impl Client {
     ) -> Result<(), ClientError> {
         let request = Request::write_multiple_registers(address, values.to_vec())?;
         self.write(unit, request).await
-    }
-
-    /// Reads the whole state of a Chloride CROSS: one function-3 read per area of
-    /// [`read_plan`], decoded into named, scaled values.
-    pub async fn read_cross(&mut self, unit: Unit) -> Result<CrossState, ClientError> {
-        let mut blocks = Vec::with_capacity(4);
-        for (start, count) in read_plan() {
-            let words = self.read_holding_registers(unit, start, count).await?;
-            blocks.push((start, words));
-        }
-        Ok(CrossState::from_blocks(&blocks)
-            .expect("the read plan covers every defined word and each answer's count is checked"))
     }
 
     /// Sends `request` to its unit and returns the checked answer (never
@@ -558,15 +545,19 @@ mod tests {
     }
 
     #[tokio::test(start_paused = true)]
-    async fn read_cross_decodes_the_twin_in_four_requests_and_sees_a_transfer() {
+    async fn cross_read_decodes_the_twin_in_four_requests_and_sees_a_transfer() {
         let cross = twin();
         let mut b = bench(cross.line(), vec![], at_9600(), ClientConfig::default());
-        let state = b.client.read_cross(unit(2)).await.expect("read");
+        let state = crate::cross::read(&mut b.client, unit(2))
+            .await
+            .expect("read");
         assert_eq!(state.feed(), Feed::StaticSwitch(Source::S1));
         assert!(state.alarms().is_empty(), "{:?}", state.alarms());
         assert_eq!(b.requests(), 4);
         cross.lock().fail_source(Source::S1);
-        let state = b.client.read_cross(unit(2)).await.expect("read");
+        let state = crate::cross::read(&mut b.client, unit(2))
+            .await
+            .expect("read");
         assert_eq!(state.feed(), Feed::StaticSwitch(Source::S2));
         assert!(
             state.alarms().iter().any(|a| a.contains("S1 failure")),
@@ -955,7 +946,7 @@ mod tests {
             tokio::spawn(async move { dead.read_holding_registers(unit(9), 0, 1).await });
         tokio::task::yield_now().await;
         let alive_task = tokio::spawn(async move {
-            let state = alive.read_cross(unit(2)).await;
+            let state = crate::cross::read(&mut alive, unit(2)).await;
             let first = Instant::now();
             let words = alive.read_holding_registers(unit(1), 0, 2).await;
             (state, first, words)

@@ -17,6 +17,9 @@
 //! - [`keepalive`]: the host's C2HB/R1HB wire-break check.
 //! - [`twin`]: a placement-machine model for simulators and tests: program store, modes,
 //!   a production run over simulated time, the R-message buffer and the exact refusals.
+//! - [`operator`]: the commands an operator gives the twin at its panel (`start ep`,
+//!   `pause-feeder 7`, `clear`), parsed and carried out the same way by `cellbus sim` and
+//!   the gateway's demo cell.
 //! - [`server`]: the twin on its two TCP ports (tokio), with a control handle for tests
 //!   and demos; [`client`]: the host side over [`link`]: every C command with time-outs,
 //!   the keep-alive, reconnection with backoff, and the R messages as a typed stream.
@@ -37,6 +40,7 @@ pub mod conversation;
 pub mod event;
 pub mod keepalive;
 pub mod message;
+pub mod operator;
 pub mod packet;
 pub mod production;
 pub mod program;

@@ -38,6 +38,7 @@ use tokio::time::Instant;
 
 use crate::Port;
 use crate::message::Message;
+use crate::operator;
 use crate::program::ProgramName;
 use crate::status::{ControlMode, MachineStatus, StopMode};
 use crate::twin::{Machine, TwinError};
@@ -244,6 +245,11 @@ impl Control {
     /// Clears every cause of an error and presses RESET (Ready).
     pub fn clear(&self) {
         self.with(|machine, now| machine.clear(now));
+    }
+
+    /// Carries out an operator command at the panel now (see [`operator::apply`]).
+    pub fn apply(&self, command: operator::Command) -> Result<String, TwinError> {
+        self.with(|machine, now| operator::apply(machine, command, now))
     }
 
     /// Closes the port's current connection once; the host may reconnect at once.

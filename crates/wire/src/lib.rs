@@ -12,6 +12,8 @@
 //! - [`failure`]: the kinds of failure every client error reports ([`FailureKind`]).
 //! - [`device`]: the interface between a simulated device and the line that serves it,
 //!   and seeded [`device::FaultInjector`] for realistic line trouble.
+//! - [`operator`]: the operator commands a simulated device takes while it serves (a
+//!   command table, one parser, `help`), each device's set defined next to its twin.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -22,6 +24,7 @@ pub mod codec;
 pub mod device;
 pub mod exchange;
 pub mod failure;
+pub mod operator;
 pub mod scan;
 
 pub use codec::{Codec, Deframer, Resync};

@@ -11,10 +11,13 @@
 //! - one alarm point per condition (`s1_alarms`, `s2_alarms`, `s1_switch_alarms`,
 //!   `s2_switch_alarms`, `load_alarms`, `system_alarms`): the active alarms in words, or
 //!   `none`; anything else is an alarm, so alarms appearing and clearing are events;
-//! - the measures with their units: source, output and neutral voltages (V), currents (A),
-//!   frequencies (Hz), load power (kVA), phase error (°), inlet air (°C); the ratings.
+//! - the measures and ratings of `jbus::cross::points` with their units: source, output
+//!   and neutral voltages (V), currents (A), frequencies (Hz), load power (kVA), phase
+//!   error (°), inlet air (°C), full scales; a three-phase quantity is one point per phase
+//!   (`s1_voltage_u`, `s1_voltage_v`, `s1_voltage_w`).
 //!
-//! A change of `load_feed` between two polls is recorded as a `state_changed` event: a
+//! A change of `load_feed` between two polls, as `jbus::cross::change` detects it (the
+//! changes `cellbus cross watch` prints), is recorded as a `state_changed` event: a
 //! transfer (the load moved to the other source) says from which source to which.
 //!
 //! The CROSS is read-only over JBUS (it answers function 3 only): no point is writable.
@@ -23,7 +26,10 @@
 use std::time::Duration;
 
 use jbus::client::{Client, ClientConfig, ClientError};
-use jbus::cross::{Area, CrossState, Feed, InternalState, Measures, Ratings, Source};
+use jbus::cross::points::{self, Amount, Phase, Quantity};
+use jbus::cross::{
+    Area, Change, Discrete, Feed, InternalState, Measures, Ratings, Source, Transfer,
+};
 use jbus::rtu::Unit;
 use link::{SerialSettings, SharedLine};
 
@@ -72,8 +78,10 @@ enum Show {
     Reserve,
     States,
     Alarms(Condition),
-    Measure(fn(&Measures) -> f64),
-    Rating(fn(&Ratings) -> f64),
+    /// A measure, or one phase of it.
+    Measure(&'static Quantity<Measures>, Option<Phase>),
+    /// A rating, or one phase of it.
+    Rating(&'static Quantity<Ratings>, Option<Phase>),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -87,161 +95,87 @@ enum Condition {
 }
 
 struct Def {
-    name: &'static str,
-    title: &'static str,
+    name: String,
+    title: String,
     unit: Option<&'static str>,
     show: Show,
 }
 
-const fn def(name: &'static str, title: &'static str, show: Show) -> Def {
+fn def(name: &str, title: &str, show: Show) -> Def {
     Def {
-        name,
-        title,
+        name: name.to_owned(),
+        title: title.to_owned(),
         unit: None,
         show,
     }
 }
 
-const fn measure(
-    name: &'static str,
-    title: &'static str,
-    unit: &'static str,
-    f: fn(&Measures) -> f64,
-) -> Def {
-    Def {
-        name,
-        title,
-        unit: Some(unit),
-        show: Show::Measure(f),
-    }
+/// One point per value of `quantity`: `name` for one value, `name_u`… for each phase.
+fn quantity_defs<A>(
+    quantity: &'static Quantity<A>,
+    area: &A,
+    show: fn(&'static Quantity<A>, Option<Phase>) -> Show,
+) -> Vec<Def> {
+    (quantity.read)(area)
+        .values()
+        .into_iter()
+        .map(|(phase, _)| Def {
+            name: match phase {
+                Some(p) => format!("{}_{}", quantity.name, p.key()),
+                None => quantity.name.to_owned(),
+            },
+            title: match phase {
+                Some(p) => format!("{} {p}", quantity.title),
+                None => quantity.title.to_owned(),
+            },
+            unit: quantity.unit,
+            show: show(quantity, phase),
+        })
+        .collect()
 }
 
-const fn rating(
-    name: &'static str,
-    title: &'static str,
-    unit: Option<&'static str>,
-    f: fn(&Ratings) -> f64,
-) -> Def {
-    Def {
-        name,
-        title,
-        unit,
-        show: Show::Rating(f),
+/// Every point, in the order a person reads them: the load, states and alarms, then the
+/// measures and ratings of `jbus::cross::points`.
+fn defs() -> Vec<Def> {
+    let mut defs = vec![
+        def("load_feed", "Load fed by", Show::Feed),
+        def("on_reserve_line", "Load on reserve line", Show::Reserve),
+        def("states", "States", Show::States),
+        def("s1_alarms", "Source 1 alarms", Show::Alarms(Condition::S1)),
+        def("s2_alarms", "Source 2 alarms", Show::Alarms(Condition::S2)),
+        def(
+            "s1_switch_alarms",
+            "S1 static switch alarms",
+            Show::Alarms(Condition::S1Switch),
+        ),
+        def(
+            "s2_switch_alarms",
+            "S2 static switch alarms",
+            Show::Alarms(Condition::S2Switch),
+        ),
+        def("load_alarms", "Load alarms", Show::Alarms(Condition::Load)),
+        def(
+            "system_alarms",
+            "System alarms",
+            Show::Alarms(Condition::System),
+        ),
+    ];
+    // The shape of a quantity (one value or three) does not depend on the words.
+    let measures = Measures::from_words(&[0; Measures::LEN]);
+    let ratings = Ratings::from_words(&[0; Ratings::LEN]);
+    for quantity in points::MEASURES {
+        defs.extend(quantity_defs(quantity, &measures, Show::Measure));
     }
+    for quantity in points::RATINGS {
+        defs.extend(quantity_defs(quantity, &ratings, Show::Rating));
+    }
+    defs
 }
-
-const V: &str = "V";
-const A: &str = "A";
-const HZ: &str = "Hz";
-
-/// Every point, in the order a person reads them.
-const POINTS: &[Def] = &[
-    def("load_feed", "Load fed by", Show::Feed),
-    def("on_reserve_line", "Load on reserve line", Show::Reserve),
-    def("states", "States", Show::States),
-    def("s1_alarms", "Source 1 alarms", Show::Alarms(Condition::S1)),
-    def("s2_alarms", "Source 2 alarms", Show::Alarms(Condition::S2)),
-    def(
-        "s1_switch_alarms",
-        "S1 static switch alarms",
-        Show::Alarms(Condition::S1Switch),
-    ),
-    def(
-        "s2_switch_alarms",
-        "S2 static switch alarms",
-        Show::Alarms(Condition::S2Switch),
-    ),
-    def("load_alarms", "Load alarms", Show::Alarms(Condition::Load)),
-    def(
-        "system_alarms",
-        "System alarms",
-        Show::Alarms(Condition::System),
-    ),
-    measure("s1_voltage_u", "S1 voltage U", V, |m| {
-        m.s1_voltage.u.value()
-    }),
-    measure("s1_voltage_v", "S1 voltage V", V, |m| {
-        m.s1_voltage.v.value()
-    }),
-    measure("s1_voltage_w", "S1 voltage W", V, |m| {
-        m.s1_voltage.w.value()
-    }),
-    measure("s1_frequency", "S1 frequency", HZ, |m| {
-        m.s1_frequency.value()
-    }),
-    measure("s2_voltage_u", "S2 voltage U", V, |m| {
-        m.s2_voltage.u.value()
-    }),
-    measure("s2_voltage_v", "S2 voltage V", V, |m| {
-        m.s2_voltage.v.value()
-    }),
-    measure("s2_voltage_w", "S2 voltage W", V, |m| {
-        m.s2_voltage.w.value()
-    }),
-    measure("s2_frequency", "S2 frequency", HZ, |m| {
-        m.s2_frequency.value()
-    }),
-    measure("output_voltage_u", "Output voltage U", V, |m| {
-        m.output_voltage.u.value()
-    }),
-    measure("output_voltage_v", "Output voltage V", V, |m| {
-        m.output_voltage.v.value()
-    }),
-    measure("output_voltage_w", "Output voltage W", V, |m| {
-        m.output_voltage.w.value()
-    }),
-    measure("output_current_u", "Output current U", A, |m| {
-        m.output_current.u.value()
-    }),
-    measure("output_current_v", "Output current V", A, |m| {
-        m.output_current.v.value()
-    }),
-    measure("output_current_w", "Output current W", A, |m| {
-        m.output_current.w.value()
-    }),
-    measure("neutral_current", "Neutral current", A, |m| {
-        m.neutral_current.value()
-    }),
-    measure("neutral_voltage", "Neutral voltage", V, |m| {
-        m.neutral_voltage.value()
-    }),
-    measure("output_frequency", "Output frequency", HZ, |m| {
-        m.output_frequency.value()
-    }),
-    measure("load_power", "Load power", "kVA", |m| m.load_power.value()),
-    measure(
-        "phase_error",
-        "Phase error between the sources",
-        "°",
-        |m| m.phase_error.value(),
-    ),
-    measure("inlet_air", "Inlet air temperature", "°C", |m| {
-        m.inlet_air.value()
-    }),
-    rating("rated_current", "Rated current", Some(A), |r| {
-        r.rated_current.value()
-    }),
-    rating(
-        "output_voltage_full_scale",
-        "Output voltage full scale",
-        Some(V),
-        |r| r.output_voltage_full_scale.u.value(),
-    ),
-    rating(
-        "output_current_full_scale",
-        "Output current full scale",
-        Some(A),
-        |r| r.output_current_full_scale.u.value(),
-    ),
-    rating("protocol_revision", "JBUS protocol revision", None, |r| {
-        f64::from(r.protocol_revision)
-    }),
-];
 
 impl Def {
     fn group(&self) -> &'static str {
         match self.show {
-            Show::Rating(_) => RATINGS,
+            Show::Rating(..) => RATINGS,
             _ => LIVE,
         }
     }
@@ -270,8 +204,10 @@ pub struct CrossDriver {
     unit: Unit,
     config: ClientConfig,
     client: Option<Client>,
-    /// What fed the load at the last poll, to see transfers.
-    feed: Option<Feed>,
+    /// Every point.
+    defs: Vec<Def>,
+    /// The discrete parts at the last poll, to see transfers.
+    last: Option<Discrete>,
     events: Vec<DeviceEvent>,
 }
 
@@ -294,13 +230,14 @@ impl CrossDriver {
                 ..defaults
             },
             client: None,
-            feed: None,
+            defs: defs(),
+            last: None,
             events: Vec::new(),
         })
     }
 
     fn point_id(&self, def: &Def) -> PointId {
-        PointId::new(&self.device, def.name).expect("point names in POINTS follow the id rules")
+        PointId::new(&self.device, &def.name).expect("point names in defs() follow the id rules")
     }
 
     fn spec(&self, def: &Def) -> PointSpec {
@@ -334,11 +271,11 @@ impl CrossDriver {
             ),
             Show::States => (PointKind::Text, None),
             Show::Alarms(_) => (PointKind::Text, Some(AlarmRule::NotText(NO_ALARM))),
-            Show::Measure(_) | Show::Rating(_) => (PointKind::Numeric, None),
+            Show::Measure(..) | Show::Rating(..) => (PointKind::Numeric, None),
         };
         PointSpec {
             id: self.point_id(def),
-            name: def.title.to_owned(),
+            name: def.title.clone(),
             unit: def.unit.map(str::to_owned),
             kind,
             group: def.group().to_owned(),
@@ -378,13 +315,13 @@ impl CrossDriver {
                 .and_then(|w| words::<{ Measures::LEN }>(&w, Area::Measures))
                 .map(|w| Measures::from_words(&w));
             if let Ok(internal) = &internal {
-                self.note_feed(state_of(internal).feed());
+                self.note_changes(internal);
             }
-            for def in POINTS.iter().filter(|d| d.group() == LIVE) {
+            for def in self.defs.iter().filter(|d| d.group() == LIVE) {
                 let value = match def.show {
-                    Show::Measure(f) => measures
+                    Show::Measure(quantity, phase) => measures
                         .as_ref()
-                        .map(|m| Value::Number(round(f(m))))
+                        .map(|m| number((quantity.read)(m), phase))
                         .map_err(Clone::clone),
                     _ => internal
                         .as_ref()
@@ -402,9 +339,9 @@ impl CrossDriver {
                 .await?
                 .and_then(|w| words::<{ Ratings::LEN }>(&w, Area::Ratings))
                 .map(|w| Ratings::from_words(&w));
-            for def in POINTS.iter().filter(|d| d.group() == RATINGS) {
+            for def in self.defs.iter().filter(|d| d.group() == RATINGS) {
                 let value = match (def.show, &ratings) {
-                    (Show::Rating(f), Ok(r)) => Ok(Value::Number(round(f(r)))),
+                    (Show::Rating(quantity, phase), Ok(r)) => Ok(number((quantity.read)(r), phase)),
                     (_, Err(e)) => Err(e.clone()),
                     _ => continue,
                 };
@@ -422,32 +359,40 @@ impl CrossDriver {
         Ok(readings)
     }
 
-    /// Records a change of what feeds the load.
-    fn note_feed(&mut self, feed: Feed) {
-        let Some(old) = self.feed.replace(feed) else {
+    /// Records a change of what feeds the load (a transfer names both sources), as
+    /// `jbus::cross::change` detects it; alarms are events through their points' rules.
+    fn note_changes(&mut self, internal: &InternalState) {
+        let now = Discrete::of(internal);
+        let Some(before) = self.last.replace(now.clone()) else {
             return;
         };
-        if old == feed {
-            return;
-        }
-        let message = match (source_of(old), source_of(feed)) {
-            (Some(from), Some(to)) if from != to => {
-                format!("load transferred from {from} to {to}: {feed} (was {old})")
+        for change in now.changes_since(&before) {
+            let Change::Load { was, now: load } = change else {
+                continue;
+            };
+            if was.feed == load.feed {
+                continue;
             }
-            _ => format!("load {feed} (was {old})"),
-        };
-        self.events.push(DeviceEvent {
-            kind: EventKind::StateChanged,
-            point: Some("load_feed"),
-            message,
-            at: None,
-        });
+            let message = match change.transfer() {
+                Some(Transfer { from, to }) => format!(
+                    "load transferred from {from} to {to}: {} (was {})",
+                    load.feed, was.feed
+                ),
+                None => format!("load {} (was {})", load.feed, was.feed),
+            };
+            self.events.push(DeviceEvent {
+                kind: EventKind::StateChanged,
+                point: Some("load_feed"),
+                message,
+                at: None,
+            });
+        }
     }
 }
 
 impl Driver for CrossDriver {
     fn points(&self) -> Vec<PointSpec> {
-        POINTS.iter().map(|d| self.spec(d)).collect()
+        self.defs.iter().map(|d| self.spec(d)).collect()
     }
 
     fn groups(&self) -> Vec<PollGroup> {
@@ -483,32 +428,18 @@ impl Driver for CrossDriver {
     }
 }
 
-/// The state words as a [`CrossState`] (for its `feed`).
-fn state_of(internal: &InternalState) -> CrossState {
-    CrossState {
-        internal: *internal,
-        ..CrossState::default()
-    }
-}
-
-fn source_of(feed: Feed) -> Option<Source> {
-    match feed {
-        Feed::StaticSwitch(s) | Feed::Bypass(s) => Some(s),
-        Feed::OutputBreakerOpen | Feed::NotSupplied => None,
-    }
+/// A quantity's value (of one phase) as a point value, the nearest short decimal.
+fn number(amount: Amount, phase: Option<Phase>) -> Value {
+    Value::Number(round(amount.get(phase).unwrap_or(f64::NAN)))
 }
 
 fn live_value(show: Show, s: &InternalState) -> Value {
     let text = |t: String| Value::Text(t);
     match show {
-        Show::Feed => Value::Number(feed_number(state_of(s).feed()) as f64),
-        Show::Reserve => Value::Number(if state_of(s).on_reserve_line() {
-            1.0
-        } else {
-            0.0
-        }),
+        Show::Feed => Value::Number(feed_number(s.feed()) as f64),
+        Show::Reserve => Value::Number(if s.on_reserve_line() { 1.0 } else { 0.0 }),
         Show::States => {
-            let states = state_of(s).conditions();
+            let states = s.conditions();
             text(if states.is_empty() {
                 NO_ALARM.to_owned()
             } else {
@@ -523,7 +454,7 @@ fn live_value(show: Show, s: &InternalState) -> Value {
             Condition::Load => s.load.alarm.to_string(),
             Condition::System => s.system.alarm.to_string(),
         }),
-        Show::Measure(_) | Show::Rating(_) => text(String::new()),
+        Show::Measure(..) | Show::Rating(..) => text(String::new()),
     }
 }
 
@@ -622,7 +553,7 @@ mod tests {
         let live = driver.poll(LIVE).await.unwrap();
         assert_eq!(
             live.len(),
-            POINTS.iter().filter(|d| d.group() == LIVE).count()
+            defs().iter().filter(|d| d.group() == LIVE).count()
         );
         assert_eq!(value(&live, "load_feed"), Ok(Value::Number(1.0)));
         assert_eq!(value(&live, "s1_alarms"), Ok(Value::Text("none".into())));
@@ -673,6 +604,58 @@ mod tests {
                 .message
                 .contains("from source 2 (S2) to source 1 (S1)"),
             "{back:?}"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_transfer_event_is_the_load_change_jbus_cross_detects_as_cellbus_watch_prints_it() {
+        let (mut driver, twin) = rig(1);
+        let now = || tokio::time::Instant::now().into_std();
+        driver.poll(LIVE).await.unwrap();
+        let before = Discrete::of(&twin.lock().reading(now()).internal);
+        twin.lock().fail_source(Source::S1);
+        driver.poll(LIVE).await.unwrap();
+        let after = Discrete::of(&twin.lock().reading(now()).internal);
+        let changes = after.changes_since(&before);
+        let load = changes
+            .iter()
+            .find(|c| matches!(c, Change::Load { .. }))
+            .expect("the load moved");
+        let Transfer { from, to } = load.transfer().expect("to the other source");
+        // `cellbus cross watch` prints the change as it is shown…
+        assert_eq!(load.to_string(), format!("load {}", after.load()));
+        // …and the driver records the same transfer as its one event.
+        let events = driver.take_events();
+        assert_eq!(events.len(), 1, "{events:?}");
+        assert!(
+            events[0]
+                .message
+                .starts_with(&format!("load transferred from {from} to {to}: ")),
+            "{}",
+            events[0].message
+        );
+    }
+
+    #[test]
+    fn a_three_phase_quantity_is_one_point_per_phase_with_its_unit() {
+        let driver = CrossDriver::new(&config(1)).unwrap();
+        let points = driver.points();
+        for (name, title) in [
+            ("s1_voltage_u", "S1 voltage U"),
+            ("s1_voltage_w", "S1 voltage W"),
+            ("output_current_full_scale_v", "Output current full scale V"),
+        ] {
+            let point = points.iter().find(|p| p.id.name() == name).unwrap();
+            assert_eq!(point.name, title);
+            assert!(point.unit.is_some(), "{name} has a unit");
+        }
+        let revision = points
+            .iter()
+            .find(|p| p.id.name() == "protocol_revision")
+            .unwrap();
+        assert_eq!(
+            (revision.unit.as_deref(), revision.group.as_str()),
+            (None, RATINGS)
         );
     }
 

@@ -137,6 +137,15 @@ impl<T: Copy> Phases<T> {
     pub const fn to_array(self) -> [T; 3] {
         [self.u, self.v, self.w]
     }
+
+    /// Each phase's value through `f` (a quantity's value in its unit).
+    pub fn map<U>(self, f: impl Fn(T) -> U) -> Phases<U> {
+        Phases {
+            u: f(self.u),
+            v: f(self.v),
+            w: f(self.w),
+        }
+    }
 }
 
 impl<T: fmt::Display> fmt::Display for Phases<T> {

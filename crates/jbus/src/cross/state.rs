@@ -58,6 +58,17 @@ pub enum Feed {
     NotSupplied,
 }
 
+impl Feed {
+    /// The source that feeds the load, through its static switch or its bypass; `None`
+    /// when the load is disconnected or not supplied.
+    pub const fn source(self) -> Option<Source> {
+        match self {
+            Self::StaticSwitch(s) | Self::Bypass(s) => Some(s),
+            Self::OutputBreakerOpen | Self::NotSupplied => None,
+        }
+    }
+}
+
 impl fmt::Display for Feed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -143,7 +154,31 @@ impl CrossState {
 
     /// What feeds the load.
     pub fn feed(&self) -> Feed {
-        let s = &self.internal;
+        self.internal.feed()
+    }
+
+    /// Descriptions of every active alarm bit.
+    pub fn alarms(&self) -> Vec<&'static str> {
+        self.internal.alarms()
+    }
+
+    /// Descriptions of the active bits of the on-state and off-state words (the states
+    /// that are not alarms: "S1 normal", "load on reserve line", "S2 breaker open", ...).
+    pub fn conditions(&self) -> Vec<&'static str> {
+        self.internal.conditions()
+    }
+
+    /// Whether the load is on the reserve (non-preferred) line, per the LOAD on-state word.
+    pub fn on_reserve_line(&self) -> bool {
+        self.internal.on_reserve_line()
+    }
+}
+
+/// What the internal-state area alone tells (the gateway's live poll reads no other area).
+impl InternalState {
+    /// What feeds the load.
+    pub fn feed(&self) -> Feed {
+        let s = self;
         if s.load.off.contains(LoadOff::OutputBreakerOpen) {
             Feed::OutputBreakerOpen
         } else if s.load.alarm.contains(LoadAlarm::NotSupplied) {
@@ -161,15 +196,10 @@ impl CrossState {
         }
     }
 
-    /// Descriptions of every active alarm bit.
-    pub fn alarms(&self) -> Vec<&'static str> {
-        self.internal.alarms()
-    }
-
     /// Descriptions of the active bits of the on-state and off-state words (the states
     /// that are not alarms: "S1 normal", "load on reserve line", "S2 breaker open", ...).
     pub fn conditions(&self) -> Vec<&'static str> {
-        let s = &self.internal;
+        let s = self;
         let mut out = Vec::new();
         out.extend(s.s1.on.active().map(NamedBit::describe));
         out.extend(s.s1.off.active().map(NamedBit::describe));
@@ -197,7 +227,7 @@ impl CrossState {
 
     /// Whether the load is on the reserve (non-preferred) line, per the LOAD on-state word.
     pub fn on_reserve_line(&self) -> bool {
-        self.internal.load.on.contains(LoadOn::OnReserveLine)
+        self.load.on.contains(LoadOn::OnReserveLine)
     }
 }
 

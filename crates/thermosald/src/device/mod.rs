@@ -2,7 +2,8 @@
 //!
 //! [`Line`] holds several [`Regulator`]s, each with its own sealing band, memory and faults
 //! ([`band`] documents the physics, [`regulator`] the behaviour). Serve it with
-//! `wire::device::SharedModel::new(line).line()`.
+//! `wire::device::SharedModel::new(line).line()`. [`operator`] holds the commands an
+//! operator gives the line while it serves (`fault 1 open-band`, `power-cycle 2`).
 //!
 //! # Silence
 //!
@@ -38,6 +39,7 @@
 //! line where any driver pulling low is seen) and logged as a collision.
 
 pub mod band;
+pub mod operator;
 pub mod regulator;
 
 use std::time::Instant;
