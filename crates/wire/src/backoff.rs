@@ -46,6 +46,8 @@ pub struct BackoffTimer {
 
 impl BackoffTimer {
     /// The wait before the next attempt; the one after is twice as long (up to the cap).
+    // Not an iterator: it never ends, and `peek`/`reset` are its point.
+    #[allow(clippy::should_implement_trait)]
     pub fn next(&mut self) -> Duration {
         let wait = self.next;
         self.next = wait
