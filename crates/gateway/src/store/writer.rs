@@ -23,8 +23,8 @@ const FIRST_PRUNE_AFTER: Duration = Duration::from_secs(60);
 /// Commands taken from the channel before the writer looks at its batch and its prune.
 const DRAIN_MAX: usize = 10_000;
 
-/// Pages returned to the file system per `incremental_vacuum` step (16 MB of 4 KiB pages).
-const VACUUM_PAGES: u32 = 4096;
+/// Pages returned to the file system per `incremental_vacuum` step (4 MB of 4 KiB pages).
+const VACUUM_PAGES: u32 = 1024;
 
 /// A row waiting for its commit.
 pub(super) enum Row {
@@ -283,19 +283,24 @@ impl Writer {
             })
         };
         let victim = match incoming {
-            Row::Audit(_) => oldest(&self.pending, false).or_else(|| oldest(&self.pending, true)),
-            Row::Event(_) => oldest(&self.pending, false).or_else(|| oldest(&self.pending, true)),
+            // A sample makes room only by dropping an older sample, or itself.
             Row::Sample(_) => oldest(&self.pending, false),
+            Row::Event(_) | Row::Audit(_) => {
+                oldest(&self.pending, false).or_else(|| oldest(&self.pending, true))
+            }
         };
-        self.stats.rows_dropped.fetch_add(1, Ordering::Relaxed);
-        match victim {
+        let keep = match victim {
             Some(i) => {
                 self.pending.remove(i);
                 true
             }
             // Nothing older may go: an audit row is kept anyway, the rest is dropped.
             None => matches!(incoming, Row::Audit(_)),
+        };
+        if victim.is_some() || !keep {
+            self.stats.rows_dropped.fetch_add(1, Ordering::Relaxed);
         }
+        keep
     }
 
     fn commit_if_due(&mut self, now: Instant) {
