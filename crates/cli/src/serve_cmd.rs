@@ -22,9 +22,14 @@ pub struct ServeArgs {
     /// Where the history database is kept.
     #[arg(long, value_name = "DIR", default_value = gateway::DEFAULT_DATA_DIR)]
     pub data: PathBuf,
-    /// How long history is kept: `30d`, `12h`, `90min`.
+    /// How long history (samples and events) is kept: `30d`, `12h`, `90min`. Deleted hourly,
+    /// in chunks; the freed space goes back to the file system.
     #[arg(long, value_name = "AGE", default_value = "30d", value_parser = humantime::parse_duration)]
     pub retain: Duration,
+    /// How long the audit log of write attempts is kept: `365d`, `2y`. Never less than
+    /// --retain (the longer wins).
+    #[arg(long, value_name = "AGE", default_value = "365d", value_parser = humantime::parse_duration)]
+    pub retain_audit: Duration,
     /// Accept `POST /api/devices/{id}/write`, with `Authorization: Bearer <token>` (the
     /// token from --token, CELLBUS_TOKEN or the configuration).
     #[arg(long)]
@@ -55,6 +60,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
         config: args.config,
         data_dir: args.data,
         retain: args.retain,
+        retain_audit: args.retain_audit,
         allow_writes: args.allow_writes,
         token: args.token,
     };

@@ -35,11 +35,18 @@ pub enum EventKind {
     StateChanged,
     /// A device reported something unsolicited (a Panasonic R message).
     DeviceEvent,
+    /// History commits started failing (a full disk, a damaged file), or the history could
+    /// not be opened at start; live values go on.
+    HistoryFailed,
+    /// History commits work again after failing.
+    HistoryRecovered,
+    /// A damaged history file was moved aside at start and a new one started.
+    HistoryReset,
 }
 
 impl EventKind {
     /// Every kind, for filters and the API description.
-    pub const ALL: [EventKind; 12] = [
+    pub const ALL: [EventKind; 15] = [
         EventKind::GatewayStarted,
         EventKind::GatewayStopped,
         EventKind::LineUp,
@@ -52,6 +59,9 @@ impl EventKind {
         EventKind::Write,
         EventKind::StateChanged,
         EventKind::DeviceEvent,
+        EventKind::HistoryFailed,
+        EventKind::HistoryRecovered,
+        EventKind::HistoryReset,
     ];
 
     /// The name stored and printed (`device_down`).
@@ -69,6 +79,9 @@ impl EventKind {
             EventKind::Write => "write",
             EventKind::StateChanged => "state_changed",
             EventKind::DeviceEvent => "device_event",
+            EventKind::HistoryFailed => "history_failed",
+            EventKind::HistoryRecovered => "history_recovered",
+            EventKind::HistoryReset => "history_reset",
         }
     }
 

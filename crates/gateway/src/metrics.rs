@@ -106,6 +106,8 @@ pub struct Metrics {
     pub sse_clients: Gauge,
     history_rows: Counter,
     history_commit_errors: Counter,
+    history_rows_dropped: Counter,
+    history_pending_rows: Gauge,
     /// Serialises scrapes, which bring the history counters up to date.
     scrape: Mutex<()>,
 }
@@ -140,6 +142,8 @@ impl Metrics {
         let sse_clients = Gauge::default();
         let history_rows = Counter::default();
         let history_commit_errors = Counter::default();
+        let history_rows_dropped = Counter::default();
+        let history_pending_rows = Gauge::default();
         registry.register("polls", "Polls of a device's point group", polls.clone());
         registry.register(
             "errors",
@@ -195,6 +199,16 @@ impl Metrics {
             "History commits that failed (rows are kept and retried)",
             history_commit_errors.clone(),
         );
+        registry.register(
+            "history_rows_dropped",
+            "Rows never stored: oldest samples (then events, never audit rows) dropped while commits failed, or every row while the history is off",
+            history_rows_dropped.clone(),
+        );
+        registry.register(
+            "history_pending_rows",
+            "Rows waiting for their history commit",
+            history_pending_rows.clone(),
+        );
         Self {
             registry,
             polls,
@@ -212,6 +226,8 @@ impl Metrics {
             sse_clients,
             history_rows,
             history_commit_errors,
+            history_rows_dropped,
+            history_pending_rows,
             scrape: Mutex::new(()),
         }
     }
@@ -228,6 +244,20 @@ impl Metrics {
             store
                 .commit_errors
                 .load(std::sync::atomic::Ordering::Relaxed),
+        );
+        catch_up(
+            &self.history_rows_dropped,
+            store
+                .rows_dropped
+                .load(std::sync::atomic::Ordering::Relaxed),
+        );
+        self.history_pending_rows.set(
+            i64::try_from(
+                store
+                    .pending_rows
+                    .load(std::sync::atomic::Ordering::Relaxed),
+            )
+            .unwrap_or(i64::MAX),
         );
         let mut text = String::new();
         prometheus_client::encoding::text::encode(&mut text, &self.registry)

@@ -17,7 +17,7 @@ use crate::demo::DemoCell;
 use crate::event::{Event, EventKind};
 use crate::http::{self, WritePolicy};
 use crate::metrics::Metrics;
-use crate::store::{Store, StoreOptions};
+use crate::store::{HistoryState, Store, StoreOptions};
 use crate::time::Timestamp;
 
 /// Address the gateway listens on by default: loopback only.
@@ -29,6 +29,9 @@ pub const DEFAULT_DATA_DIR: &str = "cellbus-data";
 
 /// History kept by default: 30 days.
 pub const DEFAULT_RETAIN: Duration = Duration::from_secs(30 * 24 * 3600);
+
+/// Audit rows kept by default: 365 days (never less than the history).
+pub const DEFAULT_RETAIN_AUDIT: Duration = Duration::from_secs(365 * 24 * 3600);
 
 /// Environment variable holding the write token.
 pub const TOKEN_ENV: &str = "CELLBUS_TOKEN";
@@ -47,6 +50,8 @@ pub struct ServeOptions {
     pub data_dir: PathBuf,
     /// How long history is kept (default 30 days).
     pub retain: Duration,
+    /// How long audit rows are kept (default 365 days; never less than `retain`).
+    pub retain_audit: Duration,
     /// Whether `POST /api/devices/{id}/write` is allowed.
     pub allow_writes: bool,
     /// The write token; else `CELLBUS_TOKEN`, else the config's `token`.
@@ -60,6 +65,7 @@ impl Default for ServeOptions {
             config: None,
             data_dir: PathBuf::from(DEFAULT_DATA_DIR),
             retain: DEFAULT_RETAIN,
+            retain_audit: DEFAULT_RETAIN_AUDIT,
             allow_writes: false,
             token: None,
         }
@@ -99,8 +105,13 @@ pub struct Gateway {
 }
 
 impl Gateway {
-    /// Reads the configuration (or starts the demo cell), opens the history, binds the
+    /// Reads the configuration (or starts the demo cell), starts the history, binds the
     /// port and starts polling.
+    ///
+    /// The history never stops the start: its file is opened and checked on its own
+    /// thread; a damaged file is moved aside (a `history_reset` event names it), and a data
+    /// directory that cannot be used turns the history off (a `history_failed` event,
+    /// `/healthz` degraded, history queries 503) while live values are served.
     pub async fn start(options: ServeOptions) -> anyhow::Result<Self> {
         let (config, demo) = match &options.config {
             Some(path) => (check_config(path)?, None),
@@ -112,13 +123,14 @@ impl Gateway {
             }
         };
         let writes = write_policy(&options, &config)?;
-        let store = Store::open(
+        let store = Store::start(
             &options.data_dir,
             StoreOptions {
                 retain: options.retain,
+                retain_audit: options.retain_audit,
                 ..StoreOptions::default()
             },
-        )?;
+        );
         let listener = bind(options.listen).await?;
         let addr = listener
             .local_addr()
@@ -147,6 +159,7 @@ impl Gateway {
                 },
             ),
         });
+        report_history_off(&cell, options.data_dir.clone());
         let (stop, stopped) = watch::channel(false);
         let pollers = tasks
             .into_iter()
@@ -217,14 +230,46 @@ impl Gateway {
             message: "gateway stopped".to_owned(),
         });
         let flushed = cell.store().flush().await;
+        // With the history off there is nothing to commit; its start already said why.
+        let history_off = matches!(
+            cell.store().health(Timestamp::now()).history,
+            HistoryState::Off(_)
+        );
         drop(cell);
         tokio::task::spawn_blocking(move || store.close())
             .await
             .context("the history writer did not stop cleanly")?;
         served.context("the HTTP server failed")?;
-        flushed.context("the history could not be committed at shutdown")?;
+        if !history_off {
+            flushed.context("the history could not be committed at shutdown")?;
+        }
         Ok(())
     }
+}
+
+/// Once the history has opened (or failed to), emits a `history_failed` event if it is off,
+/// so the event stream and the log say so; polling does not wait for it.
+fn report_history_off(cell: &Arc<Cell>, data_dir: PathBuf) {
+    let cell = Arc::clone(cell);
+    tokio::task::spawn_blocking(move || {
+        // Waits (bounded) for the writer's open.
+        let _ = cell.store().wait_open();
+        let HistoryState::Off(reason) = cell.store().health(Timestamp::now()).history else {
+            return;
+        };
+        cell.emit(Event {
+            t: Timestamp::now(),
+            kind: EventKind::HistoryFailed,
+            line: None,
+            device: None,
+            point: None,
+            message: format!(
+                "history is off (data directory {}): {reason}; live values are served but not \
+                 stored; fix the data directory and restart",
+                data_dir.display()
+            ),
+        });
+    });
 }
 
 /// Binds the listening port, saying what to do when it is taken.

@@ -234,3 +234,125 @@ async fn writes_without_a_token_are_refused_at_start() {
     assert!(err.contains("--allow-writes needs a token"), "{err}");
     assert!(err.contains("CELLBUS_TOKEN"), "{err}");
 }
+
+/// Waits (bounded) until the JBC station's air temperature is served live, good.
+async fn wait_for_live_value(addr: SocketAddr) {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    loop {
+        let (status, devices) = get(addr, "/api/devices").await;
+        assert_eq!(status, "HTTP/1.1 200 OK");
+        let air = point(&devices, "jbc1.air_temperature");
+        if air["value"].is_number() && air["quality"] == "good" {
+            return;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no live value within 60 s: {devices}"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+/// Runs a started gateway until the returned sender is used; the handle gives its result.
+fn run_until_stopped(
+    gateway: Gateway,
+) -> (
+    tokio::sync::oneshot::Sender<()>,
+    tokio::task::JoinHandle<anyhow::Result<()>>,
+) {
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let run = tokio::spawn(gateway.run(async {
+        let _ = stopped.await;
+    }));
+    (stop, run)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_unusable_data_directory_leaves_live_values_served_and_reports_the_fault() {
+    let dir = tempfile::tempdir().unwrap();
+    // A regular file where the data directory should be: refused even to root (a chmod
+    // 0555 directory is not).
+    let data = dir.path().join("data");
+    std::fs::write(&data, b"not a directory").unwrap();
+    // Before the fix the gateway stopped here, exit 1.
+    let gateway = Gateway::start(options(dir.path())).await.unwrap();
+    let addr = gateway.local_addr();
+    let (stop, run) = run_until_stopped(gateway);
+    wait_for_live_value(addr).await;
+
+    let (status, health) = get(addr, "/healthz").await;
+    assert_eq!(status, "HTTP/1.1 200 OK");
+    assert_eq!(health["status"], "degraded", "{health}");
+    let history = health["history"].as_str().unwrap();
+    assert!(history.starts_with("off: "), "{health}");
+    assert!(history.contains(&data.display().to_string()), "{health}");
+    assert!(history.contains("os error"), "{health}");
+    assert!(
+        health["history_rows_dropped"].as_u64().unwrap() > 0,
+        "{health}"
+    );
+
+    let (status, body) = get(addr, "/api/history?point=jbc1.air_temperature").await;
+    assert_eq!(status, "HTTP/1.1 503 Service Unavailable", "{body}");
+    let error = body["error"].as_str().unwrap();
+    assert!(error.contains("history is off"), "{error}");
+    assert!(error.contains(&data.display().to_string()), "{error}");
+    assert!(error.contains("os error"), "{error}");
+
+    stop.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(30), run)
+        .await
+        .expect("serve stops within 30 s")
+        .unwrap()
+        .expect("a stop with the history off is clean");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_garbage_history_file_is_moved_aside_and_the_gateway_serves_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    std::fs::create_dir(&data).unwrap();
+    let garbage: Vec<u8> = (0..8192u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 11) as u8)
+        .collect();
+    std::fs::write(data.join("cellbus.db"), &garbage).unwrap();
+    // Before the fix: "file is not a database", exit 1.
+    let gateway = Gateway::start(options(dir.path())).await.unwrap();
+    let addr = gateway.local_addr();
+    let (stop, run) = run_until_stopped(gateway);
+    wait_for_live_value(addr).await;
+
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    let reset = loop {
+        let (status, body) = get(addr, "/api/events?kind=history_reset").await;
+        assert_eq!(status, "HTTP/1.1 200 OK", "{body}");
+        if let Some(event) = body["events"].as_array().and_then(|e| e.first()) {
+            break event.clone();
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no history_reset event within 60 s"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    let message = reset["message"].as_str().unwrap();
+    assert!(message.contains("cellbus.db.corrupt-"), "{message}");
+    let aside: Vec<_> = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.starts_with("cellbus.db.corrupt-"))
+        .collect();
+    assert_eq!(aside.len(), 1, "{aside:?}");
+    assert!(message.contains(&aside[0]), "{message}");
+    assert_eq!(std::fs::read(data.join(&aside[0])).unwrap(), garbage);
+    let (_, health) = get(addr, "/healthz").await;
+    assert_eq!(health["status"], "ok", "{health}");
+    assert_eq!(health["history"], "ok", "{health}");
+
+    stop.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(30), run)
+        .await
+        .expect("serve stops within 30 s")
+        .unwrap()
+        .unwrap();
+}

@@ -183,7 +183,11 @@ impl From<JsonRejection> for ApiError {
 
 impl From<crate::store::StoreError> for ApiError {
     fn from(error: crate::store::StoreError) -> Self {
-        Self::new(StatusCode::INTERNAL_SERVER_ERROR, error.to_string())
+        let status = match error {
+            crate::store::StoreError::Unavailable { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            _ => StatusCode::INTERNAL_SERVER_ERROR,
+        };
+        Self::new(status, error.to_string())
     }
 }
 
@@ -213,12 +217,15 @@ async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
         .filter(|d| d.summary.status == DeviceStatus::Up)
         .count();
     let lines = s.cell.lines();
-    let stats = s.cell.store().stats();
+    let store = s.cell.store();
+    let stats = store.stats();
     let commit_errors = stats
         .commit_errors
         .load(std::sync::atomic::Ordering::Relaxed);
+    let history = store.health(Timestamp::now());
+    let (last_error_at, last_error) = history.last_fault.clone().unzip();
     Json(json!({
-        "status": if commit_errors == 0 { "ok" } else { "degraded" },
+        "status": if history.degraded() { "degraded" } else { "ok" },
         "started": s.started,
         "devices": devices.len(),
         "devices_up": up,
@@ -226,6 +233,11 @@ async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
         "lines_open": lines.iter().filter(|l| l.state.open).count(),
         "history_rows_written": stats.rows_written(),
         "history_commit_errors": commit_errors,
+        "history": history.summary(),
+        "history_pending_rows": history.pending_rows,
+        "history_rows_dropped": history.rows_dropped,
+        "history_last_error": last_error,
+        "history_last_error_at": last_error_at,
         "writes_enabled": s.writes.enabled,
     }))
 }

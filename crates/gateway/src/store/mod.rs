@@ -20,24 +20,47 @@
 //! real child process.
 //!
 //! Retention: rows older than [`StoreOptions::retain`] are deleted every
-//! [`StoreOptions::prune_every`] (samples point by point, so no delete holds the write
-//! lock for long). The audit table is kept whole: it is the record of who changed what.
+//! [`StoreOptions::prune_every`], the audit table's after [`StoreOptions::retain_audit`]
+//! (a year by default, never less than the history's). Deletes go in chunks of
+//! [`StoreOptions::prune_chunk_rows`], each its own transaction, with new rows committed
+//! between chunks, so a large prune never stalls the writer for long. A new file is created
+//! with `auto_vacuum=INCREMENTAL`, and a prune that deleted rows returns the freed pages
+//! to the file system (`PRAGMA incremental_vacuum`) and truncates the WAL
+//! (`wal_checkpoint(TRUNCATE)`). A file created before this setting keeps
+//! `auto_vacuum=NONE` (SQLite can change it only by a full `VACUUM`, which copies the whole
+//! file): its freed pages are reused but the file does not shrink.
+//!
+//! Faults: a failed commit keeps its rows pending and is retried after a wait that doubles
+//! from 100 ms to 30 s; one log line per wait says how many commits failed since the last
+//! one. While rows cannot be committed, at most [`MAX_PENDING_ROWS`] are kept: past it the
+//! oldest samples are dropped first, then the oldest events, never audit rows (counted in
+//! [`StoreStats::rows_dropped`]). The first failure queues a `history_failed` event and the
+//! first commit after it records `history_recovered`. [`StoreHandle::health`] is degraded
+//! while a commit failed in the last minute. At start the writer runs `PRAGMA quick_check`;
+//! a file that is not a database or fails it is moved aside as
+//! `cellbus.db.corrupt-<UTC time>` (with its `-wal` and `-shm`), a new one is started, and a
+//! `history_reset` event names the old one. A data directory that cannot be used turns the
+//! history off ([`Store::start`]): rows are counted and discarded, queries answer
+//! [`StoreError::Unavailable`], and the live values go on.
 //!
 //! - [`records`]: what is stored and what queries return.
 //! - `schema`: the tables and the connection settings.
+//! - `open`: opening, checking and moving aside a damaged file.
+//! - `fault`: when to retry a failed commit and what to log.
 //! - `writer`: the writer thread's batches and retention.
 //! - `query`: the read connections and the queries.
 
-use std::collections::VecDeque;
+use std::future::Future;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, mpsc};
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Condvar, Mutex, PoisonError, mpsc};
 use std::thread;
 use std::time::Duration;
 
-use rusqlite::Connection;
-
 use crate::time::Timestamp;
 
+mod fault;
+mod open;
 mod query;
 mod records;
 mod schema;
@@ -59,31 +82,61 @@ pub const DB_FILE: &str = "cellbus.db";
 /// Most raw samples one history query returns; ask with a `step` for longer ranges.
 pub const MAX_RAW_SAMPLES: usize = 50_000;
 
-/// Most pending rows kept while the disk refuses writes; older ones are dropped (counted).
-const MAX_PENDING_ROWS: usize = 200_000;
+/// Most pending rows kept while the disk refuses writes; past it the oldest samples go
+/// first, then the oldest events; audit rows are never dropped.
+pub const MAX_PENDING_ROWS: usize = 200_000;
+
+/// Pending rows past which the history is reported degraded even without a recent failure.
+pub const PENDING_ROWS_DEGRADED: usize = MAX_PENDING_ROWS / 4;
+
+/// How long after a failed commit the history is reported degraded.
+pub const FAULT_WINDOW: Duration = Duration::from_secs(60);
+
+/// The wait before retrying a failed commit, doubling up to [`COMMIT_RETRY_CAP`].
+pub const COMMIT_RETRY_FIRST: Duration = Duration::from_millis(100);
+
+/// The longest wait between two attempts to commit.
+pub const COMMIT_RETRY_CAP: Duration = Duration::from_secs(30);
+
+/// How long a query waits for the writer to finish opening and checking the file.
+const OPEN_WAIT: Duration = Duration::from_secs(120);
 
 /// How the store batches and how long it keeps history.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StoreOptions {
     /// Samples and events older than this are deleted.
     pub retain: Duration,
+    /// Audit rows older than this are deleted; never less than `retain` (the longer wins).
+    pub retain_audit: Duration,
     /// Commit when this many rows are waiting.
     pub batch_rows: usize,
     /// Commit when the oldest waiting row is this old.
     pub batch_delay: Duration,
     /// How often old rows are deleted.
     pub prune_every: Duration,
+    /// Rows deleted per retention transaction; new rows are committed between two.
+    pub prune_chunk_rows: usize,
 }
 
 impl Default for StoreOptions {
-    /// 30 days, 5000 rows or 200 ms, pruning hourly.
+    /// 30 days of history, a year of audit, 5000 rows or 200 ms, pruning hourly in chunks
+    /// of 10 000 rows.
     fn default() -> Self {
         Self {
             retain: Duration::from_secs(30 * 24 * 3600),
+            retain_audit: Duration::from_secs(365 * 24 * 3600),
             batch_rows: 5_000,
             batch_delay: Duration::from_millis(200),
             prune_every: Duration::from_secs(3600),
+            prune_chunk_rows: 10_000,
         }
+    }
+}
+
+impl StoreOptions {
+    /// How long audit rows are kept: `retain_audit`, or `retain` if that is longer.
+    pub fn audit_retention(&self) -> Duration {
+        self.retain_audit.max(self.retain)
     }
 }
 
@@ -107,6 +160,22 @@ pub enum StoreError {
         /// What SQLite said.
         source: rusqlite::Error,
     },
+    /// A damaged file could not be moved aside.
+    #[error("history database {path} is damaged ({fault}) and cannot be moved aside: {source}")]
+    MoveAside {
+        /// The database file.
+        path: PathBuf,
+        /// What was wrong with it.
+        fault: String,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// The history is off: its directory or file could not be used at start.
+    #[error("history is off: {reason}; live values still work; fix the data directory and restart")]
+    Unavailable {
+        /// Why, with the directory and what the OS or SQLite said.
+        reason: String,
+    },
     /// The writer thread has stopped (after a failed commit or at shutdown).
     #[error("the history writer has stopped")]
     WriterGone,
@@ -121,6 +190,9 @@ enum Command {
     Audit(AuditEntry),
     Flush(tokio::sync::oneshot::Sender<Result<u64, String>>),
     Prune(Timestamp, tokio::sync::oneshot::Sender<Result<u64, String>>),
+    /// Caps the file at its current size (`max_page_count`), as a full disk would.
+    #[cfg(test)]
+    FillDisk(bool),
     Shutdown,
 }
 
@@ -138,54 +210,172 @@ pub struct StoreHandle {
     tx: mpsc::Sender<Command>,
     readers: Arc<ReaderPool>,
     stats: Arc<StoreStats>,
+    shared: Arc<Shared>,
+}
+
+/// What the writer tells the handles: whether the file is open, the last commit fault.
+#[derive(Debug, Default)]
+pub(crate) struct Shared {
+    state: Mutex<SharedState>,
+    opened: Condvar,
+}
+
+#[derive(Debug, Default)]
+struct SharedState {
+    /// `None` while the writer opens and checks the file.
+    open: Option<Result<(), String>>,
+    /// The last failed commit: when and why.
+    last_fault: Option<(Timestamp, String)>,
+    /// Set while commits fail, cleared by the first that works.
+    failing: bool,
+}
+
+impl Shared {
+    fn lock(&self) -> std::sync::MutexGuard<'_, SharedState> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn set_open(&self, result: Result<(), String>) {
+        self.lock().open = Some(result);
+        self.opened.notify_all();
+    }
+
+    fn fault(&self, t: Timestamp, error: &str) {
+        let mut state = self.lock();
+        state.last_fault = Some((t, error.to_owned()));
+        state.failing = true;
+    }
+
+    fn recovered(&self) {
+        self.lock().failing = false;
+    }
+
+    /// Waits (bounded) until the writer has opened the file; `Err` if the history is off.
+    fn wait_open(&self) -> Result<(), StoreError> {
+        let state = self.lock();
+        let (state, _) = self
+            .opened
+            .wait_timeout_while(state, OPEN_WAIT, |s| s.open.is_none())
+            .unwrap_or_else(PoisonError::into_inner);
+        match &state.open {
+            Some(Ok(())) => Ok(()),
+            Some(Err(reason)) => Err(StoreError::Unavailable {
+                reason: reason.clone(),
+            }),
+            None => Err(StoreError::Unavailable {
+                reason: format!(
+                    "the history file is still being checked after {} s",
+                    OPEN_WAIT.as_secs()
+                ),
+            }),
+        }
+    }
+}
+
+/// How the history is doing, for `/healthz`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StoreHealth {
+    /// Off, failing or fine.
+    pub history: HistoryState,
+    /// Rows waiting for a commit.
+    pub pending_rows: u64,
+    /// Rows never stored (dropped under back-pressure or discarded while off).
+    pub rows_dropped: u64,
+    /// The last failed commit, however old: when and why.
+    pub last_fault: Option<(Timestamp, String)>,
+}
+
+/// The history's state in one word and its reason.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum HistoryState {
+    /// Commits work (or the last failure is more than [`FAULT_WINDOW`] old).
+    Ok,
+    /// The writer is still opening and checking the file.
+    Opening,
+    /// A commit failed in the last [`FAULT_WINDOW`], or too many rows are pending.
+    Failing(String),
+    /// The history could not be opened at start; rows are discarded.
+    Off(String),
+}
+
+impl StoreHealth {
+    /// Whether `/healthz` should say `degraded`.
+    pub fn degraded(&self) -> bool {
+        matches!(
+            self.history,
+            HistoryState::Failing(_) | HistoryState::Off(_)
+        )
+    }
+
+    /// `ok`, `opening`, `failing: <error>` or `off: <error>`.
+    pub fn summary(&self) -> String {
+        match &self.history {
+            HistoryState::Ok => "ok".to_owned(),
+            HistoryState::Opening => "opening".to_owned(),
+            HistoryState::Failing(e) => format!("failing: {e}"),
+            HistoryState::Off(e) => format!("off: {e}"),
+        }
+    }
 }
 
 impl Store {
-    /// Opens (creating if needed) the history in `dir` and starts its writer.
+    /// Opens (creating if needed) the history in `dir`, checks it and starts its writer;
+    /// waits for the check and says what failed. A damaged file is moved aside and a new one
+    /// started (see the module docs).
     pub fn open(dir: &Path, options: StoreOptions) -> Result<Self, StoreError> {
-        std::fs::create_dir_all(dir).map_err(|source| StoreError::Directory {
-            path: dir.to_owned(),
-            source,
-        })?;
+        let (store, opened) = Self::spawn(dir, options);
+        match opened.recv() {
+            Ok(Ok(())) => Ok(store),
+            Ok(Err(e)) => Err(e),
+            Err(_) => Err(StoreError::WriterGone),
+        }
+    }
+
+    /// Starts the history in `dir` without waiting: the writer opens and checks the file on
+    /// its own thread while rows queue. If the directory or the file cannot be used, the
+    /// history is off (logged, in [`StoreHandle::health`]): rows are counted and discarded
+    /// and queries answer [`StoreError::Unavailable`]. What a gateway uses: polling and
+    /// the live API never wait on the history.
+    pub fn start(dir: &Path, options: StoreOptions) -> Self {
+        Self::spawn(dir, options).0
+    }
+
+    fn spawn(dir: &Path, options: StoreOptions) -> (Self, mpsc::Receiver<Result<(), StoreError>>) {
         let path = dir.join(DB_FILE);
-        let sqlite = |source| StoreError::Sqlite {
-            path: path.clone(),
-            source,
-        };
-        let conn = Connection::open(&path).map_err(sqlite)?;
-        configure(&conn).map_err(sqlite)?;
-        conn.execute_batch(SCHEMA).map_err(sqlite)?;
-        let points = load_points(&conn).map_err(sqlite)?;
         let stats = Arc::new(StoreStats::default());
+        let shared = Arc::new(Shared::default());
         let (tx, rx) = mpsc::channel();
-        let writer = Writer {
-            conn,
-            path: path.clone(),
-            points,
-            options,
-            stats: Arc::clone(&stats),
-            pending: VecDeque::new(),
-            oldest: None,
-            last_prune: None,
+        let (opened_tx, opened) = mpsc::channel();
+        let spawned = {
+            let (dir, stats, shared) = (dir.to_owned(), Arc::clone(&stats), Arc::clone(&shared));
+            thread::Builder::new()
+                .name("cellbus-history".into())
+                .spawn(move || run_writer(&dir, options, stats, shared, rx, opened_tx))
         };
-        let writer = thread::Builder::new()
-            .name("cellbus-history".into())
-            .spawn(move || writer.run(rx))
-            .map_err(|source| StoreError::Directory {
-                path: dir.to_owned(),
-                source,
-            })?;
-        Ok(Self {
+        let writer = match spawned {
+            Ok(writer) => Some(writer),
+            Err(e) => {
+                let reason = format!("cannot start the history writer thread: {e}");
+                tracing::error!("{reason}");
+                shared.set_open(Err(reason.clone()));
+                // `opened` then reports the sender gone: `open` says so.
+                None
+            }
+        };
+        let store = Self {
             handle: StoreHandle {
                 tx,
                 readers: Arc::new(ReaderPool {
                     path,
                     idle: Mutex::new(Vec::new()),
+                    shared: Arc::clone(&shared),
                 }),
                 stats,
+                shared,
             },
-            writer: Some(writer),
-        })
+            writer,
+        };
+        (store, opened)
     }
 
     /// A handle for recording and querying.
@@ -217,46 +407,95 @@ impl Drop for Store {
 impl StoreHandle {
     /// Queues a value change.
     pub fn sample(&self, sample: Sample) {
-        let _ = self.tx.send(Command::Sample(sample));
+        self.send(Command::Sample(sample));
     }
 
     /// Queues an event.
     pub fn event(&self, event: Event) {
-        let _ = self.tx.send(Command::Event(event));
+        self.send(Command::Event(event));
     }
 
-    /// Queues a write attempt; the writer commits it at once.
+    /// Queues a write attempt; the writer commits it at once (unless commits are failing).
     pub fn audit(&self, entry: AuditEntry) {
-        let _ = self.tx.send(Command::Audit(entry));
+        self.send(Command::Audit(entry));
     }
 
-    /// Commits everything queued before this call; returns the rows committed so far.
-    pub async fn flush(&self) -> Result<u64, StoreError> {
-        let (reply, answer) = tokio::sync::oneshot::channel();
-        self.tx
-            .send(Command::Flush(reply))
-            .map_err(|_| StoreError::WriterGone)?;
-        answer
-            .await
-            .map_err(|_| StoreError::WriterGone)?
-            .map_err(StoreError::Commit)
+    fn send(&self, command: Command) {
+        if self.tx.send(command).is_err() {
+            self.stats.rows_dropped.fetch_add(1, Ordering::Relaxed);
+        }
     }
 
-    /// Deletes rows older than the retention before `now`; returns how many went.
-    pub async fn prune(&self, now: Timestamp) -> Result<u64, StoreError> {
+    /// Commits everything queued before this call; returns the rows committed so far. While
+    /// commits fail and wait for their retry, answers the last error at once.
+    pub fn flush(&self) -> impl Future<Output = Result<u64, StoreError>> + use<> {
         let (reply, answer) = tokio::sync::oneshot::channel();
-        self.tx
-            .send(Command::Prune(now, reply))
-            .map_err(|_| StoreError::WriterGone)?;
-        answer
-            .await
-            .map_err(|_| StoreError::WriterGone)?
-            .map_err(StoreError::Commit)
+        let sent = self.tx.send(Command::Flush(reply));
+        async move {
+            sent.map_err(|_| StoreError::WriterGone)?;
+            answer
+                .await
+                .map_err(|_| StoreError::WriterGone)?
+                .map_err(StoreError::Commit)
+        }
+    }
+
+    /// Deletes rows older than the retention before `now` (in chunks, new rows being
+    /// committed between them); returns how many went.
+    pub fn prune(&self, now: Timestamp) -> impl Future<Output = Result<u64, StoreError>> + use<> {
+        let (reply, answer) = tokio::sync::oneshot::channel();
+        let sent = self.tx.send(Command::Prune(now, reply));
+        async move {
+            sent.map_err(|_| StoreError::WriterGone)?;
+            answer
+                .await
+                .map_err(|_| StoreError::WriterGone)?
+                .map_err(StoreError::Commit)
+        }
     }
 
     /// The writer's counters.
     pub fn stats(&self) -> &StoreStats {
         &self.stats
+    }
+
+    /// How the history is doing at `now`: degraded while a commit failed in the last
+    /// [`FAULT_WINDOW`] or more than [`PENDING_ROWS_DEGRADED`] rows wait, or when it is off.
+    pub fn health(&self, now: Timestamp) -> StoreHealth {
+        let pending_rows = self.stats.pending_rows.load(Ordering::Relaxed);
+        let rows_dropped = self.stats.rows_dropped.load(Ordering::Relaxed);
+        let state = self.shared.lock();
+        let recent = state
+            .last_fault
+            .as_ref()
+            .filter(|(t, _)| state.failing || now.minus(FAULT_WINDOW) < *t);
+        let history = match (&state.open, recent) {
+            (None, _) => HistoryState::Opening,
+            (Some(Err(reason)), _) => HistoryState::Off(reason.clone()),
+            (Some(Ok(())), Some((_, error))) => HistoryState::Failing(error.clone()),
+            (Some(Ok(())), None) if pending_rows > PENDING_ROWS_DEGRADED as u64 => {
+                HistoryState::Failing(format!("{pending_rows} rows wait for their commit"))
+            }
+            (Some(Ok(())), None) => HistoryState::Ok,
+        };
+        StoreHealth {
+            history,
+            pending_rows,
+            rows_dropped,
+            last_fault: state.last_fault.clone(),
+        }
+    }
+
+    /// Waits (at most two minutes) until the writer has opened and checked the file;
+    /// [`StoreError::Unavailable`] if the history is off. Blocks: not for async code.
+    pub fn wait_open(&self) -> Result<(), StoreError> {
+        self.shared.wait_open()
+    }
+
+    /// Makes the writer's commits fail as on a full disk (`true`) or work again (`false`).
+    #[cfg(test)]
+    pub(crate) fn fill_disk(&self, full: bool) {
+        let _ = self.tx.send(Command::FillDisk(full));
     }
 }
 

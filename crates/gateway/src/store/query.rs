@@ -2,7 +2,7 @@
 //! writes, and the queries the API runs.
 
 use std::path::PathBuf;
-use std::sync::{Mutex, PoisonError};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use rusqlite::{Connection, OptionalExtension, params};
@@ -188,6 +188,8 @@ impl StoreHandle {
 pub(super) struct ReaderPool {
     pub(super) path: PathBuf,
     pub(super) idle: Mutex<Vec<Connection>>,
+    /// Whether the writer has opened the file (or the history is off).
+    pub(super) shared: Arc<Shared>,
 }
 
 impl ReaderPool {
@@ -195,6 +197,7 @@ impl ReaderPool {
         &self,
         f: impl FnOnce(&Connection) -> rusqlite::Result<T>,
     ) -> Result<T, StoreError> {
+        self.shared.wait_open()?;
         let sqlite = |source| StoreError::Sqlite {
             path: self.path.clone(),
             source,

@@ -195,8 +195,11 @@ pub struct StoreStats {
     pub commits: AtomicU64,
     /// Commits that failed.
     pub commit_errors: AtomicU64,
-    /// Rows dropped because the disk refused writes for too long.
+    /// Rows never stored: dropped (oldest samples first, never audit rows) while the disk
+    /// refused writes for too long, or discarded while the history is off.
     pub rows_dropped: AtomicU64,
+    /// Rows waiting for their commit (a gauge).
+    pub pending_rows: AtomicU64,
     /// Rows deleted by retention.
     pub rows_pruned: AtomicU64,
 }

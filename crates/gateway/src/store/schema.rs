@@ -1,6 +1,5 @@
 //! The tables, their indexes and the connection settings.
 
-use std::collections::HashMap;
 use std::time::Duration;
 
 use rusqlite::Connection;
@@ -44,6 +43,7 @@ CREATE TABLE IF NOT EXISTS audit (
     result    TEXT NOT NULL,
     detail    TEXT NOT NULL
 );
+CREATE INDEX IF NOT EXISTS audit_by_time ON audit(t);
 PRAGMA user_version = 1;
 ";
 
@@ -53,13 +53,6 @@ pub(super) fn configure(conn: &Connection) -> rusqlite::Result<()> {
     conn.pragma_update(None, "synchronous", "FULL")?;
     conn.busy_timeout(Duration::from_secs(5))?;
     Ok(())
-}
-
-pub(super) fn load_points(conn: &Connection) -> rusqlite::Result<HashMap<String, i64>> {
-    // The schema may not exist yet on a reader opened before the writer; callers order it.
-    let mut stmt = conn.prepare("SELECT name, id FROM points")?;
-    let rows = stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?;
-    rows.collect()
 }
 
 pub(super) fn read_sample(r: &rusqlite::Row<'_>) -> rusqlite::Result<HistorySample> {

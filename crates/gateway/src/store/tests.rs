@@ -1,4 +1,5 @@
 use super::*;
+use crate::event::{Event, EventKind};
 use crate::point::{DeviceId, PointId, Quality, Value};
 use crate::time::Timestamp;
 use std::sync::atomic::Ordering;
@@ -304,4 +305,548 @@ fn event_kinds_round_trip_through_their_names() {
         assert_eq!(EventKind::parse(kind.as_str()), Some(kind));
     }
     assert_eq!(EventKind::parse("nope"), None);
+}
+
+// --- Faults: a full disk, a damaged file, an unusable directory ---------------------------
+
+/// Events of `kind` in the store.
+fn events_of(h: &StoreHandle, kind: EventKind) -> Vec<EventRecord> {
+    h.events(&EventFilter {
+        kind: Some(kind),
+        limit: 100,
+        ..EventFilter::default()
+    })
+    .unwrap()
+}
+
+/// Flushes until a commit works (the wait of a failed one may have to pass first).
+async fn flush_until_committed(h: &StoreHandle) -> u64 {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        match h.flush().await {
+            Ok(rows) => return rows,
+            Err(e) => assert!(Instant::now() < deadline, "still failing after 60 s: {e}"),
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Enough samples to need new pages, so a capped file refuses them.
+fn fill(h: &StoreHandle, p: &str, from: i64, count: i64) {
+    for t in from..from + count {
+        h.sample(sample(p, t, t as f64));
+    }
+}
+
+fn audit(t: i64, detail: &str) -> AuditEntry {
+    AuditEntry {
+        t: Timestamp(t),
+        client: "127.0.0.1:5000".into(),
+        device: "jbc1".into(),
+        point: "jbc1.air_temperature_setpoint".into(),
+        old: None,
+        new: serde_json::json!(350),
+        result: AuditResult::Accepted,
+        detail: detail.into(),
+    }
+}
+
+#[tokio::test]
+async fn a_full_disk_is_retried_with_a_doubling_wait_instead_of_a_busy_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    h.fill_disk(true);
+    fill(&h, "a.temp", 0, 5_000);
+    let err = h.flush().await.unwrap_err().to_string();
+    assert!(err.contains("full"), "{err}");
+    // A bounded window of real time with rows arriving all along: before the fix the
+    // writer retried at once, thousands of times a second (57 000 in 15 s on a full disk).
+    let window = Instant::now();
+    let mut t = 5_000;
+    while window.elapsed() < Duration::from_millis(1500) {
+        h.sample(sample("a.temp", t, 0.0));
+        t += 1;
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let attempts = h.stats().commit_errors.load(Ordering::Relaxed);
+    // 100 ms doubling: tries at 0, 0.1, 0.3, 0.7 and 1.5 s.
+    assert!(attempts <= 6, "{attempts} commit attempts in 1.5 s");
+    assert!(h.stats().pending_rows.load(Ordering::Relaxed) >= 5_000);
+    assert_eq!(h.stats().rows_dropped.load(Ordering::Relaxed), 0);
+}
+
+#[test]
+fn failed_commits_wait_100_ms_doubling_to_30_s_with_one_log_line_per_wait() {
+    use super::fault::CommitFaults;
+    let start = Instant::now();
+    let mut faults = CommitFaults::default();
+    let (mut attempts, mut lines, mut firsts) = (Vec::new(), 0, 0);
+    // Ten minutes of a disk that stays full, looked at every 10 ms.
+    for tick in 0..60_000u64 {
+        let now = start + Duration::from_millis(10 * tick);
+        if !faults.may_commit(now) {
+            continue;
+        }
+        attempts.push(now - start);
+        let failure = faults.failed(now, "database or disk is full");
+        lines += usize::from(failure.log.is_some());
+        firsts += usize::from(failure.first);
+    }
+    let gaps: Vec<u64> = attempts
+        .windows(2)
+        .map(|w| (w[1] - w[0]).as_millis() as u64)
+        .collect();
+    assert_eq!(
+        gaps[..10],
+        [100, 200, 400, 800, 1600, 3200, 6400, 12_800, 25_600, 30_000]
+    );
+    assert!(gaps[10..].iter().all(|g| *g == 30_000), "{gaps:?}");
+    assert_eq!(attempts.len(), 28);
+    assert_eq!(lines, attempts.len(), "one line per wait");
+    assert_eq!(firsts, 1);
+    let end = start + Duration::from_secs(600);
+    let recovery = faults.succeeded(end).unwrap();
+    assert_eq!(recovery.failures, 28);
+    assert_eq!(recovery.lasted, Duration::from_secs(600));
+    assert!(faults.may_commit(end));
+    assert_eq!(faults.succeeded(end), None);
+}
+
+#[test]
+fn commits_forced_during_a_wait_still_log_at_most_one_line_per_wait() {
+    use super::fault::CommitFaults;
+    let start = Instant::now();
+    let mut faults = CommitFaults::default();
+    let mut lines = Vec::new();
+    // A commit forced every millisecond for a minute (flushes, shutdown): at most a line per
+    // wait, and every failure counted in one of them.
+    for ms in 0..60_000u64 {
+        let now = start + Duration::from_millis(ms);
+        if let Some(line) = faults.failed(now, "disk I/O error").log {
+            lines.push(line);
+        }
+    }
+    assert!(lines.len() <= 8, "{} lines: {lines:#?}", lines.len());
+    assert!(
+        lines[0].starts_with("commit failed: disk I/O error"),
+        "{}",
+        lines[0]
+    );
+    assert!(
+        lines[1].contains("commits failed in the last"),
+        "{}",
+        lines[1]
+    );
+}
+
+#[tokio::test]
+async fn rows_kept_while_the_disk_is_full_are_committed_when_it_has_room_and_an_event_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    assert_eq!(h.health(Timestamp::now()).history, HistoryState::Ok);
+    h.fill_disk(true);
+    fill(&h, "a.temp", 0, 3_000);
+    h.audit(audit(1, "while full"));
+    assert!(h.flush().await.is_err());
+    let failed_at = Timestamp::now();
+    let health = h.health(failed_at);
+    assert!(health.degraded());
+    assert!(
+        health.summary().starts_with("failing: "),
+        "{}",
+        health.summary()
+    );
+    assert!(health.pending_rows >= 3_001, "{health:?}");
+
+    h.fill_disk(false);
+    flush_until_committed(&h).await;
+    let got = h
+        .history(&point("a.temp"), Timestamp(0), Timestamp(99_999), None)
+        .unwrap();
+    assert_eq!(samples_of(&got).len(), 3_000);
+    assert_eq!(h.audit_log(None, 10).unwrap().len(), 1);
+    let failed = events_of(&h, EventKind::HistoryFailed);
+    assert_eq!(failed.len(), 1);
+    assert!(failed[0].message.contains("full"), "{}", failed[0].message);
+    let recovered = events_of(&h, EventKind::HistoryRecovered);
+    assert_eq!(recovered.len(), 1);
+    assert!(
+        recovered[0].message.contains("work again after"),
+        "{}",
+        recovered[0].message
+    );
+    // Health looks at the last minute, not at errors since start.
+    let now = Timestamp::now();
+    assert!(h.health(now).degraded(), "a failure less than a minute ago");
+    let later = h.health(now.plus(FAULT_WINDOW + Duration::from_secs(1)));
+    assert_eq!(later.history, HistoryState::Ok);
+    assert!(later.last_fault.is_some());
+    assert_eq!(later.pending_rows, 0);
+}
+
+#[tokio::test]
+async fn back_pressure_drops_the_oldest_samples_and_never_an_audit_row_or_an_event() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    h.fill_disk(true);
+    h.audit(audit(0, "first"));
+    let over = 1_000;
+    let total = i64::try_from(MAX_PENDING_ROWS).unwrap() + over;
+    for t in 0..total {
+        h.sample(sample("a.temp", t, 0.0));
+        if t % 20_000 == 0 {
+            h.event(Event {
+                t: Timestamp(t),
+                kind: EventKind::DeviceDown,
+                line: None,
+                device: None,
+                point: None,
+                message: format!("down at {t}"),
+            });
+        }
+    }
+    h.audit(audit(total, "last"));
+    assert!(h.flush().await.is_err());
+    h.fill_disk(false);
+    flush_until_committed(&h).await;
+    assert_eq!(h.audit_log(None, 10).unwrap().len(), 2);
+    assert_eq!(events_of(&h, EventKind::DeviceDown).len(), 11);
+    let dropped = h.stats().rows_dropped.load(Ordering::Relaxed);
+    // The extra samples, and as many as the events, audit rows and the history_failed
+    // event pending with them, made room by dropping samples.
+    assert!(
+        (over as u64..=over as u64 + 14).contains(&dropped),
+        "{dropped}"
+    );
+    let got = h
+        .history(
+            &point("a.temp"),
+            Timestamp(0),
+            Timestamp(i64::MAX),
+            Some(Duration::from_secs(1_000_000)),
+        )
+        .unwrap();
+    let Series::Buckets(buckets) = got.series else {
+        panic!("expected buckets")
+    };
+    assert_eq!(buckets[0].count, (total as u64) - dropped);
+    // The oldest samples went, the newest are there.
+    let newest = h
+        .history(
+            &point("a.temp"),
+            Timestamp(total - 1),
+            Timestamp(total),
+            None,
+        )
+        .unwrap();
+    assert_eq!(samples_of(&newest).len(), 1);
+    let oldest = h
+        .history(
+            &point("a.temp"),
+            Timestamp(0),
+            Timestamp(dropped as i64),
+            None,
+        )
+        .unwrap();
+    assert_eq!(samples_of(&oldest).len(), 0);
+}
+
+#[tokio::test]
+async fn a_garbage_file_is_moved_aside_and_a_new_history_started_with_an_event() {
+    let dir = tempfile::tempdir().unwrap();
+    let garbage: Vec<u8> = (0..10_000u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    std::fs::write(dir.path().join(DB_FILE), &garbage).unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    h.sample(sample("a.temp", 1, 1.0));
+    h.flush().await.unwrap();
+    let aside: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.starts_with("cellbus.db.corrupt-"))
+        .collect();
+    assert_eq!(aside.len(), 1, "{aside:?}");
+    // cellbus.db.corrupt-20261125T064500Z
+    let stamp = aside[0].trim_start_matches("cellbus.db.corrupt-");
+    assert_eq!(stamp.len(), 16, "{stamp}");
+    assert!(
+        stamp.ends_with('Z') && stamp.as_bytes()[8] == b'T',
+        "{stamp}"
+    );
+    assert_eq!(std::fs::read(dir.path().join(&aside[0])).unwrap(), garbage);
+    let reset = events_of(&h, EventKind::HistoryReset);
+    assert_eq!(reset.len(), 1);
+    assert!(reset[0].message.contains(&aside[0]), "{}", reset[0].message);
+    assert!(
+        reset[0].message.contains("not a database"),
+        "{}",
+        reset[0].message
+    );
+    assert_eq!(h.integrity_check().unwrap(), "ok");
+    assert_eq!(h.health(Timestamp::now()).history, HistoryState::Ok);
+}
+
+#[tokio::test]
+async fn a_file_with_a_damaged_page_fails_quick_check_and_is_moved_aside() {
+    let dir = tempfile::tempdir().unwrap();
+    {
+        let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+        let h = store.handle();
+        fill(&h, "a.temp", 0, 20_000);
+        h.flush().await.unwrap();
+        store.close();
+    }
+    // Checkpointed at close: the rows are in the main file. Damage a page in its middle.
+    let path = dir.path().join(DB_FILE);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let page = 4096;
+    let middle = (bytes.len() / page / 2) * page;
+    bytes[middle..middle + page].fill(0x5a);
+    std::fs::write(&path, &bytes).unwrap();
+    let _ = std::fs::remove_file(dir.path().join("cellbus.db-wal"));
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    h.flush().await.unwrap();
+    let reset = events_of(&h, EventKind::HistoryReset);
+    assert_eq!(reset.len(), 1);
+    assert!(
+        reset[0].message.contains("quick_check"),
+        "{}",
+        reset[0].message
+    );
+    let got = h
+        .history(&point("a.temp"), Timestamp(0), Timestamp(99_999), None)
+        .unwrap();
+    assert_eq!(samples_of(&got).len(), 0, "a new, empty history");
+}
+
+#[tokio::test]
+async fn an_unusable_data_directory_turns_the_history_off_and_rows_are_counted_and_discarded() {
+    let dir = tempfile::tempdir().unwrap();
+    // A regular file where the directory should be: refused even to root.
+    let data = dir.path().join("data");
+    std::fs::write(&data, b"not a directory").unwrap();
+    let store = Store::start(&data, StoreOptions::default());
+    let h = store.handle();
+    assert!(h.wait_open().is_err());
+    let health = h.health(Timestamp::now());
+    assert!(health.degraded());
+    let summary = health.summary();
+    assert!(summary.starts_with("off: "), "{summary}");
+    assert!(summary.contains(&data.display().to_string()), "{summary}");
+    assert!(summary.contains("os error"), "{summary}");
+    for t in 0..10 {
+        h.sample(sample("a.temp", t, 1.0));
+    }
+    h.audit(audit(1, "off"));
+    let err = h.flush().await.unwrap_err().to_string();
+    assert!(err.contains("history is off"), "{err}");
+    assert_eq!(h.stats().rows_dropped.load(Ordering::Relaxed), 11);
+    let err = h
+        .history(&point("a.temp"), Timestamp(0), Timestamp(10), None)
+        .unwrap_err();
+    assert!(matches!(err, StoreError::Unavailable { .. }), "{err}");
+    let text = err.to_string();
+    assert!(
+        text.contains(&data.display().to_string()) && text.contains("os error"),
+        "{text}"
+    );
+    store.close();
+}
+
+// --- Retention ---------------------------------------------------------------------------
+
+#[tokio::test]
+async fn retention_deletes_in_chunks_and_commits_new_rows_between_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = StoreOptions {
+        retain: Duration::from_secs(10),
+        prune_chunk_rows: 100,
+        ..StoreOptions::default()
+    };
+    let store = Store::open(dir.path(), options).unwrap();
+    let h = store.handle();
+    fill(&h, "a.temp", 0, 10_000);
+    h.flush().await.unwrap();
+    let prune = h.prune(Timestamp(1_000_000));
+    h.sample(sample("b.temp", 999_999, 1.0));
+    let flushed = h.flush();
+    flushed.await.unwrap();
+    let pruned = h.stats().rows_pruned.load(Ordering::Relaxed);
+    // Before the fix the whole delete ran first, in one transaction.
+    assert!(
+        pruned < 10_000,
+        "{pruned} rows pruned before a new row was committed"
+    );
+    assert_eq!(prune.await.unwrap(), 10_000);
+    let got = h
+        .history(&point("a.temp"), Timestamp(0), Timestamp(i64::MAX), None)
+        .unwrap();
+    assert!(samples_of(&got).is_empty());
+}
+
+#[tokio::test]
+async fn audit_rows_have_their_own_longer_retention() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = StoreOptions {
+        retain: Duration::from_secs(10),
+        retain_audit: Duration::from_secs(100),
+        ..StoreOptions::default()
+    };
+    let store = Store::open(dir.path(), options).unwrap();
+    let h = store.handle();
+    for t in [1_000, 50_000, 150_000] {
+        h.audit(audit(t, &format!("at {t}")));
+        h.sample(sample("a.temp", t, 1.0));
+    }
+    h.flush().await.unwrap();
+    // Now is 160 s: samples before 150 s go, audit rows before 60 s.
+    assert_eq!(h.prune(Timestamp(160_000)).await.unwrap(), 2 + 2);
+    let kept: Vec<i64> = h
+        .audit_log(None, 10)
+        .unwrap()
+        .iter()
+        .map(|a| a.t.0)
+        .collect();
+    assert_eq!(kept, vec![150_000]);
+
+    // An audit retention shorter than the history's: the history's wins.
+    let short = StoreOptions {
+        retain: Duration::from_secs(100),
+        retain_audit: Duration::from_secs(10),
+        ..StoreOptions::default()
+    };
+    assert_eq!(short.audit_retention(), Duration::from_secs(100));
+    assert_eq!(
+        StoreOptions::default().audit_retention(),
+        Duration::from_secs(365 * 24 * 3600)
+    );
+}
+
+#[tokio::test]
+async fn a_new_file_vacuums_incrementally_and_shrinks_with_its_wal_after_a_prune() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = StoreOptions {
+        retain: Duration::from_secs(10),
+        ..StoreOptions::default()
+    };
+    let store = Store::open(dir.path(), options).unwrap();
+    let h = store.handle();
+    let rows = 100_000;
+    fill(&h, "a.temp", 0, rows);
+    h.flush().await.unwrap();
+    let size = |name: &str| std::fs::metadata(dir.path().join(name)).map_or(0, |m| m.len());
+    let before = size(DB_FILE) + size("cellbus.db-wal");
+    let started = Instant::now();
+    assert_eq!(h.prune(Timestamp(10_000_000)).await.unwrap(), rows as u64);
+    let took = started.elapsed();
+    let after_db = size(DB_FILE);
+    let after_wal = size("cellbus.db-wal");
+    println!(
+        "prune of {rows} rows: {took:?}; files {before} bytes before, db {after_db} + wal \
+         {after_wal} after"
+    );
+    assert_eq!(after_wal, 0, "the WAL is truncated after a prune");
+    assert!(
+        after_db * 4 < before,
+        "{after_db} bytes after, {before} before"
+    );
+    let conn = rusqlite::Connection::open(dir.path().join(DB_FILE)).unwrap();
+    let auto: i64 = conn
+        .query_row("PRAGMA auto_vacuum", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(auto, 2, "INCREMENTAL");
+    let free: i64 = conn
+        .query_row("PRAGMA freelist_count", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(free, 0);
+}
+
+// --- The gateway on a full disk ----------------------------------------------------------
+
+#[tokio::test(start_paused = true)]
+async fn a_full_disk_leaves_live_values_served_and_healthz_reporting_the_fault() {
+    use crate::http::{WritePolicy, router};
+    use crate::metrics::{PollLabels, PollResult};
+    use axum::body::Body;
+    use axum::http::{Request, StatusCode};
+    use tower::ServiceExt;
+
+    let rig = crate::testing::rig(1);
+    let app = router(
+        std::sync::Arc::clone(&rig.cell),
+        WritePolicy {
+            enabled: false,
+            token: None,
+        },
+        rig.shutdown.subscribe(),
+    );
+    let get = |uri: &'static str| {
+        let app = app.clone();
+        async move {
+            let response = app
+                .oneshot(Request::get(uri).body(Body::empty()).unwrap())
+                .await
+                .unwrap();
+            let status = response.status();
+            let body = axum::body::to_bytes(response.into_body(), 1 << 20)
+                .await
+                .unwrap();
+            (
+                status,
+                serde_json::from_slice::<serde_json::Value>(&body).unwrap(),
+            )
+        }
+    };
+    let polls = || {
+        rig.cell
+            .metrics()
+            .polls
+            .get_or_create(&PollLabels {
+                line: "bench".into(),
+                device: "jbc1".into(),
+                result: PollResult::ok,
+            })
+            .get()
+    };
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let h = rig.cell.store().clone();
+    h.flush().await.unwrap();
+    h.fill_disk(true);
+    fill(&h, "pad.rows", Timestamp::now().0, 5_000);
+    assert!(h.flush().await.is_err(), "the disk is full");
+
+    let before = polls();
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    assert!(polls() > before, "polling goes on");
+    let (status, devices) = get("/api/devices").await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(devices["devices"][0]["status"], "up", "{devices}");
+    let (status, health) = get("/healthz").await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(health["status"], "degraded", "{health}");
+    let history = health["history"].as_str().unwrap();
+    assert!(
+        history.starts_with("failing: ") && history.contains("full"),
+        "{health}"
+    );
+    assert!(
+        health["history_pending_rows"].as_u64().unwrap() >= 5_000,
+        "{health}"
+    );
+    assert!(health["history_last_error_at"].is_string(), "{health}");
+    // What was committed can still be read.
+    let (status, _) = get("/api/history?point=jbc1.air_temperature").await;
+    assert_eq!(status, StatusCode::OK);
+
+    h.fill_disk(false);
+    flush_until_committed(&h).await;
+    assert_eq!(events_of(&h, EventKind::HistoryRecovered).len(), 1);
+    let (_, health) = get("/healthz").await;
+    assert_eq!(health["history_pending_rows"], 0, "{health}");
 }

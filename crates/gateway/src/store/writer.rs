@@ -1,17 +1,30 @@
-//! The writer thread: batches of rows, commits, retention.
+//! The writer thread: batches of rows, commits and their retries, retention in chunks.
 
 use std::collections::{HashMap, VecDeque};
-use std::path::PathBuf;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
-use rusqlite::{Connection, Transaction, params};
+use rusqlite::{Connection, OptionalExtension, Transaction, params};
 
 use crate::point::{DeviceId, PointId, Value};
 use crate::time::Timestamp;
 
+use super::fault::CommitFaults;
+use super::open::open_writer;
 use super::*;
+
+/// The first automatic prune waits this long after start, so a start after a long
+/// stop (with much to delete) is not slowed by it.
+const FIRST_PRUNE_AFTER: Duration = Duration::from_secs(60);
+
+/// Commands taken from the channel before the writer looks at its batch and its prune.
+const DRAIN_MAX: usize = 10_000;
+
+/// Pages returned to the file system per `incremental_vacuum` step (4 MB of 4 KiB pages).
+const VACUUM_PAGES: u32 = 1024;
 
 /// A row waiting for its commit.
 pub(super) enum Row {
@@ -20,135 +33,541 @@ pub(super) enum Row {
     Audit(AuditEntry),
 }
 
-pub(super) struct Writer {
-    pub(super) conn: Connection,
-    pub(super) path: PathBuf,
-    pub(super) points: HashMap<String, i64>,
-    pub(super) options: StoreOptions,
-    pub(super) stats: Arc<StoreStats>,
-    pub(super) pending: VecDeque<Row>,
-    pub(super) oldest: Option<Instant>,
-    pub(super) last_prune: Option<Instant>,
+/// The writer thread's body: opens the file, then writes until shut down. If the file
+/// cannot be opened, the history is off: rows are counted and discarded.
+pub(super) fn run_writer(
+    dir: &Path,
+    options: StoreOptions,
+    stats: Arc<StoreStats>,
+    shared: Arc<Shared>,
+    rx: mpsc::Receiver<Command>,
+    opened: mpsc::Sender<Result<(), StoreError>>,
+) {
+    match open_writer(dir) {
+        Ok(open) => {
+            let mut writer = Writer {
+                conn: open.conn,
+                path: dir.join(DB_FILE),
+                points: HashMap::new(),
+                options,
+                stats,
+                shared,
+                pending: VecDeque::new(),
+                oldest: None,
+                last_prune: None,
+                faults: CommitFaults::default(),
+                prunes: VecDeque::new(),
+            };
+            if let Some((aside, fault)) = open.moved_aside {
+                writer.push(Row::Event(history_event(
+                    EventKind::HistoryReset,
+                    format!(
+                        "the history file was damaged ({fault}); it was moved aside as {} and \
+                         a new history started",
+                        aside.display()
+                    ),
+                )));
+            }
+            writer.shared.set_open(Ok(()));
+            let _ = opened.send(Ok(()));
+            writer.run(&rx);
+        }
+        Err(e) => {
+            let reason = e.to_string();
+            tracing::error!(
+                "history is off: {reason}; values are served live but not stored; \
+                 fix the data directory and restart"
+            );
+            shared.set_open(Err(reason.clone()));
+            let _ = opened.send(Err(e));
+            discard(&rx, &stats, &reason);
+        }
+    }
+}
+
+/// The history is off: rows are counted and dropped, flushes and prunes say why.
+fn discard(rx: &mpsc::Receiver<Command>, stats: &StoreStats, reason: &str) {
+    let off = || Err(format!("history is off: {reason}"));
+    for command in rx {
+        match command {
+            Command::Sample(_) | Command::Event(_) | Command::Audit(_) => {
+                stats.rows_dropped.fetch_add(1, Ordering::Relaxed);
+            }
+            Command::Flush(reply) | Command::Prune(_, reply) => {
+                let _ = reply.send(off());
+            }
+            #[cfg(test)]
+            Command::FillDisk(_) => {}
+            Command::Shutdown => return,
+        }
+    }
+}
+
+fn history_event(kind: EventKind, message: String) -> Event {
+    Event {
+        t: Timestamp::now(),
+        kind,
+        line: None,
+        device: None,
+        point: None,
+        message,
+    }
+}
+
+struct Writer {
+    conn: Connection,
+    path: PathBuf,
+    /// Point ids known to be committed (a cache; `point_id` asks the table otherwise).
+    points: HashMap<String, i64>,
+    options: StoreOptions,
+    stats: Arc<StoreStats>,
+    shared: Arc<Shared>,
+    pending: VecDeque<Row>,
+    oldest: Option<Instant>,
+    last_prune: Option<Instant>,
+    faults: CommitFaults,
+    prunes: VecDeque<PruneJob>,
 }
 
 impl Writer {
-    pub(super) fn run(mut self, rx: mpsc::Receiver<Command>) {
-        self.prune_if_due(Timestamp::now());
+    fn run(mut self, rx: &mpsc::Receiver<Command>) {
+        let now = Instant::now();
+        self.last_prune = Some(
+            now.checked_sub(self.options.prune_every.saturating_sub(FIRST_PRUNE_AFTER))
+                .unwrap_or(now),
+        );
         loop {
-            let wait = match self.oldest {
-                Some(oldest) => {
-                    (oldest + self.options.batch_delay).saturating_duration_since(Instant::now())
-                }
-                None => self.options.prune_every.min(Duration::from_secs(60)),
+            let wait = if self.prunes.is_empty() {
+                self.wake_in(Instant::now())
+            } else {
+                Duration::ZERO
             };
-            match rx.recv_timeout(wait) {
-                Ok(Command::Sample(sample)) => self.push(Row::Sample(sample)),
-                Ok(Command::Event(event)) => self.push(Row::Event(event)),
-                Ok(Command::Audit(entry)) => {
-                    self.push(Row::Audit(entry));
-                    let _ = self.commit();
-                }
-                Ok(Command::Flush(reply)) => {
-                    let _ = reply.send(self.commit().map(|()| self.stats.rows_written()));
-                }
-                Ok(Command::Prune(now, reply)) => {
-                    let result = self.commit().and_then(|()| self.prune(now));
-                    let _ = reply.send(result);
-                }
-                Ok(Command::Shutdown) | Err(mpsc::RecvTimeoutError::Disconnected) => {
-                    if let Err(e) = self.commit() {
-                        tracing::error!(
-                            "history: {} rows could not be committed at shutdown: {e}",
-                            self.pending.len()
-                        );
+            let mut received = Some(rx.recv_timeout(wait));
+            let mut handled = 0;
+            while let Some(next) = received.take() {
+                match next {
+                    Ok(command) => {
+                        if self.handle(command).is_break() {
+                            return;
+                        }
                     }
-                    return;
+                    Err(mpsc::RecvTimeoutError::Timeout) => break,
+                    Err(mpsc::RecvTimeoutError::Disconnected) => {
+                        self.shut_down();
+                        return;
+                    }
                 }
-                Err(mpsc::RecvTimeoutError::Timeout) => {
-                    let _ = self.commit();
-                    self.prune_if_due(Timestamp::now());
+                handled += 1;
+                if handled < DRAIN_MAX {
+                    received = match rx.try_recv() {
+                        Ok(command) => Some(Ok(command)),
+                        Err(mpsc::TryRecvError::Empty) => None,
+                        Err(mpsc::TryRecvError::Disconnected) => {
+                            Some(Err(mpsc::RecvTimeoutError::Disconnected))
+                        }
+                    };
                 }
+            }
+            let now = Instant::now();
+            self.commit_if_due(now);
+            if self.prunes.is_empty() {
+                self.prune_if_due(now);
+            } else {
+                self.prune_step();
             }
         }
     }
 
-    pub(super) fn push(&mut self, row: Row) {
-        if self.pending.len() >= MAX_PENDING_ROWS {
-            self.pending.pop_front();
-            self.stats.rows_dropped.fetch_add(1, Ordering::Relaxed);
+    /// How long to sleep: until the batch is due (or its retry), or the next prune.
+    fn wake_in(&self, now: Instant) -> Duration {
+        let prune = self
+            .last_prune
+            .map_or(now, |last| last + self.options.prune_every)
+            .min(now + Duration::from_secs(60));
+        let commit = self.oldest.map(|oldest| {
+            let due = oldest + self.options.batch_delay;
+            self.faults.retry_at().map_or(due, |retry| retry.max(due))
+        });
+        commit
+            .map_or(prune, |c| c.min(prune))
+            .saturating_duration_since(now)
+    }
+
+    fn handle(&mut self, command: Command) -> ControlFlow<()> {
+        match command {
+            Command::Sample(sample) => self.push(Row::Sample(sample)),
+            Command::Event(event) => self.push(Row::Event(event)),
+            Command::Audit(entry) => {
+                self.push(Row::Audit(entry));
+                if self.faults.may_commit(Instant::now()) {
+                    let _ = self.commit();
+                }
+            }
+            Command::Flush(reply) => {
+                let result = self.flush();
+                let _ = reply.send(result);
+            }
+            Command::Prune(now, reply) => {
+                self.prunes
+                    .push_back(PruneJob::new(&self.conn, now, &self.options, Some(reply)))
+            }
+            #[cfg(test)]
+            Command::FillDisk(full) => {
+                // Lowering it below the file's size caps the file at its size.
+                let pages = if full { 1 } else { 4_294_967_294u64 };
+                if let Err(e) =
+                    self.conn
+                        .query_row(&format!("PRAGMA max_page_count = {pages}"), [], |r| {
+                            r.get::<_, i64>(0)
+                        })
+                {
+                    tracing::error!("max_page_count: {e}");
+                }
+            }
+            Command::Shutdown => {
+                self.shut_down();
+                return ControlFlow::Break(());
+            }
+        }
+        ControlFlow::Continue(())
+    }
+
+    /// Commits what is pending, unless a failure's wait is not over: then its error.
+    fn flush(&mut self) -> Result<u64, String> {
+        let now = Instant::now();
+        if !self.faults.may_commit(now)
+            && let Some(waiting) = self.faults.waiting(now)
+        {
+            return Err(waiting);
+        }
+        self.commit().map(|()| self.stats.rows_written())
+    }
+
+    fn shut_down(&mut self) {
+        if let Err(e) = self.commit() {
+            tracing::error!(
+                "history {}: {} rows could not be committed at shutdown: {e}",
+                self.path.display(),
+                self.pending.len()
+            );
+        }
+        for job in self.prunes.drain(..) {
+            if let Some(reply) = job.reply {
+                let _ = reply.send(Err("the history writer stopped during the prune".into()));
+            }
+        }
+    }
+
+    fn push(&mut self, row: Row) {
+        if self.pending.len() >= MAX_PENDING_ROWS && !self.make_room(&row) {
+            return;
         }
         self.pending.push_back(row);
+        self.stats
+            .pending_rows
+            .store(self.pending.len() as u64, Ordering::Relaxed);
         self.oldest.get_or_insert_with(Instant::now);
-        if self.pending.len() >= self.options.batch_rows {
+        if self.pending.len() >= self.options.batch_rows && self.faults.may_commit(Instant::now()) {
             let _ = self.commit();
         }
     }
 
-    /// Commits the pending rows in one transaction. On failure they stay pending.
-    pub(super) fn commit(&mut self) -> Result<(), String> {
+    /// The pending rows are at their cap: drops the oldest sample, else (for an event) the
+    /// oldest event; audit rows are never dropped. Returns whether `incoming` is kept.
+    fn make_room(&mut self, incoming: &Row) -> bool {
+        let oldest = |pending: &VecDeque<Row>, event: bool| {
+            pending.iter().position(|r| match r {
+                Row::Sample(_) => !event,
+                Row::Event(_) => event,
+                Row::Audit(_) => false,
+            })
+        };
+        let victim = match incoming {
+            // A sample makes room only by dropping an older sample, or itself.
+            Row::Sample(_) => oldest(&self.pending, false),
+            Row::Event(_) | Row::Audit(_) => {
+                oldest(&self.pending, false).or_else(|| oldest(&self.pending, true))
+            }
+        };
+        let keep = match victim {
+            Some(i) => {
+                self.pending.remove(i);
+                true
+            }
+            // Nothing older may go: an audit row is kept anyway, the rest is dropped.
+            None => matches!(incoming, Row::Audit(_)),
+        };
+        if victim.is_some() || !keep {
+            self.stats.rows_dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        keep
+    }
+
+    fn commit_if_due(&mut self, now: Instant) {
+        let due = self.oldest.is_some_and(|oldest| {
+            now >= oldest + self.options.batch_delay
+                || self.pending.len() >= self.options.batch_rows
+        });
+        if due && self.faults.may_commit(now) {
+            let _ = self.commit();
+        }
+    }
+
+    /// Commits the pending rows in one transaction. On failure they stay pending and the
+    /// next try waits (see [`CommitFaults`]).
+    fn commit(&mut self) -> Result<(), String> {
         if self.pending.is_empty() {
             return Ok(());
         }
         let mut rows = std::mem::take(&mut self.pending);
-        match write_rows(&mut self.conn, &mut self.points, rows.make_contiguous()) {
+        let result = write_rows(&mut self.conn, &mut self.points, rows.make_contiguous());
+        let now = Instant::now();
+        match result {
             Ok(counts) => {
                 self.oldest = None;
-                let s = &self.stats;
-                s.samples_written.fetch_add(counts[0], Ordering::Relaxed);
-                s.events_written.fetch_add(counts[1], Ordering::Relaxed);
-                s.audit_written.fetch_add(counts[2], Ordering::Relaxed);
-                s.commits.fetch_add(1, Ordering::Relaxed);
+                self.stats.pending_rows.store(0, Ordering::Relaxed);
+                self.count(counts);
+                if let Some(recovery) = self.faults.succeeded(now) {
+                    self.shared.recovered();
+                    let message = format!(
+                        "history commits work again after {} failed over {:.1} s (last error: {})",
+                        recovery.failures,
+                        recovery.lasted.as_secs_f64(),
+                        recovery.last_error
+                    );
+                    tracing::warn!("history {}: {message}", self.path.display());
+                    let event = [Row::Event(history_event(
+                        EventKind::HistoryRecovered,
+                        message,
+                    ))];
+                    match write_rows(&mut self.conn, &mut self.points, &event) {
+                        Ok(counts) => self.count(counts),
+                        Err(_) => self.pending.extend(event),
+                    }
+                }
                 Ok(())
             }
             Err(e) => {
+                let error = e.to_string();
                 self.stats.commit_errors.fetch_add(1, Ordering::Relaxed);
-                tracing::error!("history {}: commit failed: {e}", self.path.display());
+                self.shared.fault(Timestamp::now(), &error);
                 // Ids handed out inside the failed transaction are gone with it.
-                self.points = load_points(&self.conn).unwrap_or_default();
+                self.points.clear();
                 self.pending = rows;
-                Err(e.to_string())
+                let failure = self.faults.failed(now, &error);
+                if let Some(line) = failure.log {
+                    tracing::error!(
+                        "history {}: {line}; {} rows pending",
+                        self.path.display(),
+                        self.pending.len()
+                    );
+                }
+                if failure.first {
+                    self.push(Row::Event(history_event(
+                        EventKind::HistoryFailed,
+                        format!(
+                            "history commits fail: {error}; rows are kept (at most \
+                             {MAX_PENDING_ROWS}, oldest samples dropped first) and retried"
+                        ),
+                    )));
+                }
+                Err(error)
             }
         }
     }
 
-    pub(super) fn prune_if_due(&mut self, now: Timestamp) {
+    fn count(&self, counts: [u64; 3]) {
+        let s = &self.stats;
+        s.samples_written.fetch_add(counts[0], Ordering::Relaxed);
+        s.events_written.fetch_add(counts[1], Ordering::Relaxed);
+        s.audit_written.fetch_add(counts[2], Ordering::Relaxed);
+        s.commits.fetch_add(1, Ordering::Relaxed);
+    }
+
+    fn prune_if_due(&mut self, now: Instant) {
         let due = self
             .last_prune
-            .is_none_or(|last| last.elapsed() >= self.options.prune_every);
-        if due {
-            self.last_prune = Some(Instant::now());
-            if let Err(e) = self.prune(now) {
-                tracing::error!("history {}: retention failed: {e}", self.path.display());
-            }
+            .is_none_or(|last| now.saturating_duration_since(last) >= self.options.prune_every);
+        // While commits fail, deletes would too; the prune waits for the disk.
+        if due && self.faults.retry_at().is_none() {
+            self.last_prune = Some(now);
+            let job = PruneJob::new(&self.conn, Timestamp::now(), &self.options, None);
+            self.prunes.push_back(job);
         }
     }
 
-    pub(super) fn prune(&mut self, now: Timestamp) -> Result<u64, String> {
-        let cutoff = now.minus(self.options.retain).0;
-        let mut deleted = 0u64;
-        let ids: Vec<i64> = self.points.values().copied().collect();
-        for id in ids {
-            let n = self
-                .conn
-                .execute(
-                    "DELETE FROM samples WHERE point = ?1 AND t < ?2",
-                    params![id, cutoff],
-                )
-                .map_err(|e| e.to_string())?;
-            deleted += n as u64;
+    /// One chunk of the first prune job; answers it when done or failed.
+    fn prune_step(&mut self) {
+        let Some(job) = self.prunes.front_mut() else {
+            return;
+        };
+        let chunk = self.options.prune_chunk_rows.max(1);
+        match job.step(&self.conn, chunk) {
+            Ok(n) => {
+                self.stats.rows_pruned.fetch_add(n, Ordering::Relaxed);
+                if !job.done() {
+                    return;
+                }
+            }
+            Err(e) => {
+                tracing::error!("history {}: retention failed: {e}", self.path.display());
+                job.failed = Some(e.to_string());
+            }
         }
-        let n = self
-            .conn
-            .execute("DELETE FROM events WHERE t < ?1", [cutoff])
-            .map_err(|e| e.to_string())?;
-        deleted += n as u64;
-        self.stats.rows_pruned.fetch_add(deleted, Ordering::Relaxed);
-        Ok(deleted)
+        if let Some(job) = self.prunes.pop_front() {
+            if job.deleted > 0 {
+                tracing::info!(
+                    "history {}: retention deleted {} rows in {:.1} s",
+                    self.path.display(),
+                    job.deleted,
+                    job.started.elapsed().as_secs_f64()
+                );
+            }
+            if let Some(reply) = job.reply {
+                let _ = reply.send(match job.failed {
+                    Some(e) => Err(e),
+                    None => Ok(job.deleted),
+                });
+            }
+        }
+    }
+}
+
+/// A retention run, done one chunk per writer turn.
+struct PruneJob {
+    cutoff: i64,
+    audit_cutoff: i64,
+    /// Point ids left to prune.
+    points: Vec<i64>,
+    stage: Stage,
+    deleted: u64,
+    started: Instant,
+    failed: Option<String>,
+    reply: Option<tokio::sync::oneshot::Sender<Result<u64, String>>>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    Samples,
+    Events,
+    Audit,
+    Vacuum,
+    Checkpoint,
+    Done,
+}
+
+impl PruneJob {
+    fn new(
+        conn: &Connection,
+        now: Timestamp,
+        options: &StoreOptions,
+        reply: Option<tokio::sync::oneshot::Sender<Result<u64, String>>>,
+    ) -> Self {
+        // Every point in the table, committed or not yet cached.
+        let points = conn
+            .prepare("SELECT id FROM points ORDER BY id DESC")
+            .and_then(|mut stmt| stmt.query_map([], |r| r.get(0))?.collect())
+            .unwrap_or_default();
+        Self {
+            cutoff: now.minus(options.retain).0,
+            audit_cutoff: now.minus(options.audit_retention()).0,
+            points,
+            stage: Stage::Samples,
+            deleted: 0,
+            started: Instant::now(),
+            failed: None,
+            reply,
+        }
+    }
+
+    fn done(&self) -> bool {
+        self.stage == Stage::Done
+    }
+
+    /// Deletes at most `chunk` rows (or returns a chunk of pages); returns the rows deleted.
+    fn step(&mut self, conn: &Connection, chunk: usize) -> rusqlite::Result<u64> {
+        let limit = i64::try_from(chunk).unwrap_or(i64::MAX);
+        let n = match self.stage {
+            Stage::Samples => match self.points.last().copied() {
+                Some(point) => {
+                    let n = conn
+                        .prepare_cached(
+                            "DELETE FROM samples WHERE rowid IN (SELECT rowid FROM samples \
+                             WHERE point = ?1 AND t < ?2 LIMIT ?3)",
+                        )?
+                        .execute(params![point, self.cutoff, limit])?;
+                    if n < chunk {
+                        self.points.pop();
+                    }
+                    n
+                }
+                None => {
+                    self.stage = Stage::Events;
+                    0
+                }
+            },
+            Stage::Events => {
+                let n = conn
+                    .prepare_cached(
+                        "DELETE FROM events WHERE id IN \
+                         (SELECT id FROM events WHERE t < ?1 LIMIT ?2)",
+                    )?
+                    .execute(params![self.cutoff, limit])?;
+                if n < chunk {
+                    self.stage = Stage::Audit;
+                }
+                n
+            }
+            Stage::Audit => {
+                let n = conn
+                    .prepare_cached(
+                        "DELETE FROM audit WHERE id IN \
+                         (SELECT id FROM audit WHERE t < ?1 LIMIT ?2)",
+                    )?
+                    .execute(params![self.audit_cutoff, limit])?;
+                if n < chunk {
+                    self.stage = if self.deleted + n as u64 > 0 {
+                        Stage::Vacuum
+                    } else {
+                        Stage::Done
+                    };
+                }
+                n
+            }
+            Stage::Vacuum => {
+                // Steps the pragma to its end: each step frees pages.
+                let mut stmt =
+                    conn.prepare(&format!("PRAGMA incremental_vacuum({VACUUM_PAGES})"))?;
+                let mut rows = stmt.query([])?;
+                while rows.next()?.is_some() {}
+                let free: i64 = conn.query_row("PRAGMA freelist_count", [], |r| r.get(0))?;
+                let auto: i64 = conn.query_row("PRAGMA auto_vacuum", [], |r| r.get(0))?;
+                // auto_vacuum 2 is INCREMENTAL; an older file (NONE) keeps its free pages.
+                if free == 0 || auto != 2 {
+                    self.stage = Stage::Checkpoint;
+                }
+                0
+            }
+            Stage::Checkpoint => {
+                let busy: Option<i64> = conn
+                    .query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |r| r.get(0))
+                    .optional()?;
+                if busy == Some(1) {
+                    tracing::debug!("history checkpoint after the prune: readers kept the WAL");
+                }
+                self.stage = Stage::Done;
+                0
+            }
+            Stage::Done => 0,
+        };
+        let n = n as u64;
+        self.deleted += n;
+        Ok(n)
     }
 }
 
 /// Writes rows in one transaction; returns how many samples, events and audit rows.
-pub(super) fn write_rows(
+fn write_rows(
     conn: &mut Connection,
     points: &mut HashMap<String, i64>,
     rows: &[Row],
@@ -208,7 +627,8 @@ pub(super) fn write_rows(
     Ok(counts)
 }
 
-pub(super) fn point_id(
+/// The id of point `name`: cached, else from the table, else a new row.
+fn point_id(
     tx: &Transaction<'_>,
     points: &mut HashMap<String, i64>,
     name: &str,
@@ -216,9 +636,18 @@ pub(super) fn point_id(
     if let Some(id) = points.get(name) {
         return Ok(*id);
     }
-    tx.prepare_cached("INSERT INTO points (name) VALUES (?1)")?
-        .execute([name])?;
-    let id = tx.last_insert_rowid();
+    let known: Option<i64> = tx
+        .prepare_cached("SELECT id FROM points WHERE name = ?1")?
+        .query_row([name], |r| r.get(0))
+        .optional()?;
+    let id = match known {
+        Some(id) => id,
+        None => {
+            tx.prepare_cached("INSERT INTO points (name) VALUES (?1)")?
+                .execute([name])?;
+            tx.last_insert_rowid()
+        }
+    };
     points.insert(name.to_owned(), id);
     Ok(id)
 }
