@@ -586,17 +586,34 @@ fn locate(text: &str, path: &Path, span: Range<usize>, message: String) -> Confi
     let column = text
         .get(line_start..start)
         .map_or(1, |s| s.chars().count() + 1);
-    let source_line = text
-        .get(line_start..)
-        .and_then(|rest| rest.lines().next())
-        .unwrap_or("")
-        .to_owned();
+    let source_line = hide_secret(
+        text.get(line_start..)
+            .and_then(|rest| rest.lines().next())
+            .unwrap_or(""),
+    );
     ConfigError::Invalid {
         path: path.to_owned(),
         line,
         column,
         message,
         source_line,
+    }
+}
+
+/// The line as shown under an error, with the value of a secret (`token = …`,
+/// `password = …`) hidden: error messages end up in logs and support tickets.
+fn hide_secret(line: &str) -> String {
+    let Some((key, _)) = line.split_once('=') else {
+        return line.to_owned();
+    };
+    let name = key.trim().trim_matches(['"', '\'']).to_ascii_lowercase();
+    if ["token", "password", "secret"]
+        .iter()
+        .any(|word| name.contains(word))
+    {
+        format!("{key}= \"(hidden)\"")
+    } else {
+        line.to_owned()
     }
 }
 
@@ -1084,5 +1101,14 @@ writable = { min = 5.0, max = 30.0 }
     fn a_missing_file_is_named() {
         let err = check_config(Path::new("/nonexistent/cell.toml")).unwrap_err();
         assert!(err.to_string().contains("/nonexistent/cell.toml"), "{err}");
+    }
+
+    #[test]
+    fn an_error_on_the_token_line_does_not_show_the_token() {
+        let err = parse(&format!("token = \"s3cret-value\n{ONE}")).unwrap_err();
+        let shown = err.to_string();
+        assert!(!shown.contains("s3cret"), "{shown}");
+        assert!(shown.contains("token = \"(hidden)\""), "{shown}");
+        assert_eq!(hide_secret("name = \"rework\""), "name = \"rework\"");
     }
 }

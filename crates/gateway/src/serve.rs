@@ -135,6 +135,9 @@ impl Gateway {
         let addr = listener
             .local_addr()
             .context("cannot read the bound address")?;
+        if let Some(warning) = exposure_warning(addr, &writes) {
+            tracing::warn!("{warning}");
+        }
         let metrics = Arc::new(Metrics::new());
         let (cell, tasks) =
             Cell::new(&config, store.handle(), metrics).map_err(anyhow::Error::msg)?;
@@ -272,6 +275,25 @@ fn report_history_off(cell: &Arc<Cell>, data_dir: PathBuf) {
     });
 }
 
+/// What to tell the user who listens beyond this machine: every read route (values,
+/// history, the audit log with client addresses, the lines' endpoints) answers anyone who
+/// can reach the port, and without a token nobody can write but nobody is kept out either.
+pub fn exposure_warning(addr: SocketAddr, writes: &http::WritePolicy) -> Option<String> {
+    if addr.ip().is_loopback() {
+        return None;
+    }
+    let writes = match (&writes.enabled, &writes.token) {
+        (true, Some(_)) => "writes need the token",
+        _ => "writes are off",
+    };
+    Some(format!(
+        "listening on {addr}, beyond this machine: the API and the page (values, history, the \
+         audit log with client addresses, the lines' endpoints) answer anyone who can reach \
+         this port ({writes}); keep it on a plant network behind a firewall, or listen on \
+         127.0.0.1 behind a reverse proxy that authenticates"
+    ))
+}
+
 /// Binds the listening port, saying what to do when it is taken.
 async fn bind(addr: SocketAddr) -> anyhow::Result<tokio::net::TcpListener> {
     tokio::net::TcpListener::bind(addr).await.map_err(|e| {
@@ -320,4 +342,24 @@ fn write_policy(options: &ServeOptions, config: &CellConfig) -> anyhow::Result<W
         enabled: options.allow_writes,
         token,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn listening_beyond_loopback_is_warned_about_and_loopback_is_not() {
+        let off = http::WritePolicy {
+            enabled: false,
+            token: None,
+        };
+        assert_eq!(
+            exposure_warning("127.0.0.1:8080".parse().unwrap(), &off),
+            None
+        );
+        let warning = exposure_warning("0.0.0.0:8080".parse().unwrap(), &off).unwrap();
+        assert!(warning.contains("beyond this machine"), "{warning}");
+        assert!(warning.contains("audit log"), "{warning}");
+    }
 }

@@ -14,6 +14,14 @@ use crate::endpoint::{
     DataBits, DirectionControl, Echo, Endpoint, Parity, Rs485, SerialSettings, StopBits,
 };
 
+/// How long opening a `tcp://` line may take before it fails (a host that is off, or a
+/// firewall that drops the connection, would otherwise hold it for minutes).
+pub const TCP_CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
+/// Idle time before the OS starts probing a `tcp://` line that carries nothing.
+pub const TCP_KEEPALIVE_IDLE: Duration = Duration::from_secs(30);
+/// Time between keep-alive probes.
+pub const TCP_KEEPALIVE_INTERVAL: Duration = Duration::from_secs(10);
+
 /// Any byte stream a line can run over (a serial port, a TCP socket, an in-memory duplex).
 pub trait Io: AsyncRead + AsyncWrite + Send + Unpin {}
 impl<T: AsyncRead + AsyncWrite + Send + Unpin> Io for T {}
@@ -132,16 +140,40 @@ impl Line {
                 Ok(line)
             }
             Endpoint::Tcp { host, port, line } => {
-                let stream = TcpStream::connect((host.as_str(), *port)).await.map_err(|source| {
+                let connect = TcpStream::connect((host.as_str(), *port));
+                let connected = tokio::time::timeout(TCP_CONNECT_TIMEOUT, connect)
+                    .await
+                    .unwrap_or_else(|_| {
+                        Err(io::Error::new(
+                            io::ErrorKind::TimedOut,
+                            format!("no connection within {TCP_CONNECT_TIMEOUT:?}"),
+                        ))
+                    });
+                let stream = connected.map_err(|source| {
                     let hint = match source.kind() {
                         io::ErrorKind::ConnectionRefused => {
                             "; is the serial server or simulator running, and is the port right?"
                         }
+                        io::ErrorKind::TimedOut => {
+                            "; is the host on, and does a firewall drop the connection?"
+                        }
                         _ => "",
                     };
-                    OpenError::Tcp { endpoint: endpoint.to_string(), source, hint }
+                    OpenError::Tcp {
+                        endpoint: endpoint.to_string(),
+                        source,
+                        hint,
+                    }
                 })?;
                 stream.set_nodelay(true).ok();
+                // A serial server that vanishes (power cut, cable) is noticed even on a
+                // line with nothing to send.
+                let keepalive = socket2::TcpKeepalive::new()
+                    .with_time(TCP_KEEPALIVE_IDLE)
+                    .with_interval(TCP_KEEPALIVE_INTERVAL);
+                if let Err(e) = socket2::SockRef::from(&stream).set_tcp_keepalive(&keepalive) {
+                    tracing::debug!(%endpoint, "TCP keep-alive not set: {e}");
+                }
                 Ok(Self::from_stream(stream, endpoint.to_string(), *line))
             }
         }

@@ -65,6 +65,9 @@ pub const MAX_AUDIT_BYTES: usize = 4 << 20;
 /// History, event and audit queries running at once; more wait their turn.
 pub const MAX_CONCURRENT_QUERIES: usize = 4;
 
+/// Event streams open at once; more are answered 503.
+pub const MAX_EVENT_STREAMS: usize = 64;
+
 /// How long a query waits for its turn before the answer is 503.
 const QUERY_WAIT: Duration = Duration::from_secs(10);
 
@@ -89,6 +92,7 @@ pub struct AppState {
     shutdown: watch::Receiver<bool>,
     guard: Arc<write::Guard>,
     queries: Arc<tokio::sync::Semaphore>,
+    streams: Arc<std::sync::atomic::AtomicUsize>,
 }
 
 /// The router over `cell`; event streams end when `shutdown` turns true.
@@ -100,6 +104,7 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
         shutdown,
         guard: Arc::default(),
         queries: Arc::new(tokio::sync::Semaphore::new(MAX_CONCURRENT_QUERIES)),
+        streams: Arc::default(),
     };
     Router::new()
         .route("/healthz", get(healthz))
@@ -484,7 +489,15 @@ enum StreamItem {
 
 async fn stream(
     State(s): State<AppState>,
-) -> Sse<impl Stream<Item = Result<SseEvent, Infallible>>> {
+) -> ApiResult<Sse<impl Stream<Item = Result<SseEvent, Infallible>>>> {
+    let guard = ClientGuard::new(Arc::clone(&s.cell), Arc::clone(&s.streams)).ok_or_else(|| {
+        ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!(
+                "{MAX_EVENT_STREAMS} event streams are open, the most allowed; try again later"
+            ),
+        )
+    })?;
     // Subscribe before the snapshot, so no change falls between the two.
     let live = tokio_stream::wrappers::BroadcastStream::new(s.cell.subscribe()).map(|m| {
         StreamItem::Live(
@@ -500,45 +513,63 @@ async fn stream(
         .event("snapshot")
         .data(snapshot.to_string());
     let stop = tokio_stream::wrappers::WatchStream::new(s.shutdown.clone()).map(StreamItem::Stop);
-    let guard = ClientGuard::new(Arc::clone(&s.cell));
+    let mut lagged = false;
     let events = live
         .merge(stop)
         .take_while(|item| !matches!(item, StreamItem::Stop(true)))
-        .filter_map(move |item| {
+        .map_while(move |item| {
             let _alive = &guard;
-            match item {
+            if lagged {
+                return None;
+            }
+            Some(match item {
                 StreamItem::Live(Ok(message)) => Some(
                     SseEvent::default()
                         .event(message.name())
                         .json_data(&message)
                         .unwrap_or_else(|e| SseEvent::default().event("error").data(e.to_string())),
                 ),
-                // The client fell behind: it should fetch a fresh snapshot.
-                StreamItem::Live(Err(missed)) => Some(
-                    SseEvent::default()
-                        .event("lagged")
-                        .data(json!({ "missed": missed }).to_string()),
-                ),
+                // The client fell behind (its buffer filled): tell it, and end the stream; an
+                // EventSource reconnects and starts again from a fresh snapshot.
+                StreamItem::Live(Err(missed)) => {
+                    lagged = true;
+                    Some(
+                        SseEvent::default()
+                            .event("lagged")
+                            .data(json!({ "missed": missed }).to_string()),
+                    )
+                }
                 StreamItem::Stop(_) => None,
-            }
-        });
+            })
+        })
+        .filter_map(|event| event);
     let all = tokio_stream::once(first).chain(events).map(Ok);
-    Sse::new(all).keep_alive(KeepAlive::default())
+    Ok(Sse::new(all).keep_alive(KeepAlive::default()))
 }
 
-/// Counts open event streams.
-struct ClientGuard(Arc<Cell>);
+/// Counts open event streams; at most [`MAX_EVENT_STREAMS`].
+struct ClientGuard {
+    cell: Arc<Cell>,
+    open: Arc<std::sync::atomic::AtomicUsize>,
+}
 
 impl ClientGuard {
-    fn new(cell: Arc<Cell>) -> Self {
+    /// A place for one more stream, if there is one.
+    fn new(cell: Arc<Cell>, open: Arc<std::sync::atomic::AtomicUsize>) -> Option<Self> {
+        use std::sync::atomic::Ordering;
+        open.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| {
+            (n < MAX_EVENT_STREAMS).then_some(n + 1)
+        })
+        .ok()?;
         cell.metrics().sse_clients.inc();
-        Self(cell)
+        Some(Self { cell, open })
     }
 }
 
 impl Drop for ClientGuard {
     fn drop(&mut self) {
-        self.0.metrics().sse_clients.dec();
+        self.open.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+        self.cell.metrics().sse_clients.dec();
     }
 }
 

@@ -742,3 +742,27 @@ async fn a_history_query_for_too_many_buckets_is_refused_with_the_smallest_step_
     assert_eq!(status, StatusCode::OK, "{reply}");
     assert_eq!(reply["truncated"], false);
 }
+
+#[tokio::test(start_paused = true)]
+async fn event_streams_beyond_the_cap_are_refused_until_one_closes() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    let open_stream = || {
+        app.clone().oneshot(
+            Request::get("/api/events/stream")
+                .body(Body::empty())
+                .unwrap(),
+        )
+    };
+    let mut held = Vec::new();
+    for _ in 0..MAX_EVENT_STREAMS {
+        let response = open_stream().await.unwrap();
+        assert_eq!(response.status(), StatusCode::OK);
+        held.push(response);
+    }
+    let refused = open_stream().await.unwrap();
+    assert_eq!(refused.status(), StatusCode::SERVICE_UNAVAILABLE);
+    held.pop();
+    let again = open_stream().await.unwrap();
+    assert_eq!(again.status(), StatusCode::OK);
+}
