@@ -12,7 +12,7 @@ use jbus::client::{
 };
 use jbus::cross::device::CrossTwin;
 use jbus::cross::{Amount, CrossState, Discrete, MEASURES, NamedBit, Quantity, RATINGS, Source};
-use jbus::rtu::{Addressed, Answer, Broadcast, Request, Unit, Write};
+use jbus::rtu::{Addressed, Answer, Broadcast, Request, UnitId, Write};
 use jbus::slave::{Slave, SlaveMap};
 use link::{Endpoint, Line, SerialSettings, SharedLine};
 use serde_json::{Map, Value, json};
@@ -174,7 +174,7 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
         }
     } else {
         Send::To(Addressed::new(
-            Unit::jbus(args.unit).map_err(usage)?,
+            UnitId::jbus(args.unit).map_err(usage)?,
             request,
         ))
     };
@@ -367,7 +367,7 @@ pub enum CrossAction {
 
 pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
     let endpoint = args.line.endpoint()?;
-    let unit = Unit::jbus(args.unit).map_err(usage)?;
+    let unit = UnitId::jbus(args.unit).map_err(usage)?;
     if let CrossAction::Watch { interval, .. } = args.action
         && interval.is_zero()
     {
@@ -396,7 +396,7 @@ pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
 
 async fn watch(
     client: &mut Client,
-    unit: Unit,
+    unit: UnitId,
     interval: Duration,
     stop_after: Option<u64>,
     json: bool,
@@ -495,7 +495,7 @@ fn print_watch(
 }
 
 /// `cellbus cross status --json`: the state with the unit number.
-fn cross_json(unit: Unit, state: &CrossState) -> Value {
+fn cross_json(unit: UnitId, state: &CrossState) -> Value {
     let mut object = Map::new();
     object.insert("unit".into(), json!(unit.get()));
     if let Value::Object(rest) = state_json(state) {
@@ -584,7 +584,7 @@ pub struct SimModbusArgs {
 }
 
 pub async fn sim_cross(args: SimCrossArgs) -> anyhow::Result<ExitCode> {
-    let unit = Unit::jbus(args.unit).map_err(usage)?;
+    let unit = UnitId::jbus(args.unit).map_err(usage)?;
     if args.cycle_outage.is_some_and(|d| d.is_zero()) {
         return Err(usage("--cycle-outage must be longer than 0"));
     }
@@ -611,10 +611,10 @@ pub async fn sim_modbus(args: SimModbusArgs) -> anyhow::Result<ExitCode> {
                 .map_err(usage)?;
             SlaveMap::parse(&text).map_err(|e| usage(format!("map {}: {e}", path.display())))?
         }
-        None => SlaveMap::all_writable(Unit::jbus(DEFAULT_SLAVE_UNIT).map_err(usage)?),
+        None => SlaveMap::all_writable(UnitId::jbus(DEFAULT_SLAVE_UNIT).map_err(usage)?),
     };
     let map = match args.unit {
-        Some(number) => map.with_unit(Unit::jbus(number).map_err(usage)?),
+        Some(number) => map.with_unit(UnitId::jbus(number).map_err(usage)?),
         None => map,
     };
     let slave = SharedModel::new(Slave::new(map));

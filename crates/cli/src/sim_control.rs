@@ -17,7 +17,7 @@ use std::io::{BufRead, IsTerminal};
 use std::time::Instant;
 
 use panasonic::server::Control;
-use thermosald::device::{Line as Twin, operator as sealer};
+use thermosald::device::{RegulatorBus, operator as sealer};
 use wire::device::SharedModel;
 use wire::operator::{CommandSet, help_rows, parse};
 
@@ -100,7 +100,7 @@ pub fn panasonic(control: Control) {
 }
 
 /// Starts the Thermosald line's control channel on stdin.
-pub fn thermosald(model: SharedModel<Twin>) {
+pub fn thermosald(model: SharedModel<RegulatorBus>) {
     spawn(move |command| {
         sealer::apply(&mut model.lock(), command, Instant::now()).map_err(|err| err.to_string())
     });

@@ -10,7 +10,7 @@ use clap::{Args, Subcommand};
 use link::{Endpoint, Line, SerialSettings, SharedLine};
 use serde_json::{Map, json};
 use thermosald::client::{self, Client, ClientConfig, ClientError, DEFAULT_RETRIES};
-use thermosald::device::Line as Twin;
+use thermosald::device::RegulatorBus;
 use thermosald::exchange::{ANSWER_AFTER_RECEPTION, LineTiming};
 use thermosald::frame::{Address, FrameCodec, Target};
 use thermosald::tables::{Item, Reading, Table, Unit, runtime};
@@ -637,7 +637,7 @@ fn reading_json(reading: &Reading) -> serde_json::Value {
 
 /// `cellbus sim thermosald`: regulators on one simulated line.
 pub async fn sim(args: SimThermosaldArgs) -> anyhow::Result<ExitCode> {
-    let mut twin = Twin::new(&args.addresses, std::time::Instant::now()).map_err(usage)?;
+    let mut twin = RegulatorBus::new(&args.addresses, std::time::Instant::now()).map_err(usage)?;
     if let Some(baud) = args.serve.baud {
         // The twin counts its answers' wire time exactly when the serve loop paces the line.
         let timing = LineTiming::new(baud, THERMOSALD_LINE.bits_per_char()).map_err(usage)?;

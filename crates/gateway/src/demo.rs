@@ -41,7 +41,7 @@ use panasonic::status::StopMode;
 use panasonic::{Machine, MachineConfig};
 use thermosald::Address;
 use thermosald::device::operator::{self as sealer, Command as SealerCommand};
-use thermosald::device::{Line as RegulatorLine, Regulator, RegulatorConfig};
+use thermosald::device::{Regulator, RegulatorBus, RegulatorConfig};
 use thermosald::diagnostic::Fault;
 use thermosald::exchange::LineTiming;
 use tokio::net::TcpListener;
@@ -61,7 +61,7 @@ pub struct DemoCell {
     /// The JBC station models, for tests and for a look inside.
     pub stations: Vec<SharedModel<Station>>,
     /// The Thermosald lines (each with its regulators).
-    pub regulators: Vec<SharedModel<RegulatorLine>>,
+    pub regulators: Vec<SharedModel<RegulatorBus>>,
     /// The CROSS twins.
     pub crosses: Vec<SharedModel<CrossTwin>>,
     /// The Panasonic machines, served on their two ports (their `control()` is the panel).
@@ -203,7 +203,7 @@ pub async fn start_thermosald_line(demo: &mut DemoCell, line: &str) -> std::io::
     let serial = crate::driver::thermosald::DEFAULT_SERIAL;
     let timing = LineTiming::new(serial.baud, serial.bits_per_char())
         .map_err(|e| std::io::Error::other(e.to_string()))?;
-    let model = SharedModel::new(RegulatorLine::from_regulators(regulators).paced(timing));
+    let model = SharedModel::new(RegulatorBus::from_regulators(regulators).paced(timing));
     let endpoint = serve_model(demo, model.clone(), serial, "Thermosald line").await?;
     demo.tasks
         .push(tokio::spawn(operate_sealers(model.clone())));
@@ -220,7 +220,7 @@ pub async fn start_thermosald_line(demo: &mut DemoCell, line: &str) -> std::io::
 /// The sealers' supply trouble, repeated: every 3 minutes regulator 2's supply sags for
 /// half a minute; then the operator repairs it and switches it off and on, with the same
 /// commands `cellbus sim thermosald` takes on its stdin.
-async fn operate_sealers(model: SharedModel<RegulatorLine>) {
+async fn operate_sealers(model: SharedModel<RegulatorBus>) {
     let Ok(address) = Address::new(2) else {
         return;
     };
@@ -247,7 +247,7 @@ async fn operate_sealers(model: SharedModel<RegulatorLine>) {
 /// fails for 40 s (an outage, then an undervoltage), so the load transfers to source 2
 /// and back.
 pub async fn start_cross(demo: &mut DemoCell, id: &str, name: &str) -> std::io::Result<()> {
-    let unit = jbus::rtu::Unit::jbus(1).map_err(|e| std::io::Error::other(e.to_string()))?;
+    let unit = jbus::rtu::UnitId::jbus(1).map_err(|e| std::io::Error::other(e.to_string()))?;
     let model = SharedModel::new(CrossTwin::new(unit, 1));
     let serial = crate::driver::cross::DEFAULT_SERIAL;
     let endpoint = serve_model(demo, model.clone(), serial, "CROSS").await?;

@@ -6,12 +6,12 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use jbus::rtu::{
     Addressed, RegisterValues, Request, RequestAdu, RequestCodec, Response, ResponseAdu,
-    ResponseCodec, Unit,
+    ResponseCodec, UnitId,
 };
 use wire::Codec;
 
 fn request() -> RequestAdu {
-    let unit = Unit::new(2).expect("2 is a unit number");
+    let unit = UnitId::new(2).expect("2 is a unit number");
     Addressed::new(
         unit,
         Request::read_holding_registers(0, 125).expect("125 registers from 0"),

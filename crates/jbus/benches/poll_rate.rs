@@ -24,7 +24,7 @@ use std::time::Duration;
 use jbus::client::{Client, ClientConfig, expected_answer_len};
 use jbus::cross::device::{CrossTwin, REPLY_DELAY};
 use jbus::cross::{read_plan, read_requests};
-use jbus::rtu::{Addressed, LineTiming, Request, Unit};
+use jbus::rtu::{Addressed, LineTiming, Request, UnitId};
 use link::serve::serve_tcp;
 use link::{Endpoint, Line, SerialSettings, SharedLine};
 use tokio::time::Instant;
@@ -42,7 +42,7 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(8u64);
-    let unit = Unit::jbus(UNIT).expect("2 is a unit number");
+    let unit = UnitId::jbus(UNIT).expect("2 is a unit number");
     let plan = read_requests();
 
     println!(
@@ -175,7 +175,7 @@ struct Theory {
 
 impl Theory {
     fn new(plan: &[Request]) -> Self {
-        let unit = Unit::jbus(UNIT).expect("2 is a unit number");
+        let unit = UnitId::jbus(UNIT).expect("2 is a unit number");
         Self {
             timing: LineTiming::new(LINE.baud, LINE.bits_per_char()).expect("9600 8N1 is a line"),
             request_chars: plan
@@ -224,7 +224,7 @@ impl Theory {
         let ms = |d: Duration| d.as_secs_f64() * 1000.0;
         let silence = self.timing.inter_frame_silence();
         let n = self.exchanges;
-        let unit = Unit::jbus(UNIT).expect("2 is a unit number");
+        let unit = UnitId::jbus(UNIT).expect("2 is a unit number");
         println!(
             "line: {} baud, 8N1 (the CROSS's setting) = {} bits per character: {:.4} ms per \
              character; 3.5-character silence = {:.4} ms",
@@ -288,7 +288,7 @@ impl Theory {
 }
 
 /// Polls with our client for `duration`; returns when each cycle ended.
-async fn poll_with_ours(url: &str, unit: Unit, duration: Duration) -> Vec<Instant> {
+async fn poll_with_ours(url: &str, unit: UnitId, duration: Duration) -> Vec<Instant> {
     let endpoint = Endpoint::parse(url, LINE).expect("a valid URL");
     let line = Line::open(&endpoint).await.expect("the simulator listens");
     let mut client = Client::new(SharedLine::new(line), ClientConfig::default());
@@ -311,7 +311,7 @@ struct Pymodbus {
 }
 
 /// Runs `benches/poll_rate_pymodbus.py` against the simulator; `Err` says why it could not.
-fn poll_with_pymodbus(port: u16, unit: Unit, seconds: u64) -> Result<Pymodbus, String> {
+fn poll_with_pymodbus(port: u16, unit: UnitId, seconds: u64) -> Result<Pymodbus, String> {
     let hint = "python3 -m pip install pymodbus==3.16.1 (scripts/test does)";
     let probe = Command::new("python3")
         .args(["-c", "import pymodbus"])

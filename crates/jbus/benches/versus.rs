@@ -25,7 +25,7 @@ use std::task::{Context, Poll};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use jbus::client::{Client, ClientConfig};
 use jbus::rtu::{
-    Addressed, RegisterValues, Request, Response, ResponseAdu, Unit, check_response,
+    Addressed, RegisterValues, Request, Response, ResponseAdu, UnitId, check_response,
     codec::decode_response,
 };
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
@@ -48,7 +48,7 @@ fn codec(c: &mut Criterion) {
     let mut group = c.benchmark_group("codec_125_registers");
     group.throughput(Throughput::Elements(1));
 
-    let unit = Unit::new(UNIT).expect("a unit number");
+    let unit = UnitId::new(UNIT).expect("a unit number");
     group.bench_function("jbus", |b| {
         b.iter(|| {
             let request = Addressed::new(
@@ -142,7 +142,7 @@ fn clients(c: &mut Criterion) {
         link::SharedLine::new(link::Line::from_stream(transport, "loopback", None))
     });
     let mut client = Client::new(line, ClientConfig::default());
-    let unit = Unit::new(UNIT).expect("a unit number");
+    let unit = UnitId::new(UNIT).expect("a unit number");
     group.bench_function("jbus", |b| {
         b.iter(|| {
             runtime

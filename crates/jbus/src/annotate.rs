@@ -268,12 +268,12 @@ fn hex(bytes: &[u8]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rtu::{Addressed, RegisterValues, Unit};
+    use crate::rtu::{Addressed, RegisterValues, UnitId};
 
     fn read_request() -> Sniffed {
         Sniffed::Request(
             Addressed::new(
-                Unit::new(2).expect("2"),
+                UnitId::new(2).expect("2"),
                 Request::read_holding_registers(0x46, 2).expect("valid"),
             )
             .to_adu(),
@@ -307,7 +307,7 @@ mod tests {
     #[test]
     fn a_write_and_its_identical_echo_are_request_then_response() {
         let write = Addressed::new(
-            Unit::new(1).expect("1"),
+            UnitId::new(1).expect("1"),
             Request::write_single_register(4, 77),
         )
         .to_adu()

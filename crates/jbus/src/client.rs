@@ -34,7 +34,7 @@ use wire::{Exchange, Failure, FailureKind};
 
 use crate::rtu::{
     Addressed, Answer, Broadcast, DecodeError, Exception, ExceptionCode, InvalidValue, LineTiming,
-    Mismatch, Request, ResponseAdu, ResponseCodec, Unit, check_response, find_frame,
+    Mismatch, Request, ResponseAdu, ResponseCodec, UnitId, check_response, find_frame,
 };
 
 /// Default time to wait for an answer after the request has left, on top of the wire time
@@ -147,7 +147,7 @@ impl Client {
     /// Function 1: `count` (1–2000) coils from `address`.
     pub async fn read_coils(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         address: u16,
         count: u16,
     ) -> Result<Vec<bool>, ClientError> {
@@ -158,7 +158,7 @@ impl Client {
     /// Function 2: `count` (1–2000) discrete inputs from `address`.
     pub async fn read_discrete_inputs(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         address: u16,
         count: u16,
     ) -> Result<Vec<bool>, ClientError> {
@@ -169,7 +169,7 @@ impl Client {
     /// Function 3: `count` (1–125) holding registers from `address`.
     pub async fn read_holding_registers(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         address: u16,
         count: u16,
     ) -> Result<Vec<u16>, ClientError> {
@@ -180,7 +180,7 @@ impl Client {
     /// Function 4: `count` (1–125) input registers from `address`.
     pub async fn read_input_registers(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         address: u16,
         count: u16,
     ) -> Result<Vec<u16>, ClientError> {
@@ -191,7 +191,7 @@ impl Client {
     /// Function 5: switches one coil on or off.
     pub async fn write_single_coil(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         address: u16,
         value: bool,
     ) -> Result<(), ClientError> {
@@ -202,7 +202,7 @@ impl Client {
     /// Function 6: writes one holding register.
     pub async fn write_single_register(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         address: u16,
         value: u16,
     ) -> Result<(), ClientError> {
@@ -213,7 +213,7 @@ impl Client {
     /// Function 15: writes 1–1968 coils from `address`.
     pub async fn write_multiple_coils(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         address: u16,
         values: &[bool],
     ) -> Result<(), ClientError> {
@@ -224,7 +224,7 @@ impl Client {
     /// Function 16: writes 1–123 holding registers from `address`.
     pub async fn write_multiple_registers(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         address: u16,
         values: &[u16],
     ) -> Result<(), ClientError> {
@@ -273,7 +273,11 @@ impl Client {
         Ok(())
     }
 
-    async fn read_bits(&mut self, unit: Unit, request: Request) -> Result<Vec<bool>, ClientError> {
+    async fn read_bits(
+        &mut self,
+        unit: UnitId,
+        request: Request,
+    ) -> Result<Vec<bool>, ClientError> {
         match self.request(&Addressed::new(unit, request)).await? {
             Answer::Bits(bits) => Ok(bits),
             other => unreachable_answer(other),
@@ -282,7 +286,7 @@ impl Client {
 
     async fn read_registers(
         &mut self,
-        unit: Unit,
+        unit: UnitId,
         request: Request,
     ) -> Result<Vec<u16>, ClientError> {
         match self.request(&Addressed::new(unit, request)).await? {
@@ -291,7 +295,7 @@ impl Client {
         }
     }
 
-    async fn write(&mut self, unit: Unit, request: Request) -> Result<(), ClientError> {
+    async fn write(&mut self, unit: UnitId, request: Request) -> Result<(), ClientError> {
         self.request(&Addressed::new(unit, request)).await.map(drop)
     }
 }
@@ -483,8 +487,8 @@ mod tests {
         }
     }
 
-    fn unit(number: u8) -> Unit {
-        Unit::new(number).expect("test unit")
+    fn unit(number: u8) -> UnitId {
+        UnitId::new(number).expect("test unit")
     }
 
     fn twin() -> SharedModel<CrossTwin> {
@@ -851,7 +855,7 @@ mod tests {
             matches!(
                 err,
                 ClientError::NoAnswer {
-                    last: Trouble::Mismatch(Mismatch::Unit {
+                    last: Trouble::Mismatch(Mismatch::UnitId {
                         expected: 2,
                         actual: 3
                     }),

@@ -9,7 +9,7 @@ use wire::{Codec, Deframer, Resync};
 
 use crate::cross::device::CrossTwin;
 use crate::rtu::codec::append_crc;
-use crate::rtu::{Addressed, RequestCodec, ResponseCodec, SniffCodec, Unit, check_response};
+use crate::rtu::{Addressed, RequestCodec, ResponseCodec, SniffCodec, UnitId, check_response};
 use crate::slave::Slave;
 
 /// Decodes `data` as requests (the server's side), checks every frame round-trips, checks
@@ -65,7 +65,7 @@ fn with_crc(data: &[u8]) -> Vec<u8> {
 
 fn run_requests(data: &[u8]) {
     let codec = RequestCodec;
-    let unit = Unit::new(1).expect("1 is a unit number");
+    let unit = UnitId::new(1).expect("1 is a unit number");
     let mut twin = CrossTwin::new(unit, 0);
     let mut slave = Slave::all_writable(unit);
     let now = std::time::Instant::now();
@@ -95,8 +95,8 @@ fn run_requests(data: &[u8]) {
 
 fn run_responses(data: &[u8]) {
     let codec = ResponseCodec;
-    let unit =
-        Unit::jbus(data.first().copied().unwrap_or(1).max(1)).expect("1-255 is a JBUS unit number");
+    let unit = UnitId::jbus(data.first().copied().unwrap_or(1).max(1))
+        .expect("1-255 is a JBUS unit number");
     let requests = crate::cross::read_requests();
     let mut deframer = Deframer::new(codec);
     deframer.push(data);

@@ -8,7 +8,7 @@ use jbus::rtu::codec::append_crc;
 use jbus::rtu::{
     Addressed, Answer, ByteField, DecodeError, ExceptionCode, FunctionCode, OtherFunction,
     PackedBits, RegisterValues, Request, RequestAdu, RequestCodec, RequestPdu, Response,
-    ResponseAdu, ResponseCodec, Unit, WriteCoil, WriteRegister, check_response,
+    ResponseAdu, ResponseCodec, UnitId, WriteCoil, WriteRegister, check_response,
 };
 use jbus::slave::Slave;
 use proptest::prelude::*;
@@ -17,10 +17,10 @@ use wire::{Codec, Deframer};
 
 // --- Strategies ---
 
-fn unit() -> impl Strategy<Value = Unit> {
+fn unit() -> impl Strategy<Value = UnitId> {
     prop_oneof![
-        (1u8..=247).prop_map(|n| Unit::new(n).expect("1-247")),
-        (248u8..=255).prop_map(|n| Unit::jbus(n).expect("248-255 are JBUS units")),
+        (1u8..=247).prop_map(|n| UnitId::new(n).expect("1-247")),
+        (248u8..=255).prop_map(|n| UnitId::jbus(n).expect("248-255 are JBUS units")),
     ]
 }
 
@@ -344,7 +344,7 @@ proptest! {
 
     #[test]
     fn writes_to_the_generic_server_read_back(address in any::<u16>(), values in prop::collection::vec(any::<u16>(), 1..=123)) {
-        let unit = Unit::new(1).expect("1");
+        let unit = UnitId::new(1).expect("1");
         let address = address.min(u16::MAX - (values.len() as u16 - 1));
         let mut slave = Slave::all_writable(unit);
         let write = Addressed::new(unit, Request::write_multiple_registers(address, values.clone()).expect("valid"));
@@ -361,7 +361,7 @@ proptest! {
         count in 0u16..140,
         seed in any::<u64>(),
     ) {
-        let unit = Unit::new(2).expect("2");
+        let unit = UnitId::new(2).expect("2");
         let mut twin = CrossTwin::new(unit, seed);
         let mut bytes = vec![2, 3];
         bytes.extend(address.to_be_bytes());
@@ -396,7 +396,7 @@ proptest! {
         use jbus::cross::Feed;
         use jbus::cross::device::{Breaker, SourceFault};
         use jbus::cross::state::Source;
-        let mut twin = CrossTwin::new(Unit::new(1).expect("1"), seed);
+        let mut twin = CrossTwin::new(UnitId::new(1).expect("1"), seed);
         for (event, flag) in events {
             let source = if flag { Source::S1 } else { Source::S2 };
             match event {

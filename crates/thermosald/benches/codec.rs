@@ -5,7 +5,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use thermosald::device::Line;
+use thermosald::device::RegulatorBus;
 use thermosald::frame::{Count, Direction, Frame, FrameCodec, MessageNumber, RawValue, Target};
 use thermosald::{Address, Table};
 use wire::device::Model;
@@ -80,7 +80,8 @@ fn codec(c: &mut Criterion) {
     let mut group = c.benchmark_group("twin");
     group.throughput(Throughput::Elements(1));
     let t0 = Instant::now();
-    let mut line = Line::new(&[Address::new(0).expect("valid")], t0).expect("one regulator");
+    let mut line =
+        RegulatorBus::new(&[Address::new(0).expect("valid")], t0).expect("one regulator");
     let query = FrameCodec
         .decode(b"%053Q990\n")
         .expect("valid")

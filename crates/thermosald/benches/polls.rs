@@ -17,7 +17,7 @@ use std::time::Duration;
 use link::serve::{serve_stream, serve_tcp};
 use link::{Line, SerialSettings, SharedLine};
 use thermosald::client::{Client, ClientConfig};
-use thermosald::device::Line as Twin;
+use thermosald::device::RegulatorBus;
 use thermosald::exchange::LineTiming;
 use thermosald::frame::Address;
 use thermosald::tables::{Table, runtime};
@@ -132,7 +132,7 @@ async fn measure(
     let addresses: Vec<Address> = (0..regulators)
         .map(|a| Address::new(a).expect("0-2 are addresses"))
         .collect();
-    let twin = Twin::new(&addresses, std::time::Instant::now())
+    let twin = RegulatorBus::new(&addresses, std::time::Instant::now())
         .expect("distinct addresses")
         .paced(LineTiming::RS485_9600_8N1);
     let model = SharedModel::new(twin);

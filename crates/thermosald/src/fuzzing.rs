@@ -15,9 +15,11 @@ pub fn decode(data: &[u8]) {
     let mut deframer = Deframer::new(FrameCodec);
     deframer.push(data);
     let start = Instant::now();
-    let mut line =
-        crate::device::Line::new(&[crate::Address::new(0).expect("0 is an address")], start)
-            .expect("one regulator is a valid line");
+    let mut line = crate::device::RegulatorBus::new(
+        &[crate::Address::new(0).expect("0 is an address")],
+        start,
+    )
+    .expect("one regulator is a valid line");
     let mut at = start;
     while let Some(input) = deframer.next_frame() {
         if let Ok(frame) = &input {

@@ -21,7 +21,7 @@
 //! ```
 //! use std::time::{Duration, Instant};
 //! use thermosald::exchange::{Answer, Classified, Exchange};
-//! use thermosald::{Address, FrameCodec, Read, Table, Write, device::Line};
+//! use thermosald::{Address, FrameCodec, Read, Table, Write, device::RegulatorBus};
 //! use wire::{Codec, device::Model};
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let address = Address::new(0)?;
@@ -31,7 +31,7 @@
 //!
 //! // The twin answers 200 ms after the question; the master checks the echo.
 //! let t0 = Instant::now();
-//! let mut line = Line::new(&[address], t0)?;
+//! let mut line = RegulatorBus::new(&[address], t0)?;
 //! let answer = line.handle(Ok(write.query().clone()), t0).remove(0);
 //! assert_eq!(answer.delay, Duration::from_millis(200));
 //! let (echo, _) = FrameCodec.decode(&answer.bytes)?.ok_or("a whole frame")?;

@@ -8,7 +8,7 @@ use testkit::{At, Tap, Trick, Tricky};
 use thermosald::client::{
     Client, ClientConfig, ClientError, DEFAULT_TIMEOUT, Trouble, probe_timeout, scan,
 };
-use thermosald::device::Line as Twin;
+use thermosald::device::RegulatorBus;
 use thermosald::diagnostic::{self, Fault};
 use thermosald::exchange::{LineTiming, RELEASE_AFTER_ANSWER};
 use thermosald::frame::{Address, Direction, Frame, RawValue, Target};
@@ -58,7 +58,7 @@ struct Message {
 
 struct Bench {
     line: SharedLine,
-    twin: SharedModel<Twin>,
+    twin: SharedModel<RegulatorBus>,
     tap: Tap,
     pace: Option<LineTiming>,
 }
@@ -78,7 +78,7 @@ impl Bench {
     fn build(addresses: &[u8], tricks: Vec<Trick>, pace: Option<SerialSettings>) -> Bench {
         let addresses: Vec<Address> = addresses.iter().map(|a| addr(*a)).collect();
         let timing = pace.map(|_| LineTiming::RS485_9600_8N1);
-        let mut twin = Twin::new(&addresses, Instant::now().into_std()).expect("distinct");
+        let mut twin = RegulatorBus::new(&addresses, Instant::now().into_std()).expect("distinct");
         if let Some(timing) = timing {
             twin = twin.paced(timing);
         }

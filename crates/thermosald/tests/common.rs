@@ -2,7 +2,7 @@
 
 use std::time::{Duration, Instant};
 
-use thermosald::device::Line;
+use thermosald::device::RegulatorBus;
 use thermosald::frame::{Address, Frame, FrameCodec};
 use wire::device::{Model, Transmit};
 use wire::{Codec, Deframer};
@@ -35,7 +35,7 @@ pub fn decode_one(bytes: &[u8]) -> Frame {
 }
 
 /// Feeds `bytes` to the line model at `now` through a deframer, as the serve loop does.
-pub fn send(line: &mut Line, bytes: &[u8], now: Instant) -> Vec<Transmit> {
+pub fn send(line: &mut RegulatorBus, bytes: &[u8], now: Instant) -> Vec<Transmit> {
     let mut deframer = Deframer::new(FrameCodec);
     deframer.push(bytes);
     let mut out = Vec::new();
@@ -46,7 +46,7 @@ pub fn send(line: &mut Line, bytes: &[u8], now: Instant) -> Vec<Transmit> {
 }
 
 /// The only answer to `bytes` at `now`, decoded; panics on silence.
-pub fn ask(line: &mut Line, bytes: &[u8], now: Instant) -> Frame {
+pub fn ask(line: &mut RegulatorBus, bytes: &[u8], now: Instant) -> Frame {
     let out = send(line, bytes, now);
     assert_eq!(
         out.len(),

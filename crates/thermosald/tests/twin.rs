@@ -7,7 +7,7 @@
 use std::time::{Duration, Instant};
 
 use thermosald::device::band::TCR_PER_K;
-use thermosald::device::{Line, Phase, RegulatorConfig, Status};
+use thermosald::device::{Phase, RegulatorBus, RegulatorConfig, Status};
 use thermosald::diagnostic::{self, Fault};
 use thermosald::exchange::{Classified, Exchange, ExchangeError};
 use thermosald::frame::Address;
@@ -20,24 +20,27 @@ fn secs(s: f64) -> Duration {
     Duration::from_secs_f64(s)
 }
 
-fn line_at_0() -> (Line, Instant) {
+fn line_at_0() -> (RegulatorBus, Instant) {
     let t0 = Instant::now();
-    (Line::new(&[addr(0)], t0).expect("one regulator"), t0)
+    (
+        RegulatorBus::new(&[addr(0)], t0).expect("one regulator"),
+        t0,
+    )
 }
 
-fn status(line: &mut Line, address: u8, now: Instant) -> Status {
+fn status(line: &mut RegulatorBus, address: u8, now: Instant) -> Status {
     line.regulator_mut(addr(address))
         .expect("regulator present")
         .status(now)
 }
 
 /// Run-time data read over the protocol.
-fn runtime_raw(line: &mut Line, address: u8, now: Instant) -> Vec<u16> {
+fn runtime_raw(line: &mut RegulatorBus, address: u8, now: Instant) -> Vec<u16> {
     let reply = ask(line, format!("%{address}53Q990\n").as_bytes(), now);
     reply.data().iter().map(|r| r.get()).collect()
 }
 
-fn fault(line: &mut Line, address: u8, now: Instant) -> u16 {
+fn fault(line: &mut RegulatorBus, address: u8, now: Instant) -> u16 {
     runtime_raw(line, address, now)[usize::from(runtime::FAULT)]
 }
 
@@ -105,7 +108,7 @@ fn seal_cycles_repeat_on_the_configured_period_for_hours() {
         seal_period: Some(Duration::from_secs(2)),
         ..RegulatorConfig::default()
     };
-    let mut line = Line::with_config(&[addr(0)], config, t0).expect("one regulator");
+    let mut line = RegulatorBus::with_config(&[addr(0)], config, t0).expect("one regulator");
     for k in 1..=30u32 {
         let start = t0 + Duration::from_secs(2) * k;
         assert_ne!(
@@ -146,7 +149,7 @@ fn without_a_seal_period_the_band_holds_the_pre_heating_temperature() {
         seal_period: None,
         ..RegulatorConfig::default()
     };
-    let mut line = Line::with_config(&[addr(0)], config, t0).expect("one regulator");
+    let mut line = RegulatorBus::with_config(&[addr(0)], config, t0).expect("one regulator");
     let later = status(&mut line, 0, t0 + Duration::from_secs(60));
     assert_eq!(later.phase, Phase::PreHeating);
     assert!(close(later.band_temperature, 80.0));
@@ -478,7 +481,7 @@ fn balancing_at_a_wrong_reference_temperature_offsets_the_measurement() {
 #[test]
 fn settings_are_volatile_until_saved_to_eeprom() {
     let (mut line, t0) = line_at_0();
-    let sealing = |line: &mut Line, now| ask(line, b"%052Q150\n", now).data()[0].get();
+    let sealing = |line: &mut RegulatorBus, now| ask(line, b"%052Q150\n", now).data()[0].get();
     ask(&mut line, b"%012Q150150\n", t0 + secs(1.0));
     assert_eq!(sealing(&mut line, t0 + secs(1.5)), 150);
     assert_eq!(
@@ -590,7 +593,7 @@ fn writing_machine_item_14_moves_the_regulator_to_the_new_address() {
 #[test]
 fn set_address_to_a_current_address_moves_that_regulator() {
     let t0 = Instant::now();
-    let mut line = Line::new(&[addr(0), addr(1)], t0).expect("two regulators");
+    let mut line = RegulatorBus::new(&[addr(0), addr(1)], t0).expect("two regulators");
     assert_eq!(
         ask(&mut line, b"%110Q000006\n", t0 + secs(1.0)).to_bytes(),
         b"%110R000006\n"

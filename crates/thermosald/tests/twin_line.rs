@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use thermosald::device::{Line, LineError, Regulator, RegulatorConfig};
+use thermosald::device::{BusError, Regulator, RegulatorBus, RegulatorConfig};
 use thermosald::diagnostic::Fault;
 use thermosald::exchange::{
     ANSWER_AFTER_RECEPTION, Answer, Classified, Exchange, LineActivity, LineTiming,
@@ -17,19 +17,25 @@ use wire::device::{Device, FaultInjector, SharedModel, Transmit};
 
 use crate::common::{addr, ask, decode_one, ms, send};
 
-fn line(addresses: &[u8]) -> (Line, Instant) {
+fn line(addresses: &[u8]) -> (RegulatorBus, Instant) {
     let t0 = Instant::now();
     let addresses: Vec<_> = addresses.iter().map(|a| addr(*a)).collect();
-    (Line::new(&addresses, t0).expect("distinct addresses"), t0)
+    (
+        RegulatorBus::new(&addresses, t0).expect("distinct addresses"),
+        t0,
+    )
 }
 
 #[test]
 fn a_line_needs_distinct_addresses() {
     let t0 = Instant::now();
-    assert_eq!(Line::new(&[], t0).err(), Some(LineError::NoRegulators));
     assert_eq!(
-        Line::new(&[addr(1), addr(2), addr(1)], t0).err(),
-        Some(LineError::DuplicateAddress { address: addr(1) })
+        RegulatorBus::new(&[], t0).err(),
+        Some(BusError::NoRegulators)
+    );
+    assert_eq!(
+        RegulatorBus::new(&[addr(1), addr(2), addr(1)], t0).err(),
+        Some(BusError::DuplicateAddress { address: addr(1) })
     );
 }
 
@@ -173,7 +179,7 @@ fn each_regulator_keeps_its_own_state() {
 fn address_assignment_reaches_every_powered_regulator_and_their_echoes_overlap_into_one() {
     let t0 = Instant::now();
     let config = RegulatorConfig::default();
-    let mut line = Line::from_regulators(vec![
+    let mut line = RegulatorBus::from_regulators(vec![
         Regulator::from_factory(config, t0),
         Regulator::from_factory(config, t0),
     ]);
@@ -193,14 +199,14 @@ fn address_assignment_reaches_every_powered_regulator_and_their_echoes_overlap_i
 fn different_answers_at_once_collide_into_something_neither_sent() {
     let t0 = Instant::now();
     let config = RegulatorConfig::default();
-    let mut line = Line::from_regulators(vec![
+    let mut line = RegulatorBus::from_regulators(vec![
         Regulator::new(addr(0), config, t0),
         Regulator::new(addr(0), config, t0),
     ]);
     line.regulators_mut()[1].provoke(Fault::OpenBand, t0);
     let out = send(&mut line, b"%053Q990\n", t0 + ms(500));
     assert_eq!(out.len(), 1);
-    let mut one = Line::new(&[addr(0)], t0).expect("one regulator");
+    let mut one = RegulatorBus::new(&[addr(0)], t0).expect("one regulator");
     let clean = send(&mut one, b"%053Q990\n", t0 + ms(500));
     assert_ne!(out[0].bytes, clean[0].bytes);
 }
@@ -208,7 +214,7 @@ fn different_answers_at_once_collide_into_something_neither_sent() {
 #[test]
 fn a_question_split_into_chunks_is_answered_when_its_last_byte_arrives() {
     let t0 = Instant::now();
-    let model = SharedModel::new(Line::new(&[addr(0)], t0).expect("one regulator"));
+    let model = SharedModel::new(RegulatorBus::new(&[addr(0)], t0).expect("one regulator"));
     let mut device = model.line();
     assert!(device.receive(b"%05", t0).is_empty());
     assert!(device.receive(b"2Q1", t0 + ms(3)).is_empty());
@@ -223,7 +229,7 @@ fn a_question_split_into_chunks_is_answered_when_its_last_byte_arrives() {
 #[test]
 fn the_twin_works_behind_seeded_fault_injection() {
     let t0 = Instant::now();
-    let model = SharedModel::new(Line::new(&[addr(0)], t0).expect("one regulator"));
+    let model = SharedModel::new(RegulatorBus::new(&[addr(0)], t0).expect("one regulator"));
     let mut device = FaultInjector::new(model.line(), 42, 0.5).expect("valid rate");
     let mut answered = 0;
     for i in 0..40u32 {
@@ -251,7 +257,7 @@ fn the_twin_works_behind_seeded_fault_injection() {
 fn poll_rate(exchanges: &[Exchange], polls: u32) -> f64 {
     let timing = LineTiming::RS485_9600_8N1;
     let t0 = Instant::now();
-    let mut line = Line::new(&[addr(0), addr(1), addr(2)], t0)
+    let mut line = RegulatorBus::new(&[addr(0), addr(1), addr(2)], t0)
         .expect("three regulators")
         .paced(timing);
     let mut send_at = t0;
@@ -300,7 +306,7 @@ fn a_master_keeping_the_timing_polls_at_the_theoretical_limit_and_never_faster()
 fn a_master_starting_1_ms_too_early_on_a_paced_line_is_not_heard() {
     let timing = LineTiming::RS485_9600_8N1;
     let t0 = Instant::now();
-    let mut line = Line::new(&[addr(0)], t0)
+    let mut line = RegulatorBus::new(&[addr(0)], t0)
         .expect("one regulator")
         .paced(timing);
     let out = send(&mut line, b"%053Q990\n", t0);

@@ -30,7 +30,7 @@ use jbus::cross::points::{self, Amount, Phase, Quantity};
 use jbus::cross::{
     Area, Change, Discrete, Feed, InternalState, Measures, Ratings, Source, Transfer,
 };
-use jbus::rtu::Unit;
+use jbus::rtu::UnitId;
 use link::{SerialSettings, SharedLine};
 
 use super::{
@@ -57,16 +57,16 @@ const NO_ALARM: &str = "none";
 /// Checks a JBUS unit number: 1–255 (JBUS allows numbers above Modbus's 247).
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
     match address {
-        Some(a) if (i64::from(Unit::MIN)..=i64::from(Unit::JBUS_MAX)).contains(&a) => Ok(()),
+        Some(a) if (i64::from(UnitId::MIN)..=i64::from(UnitId::JBUS_MAX)).contains(&a) => Ok(()),
         Some(a) => Err(format!(
             "JBUS unit number {a} is out of range: {} to {} (0 is broadcast, which the CROSS never answers)",
-            Unit::MIN,
-            Unit::JBUS_MAX
+            UnitId::MIN,
+            UnitId::JBUS_MAX
         )),
         None => Err(format!(
             "a CROSS needs its JBUS unit number, {} to {}",
-            Unit::MIN,
-            Unit::JBUS_MAX
+            UnitId::MIN,
+            UnitId::JBUS_MAX
         )),
     }
 }
@@ -201,7 +201,7 @@ fn feed_number(feed: Feed) -> i64 {
 /// A CROSS on a line.
 pub struct CrossDriver {
     device: DeviceId,
-    unit: Unit,
+    unit: UnitId,
     config: ClientConfig,
     client: Option<Client>,
     /// Every point.
@@ -218,7 +218,7 @@ impl CrossDriver {
         let unit = config
             .address
             .and_then(|a| u8::try_from(a).ok())
-            .and_then(|a| Unit::jbus(a).ok())
+            .and_then(|a| UnitId::jbus(a).ok())
             .ok_or_else(|| "JBUS unit number out of range".to_owned())?;
         let defaults = ClientConfig::default();
         Ok(Self {
@@ -495,7 +495,7 @@ mod tests {
     }
 
     fn rig(unit: i64) -> (CrossDriver, SharedModel<CrossTwin>) {
-        let twin = SharedModel::new(CrossTwin::new(Unit::jbus(1).unwrap(), 7));
+        let twin = SharedModel::new(CrossTwin::new(UnitId::jbus(1).unwrap(), 7));
         let (a, b) = tokio::io::duplex(1024);
         tokio::spawn(link::serve::serve_stream(b, twin.line(), None));
         let mut driver = CrossDriver::new(&config(unit)).unwrap();

@@ -33,7 +33,7 @@ use std::time::Duration;
 
 use jbus::client::{Client, ClientConfig, ClientError};
 
-use jbus::rtu::Unit;
+use jbus::rtu::UnitId;
 use link::{SerialSettings, SharedLine};
 
 use super::{
@@ -86,7 +86,7 @@ pub struct RegisterConfig {
     pub address: u16,
     /// What one step of the register is worth.
     pub scale: f64,
-    /// Unit symbol.
+    /// The symbol of its unit of measure (`°C`, `kW`).
     pub unit: Option<String>,
     /// Two's complement.
     pub signed: bool,
@@ -132,16 +132,16 @@ impl RegisterConfig {
 /// Checks a unit number: 1–255.
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
     match address {
-        Some(a) if (i64::from(Unit::MIN)..=i64::from(Unit::JBUS_MAX)).contains(&a) => Ok(()),
+        Some(a) if (i64::from(UnitId::MIN)..=i64::from(UnitId::JBUS_MAX)).contains(&a) => Ok(()),
         Some(a) => Err(format!(
             "Modbus unit number {a} is out of range: {} to {} (0 is broadcast, never answered)",
-            Unit::MIN,
-            Unit::JBUS_MAX
+            UnitId::MIN,
+            UnitId::JBUS_MAX
         )),
         None => Err(format!(
             "a Modbus device needs its unit number, {} to {}",
-            Unit::MIN,
-            Unit::JBUS_MAX
+            UnitId::MIN,
+            UnitId::JBUS_MAX
         )),
     }
 }
@@ -149,7 +149,7 @@ pub fn check_address(address: Option<i64>) -> Result<(), String> {
 /// A Modbus device with configured registers.
 pub struct ModbusDriver {
     device: DeviceId,
-    unit: Unit,
+    unit: UnitId,
     config: ClientConfig,
     client: Option<Client>,
     registers: Vec<RegisterConfig>,
@@ -164,7 +164,7 @@ impl ModbusDriver {
         let unit = config
             .address
             .and_then(|a| u8::try_from(a).ok())
-            .and_then(|a| Unit::jbus(a).ok())
+            .and_then(|a| UnitId::jbus(a).ok())
             .ok_or_else(|| "Modbus unit number out of range".to_owned())?;
         for r in &config.registers {
             PointId::new(&config.id, &r.name).map_err(|e| e.to_string())?;

@@ -671,7 +671,7 @@ mod tests {
     use std::sync::{Arc, Mutex};
 
     use super::*;
-    use thermosald::device::Line as Twin;
+    use thermosald::device::RegulatorBus;
     use wire::Transmit;
     use wire::device::{Device, FaultInjector, ModelLine, SharedModel};
 
@@ -693,9 +693,9 @@ mod tests {
     }
 
     /// Drivers for regulators 0, 1 and 2 on one simulated RS-485 line.
-    fn rig(addresses: &[u8]) -> (Vec<ThermosaldDriver>, SharedModel<Twin>) {
+    fn rig(addresses: &[u8]) -> (Vec<ThermosaldDriver>, SharedModel<RegulatorBus>) {
         let list: Vec<Address> = addresses.iter().map(|&a| address(a)).collect();
-        let twin = Twin::new(&list, tokio::time::Instant::now().into_std()).unwrap();
+        let twin = RegulatorBus::new(&list, tokio::time::Instant::now().into_std()).unwrap();
         let model = SharedModel::new(twin);
         let (a, b) = tokio::io::duplex(1024);
         tokio::spawn(link::serve::serve_stream(b, model.line(), None));
@@ -941,14 +941,15 @@ mod tests {
     /// Regulator 0's driver on a line to its twin through a [`Tap`].
     struct Bench<D> {
         driver: ThermosaldDriver,
-        model: SharedModel<Twin>,
+        model: SharedModel<RegulatorBus>,
         device: Arc<Mutex<D>>,
         questions: Arc<AtomicUsize>,
         damage: Arc<Mutex<Vec<Damage>>>,
     }
 
-    fn bench<D: Device>(retries: u8, wrap: impl FnOnce(ModelLine<Twin>) -> D) -> Bench<D> {
-        let twin = Twin::new(&[address(0)], tokio::time::Instant::now().into_std()).unwrap();
+    fn bench<D: Device>(retries: u8, wrap: impl FnOnce(ModelLine<RegulatorBus>) -> D) -> Bench<D> {
+        let twin =
+            RegulatorBus::new(&[address(0)], tokio::time::Instant::now().into_std()).unwrap();
         let model = SharedModel::new(twin);
         let device = Arc::new(Mutex::new(wrap(model.line())));
         let questions = Arc::new(AtomicUsize::new(0));
@@ -1011,7 +1012,7 @@ mod tests {
 
     /// Another master on the same twin (the regulator's panel, a PLC) writes `value` to
     /// `item` over its own line, away from the driver's exchanges.
-    async fn set_on_the_twin(model: &SharedModel<Twin>, item: &'static Item, value: f64) {
+    async fn set_on_the_twin(model: &SharedModel<RegulatorBus>, item: &'static Item, value: f64) {
         tokio::time::sleep(Duration::from_millis(300)).await;
         let (a, b) = tokio::io::duplex(1024);
         tokio::spawn(link::serve::serve_stream(b, model.line(), None));
@@ -1285,7 +1286,7 @@ mod tests {
      {
         // A run-time answer while sealing, as the twin gives it 1.5 s into its first impulse.
         let t0 = std::time::Instant::now();
-        let mut twin = Twin::new(&[address(0)], t0).unwrap();
+        let mut twin = RegulatorBus::new(&[address(0)], t0).unwrap();
         let data = twin.regulators_mut()[0].table(Table::Runtime, t0 + Duration::from_millis(3500));
         let digits: String = data.iter().map(|raw| format!("{:03}", raw.get())).collect();
         let answer = format!("%053R990{digits}\n").into_bytes();

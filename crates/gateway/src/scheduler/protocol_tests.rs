@@ -10,7 +10,7 @@ use jbus::cross::Source;
 use jbus::cross::device::CrossTwin;
 use link::{Endpoint, Line};
 use thermosald::Address;
-use thermosald::device::Line as RegulatorLine;
+use thermosald::device::RegulatorBus;
 use thermosald::diagnostic::Fault;
 use thermosald::tables::Table;
 use tokio::sync::watch;
@@ -27,7 +27,7 @@ use crate::store::{EventFilter, Store, StoreOptions};
 
 struct Rig {
     cell: Arc<Cell>,
-    regulators: SharedModel<RegulatorLine>,
+    regulators: SharedModel<RegulatorBus>,
     cross: SharedModel<CrossTwin>,
     _shutdown: watch::Sender<bool>,
     _store: Store,
@@ -96,9 +96,9 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
     let addresses: Vec<Address> = (0..3).map(|a| Address::new(a).unwrap()).collect();
     let regulators = SharedModel::new(
-        RegulatorLine::new(&addresses, tokio::time::Instant::now().into_std()).unwrap(),
+        RegulatorBus::new(&addresses, tokio::time::Instant::now().into_std()).unwrap(),
     );
-    let cross = SharedModel::new(CrossTwin::new(jbus::rtu::Unit::jbus(1).unwrap(), 3));
+    let cross = SharedModel::new(CrossTwin::new(jbus::rtu::UnitId::jbus(1).unwrap(), 3));
     let sealing = crate::driver::thermosald::DEFAULT_SERIAL;
     let jbus_line = crate::driver::cross::DEFAULT_SERIAL;
     let config = CellConfig {

@@ -37,12 +37,12 @@ use gateway::scheduler::Opener;
 use gateway::store::{Store, StoreOptions};
 use jbc::device::{Station, StationConfig};
 use jbus::cross::device::CrossTwin;
-use jbus::rtu::Unit;
+use jbus::rtu::UnitId;
 use jbus::slave::{Slave, SlaveMap};
 use link::{Endpoint, Line};
 use testkit::{LineControl, NoiseConfig, NoiseCounts, NoisyProxy, noisy_pipe};
 use thermosald::Address;
-use thermosald::device::{Line as RegulatorLine, Regulator, RegulatorConfig};
+use thermosald::device::{Regulator, RegulatorBus, RegulatorConfig};
 use tokio::sync::{broadcast, watch};
 use tokio::time::Instant;
 use wire::device::SharedModel;
@@ -402,7 +402,7 @@ impl CellSet {
                     Regulator::new(address, RegulatorConfig::default(), now)
                 })
                 .collect();
-            let sealers = SharedModel::new(RegulatorLine::from_regulators(regulators));
+            let sealers = SharedModel::new(RegulatorBus::from_regulators(regulators));
             let make: MakeBus = Arc::new(move || Bus(vec![Box::new(sealers.line())]));
             let devices = (0..3)
                 .map(|a| {
@@ -422,7 +422,7 @@ impl CellSet {
             .await?;
             // A CROSS and a generic Modbus server on one RS-485 line.
             let cross = SharedModel::new(CrossTwin::new(
-                Unit::jbus(2).expect("2 is a unit"),
+                UnitId::jbus(2).expect("2 is a unit"),
                 options.seed.wrapping_add(g as u64),
             ));
             let map = SlaveMap::parse("unit 1\nholding 0 = 1234 0 65535 42 7 0x8000 12 13\n")

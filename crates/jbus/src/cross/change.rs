@@ -9,9 +9,9 @@
 //! use std::time::Instant;
 //! use jbus::cross::{Discrete, Source};
 //! use jbus::cross::device::CrossTwin;
-//! use jbus::rtu::Unit;
+//! use jbus::rtu::UnitId;
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let mut twin = CrossTwin::new(Unit::jbus(1)?, 7);
+//! let mut twin = CrossTwin::new(UnitId::jbus(1)?, 7);
 //! let before = Discrete::of(&twin.reading(Instant::now()).internal);
 //! twin.fail_source(Source::S1);
 //! let after = Discrete::of(&twin.reading(Instant::now()).internal);
@@ -176,10 +176,10 @@ impl Discrete {
 mod tests {
     use super::*;
     use crate::cross::device::CrossTwin;
-    use crate::rtu::Unit;
+    use crate::rtu::UnitId;
 
     fn twin() -> CrossTwin {
-        CrossTwin::new(Unit::jbus(1).expect("unit 1"), 7)
+        CrossTwin::new(UnitId::jbus(1).expect("unit 1"), 7)
     }
 
     fn discrete(twin: &mut CrossTwin) -> Discrete {

@@ -50,7 +50,7 @@ use super::mimic::{Element, Lamps, Mimic, Segment, Segments};
 use super::state::{CrossState, Source};
 use crate::rtu::{
     DecodeError, EXCEPTION_BIT, ExceptionCode, FunctionCode, RegisterValues, Request, RequestAdu,
-    RequestCodec, RequestPdu, Response, ResponseAdu, Unit,
+    RequestCodec, RequestPdu, Response, ResponseAdu, UnitId,
 };
 
 /// How long after a request the twin's answer leaves: 5 ms, the order of a small
@@ -137,7 +137,7 @@ impl fmt::Display for Breaker {
 /// A simulated CROSS on one unit number.
 #[derive(Debug, Clone)]
 pub struct CrossTwin {
-    unit: Unit,
+    unit: UnitId,
     rng: fastrand::Rng,
     reply_delay: Duration,
     preferred: Source,
@@ -153,7 +153,7 @@ impl CrossTwin {
     /// A healthy switch answering as `unit` (JBUS numbers up to 255 allowed), with noise
     /// seeded by `seed`: S1 preferred and feeding a 40 kVA load, input and output breakers
     /// closed, bypasses open.
-    pub fn new(unit: Unit, seed: u64) -> Self {
+    pub fn new(unit: UnitId, seed: u64) -> Self {
         let mut twin = Self {
             unit,
             rng: fastrand::Rng::with_seed(seed),
@@ -177,7 +177,7 @@ impl CrossTwin {
     }
 
     /// The unit number it answers to.
-    pub fn unit(&self) -> Unit {
+    pub fn unit(&self) -> UnitId {
         self.unit
     }
 
@@ -684,8 +684,8 @@ mod tests {
         bits.iter().copied().collect()
     }
 
-    fn unit2() -> Unit {
-        Unit::new(2).expect("unit 2")
+    fn unit2() -> UnitId {
+        UnitId::new(2).expect("unit 2")
     }
 
     fn twin() -> CrossTwin {
@@ -1148,7 +1148,7 @@ mod tests {
 
     #[test]
     fn the_manuals_function_9_example_gets_89_01() {
-        let mut twin = CrossTwin::new(Unit::new(1).expect("1"), 0);
+        let mut twin = CrossTwin::new(UnitId::new(1).expect("1"), 0);
         let mut bytes = vec![1, 9, 0, 0, 0, 0];
         append_crc(&mut bytes, 0);
         let out = twin.handle(
@@ -1263,7 +1263,7 @@ mod tests {
                 .is_empty()
         );
         let other = Addressed::new(
-            Unit::new(3).expect("3"),
+            UnitId::new(3).expect("3"),
             Request::read_holding_registers(0, 18).expect("valid"),
         );
         assert!(exchange(&mut twin, &other.to_adu().to_bytes(), now).is_none());
@@ -1280,7 +1280,7 @@ mod tests {
 
     #[test]
     fn jbus_unit_255_is_served() {
-        let unit = Unit::jbus(255).expect("JBUS allows 255");
+        let unit = UnitId::jbus(255).expect("JBUS allows 255");
         let mut twin = CrossTwin::new(unit, 1);
         let request = Addressed::new(
             unit,

@@ -49,12 +49,12 @@ pub use state::{CrossState, Feed, MissingWord, Source};
 #[cfg(feature = "io")]
 use crate::client::{Client, ClientError};
 #[cfg(feature = "io")]
-use crate::rtu::Unit;
+use crate::rtu::UnitId;
 
 /// Reads the whole state of a CROSS at `unit` through `client`: one function-3 read per
 /// block of [`read_plan`], decoded into named, scaled values.
 #[cfg(feature = "io")]
-pub async fn read(client: &mut Client, unit: Unit) -> Result<CrossState, ClientError> {
+pub async fn read(client: &mut Client, unit: UnitId) -> Result<CrossState, ClientError> {
     let mut image = [0u16; MAP_LEN];
     for (start, count) in read_plan() {
         let words = client.read_holding_registers(unit, start, count).await?;

@@ -642,7 +642,7 @@ fn parse_response(body: &[u8]) -> Result<Response, Malformed> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rtu::{Request, Unit};
+    use crate::rtu::{Request, UnitId};
     use wire::Deframer;
 
     fn hex(text: &str) -> Vec<u8> {
@@ -687,7 +687,7 @@ mod tests {
     fn cross_example_read_words_0805_to_080a_of_slave_2() {
         // "Reading of words from 805 to 80A of slave n° 2. Request: 2 3 0805 6 CRC 16".
         let request = Addressed::new(
-            Unit::new(2).expect("unit 2"),
+            UnitId::new(2).expect("unit 2"),
             Request::read_holding_registers(0x0805, 6).expect("6 words"),
         );
         let bytes = request.to_adu().to_bytes();
@@ -970,7 +970,7 @@ mod tests {
 
     #[test]
     fn sniffing_a_capture_tells_requests_from_responses() {
-        let unit = Unit::new(1).expect("1");
+        let unit = UnitId::new(1).expect("1");
         let read =
             Addressed::new(unit, Request::read_holding_registers(0, 2).expect("valid")).to_adu();
         let registers = ResponseAdu {

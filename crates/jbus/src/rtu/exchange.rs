@@ -69,7 +69,7 @@ impl fmt::Display for EchoField {
 pub enum Mismatch {
     /// Another unit answered.
     #[error("the answer comes from unit {actual}, but unit {expected} was asked")]
-    Unit {
+    UnitId {
         /// The unit asked.
         expected: u8,
         /// The unit in the answer.
@@ -109,7 +109,7 @@ pub enum Mismatch {
 pub fn check_response(request: &Addressed, response: &ResponseAdu) -> Result<Answer, Mismatch> {
     let expected_unit = request.unit.get();
     if response.unit != expected_unit {
-        return Err(Mismatch::Unit {
+        return Err(Mismatch::UnitId {
             expected: expected_unit,
             actual: response.unit,
         });
@@ -192,10 +192,10 @@ fn coil_word(on: bool) -> u16 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rtu::{ExceptionCode, PackedBits, RegisterValues, Unit, WriteCoil, WriteRegister};
+    use crate::rtu::{ExceptionCode, PackedBits, RegisterValues, UnitId, WriteCoil, WriteRegister};
 
     fn ask(unit: u8, request: Request) -> Addressed {
-        Addressed::new(Unit::new(unit).expect("test unit"), request)
+        Addressed::new(UnitId::new(unit).expect("test unit"), request)
     }
 
     fn answer(unit: u8, response: Response) -> ResponseAdu {
@@ -220,7 +220,7 @@ mod tests {
         let request = ask(2, Request::read_holding_registers(0x46, 3).expect("valid"));
         assert_eq!(
             check_response(&request, &answer(3, registers(&[1, 2, 3]))),
-            Err(Mismatch::Unit {
+            Err(Mismatch::UnitId {
                 expected: 2,
                 actual: 3
             })

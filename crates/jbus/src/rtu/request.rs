@@ -1,7 +1,7 @@
 //! Requests: typed ([`Request`], valid by construction, what a client sends) and as they
 //! stand on the wire ([`RequestPdu`], any numbers, what a server receives).
 //!
-//! A client builds a [`Request`] and addresses it to a [`Unit`] ([`Addressed`]) or, for a
+//! A client builds a [`Request`] and addresses it to a [`UnitId`] ([`Addressed`]) or, for a
 //! write, to every unit ([`Broadcast`]). A server decodes a [`RequestAdu`] whatever its
 //! counts say, then checks it as a Modbus server does with [`RequestPdu::to_request`], which
 //! names the exception to answer (1, 2 or 3) when the request is not valid.
@@ -10,7 +10,7 @@ use std::fmt;
 
 use super::value::{
     BROADCAST_UNIT, ExceptionCode, FunctionCode, InvalidValue, ReadBitCount, ReadRegisterCount,
-    Unit, WriteBitCount, WriteRegisterCount, check_block,
+    UnitId, WriteBitCount, WriteRegisterCount, check_block,
 };
 
 /// The value of a coil switched on, as function 5 carries it.
@@ -407,14 +407,14 @@ pub enum Write {
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub struct Addressed {
     /// The unit asked.
-    pub unit: Unit,
+    pub unit: UnitId,
     /// What it is asked.
     pub request: Request,
 }
 
 impl Addressed {
     /// `request` for `unit`.
-    pub fn new(unit: Unit, request: Request) -> Self {
+    pub fn new(unit: UnitId, request: Request) -> Self {
         Self { unit, request }
     }
 

@@ -76,11 +76,11 @@ pub const BROADCAST_UNIT: u8 = 0;
 
 /// The number of one device on the line: 1–247 as Modbus allows, or up to 255 for JBUS
 /// devices, which the JBUS documents allow ("from 1 to FF") but must be asked for with
-/// [`Unit::jbus`]. Broadcast (0) is not a unit: see [`Broadcast`](super::Broadcast).
+/// [`UnitId::jbus`]. Broadcast (0) is not a unit: see [`Broadcast`](super::Broadcast).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct Unit(NonZeroU8);
+pub struct UnitId(NonZeroU8);
 
-impl Unit {
+impl UnitId {
     /// The lowest unit number.
     pub const MIN: u8 = 1;
     /// The highest Modbus unit number (248–255 are reserved by Modbus).
@@ -116,15 +116,15 @@ impl Unit {
     }
 }
 
-impl TryFrom<u8> for Unit {
+impl TryFrom<u8> for UnitId {
     type Error = InvalidValue;
-    /// Same as [`Unit::new`] (1–247).
+    /// Same as [`UnitId::new`] (1–247).
     fn try_from(number: u8) -> Result<Self, InvalidValue> {
         Self::new(number)
     }
 }
 
-impl fmt::Display for Unit {
+impl fmt::Display for UnitId {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}", self.get())
     }
@@ -399,10 +399,10 @@ mod tests {
 
     #[test]
     fn unit_accepts_1_to_247_and_refuses_0_and_248() {
-        assert_eq!(Unit::new(1).map(Unit::get), Ok(1));
-        assert_eq!(Unit::new(247).map(Unit::get), Ok(247));
+        assert_eq!(UnitId::new(1).map(UnitId::get), Ok(1));
+        assert_eq!(UnitId::new(247).map(UnitId::get), Ok(247));
         assert_eq!(
-            Unit::new(0),
+            UnitId::new(0),
             Err(InvalidValue::OutOfRange {
                 what: "unit number",
                 value: 0,
@@ -411,7 +411,7 @@ mod tests {
             })
         );
         assert_eq!(
-            Unit::new(248),
+            UnitId::new(248),
             Err(InvalidValue::OutOfRange {
                 what: "unit number",
                 value: 248,
@@ -423,9 +423,9 @@ mod tests {
 
     #[test]
     fn jbus_units_reach_255_but_never_0() {
-        assert_eq!(Unit::jbus(255).map(Unit::get), Ok(255));
-        assert_eq!(Unit::jbus(248).map(Unit::get), Ok(248));
-        assert!(Unit::jbus(0).is_err());
+        assert_eq!(UnitId::jbus(255).map(UnitId::get), Ok(255));
+        assert_eq!(UnitId::jbus(248).map(UnitId::get), Ok(248));
+        assert!(UnitId::jbus(0).is_err());
     }
 
     #[test]

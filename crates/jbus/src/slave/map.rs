@@ -17,7 +17,7 @@
 use std::fmt;
 use std::str::FromStr;
 
-use crate::rtu::{ADDRESS_SPACE, InvalidValue, Unit};
+use crate::rtu::{ADDRESS_SPACE, InvalidValue, UnitId};
 
 /// One of the four Modbus tables.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -161,7 +161,7 @@ pub enum MapProblem {
     },
     /// A bad unit number.
     #[error("bad unit: {0}")]
-    Unit(InvalidValue),
+    UnitId(InvalidValue),
 }
 
 /// The addresses of one table that exist, and their values.
@@ -249,7 +249,7 @@ impl TableData {
 /// A generic server's unit number and tables.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SlaveMap {
-    pub(crate) unit: Unit,
+    pub(crate) unit: UnitId,
     pub(crate) tables: [TableData; 4],
 }
 
@@ -258,7 +258,7 @@ impl SlaveMap {
     pub const DEFAULT_UNIT: u8 = 1;
 
     /// Every address of every table exists and holds 0 (65536 of each).
-    pub fn all_writable(unit: Unit) -> Self {
+    pub fn all_writable(unit: UnitId) -> Self {
         Self {
             unit,
             tables: std::array::from_fn(|_| TableData::full()),
@@ -267,7 +267,7 @@ impl SlaveMap {
 
     /// Reads a map (see the module documentation for the format).
     pub fn parse(text: &str) -> Result<Self, MapError> {
-        let default_unit = Unit::new(Self::DEFAULT_UNIT).expect("1 is a unit number");
+        let default_unit = UnitId::new(Self::DEFAULT_UNIT).expect("1 is a unit number");
         let mut map = Self {
             unit: default_unit,
             tables: std::array::from_fn(|_| TableData::empty()),
@@ -281,12 +281,12 @@ impl SlaveMap {
     }
 
     /// The unit number.
-    pub fn unit(&self) -> Unit {
+    pub fn unit(&self) -> UnitId {
         self.unit
     }
 
     /// The same map on another unit number.
-    pub fn with_unit(mut self, unit: Unit) -> Self {
+    pub fn with_unit(mut self, unit: UnitId) -> Self {
         self.unit = unit;
         self
     }
@@ -314,7 +314,7 @@ impl SlaveMap {
                 value: number,
                 max: 255,
             })?;
-            self.unit = Unit::jbus(number).map_err(MapProblem::Unit)?;
+            self.unit = UnitId::jbus(number).map_err(MapProblem::UnitId)?;
             return expect_end(words.next());
         }
         let table = Table::from_keyword(keyword).ok_or_else(|| MapProblem::UnknownKeyword {
@@ -483,7 +483,7 @@ mod tests {
 
     #[test]
     fn all_writable_map_has_every_address_zeroed() {
-        let map = SlaveMap::all_writable(Unit::new(5).expect("5"));
+        let map = SlaveMap::all_writable(UnitId::new(5).expect("5"));
         for table in Table::ALL {
             assert_eq!(map.defined(table), 65536);
             assert_eq!(map.get(table, 0xFFFF), Some(0));
@@ -543,7 +543,7 @@ mod tests {
             problem("holding 5 =").to_string(),
             "line 1: expected values after `=`, found end of line"
         );
-        assert!(matches!(problem("unit 0").problem, MapProblem::Unit(_)));
+        assert!(matches!(problem("unit 0").problem, MapProblem::UnitId(_)));
         assert_eq!(
             problem("unit 300").problem,
             MapProblem::TooLarge {

@@ -20,7 +20,7 @@ pub use map::{MapError, MapProblem, SlaveMap, Table};
 
 use crate::rtu::{
     DecodeError, EXCEPTION_BIT, ExceptionCode, FunctionCode, PackedBits, RegisterValues, Request,
-    RequestAdu, RequestCodec, RequestPdu, Response, ResponseAdu, Unit, WriteCoil, WriteRegister,
+    RequestAdu, RequestCodec, RequestPdu, Response, ResponseAdu, UnitId, WriteCoil, WriteRegister,
 };
 
 /// How long after a request the server's answer leaves, unless set otherwise: 2 ms.
@@ -58,7 +58,7 @@ impl Slave {
     }
 
     /// A server on `unit` where every address of every table exists and holds 0.
-    pub fn all_writable(unit: Unit) -> Self {
+    pub fn all_writable(unit: UnitId) -> Self {
         Self::new(SlaveMap::all_writable(unit))
     }
 
@@ -69,7 +69,7 @@ impl Slave {
     }
 
     /// The unit number it answers to.
-    pub fn unit(&self) -> Unit {
+    pub fn unit(&self) -> UnitId {
         self.map.unit
     }
 
@@ -278,8 +278,8 @@ mod tests {
         Slave::new(SlaveMap::parse(MAP).expect("test map"))
     }
 
-    fn unit9() -> Unit {
-        Unit::new(9).expect("9")
+    fn unit9() -> UnitId {
+        UnitId::new(9).expect("9")
     }
 
     fn frame_to(slave: &mut Slave, bytes: &[u8]) -> Vec<Transmit> {
@@ -498,7 +498,7 @@ mod tests {
         bytes[2] ^= 0x80;
         assert!(frame_to(&mut s, &bytes).is_empty());
         let other = Addressed::new(
-            Unit::new(10).expect("10"),
+            UnitId::new(10).expect("10"),
             Request::read_holding_registers(0, 1).expect("valid"),
         );
         assert!(frame_to(&mut s, &other.to_adu().to_bytes()).is_empty());

@@ -1,7 +1,7 @@
 //! A twin of Thermosald ISC regulators on one RS-485 line: a [`wire::device::Model`].
 //!
-//! [`Line`] holds several [`Regulator`]s, each with its own sealing band, memory and faults
-//! ([`band`] documents the physics, [`regulator`] the behaviour). Serve it with
+//! A [`RegulatorBus`] holds several [`Regulator`]s, each with its own sealing band, memory
+//! and faults ([`band`] documents the physics, [`regulator`] the behaviour). Serve it with
 //! `wire::device::SharedModel::new(line).line()`. [`operator`] holds the commands an
 //! operator gives the line while it serves (`fault 1 open-band`, `power-cycle 2`).
 //!
@@ -28,7 +28,7 @@
 //! end of the question, as a [`Transmit`] with that delay; the line is released
 //! [`RELEASE_AFTER_ANSWER`] after the answer's end. That end is the moment the answer is
 //! handed to the serve loop (it writes at once over TCP), or, after
-//! [`Line::paced`], that moment plus the answer's wire time (a serve loop that paces
+//! [`RegulatorBus::paced`], that moment plus the answer's wire time (a serve loop that paces
 //! replies at the line's rate). A message that ends before the line is free again is
 //! ignored and logged, as a real regulator would miss it; on a paced line, so is one that
 //! began (its end minus its wire time) before the line was free.
@@ -56,31 +56,31 @@ pub use regulator::{Calibration, Phase, Regulator, RegulatorConfig, Status};
 
 /// Several regulators on one simulated RS-485 line.
 #[derive(Debug, Clone)]
-pub struct Line {
+pub struct RegulatorBus {
     regulators: Vec<Regulator>,
     listening_from: Option<Instant>,
     pace: Option<LineTiming>,
 }
 
-impl Line {
+impl RegulatorBus {
     /// Commissioned regulators at `addresses` with the default [`RegulatorConfig`], their
     /// clocks starting at `now`. Refused: no address, or one given twice.
-    pub fn new(addresses: &[Address], now: Instant) -> Result<Self, LineError> {
+    pub fn new(addresses: &[Address], now: Instant) -> Result<Self, BusError> {
         Self::with_config(addresses, RegulatorConfig::default(), now)
     }
 
-    /// Like [`Line::new`] with `config` for every regulator.
+    /// Like [`RegulatorBus::new`] with `config` for every regulator.
     pub fn with_config(
         addresses: &[Address],
         config: RegulatorConfig,
         now: Instant,
-    ) -> Result<Self, LineError> {
+    ) -> Result<Self, BusError> {
         if addresses.is_empty() {
-            return Err(LineError::NoRegulators);
+            return Err(BusError::NoRegulators);
         }
         for (i, address) in addresses.iter().enumerate() {
             if addresses[..i].contains(address) {
-                return Err(LineError::DuplicateAddress { address: *address });
+                return Err(BusError::DuplicateAddress { address: *address });
             }
         }
         let regulators = addresses
@@ -207,7 +207,7 @@ impl Line {
     }
 }
 
-impl Model for Line {
+impl Model for RegulatorBus {
     type Codec = FrameCodec;
 
     fn codec(&self) -> FrameCodec {
@@ -241,7 +241,7 @@ impl Model for Line {
 /// A line that cannot be built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
-pub enum LineError {
+pub enum BusError {
     /// No address given.
     #[error("a simulated line needs at least one regulator address")]
     NoRegulators,

@@ -8,11 +8,11 @@
 //! ```
 //! use std::time::Instant;
 //! use thermosald::Address;
-//! use thermosald::device::Line;
+//! use thermosald::device::RegulatorBus;
 //! use thermosald::device::operator::{Command, apply};
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let now = Instant::now();
-//! let mut line = Line::new(&[Address::new(1)?], now)?;
+//! let mut line = RegulatorBus::new(&[Address::new(1)?], now)?;
 //! let command: Command = "fault 1 open-band".parse()?;
 //! let done = apply(&mut line, command, now)?;
 //! assert!(done.ends_with("fault number now 1 (sealing band open)"));
@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use wire::operator::{CommandSet, ParseError, Syntax, Words, help_line};
 
-use super::{Line, Phase, Regulator};
+use super::{Phase, Regulator, RegulatorBus};
 use crate::diagnostic::{self, Fault};
 use crate::frame::Address;
 
@@ -139,7 +139,7 @@ wire::operator_from_str!(Command);
 
 /// Carries out `command` on the regulators of `line` at `now`; says in words what happened
 /// and the fault number the regulator shows now, or why nothing happened.
-pub fn apply(line: &mut Line, command: Command, now: Instant) -> Result<String, Refused> {
+pub fn apply(line: &mut RegulatorBus, command: Command, now: Instant) -> Result<String, Refused> {
     let (address, done): (Address, fn(&mut Regulator, Instant) -> String) = match command {
         Command::Status => return Ok(status(line, now)),
         Command::Help(about) => return Ok(help_line::<Command>(about)),
@@ -180,7 +180,7 @@ fn address(words: &mut Words<'_>) -> Result<Address, ParseError> {
 }
 
 /// One line on every regulator: phase, measured temperature, fault number in words.
-fn status(line: &mut Line, now: Instant) -> String {
+fn status(line: &mut RegulatorBus, now: Instant) -> String {
     let all: Vec<String> = line
         .regulators_mut()
         .iter_mut()
@@ -216,7 +216,7 @@ fn phase_words(phase: Phase) -> String {
 }
 
 /// The regulator at `address`, or which addresses the line has.
-fn regulator_at(line: &mut Line, address: Address) -> Result<&mut Regulator, Refused> {
+fn regulator_at(line: &mut RegulatorBus, address: Address) -> Result<&mut Regulator, Refused> {
     let on_line: Vec<Address> = line
         .regulators()
         .iter()
@@ -341,7 +341,7 @@ mod tests {
     #[test]
     fn an_open_band_latches_fault_1_and_repair_leaves_it_for_clear_faults() {
         let now = Instant::now();
-        let mut line = Line::new(&[address(1), address(2)], now).expect("two regulators");
+        let mut line = RegulatorBus::new(&[address(1), address(2)], now).expect("two regulators");
         let fault = Command::Fault {
             address: address(1),
             kind: Fault::OpenBand,
@@ -377,7 +377,7 @@ mod tests {
     #[test]
     fn a_command_for_an_absent_regulator_names_the_addresses_on_the_line() {
         let now = Instant::now();
-        let mut line = Line::new(&[address(1), address(2)], now).expect("two regulators");
+        let mut line = RegulatorBus::new(&[address(1), address(2)], now).expect("two regulators");
         let refused = apply(
             &mut line,
             Command::Repair {
@@ -402,7 +402,7 @@ mod tests {
     #[test]
     fn help_is_answered_by_apply_on_one_line() {
         let now = Instant::now();
-        let mut line = Line::new(&[address(1)], now).expect("one regulator");
+        let mut line = RegulatorBus::new(&[address(1)], now).expect("one regulator");
         let list = apply(&mut line, Command::Help(None), now).expect("help");
         assert!(!list.contains('\n'), "{list}");
         assert!(list.contains("power-cycle ADDR"), "{list}");
