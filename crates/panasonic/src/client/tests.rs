@@ -7,6 +7,7 @@ use super::*;
 use crate::command::ProductionScope;
 use crate::production::Counter;
 use crate::reply::A4Reason;
+use crate::reply::Reply;
 use crate::server::{PortFault, RunningTwin, TwinServer};
 use crate::status::{ControlMode, RunState};
 use crate::twin::{DEMO_PROGRAM, Machine, MachineConfig};

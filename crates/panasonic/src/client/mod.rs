@@ -8,6 +8,10 @@
 //! message ([`Event`]) and reconnects with backoff when the connection goes. The stream
 //! survives reconnects and reports them as [`Notice`]s between the events.
 //!
+//! Here: the configuration, the errors, the notices and [`Client`]'s commands; `port1` the
+//! command connection and its reconnection, `port2` the R-message reader, `keep_alive` the
+//! `C2HB` schedule. Reconnection waits are `wire::backoff`'s, as the gateway's are.
+//!
 //! **Retries.** TCP does not damage bytes, so a missing answer means a busy machine or a
 //! dead connection: the client drops the connection (the machine may still be in
 //! conversation mode) and, for a command that changes nothing
@@ -33,23 +37,21 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use link::{Endpoint, Line, LineError, OpenError};
+use link::{Endpoint, OpenError};
 use tokio::sync::{Mutex, broadcast, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
-use wire::Deframer;
 pub use wire::backoff::Backoff;
-use wire::backoff::BackoffTimer;
 
 use crate::Port;
 use crate::command::{Command, KeepAliveId, ProductionRequest};
-use crate::conversation::{ConversationError, HostConversation, Next, Outcome};
-use crate::event::{self, Event};
-use crate::keepalive::{self, KeepAlive, KeepAliveConfig, KeepAliveConfigError, Verdict};
-use crate::message::{DecodeError, Message, MessageCodec, MessageError};
+use crate::conversation::{ConversationError, Outcome};
+use crate::event::Event;
+use crate::keepalive::{self, KeepAlive, KeepAliveConfig, KeepAliveConfigError};
+use crate::message::{DecodeError, MessageError};
 use crate::production::ProductionData;
 use crate::program::{ProgramList, ProgramName, Target};
-use crate::reply::{Refusal, Reply};
+use crate::reply::Refusal;
 use crate::status::{MachineStatus, StopMode};
 
 /// Time to wait for each answer of the machine \[?\]: it answers status and names at once;
@@ -692,417 +694,20 @@ struct Inner {
     checks: AtomicU64,
 }
 
-/// Port 1: the connection, when open, and the exchange state.
-#[derive(Debug)]
-struct Port1 {
-    line: Option<Line>,
-    /// Bumped at every connection, so the keep-alive closes only the one it found dead.
-    generation: u64,
-    deframer: Deframer<MessageCodec>,
-    conversation: HostConversation,
-    buf: Vec<u8>,
-}
-
-impl Default for Port1 {
-    fn default() -> Self {
-        Port1 {
-            line: None,
-            generation: 0,
-            deframer: Deframer::new(MessageCodec),
-            conversation: HostConversation::new(),
-            buf: vec![0; READ_BUFFER],
-        }
-    }
-}
-
-/// How one attempt ended, when it gave no outcome.
-enum Failure {
-    Refused(Refusal),
-    Protocol(ConversationError),
-    Trouble(Trouble),
-}
-
-fn trouble(error: LineError) -> Failure {
-    use std::io::ErrorKind::{BrokenPipe, ConnectionAborted, ConnectionReset, UnexpectedEof};
-    Failure::Trouble(match error {
-        LineError::Timeout { .. } => Trouble::Silence,
-        LineError::Closed => Trouble::Closed,
-        // A machine that closes a connection with our request unread resets it.
-        LineError::Io(e)
-            if matches!(
-                e.kind(),
-                ConnectionReset | ConnectionAborted | BrokenPipe | UnexpectedEof
-            ) =>
-        {
-            Trouble::Closed
-        }
-        other => Trouble::Io(other.to_string()),
-    })
-}
-
-impl Port1 {
-    /// Sends `request` and follows the exchange to its end.
-    async fn attempt(
-        &mut self,
-        command: &Command,
-        request: &[u8],
-        timeout: Duration,
-    ) -> Result<Outcome, Failure> {
-        let Port1 {
-            line,
-            deframer,
-            conversation,
-            buf,
-            ..
-        } = self;
-        let line = line.as_mut().ok_or(Failure::Trouble(Trouble::Closed))?;
-        conversation.abort();
-        conversation.start(command).map_err(Failure::Protocol)?;
-        let stale = line.discard_input().await.map_err(trouble)?;
-        if stale > 0 {
-            tracing::debug!(
-                bytes = stale,
-                "dropped bytes that came between exchanges on Port 1"
-            );
-        }
-        deframer.clear();
-        line.send(request).await.map_err(trouble)?;
-        let mut deadline = Instant::now() + timeout;
-        loop {
-            let n = line.recv(buf, deadline).await.map_err(trouble)?;
-            deframer.push(buf.get(..n).unwrap_or_default());
-            while let Some(input) = deframer.next_frame() {
-                let message = input.map_err(|error| Failure::Trouble(Trouble::Damaged(error)))?;
-                if message.command().starts_with(event::code::CLASS) {
-                    tracing::warn!(%message, "an R message on Port 1 (R messages belong on Port 2): skipped");
-                    continue;
-                }
-                match conversation.handle(message) {
-                    Next::Send(ack) => {
-                        line.send(&ack.to_bytes()).await.map_err(trouble)?;
-                        deadline = Instant::now() + timeout;
-                    }
-                    Next::Done { send, outcome } => {
-                        if let Some(last) = send {
-                            line.send(&last.to_bytes()).await.map_err(trouble)?;
-                        }
-                        return Ok(outcome);
-                    }
-                    Next::Failed { send, error } => {
-                        if let Some(last) = send {
-                            if let Err(error) = line.send(&last.to_bytes()).await {
-                                tracing::debug!(%error, "cannot send the closing message");
-                            }
-                        }
-                        return Err(match error {
-                            ConversationError::Refused(refusal) => Failure::Refused(refusal),
-                            other => Failure::Protocol(other),
-                        });
-                    }
-                }
-            }
-        }
-    }
-}
-
 impl Inner {
     fn notify(&self, notice: Notice) {
         // Nobody listening is fine: the notices are for whoever wants them.
         let _ = self.notices.send(notice);
     }
-
-    /// Opens a port within the connect time-out.
-    async fn open(&self, endpoint: &Endpoint, port: Port) -> Result<Line, ClientError> {
-        let after = self.config.connect_timeout;
-        match tokio::time::timeout(after, Line::open(endpoint)).await {
-            Ok(Ok(line)) => Ok(line),
-            Ok(Err(source)) => Err(ClientError::Connect { port, source }),
-            Err(_) => Err(ClientError::ConnectTimeout {
-                port,
-                endpoint: endpoint.to_string(),
-                after,
-            }),
-        }
-    }
-
-    async fn connect_port1(&self, port1: &mut Port1) -> Result<(), ClientError> {
-        let line = self.open(&self.command, Port::Command).await?;
-        port1.line = Some(line);
-        port1.generation += 1;
-        self.notify(Notice::Connected {
-            port: Port::Command,
-            endpoint: self.command.to_string(),
-        });
-        Ok(())
-    }
-
-    fn disconnect_port1(&self, port1: &mut Port1, reason: String) {
-        port1.conversation.abort();
-        if port1.line.take().is_some() {
-            tracing::info!(endpoint = %self.command, "Port 1 closed: {reason}");
-            self.notify(Notice::Disconnected {
-                port: Port::Command,
-                endpoint: self.command.to_string(),
-                reason,
-            });
-        }
-    }
-
-    /// Runs `command` on Port 1 (already locked), with up to `attempts` attempts.
-    async fn exchange(
-        &self,
-        port1: &mut Port1,
-        command: &Command,
-        attempts: u8,
-    ) -> Result<Outcome, ClientError> {
-        let request = command
-            .to_message()
-            .map_err(|source| ClientError::Request {
-                command: command.wire(),
-                source,
-            })?
-            .to_bytes();
-        let attempts = attempts.max(1);
-        let mut last = Trouble::Silence;
-        for attempt in 1..=attempts {
-            if port1.line.is_none() {
-                self.connect_port1(port1).await?;
-            }
-            match port1.attempt(command, &request, self.config.timeout).await {
-                Ok(outcome) => return Ok(outcome),
-                Err(Failure::Refused(refusal)) => return Err(ClientError::Refused(refusal)),
-                Err(Failure::Protocol(error)) => {
-                    // The machine's idea of the exchange is unknown: start clean next time.
-                    self.disconnect_port1(port1, format!("protocol error: {error}"));
-                    return Err(ClientError::Protocol {
-                        endpoint: self.command.to_string(),
-                        error,
-                    });
-                }
-                Err(Failure::Trouble(trouble)) => {
-                    tracing::debug!(attempt, %trouble, command = %command.wire(), "Port 1 attempt failed");
-                    // The machine may still be in conversation mode: a new connection
-                    // starts it afresh.
-                    self.disconnect_port1(port1, format!("{} during {}", trouble, command.wire()));
-                    last = trouble;
-                }
-            }
-        }
-        Err(ClientError::NoAnswer {
-            endpoint: self.command.to_string(),
-            command: command.wire(),
-            attempts,
-            timeout: self.config.timeout,
-            last,
-            repeatable: command.is_repeatable(),
-        })
-    }
-
-    /// Reconnects Port 1 after the keep-alive found connection `generation` dead: closes
-    /// it (unless a command replaced it already), then tries with backoff until connected.
-    async fn reconnect_port1(&self, generation: u64, backoff: &mut BackoffTimer) {
-        {
-            let mut port1 = self.port1.lock().await;
-            if port1.line.is_some() && port1.generation != generation {
-                return;
-            }
-            self.disconnect_port1(
-                &mut port1,
-                "no answer to the keep-alive: the connection is dead".to_owned(),
-            );
-        }
-        loop {
-            tokio::time::sleep(backoff.next_wait()).await;
-            let mut port1 = self.port1.lock().await;
-            if port1.line.is_some() {
-                return;
-            }
-            match self.connect_port1(&mut port1).await {
-                Ok(()) => return,
-                Err(error) => self.notify(Notice::ConnectFailed {
-                    port: Port::Command,
-                    endpoint: self.command.to_string(),
-                    reason: error.to_string(),
-                    retry_in: backoff.peek(),
-                }),
-            }
-        }
-    }
-
-    /// Types a message from Port 2 and passes it on.
-    fn deliver(&self, input: Result<Message, DecodeError>) {
-        match input {
-            Ok(message) => match Event::parse(&message) {
-                Ok(event) => {
-                    tracing::debug!(%event, "R message");
-                    self.notify(Notice::Event(event));
-                }
-                Err(error) => {
-                    tracing::warn!(%message, %error, "a message on Port 2 that is not an R message we read");
-                    self.notify(Notice::Unreadable {
-                        message: message.to_string(),
-                        reason: error.to_string(),
-                    });
-                }
-            },
-            Err(error) => {
-                tracing::warn!(%error, "undecodable bytes on Port 2 skipped");
-                self.notify(Notice::Unreadable {
-                    message: "bytes that are not a message".to_owned(),
-                    reason: error.to_string(),
-                });
-            }
-        }
-    }
 }
 
-/// Reads Port 2 for the life of the client, reconnecting with backoff.
-async fn run_port2(inner: Arc<Inner>, endpoint: Endpoint, first: Line) {
-    let mut backoff = inner.config.backoff.timer();
-    let mut dead = inner.port2_dead.subscribe();
-    let mut line = Some(first);
-    loop {
-        let current = match line.take() {
-            Some(current) => current,
-            None => {
-                tokio::time::sleep(backoff.next_wait()).await;
-                match inner.open(&endpoint, Port::Event).await {
-                    Ok(current) => {
-                        inner.notify(Notice::Connected {
-                            port: Port::Event,
-                            endpoint: endpoint.to_string(),
-                        });
-                        current
-                    }
-                    Err(error) => {
-                        inner.notify(Notice::ConnectFailed {
-                            port: Port::Event,
-                            endpoint: endpoint.to_string(),
-                            reason: error.to_string(),
-                            retry_in: backoff.peek(),
-                        });
-                        continue;
-                    }
-                }
-            }
-        };
-        // A dead verdict about an earlier connection does not concern this one.
-        dead.borrow_and_update();
-        let connected = Instant::now();
-        let reason = read_events(&inner, current, &mut dead).await;
-        if connected.elapsed() >= STABLE_CONNECTION {
-            backoff.reset();
-        }
-        tracing::info!(%endpoint, "Port 2 closed: {reason}");
-        inner.notify(Notice::Disconnected {
-            port: Port::Event,
-            endpoint: endpoint.to_string(),
-            reason,
-        });
-    }
-}
+mod keep_alive;
+mod port1;
+mod port2;
 
-/// Reads R messages until the connection goes; returns why it went.
-async fn read_events(inner: &Inner, mut line: Line, dead: &mut watch::Receiver<u64>) -> String {
-    let mut deframer = Deframer::new(MessageCodec);
-    let mut buf = vec![0u8; 8192];
-    loop {
-        tokio::select! {
-            read = line.recv(&mut buf, Instant::now() + IDLE_READ) => match read {
-                Ok(n) => {
-                    deframer.push(buf.get(..n).unwrap_or_default());
-                    while let Some(input) = deframer.next_frame() {
-                        inner.deliver(input);
-                    }
-                }
-                Err(LineError::Timeout { .. }) => {}
-                Err(LineError::Closed) => return "the machine closed the connection".to_owned(),
-                Err(error) => return error.to_string(),
-            },
-            changed = dead.changed() => {
-                return match changed {
-                    Ok(()) => "no R1HB echo to the keep-alive: the connection is dead".to_owned(),
-                    Err(_) => "the client stopped".to_owned(),
-                };
-            }
-        }
-    }
-}
-
-/// Runs the keep-alive for the life of the client.
-async fn run_keep_alive(
-    inner: Arc<Inner>,
-    mut schedule: KeepAlive,
-    mut echoes: broadcast::Receiver<Notice>,
-) {
-    let mut backoff = inner.config.backoff.timer();
-    let mut probed_generation = 0;
-    loop {
-        let wake = Instant::from_std(schedule.poll_timeout());
-        tokio::select! {
-            () = tokio::time::sleep_until(wake) => {}
-            notice = echoes.recv() => match notice {
-                Ok(notice) => take_echo(&mut schedule, &notice),
-                Err(broadcast::error::RecvError::Lagged(_)) => {}
-                Err(broadcast::error::RecvError::Closed) => return,
-            }
-        }
-        if Instant::now() >= wake && !schedule.is_checking() {
-            // Lock first: the check's time-out starts when Port 1 is ours, not while a
-            // long transfer still holds it.
-            let mut port1 = inner.port1.lock().await;
-            if let Some(command) = schedule.poll_transmit(now_std()) {
-                tracing::debug!(command = %command.wire(), "keep-alive");
-                let answered = inner.exchange(&mut port1, &command, 1).await;
-                probed_generation = port1.generation;
-                match answered {
-                    Ok(_) => schedule.port1_answered(),
-                    // 3.5-2: A4E00 means the command was wrong but the port works.
-                    Err(ClientError::Refused(refusal))
-                        if refusal.reply == Reply::OPERATION_ERROR =>
-                    {
-                        schedule.port1_answered();
-                    }
-                    Err(error) => tracing::warn!(%error, "keep-alive: no answer on Port 1"),
-                }
-            }
-        }
-        loop {
-            match echoes.try_recv() {
-                Ok(notice) => take_echo(&mut schedule, &notice),
-                Err(broadcast::error::TryRecvError::Lagged(_)) => {}
-                Err(_) => break,
-            }
-        }
-        match schedule.poll_verdict(now_std()) {
-            Some(Verdict::Alive { id }) => {
-                tracing::trace!(%id, "keep-alive: both ports answered");
-                backoff.reset();
-            }
-            Some(Verdict::Dead { id, port1, port2 }) => {
-                tracing::warn!(%id, port1_dead = port1, port2_dead = port2, "keep-alive failed: reconnecting");
-                inner.notify(Notice::KeepAliveFailed { id, port1, port2 });
-                if port2 {
-                    inner.port2_dead.send_modify(|n| *n += 1);
-                }
-                if port1 {
-                    inner.reconnect_port1(probed_generation, &mut backoff).await;
-                    schedule.reset(now_std());
-                }
-            }
-            None => {}
-        }
-    }
-}
-
-/// Feeds an `R1HB` to the keep-alive schedule.
-fn take_echo(schedule: &mut KeepAlive, notice: &Notice) {
-    if let Notice::Event(Event::Heartbeat { id }) = notice {
-        if !schedule.port2_echo(id) {
-            tracing::debug!(%id, "an R1HB that answers no open keep-alive");
-        }
-    }
-}
+use keep_alive::*;
+use port1::*;
+use port2::*;
 
 #[cfg(test)]
 mod tests;
