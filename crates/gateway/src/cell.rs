@@ -225,9 +225,9 @@ pub struct DeviceView {
     pub name: String,
     /// Its protocol.
     pub protocol: Protocol,
-    /// Its line.
+    /// The name of the line it is on.
     pub line: String,
-    /// Its address.
+    /// Its address on the line (JBC station, regulator, Modbus unit), if it has one.
     pub address: Option<i64>,
     /// Its id and status.
     #[serde(flatten)]
@@ -254,7 +254,7 @@ pub struct GroupView {
 pub struct LineView {
     /// Its name.
     pub name: String,
-    /// Its endpoint.
+    /// Its endpoint URL, as configured (`serial:///dev/ttyUSB0?baud=9600`).
     pub endpoint: String,
     /// Devices on it.
     pub devices: Vec<DeviceId>,

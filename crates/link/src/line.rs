@@ -43,7 +43,7 @@ pub enum OpenError {
     /// The TCP connection failed.
     #[error("cannot connect to {endpoint}: {source}{hint}")]
     Tcp {
-        /// The endpoint.
+        /// The endpoint that failed, as the user named it.
         endpoint: String,
         /// What the OS said.
         source: io::Error,

@@ -360,7 +360,7 @@ pub enum ProductionDataError {
     BadLine {
         /// 1-based line number.
         line: usize,
-        /// The line.
+        /// The line of text as the machine sent it.
         text: String,
     },
     /// `START=` or `END=` is not a timestamp.

@@ -371,7 +371,7 @@ pub enum ProgramListError {
     BadLine {
         /// 1-based line number.
         line: usize,
-        /// The line.
+        /// The line of text as the machine sent it.
         text: String,
     },
     /// A line with a bad date.

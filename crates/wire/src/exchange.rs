@@ -107,14 +107,14 @@ pub enum ExchangeError<Q, R, T, L> {
     Request(Q),
     /// The device understood the request and refused it.
     Refused {
-        /// The line.
+        /// The line's endpoint as the user named it (`tcp://…`, `serial:///dev/…`).
         endpoint: String,
         /// What the device said.
         refusal: R,
     },
     /// No valid answer within the attempts.
     NoAnswer {
-        /// The line.
+        /// The line's endpoint as the user named it (`tcp://…`, `serial:///dev/…`).
         endpoint: String,
         /// Whom we asked (`station 07`, `regulator 5`, `unit 9`).
         device: String,
@@ -129,7 +129,7 @@ pub enum ExchangeError<Q, R, T, L> {
     },
     /// The line itself failed (closed, I/O error).
     Line {
-        /// The line.
+        /// The line's endpoint as the user named it (`tcp://…`, `serial:///dev/…`).
         endpoint: String,
         /// What happened.
         source: L,

@@ -256,13 +256,13 @@ pub enum WriteError {
     /// The point is not one of this device's.
     #[error("{point} is not a point of this device")]
     UnknownPoint {
-        /// The point.
+        /// The point named in the write.
         point: PointId,
     },
     /// The device's poller is not running (the gateway is stopping).
     #[error("the poller of line {line} is not running; the gateway may be stopping")]
     NotRunning {
-        /// The line.
+        /// The name of the line whose task is not running.
         line: String,
     },
 }

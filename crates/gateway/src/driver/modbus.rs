@@ -80,9 +80,9 @@ pub struct RegisterConfig {
     pub name: String,
     /// Words for people.
     pub title: String,
-    /// Its table.
+    /// The table it is in (holding or input registers).
     pub table: RegisterTable,
-    /// Its address.
+    /// Its register address, from 0.
     pub address: u16,
     /// What one step of the register is worth.
     pub scale: f64,

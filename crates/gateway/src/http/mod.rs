@@ -130,7 +130,7 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
 /// An error answer: a status and words.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ApiError {
-    /// The status.
+    /// The HTTP status to answer with.
     pub status: StatusCode,
     /// What was wrong.
     pub message: String,

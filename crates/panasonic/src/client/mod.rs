@@ -184,7 +184,7 @@ pub enum ClientError {
     ConnectTimeout {
         /// Which port.
         port: Port,
-        /// The endpoint.
+        /// The machine's port, as `tcp://host:port`.
         endpoint: String,
         /// The time waited.
         after: Duration,
@@ -287,14 +287,14 @@ pub enum Notice {
     Connected {
         /// Which port.
         port: Port,
-        /// Its endpoint.
+        /// The machine's port, as `tcp://host:port`.
         endpoint: String,
     },
     /// A port's connection is gone; the client reconnects.
     Disconnected {
         /// Which port.
         port: Port,
-        /// Its endpoint.
+        /// The machine's port, as `tcp://host:port`.
         endpoint: String,
         /// Why.
         reason: String,
@@ -303,7 +303,7 @@ pub enum Notice {
     ConnectFailed {
         /// Which port.
         port: Port,
-        /// Its endpoint.
+        /// The machine's port, as `tcp://host:port`.
         endpoint: String,
         /// Why.
         reason: String,
