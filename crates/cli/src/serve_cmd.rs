@@ -37,6 +37,12 @@ pub struct ServeArgs {
     /// The write token (prefer CELLBUS_TOKEN, which does not show in the process list).
     #[arg(long, value_name = "TOKEN")]
     pub token: Option<String>,
+    /// Require this token (or the write token) on every API route and /metrics, as
+    /// `Authorization: Bearer <token>`; the page asks for it once. Prefer
+    /// CELLBUS_READ_TOKEN, or read_token in the configuration. Without one, anyone who
+    /// can reach the port reads the cell.
+    #[arg(long, value_name = "TOKEN")]
+    pub read_token: Option<String>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -63,6 +69,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
         retain_audit: args.retain_audit,
         allow_writes: args.allow_writes,
         token: args.token,
+        read_token: args.read_token,
     };
     gateway::serve(options, shutdown_signal()).await?;
     Ok(ExitCode::SUCCESS)

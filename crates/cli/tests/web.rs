@@ -10,6 +10,19 @@ use common::Gateway;
 
 #[test]
 fn the_page_shows_every_demo_device_and_a_value_changes_by_itself() {
+    let seen = open_the_page(None);
+    assert_eq!(seen["asked"], 0, "no prompt without a read token");
+}
+
+#[test]
+fn a_gateway_with_a_read_token_is_asked_for_it_once_and_then_shows_the_cell() {
+    let seen = open_the_page(Some("look-only"));
+    assert_eq!(seen["asked"], 1, "one prompt");
+}
+
+/// Starts the demo gateway (with `read_token` if given), opens its page in Chromium and
+/// checks a card for every device and a value that changes; returns what the page saw.
+fn open_the_page(read_token: Option<&str>) -> serde_json::Value {
     let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/web");
     assert!(
         web.join("node_modules/playwright-core").is_dir(),
@@ -23,13 +36,15 @@ fn the_page_shows_every_demo_device_and_a_value_changes_by_itself() {
     );
 
     let data = tempfile::tempdir().unwrap();
-    let gateway = Gateway::start(data.path());
+    let args: Vec<&str> = read_token.map_or(vec![], |t| vec!["--read-token", t]);
+    let gateway = Gateway::start_with(data.path(), &args);
     let screenshot = data.path().join("page.png");
     let out = Command::new("node")
         .arg(web.join("page.mjs"))
         .arg(format!("http://{}", gateway.addr))
         .arg(&screenshot)
         .env("CHROMIUM", &chromium)
+        .env("READ_TOKEN", read_token.unwrap_or(""))
         .output()
         .expect("node runs (install Node.js: it comes with npm)");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -40,19 +55,25 @@ fn the_page_shows_every_demo_device_and_a_value_changes_by_itself() {
     );
     let seen: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
     let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200);
-    let api: serde_json::Value = serde_json::from_str(&body).unwrap();
-    let ids: Vec<_> = api["devices"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|d| d["id"].clone())
-        .collect();
-    assert_eq!(
-        seen["devices"].as_array().unwrap(),
-        &ids,
-        "a card for every device"
-    );
+    if read_token.is_some() {
+        assert_eq!(status, 401, "the API needs the token: {body}");
+    } else {
+        assert_eq!(status, 200);
+        let api: serde_json::Value = serde_json::from_str(&body).unwrap();
+        let ids: Vec<_> = api["devices"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| d["id"].clone())
+            .collect();
+        assert_eq!(
+            seen["devices"].as_array().unwrap(),
+            &ids,
+            "a card for every device"
+        );
+    }
+    assert!(!seen["devices"].as_array().unwrap().is_empty());
     assert_ne!(seen["change"]["before"], seen["change"]["after"]);
     assert!(screenshot.exists());
+    seen
 }

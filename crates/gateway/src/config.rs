@@ -2,6 +2,8 @@
 //!
 //! ```toml
 //! token = "change-me"                   # optional; CELLBUS_TOKEN and --token win over it
+//! read_token = "look-only"              # optional; then every API route needs it (or the
+//!                                       # write token); CELLBUS_READ_TOKEN wins over it
 //!
 //! [[line]]
 //! name = "rework"                       # unique; a-z, 0-9, _ and -
@@ -69,6 +71,8 @@ pub struct CellConfig {
     pub source: Option<PathBuf>,
     /// The token writes need, if the file sets one.
     pub token: Option<String>,
+    /// The token every API route needs, if the file sets one.
+    pub read_token: Option<String>,
     /// The lines, in file order.
     pub lines: Vec<LineConfig>,
 }
@@ -292,17 +296,20 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
             reopen_after_timeouts,
         });
     }
-    if let Some(token) = &raw.token
-        && token.get_ref().trim().is_empty()
-    {
-        return Err(at(
-            token.span(),
-            "token is empty; remove it or set a secret".into(),
-        ));
+    for (key, token) in [("token", &raw.token), ("read_token", &raw.read_token)] {
+        if let Some(token) = token
+            && token.get_ref().trim().is_empty()
+        {
+            return Err(at(
+                token.span(),
+                format!("{key} is empty; remove it or set a secret"),
+            ));
+        }
     }
     Ok(CellConfig {
         source: Some(path.to_owned()),
         token: raw.token.map(Spanned::into_inner),
+        read_token: raw.read_token.map(Spanned::into_inner),
         lines,
     })
 }
@@ -627,6 +634,7 @@ impl fmt::Display for LineConfig {
 #[serde(deny_unknown_fields)]
 struct RawConfig {
     token: Option<Spanned<String>>,
+    read_token: Option<Spanned<String>>,
     #[serde(default)]
     line: Vec<RawLine>,
 }

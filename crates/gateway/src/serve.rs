@@ -35,6 +35,8 @@ pub const DEFAULT_RETAIN_AUDIT: Duration = Duration::from_secs(365 * 24 * 3600);
 
 /// Environment variable holding the write token.
 pub const TOKEN_ENV: &str = "CELLBUS_TOKEN";
+/// Environment variable holding the read token.
+pub const READ_TOKEN_ENV: &str = "CELLBUS_READ_TOKEN";
 
 /// How long line tasks get to finish their request at shutdown.
 const STOP_GRACE: Duration = Duration::from_secs(5);
@@ -56,6 +58,9 @@ pub struct ServeOptions {
     pub allow_writes: bool,
     /// The write token; else `CELLBUS_TOKEN`, else the config's `token`.
     pub token: Option<String>,
+    /// The read token every API route then needs; else `CELLBUS_READ_TOKEN`, else the
+    /// config's `read_token`; none: reading is open.
+    pub read_token: Option<String>,
 }
 
 impl Default for ServeOptions {
@@ -68,6 +73,7 @@ impl Default for ServeOptions {
             retain_audit: DEFAULT_RETAIN_AUDIT,
             allow_writes: false,
             token: None,
+            read_token: None,
         }
     }
 }
@@ -282,6 +288,9 @@ pub fn exposure_warning(addr: SocketAddr, writes: &http::WritePolicy) -> Option<
     if addr.ip().is_loopback() {
         return None;
     }
+    if writes.read_token.is_some() {
+        return None;
+    }
     let writes = match (&writes.enabled, &writes.token) {
         (true, Some(_)) => "writes need the token",
         _ => "writes are off",
@@ -289,8 +298,8 @@ pub fn exposure_warning(addr: SocketAddr, writes: &http::WritePolicy) -> Option<
     Some(format!(
         "listening on {addr}, beyond this machine: the API and the page (values, history, the \
          audit log with client addresses, the lines' endpoints) answer anyone who can reach \
-         this port ({writes}); keep it on a plant network behind a firewall, or listen on \
-         127.0.0.1 behind a reverse proxy that authenticates"
+         this port ({writes}); set a read token ({READ_TOKEN_ENV} or read_token in the \
+         config) to require one, or keep it behind a firewall"
     ))
 }
 
@@ -338,9 +347,21 @@ fn write_policy(options: &ServeOptions, config: &CellConfig) -> anyhow::Result<W
              set {TOKEN_ENV} or token = \"...\" in the config"
         );
     }
+    let read_token = options
+        .read_token
+        .clone()
+        .or_else(|| std::env::var(READ_TOKEN_ENV).ok())
+        .or_else(|| config.read_token.clone())
+        .map(|t| t.trim().to_owned());
+    if read_token.as_deref() == Some("") {
+        bail!(
+            "the read token is empty; set a non-empty {READ_TOKEN_ENV} or read_token in the config"
+        );
+    }
     Ok(WritePolicy {
         enabled: options.allow_writes,
         token,
+        read_token,
     })
 }
 
@@ -353,6 +374,7 @@ mod tests {
         let off = http::WritePolicy {
             enabled: false,
             token: None,
+            read_token: None,
         };
         assert_eq!(
             exposure_warning("127.0.0.1:8080".parse().unwrap(), &off),

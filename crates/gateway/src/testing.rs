@@ -140,6 +140,7 @@ pub fn rig(count: u8) -> Rig {
     let config = CellConfig {
         source: None,
         token: None,
+        read_token: None,
         lines: vec![LineConfig {
             reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
             name: "bench".into(),

@@ -139,9 +139,15 @@ pub struct Gateway {
 
 impl Gateway {
     pub fn start(data: &std::path::Path) -> Gateway {
+        Gateway::start_with(data, &[])
+    }
+
+    /// Like [`Gateway::start`], with more `cellbus serve` arguments.
+    pub fn start_with(data: &std::path::Path, args: &[&str]) -> Gateway {
         let mut child = cellbus()
             .args(["serve", "--listen", "127.0.0.1:0", "--data"])
             .arg(data)
+            .args(args)
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()

@@ -1,13 +1,17 @@
 // Opens the gateway's page in headless Chromium and checks what a person would see:
 // a card for every device the API lists, and a value on the page that changes by itself.
 // Usage: node page.mjs http://127.0.0.1:PORT screenshot.png
+// With READ_TOKEN set, the gateway needs it: the page must ask for it (a prompt, answered
+// here) before it shows anything.
 // Prints one JSON line with what it saw; exits non-zero with a reason otherwise.
 import { chromium } from 'playwright-core';
 
 const [base, screenshot] = process.argv.slice(2);
 const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
 
-const api = await (await fetch(`${base}/api/devices`)).json();
+const readToken = process.env.READ_TOKEN || '';
+const headers = readToken ? { Authorization: `Bearer ${readToken}` } : {};
+const api = await (await fetch(`${base}/api/devices`, { headers })).json();
 const ids = api.devices.map((d) => d.id);
 
 const browser = await chromium.launch({
@@ -20,7 +24,12 @@ const browser = await chromium.launch({
 try {
   const page = await browser.newPage({ viewport: { width: 1600, height: 1000 } });
   const errors = [];
+  let asked = 0;
   page.on('pageerror', (e) => errors.push(String(e)));
+  page.on('dialog', async (dialog) => {
+    asked += 1;
+    await dialog.accept(readToken);
+  });
   await page.goto(`${base}/`);
   for (const id of ids) {
     await page.waitForSelector(`[id="device-${id}"]`, { timeout: 20000 });
@@ -48,7 +57,7 @@ try {
   const change = await changed.jsonValue();
   if (screenshot) await page.screenshot({ path: screenshot, fullPage: true });
   if (errors.length) throw new Error(`the page threw: ${errors.join('; ')}`);
-  console.log(JSON.stringify({ devices: ids, points: before.length, change }));
+  console.log(JSON.stringify({ devices: ids, points: before.length, change, asked }));
 } finally {
   await browser.close();
 }

@@ -81,6 +81,9 @@ pub struct WritePolicy {
     pub enabled: bool,
     /// The bearer token they need.
     pub token: Option<String>,
+    /// A token every `/api/` route and `/metrics` then need (the write token is taken
+    /// too); `None`: reading is open.
+    pub read_token: Option<String>,
 }
 
 /// What the handlers share.
@@ -124,7 +127,76 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
         .merge(web::routes())
         .fallback(no_route)
         .method_not_allowed_fallback(wrong_method)
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            require_read_token,
+        ))
         .with_state(state)
+}
+
+/// With a read token set, every `/api/` route and `/metrics` need it (or the write token)
+/// as `Authorization: Bearer …`, or as `?token=` for an event stream (a browser's
+/// EventSource cannot send headers). The page and `/healthz` stay open.
+async fn require_read_token(
+    State(s): State<AppState>,
+    mut request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    let Some(read) = s.writes.read_token.as_deref() else {
+        return next.run(request).await;
+    };
+    let path = request.uri().path();
+    if !(path.starts_with("/api/") || path == "/metrics") {
+        return next.run(request).await;
+    }
+    let given = write::bearer(request.headers()).or_else(|| query_token(request.uri()));
+    let accepted = given.as_deref().is_some_and(|given| {
+        write::constant_time_eq(given.as_bytes(), read.as_bytes())
+            || s.writes
+                .token
+                .as_deref()
+                .is_some_and(|t| write::constant_time_eq(given.as_bytes(), t.as_bytes()))
+    });
+    if !accepted {
+        let message = if given.is_some() {
+            "wrong read token"
+        } else {
+            "this gateway needs its read token: send Authorization: Bearer <token>"
+        };
+        return ApiError::new(StatusCode::UNAUTHORIZED, message).into_response();
+    }
+    // The handlers' queries refuse fields they do not know: the token is not theirs.
+    if let Some(uri) = without_token(request.uri()) {
+        *request.uri_mut() = uri;
+    }
+    next.run(request).await
+}
+
+/// The `token` query parameter, if any.
+fn query_token(uri: &Uri) -> Option<String> {
+    url::form_urlencoded::parse(uri.query()?.as_bytes())
+        .find(|(k, _)| k == "token")
+        .map(|(_, v)| v.into_owned())
+}
+
+/// `uri` without its `token` query parameter, if it had one.
+fn without_token(uri: &Uri) -> Option<Uri> {
+    let query = uri.query()?;
+    let pairs: Vec<(String, String)> = url::form_urlencoded::parse(query.as_bytes())
+        .into_owned()
+        .collect();
+    if !pairs.iter().any(|(k, _)| k == "token") {
+        return None;
+    }
+    let rest = url::form_urlencoded::Serializer::new(String::new())
+        .extend_pairs(pairs.iter().filter(|(k, _)| k != "token"))
+        .finish();
+    let path_and_query = if rest.is_empty() {
+        uri.path().to_owned()
+    } else {
+        format!("{}?{rest}", uri.path())
+    };
+    path_and_query.parse().ok()
 }
 
 /// An error answer: a status and words.

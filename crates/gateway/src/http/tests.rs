@@ -16,11 +16,16 @@ use crate::testing::{Rig, rig};
 const TOKEN: &str = "s3cret-token";
 
 fn app(rig: &Rig, enabled: bool) -> Router {
+    app_with(rig, enabled, None)
+}
+
+fn app_with(rig: &Rig, enabled: bool, read_token: Option<&str>) -> Router {
     router(
         Arc::clone(&rig.cell),
         WritePolicy {
             enabled,
             token: Some(TOKEN.into()),
+            read_token: read_token.map(str::to_owned),
         },
         rig.shutdown.subscribe(),
     )
@@ -765,4 +770,43 @@ async fn event_streams_beyond_the_cap_are_refused_until_one_closes() {
     held.pop();
     let again = open_stream().await.unwrap();
     assert_eq!(again.status(), StatusCode::OK);
+}
+
+#[tokio::test(start_paused = true)]
+async fn with_a_read_token_every_api_route_needs_it_and_the_page_and_health_do_not() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let app = app_with(&rig, false, Some("look-only"));
+    let with = |uri: &str, token: &str| {
+        Request::get(uri)
+            .header("authorization", format!("Bearer {token}"))
+            .body(Body::empty())
+            .unwrap()
+    };
+    let (status, reply) = get(&app, "/api/devices").await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+    assert!(error_of(&reply).contains("read token"), "{reply}");
+    assert_eq!(get(&app, "/metrics").await.0, StatusCode::UNAUTHORIZED);
+    let (status, reply) = call(&app, with("/api/devices", "guess")).await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+    assert_eq!(error_of(&reply), "wrong read token");
+    assert_eq!(
+        call(&app, with("/api/devices", "look-only")).await.0,
+        StatusCode::OK
+    );
+    assert_eq!(
+        call(&app, with("/api/lines", TOKEN)).await.0,
+        StatusCode::OK,
+        "the write token reads too"
+    );
+    // An EventSource cannot send headers: `?token=` works, and the query's own fields
+    // are still checked without it.
+    let (status, reply) = get(
+        &app,
+        "/api/history?point=jbc1.air_temperature&token=look-only&from=-1m",
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{reply}");
+    assert_eq!(get(&app, "/healthz").await.0, StatusCode::OK);
+    assert_eq!(get(&app, "/").await.0, StatusCode::OK);
 }

@@ -426,24 +426,27 @@ pub(super) fn check_token(headers: &HeaderMap, token: Option<&str>) -> ApiResult
             "missing Authorization header; send Authorization: Bearer <token>",
         ));
     };
-    let given = value
-        .to_str()
-        .ok()
-        .and_then(|v| {
-            let (scheme, rest) = v.trim().split_once(' ')?;
-            scheme.eq_ignore_ascii_case("bearer").then(|| rest.trim())
-        })
-        .ok_or_else(|| {
-            ApiError::new(
-                StatusCode::UNAUTHORIZED,
-                "the Authorization header must be Bearer <token>",
-            )
-        })?;
+    let given = bearer_value(value).ok_or_else(|| {
+        ApiError::new(
+            StatusCode::UNAUTHORIZED,
+            "the Authorization header must be Bearer <token>",
+        )
+    })?;
     if constant_time_eq(given.as_bytes(), expected.as_bytes()) {
         Ok(())
     } else {
         Err(ApiError::new(StatusCode::UNAUTHORIZED, "wrong token"))
     }
+}
+
+/// The token of an `Authorization: Bearer <token>` header.
+pub(super) fn bearer(headers: &HeaderMap) -> Option<String> {
+    bearer_value(headers.get(header::AUTHORIZATION)?).map(str::to_owned)
+}
+
+fn bearer_value(value: &HeaderValue) -> Option<&str> {
+    let (scheme, rest) = value.to_str().ok()?.trim().split_once(' ')?;
+    scheme.eq_ignore_ascii_case("bearer").then(|| rest.trim())
 }
 
 /// Compares without stopping at the first difference, so timing does not leak the token.

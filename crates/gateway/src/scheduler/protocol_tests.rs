@@ -104,6 +104,7 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
     let config = CellConfig {
         source: None,
         token: None,
+        read_token: None,
         lines: vec![
             LineConfig {
                 reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,

@@ -783,6 +783,7 @@ async fn a_full_disk_leaves_live_values_served_and_healthz_reporting_the_fault()
         WritePolicy {
             enabled: false,
             token: None,
+            read_token: None,
         },
         rig.shutdown.subscribe(),
     );

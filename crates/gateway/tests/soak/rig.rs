@@ -373,6 +373,7 @@ impl CellSet {
             config: CellConfig {
                 source: None,
                 token: None,
+                read_token: None,
                 lines: Vec::new(),
             },
             openers: HashMap::new(),

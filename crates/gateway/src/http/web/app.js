@@ -165,7 +165,7 @@ function statusDetail(device) {
 
 async function loadHistory(pointId) {
   try {
-    const response = await fetch(`/api/history?point=${encodeURIComponent(pointId)}&from=-10m`);
+    const response = await api(`/api/history?point=${encodeURIComponent(pointId)}&from=-10m`);
     if (!response.ok) return;
     const history = await response.json();
     const samples = (history.before ? [history.before] : []).concat(history.samples || []);
@@ -265,7 +265,7 @@ function renderLines(lines) {
 
 async function refreshLines() {
   try {
-    const response = await fetch('/api/lines');
+    const response = await api('/api/lines');
     if (response.ok) renderLines((await response.json()).lines);
   } catch (e) {
     console.warn('lines', e);
@@ -285,7 +285,7 @@ function addEvent(event, atTop = true) {
 
 async function loadEvents() {
   try {
-    const response = await fetch('/api/events?limit=50');
+    const response = await api('/api/events?limit=50');
     if (!response.ok) return;
     const list = document.getElementById('events');
     list.replaceChildren();
@@ -360,13 +360,49 @@ function setUpWriteForm(device, form) {
   });
 }
 
+// ---- the read token ------------------------------------------------------------------
+
+// A gateway started with a read token answers 401 to the API without it: the page asks
+// for it once and keeps it for the browser tab.
+const READ_TOKEN_KEY = 'cellbus-read-token';
+
+function readToken() {
+  return sessionStorage.getItem(READ_TOKEN_KEY) || '';
+}
+
+async function api(url, options = {}) {
+  const send = () => {
+    const headers = { ...(options.headers || {}) };
+    const read = readToken();
+    if (read && !headers.Authorization) headers.Authorization = `Bearer ${read}`;
+    return fetch(url, { ...options, headers });
+  };
+  let response = await send();
+  if (response.status === 401 && askReadToken()) response = await send();
+  return response;
+}
+
+let asked = false;
+
+function askReadToken() {
+  if (asked) return false;
+  asked = true;
+  const given = window.prompt('This gateway needs its read token:');
+  if (!given) return false;
+  sessionStorage.setItem(READ_TOKEN_KEY, given.trim());
+  return true;
+}
+
 // ---- the stream ----------------------------------------------------------------------
 
 let source = null;
 
 function connect() {
   const connection = document.getElementById('connection');
-  source = new EventSource('/api/events/stream');
+  const read = readToken();
+  source = new EventSource(
+    read ? `/api/events/stream?token=${encodeURIComponent(read)}` : '/api/events/stream',
+  );
   source.onopen = () => {
     connection.dataset.state = 'live';
     connection.textContent = 'live';
@@ -374,6 +410,12 @@ function connect() {
   source.onerror = () => {
     connection.dataset.state = 'lost';
     connection.textContent = 'reconnecting…';
+    // Refused for good (a read token is needed): ask for it once, then start again.
+    if (source.readyState === EventSource.CLOSED) {
+      api('/api/lines').then((response) => {
+        if (response.ok) connect();
+      }, () => {});
+    }
   };
   source.addEventListener('snapshot', (e) => {
     const snapshot = JSON.parse(e.data);
