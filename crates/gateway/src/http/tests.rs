@@ -598,7 +598,8 @@ async fn the_page_and_its_assets_are_served_and_fetch_nothing_from_elsewhere() {
     }
     // The page is built from the stream and marks devices and points for tests and tools.
     assert!(web::INDEX_HTML.contains(r#"<script src="/app.js"></script>"#));
-    assert!(web::APP_JS.contains("new EventSource('/api/events/stream')"));
+    assert!(web::APP_JS.contains("new EventSource("));
+    assert!(web::APP_JS.contains("'/api/events/stream'"));
     assert!(web::APP_JS.contains("card.id = `device-${device.id}`"));
     assert!(web::APP_JS.contains("tile.id = `point-${point.id}`"));
 }
