@@ -26,6 +26,8 @@
 //! - [`http`]: the API, described at `/api/openapi.json`, and the web page at `/`.
 //! - [`metrics`]: Prometheus metrics.
 //! - [`demo`]: the simulated cell `serve` starts without a configuration.
+//! - [`fuzzing`]: the bodies of the fuzz targets over the configuration, query times and
+//!   query strings.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -34,6 +36,7 @@ pub mod config;
 pub mod demo;
 pub mod driver;
 pub mod event;
+pub mod fuzzing;
 pub mod http;
 pub mod metrics;
 pub mod point;

@@ -3,7 +3,9 @@
 //! A [`Timestamp`] is milliseconds since the Unix epoch (UTC): what SQLite stores and sorts,
 //! what the API prints as RFC 3339 (`2026-11-03T08:15:02.125Z`). Query parameters accept RFC
 //! 3339 (`Z` or an offset such as `+01:00`), `now`, or a time relative to now (`-1h`,
-//! `-15m`, `-2d`), so a person can type them in a browser's address bar.
+//! `-15m`, `-2d`), so a person can type them in a browser's address bar. A time given that
+//! way must fall in the years 1970 to 9999 ([`Timestamp::MIN`] to [`Timestamp::MAX`]), the
+//! range RFC 3339 printing covers.
 
 use std::fmt;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
@@ -15,6 +17,11 @@ use serde::{Serialize, Serializer};
 pub struct Timestamp(pub i64);
 
 impl Timestamp {
+    /// The earliest time a query may name: 1970-01-01T00:00:00.000Z.
+    pub const MIN: Timestamp = Timestamp(0);
+    /// The latest time a query may name: 9999-12-31T23:59:59.999Z.
+    pub const MAX: Timestamp = Timestamp(253_402_300_799_999);
+
     /// The current wall-clock time.
     pub fn now() -> Self {
         Self::from_system(SystemTime::now())
@@ -54,27 +61,50 @@ impl Timestamp {
     }
 
     /// Parses a time given by a person or a program, relative to `now`: RFC 3339, `now`, or
-    /// `-<duration>` such as `-1h`, `-90s`, `-2d`.
+    /// `-<duration>` such as `-1h`, `-90s`, `-2d`. A time before 1970 or after 9999 is
+    /// refused, whichever way it was written.
     pub fn parse_relative(text: &str, now: Timestamp) -> Result<Self, TimeError> {
         let text = text.trim();
-        if text.eq_ignore_ascii_case("now") {
-            return Ok(now);
-        }
-        if let Some(ago) = text.strip_prefix('-') {
-            let d = humantime::parse_duration(ago.trim()).map_err(|e| TimeError {
+        let time = if text.eq_ignore_ascii_case("now") {
+            now
+        } else if let Some(ago) = text.strip_prefix('-') {
+            let d = humantime::parse_duration(ago.trim()).map_err(|e| TimeError::Malformed {
                 text: text.to_owned(),
                 reason: e.to_string(),
             })?;
-            return Ok(now.minus(d));
+            now.minus(d)
+        } else {
+            parse_rfc3339(text)?
+        };
+        if time < Self::MIN {
+            return Err(TimeError::BeforeEpoch {
+                text: text.to_owned(),
+            });
         }
-        parse_rfc3339(text)
+        if time > Self::MAX {
+            return Err(TimeError::AfterYear9999 {
+                text: text.to_owned(),
+            });
+        }
+        Ok(time)
+    }
+
+    /// Whether RFC 3339 can print this time: the years 1970 to 9999.
+    pub fn is_printable(self) -> bool {
+        (Self::MIN..=Self::MAX).contains(&self)
     }
 }
 
 impl fmt::Display for Timestamp {
-    /// RFC 3339 in UTC with milliseconds.
+    /// RFC 3339 in UTC with milliseconds. A time outside the years 1970 to 9999, which no
+    /// query can name but arithmetic can reach, prints as its milliseconds from the epoch
+    /// (`-3600000 ms from 1970-01-01T00:00:00Z`) instead of panicking in the formatter.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", humantime::format_rfc3339_millis(self.to_system()))
+        if self.is_printable() {
+            write!(f, "{}", humantime::format_rfc3339_millis(self.to_system()))
+        } else {
+            write!(f, "{} ms from 1970-01-01T00:00:00Z", self.0)
+        }
     }
 }
 
@@ -84,16 +114,42 @@ impl Serialize for Timestamp {
     }
 }
 
-/// A time the gateway could not read.
+/// A time the gateway could not read, or one outside the years it serves.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error(
-    "{text:?} is not a time ({reason}); write RFC 3339 like 2026-11-03T08:00:00Z, `now`, or a time relative to now like -1h or -15m"
-)]
-pub struct TimeError {
+pub enum TimeError {
+    /// The text is not a time in any accepted form.
+    #[error(
+        "{text:?} is not a time ({reason}); write RFC 3339 like 2026-11-03T08:00:00Z, `now`, or a time relative to now like -1h or -15m"
+    )]
+    Malformed {
+        /// The text given.
+        text: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The time is before 1970-01-01T00:00:00Z.
+    #[error("{text} is before 1970-01-01")]
+    BeforeEpoch {
+        /// The text given.
+        text: String,
+    },
+    /// The time is after 9999-12-31T23:59:59.999Z.
+    #[error("{text} is after 9999-12-31")]
+    AfterYear9999 {
+        /// The text given.
+        text: String,
+    },
+}
+
+impl TimeError {
     /// The text given.
-    pub text: String,
-    /// What is wrong with it.
-    pub reason: String,
+    pub fn text(&self) -> &str {
+        match self {
+            TimeError::Malformed { text, .. }
+            | TimeError::BeforeEpoch { text }
+            | TimeError::AfterYear9999 { text } => text,
+        }
+    }
 }
 
 /// Milliseconds in `d`, saturating.
@@ -103,7 +159,7 @@ pub fn duration_millis(d: Duration) -> i64 {
 
 /// Parses RFC 3339 with `Z` or a numeric offset (`+01:00`, `-05:30`).
 fn parse_rfc3339(text: &str) -> Result<Timestamp, TimeError> {
-    let err = |reason: &str| TimeError {
+    let err = |reason: &str| TimeError::Malformed {
         text: text.to_owned(),
         reason: reason.to_owned(),
     };
@@ -126,7 +182,7 @@ fn parse_rfc3339(text: &str) -> Result<Timestamp, TimeError> {
     };
     let time = humantime::parse_rfc3339_weak(&local).map_err(|e| err(&e.to_string()))?;
     let utc = Timestamp::from_system(time);
-    Ok(Timestamp(utc.0 - offset_minutes * 60_000))
+    Ok(Timestamp(utc.0.saturating_sub(offset_minutes * 60_000)))
 }
 
 #[cfg(test)]
@@ -170,9 +226,61 @@ mod tests {
     #[test]
     fn a_bad_time_names_the_text_and_the_accepted_forms() {
         let err = Timestamp::parse_relative("yesterday", Timestamp(0)).unwrap_err();
-        assert_eq!(err.text, "yesterday");
+        assert_eq!(err.text(), "yesterday");
         assert!(err.to_string().contains("-1h"), "{err}");
         assert!(Timestamp::parse_relative("-1 fortnight", Timestamp(0)).is_err());
+    }
+
+    #[test]
+    fn a_relative_time_before_1970_is_refused_not_a_panic() {
+        let now = Timestamp(1_793_692_800_000);
+        let err = Timestamp::parse_relative("-100000d", now).unwrap_err();
+        assert_eq!(
+            err,
+            TimeError::BeforeEpoch {
+                text: "-100000d".into()
+            }
+        );
+        assert_eq!(err.to_string(), "-100000d is before 1970-01-01");
+        assert!(Timestamp::parse_relative("-1ms", Timestamp::MIN).is_err());
+        assert_eq!(
+            Timestamp::parse_relative("-0s", Timestamp::MIN),
+            Ok(Timestamp::MIN)
+        );
+    }
+
+    #[test]
+    fn an_offset_cannot_carry_a_time_outside_1970_to_9999() {
+        let now = Timestamp(0);
+        assert!(matches!(
+            Timestamp::parse_relative("1970-01-01T00:00:00+00:01", now),
+            Err(TimeError::BeforeEpoch { .. })
+        ));
+        assert!(matches!(
+            Timestamp::parse_relative("9999-12-31T23:59:59-00:01", now),
+            Err(TimeError::AfterYear9999 { .. })
+        ));
+        assert_eq!(
+            Timestamp::parse_relative("9999-12-31T23:59:59.999Z", now),
+            Ok(Timestamp::MAX)
+        );
+        assert_eq!(
+            Timestamp::parse_relative("1970-01-01T01:00:00+01:00", now),
+            Ok(Timestamp::MIN)
+        );
+    }
+
+    #[test]
+    fn a_timestamp_outside_1970_to_9999_prints_as_milliseconds_instead_of_panicking() {
+        assert_eq!(
+            Timestamp(-3_600_000).to_string(),
+            "-3600000 ms from 1970-01-01T00:00:00Z"
+        );
+        assert_eq!(Timestamp::MAX.to_string(), "9999-12-31T23:59:59.999Z");
+        assert_eq!(
+            Timestamp(i64::MAX).to_string(),
+            format!("{} ms from 1970-01-01T00:00:00Z", i64::MAX)
+        );
     }
 
     #[test]

@@ -268,7 +268,7 @@ impl From<crate::store::StoreError> for ApiError {
     }
 }
 
-type ApiResult<T> = Result<T, ApiError>;
+pub(crate) type ApiResult<T> = Result<T, ApiError>;
 
 async fn no_route(method: Method, uri: Uri) -> ApiError {
     ApiError::not_found(format!(
@@ -362,11 +362,19 @@ fn unknown_device(cell: &Cell, id: &str) -> ApiError {
 /// Query of `/api/history`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct HistoryQuery {
+pub(crate) struct HistoryQuery {
     point: Option<String>,
     from: Option<String>,
     to: Option<String>,
     step: Option<String>,
+}
+
+/// The time range and step a history query asks for, checked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct HistoryRange {
+    pub(crate) from: Timestamp,
+    pub(crate) to: Timestamp,
+    pub(crate) step: Option<Duration>,
 }
 
 fn parse_time(name: &str, text: Option<&str>, now: Timestamp) -> ApiResult<Option<Timestamp>> {
@@ -375,15 +383,69 @@ fn parse_time(name: &str, text: Option<&str>, now: Timestamp) -> ApiResult<Optio
         .map_err(|e| ApiError::bad_request(format!("{name}: {e}")))
 }
 
+/// The point a history query names, as written (whether the cell has it is the handler's
+/// question).
+pub(crate) fn history_point(q: &HistoryQuery) -> ApiResult<PointId> {
+    let point = q.point.as_deref().ok_or_else(|| {
+        ApiError::bad_request("give the point: /api/history?point=jbc1.air_temperature&from=-1h")
+    })?;
+    PointId::parse(point).map_err(|e| ApiError::bad_request(e.to_string()))
+}
+
+/// The range of a history query at `now`: `to` defaults to now, `from` to an hour before
+/// `to` (not before 1970), and `from` must be before `to`.
+pub(crate) fn history_range(q: &HistoryQuery, now: Timestamp) -> ApiResult<HistoryRange> {
+    let to = parse_time("to", q.to.as_deref(), now)?.unwrap_or(now);
+    let from = parse_time("from", q.from.as_deref(), now)?
+        .unwrap_or(to.minus(DEFAULT_HISTORY).max(Timestamp::MIN));
+    if from >= to {
+        return Err(ApiError::bad_request(format!(
+            "from ({from}) must be before to ({to})"
+        )));
+    }
+    let step = q.step.as_deref().map(parse_step).transpose()?;
+    if let Some(step) = step {
+        check_buckets(from, to, step)?;
+    }
+    Ok(HistoryRange { from, to, step })
+}
+
+/// Refuses a step that would cut `from`..`to` into more than [`MAX_BUCKETS`] buckets,
+/// naming the smallest step that would do.
+fn check_buckets(from: Timestamp, to: Timestamp, step: Duration) -> ApiResult<()> {
+    let span = u128::try_from(to.millis().saturating_sub(from.millis())).unwrap_or(0);
+    let buckets = span.div_ceil(step.as_millis().max(1));
+    if buckets <= MAX_BUCKETS as u128 {
+        return Ok(());
+    }
+    let least = Duration::from_millis(
+        u64::try_from(span.div_ceil(MAX_BUCKETS as u128)).unwrap_or(u64::MAX),
+    );
+    Err(ApiError::bad_request(format!(
+        "from {from} to {to} in steps of {} would be {buckets} buckets; the most is \
+         {MAX_BUCKETS}: use a step of {} or more, or a shorter span",
+        humantime::format_duration(step),
+        humantime::format_duration(round_up_to_second(least))
+    )))
+}
+
+/// A history step: a duration of at least 1 ms.
+pub(crate) fn parse_step(text: &str) -> ApiResult<Duration> {
+    match humantime::parse_duration(text.trim()) {
+        Ok(d) if d >= Duration::from_millis(1) => Ok(d),
+        Ok(_) => Err(ApiError::bad_request("step must be at least 1ms")),
+        Err(e) => Err(ApiError::bad_request(format!(
+            "step {text:?} is not a duration ({e}); write e.g. 10s, 1m or 1h"
+        ))),
+    }
+}
+
 async fn history(
     State(s): State<AppState>,
     query: Result<Query<HistoryQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
     let Query(q) = query?;
-    let point = q.point.ok_or_else(|| {
-        ApiError::bad_request("give the point: /api/history?point=jbc1.air_temperature&from=-1h")
-    })?;
-    let point = PointId::parse(&point).map_err(|e| ApiError::bad_request(e.to_string()))?;
+    let point = history_point(&q)?;
     if s.cell.point(&point).is_none() {
         if s.cell.device_entry(point.device()).is_none() {
             return Err(unknown_device(&s.cell, point.device()));
@@ -395,40 +457,7 @@ async fn history(
             point.device()
         )));
     }
-    let now = Timestamp::now();
-    let to = parse_time("to", q.to.as_deref(), now)?.unwrap_or(now);
-    let from = parse_time("from", q.from.as_deref(), now)?.unwrap_or(to.minus(DEFAULT_HISTORY));
-    if from >= to {
-        return Err(ApiError::bad_request(format!(
-            "from ({from}) must be before to ({to})"
-        )));
-    }
-    let step = q
-        .step
-        .as_deref()
-        .map(|text| match humantime::parse_duration(text.trim()) {
-            Ok(d) if d >= Duration::from_millis(1) => Ok(d),
-            Ok(_) => Err(ApiError::bad_request("step must be at least 1ms")),
-            Err(e) => Err(ApiError::bad_request(format!(
-                "step {text:?} is not a duration ({e}); write e.g. 10s, 1m or 1h"
-            ))),
-        })
-        .transpose()?;
-    if let Some(step) = step {
-        let span = u128::try_from(to.millis().saturating_sub(from.millis())).unwrap_or(0);
-        let buckets = span.div_ceil(step.as_millis().max(1));
-        if buckets > MAX_BUCKETS as u128 {
-            let least = Duration::from_millis(
-                u64::try_from(span.div_ceil(MAX_BUCKETS as u128)).unwrap_or(u64::MAX),
-            );
-            return Err(ApiError::bad_request(format!(
-                "from {from} to {to} in steps of {} would be {buckets} buckets; the most is \
-                 {MAX_BUCKETS}: use a step of {} or more, or a shorter span",
-                humantime::format_duration(step),
-                humantime::format_duration(round_up_to_second(least))
-            )));
-        }
-    }
+    let HistoryRange { from, to, step } = history_range(&q, Timestamp::now())?;
     let history = run_query(&s, move |store| store.history(&point, from, to, step)).await?;
     Ok(Json(history).into_response())
 }
@@ -436,7 +465,7 @@ async fn history(
 /// Query of `/api/events`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct EventsQuery {
+pub(crate) struct EventsQuery {
     from: Option<String>,
     to: Option<String>,
     device: Option<String>,
@@ -473,7 +502,7 @@ fn round_up_to_second(d: Duration) -> Duration {
     Duration::from_secs(d.as_secs() + u64::from(d.subsec_nanos() > 0)).max(Duration::from_secs(1))
 }
 
-fn check_limit(limit: Option<usize>) -> ApiResult<usize> {
+pub(crate) fn check_limit(limit: Option<usize>) -> ApiResult<usize> {
     match limit {
         None => Ok(100),
         Some(n) if (1..=MAX_LIMIT).contains(&n) => Ok(n),
@@ -483,17 +512,9 @@ fn check_limit(limit: Option<usize>) -> ApiResult<usize> {
     }
 }
 
-async fn events(
-    State(s): State<AppState>,
-    query: Result<Query<EventsQuery>, QueryRejection>,
-) -> ApiResult<Response> {
-    let Query(q) = query?;
-    let now = Timestamp::now();
-    if let Some(device) = &q.device
-        && s.cell.device_entry(device).is_none()
-    {
-        return Err(unknown_device(&s.cell, device));
-    }
+/// The filter an events query asks for at `now` (whether the cell has the device is the
+/// handler's question, asked first).
+pub(crate) fn events_filter(q: EventsQuery, now: Timestamp) -> ApiResult<EventFilter> {
     let kind = q
         .kind
         .as_deref()
@@ -506,13 +527,26 @@ async fn events(
             })
         })
         .transpose()?;
-    let filter = EventFilter {
+    Ok(EventFilter {
         from: parse_time("from", q.from.as_deref(), now)?,
         to: parse_time("to", q.to.as_deref(), now)?,
         device: q.device,
         kind,
         limit: check_limit(q.limit)?,
-    };
+    })
+}
+
+async fn events(
+    State(s): State<AppState>,
+    query: Result<Query<EventsQuery>, QueryRejection>,
+) -> ApiResult<Response> {
+    let Query(q) = query?;
+    if let Some(device) = &q.device
+        && s.cell.device_entry(device).is_none()
+    {
+        return Err(unknown_device(&s.cell, device));
+    }
+    let filter = events_filter(q, Timestamp::now())?;
     let events = run_query(&s, move |store| store.events(&filter)).await?;
     Ok(Json(json!({ "events": events })).into_response())
 }
@@ -520,9 +554,9 @@ async fn events(
 /// Query of `/api/audit`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct AuditQuery {
-    device: Option<String>,
-    limit: Option<usize>,
+pub(crate) struct AuditQuery {
+    pub(crate) device: Option<String>,
+    pub(crate) limit: Option<usize>,
 }
 
 async fn audit(

@@ -232,6 +232,74 @@ async fn malformed_queries_are_400_and_say_what_is_wrong() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn a_history_query_from_before_1970_is_refused_not_a_panic() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    let (status, body) = get(
+        &app,
+        "/api/history?point=jbc1.air_temperature&from=-100000d",
+    )
+    .await;
+    assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
+    assert_eq!(error_of(&body), "from: -100000d is before 1970-01-01");
+}
+
+#[tokio::test(start_paused = true)]
+async fn every_time_parameter_outside_1970_to_9999_is_a_400_naming_the_parameter() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    for (uri, expected) in [
+        (
+            "/api/history?point=jbc1.air_temperature&to=-100000d",
+            "to: -100000d is before 1970-01-01",
+        ),
+        (
+            "/api/history?point=jbc1.air_temperature&from=1970-01-01T00:00:00%2B01:00",
+            "from: 1970-01-01T00:00:00+01:00 is before 1970-01-01",
+        ),
+        (
+            "/api/history?point=jbc1.air_temperature&to=9999-12-31T23:59:59-01:00",
+            "to: 9999-12-31T23:59:59-01:00 is after 9999-12-31",
+        ),
+        (
+            "/api/events?from=-100000d",
+            "from: -100000d is before 1970-01-01",
+        ),
+        (
+            "/api/events?to=-100000d",
+            "to: -100000d is before 1970-01-01",
+        ),
+    ] {
+        let (status, body) = get(&app, uri).await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{uri}: {body}");
+        assert_eq!(error_of(&body), expected, "{uri}");
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_history_query_ending_at_the_epoch_is_refused_without_reaching_before_it() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    // Without `from`, the range would start an hour before `to`: before 1970.
+    let (status, body) = get(
+        &app,
+        "/api/history?point=jbc1.air_temperature&to=1970-01-01T00:00:00Z",
+    )
+    .await;
+    assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
+    assert_eq!(
+        error_of(&body),
+        "from (1970-01-01T00:00:00.000Z) must be before to (1970-01-01T00:00:00.000Z)"
+    );
+    let (status, body) = get(
+        &app,
+        "/api/history?point=jbc1.air_temperature&to=1970-01-01T00:30:00Z",
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+}
+
+#[tokio::test(start_paused = true)]
 async fn history_gives_changes_and_buckets_and_events_list_what_happened() {
     let rig = rig(1);
     let app = app(&rig, true);
