@@ -63,7 +63,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use gateway::cell::Cell;
 use gateway::driver::ErrorKind;
-use gateway::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
+use gateway::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollResult};
 use gateway::point::Quality;
 use gateway::{Gateway, ServeOptions};
 use jbc::code::{Code, Port, ToolError};
@@ -737,18 +737,9 @@ impl Counters {
                     .get(),
             );
             for device in &line.devices {
-                let poll = |result| {
-                    metrics
-                        .polls
-                        .get_or_create(&PollLabels {
-                            line: line.name.clone(),
-                            device: device.to_string(),
-                            result,
-                        })
-                        .get()
-                };
-                c.polls_ok += poll(PollResult::ok);
-                c.polls_failed += poll(PollResult::error);
+                c.polls_ok += metrics.poll_count(&line.name, device.as_str(), PollResult::ok);
+                c.polls_failed +=
+                    metrics.poll_count(&line.name, device.as_str(), PollResult::error);
                 c.timeouts += metrics
                     .timeouts
                     .get_or_create(&DeviceLabels {

@@ -124,6 +124,17 @@ impl Default for Metrics {
 }
 
 impl Metrics {
+    /// Polls of `device` on `line` that ended with `result`, so far.
+    pub fn poll_count(&self, line: &str, device: &str, result: PollResult) -> u64 {
+        self.polls
+            .get_or_create(&PollLabels {
+                line: line.to_owned(),
+                device: device.to_owned(),
+                result,
+            })
+            .get()
+    }
+
     /// Registers every metric.
     pub fn new() -> Self {
         let mut registry = Registry::with_prefix("cellbus");

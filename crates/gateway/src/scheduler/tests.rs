@@ -14,14 +14,7 @@ use crate::store::{EventFilter, Series};
 use crate::testing::rig;
 
 fn polls(cell: &Cell, device: &str, result: PollResult) -> u64 {
-    cell.metrics()
-        .polls
-        .get_or_create(&PollLabels {
-            line: "bench".into(),
-            device: device.into(),
-            result,
-        })
-        .get()
+    cell.metrics().poll_count("bench", device, result)
 }
 
 fn status(cell: &Cell, device: &str) -> DeviceStatus {

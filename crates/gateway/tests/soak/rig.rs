@@ -31,7 +31,7 @@ use gateway::cell::{Cell, LiveMessage};
 use gateway::config::{CellConfig, DeviceConfig, LineConfig};
 use gateway::driver::modbus::{RegisterConfig, RegisterTable};
 use gateway::driver::{DriverConfig, Protocol};
-use gateway::metrics::{Metrics, PollLabels, PollResult};
+use gateway::metrics::{Metrics, PollResult};
 use gateway::point::{DeviceId, PointId, Quality, Value};
 use gateway::scheduler::Opener;
 use gateway::store::{Store, StoreOptions};
@@ -568,18 +568,8 @@ fn polls(cell: &Cell) -> (u64, u64) {
     let mut failed = 0;
     for line in cell.lines() {
         for device in &line.devices {
-            let get = |result| {
-                metrics
-                    .polls
-                    .get_or_create(&PollLabels {
-                        line: line.name.clone(),
-                        device: device.to_string(),
-                        result,
-                    })
-                    .get()
-            };
-            ok += get(PollResult::ok);
-            failed += get(PollResult::error);
+            ok += metrics.poll_count(&line.name, device.as_str(), PollResult::ok);
+            failed += metrics.poll_count(&line.name, device.as_str(), PollResult::error);
         }
     }
     (ok, failed)
