@@ -463,7 +463,7 @@ fn a_damaged_request_announcing_a_long_frame_does_not_stall_the_simulator() {
     // report): after the line's silence the simulator drops it and answers the next read.
     let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0"]);
     let stuck = [0x01, 0x10, 0x00, 0x00, 0x00, 0x7B, 0xF6];
-    let reply = read_after_garbage(&sim, &stuck, Duration::from_millis(50));
+    let reply = read_after_garbage(&sim, &stuck, Duration::from_millis(300));
     assert_eq!(
         reply.get(..3),
         Some(&[0x01, 0x03, 0x02][..]),
@@ -473,10 +473,10 @@ fn a_damaged_request_announcing_a_long_frame_does_not_stall_the_simulator() {
 
 #[test]
 fn a_frame_gap_the_user_chose_keeps_a_half_frame_until_it_passes() {
-    // With a 10 s gap, the read sent 50 ms later is taken as the long frame's data.
+    // With a 10 s gap, the read sent 300 ms later is taken as the long frame's data.
     let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0", "--frame-gap", "10s"]);
     let stuck = [0x01, 0x10, 0x00, 0x00, 0x00, 0x7B, 0xF6];
-    let reply = read_after_garbage(&sim, &stuck, Duration::from_millis(50));
+    let reply = read_after_garbage(&sim, &stuck, Duration::from_millis(300));
     assert!(reply.is_empty(), "answered {reply:02X?}");
 }
 
