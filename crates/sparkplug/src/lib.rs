@@ -1,0 +1,28 @@
+//! Sparkplug B 3.0 for cellbus, sans I/O: the wire formats and the edge node's
+//! sequencing rules, testable without a broker. The gateway wires it to an MQTT
+//! client; this crate knows nothing of MQTT I/O, tokio or the gateway.
+//!
+//! - [`topic`][]: [`Topic`] (`spBv1.0/{group}/{type}/{edge_node}[/{device}]`, STATE)
+//!   with ids that cannot be invalid ([`Id`]).
+//! - [`proto`][]: the protobuf payload, field for field as `proto/sparkplug_b.proto`.
+//! - [`metric`][]: [`DataType`], [`MetricValue`], [`Quality`] and [`Reading`],
+//!   [`MetricSpec`] (a birth's description) and the conversions to protobuf.
+//! - [`node`][]: [`EdgeNode`], the edge node's state machine: Will, births, data,
+//!   deaths, `seq` and `bdSeq`, aliases, commands.
+//! - [`state`][]: a host application's STATE JSON.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod metric;
+pub mod node;
+pub mod proto;
+pub mod state;
+pub mod topic;
+
+pub use metric::{
+    DataType, MetricName, MetricSpec, MetricValue, Quality, Reading, Sample, Timestamp, ValueError,
+    Writable, WriteRange,
+};
+pub use node::{BdSeq, Command, CommandError, Delivery, EdgeNode, NodeError, Publish, Qos};
+pub use state::HostState;
+pub use topic::{Id, IdError, MessageKind, Topic, TopicError};

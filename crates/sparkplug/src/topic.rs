@@ -1,0 +1,254 @@
+//! Sparkplug topics: `spBv1.0/{group}/{message_type}/{edge_node}[/{device}]` and the
+//! host's `spBv1.0/STATE/{host}`, typed so that a node message cannot name a device
+//! and a device message cannot lack one.
+
+use std::fmt;
+use std::str::FromStr;
+
+/// The first level of every Sparkplug B topic.
+pub const NAMESPACE: &str = "spBv1.0";
+/// The second level of a host application's STATE topic.
+pub const STATE: &str = "STATE";
+
+/// The characters an id must not contain: MQTT's level separator and wildcards.
+const FORBIDDEN: [char; 3] = ['/', '+', '#'];
+
+/// A group, edge node, device or host id: non-empty UTF-8 without `/`, `+` or `#`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Id(String);
+
+/// Why a string is not an [`Id`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum IdError {
+    /// The id is the empty string.
+    #[error("an id must not be empty")]
+    Empty,
+    /// The id contains a character MQTT reserves.
+    #[error("the id {id:?} contains {character:?}, which MQTT topics reserve")]
+    Forbidden {
+        /// The id as given.
+        id: String,
+        /// The first reserved character in it.
+        character: char,
+    },
+}
+
+impl Id {
+    /// Checks `id` and keeps it.
+    pub fn new(id: impl Into<String>) -> Result<Self, IdError> {
+        let id = id.into();
+        if id.is_empty() {
+            return Err(IdError::Empty);
+        }
+        if let Some(character) = id.chars().find(|c| FORBIDDEN.contains(c)) {
+            return Err(IdError::Forbidden { id, character });
+        }
+        Ok(Self(id))
+    }
+
+    /// The id as text.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Display for Id {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl FromStr for Id {
+    type Err = IdError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::new(s)
+    }
+}
+
+/// What a message is about; the topic's `N`/`D` prefix says whether it is the edge
+/// node's own or one of its devices'.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MessageKind {
+    /// `NBIRTH` / `DBIRTH`: every metric with its type and value.
+    Birth,
+    /// `NDATA` / `DDATA`: changed metrics.
+    Data,
+    /// `NDEATH` / `DDEATH`: gone offline.
+    Death,
+    /// `NCMD` / `DCMD`: a host's command.
+    Command,
+}
+
+impl MessageKind {
+    fn suffix(self) -> &'static str {
+        match self {
+            Self::Birth => "BIRTH",
+            Self::Data => "DATA",
+            Self::Death => "DEATH",
+            Self::Command => "CMD",
+        }
+    }
+
+    fn from_suffix(s: &str) -> Option<Self> {
+        match s {
+            "BIRTH" => Some(Self::Birth),
+            "DATA" => Some(Self::Data),
+            "DEATH" => Some(Self::Death),
+            "CMD" => Some(Self::Command),
+            _ => None,
+        }
+    }
+}
+
+/// A Sparkplug B topic.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Topic {
+    /// `spBv1.0/{group}/N{kind}/{edge_node}`.
+    Node {
+        /// The group id.
+        group: Id,
+        /// BIRTH, DATA, DEATH or CMD.
+        kind: MessageKind,
+        /// The edge node id.
+        edge_node: Id,
+    },
+    /// `spBv1.0/{group}/D{kind}/{edge_node}/{device}`.
+    Device {
+        /// The group id.
+        group: Id,
+        /// BIRTH, DATA, DEATH or CMD.
+        kind: MessageKind,
+        /// The edge node id.
+        edge_node: Id,
+        /// The device id.
+        device: Id,
+    },
+    /// `spBv1.0/STATE/{host}`: a host application's online state.
+    State {
+        /// The host application's id.
+        host: Id,
+    },
+}
+
+impl Topic {
+    /// The message type as the topic spells it (`NBIRTH`, `DCMD`, `STATE`).
+    pub fn message_type(&self) -> String {
+        match self {
+            Self::Node { kind, .. } => format!("N{}", kind.suffix()),
+            Self::Device { kind, .. } => format!("D{}", kind.suffix()),
+            Self::State { .. } => STATE.to_owned(),
+        }
+    }
+}
+
+impl fmt::Display for Topic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Node {
+                group, edge_node, ..
+            } => write!(f, "{NAMESPACE}/{group}/{}/{edge_node}", self.message_type()),
+            Self::Device {
+                group,
+                edge_node,
+                device,
+                ..
+            } => write!(
+                f,
+                "{NAMESPACE}/{group}/{}/{edge_node}/{device}",
+                self.message_type()
+            ),
+            Self::State { host } => write!(f, "{NAMESPACE}/{STATE}/{host}"),
+        }
+    }
+}
+
+/// Why a string is not a Sparkplug B topic.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TopicError {
+    /// The first level is not `spBv1.0`.
+    #[error("a Sparkplug B topic starts with {NAMESPACE:?}, not {found:?}")]
+    Namespace {
+        /// The first level as given.
+        found: String,
+    },
+    /// The message type is none of the eight, nor STATE.
+    #[error(
+        "{found:?} is not a Sparkplug message type (NBIRTH, NDATA, NDEATH, NCMD, DBIRTH, DDATA, DDEATH, DCMD)"
+    )]
+    MessageType {
+        /// The level as given.
+        found: String,
+    },
+    /// The topic has too few or too many levels for its message type.
+    #[error("a {message_type} topic has {expected} levels, this one has {found}")]
+    Levels {
+        /// The message type read from the topic.
+        message_type: String,
+        /// How many levels it needs.
+        expected: usize,
+        /// How many it has.
+        found: usize,
+    },
+    /// An id level is not a valid id.
+    #[error("the {level} is not valid: {error}")]
+    Id {
+        /// Which id: "group id", "edge node id", "device id" or "host id".
+        level: &'static str,
+        /// What is wrong with it.
+        error: IdError,
+    },
+}
+
+impl FromStr for Topic {
+    type Err = TopicError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let levels: Vec<&str> = s.split('/').collect();
+        let id = |level: &'static str, text: &str| {
+            Id::new(text).map_err(|error| TopicError::Id { level, error })
+        };
+        let namespace = levels.first().copied().unwrap_or_default();
+        if namespace != NAMESPACE {
+            return Err(TopicError::Namespace {
+                found: namespace.to_owned(),
+            });
+        }
+        let levels_error = |message_type: &str, expected| TopicError::Levels {
+            message_type: message_type.to_owned(),
+            expected,
+            found: levels.len(),
+        };
+        if levels.get(1) == Some(&STATE) && levels.len() <= 3 {
+            let [_, _, host] = levels[..] else {
+                return Err(levels_error(STATE, 3));
+            };
+            return Ok(Self::State {
+                host: id("host id", host)?,
+            });
+        }
+        let Some(&message_type) = levels.get(2) else {
+            return Err(levels_error("Sparkplug", 4));
+        };
+        let parsed = message_type
+            .split_at_checked(1)
+            .and_then(|(prefix, suffix)| Some((prefix, MessageKind::from_suffix(suffix)?)));
+        match (parsed, &levels[..]) {
+            (Some(("N", kind)), [_, group, _, edge_node]) => Ok(Self::Node {
+                group: id("group id", group)?,
+                kind,
+                edge_node: id("edge node id", edge_node)?,
+            }),
+            (Some(("N", _)), _) => Err(levels_error(message_type, 4)),
+            (Some(("D", kind)), [_, group, _, edge_node, device]) => Ok(Self::Device {
+                group: id("group id", group)?,
+                kind,
+                edge_node: id("edge node id", edge_node)?,
+                device: id("device id", device)?,
+            }),
+            (Some(("D", _)), _) => Err(levels_error(message_type, 5)),
+            _ => Err(TopicError::MessageType {
+                found: message_type.to_owned(),
+            }),
+        }
+    }
+}
