@@ -23,6 +23,8 @@
 //! `writable`, `writeMin`, `writeMax`.
 
 pub mod mqtt;
+#[cfg(test)]
+mod tests;
 
 use sparkplug::{DataType, MetricName, MetricSpec, MetricValue, Sample, Writable, WriteRange};
 
@@ -110,7 +112,7 @@ fn metric_value(kind: &PointKind, value: &Value) -> Option<MetricValue> {
 }
 
 #[cfg(test)]
-mod tests {
+mod mapping_tests {
     use super::*;
     use crate::point::{DeviceId, EnumState, PointId};
 
