@@ -54,7 +54,7 @@ async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answe
     rig.plugged[1].store(false, Ordering::SeqCst);
     let mut nulls = 0;
     loop {
-        let m = sub.next_where("jbc2's DDEATH", LIMIT, |m| of_jbc2(m)).await;
+        let m = sub.next_where("jbc2's DDEATH", LIMIT, of_jbc2).await;
         match m.kind() {
             "DDEATH" => break,
             "DDATA" => {
