@@ -216,9 +216,13 @@ impl Link {
 
     async fn read_bd_seq(&self) -> anyhow::Result<BdSeq> {
         let dir = self.data_dir.clone();
-        let stored =
-            tokio::task::spawn_blocking(move || crate::store::read_setting(&dir, BD_SEQ_KEY))
-                .await??;
+        let store = self.cell.store().clone();
+        let stored = tokio::task::spawn_blocking(move || {
+            // The writer's open moves a damaged file aside: wait for it (bounded) first.
+            let _ = store.wait_open();
+            crate::store::read_setting(&dir, BD_SEQ_KEY)
+        })
+        .await??;
         Ok(BdSeq::new(
             u8::try_from(stored.unwrap_or(0).rem_euclid(256)).unwrap_or(0),
         ))

@@ -1,6 +1,8 @@
 //! Small values that must survive a restart (the Sparkplug `bdSeq`), in the `settings`
 //! table of the history database. Read and written on their own short connection, on the
-//! caller's thread: they are few and written once per MQTT connection.
+//! caller's thread: they are few and written once per MQTT connection. Callers wait for
+//! the writer's open first ([`StoreHandle::wait_open`](super::StoreHandle::wait_open)), so
+//! a damaged file is moved aside before a setting touches it.
 
 use std::path::Path;
 
@@ -44,6 +46,10 @@ fn connect(dir: &Path) -> Result<(std::path::PathBuf, Connection), StoreError> {
         source,
     };
     let conn = Connection::open(&path).map_err(sqlite)?;
+    // As the writer's open does: should this connection create the file, it keeps the
+    // incremental vacuum the retention relies on.
+    conn.pragma_update(None, "auto_vacuum", "INCREMENTAL")
+        .map_err(sqlite)?;
     schema::configure(&conn).map_err(sqlite)?;
     conn.execute_batch(CREATE).map_err(sqlite)?;
     Ok((path, conn))
@@ -60,5 +66,16 @@ mod tests {
         write_setting(dir.path(), "mqtt.bd_seq", 7).unwrap();
         write_setting(dir.path(), "mqtt.bd_seq", 8).unwrap();
         assert_eq!(read_setting(dir.path(), "mqtt.bd_seq").unwrap(), Some(8));
+    }
+
+    #[test]
+    fn a_file_the_settings_create_keeps_the_incremental_vacuum() {
+        let dir = tempfile::tempdir().unwrap();
+        write_setting(dir.path(), "mqtt.bd_seq", 1).unwrap();
+        let conn = Connection::open(dir.path().join(DB_FILE)).unwrap();
+        let mode: i64 = conn
+            .pragma_query_value(None, "auto_vacuum", |r| r.get(0))
+            .unwrap();
+        assert_eq!(mode, 2, "INCREMENTAL");
     }
 }
