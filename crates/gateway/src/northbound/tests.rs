@@ -5,11 +5,14 @@
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+use prost::Message as _;
 use sparkplug::Quality as SpQuality;
+use sparkplug::proto::{Metric, Payload, metric::Value as SpValue};
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 use tokio::sync::watch;
 
 use crate::config::MqttConfig;
+use crate::point::Value;
 use crate::testing::rig;
 
 /// Generous: a loaded 2-core machine, and a device's backoff of up to 10 s.
@@ -88,4 +91,97 @@ async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answe
     tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
     sub.next_where("the NDEATH at the stop", LIMIT, |m| m.kind() == "NDEATH")
         .await;
+}
+
+fn command(metric: &str, datatype: sparkplug::DataType, value: SpValue) -> Vec<u8> {
+    Payload {
+        timestamp: Some(0),
+        metrics: vec![Metric {
+            name: Some(metric.into()),
+            datatype: Some(datatype.code()),
+            value: Some(value),
+            ..Metric::default()
+        }],
+        ..Payload::default()
+    }
+    .encode_to_vec()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dcmd_write_is_not_carried_out_in_this_version() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(1);
+    let (stop_tx, stop) = watch::channel(false);
+    let task = super::mqtt::start(
+        rig.cell.clone(),
+        config(&broker),
+        rig.dir.path().join("mqtt"),
+        stop,
+    )
+    .unwrap();
+    // A writable number once it has been read.
+    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
+        .await;
+    let device = rig.cell.device("jbc1").unwrap();
+    let (name, old, target) = device
+        .points
+        .iter()
+        .find_map(|p| {
+            let range = p.writable?;
+            let Some(Value::Number(old)) = p.view.value else {
+                return None;
+            };
+            let target = if old == range.min {
+                range.max
+            } else {
+                range.min
+            };
+            Some((p.view.id.name().to_owned(), old, target))
+        })
+        .expect("a JBC station has a writable number");
+
+    sub.publish(
+        "spBv1.0/rig/DCMD/cell/jbc1",
+        command(
+            &name,
+            sparkplug::DataType::Double,
+            SpValue::DoubleValue(target),
+        ),
+    )
+    .await;
+    // Commands are handled in order: once the rebirth asked after it is out, the DCMD was
+    // handled, and the birth shows the value unchanged.
+    sub.publish(
+        "spBv1.0/rig/NCMD/cell",
+        command(
+            "Node Control/Rebirth",
+            sparkplug::DataType::Boolean,
+            SpValue::BooleanValue(true),
+        ),
+    )
+    .await;
+    sub.next_where("the NBIRTH of the rebirth", LIMIT, |m| m.kind() == "NBIRTH")
+        .await;
+    let birth = sub
+        .next_where("the DBIRTH of jbc1", LIMIT, |m| m.kind() == "DBIRTH")
+        .await;
+    assert_eq!(
+        birth.metric(&name).and_then(|m| m.value.clone()),
+        Some(SpValue::DoubleValue(old)),
+        "{name} unchanged"
+    );
+    assert_eq!(
+        rig.cell
+            .device("jbc1")
+            .unwrap()
+            .points
+            .iter()
+            .find(|p| p.view.id.name() == name)
+            .and_then(|p| p.view.value.clone()),
+        Some(Value::Number(old))
+    );
+
+    stop_tx.send(true).unwrap();
+    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
 }
