@@ -43,6 +43,11 @@ pub struct ServeArgs {
     /// can reach the port reads the cell.
     #[arg(long, value_name = "TOKEN")]
     pub read_token: Option<String>,
+    /// Publish the cell as a Sparkplug B edge node to this MQTT broker
+    /// (mqtt://HOST:PORT; TLS is not built yet). The demo cell publishes as group
+    /// `cellbus`, edge node `demo`; with --config it replaces the [mqtt] table's broker.
+    #[arg(long, value_name = "URL")]
+    pub mqtt: Option<String>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -70,6 +75,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
         allow_writes: args.allow_writes,
         token: args.token,
         read_token: args.read_token,
+        mqtt: args.mqtt,
     };
     gateway::serve(options, shutdown_signal()).await?;
     Ok(ExitCode::SUCCESS)

@@ -3,6 +3,67 @@
 mod common;
 
 use common::{Gateway, run, stderr, stdout};
+use testkit::{Mosquitto, Subscriber};
+
+/// MQTT waits: generous, for a loaded machine.
+const MQTT_LIMIT: std::time::Duration = std::time::Duration::from_secs(60);
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn serve_mqtt_publishes_the_demo_and_a_killed_gateway_leaves_its_will_with_the_births_bd_seq()
+{
+    let broker = Mosquitto::start();
+    let mut node = Subscriber::start(broker.port(), "spBv1.0/cellbus/+/demo").await;
+    let data = tempfile::tempdir().unwrap();
+    let url = broker.url();
+    let gateway = Gateway::start_with(data.path(), &["--mqtt", &url]);
+    let birth = node
+        .next_where("an NBIRTH from cellbus serve --mqtt", MQTT_LIMIT, |m| {
+            m.kind() == "NBIRTH"
+        })
+        .await;
+    let bd_seq = birth.bd_seq().expect("the NBIRTH has a bdSeq");
+
+    // kill -9: no DISCONNECT, so the broker publishes the Will.
+    drop(gateway);
+    let death = node
+        .next_where("the NDEATH Will", MQTT_LIMIT, |m| m.kind() == "NDEATH")
+        .await;
+    assert_eq!(
+        death.bd_seq(),
+        Some(bd_seq),
+        "the Will's bdSeq is the NBIRTH's"
+    );
+
+    // The same data directory: bdSeq moves on.
+    let _gateway = Gateway::start_with(data.path(), &["--mqtt", &url]);
+    let again = node
+        .next_where("an NBIRTH after the restart", MQTT_LIMIT, |m| {
+            m.kind() == "NBIRTH"
+        })
+        .await;
+    let next = again.bd_seq().expect("the NBIRTH has a bdSeq");
+    assert!(
+        next > bd_seq,
+        "bdSeq {next} after the restart, {bd_seq} before"
+    );
+}
+
+#[test]
+fn serve_refuses_an_mqtts_broker_saying_tls_is_not_built_yet() {
+    let data = tempfile::tempdir().unwrap();
+    let output = run(&[
+        "serve",
+        "--listen",
+        "127.0.0.1:0",
+        "--data",
+        data.path().to_str().unwrap(),
+        "--mqtt",
+        "mqtts://127.0.0.1:8883",
+    ]);
+    assert!(!output.status.success());
+    let err = stderr(&output);
+    assert!(err.contains("TLS) is not built yet"), "{err}");
+}
 
 #[test]
 fn serve_without_arguments_runs_the_demo_cell_and_answers_http() {

@@ -36,6 +36,25 @@ pub struct Cell {
     live: broadcast::Sender<LiveMessage>,
     store: StoreHandle,
     metrics: Arc<Metrics>,
+    mqtt: RwLock<Option<MqttLink>>,
+}
+
+/// The northbound MQTT connection as `/healthz` shows it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MqttLink {
+    /// Connected to the broker.
+    Connected,
+    /// Not connected, and why.
+    Disconnected(String),
+}
+
+impl std::fmt::Display for MqttLink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MqttLink::Connected => f.write_str("connected"),
+            MqttLink::Disconnected(why) => write!(f, "disconnected: {why}"),
+        }
+    }
 }
 
 /// One device: what it is and its live state.
@@ -407,6 +426,7 @@ impl Cell {
             live,
             store,
             metrics,
+            mqtt: RwLock::new(None),
         });
         let tasks = plans
             .into_iter()
@@ -478,6 +498,19 @@ impl Cell {
                 state: line.read().clone(),
             })
             .collect()
+    }
+
+    /// The MQTT connection's state; `None` when no broker is configured.
+    pub fn mqtt(&self) -> Option<MqttLink> {
+        self.mqtt
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    /// Records the MQTT connection's state (the northbound task does).
+    pub fn set_mqtt(&self, link: MqttLink) {
+        *self.mqtt.write().unwrap_or_else(PoisonError::into_inner) = Some(link);
     }
 
     /// Follows live changes.

@@ -75,6 +75,96 @@ pub struct CellConfig {
     pub read_token: Option<String>,
     /// The lines, in file order.
     pub lines: Vec<LineConfig>,
+    /// The northbound MQTT (Sparkplug B) connection, if the file has an `[mqtt]` table.
+    pub mqtt: Option<MqttConfig>,
+}
+
+/// Default keep-alive of the MQTT connection.
+pub const DEFAULT_MQTT_KEEP_ALIVE: Duration = Duration::from_secs(30);
+/// Default Sparkplug group id.
+pub const DEFAULT_MQTT_GROUP: &str = "cellbus";
+
+/// The `[mqtt]` table: where the broker is and who the edge node is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MqttConfig {
+    /// The broker's host.
+    pub host: String,
+    /// The broker's port.
+    pub port: u16,
+    /// The Sparkplug group id.
+    pub group_id: String,
+    /// The Sparkplug edge node id.
+    pub edge_node_id: String,
+    /// The MQTT client id.
+    pub client_id: String,
+    /// The user name, if the broker wants one.
+    pub username: Option<String>,
+    /// The environment variable holding the password (never the password itself).
+    pub password_env: Option<String>,
+    /// The MQTT keep-alive.
+    pub keep_alive: Duration,
+}
+
+impl MqttConfig {
+    /// The broker at `url` (`mqtt://host:port`) with every other field at its default and
+    /// the edge node id `edge_node_id`.
+    pub fn for_broker(url: &str, edge_node_id: &str) -> Result<Self, String> {
+        let (host, port) = parse_broker(url)?;
+        Ok(Self {
+            host,
+            port,
+            group_id: DEFAULT_MQTT_GROUP.to_owned(),
+            edge_node_id: edge_node_id.to_owned(),
+            client_id: format!("cellbus-{edge_node_id}"),
+            username: None,
+            password_env: None,
+            keep_alive: DEFAULT_MQTT_KEEP_ALIVE,
+        })
+    }
+}
+
+/// Reads `mqtt://host[:port]` (port 1883 by default). `mqtts://` is refused: TLS is not
+/// built yet.
+pub fn parse_broker(text: &str) -> Result<(String, u16), String> {
+    let url = url::Url::parse(text.trim())
+        .map_err(|e| format!("broker {text:?} is not a URL ({e}); write mqtt://host:1883"))?;
+    match url.scheme() {
+        "mqtt" => {}
+        "mqtts" => {
+            return Err(format!(
+                "broker {text:?}: mqtts:// (TLS) is not built yet; use mqtt:// to a broker on a trusted network"
+            ));
+        }
+        other => {
+            return Err(format!(
+                "broker {text:?} has scheme {other:?}; write mqtt://host:1883"
+            ));
+        }
+    }
+    let host = url
+        .host_str()
+        .filter(|h| !h.is_empty())
+        .ok_or_else(|| format!("broker {text:?} names no host; write mqtt://host:1883"))?;
+    if url.path().len() > 1 || url.query().is_some() || !url.username().is_empty() {
+        return Err(format!(
+            "broker {text:?}: write only mqtt://host:port (user name and password go in username and password_env)"
+        ));
+    }
+    let host = host
+        .trim_start_matches('[')
+        .trim_end_matches(']')
+        .to_owned();
+    Ok((host, url.port().unwrap_or(1883)))
+}
+
+/// This machine's host name as a Sparkplug id, else `cellbus`.
+pub fn default_edge_node_id() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map(|h| h.trim().to_owned())
+        .filter(|h| sparkplug::Id::new(h.as_str()).is_ok())
+        .unwrap_or_else(|| "cellbus".to_owned())
 }
 
 /// One physical line (a serial port, a serial server's TCP port).
@@ -306,11 +396,71 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
             ));
         }
     }
+    let mqtt = raw.mqtt.map(|m| check_mqtt(m, &at)).transpose()?;
     Ok(CellConfig {
         source: Some(path.to_owned()),
         token: raw.token.map(Spanned::into_inner),
         read_token: raw.read_token.map(Spanned::into_inner),
         lines,
+        mqtt,
+    })
+}
+
+fn check_mqtt(
+    raw: RawMqtt,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<MqttConfig, ConfigError> {
+    let (host, port) = parse_broker(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
+    let id = |field: &Option<Spanned<String>>, what: &str, default: String| match field {
+        None => Ok(default),
+        Some(text) => sparkplug::Id::new(text.get_ref().as_str())
+            .map(|_| text.get_ref().clone())
+            .map_err(|e| {
+                at(
+                    text.span(),
+                    format!("{what} {:?} is not valid: {e}", text.get_ref()),
+                )
+            }),
+    };
+    let group_id = id(&raw.group_id, "group_id", DEFAULT_MQTT_GROUP.to_owned())?;
+    let edge_node_id = id(&raw.edge_node_id, "edge_node_id", default_edge_node_id())?;
+    let client_id = match raw.client_id {
+        Some(c) if c.get_ref().trim().is_empty() => {
+            return Err(at(
+                c.span(),
+                "client_id is empty; remove it for the default".into(),
+            ));
+        }
+        Some(c) => c.into_inner(),
+        None => format!("cellbus-{edge_node_id}"),
+    };
+    if let Some(env) = &raw.password_env
+        && env.get_ref().trim().is_empty()
+    {
+        return Err(at(
+            env.span(),
+            "password_env is empty; name the environment variable holding the password".into(),
+        ));
+    }
+    let keep_alive = match &raw.keep_alive {
+        Some(text) => duration(
+            text,
+            Duration::from_secs(5),
+            Duration::from_secs(3600),
+            "keep_alive",
+            at,
+        )?,
+        None => DEFAULT_MQTT_KEEP_ALIVE,
+    };
+    Ok(MqttConfig {
+        host,
+        port,
+        group_id,
+        edge_node_id,
+        client_id,
+        username: raw.username.map(Spanned::into_inner),
+        password_env: raw.password_env.map(Spanned::into_inner),
+        keep_alive,
     })
 }
 
@@ -637,6 +787,19 @@ struct RawConfig {
     read_token: Option<Spanned<String>>,
     #[serde(default)]
     line: Vec<RawLine>,
+    mqtt: Option<RawMqtt>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMqtt {
+    broker: Spanned<String>,
+    group_id: Option<Spanned<String>>,
+    edge_node_id: Option<Spanned<String>>,
+    client_id: Option<Spanned<String>>,
+    username: Option<Spanned<String>>,
+    password_env: Option<Spanned<String>>,
+    keep_alive: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -1095,6 +1258,58 @@ writable = { min = 5.0, max = 30.0 }
         );
         let bare = CHILLER.split("[[line.device.register]]").next().unwrap();
         refused(bare, 7, 6, "needs its registers");
+    }
+
+    #[test]
+    fn no_mqtt_table_means_no_mqtt() {
+        assert_eq!(parse(ONE).unwrap().mqtt, None);
+    }
+
+    #[test]
+    fn an_mqtt_table_is_read_with_its_defaults() {
+        let text =
+            format!("{ONE}\n[mqtt]\nbroker = \"mqtt://broker.local\"\nedge_node_id = \"cell-7\"\n");
+        let mqtt = parse(&text).unwrap().mqtt.unwrap();
+        assert_eq!((mqtt.host.as_str(), mqtt.port), ("broker.local", 1883));
+        assert_eq!(mqtt.group_id, "cellbus");
+        assert_eq!(mqtt.client_id, "cellbus-cell-7");
+        assert_eq!(mqtt.keep_alive, DEFAULT_MQTT_KEEP_ALIVE);
+        assert_eq!((mqtt.username, mqtt.password_env), (None, None));
+    }
+
+    #[test]
+    fn mqtt_mistakes_are_refused_where_they_are() {
+        let at = |table: &str| format!("{ONE}\n[mqtt]\n{table}");
+        refused(
+            &at("broker = \"mqtts://b:8883\"\n"),
+            11,
+            10,
+            "TLS) is not built yet",
+        );
+        refused(
+            &at("broker = \"http://b\"\n"),
+            11,
+            10,
+            "write mqtt://host:1883",
+        );
+        refused(
+            &at("broker = \"mqtt://b\"\npassword = \"x\"\n"),
+            12,
+            1,
+            "unknown field `password`",
+        );
+        refused(
+            &at("broker = \"mqtt://b\"\ngroup_id = \"a/b\"\n"),
+            12,
+            12,
+            "group_id",
+        );
+        refused(
+            &at("broker = \"mqtt://b\"\nkeep_alive = \"1ms\"\n"),
+            12,
+            14,
+            "keep_alive",
+        );
     }
 
     #[test]

@@ -75,6 +75,7 @@ impl DemoCell {
         let mut demo = DemoCell {
             config: CellConfig {
                 source: None,
+                mqtt: None,
                 token: None,
                 read_token: None,
                 lines: Vec::new(),

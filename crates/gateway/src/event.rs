@@ -42,11 +42,15 @@ pub enum EventKind {
     HistoryRecovered,
     /// A damaged history file was moved aside at start and a new one started.
     HistoryReset,
+    /// The gateway's MQTT connection to its broker came up (births follow).
+    MqttConnected,
+    /// The gateway's MQTT connection to its broker was lost or refused.
+    MqttDisconnected,
 }
 
 impl EventKind {
     /// Every kind, for filters and the API description.
-    pub const ALL: [EventKind; 15] = [
+    pub const ALL: [EventKind; 17] = [
         EventKind::GatewayStarted,
         EventKind::GatewayStopped,
         EventKind::LineUp,
@@ -62,6 +66,8 @@ impl EventKind {
         EventKind::HistoryFailed,
         EventKind::HistoryRecovered,
         EventKind::HistoryReset,
+        EventKind::MqttConnected,
+        EventKind::MqttDisconnected,
     ];
 
     /// The name stored and printed (`device_down`).
@@ -82,6 +88,8 @@ impl EventKind {
             EventKind::HistoryFailed => "history_failed",
             EventKind::HistoryRecovered => "history_recovered",
             EventKind::HistoryReset => "history_reset",
+            EventKind::MqttConnected => "mqtt_connected",
+            EventKind::MqttDisconnected => "mqtt_disconnected",
         }
     }
 

@@ -39,6 +39,7 @@ pub mod event;
 pub mod fuzzing;
 pub mod http;
 pub mod metrics;
+pub mod northbound;
 pub mod point;
 pub mod scheduler;
 pub mod serve;

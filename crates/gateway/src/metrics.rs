@@ -104,6 +104,12 @@ pub struct Metrics {
     pub writes: Family<WriteLabels, Counter>,
     /// Open event streams.
     pub sse_clients: Gauge,
+    /// 1 while the MQTT connection is up (0 when down or not configured).
+    pub mqtt_connected: Gauge,
+    /// MQTT messages handed to the client (births, data, deaths).
+    pub mqtt_published: Counter,
+    /// MQTT connections made after the first.
+    pub mqtt_reconnects: Counter,
     history_rows: Counter,
     history_commit_errors: Counter,
     history_rows_dropped: Counter,
@@ -151,6 +157,9 @@ impl Metrics {
         let events = Counter::default();
         let writes = Family::<WriteLabels, Counter>::default();
         let sse_clients = Gauge::default();
+        let mqtt_connected = Gauge::default();
+        let mqtt_published = Counter::default();
+        let mqtt_reconnects = Counter::default();
         let history_rows = Counter::default();
         let history_commit_errors = Counter::default();
         let history_rows_dropped = Counter::default();
@@ -196,6 +205,21 @@ impl Metrics {
         registry.register("events", "Events emitted", events.clone());
         registry.register("writes", "Write attempts by result", writes.clone());
         registry.register(
+            "mqtt_connected",
+            "1 while the MQTT connection to the broker is up",
+            mqtt_connected.clone(),
+        );
+        registry.register(
+            "mqtt_published",
+            "MQTT messages handed to the client (Sparkplug births, data, deaths)",
+            mqtt_published.clone(),
+        );
+        registry.register(
+            "mqtt_reconnects",
+            "MQTT connections made after the first",
+            mqtt_reconnects.clone(),
+        );
+        registry.register(
             "sse_clients",
             "Open server-sent event streams",
             sse_clients.clone(),
@@ -234,6 +258,9 @@ impl Metrics {
             value_changes,
             events,
             writes,
+            mqtt_connected,
+            mqtt_published,
+            mqtt_reconnects,
             sse_clients,
             history_rows,
             history_commit_errors,

@@ -12,11 +12,12 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
 use crate::cell::Cell;
-use crate::config::{CellConfig, check_config};
+use crate::config::{CellConfig, MqttConfig, check_config, default_edge_node_id, parse_broker};
 use crate::demo::DemoCell;
 use crate::event::{Event, EventKind};
 use crate::http::{self, WritePolicy};
 use crate::metrics::Metrics;
+use crate::northbound;
 use crate::store::{HistoryState, Store, StoreOptions};
 use crate::time::Timestamp;
 
@@ -32,6 +33,9 @@ pub const DEFAULT_RETAIN: Duration = Duration::from_secs(30 * 24 * 3600);
 
 /// Audit rows kept by default: 365 days (never less than the history).
 pub const DEFAULT_RETAIN_AUDIT: Duration = Duration::from_secs(365 * 24 * 3600);
+
+/// The demo cell's Sparkplug edge node id (its group is `cellbus`).
+pub const DEMO_EDGE_NODE: &str = "demo";
 
 /// Environment variable holding the write token.
 pub const TOKEN_ENV: &str = "CELLBUS_TOKEN";
@@ -61,6 +65,10 @@ pub struct ServeOptions {
     /// The read token every API route then needs; else `CELLBUS_READ_TOKEN`, else the
     /// config's `read_token`; none: reading is open.
     pub read_token: Option<String>,
+    /// `--mqtt mqtt://HOST:PORT`: publish the cell as a Sparkplug B edge node to this
+    /// broker (the demo cell as group `cellbus`, edge node `demo`); with a config, it
+    /// replaces the `[mqtt]` table's broker.
+    pub mqtt: Option<String>,
 }
 
 impl Default for ServeOptions {
@@ -74,6 +82,7 @@ impl Default for ServeOptions {
             allow_writes: false,
             token: None,
             read_token: None,
+            mqtt: None,
         }
     }
 }
@@ -107,6 +116,7 @@ pub struct Gateway {
     writes: WritePolicy,
     stop: watch::Sender<bool>,
     pollers: Vec<JoinHandle<()>>,
+    mqtt: Option<JoinHandle<()>>,
     _demo: Option<DemoCell>,
 }
 
@@ -129,6 +139,7 @@ impl Gateway {
             }
         };
         let writes = write_policy(&options, &config)?;
+        let mqtt = mqtt_config(&options, &config, demo.is_some())?;
         let store = Store::start(
             &options.data_dir,
             StoreOptions {
@@ -174,6 +185,16 @@ impl Gateway {
             .into_iter()
             .map(|task| tokio::spawn(task.run(stopped.clone())))
             .collect();
+        let mqtt = mqtt
+            .map(|config| {
+                northbound::mqtt::start(
+                    Arc::clone(&cell),
+                    config,
+                    options.data_dir.clone(),
+                    stopped.clone(),
+                )
+            })
+            .transpose()?;
         Ok(Self {
             listener,
             addr,
@@ -182,6 +203,7 @@ impl Gateway {
             writes,
             stop,
             pollers,
+            mqtt,
             _demo: demo,
         })
     }
@@ -205,6 +227,7 @@ impl Gateway {
             writes,
             stop,
             pollers,
+            mqtt,
             _demo,
             ..
         } = self;
@@ -230,6 +253,11 @@ impl Gateway {
                 tracing::warn!("a line task did not stop in {STOP_GRACE:?}");
             }
         }
+        if let Some(mqtt) = mqtt
+            && tokio::time::timeout(STOP_GRACE, mqtt).await.is_err()
+        {
+            tracing::warn!("the MQTT task did not stop in {STOP_GRACE:?}");
+        }
         cell.emit(Event {
             t: Timestamp::now(),
             kind: EventKind::GatewayStopped,
@@ -254,6 +282,37 @@ impl Gateway {
         }
         Ok(())
     }
+}
+
+/// The MQTT connection to make, if any: `--mqtt` (the demo cell's, or replacing the
+/// config's broker), else the config's `[mqtt]` table.
+fn mqtt_config(
+    options: &ServeOptions,
+    config: &CellConfig,
+    demo: bool,
+) -> anyhow::Result<Option<MqttConfig>> {
+    let Some(url) = &options.mqtt else {
+        return Ok(config.mqtt.clone());
+    };
+    let mqtt = match &config.mqtt {
+        Some(table) => {
+            let (host, port) = parse_broker(url).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?;
+            MqttConfig {
+                host,
+                port,
+                ..table.clone()
+            }
+        }
+        None => {
+            let node = if demo {
+                DEMO_EDGE_NODE.to_owned()
+            } else {
+                default_edge_node_id()
+            };
+            MqttConfig::for_broker(url, &node).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?
+        }
+    };
+    Ok(Some(mqtt))
 }
 
 /// Once the history has opened (or failed to), emits a `history_failed` event if it is off,

@@ -316,6 +316,7 @@ async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
         "history_last_error": last_error,
         "history_last_error_at": last_error_at,
         "writes_enabled": s.writes.enabled,
+        "mqtt": s.cell.mqtt().map(|link| link.to_string()),
     }))
 }
 

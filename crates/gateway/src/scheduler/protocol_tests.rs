@@ -103,6 +103,7 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
     let jbus_line = crate::driver::cross::DEFAULT_SERIAL;
     let config = CellConfig {
         source: None,
+        mqtt: None,
         token: None,
         read_token: None,
         lines: vec![

@@ -49,6 +49,7 @@
 //! - `fault`: when to retry a failed commit and what to log.
 //! - `writer`: the writer thread's batches and retention.
 //! - `query`: the read connections and the queries.
+//! - `settings`: small values kept across restarts (the Sparkplug `bdSeq`).
 
 use std::future::Future;
 use std::path::{Path, PathBuf};
@@ -64,9 +65,11 @@ mod open;
 mod query;
 mod records;
 mod schema;
+mod settings;
 mod writer;
 
 pub use records::*;
+pub use settings::{read_setting, write_setting};
 
 /// Longest text of one audit field an audit query returns, in characters.
 pub const AUDIT_FIELD_MAX: i64 = 2048;

@@ -372,6 +372,7 @@ impl CellSet {
         let mut set = CellSet {
             config: CellConfig {
                 source: None,
+                mqtt: None,
                 token: None,
                 read_token: None,
                 lines: Vec::new(),

@@ -1,0 +1,187 @@
+//! The edge node over a real mosquitto, driven by JBC stations on an in-memory line: a
+//! device that stops answering is a DDEATH (after null readings with their quality, never
+//! the last good value) and a DBIRTH when it answers again.
+
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use prost::Message as _;
+use sparkplug::Quality as SpQuality;
+use sparkplug::proto::{Metric, Payload, metric::Value as SpValue};
+use testkit::{Mosquitto, SparkplugMessage, Subscriber};
+use tokio::sync::watch;
+
+use crate::config::MqttConfig;
+use crate::point::Value;
+use crate::testing::rig;
+
+/// Generous: a loaded 2-core machine, and a device's backoff of up to 10 s.
+const LIMIT: Duration = Duration::from_secs(60);
+
+fn config(broker: &Mosquitto) -> MqttConfig {
+    MqttConfig {
+        group_id: "rig".into(),
+        ..MqttConfig::for_broker(&broker.url(), "cell").unwrap()
+    }
+}
+
+fn of_jbc2(m: &SparkplugMessage) -> bool {
+    m.device() == Some("jbc2")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answers() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(2);
+    let (stop_tx, stop) = watch::channel(false);
+    let task = super::mqtt::start(
+        rig.cell.clone(),
+        config(&broker),
+        rig.dir.path().join("mqtt"),
+        stop,
+    )
+    .unwrap();
+
+    // Born, then read: a DDATA with good values.
+    sub.next_where("the DBIRTH of jbc2", LIMIT, |m| {
+        of_jbc2(m) && m.kind() == "DBIRTH"
+    })
+    .await;
+    sub.next_where("a DDATA of jbc2", LIMIT, |m| {
+        of_jbc2(m) && m.kind() == "DDATA"
+    })
+    .await;
+
+    // Unplugged: its points go bad (null and Quality, never the last value), then DDEATH.
+    rig.plugged[1].store(false, Ordering::SeqCst);
+    let mut nulls = 0;
+    loop {
+        let m = sub.next_where("jbc2's DDEATH", LIMIT, of_jbc2).await;
+        match m.kind() {
+            "DDEATH" => break,
+            "DDATA" => {
+                for metric in &m.payload.metrics {
+                    let quality = SpQuality::of(metric).unwrap_or(SpQuality::Good);
+                    if quality != SpQuality::Good {
+                        assert_eq!(metric.is_null, Some(true), "{metric:?}");
+                        assert_eq!(metric.value, None, "no last good value: {metric:?}");
+                        nulls += 1;
+                    }
+                }
+            }
+            other => panic!("{other} for jbc2 before its DDEATH"),
+        }
+    }
+    assert!(
+        nulls > 0,
+        "the failed reads were published as null readings"
+    );
+
+    // Plugged back: the next message about jbc2 is its DBIRTH, with good values.
+    rig.plugged[1].store(true, Ordering::SeqCst);
+    let back = sub.next_where("jbc2's next message", LIMIT, of_jbc2).await;
+    assert_eq!(back.kind(), "DBIRTH", "{}", back.topic);
+    assert!(
+        back.payload.metrics.iter().any(|m| m.value.is_some()),
+        "born again with values"
+    );
+
+    stop_tx.send(true).unwrap();
+    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
+    sub.next_where("the NDEATH at the stop", LIMIT, |m| m.kind() == "NDEATH")
+        .await;
+}
+
+fn command(metric: &str, datatype: sparkplug::DataType, value: SpValue) -> Vec<u8> {
+    Payload {
+        timestamp: Some(0),
+        metrics: vec![Metric {
+            name: Some(metric.into()),
+            datatype: Some(datatype.code()),
+            value: Some(value),
+            ..Metric::default()
+        }],
+        ..Payload::default()
+    }
+    .encode_to_vec()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dcmd_write_is_not_carried_out_in_this_version() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(1);
+    let (stop_tx, stop) = watch::channel(false);
+    let task = super::mqtt::start(
+        rig.cell.clone(),
+        config(&broker),
+        rig.dir.path().join("mqtt"),
+        stop,
+    )
+    .unwrap();
+    // A writable number once it has been read.
+    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
+        .await;
+    let device = rig.cell.device("jbc1").unwrap();
+    let (name, old, target) = device
+        .points
+        .iter()
+        .find_map(|p| {
+            let range = p.writable?;
+            let Some(Value::Number(old)) = p.view.value else {
+                return None;
+            };
+            let target = if old == range.min {
+                range.max
+            } else {
+                range.min
+            };
+            Some((p.view.id.name().to_owned(), old, target))
+        })
+        .expect("a JBC station has a writable number");
+
+    sub.publish(
+        "spBv1.0/rig/DCMD/cell/jbc1",
+        command(
+            &name,
+            sparkplug::DataType::Double,
+            SpValue::DoubleValue(target),
+        ),
+    )
+    .await;
+    // Commands are handled in order: once the rebirth asked after it is out, the DCMD was
+    // handled, and the birth shows the value unchanged.
+    sub.publish(
+        "spBv1.0/rig/NCMD/cell",
+        command(
+            "Node Control/Rebirth",
+            sparkplug::DataType::Boolean,
+            SpValue::BooleanValue(true),
+        ),
+    )
+    .await;
+    sub.next_where("the NBIRTH of the rebirth", LIMIT, |m| m.kind() == "NBIRTH")
+        .await;
+    let birth = sub
+        .next_where("the DBIRTH of jbc1", LIMIT, |m| m.kind() == "DBIRTH")
+        .await;
+    assert_eq!(
+        birth.metric(&name).and_then(|m| m.value.clone()),
+        Some(SpValue::DoubleValue(old)),
+        "{name} unchanged"
+    );
+    assert_eq!(
+        rig.cell
+            .device("jbc1")
+            .unwrap()
+            .points
+            .iter()
+            .find(|p| p.view.id.name() == name)
+            .and_then(|p| p.view.value.clone()),
+        Some(Value::Number(old))
+    );
+
+    stop_tx.send(true).unwrap();
+    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
+}

@@ -1,0 +1,343 @@
+//! The cell on MQTT, against a real mosquitto: the demo cell's Sparkplug B births, data,
+//! rebirth, death and reconnection, as an independent subscriber sees them.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use gateway::cell::{Cell, MqttLink};
+use gateway::{Gateway, ServeOptions};
+use prost::Message as _;
+use sparkplug::proto::{Metric, Payload, metric::Value};
+use testkit::{Mosquitto, SparkplugMessage, Subscriber};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+
+/// Generous: a loaded 2-core machine.
+const LIMIT: Duration = Duration::from_secs(60);
+const NODE: &str = "spBv1.0/cellbus/+/demo";
+const DEVICES: &str = "spBv1.0/cellbus/+/demo/#";
+
+struct Running {
+    cell: Arc<Cell>,
+    addr: SocketAddr,
+    stop: oneshot::Sender<()>,
+    task: JoinHandle<anyhow::Result<()>>,
+}
+
+/// The demo cell, publishing to `broker`, with its data in `dir`.
+async fn start(broker: &Mosquitto, dir: &std::path::Path) -> Running {
+    let gateway = Gateway::start(ServeOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        data_dir: dir.join("data"),
+        mqtt: Some(broker.url()),
+        ..ServeOptions::default()
+    })
+    .await
+    .unwrap();
+    let cell = Arc::clone(gateway.cell());
+    let addr = gateway.local_addr();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(gateway.run(async {
+        let _ = stopped.await;
+    }));
+    Running {
+        cell,
+        addr,
+        stop,
+        task,
+    }
+}
+
+async fn subscribe(broker: &Mosquitto) -> (Subscriber, Subscriber) {
+    (
+        Subscriber::start(broker.port(), NODE).await,
+        Subscriber::start(broker.port(), DEVICES).await,
+    )
+}
+
+async fn get(addr: SocketAddr, path: &str) -> String {
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stream
+        .write_all(
+            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
+        )
+        .await
+        .unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).await.unwrap();
+    response
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b.to_owned())
+        .unwrap_or_default()
+}
+
+/// Every device of `/api/devices` with the names of its points.
+async fn api_points(addr: SocketAddr) -> BTreeMap<String, BTreeSet<String>> {
+    let body: serde_json::Value = serde_json::from_str(&get(addr, "/api/devices").await).unwrap();
+    body["devices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| {
+            let points = d["points"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| {
+                    let id = p["id"].as_str().unwrap();
+                    id.split_once('.').unwrap().1.to_owned()
+                })
+                .collect();
+            (d["id"].as_str().unwrap().to_owned(), points)
+        })
+        .collect()
+}
+
+fn nbirth(m: &SparkplugMessage) -> bool {
+    m.kind() == "NBIRTH"
+}
+
+/// The DBIRTHs that follow an NBIRTH: one per device of `wanted`, by device.
+async fn dbirths(
+    devices: &mut Subscriber,
+    wanted: &BTreeMap<String, BTreeSet<String>>,
+) -> BTreeMap<String, SparkplugMessage> {
+    let mut births = BTreeMap::new();
+    while births.len() < wanted.len() {
+        let m = devices
+            .next_where("a DBIRTH for every device", LIMIT, |m| m.kind() == "DBIRTH")
+            .await;
+        births.insert(m.device().unwrap().to_owned(), m);
+    }
+    births
+}
+
+fn names(m: &SparkplugMessage) -> BTreeSet<String> {
+    m.payload
+        .metrics
+        .iter()
+        .filter_map(|m| m.name.clone())
+        .collect()
+}
+
+fn rebirth_command() -> Vec<u8> {
+    Payload {
+        timestamp: Some(0),
+        metrics: vec![Metric {
+            name: Some("Node Control/Rebirth".into()),
+            datatype: Some(sparkplug::DataType::Boolean.code()),
+            value: Some(Value::BooleanValue(true)),
+            ..Metric::default()
+        }],
+        ..Payload::default()
+    }
+    .encode_to_vec()
+}
+
+/// Bounded polling of the cell's MQTT state.
+async fn wait_for_link(cell: &Cell, what: &str, wanted: impl Fn(&Option<MqttLink>) -> bool) {
+    let deadline = Instant::now() + LIMIT;
+    while !wanted(&cell.mqtt()) {
+        assert!(
+            Instant::now() < deadline,
+            "MQTT never {what}: {:?}",
+            cell.mqtt()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn births_describe_every_point_changes_arrive_by_alias_and_rebirth_and_death_follow() {
+    let broker = Mosquitto::start();
+    let (mut node, mut devices) = subscribe(&broker).await;
+    let dir = tempfile::tempdir().unwrap();
+    let gateway = start(&broker, dir.path()).await;
+
+    let birth = node.next_where("an NBIRTH", LIMIT, nbirth).await;
+    assert_eq!(birth.topic, "spBv1.0/cellbus/NBIRTH/demo");
+    assert_eq!(birth.payload.seq, Some(0));
+    let bd_seq = birth.bd_seq().expect("the NBIRTH has a bdSeq");
+    for metric in ["Node Control/Rebirth", "Gateway/Version", "Gateway/Lines"] {
+        assert!(birth.metric(metric).is_some(), "NBIRTH without {metric}");
+    }
+
+    // Every point of the API is in its device's DBIRTH, with an alias and a datatype.
+    let api = api_points(gateway.addr).await;
+    assert!(!api.is_empty());
+    let births = dbirths(&mut devices, &api).await;
+    let mut aliases = BTreeMap::new();
+    for (device, points) in &api {
+        let birth = &births[device];
+        assert_eq!(&names(birth), points, "DBIRTH of {device}");
+        for m in &birth.payload.metrics {
+            assert!(
+                m.datatype.is_some(),
+                "{device}: {:?} has no datatype",
+                m.name
+            );
+            aliases.insert((device.clone(), m.alias.expect("births give aliases")), ());
+        }
+    }
+
+    // The demo's operators change values: they come as DDATA, by alias only.
+    let data = devices
+        .next_where("a DDATA", LIMIT, |m| m.kind() == "DDATA")
+        .await;
+    let device = data.device().unwrap().to_owned();
+    assert!(!data.payload.metrics.is_empty());
+    for m in &data.payload.metrics {
+        assert_eq!(m.name, None, "DDATA goes by alias");
+        let alias = m.alias.expect("an alias");
+        assert!(
+            aliases.contains_key(&(device.clone(), alias)),
+            "alias {alias} of {device} was born"
+        );
+        assert!(m.timestamp.is_some(), "the time the device was read");
+        if m.is_null == Some(true) {
+            assert!(m.properties.is_some(), "a null value says its quality");
+        }
+    }
+
+    // Visible state.
+    let health: serde_json::Value =
+        serde_json::from_str(&get(gateway.addr, "/healthz").await).unwrap();
+    assert_eq!(health["mqtt"], "connected");
+    let metrics = get(gateway.addr, "/metrics").await;
+    assert!(metrics.contains("cellbus_mqtt_connected 1"), "{metrics}");
+    assert!(
+        metrics.contains("cellbus_mqtt_published_total"),
+        "{metrics}"
+    );
+
+    // Rebirth on request: a fresh NBIRTH (same session, same bdSeq) and every DBIRTH.
+    node.publish("spBv1.0/cellbus/NCMD/demo", rebirth_command())
+        .await;
+    let again = node
+        .next_where("an NBIRTH after the rebirth command", LIMIT, nbirth)
+        .await;
+    assert_eq!(again.bd_seq(), Some(bd_seq));
+    assert_eq!(again.payload.seq, Some(0));
+    let reborn = dbirths(&mut devices, &api).await;
+    assert_eq!(
+        reborn.keys().collect::<Vec<_>>(),
+        api.keys().collect::<Vec<_>>()
+    );
+
+    // A graceful stop publishes the NDEATH with the session's bdSeq.
+    let _ = gateway.stop.send(());
+    gateway.task.await.unwrap().unwrap();
+    let death = node
+        .next_where("an NDEATH", LIMIT, |m| m.kind() == "NDEATH")
+        .await;
+    assert_eq!(death.bd_seq(), Some(bd_seq));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn after_a_broker_outage_the_gateway_reconnects_and_births_again_with_the_next_bd_seq() {
+    let mut broker = Mosquitto::start();
+    let (mut node, _devices) = subscribe(&broker).await;
+    let dir = tempfile::tempdir().unwrap();
+    let gateway = start(&broker, dir.path()).await;
+    let first = node.next_where("an NBIRTH", LIMIT, nbirth).await;
+    let first_bd_seq = first.bd_seq().unwrap();
+    wait_for_link(&gateway.cell, "connected", |l| {
+        l == &Some(MqttLink::Connected)
+    })
+    .await;
+
+    broker.restart();
+
+    let second = node
+        .next_where("an NBIRTH after the outage", LIMIT, nbirth)
+        .await;
+    assert_eq!(second.bd_seq(), Some(first_bd_seq + 1));
+    wait_for_link(&gateway.cell, "reconnected", |l| {
+        l == &Some(MqttLink::Connected)
+    })
+    .await;
+    assert!(gateway.cell.metrics().mqtt_reconnects.get() >= 1);
+    let _ = gateway.stop.send(());
+    gateway.task.await.unwrap().unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bd_seq_survives_a_restart_on_the_same_data_directory() {
+    let broker = Mosquitto::start();
+    let (mut node, _devices) = subscribe(&broker).await;
+    let dir = tempfile::tempdir().unwrap();
+
+    let gateway = start(&broker, dir.path()).await;
+    let first = node
+        .next_where("an NBIRTH", LIMIT, nbirth)
+        .await
+        .bd_seq()
+        .unwrap();
+    let _ = gateway.stop.send(());
+    gateway.task.await.unwrap().unwrap();
+
+    let gateway = start(&broker, dir.path()).await;
+    let second = node
+        .next_where("an NBIRTH after the restart", LIMIT, nbirth)
+        .await
+        .bd_seq()
+        .unwrap();
+    assert!(
+        second > first,
+        "bdSeq {second} after a restart, {first} before"
+    );
+    let _ = gateway.stop.send(());
+    gateway.task.await.unwrap().unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_unreachable_broker_shows_in_healthz_and_events_and_nothing_else_stops() {
+    // A port nobody listens on.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let dir = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start(ServeOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        data_dir: dir.path().join("data"),
+        mqtt: Some(format!("mqtt://127.0.0.1:{port}")),
+        ..ServeOptions::default()
+    })
+    .await
+    .unwrap();
+    let cell = Arc::clone(gateway.cell());
+    let addr = gateway.local_addr();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(gateway.run(async {
+        let _ = stopped.await;
+    }));
+    wait_for_link(
+        &cell,
+        "reported the refused connection",
+        |l| matches!(l, Some(MqttLink::Disconnected(why)) if why != "not connected yet"),
+    )
+    .await;
+    let health: serde_json::Value = serde_json::from_str(&get(addr, "/healthz").await).unwrap();
+    let shown = health["mqtt"].as_str().unwrap();
+    assert!(shown.starts_with("disconnected: "), "{shown}");
+    // The event is committed to the history within a batch: bounded polling.
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let events = get(addr, "/api/events?kind=mqtt_disconnected").await;
+        if events.contains("cannot connect to the MQTT broker") {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no mqtt_disconnected event: {events}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let _ = stop.send(());
+    task.await.unwrap().unwrap();
+}
