@@ -16,14 +16,19 @@ pub(super) struct Opened {
     pub(super) moved_aside: Option<(PathBuf, String)>,
 }
 
-/// Opens `dir/cellbus.db` for writing: creates the directory, checks the file and creates
-/// the tables. A file that is not a database or fails `quick_check` is moved aside.
-pub(super) fn open_writer(dir: &Path) -> Result<Opened, StoreError> {
+/// The database's path in `dir`, creating the directory if need be.
+pub(super) fn database_path(dir: &Path) -> Result<std::path::PathBuf, StoreError> {
     std::fs::create_dir_all(dir).map_err(|source| StoreError::Directory {
         path: dir.to_owned(),
         source,
     })?;
-    let path = dir.join(DB_FILE);
+    Ok(dir.join(DB_FILE))
+}
+
+/// Opens `dir/cellbus.db` for writing: creates the directory, checks the file and creates
+/// the tables. A file that is not a database or fails `quick_check` is moved aside.
+pub(super) fn open_writer(dir: &Path) -> Result<Opened, StoreError> {
+    let path = database_path(dir)?;
     let sqlite = |source| StoreError::Sqlite {
         path: path.clone(),
         source,

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use rusqlite::{Connection, OptionalExtension};
 
-use super::{DB_FILE, StoreError, schema};
+use super::{StoreError, schema};
 
 const CREATE: &str =
     "CREATE TABLE IF NOT EXISTS settings (key TEXT PRIMARY KEY, value INTEGER NOT NULL)";
@@ -36,11 +36,7 @@ pub fn write_setting(dir: &Path, key: &str, value: i64) -> Result<(), StoreError
 }
 
 fn connect(dir: &Path) -> Result<(std::path::PathBuf, Connection), StoreError> {
-    std::fs::create_dir_all(dir).map_err(|source| StoreError::Directory {
-        path: dir.to_owned(),
-        source,
-    })?;
-    let path = dir.join(DB_FILE);
+    let path = super::open::database_path(dir)?;
     let sqlite = |source| StoreError::Sqlite {
         path: path.clone(),
         source,
@@ -72,7 +68,7 @@ mod tests {
     fn a_file_the_settings_create_keeps_the_incremental_vacuum() {
         let dir = tempfile::tempdir().unwrap();
         write_setting(dir.path(), "mqtt.bd_seq", 1).unwrap();
-        let conn = Connection::open(dir.path().join(DB_FILE)).unwrap();
+        let conn = Connection::open(dir.path().join(super::super::DB_FILE)).unwrap();
         let mode: i64 = conn
             .pragma_query_value(None, "auto_vacuum", |r| r.get(0))
             .unwrap();
