@@ -72,7 +72,7 @@ use jbc::frame::{Address, Route};
 use jbc::message::{Reply, Request};
 use link::SerialSettings;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use wire::device::{Device, SharedModel, Transmit};
+use wire::device::{Bus, Device, SharedModel};
 
 /// Devices simulated when `--devices` is not given.
 const DEFAULT_DEVICES: usize = 100;
@@ -377,26 +377,6 @@ fn plan(args: &Args) -> Result<Vec<LinePlan>, String> {
 
 // ---- the simulator process ---------------------------------------------------------------
 
-/// A multi-drop line: every device hears every byte; what they send goes out in turn.
-struct Bus {
-    devices: Vec<Box<dyn Device>>,
-}
-
-impl Device for Bus {
-    fn set_timing(&mut self, timing: wire::LineTiming) {
-        for device in &mut self.devices {
-            device.set_timing(timing);
-        }
-    }
-
-    fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
-        self.devices
-            .iter_mut()
-            .flat_map(|d| d.receive(bytes, now))
-            .collect()
-    }
-}
-
 /// What an operator does to the devices of a line, every [`OPERATOR_TICK`].
 type Operator = Box<dyn FnMut(std::time::Instant) + Send>;
 
@@ -426,11 +406,11 @@ fn simulate_line(
             }
             let models: Vec<SharedModel<Station>> =
                 stations.iter().map(|(m, ..)| m.clone()).collect();
-            let bus = Arc::new(move || Bus {
-                devices: models
+            let bus = Arc::new(move || {
+                Bus(models
                     .iter()
                     .map(|m| Box::new(m.line()) as Box<dyn Device>)
-                    .collect(),
+                    .collect())
             });
             let started = std::time::Instant::now();
             let operator = Box::new(move |now: std::time::Instant| {

@@ -399,7 +399,6 @@ mod tests {
 
     use link::SerialSettings;
     use testkit::{Tap, Trick, Tricky};
-    use wire::Transmit;
     use wire::device::{Device, SharedModel};
 
     use super::*;
@@ -434,24 +433,6 @@ mod tests {
             ),
         };
         Trick::Replace(refusal.to_bytes())
-    }
-
-    /// Every device on one RS-485 pair hears every frame.
-    struct Bus(Vec<Box<dyn Device>>);
-
-    impl Device for Bus {
-        fn set_timing(&mut self, timing: wire::LineTiming) {
-            for device in &mut self.0 {
-                device.set_timing(timing);
-            }
-        }
-
-        fn receive(&mut self, bytes: &[u8], now: StdInstant) -> Vec<Transmit> {
-            self.0
-                .iter_mut()
-                .flat_map(|device| device.receive(bytes, now))
-                .collect()
-        }
     }
 
     struct Bench {
@@ -941,7 +922,7 @@ mod tests {
     async fn a_dead_unit_delays_the_others_on_its_line_only_by_its_own_timeouts() {
         let cross = twin();
         let server = slave();
-        let bus = Bus(vec![Box::new(cross.line()), Box::new(server.line())]);
+        let bus = wire::device::Bus(vec![Box::new(cross.line()), Box::new(server.line())]);
         let b = bench(bus, vec![], None, ClientConfig::default());
         let mut dead = b.client.clone();
         let mut alive = b.client.clone();

@@ -1,9 +1,9 @@
 //! Test and bench tools shared by the cellbus crates.
 //!
-//! - [`mosquitto`]: [`Mosquitto`], a real MQTT broker on a free loopback port, killed on
-//!   drop.
-//! - [`sparkplug_sub`]: [`Subscriber`], a Sparkplug B subscriber that decodes payloads
-//!   with the `sparkplug` crate and survives broker restarts.
+//! - `mosquitto` (feature `mqtt`): `Mosquitto`, a real MQTT broker on a free loopback
+//!   port, killed on drop.
+//! - `sparkplug_sub` (feature `mqtt`): `Subscriber`, a Sparkplug B subscriber that decodes
+//!   payloads with the `sparkplug` crate and survives broker restarts.
 //! - [`noise`]: [`Noise`], a seeded, sans-IO byte mangler with the trouble of a bad
 //!   serial line (flipped bits, lost, inserted and duplicated bytes, whole chunks lost,
 //!   bursts), and its counts.
@@ -16,14 +16,18 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+#[cfg(feature = "mqtt")]
 pub mod mosquitto;
 pub mod noise;
 pub mod proxy;
+#[cfg(feature = "mqtt")]
 pub mod sparkplug_sub;
 pub mod tricks;
 
+#[cfg(feature = "mqtt")]
 pub use mosquitto::Mosquitto;
 pub use noise::{Noise, NoiseConfig, NoiseCounts};
 pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
+#[cfg(feature = "mqtt")]
 pub use sparkplug_sub::{SparkplugMessage, Subscriber};
 pub use tricks::{At, Tap, Trick, Tricky};

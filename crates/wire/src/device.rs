@@ -217,6 +217,25 @@ where
     }
 }
 
+/// Several devices on one line (an RS-485 pair): each hears every byte, and their
+/// replies go out as each asks.
+pub struct Bus(pub Vec<Box<dyn Device>>);
+
+impl Device for Bus {
+    fn set_timing(&mut self, timing: LineTiming) {
+        for device in &mut self.0 {
+            device.set_timing(timing);
+        }
+    }
+
+    fn receive(&mut self, bytes: &[u8], now: Instant) -> Vec<Transmit> {
+        self.0
+            .iter_mut()
+            .flat_map(|device| device.receive(bytes, now))
+            .collect()
+    }
+}
+
 /// A device whose line drops half frames after a gap the user chose, whatever the line's
 /// pace (`cellbus sim --frame-gap`); with no gap chosen, the protocol's.
 #[derive(Debug, Clone)]

@@ -430,9 +430,8 @@ pub struct JbcDriver {
     device: DeviceId,
     config: ClientConfig,
     client: Option<Client>,
-    /// Last values read of the limit codes, for checking set points before the wire.
-    limits: HashMap<Code, i32>,
-    /// The last confirmed value of each code that is confirmed (see the module doc).
+    /// The last confirmed value of each code that is confirmed (see the module doc); the
+    /// limit codes among them check set points before the wire.
     confirmed: HashMap<Code, jbc::code::Value>,
 }
 
@@ -462,7 +461,6 @@ impl JbcDriver {
                 retries: config.retries.unwrap_or(defaults.retries),
             },
             client: None,
-            limits: HashMap::new(),
             confirmed: HashMap::new(),
         })
     }
@@ -554,14 +552,15 @@ impl JbcDriver {
                 value,
             });
         }
-        for (code, answer) in &answers {
-            if let Answer::Good(reading) = answer
-                && let jbc::code::Value::Number(n) = reading.value()
-            {
-                self.limits.insert(*code, n);
-            }
-        }
         Ok(readings)
+    }
+
+    /// The confirmed number of `code`, if there is one.
+    fn confirmed_number(&self, code: Code) -> Option<i32> {
+        match self.confirmed.get(&code)? {
+            jbc::code::Value::Number(n) => Some(*n),
+            jbc::code::Value::Text(_) => None,
+        }
     }
 
     /// Reads `code` for the points of `group`, checks its value is plausible for each of
@@ -623,7 +622,8 @@ impl JbcDriver {
         // Whole and within the JTSE's range (check_write), so it fits an i32.
         let number = number as i32;
         if let Some((low, high)) = def.limits
-            && let (Some(&min), Some(&max)) = (self.limits.get(&low), self.limits.get(&high))
+            && let (Some(min), Some(max)) =
+                (self.confirmed_number(low), self.confirmed_number(high))
             && !(min..=max).contains(&number)
         {
             return Err(WriteError::Invalid(ValueError::OutOfRange {

@@ -45,8 +45,7 @@ use thermosald::Address;
 use thermosald::device::{Regulator, RegulatorBus, RegulatorConfig};
 use tokio::sync::{broadcast, watch};
 use tokio::time::Instant;
-use wire::device::SharedModel;
-use wire::{Device, LineTiming, Transmit};
+use wire::device::{Bus, SharedModel};
 
 /// How the gateway reaches the simulators.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -234,7 +233,7 @@ pub async fn run(options: SoakOptions) -> Result<SoakReport, SoakError> {
 
     // Calm: the truth of every point that keeps one value.
     watcher.phase = Phase::Calm;
-    watcher.run_for(&cell, options.calm).await;
+    watcher.run_for(options.calm).await;
     watcher.settle_truth();
 
     // Noisy: until enough requests went out.
@@ -244,7 +243,7 @@ pub async fn run(options: SoakOptions) -> Result<SoakReport, SoakError> {
     control.set_noisy(true);
     let noisy_from = Instant::now();
     while control.to_device().minus(line_before).chunks < options.requests && !watcher.ended {
-        watcher.run_for(&cell, Duration::from_millis(100)).await;
+        watcher.run_for(Duration::from_millis(100)).await;
     }
     let noisy_for = noisy_from.elapsed();
     control.set_noisy(false);
@@ -259,7 +258,7 @@ pub async fn run(options: SoakOptions) -> Result<SoakReport, SoakError> {
     // A total outage, then the time until every device answers again.
     watcher.phase = Phase::Outage;
     control.set_outage(true);
-    watcher.run_for(&cell, options.outage).await;
+    watcher.run_for(options.outage).await;
     control.set_outage(false);
     let back = Instant::now();
     watcher.phase = Phase::Recovery;
@@ -270,12 +269,12 @@ pub async fn run(options: SoakOptions) -> Result<SoakReport, SoakError> {
             recovery = Some(back.elapsed());
             break;
         }
-        watcher.run_for(&cell, Duration::from_millis(50)).await;
+        watcher.run_for(Duration::from_millis(50)).await;
     }
 
     // Clean: the truth still holds (or the point changed on its own).
     watcher.phase = Phase::Clean;
-    watcher.run_for(&cell, options.calm).await;
+    watcher.run_for(options.calm).await;
     let drifted = watcher.drifted(&cell);
 
     shutdown.send(true)?;
@@ -544,24 +543,6 @@ fn device(id: &str, protocol: Protocol, address: i64, options: &SoakOptions) -> 
     }
 }
 
-/// The devices sharing one line (one connection).
-struct Bus(Vec<Box<dyn Device>>);
-
-impl Device for Bus {
-    fn set_timing(&mut self, timing: LineTiming) {
-        for device in &mut self.0 {
-            device.set_timing(timing);
-        }
-    }
-
-    fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
-        self.0
-            .iter_mut()
-            .flat_map(|d| d.receive(bytes, now))
-            .collect()
-    }
-}
-
 /// Polls answered and failed so far, all devices.
 fn polls(cell: &Cell) -> (u64, u64) {
     let metrics = cell.metrics();
@@ -676,7 +657,7 @@ impl Watcher {
     }
 
     /// Takes the change stream for `duration`.
-    async fn run_for(&mut self, _cell: &Cell, duration: Duration) {
+    async fn run_for(&mut self, duration: Duration) {
         let until = Instant::now() + duration;
         loop {
             let message = tokio::select! {
