@@ -45,6 +45,7 @@ pub mod scheduler;
 pub mod serve;
 pub mod store;
 pub mod time;
+pub mod write;
 
 #[cfg(test)]
 mod testing;

@@ -33,12 +33,9 @@ use serde_json::json;
 use tokio::time::Instant;
 
 use super::{ApiError, ApiResult, AppState, ClientAddr, unknown_device};
-use crate::cell::Cell;
 use crate::driver::{ErrorKind, WriteError};
-use crate::event::{Event, EventKind};
 use crate::point::{PointId, Value};
-use crate::store::{AuditEntry, AuditResult};
-use crate::time::Timestamp;
+use crate::write::{Attempt, MAX_NAME, MAX_VALUE, cut};
 
 /// Largest write request body accepted.
 pub const BODY_LIMIT: usize = 4096;
@@ -50,13 +47,6 @@ pub const FAILURE_WINDOW: Duration = Duration::from_secs(60);
 pub const LOG_EVERY: Duration = Duration::from_secs(10);
 /// Client addresses whose wrong tokens are remembered at once.
 const MAX_TRACKED_CLIENTS: usize = 4096;
-
-/// Longest stored text of a client address, device or point as the request named them.
-const MAX_NAME: usize = 128;
-/// Longest stored value as given (its JSON text).
-const MAX_VALUE: usize = 256;
-/// Longest stored detail.
-const MAX_DETAIL: usize = 1024;
 
 /// Body of a write.
 #[derive(Debug, Deserialize)]
@@ -186,19 +176,13 @@ pub(super) async fn write(
         Ok(Json(b)) => (b.point.clone(), b.value.clone()),
         Err(_) => (String::new(), serde_json::Value::Null),
     };
-    let mut attempt = Attempt {
-        cell: Arc::clone(&s.cell),
-        client,
-        device: id.clone(),
-        point: point_text,
-        new,
-    };
+    let attempt = Attempt::new(Arc::clone(&s.cell), client, id.clone(), point_text, new);
     let Some(device) = s.cell.device_entry(&id) else {
-        return Err(attempt.refuse(unknown_device(&s.cell, &id), None).await);
+        return Err(refuse(&attempt, unknown_device(&s.cell, &id)).await);
     };
     let Json(body) = match body {
         Ok(body) => body,
-        Err(rejection) => return Err(attempt.refuse(rejection.into(), None).await),
+        Err(rejection) => return Err(refuse(&attempt, rejection.into()).await),
     };
     // Accept the point's own name or its full id.
     let name = body
@@ -221,34 +205,36 @@ pub(super) async fn write(
                     .collect::<Vec<_>>()
                     .join(", ")
             ));
-            return Err(attempt.refuse(error, None).await);
+            return Err(refuse(&attempt, error).await);
         }
     };
-    attempt.point = point.to_string();
-    let value = match serde_json::from_value::<Value>(body.value.clone()) {
-        Ok(v) => v,
-        Err(_) => {
-            let error = ApiError::bad_request(format!(
-                "value must be a number or a string, not {}",
-                cut(&body.value.to_string(), MAX_VALUE)
-            ));
-            return Err(attempt.refuse(error, None).await);
-        }
+    let Ok(value) = serde_json::from_value::<Value>(body.value.clone()) else {
+        let error = ApiError::bad_request(format!(
+            "value must be a number or a string, not {}",
+            cut(&body.value.to_string(), MAX_VALUE)
+        ));
+        return Err(refuse(&attempt, error).await);
     };
-    let old = device
-        .point_index(&name)
-        .and_then(|i| device.read().points.get(i).and_then(|p| p.value.clone()));
-    // A value outside the point's range never reaches the wire, nor an `attempted` row.
-    if let Some(spec) = s.cell.point(&point)
-        && let Err(e) = spec.check_write(&value)
-    {
-        let error = super::ApiError::from(WriteError::Invalid(e));
-        return Err(attempt.refuse(error, old).await);
-    }
     // The write and its record run to the end even if the client leaves.
-    let task = tokio::spawn(async move { attempt.carry_out(point, value, old).await });
-    task.await
-        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?
+    let task = tokio::spawn(attempt.carry_out(point, value));
+    let accepted = task
+        .await
+        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))??;
+    Ok(Json(json!({
+        "device": accepted.point.device(),
+        "point": accepted.point,
+        "old": accepted.old,
+        "new": accepted.new,
+        "result": "accepted",
+        "detail": accepted.detail,
+    }))
+    .into_response())
+}
+
+/// Records a refusal before the wire and gives the error to answer with.
+async fn refuse(attempt: &Attempt, error: ApiError) -> ApiError {
+    attempt.refuse(&error.message, None).await;
+    error
 }
 
 /// Counts and (throttled) logs an unauthorised attempt; nothing is stored.
@@ -277,139 +263,6 @@ impl From<WriteError> for ApiError {
         };
         ApiError::new(status, error.to_string())
     }
-}
-
-/// A write attempt on its way to the audit table.
-struct Attempt {
-    cell: Arc<Cell>,
-    client: String,
-    device: String,
-    point: String,
-    new: serde_json::Value,
-}
-
-impl Attempt {
-    /// Records a refusal before the wire and returns the error to answer with.
-    async fn refuse(&self, error: ApiError, old: Option<Value>) -> ApiError {
-        self.record(AuditResult::Refused, old, &error.message).await;
-        error
-    }
-
-    /// Records the attempt, writes, records how it ended, and gives the answer.
-    async fn carry_out(
-        self,
-        point: PointId,
-        value: Value,
-        old: Option<Value>,
-    ) -> ApiResult<Response> {
-        let asked = format!("{point} to be set to {value} by {}", self.client);
-        self.record(AuditResult::Attempted, old.clone(), &asked)
-            .await;
-        match self.cell.write(&point, &value).await {
-            Ok(outcome) => {
-                let spec = self.cell.point(&point);
-                let shown = |v: &Value| {
-                    let label = spec.and_then(|p| p.label(v)).map(str::to_owned);
-                    let unit = spec.and_then(|p| p.unit.clone());
-                    label.unwrap_or_else(|| match unit {
-                        Some(u) => format!("{v} {u}"),
-                        None => v.to_string(),
-                    })
-                };
-                let detail = format!(
-                    "{point} set to {}{} by {}",
-                    shown(&outcome.new),
-                    outcome
-                        .old
-                        .as_ref()
-                        .map(|o| format!(" (was {})", shown(o)))
-                        .unwrap_or_default(),
-                    self.client
-                );
-                let device = self.cell.device_entry(point.device());
-                self.cell.emit(Event {
-                    t: Timestamp::now(),
-                    kind: EventKind::Write,
-                    line: device.map(|d| d.line.clone()),
-                    device: device.map(|d| d.id.clone()),
-                    point: Some(point.clone()),
-                    message: detail.clone(),
-                });
-                self.record(AuditResult::Accepted, outcome.old.clone(), &detail)
-                    .await;
-                Ok(Json(json!({
-                    "device": point.device(),
-                    "point": point,
-                    "old": outcome.old,
-                    "new": outcome.new,
-                    "result": "accepted",
-                    "detail": detail,
-                }))
-                .into_response())
-            }
-            Err(error) => {
-                let result = match &error {
-                    WriteError::Invalid(_) | WriteError::UnknownPoint { .. } => {
-                        AuditResult::Refused
-                    }
-                    WriteError::Device(e) if e.kind == ErrorKind::Usage => AuditResult::Refused,
-                    WriteError::Device(e) if e.kind == ErrorKind::Refused => AuditResult::Refused,
-                    _ => AuditResult::Failed,
-                };
-                let error = ApiError::from(error);
-                self.record(result, old, &error.message).await;
-                Err(error)
-            }
-        }
-    }
-
-    /// Writes the audit row and waits for its commit, so an answered request is on disk.
-    async fn record(&self, result: AuditResult, old: Option<Value>, detail: &str) {
-        let store = self.cell.store();
-        let new = match &self.new {
-            serde_json::Value::String(text) => serde_json::Value::String(cut(text, MAX_VALUE)),
-            other => {
-                let text = other.to_string();
-                if text.len() > MAX_VALUE {
-                    serde_json::Value::String(cut(&text, MAX_VALUE))
-                } else {
-                    other.clone()
-                }
-            }
-        };
-        store.audit(AuditEntry {
-            t: Timestamp::now(),
-            client: cut(&self.client, MAX_NAME),
-            device: cut(&self.device, MAX_NAME),
-            point: cut(&self.point, MAX_NAME),
-            old,
-            new,
-            result,
-            detail: cut(detail, MAX_DETAIL),
-        });
-        self.cell
-            .metrics()
-            .writes
-            .get_or_create(&crate::metrics::WriteLabels {
-                result: result.as_str().to_owned(),
-            })
-            .inc();
-        if let Err(e) = store.flush().await {
-            tracing::error!("audit row not committed: {e}");
-        }
-    }
-}
-
-/// `text` cut to at most `max` bytes (on a character boundary), with `…` when cut.
-pub(super) fn cut(text: &str, max: usize) -> String {
-    if text.len() <= max {
-        return text.to_owned();
-    }
-    let mut end = max.saturating_sub('…'.len_utf8());
-    while !text.is_char_boundary(end) {
-        end -= 1;
-    }
-    format!("{}…", &text[..end])
 }
 
 /// Checks `Authorization: Bearer <token>`.

@@ -1,0 +1,213 @@
+//! The audited part of the one guarded write path, shared by every interface that writes
+//! (`POST /api/devices/{id}/write`, an MQTT `DCMD`).
+//!
+//! Each interface first decides who may write (HTTP: `--allow-writes` and the token; MQTT:
+//! `--allow-writes` and `commands = true`) and refuses the rest without storing anything.
+//! From there on every attempt goes through an [`Attempt`]:
+//!
+//! 1. A request the gateway refuses before the wire (unknown point, wrong kind of value,
+//!    outside the point's range or step) is one `refused` audit row.
+//! 2. A valid write commits an `attempted` row before it goes to the line, then a second
+//!    row records how it ended (`accepted`, `refused` by the device, `failed`), and the
+//!    accepted write is a `write` event.
+//!
+//! Every stored field is cut to a bounded length, so no request can grow the audit table
+//! by more than a few kB. Each row is committed before the caller hears the answer.
+
+use std::sync::Arc;
+
+use crate::cell::Cell;
+use crate::driver::{ErrorKind, WriteError};
+use crate::event::{Event, EventKind};
+use crate::point::{PointId, Value};
+use crate::store::{AuditEntry, AuditResult};
+use crate::time::Timestamp;
+
+/// Longest stored text of a client, device or point as the request named them.
+pub const MAX_NAME: usize = 128;
+/// Longest stored value as given (its JSON text).
+pub const MAX_VALUE: usize = 256;
+/// Longest stored detail.
+pub const MAX_DETAIL: usize = 1024;
+
+/// An authorised write attempt on its way to the audit table.
+#[derive(Debug)]
+pub struct Attempt {
+    cell: Arc<Cell>,
+    /// Who asks, in words (`127.0.0.1:50312`, `mqtt DCMD spBv1.0/…`).
+    client: String,
+    /// The device as the request named it.
+    device: String,
+    /// The point as the request named it, then its full id once known.
+    point: String,
+    /// The value as given.
+    new: serde_json::Value,
+}
+
+/// A write the device took.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Accepted {
+    /// The point.
+    pub point: PointId,
+    /// The value before, if one was known.
+    pub old: Option<Value>,
+    /// The value written (as checked: an integer point's value is whole).
+    pub new: Value,
+    /// Words for the audit log and the event: `jbc1.air_temperature set to 350 °C (was …) by …`.
+    pub detail: String,
+}
+
+impl Attempt {
+    /// An attempt by `client` to set `point` of `device` to `new` (all as the request gave
+    /// them).
+    pub fn new(
+        cell: Arc<Cell>,
+        client: impl Into<String>,
+        device: impl Into<String>,
+        point: impl Into<String>,
+        new: serde_json::Value,
+    ) -> Self {
+        Self {
+            cell,
+            client: client.into(),
+            device: device.into(),
+            point: point.into(),
+            new,
+        }
+    }
+
+    /// Records a refusal before the wire (`detail` says why).
+    pub async fn refuse(&self, detail: &str, old: Option<Value>) {
+        self.record(AuditResult::Refused, old, detail).await;
+    }
+
+    /// Checks `value` against the point's spec (a refusal is recorded and returned), then
+    /// records the attempt, writes, and records how it ended. Run it in a task of its own
+    /// when the caller may leave before the answer: the write and its record then run to
+    /// the end.
+    pub async fn carry_out(mut self, point: PointId, value: Value) -> Result<Accepted, WriteError> {
+        self.point = point.to_string();
+        let old = self
+            .cell
+            .device_entry(point.device())
+            .and_then(|d| d.point_index(point.name()).map(|i| (d, i)))
+            .and_then(|(d, i)| d.read().points.get(i).and_then(|p| p.value.clone()));
+        let Some(spec) = self.cell.point(&point) else {
+            let error = WriteError::UnknownPoint { point };
+            self.refuse(&error.to_string(), None).await;
+            return Err(error);
+        };
+        // A value outside the point's range never reaches the wire, nor an `attempted` row.
+        if let Err(e) = spec.check_write(&value) {
+            let error = WriteError::Invalid(e);
+            self.refuse(&error.to_string(), old).await;
+            return Err(error);
+        }
+        let asked = format!("{point} to be set to {value} by {}", self.client);
+        self.record(AuditResult::Attempted, old.clone(), &asked)
+            .await;
+        match self.cell.write(&point, &value).await {
+            Ok(outcome) => {
+                let spec = self.cell.point(&point);
+                let shown = |v: &Value| {
+                    let label = spec.and_then(|p| p.label(v)).map(str::to_owned);
+                    let unit = spec.and_then(|p| p.unit.clone());
+                    label.unwrap_or_else(|| match unit {
+                        Some(u) => format!("{v} {u}"),
+                        None => v.to_string(),
+                    })
+                };
+                let detail = format!(
+                    "{point} set to {}{} by {}",
+                    shown(&outcome.new),
+                    outcome
+                        .old
+                        .as_ref()
+                        .map(|o| format!(" (was {})", shown(o)))
+                        .unwrap_or_default(),
+                    self.client
+                );
+                let device = self.cell.device_entry(point.device());
+                self.cell.emit(Event {
+                    t: Timestamp::now(),
+                    kind: EventKind::Write,
+                    line: device.map(|d| d.line.clone()),
+                    device: device.map(|d| d.id.clone()),
+                    point: Some(point.clone()),
+                    message: detail.clone(),
+                });
+                self.record(AuditResult::Accepted, outcome.old.clone(), &detail)
+                    .await;
+                Ok(Accepted {
+                    point,
+                    old: outcome.old,
+                    new: outcome.new,
+                    detail,
+                })
+            }
+            Err(error) => {
+                let result = match &error {
+                    WriteError::Invalid(_) | WriteError::UnknownPoint { .. } => {
+                        AuditResult::Refused
+                    }
+                    WriteError::Device(e)
+                        if matches!(e.kind, ErrorKind::Usage | ErrorKind::Refused) =>
+                    {
+                        AuditResult::Refused
+                    }
+                    _ => AuditResult::Failed,
+                };
+                self.record(result, old, &error.to_string()).await;
+                Err(error)
+            }
+        }
+    }
+
+    /// Writes the audit row and waits for its commit, so an answered request is on disk.
+    async fn record(&self, result: AuditResult, old: Option<Value>, detail: &str) {
+        let store = self.cell.store();
+        let new = match &self.new {
+            serde_json::Value::String(text) => serde_json::Value::String(cut(text, MAX_VALUE)),
+            other => {
+                let text = other.to_string();
+                if text.len() > MAX_VALUE {
+                    serde_json::Value::String(cut(&text, MAX_VALUE))
+                } else {
+                    other.clone()
+                }
+            }
+        };
+        store.audit(AuditEntry {
+            t: Timestamp::now(),
+            client: cut(&self.client, MAX_NAME),
+            device: cut(&self.device, MAX_NAME),
+            point: cut(&self.point, MAX_NAME),
+            old,
+            new,
+            result,
+            detail: cut(detail, MAX_DETAIL),
+        });
+        self.cell
+            .metrics()
+            .writes
+            .get_or_create(&crate::metrics::WriteLabels {
+                result: result.as_str().to_owned(),
+            })
+            .inc();
+        if let Err(e) = store.flush().await {
+            tracing::error!("audit row not committed: {e}");
+        }
+    }
+}
+
+/// `text` cut to at most `max` bytes (on a character boundary), with `…` when cut.
+pub fn cut(text: &str, max: usize) -> String {
+    if text.len() <= max {
+        return text.to_owned();
+    }
+    let mut end = max.saturating_sub('…'.len_utf8());
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}…", &text[..end])
+}
