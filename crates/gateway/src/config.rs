@@ -103,7 +103,52 @@ pub struct MqttConfig {
     pub password_env: Option<String>,
     /// The MQTT keep-alive.
     pub keep_alive: Duration,
+    /// What is published: Sparkplug B or plain JSON.
+    pub mode: MqttMode,
+    /// JSON mode's topic prefix (`cellbus/{edge_node_id}` by default).
+    pub prefix: String,
+    /// Whether DCMD writes are carried out (also needs `--allow-writes`).
+    pub commands: bool,
+    /// The Sparkplug primary host application whose STATE gates the births, if any.
+    pub primary_host: Option<String>,
+    /// The most stored changes sent after an outage (the newest are kept).
+    pub max_backlog: u64,
 }
+
+/// What the gateway publishes on MQTT.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MqttMode {
+    /// A Sparkplug B 3.0 edge node.
+    #[default]
+    Sparkplug,
+    /// One retained JSON message per point under a prefix, for Node-RED, Telegraf and
+    /// home-made consumers.
+    Json,
+}
+
+impl MqttMode {
+    /// Reads `sparkplug` or `json`.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "sparkplug" => Ok(Self::Sparkplug),
+            "json" => Ok(Self::Json),
+            other => Err(format!(
+                "MQTT mode {other:?} is not one cellbus knows; write \"sparkplug\" or \"json\""
+            )),
+        }
+    }
+
+    /// `sparkplug` or `json`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Sparkplug => "sparkplug",
+            Self::Json => "json",
+        }
+    }
+}
+
+/// Default of `max_backlog`: stored changes sent after an outage.
+pub const DEFAULT_MQTT_BACKLOG: u64 = 1_000_000;
 
 impl MqttConfig {
     /// The broker at `url` (`mqtt://host:port`) with every other field at its default and
@@ -119,6 +164,11 @@ impl MqttConfig {
             username: None,
             password_env: None,
             keep_alive: DEFAULT_MQTT_KEEP_ALIVE,
+            mode: MqttMode::Sparkplug,
+            prefix: format!("cellbus/{edge_node_id}"),
+            commands: false,
+            primary_host: None,
+            max_backlog: DEFAULT_MQTT_BACKLOG,
         })
     }
 }
@@ -411,19 +461,10 @@ fn check_mqtt(
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<MqttConfig, ConfigError> {
     let (host, port) = parse_broker(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
-    let id = |field: &Option<Spanned<String>>, what: &str, default: String| match field {
-        None => Ok(default),
-        Some(text) => sparkplug::Id::new(text.get_ref().as_str())
-            .map(|_| text.get_ref().clone())
-            .map_err(|e| {
-                at(
-                    text.span(),
-                    format!("{what} {:?} is not valid: {e}", text.get_ref()),
-                )
-            }),
-    };
-    let group_id = id(&raw.group_id, "group_id", DEFAULT_MQTT_GROUP.to_owned())?;
-    let edge_node_id = id(&raw.edge_node_id, "edge_node_id", default_edge_node_id())?;
+    let group_id = id_opt(&raw.group_id, "group_id", at)?
+        .unwrap_or_else(|| DEFAULT_MQTT_GROUP.to_owned());
+    let edge_node_id =
+        id_opt(&raw.edge_node_id, "edge_node_id", at)?.unwrap_or_else(default_edge_node_id);
     let client_id = match raw.client_id {
         Some(c) if c.get_ref().trim().is_empty() => {
             return Err(at(
@@ -452,6 +493,43 @@ fn check_mqtt(
         )?,
         None => DEFAULT_MQTT_KEEP_ALIVE,
     };
+    let mode = match &raw.mode {
+        Some(text) => MqttMode::parse(text.get_ref()).map_err(|m| at(text.span(), m))?,
+        None => MqttMode::Sparkplug,
+    };
+    let prefix = match &raw.prefix {
+        Some(text) => {
+            let p = text.get_ref().trim_end_matches('/');
+            if p.is_empty() || p.contains(['+', '#', '\0']) || p.starts_with('$') {
+                return Err(at(
+                    text.span(),
+                    format!(
+                        "prefix {:?} is not a usable topic prefix; write words separated by / \
+                         without +, # or a leading $",
+                        text.get_ref()
+                    ),
+                ));
+            }
+            p.to_owned()
+        }
+        None => format!("cellbus/{edge_node_id}"),
+    };
+    let primary_host = id_opt(&raw.primary_host, "primary_host", at)?;
+    let max_backlog = match &raw.max_backlog {
+        Some(n) => u64::try_from(*n.get_ref())
+            .ok()
+            .filter(|n| (1..=100_000_000).contains(n))
+            .ok_or_else(|| {
+                at(
+                    n.span(),
+                    format!(
+                        "max_backlog {} is outside 1–100000000 stored changes",
+                        n.get_ref()
+                    ),
+                )
+            })?,
+        None => DEFAULT_MQTT_BACKLOG,
+    };
     Ok(MqttConfig {
         host,
         port,
@@ -461,7 +539,33 @@ fn check_mqtt(
         username: raw.username.map(Spanned::into_inner),
         password_env: raw.password_env.map(Spanned::into_inner),
         keep_alive,
+        mode,
+        prefix,
+        commands: raw.commands.map(Spanned::into_inner).unwrap_or(false),
+        primary_host,
+        max_backlog,
     })
+}
+
+/// An optional Sparkplug id (no `/`, `+`, `#`).
+fn id_opt(
+    field: &Option<Spanned<String>>,
+    what: &str,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Option<String>, ConfigError> {
+    field
+        .as_ref()
+        .map(|text| {
+            sparkplug::Id::new(text.get_ref().as_str())
+                .map(|_| text.get_ref().clone())
+                .map_err(|e| {
+                    at(
+                        text.span(),
+                        format!("{what} {:?} is not valid: {e}", text.get_ref()),
+                    )
+                })
+        })
+        .transpose()
 }
 
 fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
@@ -800,6 +904,11 @@ struct RawMqtt {
     username: Option<Spanned<String>>,
     password_env: Option<Spanned<String>>,
     keep_alive: Option<Spanned<String>>,
+    mode: Option<Spanned<String>>,
+    prefix: Option<Spanned<String>>,
+    commands: Option<Spanned<bool>>,
+    primary_host: Option<Spanned<String>>,
+    max_backlog: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]

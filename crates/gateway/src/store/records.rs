@@ -122,6 +122,35 @@ pub struct HistorySample {
     pub quality: Quality,
 }
 
+/// A stored change of any point, in the order changes are forwarded after an outage.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StoredChange {
+    /// Its place in the order: (time, row id).
+    pub key: ChangeKey,
+    /// The point, as stored.
+    pub point: String,
+    /// The value, `None` when the read failed.
+    pub value: Option<Value>,
+    /// Its quality.
+    pub quality: Quality,
+}
+
+/// Where a stored change is in time order: its time, then the order it was stored in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct ChangeKey {
+    /// When the point was read.
+    pub t: Timestamp,
+    /// The row id (ties between changes of the same millisecond).
+    pub row: i64,
+}
+
+impl ChangeKey {
+    /// Before every change stored at `t` or later.
+    pub fn before(t: Timestamp) -> Self {
+        Self { t, row: i64::MIN }
+    }
+}
+
 /// Statistics of the good numeric samples in one time bucket.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Bucket {

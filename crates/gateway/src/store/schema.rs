@@ -22,6 +22,7 @@ CREATE TABLE IF NOT EXISTS samples (
     quality INTEGER NOT NULL
 );
 CREATE INDEX IF NOT EXISTS samples_by_point_time ON samples(point, t);
+CREATE INDEX IF NOT EXISTS samples_by_time ON samples(t);
 CREATE TABLE IF NOT EXISTS events (
     id      INTEGER PRIMARY KEY,
     t       INTEGER NOT NULL,

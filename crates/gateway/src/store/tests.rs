@@ -851,3 +851,51 @@ async fn a_full_disk_leaves_live_values_served_and_healthz_reporting_the_fault()
     let (_, health) = get("/healthz").await;
     assert_eq!(health["history_pending_rows"], 0, "{health}");
 }
+
+#[tokio::test]
+async fn stored_changes_of_every_point_come_back_in_time_order_in_pages() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    // Stored out of time order, as two lines' changes can be.
+    for (p, t, v) in [
+        ("a.temp", 2000, 2.0),
+        ("b.temp", 1000, 1.0),
+        ("a.temp", 3000, 3.0),
+        ("b.temp", 3000, 30.0),
+        ("a.temp", 5000, 5.0),
+    ] {
+        h.sample(sample(p, t, v));
+    }
+    h.flush().await.unwrap();
+    let all = |after: ChangeKey| {
+        h.changes(after, Timestamp(4000), 2)
+            .unwrap()
+            .into_iter()
+            .map(|c| (c.point, c.key.t.0))
+            .collect::<Vec<_>>()
+    };
+    let first = h.changes(ChangeKey::before(Timestamp(0)), Timestamp(4000), 2).unwrap();
+    assert_eq!(
+        all(ChangeKey::before(Timestamp(0))),
+        vec![("b.temp".to_owned(), 1000), ("a.temp".to_owned(), 2000)]
+    );
+    assert_eq!(
+        all(first[1].key),
+        vec![("a.temp".to_owned(), 3000), ("b.temp".to_owned(), 3000)],
+        "the page after the last key, ties in the order stored, nothing after `until`"
+    );
+    let (count, start) = h
+        .count_changes(ChangeKey::before(Timestamp(0)), Timestamp(4000), 10)
+        .unwrap();
+    assert_eq!((count, start), (4, None));
+    let (count, start) = h
+        .count_changes(ChangeKey::before(Timestamp(0)), Timestamp(4000), 2)
+        .unwrap();
+    assert_eq!(count, 4);
+    assert_eq!(
+        all(start.unwrap()),
+        vec![("a.temp".to_owned(), 3000), ("b.temp".to_owned(), 3000)],
+        "the newest two are kept"
+    );
+}
