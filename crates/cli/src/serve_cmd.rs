@@ -43,11 +43,28 @@ pub struct ServeArgs {
     /// can reach the port reads the cell.
     #[arg(long, value_name = "TOKEN")]
     pub read_token: Option<String>,
-    /// Publish the cell as a Sparkplug B edge node to this MQTT broker
-    /// (mqtt://HOST:PORT; TLS is not built yet). The demo cell publishes as group
-    /// `cellbus`, edge node `demo`; with --config it replaces the [mqtt] table's broker.
+    /// Publish the cell to this MQTT broker (mqtt://HOST:PORT), as a Sparkplug B edge node
+    /// or as JSON (--mqtt-mode). The demo cell publishes as group `cellbus`, edge node
+    /// `demo` (JSON under `cellbus/demo/`); with --config it replaces the [mqtt] table's
+    /// broker.
     #[arg(long, value_name = "URL")]
     pub mqtt: Option<String>,
+    /// What to publish on MQTT: `sparkplug` (Sparkplug B 3.0, the default) or `json` (one
+    /// retained topic per point).
+    #[arg(long, value_name = "MODE", value_parser = parse_mqtt_mode)]
+    pub mqtt_mode: Option<gateway::config::MqttMode>,
+    /// The Sparkplug edge node id (default: the [mqtt] table's, else this machine's host
+    /// name; `demo` for the demo cell).
+    #[arg(long, value_name = "ID")]
+    pub mqtt_node: Option<String>,
+    /// Wait for this Sparkplug primary host application to be online (its
+    /// spBv1.0/STATE/ID message) before publishing; while it is away, store and forward.
+    #[arg(long, value_name = "ID")]
+    pub mqtt_primary_host: Option<String>,
+}
+
+fn parse_mqtt_mode(text: &str) -> Result<gateway::config::MqttMode, String> {
+    gateway::config::MqttMode::parse(text)
 }
 
 #[derive(Debug, Subcommand)]
@@ -76,6 +93,9 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
         token: args.token,
         read_token: args.read_token,
         mqtt: args.mqtt,
+        mqtt_mode: args.mqtt_mode,
+        mqtt_node: args.mqtt_node,
+        mqtt_primary_host: args.mqtt_primary_host,
     };
     gateway::serve(options, shutdown_signal()).await?;
     Ok(ExitCode::SUCCESS)

@@ -461,8 +461,8 @@ fn check_mqtt(
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<MqttConfig, ConfigError> {
     let (host, port) = parse_broker(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
-    let group_id = id_opt(&raw.group_id, "group_id", at)?
-        .unwrap_or_else(|| DEFAULT_MQTT_GROUP.to_owned());
+    let group_id =
+        id_opt(&raw.group_id, "group_id", at)?.unwrap_or_else(|| DEFAULT_MQTT_GROUP.to_owned());
     let edge_node_id =
         id_opt(&raw.edge_node_id, "edge_node_id", at)?.unwrap_or_else(default_edge_node_id);
     let client_id = match raw.client_id {

@@ -110,6 +110,8 @@ pub struct Metrics {
     pub mqtt_published: Counter,
     /// MQTT connections made after the first.
     pub mqtt_reconnects: Counter,
+    /// Stored changes sent after an outage (Sparkplug historical metrics, JSON backlog).
+    pub mqtt_forwarded: Counter,
     history_rows: Counter,
     history_commit_errors: Counter,
     history_rows_dropped: Counter,
@@ -160,6 +162,7 @@ impl Metrics {
         let mqtt_connected = Gauge::default();
         let mqtt_published = Counter::default();
         let mqtt_reconnects = Counter::default();
+        let mqtt_forwarded = Counter::default();
         let history_rows = Counter::default();
         let history_commit_errors = Counter::default();
         let history_rows_dropped = Counter::default();
@@ -220,6 +223,11 @@ impl Metrics {
             mqtt_reconnects.clone(),
         );
         registry.register(
+            "mqtt_forwarded",
+            "Stored changes sent to the broker after an outage (store and forward)",
+            mqtt_forwarded.clone(),
+        );
+        registry.register(
             "sse_clients",
             "Open server-sent event streams",
             sse_clients.clone(),
@@ -261,6 +269,7 @@ impl Metrics {
             mqtt_connected,
             mqtt_published,
             mqtt_reconnects,
+            mqtt_forwarded,
             sse_clients,
             history_rows,
             history_commit_errors,

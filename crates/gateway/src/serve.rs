@@ -12,7 +12,9 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
 use crate::cell::Cell;
-use crate::config::{CellConfig, MqttConfig, check_config, default_edge_node_id, parse_broker};
+use crate::config::{
+    CellConfig, MqttConfig, MqttMode, check_config, default_edge_node_id, parse_broker,
+};
 use crate::demo::DemoCell;
 use crate::event::{Event, EventKind};
 use crate::http::{self, WritePolicy};
@@ -69,6 +71,12 @@ pub struct ServeOptions {
     /// broker (the demo cell as group `cellbus`, edge node `demo`); with a config, it
     /// replaces the `[mqtt]` table's broker.
     pub mqtt: Option<String>,
+    /// `--mqtt-mode`: Sparkplug B or JSON, overriding the `[mqtt]` table's `mode`.
+    pub mqtt_mode: Option<MqttMode>,
+    /// `--mqtt-node`: the Sparkplug edge node id, overriding the `[mqtt]` table's.
+    pub mqtt_node: Option<String>,
+    /// `--mqtt-primary-host`: the Sparkplug primary host whose STATE gates the births.
+    pub mqtt_primary_host: Option<String>,
 }
 
 impl Default for ServeOptions {
@@ -83,6 +91,9 @@ impl Default for ServeOptions {
             token: None,
             read_token: None,
             mqtt: None,
+            mqtt_mode: None,
+            mqtt_node: None,
+            mqtt_primary_host: None,
         }
     }
 }
@@ -191,6 +202,7 @@ impl Gateway {
                     Arc::clone(&cell),
                     config,
                     options.data_dir.clone(),
+                    options.allow_writes,
                     stopped.clone(),
                 )
             })
@@ -285,17 +297,28 @@ impl Gateway {
 }
 
 /// The MQTT connection to make, if any: `--mqtt` (the demo cell's, or replacing the
-/// config's broker), else the config's `[mqtt]` table.
+/// config's broker), else the config's `[mqtt]` table; `--mqtt-mode`, `--mqtt-node` and
+/// `--mqtt-primary-host` override the table's fields.
 fn mqtt_config(
     options: &ServeOptions,
     config: &CellConfig,
     demo: bool,
 ) -> anyhow::Result<Option<MqttConfig>> {
-    let Some(url) = &options.mqtt else {
-        return Ok(config.mqtt.clone());
-    };
-    let mqtt = match &config.mqtt {
-        Some(table) => {
+    let mut mqtt = match (&options.mqtt, &config.mqtt) {
+        (None, None) => {
+            if options.mqtt_mode.is_some()
+                || options.mqtt_node.is_some()
+                || options.mqtt_primary_host.is_some()
+            {
+                anyhow::bail!(
+                    "--mqtt-mode, --mqtt-node and --mqtt-primary-host need a broker: give \
+                     --mqtt URL or an [mqtt] table in the configuration"
+                );
+            }
+            return Ok(None);
+        }
+        (None, Some(table)) => table.clone(),
+        (Some(url), Some(table)) => {
             let (host, port) = parse_broker(url).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?;
             MqttConfig {
                 host,
@@ -303,15 +326,34 @@ fn mqtt_config(
                 ..table.clone()
             }
         }
-        None => {
-            let node = if demo {
-                DEMO_EDGE_NODE.to_owned()
-            } else {
-                default_edge_node_id()
+        (Some(url), None) => {
+            let node = match &options.mqtt_node {
+                Some(node) => node.clone(),
+                None if demo => DEMO_EDGE_NODE.to_owned(),
+                None => default_edge_node_id(),
             };
             MqttConfig::for_broker(url, &node).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?
         }
     };
+    if let Some(mode) = options.mqtt_mode {
+        mqtt.mode = mode;
+    }
+    if let Some(node) = &options.mqtt_node {
+        sparkplug::Id::new(node.as_str())
+            .map_err(|e| anyhow::anyhow!("--mqtt-node {node:?}: {e}"))?;
+        if mqtt.prefix == format!("cellbus/{}", mqtt.edge_node_id) {
+            mqtt.prefix = format!("cellbus/{node}");
+        }
+        if mqtt.client_id == format!("cellbus-{}", mqtt.edge_node_id) {
+            mqtt.client_id = format!("cellbus-{node}");
+        }
+        mqtt.edge_node_id.clone_from(node);
+    }
+    if let Some(host) = &options.mqtt_primary_host {
+        sparkplug::Id::new(host.as_str())
+            .map_err(|e| anyhow::anyhow!("--mqtt-primary-host {host:?}: {e}"))?;
+        mqtt.primary_host = Some(host.clone());
+    }
     Ok(Some(mqtt))
 }
 

@@ -127,6 +127,10 @@ impl Attempt {
                         .unwrap_or_default(),
                     self.client
                 );
+                // The audit row first (whoever sees the event finds it committed), then the event,
+                // committed before the caller hears the answer.
+                self.record(AuditResult::Accepted, outcome.old.clone(), &detail)
+                    .await;
                 let device = self.cell.device_entry(point.device());
                 self.cell.emit(Event {
                     t: Timestamp::now(),
@@ -136,8 +140,9 @@ impl Attempt {
                     point: Some(point.clone()),
                     message: detail.clone(),
                 });
-                self.record(AuditResult::Accepted, outcome.old.clone(), &detail)
-                    .await;
+                if let Err(e) = self.cell.store().flush().await {
+                    tracing::error!("write event not committed: {e}");
+                }
                 Ok(Accepted {
                     point,
                     old: outcome.old,

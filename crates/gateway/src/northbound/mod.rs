@@ -5,8 +5,8 @@
 //! [`Cell::devices`](crate::cell::Cell::devices) for births) and writes only through the
 //! cell's one guarded write path; it never polls a device or knows a field protocol.
 //!
-//! - [`mqtt`]: a Sparkplug B edge node ([`sparkplug::EdgeNode`]) on an MQTT connection
-//!   (rumqttc).
+//! - [`mqtt`]: the cell on an MQTT broker (rumqttc), as a Sparkplug B edge node
+//!   ([`sparkplug::EdgeNode`]) or as plain JSON, with store and forward.
 //!
 //! This module holds the sans-IO mapping from the cell's points to Sparkplug metrics:
 //!
@@ -61,13 +61,29 @@ pub fn metric_spec(spec: &PointSpec) -> Option<MetricSpec> {
 /// A point's current reading as a Sparkplug sample: the value only when its quality is
 /// good, timed when the device was read (`now` if never).
 pub fn sample_of(kind: &PointKind, view: &PointView, now: Timestamp) -> Sample {
-    let t = sparkplug_time(view.t.unwrap_or(now));
-    match (view.quality, &view.value) {
-        (Some(Quality::Good), Some(value)) => match metric_value(kind, value) {
+    match view.quality {
+        Some(quality) => {
+            sample_of_stored(kind, view.value.as_ref(), quality, view.t.unwrap_or(now))
+        }
+        None => Sample::bad(sparkplug_time(view.t.unwrap_or(now))),
+    }
+}
+
+/// A reading (live or stored) read at `t` as a Sparkplug sample: the value only when its
+/// quality is good.
+pub fn sample_of_stored(
+    kind: &PointKind,
+    value: Option<&Value>,
+    quality: Quality,
+    t: Timestamp,
+) -> Sample {
+    let t = sparkplug_time(t);
+    match (quality, value) {
+        (Quality::Good, Some(value)) => match metric_value(kind, value) {
             Some(value) => Sample::good(value, t),
             None => Sample::bad(t),
         },
-        (Some(Quality::Stale), _) => Sample::stale(t),
+        (Quality::Stale, _) => Sample::stale(t),
         _ => Sample::bad(t),
     }
 }

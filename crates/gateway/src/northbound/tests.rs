@@ -39,6 +39,7 @@ async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answe
         rig.cell.clone(),
         config(&broker),
         rig.dir.path().join("mqtt"),
+        false,
         stop,
     )
     .unwrap();
@@ -107,24 +108,10 @@ fn command(metric: &str, datatype: sparkplug::DataType, value: SpValue) -> Vec<u
     .encode_to_vec()
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_dcmd_write_is_not_carried_out_in_this_version() {
-    let broker = Mosquitto::start();
-    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
-    let rig = rig(1);
-    let (stop_tx, stop) = watch::channel(false);
-    let task = super::mqtt::start(
-        rig.cell.clone(),
-        config(&broker),
-        rig.dir.path().join("mqtt"),
-        stop,
-    )
-    .unwrap();
-    // A writable number once it has been read.
-    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
-        .await;
+/// A writable number of jbc1 once it has been read: its name, value, and a value to write.
+fn writable_number(rig: &crate::testing::Rig) -> (String, f64, f64) {
     let device = rig.cell.device("jbc1").unwrap();
-    let (name, old, target) = device
+    device
         .points
         .iter()
         .find_map(|p| {
@@ -139,7 +126,31 @@ async fn a_dcmd_write_is_not_carried_out_in_this_version() {
             };
             Some((p.view.id.name().to_owned(), old, target))
         })
-        .expect("a JBC station has a writable number");
+        .expect("a JBC station has a writable number")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dcmd_write_is_refused_without_allow_writes_and_nothing_is_stored() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(1);
+    let (stop_tx, stop) = watch::channel(false);
+    // The table asks for commands, but the gateway runs without --allow-writes.
+    let config = MqttConfig {
+        commands: true,
+        ..config(&broker)
+    };
+    let task = super::mqtt::start(
+        rig.cell.clone(),
+        config,
+        rig.dir.path().join("mqtt"),
+        false,
+        stop,
+    )
+    .unwrap();
+    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
+        .await;
+    let (name, old, target) = writable_number(&rig);
 
     sub.publish(
         "spBv1.0/rig/DCMD/cell/jbc1",
@@ -181,6 +192,94 @@ async fn a_dcmd_write_is_not_carried_out_in_this_version() {
             .and_then(|p| p.view.value.clone()),
         Some(Value::Number(old))
     );
+    assert_eq!(
+        rig.cell.store().audit_log(None, 10).unwrap(),
+        vec![],
+        "nothing stored"
+    );
+    let refused = rig
+        .cell
+        .metrics()
+        .writes
+        .get_or_create(&crate::metrics::WriteLabels {
+            result: "unauthorised".into(),
+        })
+        .get();
+    assert_eq!(refused, 1, "counted");
+
+    stop_tx.send(true).unwrap();
+    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(1);
+    let mut live = rig.cell.subscribe();
+    let (stop_tx, stop) = watch::channel(false);
+    let config = MqttConfig {
+        commands: true,
+        ..config(&broker)
+    };
+    let task = super::mqtt::start(
+        rig.cell.clone(),
+        config,
+        rig.dir.path().join("mqtt"),
+        true,
+        stop,
+    )
+    .unwrap();
+    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
+        .await;
+    let (name, old, target) = writable_number(&rig);
+
+    // Outside the point's range: refused before the wire, with one audit row.
+    sub.publish(
+        "spBv1.0/rig/DCMD/cell/jbc1",
+        command(
+            &name,
+            sparkplug::DataType::Double,
+            SpValue::DoubleValue(1e9),
+        ),
+    )
+    .await;
+    sub.publish(
+        "spBv1.0/rig/DCMD/cell/jbc1",
+        command(
+            &name,
+            sparkplug::DataType::Double,
+            SpValue::DoubleValue(target),
+        ),
+    )
+    .await;
+    // The write event is emitted when the device took the value.
+    tokio::time::timeout(LIMIT, async {
+        loop {
+            if let Ok(crate::cell::LiveMessage::Event(e)) = live.recv().await
+                && e.kind == crate::event::EventKind::Write
+            {
+                return e;
+            }
+        }
+    })
+    .await
+    .expect("the write event");
+    let audit = rig.cell.store().audit_log(None, 10).unwrap();
+    let results: Vec<&str> = audit.iter().rev().map(|a| a.result.as_str()).collect();
+    assert_eq!(
+        results,
+        vec!["refused", "attempted", "accepted"],
+        "{audit:#?}"
+    );
+    assert!(
+        audit
+            .iter()
+            .all(|a| a.client == "mqtt spBv1.0/rig/DCMD/cell/jbc1"),
+        "{audit:#?}"
+    );
+    assert_eq!(audit[0].old_value, Some(serde_json::json!(old)));
+    assert!(audit[0].detail.contains(&name), "{}", audit[0].detail);
 
     stop_tx.send(true).unwrap();
     tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();

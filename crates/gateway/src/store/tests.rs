@@ -875,7 +875,9 @@ async fn stored_changes_of_every_point_come_back_in_time_order_in_pages() {
             .map(|c| (c.point, c.key.t.0))
             .collect::<Vec<_>>()
     };
-    let first = h.changes(ChangeKey::before(Timestamp(0)), Timestamp(4000), 2).unwrap();
+    let first = h
+        .changes(ChangeKey::before(Timestamp(0)), Timestamp(4000), 2)
+        .unwrap();
     assert_eq!(
         all(ChangeKey::before(Timestamp(0))),
         vec![("b.temp".to_owned(), 1000), ("a.temp".to_owned(), 2000)]

@@ -1,47 +1,42 @@
-//! The cell as a Sparkplug B edge node on an MQTT broker: [`sparkplug::EdgeNode`] decides
-//! what to publish, rumqttc carries it.
+//! The cell on an MQTT broker, as a Sparkplug B edge node ([`sparkplug`](self::sparkplug))
+//! or as plain JSON ([`json`]); rumqttc carries it.
 //!
-//! One task per gateway. Per connection it:
+//! One task per gateway. The connection plumbing here is shared by both modes; per
+//! connection it:
 //!
-//! 1. stores the next `bdSeq` in the history database (`settings` table) before
-//!    connecting, so a restart never reuses one;
-//! 2. builds fresh `MqttOptions` whose Will is the NDEATH with this connection's `bdSeq`
-//!    (rumqttc fixes the Will at connect and would reconnect with a stale one, so the
-//!    task makes a new client for every connection instead of letting rumqttc reconnect);
-//! 3. on ConnAck: subscribes to NCMD and DCMD (rumqttc does not re-subscribe), then
-//!    publishes the NBIRTH and a DBIRTH per device (followed by a DDEATH for a device that
-//!    is down), from a fresh subscription to the change stream so nothing falls between;
-//! 4. turns each change into a DDATA by alias (changed metrics only), a device going down
-//!    into a DDEATH and coming back into a DBIRTH; a lagging change stream, or an NCMD
-//!    `Node Control/Rebirth`, gives a full rebirth;
-//! 5. on a lost connection waits (0.5 s doubling to 30 s) and starts again at 1.
+//! 1. asks the mode for the connection's Will (Sparkplug first stores the next `bdSeq` in
+//!    the history database, so a restart never reuses one);
+//! 2. builds fresh `MqttOptions` with that Will (rumqttc fixes the Will at connect and
+//!    would reconnect with a stale one, so the task makes a new client for every
+//!    connection instead of letting rumqttc reconnect);
+//! 3. lets the mode serve the connection: on ConnAck it subscribes (rumqttc does not
+//!    re-subscribe), publishes its births or retained state, the stored changes since the
+//!    forwarded mark ([`forward`]), then the change stream;
+//! 4. on a lost connection waits (0.5 s doubling to 30 s) and starts again at 1.
 //!
-//! A graceful stop publishes the NDEATH itself before disconnecting. DCMD writes are not
-//! enabled in this version: a valid DCMD is logged and ignored.
+//! A graceful stop publishes the Will itself before disconnecting.
 
-use std::collections::HashSet;
+pub mod forward;
+pub mod json;
+pub mod sparkplug;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
-use rumqttc::{AsyncClient, Event as MqttEvent, EventLoop, LastWill, MqttOptions, Packet, QoS};
-use sparkplug::{
-    BdSeq, Command, DataType, Delivery, EdgeNode, Id, MetricName, MetricSpec, MetricValue, Publish,
-    Qos, Sample,
+use rumqttc::{
+    AsyncClient, Event as MqttEvent, EventLoop, LastWill, MqttOptions, Outgoing as Sent, Packet,
+    QoS,
 };
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio::task::JoinHandle;
 
-use super::{device_metrics, sample_of, sparkplug_time};
-use crate::cell::{Cell, DeviceStatus, LiveMessage, MqttLink};
-use crate::config::MqttConfig;
+use self::forward::{Delivery, FORWARDED_KEY};
+use crate::cell::{Cell, LiveMessage, MqttLink};
+use crate::config::{MqttConfig, MqttMode};
 use crate::event::{Event, EventKind};
-use crate::point::{DeviceId, PointId};
 use crate::time::Timestamp;
-
-/// The key of the stored `bdSeq` in the history database's `settings` table.
-pub const BD_SEQ_KEY: &str = "mqtt.bd_seq";
 
 /// First wait after a lost or refused connection; it doubles up to [`RETRY_CAP`].
 pub const RETRY_FIRST: Duration = Duration::from_millis(500);
@@ -52,23 +47,19 @@ pub const RETRY_CAP: Duration = Duration::from_secs(30);
 const QUEUE: usize = 1024;
 /// Largest MQTT packet sent or accepted: large cells make large births.
 const MAX_PACKET: usize = 4 << 20;
-/// How long a graceful stop waits for the NDEATH and DISCONNECT to leave.
+/// How long a graceful stop waits for the last messages and DISCONNECT to leave.
 const STOP_GRACE: Duration = Duration::from_secs(3);
 
-/// Node metric: the gateway's version.
-pub const VERSION_METRIC: &str = "Gateway/Version";
-/// Node metric: the number of lines.
-pub const LINES_METRIC: &str = "Gateway/Lines";
-/// Node metric: history rows written since start.
-pub const HISTORY_ROWS_METRIC: &str = "Gateway/History rows";
-
 /// Starts publishing `cell` to the broker in `config` until `stop` turns true; `data_dir`
-/// holds the database that keeps `bdSeq`. Fails at once only for what no retry can fix
-/// (an id Sparkplug refuses, a password variable that is not set).
+/// holds the database that keeps `bdSeq` and the forwarded mark. `allow_writes` is the
+/// gateway's `--allow-writes`: with the config's `commands = true`, DCMD writes are
+/// carried out. Fails at once only for what no retry can fix (an id Sparkplug refuses, a
+/// password variable that is not set).
 pub fn start(
     cell: Arc<Cell>,
     config: MqttConfig,
     data_dir: PathBuf,
+    allow_writes: bool,
     stop: watch::Receiver<bool>,
 ) -> anyhow::Result<JoinHandle<()>> {
     let password = match &config.password_env {
@@ -77,45 +68,109 @@ pub fn start(
         })?),
         None => None,
     };
-    let group = Id::new(config.group_id.as_str())
-        .map_err(|e| anyhow::anyhow!("MQTT group_id {:?}: {e}", config.group_id))?;
-    let edge_node = Id::new(config.edge_node_id.as_str())
-        .map_err(|e| anyhow::anyhow!("MQTT edge_node_id {:?}: {e}", config.edge_node_id))?;
     cell.set_mqtt(MqttLink::Disconnected("not connected yet".to_owned()));
+    let mode = config.mode;
     let link = Link {
         cell,
         config,
         password,
         data_dir,
     };
-    Ok(tokio::spawn(link.run(group, edge_node, stop)))
+    Ok(match mode {
+        MqttMode::Sparkplug => {
+            let node = sparkplug::Node::new(&link, allow_writes)?;
+            tokio::spawn(link.run(node, stop))
+        }
+        MqttMode::Json => {
+            let publisher = json::Publisher::new(&link);
+            tokio::spawn(link.run(publisher, stop))
+        }
+    })
 }
 
-struct Link {
+/// What the gateway needs to connect, shared by the modes.
+pub struct Link {
     cell: Arc<Cell>,
     config: MqttConfig,
     password: Option<String>,
     data_dir: PathBuf,
 }
 
+/// A message to publish, with the latest read time among the changes it holds.
+#[derive(Debug, Clone)]
+pub struct Outgoing {
+    /// Where.
+    pub topic: String,
+    /// What.
+    pub payload: Vec<u8>,
+    /// With which QoS.
+    pub qos: QoS,
+    /// Whether the broker keeps it for later subscribers.
+    pub retain: bool,
+    /// The latest read time of the changes in it, if it holds any.
+    pub latest: Option<Timestamp>,
+}
+
 /// Why a connection ended.
-enum End {
-    /// Lost or refused; try again.
+#[derive(Debug)]
+pub enum End {
+    /// Lost or refused; try again after a wait.
     Lost(String),
+    /// Ended on purpose (a primary host went offline): publish the Will, disconnect, and
+    /// connect again at once.
+    Again(String),
     /// The gateway stops.
     Stop,
 }
 
+/// What a connection brought.
+#[derive(Debug)]
+pub enum Step {
+    /// The broker accepted the connection (ConnAck).
+    Connected,
+    /// A message on a subscribed topic.
+    Message {
+        /// Its topic.
+        topic: String,
+        /// Its payload.
+        payload: Vec<u8>,
+    },
+    /// From the change stream.
+    Live(Result<LiveMessage, broadcast::error::RecvError>),
+    /// The mode's timer.
+    Tick,
+}
+
+/// One way of publishing the cell (Sparkplug B or JSON); the connection loop is shared.
+pub trait Mode {
+    /// Prepares the next connection and gives its Will (also published before a
+    /// graceful disconnect).
+    fn prepare(&mut self, link: &Link) -> impl Future<Output = Outgoing> + Send;
+    /// Serves one connection until it ends.
+    fn serve(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+    ) -> impl Future<Output = End> + Send;
+    /// The connection is gone.
+    fn lost(&mut self);
+    /// How often [`Step::Tick`] comes.
+    fn tick(&self) -> Duration;
+}
+
 impl Link {
-    async fn run(self, group: Id, edge_node: Id, mut stop: watch::Receiver<bool>) {
-        let first = match self.read_bd_seq().await {
-            Ok(n) => n,
-            Err(e) => {
-                tracing::warn!("cannot read the stored MQTT bdSeq ({e}); starting from 0");
-                BdSeq::new(0)
-            }
-        };
-        let mut node = EdgeNode::new(group, edge_node, first);
+    /// The cell.
+    pub fn cell(&self) -> &Arc<Cell> {
+        &self.cell
+    }
+
+    /// The `[mqtt]` table.
+    pub fn config(&self) -> &MqttConfig {
+        &self.config
+    }
+
+    async fn run<M: Mode + Send>(self, mut mode: M, mut stop: watch::Receiver<bool>) {
+        let mut delivery = Delivery::new(self.read_forwarded().await);
         let mut live = self.cell.subscribe();
         let mut retry = RETRY_FIRST;
         let mut connections = 0_u64;
@@ -124,46 +179,54 @@ impl Link {
             if *stop.borrow() {
                 return;
             }
-            if let Err(e) = self.write_bd_seq(node.next_bd_seq()).await {
-                tracing::warn!(
-                    "cannot store the next MQTT bdSeq ({e}); a restart may repeat bdSeq {}",
-                    node.bd_seq().value()
-                );
-            }
-            let will = node.will();
+            let will = mode.prepare(&self).await;
             let (client, eventloop) = AsyncClient::new(self.options(&will), QUEUE);
             let (events_tx, events) = mpsc::unbounded_channel();
             let pump = tokio::spawn(pump(eventloop, events_tx));
-            let mut session = Session {
-                cell: &self.cell,
-                client: &client,
-                node: &mut node,
-                dead: HashSet::new(),
+            let mut tick = tokio::time::interval(mode.tick());
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            let mut conn = Connection {
+                link: &self,
+                client,
+                events,
+                delivery: &mut delivery,
+                stop: &mut stop,
+                tick,
                 connected: false,
+                connections: &mut connections,
             };
-            let end = session
-                .serve(events, &mut live, &mut stop, &mut connections)
-                .await;
-            let connected = session.connected;
+            let end = mode.serve(&mut conn, &mut live).await;
+            let connected = conn.connected;
             if connected {
                 retry = RETRY_FIRST;
             }
             match end {
                 End::Stop => {
                     if connected {
-                        let _ = publish(&self.cell, &client, &will).await;
-                        let _ = client.disconnect().await;
-                        let _ = tokio::time::timeout(STOP_GRACE, pump).await;
-                    } else {
-                        pump.abort();
+                        conn.close(&will).await;
                     }
-                    self.went_down(&mut node, connected, "the gateway stopped".to_owned());
+                    pump.abort();
+                    mode.lost();
+                    self.went_down(connected, "the gateway stopped".to_owned());
                     return;
+                }
+                End::Again(why) => {
+                    if connected {
+                        conn.close(&will).await;
+                    }
+                    pump.abort();
+                    delivery.lost();
+                    mode.lost();
+                    self.went_down(connected, why);
+                    retry = RETRY_FIRST;
+                    was_connected = true;
                 }
                 End::Lost(why) => {
                     pump.abort();
+                    delivery.lost();
+                    mode.lost();
                     if connected || was_connected {
-                        self.went_down(&mut node, connected, why.clone());
+                        self.went_down(connected, why.clone());
                     }
                     self.cell.set_mqtt(MqttLink::Disconnected(why));
                     was_connected = connected;
@@ -177,12 +240,11 @@ impl Link {
         }
     }
 
-    fn went_down(&self, node: &mut EdgeNode, connected: bool, why: String) {
-        node.on_disconnect();
+    fn went_down(&self, connected: bool, why: String) {
         self.cell.metrics().mqtt_connected.set(0);
         self.cell.set_mqtt(MqttLink::Disconnected(why.clone()));
         let what = if connected {
-            "MQTT connection lost"
+            "MQTT connection ended"
         } else {
             "cannot connect to the MQTT broker"
         };
@@ -195,7 +257,7 @@ impl Link {
         ));
     }
 
-    fn options(&self, will: &Publish) -> MqttOptions {
+    fn options(&self, will: &Outgoing) -> MqttOptions {
         let c = &self.config;
         let mut options = MqttOptions::new(&c.client_id, &c.host, c.port);
         options
@@ -203,9 +265,9 @@ impl Link {
             .set_clean_session(true)
             .set_max_packet_size(MAX_PACKET, MAX_PACKET)
             .set_last_will(LastWill::new(
-                will.topic.to_string(),
+                will.topic.clone(),
                 will.payload.clone(),
-                qos(will.qos),
+                will.qos,
                 will.retain,
             ));
         if let Some(user) = &c.username {
@@ -214,237 +276,180 @@ impl Link {
         options
     }
 
-    async fn read_bd_seq(&self) -> anyhow::Result<BdSeq> {
+    /// Reads a stored integer setting (waiting for the history's open, which moves a
+    /// damaged file aside, first).
+    pub async fn read_setting(&self, key: &'static str) -> anyhow::Result<Option<i64>> {
         let dir = self.data_dir.clone();
         let store = self.cell.store().clone();
-        let stored = tokio::task::spawn_blocking(move || {
-            // The writer's open moves a damaged file aside: wait for it (bounded) first.
+        Ok(tokio::task::spawn_blocking(move || {
             let _ = store.wait_open();
-            crate::store::read_setting(&dir, BD_SEQ_KEY)
+            crate::store::read_setting(&dir, key)
         })
-        .await??;
-        Ok(BdSeq::new(
-            u8::try_from(stored.unwrap_or(0).rem_euclid(256)).unwrap_or(0),
-        ))
+        .await??)
     }
 
-    async fn write_bd_seq(&self, next: BdSeq) -> anyhow::Result<()> {
+    /// Stores an integer setting, committed when this returns.
+    pub async fn write_setting(&self, key: &'static str, value: i64) -> anyhow::Result<()> {
         let dir = self.data_dir.clone();
-        tokio::task::spawn_blocking(move || {
-            crate::store::write_setting(&dir, BD_SEQ_KEY, i64::from(next.value()))
-        })
-        .await??;
+        tokio::task::spawn_blocking(move || crate::store::write_setting(&dir, key, value))
+            .await??;
         Ok(())
+    }
+
+    /// The forwarded mark: stored, or now (stored at once) on the first start with MQTT.
+    async fn read_forwarded(&self) -> Timestamp {
+        match self.read_setting(FORWARDED_KEY).await {
+            Ok(Some(t)) => Timestamp(t),
+            Ok(None) => {
+                let now = Timestamp::now();
+                self.store_forwarded(now).await;
+                now
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "cannot read the MQTT forwarded mark ({e}); changes stored before now \
+                     will not be sent"
+                );
+                Timestamp::now()
+            }
+        }
+    }
+
+    async fn store_forwarded(&self, t: Timestamp) {
+        if let Err(e) = self.write_setting(FORWARDED_KEY, t.0).await {
+            tracing::warn!("cannot store the MQTT forwarded mark ({e}); a restart may resend");
+        }
     }
 }
 
-/// One MQTT connection's life.
-struct Session<'a> {
-    cell: &'a Arc<Cell>,
-    client: &'a AsyncClient,
-    node: &'a mut EdgeNode,
-    /// Devices with a DDEATH since their last DBIRTH.
-    dead: HashSet<DeviceId>,
-    connected: bool,
+/// One MQTT connection, as the modes see it.
+pub struct Connection<'a> {
+    link: &'a Link,
+    client: AsyncClient,
+    events: mpsc::UnboundedReceiver<Result<MqttEvent, rumqttc::ConnectionError>>,
+    delivery: &'a mut Delivery,
+    stop: &'a mut watch::Receiver<bool>,
+    tick: tokio::time::Interval,
+    connections: &'a mut u64,
+    /// Whether the mode is serving (set by the mode once its first messages are out).
+    pub connected: bool,
 }
 
-impl Session<'_> {
-    async fn serve(
+impl Connection<'_> {
+    /// The next thing that happened; the change stream only when `live_on`.
+    pub async fn next(
         &mut self,
-        mut events: mpsc::UnboundedReceiver<Result<MqttEvent, rumqttc::ConnectionError>>,
         live: &mut broadcast::Receiver<LiveMessage>,
-        stop: &mut watch::Receiver<bool>,
-        connections: &mut u64,
-    ) -> End {
+        live_on: bool,
+    ) -> Result<Step, End> {
         loop {
-            let step = tokio::select! {
-                changed = stop.changed() => {
-                    if changed.is_err() || *stop.borrow() {
-                        return End::Stop;
+            let event = tokio::select! {
+                changed = self.stop.changed() => {
+                    if changed.is_err() || *self.stop.borrow() {
+                        return Err(End::Stop);
                     }
-                    Ok(())
+                    continue;
                 }
-                event = events.recv() => match event {
-                    Some(Ok(MqttEvent::Incoming(Packet::ConnAck(_)))) => {
-                        *connections += 1;
-                        if *connections > 1 {
-                            self.cell.metrics().mqtt_reconnects.inc();
-                        }
-                        // A fresh receiver: the births are a snapshot taken after it.
-                        *live = live.resubscribe();
-                        self.on_connect().await
-                    }
-                    Some(Ok(MqttEvent::Incoming(Packet::Publish(p)))) => {
-                        self.on_command(&p.topic, &p.payload).await
-                    }
-                    Some(Ok(_)) => Ok(()),
-                    Some(Err(e)) => return End::Lost(e.to_string()),
-                    None => return End::Lost("the MQTT client stopped".to_owned()),
-                },
-                message = live.recv(), if self.connected => match message {
-                    Ok(message) => self.on_change(message).await,
-                    Err(broadcast::error::RecvError::Lagged(missed)) => {
-                        tracing::warn!("MQTT: {missed} changes missed; publishing births again");
-                        self.births().await
-                    }
-                    Err(broadcast::error::RecvError::Closed) => return End::Stop,
-                },
+                event = self.events.recv() => event,
+                message = live.recv(), if live_on => return Ok(Step::Live(message)),
+                _ = self.tick.tick() => return Ok(Step::Tick),
             };
-            if let Err(why) = step {
-                return End::Lost(why);
+            match event {
+                Some(Ok(MqttEvent::Incoming(Packet::ConnAck(_)))) => {
+                    *self.connections += 1;
+                    if *self.connections > 1 {
+                        self.link.cell.metrics().mqtt_reconnects.inc();
+                    }
+                    return Ok(Step::Connected);
+                }
+                Some(Ok(MqttEvent::Incoming(Packet::Publish(p)))) => {
+                    return Ok(Step::Message {
+                        topic: p.topic,
+                        payload: p.payload.to_vec(),
+                    });
+                }
+                Some(Ok(MqttEvent::Incoming(Packet::PingResp))) => {
+                    if let Some(t) = self.delivery.ping_answered() {
+                        self.link.store_forwarded(t).await;
+                    }
+                }
+                Some(Ok(MqttEvent::Outgoing(Sent::Publish(_)))) => self.delivery.wrote_publish(),
+                Some(Ok(MqttEvent::Outgoing(Sent::PingReq))) => self.delivery.wrote_ping(),
+                Some(Ok(_)) => {}
+                Some(Err(e)) => return Err(End::Lost(e.to_string())),
+                None => return Err(End::Lost("the MQTT client stopped".to_owned())),
             }
         }
     }
 
-    async fn on_connect(&mut self) -> Result<(), String> {
-        self.node.on_connect();
-        for filter in self.node.command_filters() {
-            self.client
-                .subscribe(filter, QoS::AtLeastOnce)
-                .await
-                .map_err(|e| format!("cannot subscribe to commands: {e}"))?;
+    /// Hands a message to the client (waiting while its queue is full).
+    pub async fn publish(&mut self, message: Outgoing) -> Result<(), String> {
+        let topic = message.topic.clone();
+        self.delivery.handed(message.latest);
+        self.client
+            .publish(message.topic, message.qos, message.retain, message.payload)
+            .await
+            .map_err(|e| format!("cannot publish {topic}: {e}"))?;
+        self.link.cell.metrics().mqtt_published.inc();
+        Ok(())
+    }
+
+    /// Subscribes to `filter` (QoS 1).
+    pub async fn subscribe(&self, filter: String) -> Result<(), String> {
+        self.client
+            .subscribe(filter.clone(), QoS::AtLeastOnce)
+            .await
+            .map_err(|e| format!("cannot subscribe to {filter}: {e}"))
+    }
+
+    /// The forwarded mark.
+    pub fn forwarded(&self) -> Timestamp {
+        self.delivery.forwarded()
+    }
+
+    /// Moves the forwarded mark back to `at` at the latest, and stores it.
+    pub async fn rewind_forwarded(&mut self, at: Timestamp) {
+        if let Some(t) = self.delivery.rewind_to(at) {
+            self.link.store_forwarded(t).await;
         }
-        self.births().await?;
+    }
+
+    /// The mode is serving: the status says connected.
+    pub fn serving(&mut self, words: String) {
         self.connected = true;
-        self.cell.metrics().mqtt_connected.set(1);
-        self.cell.set_mqtt(MqttLink::Connected);
-        let bd_seq = self.node.bd_seq().value().wrapping_sub(1);
-        self.cell.emit(event(
-            EventKind::MqttConnected,
-            format!(
-                "MQTT connected as spBv1.0/{}/{} (bdSeq {bd_seq}); births published",
-                self.node.group(),
-                self.node.edge_node()
-            ),
-        ));
-        Ok(())
+        let cell = &self.link.cell;
+        cell.metrics().mqtt_connected.set(1);
+        cell.set_mqtt(MqttLink::Connected);
+        cell.emit(event(EventKind::MqttConnected, words));
     }
 
-    /// NBIRTH, then a DBIRTH per device (and a DDEATH after it for a device that is down).
-    async fn births(&mut self) -> Result<(), String> {
-        let now = Timestamp::now();
-        let t = sparkplug_time(now);
-        let birth = self
-            .node
-            .node_birth(&node_metrics(self.cell, t), t)
-            .map_err(|e| format!("cannot build the NBIRTH: {e}"))?;
-        publish(self.cell, self.client, &birth).await?;
-        self.dead.clear();
-        for device in self.cell.devices() {
-            let Ok(id) = Id::new(device.summary.id.as_str()) else {
-                continue;
-            };
-            let birth = self
-                .node
-                .device_birth(&id, &device_metrics(&device, now), t)
-                .map_err(|e| format!("cannot build the DBIRTH of {id}: {e}"))?;
-            publish(self.cell, self.client, &birth).await?;
-            if device.summary.status == DeviceStatus::Down {
-                self.device_down(&device.summary.id, t).await?;
-            }
-        }
-        Ok(())
-    }
-
-    async fn device_down(
-        &mut self,
-        device: &DeviceId,
-        t: sparkplug::Timestamp,
-    ) -> Result<(), String> {
-        let Ok(id) = Id::new(device.as_str()) else {
-            return Ok(());
-        };
-        if let Ok(death) = self.node.device_death(&id, t) {
-            publish(self.cell, self.client, &death).await?;
-        }
-        self.dead.insert(device.clone());
-        Ok(())
-    }
-
-    async fn on_change(&mut self, message: LiveMessage) -> Result<(), String> {
-        let now = Timestamp::now();
-        let t = sparkplug_time(now);
-        match message {
-            LiveMessage::Value(view) => {
-                let Some(device) = self.live_device(&view.id) else {
-                    return Ok(());
-                };
-                let Some(spec) = self.cell.point(&view.id) else {
-                    return Ok(());
-                };
-                let sample = sample_of(&spec.kind, &view, now);
-                match self
-                    .node
-                    .device_data(&device, &[(view.id.name(), sample)], t, Delivery::Live)
-                {
-                    Ok(Some(data)) => publish(self.cell, self.client, &data).await?,
-                    Ok(None) => {}
-                    Err(e) => tracing::debug!("MQTT: no DDATA for {}: {e}", view.id),
+    /// Publishes `will`, disconnects, and waits (bounded) until everything is written; a
+    /// clean close moves the forwarded mark.
+    async fn close(&mut self, will: &Outgoing) {
+        let _ = self.publish(will.clone()).await;
+        let _ = self.client.disconnect().await;
+        let drained = tokio::time::timeout(STOP_GRACE, async {
+            while let Some(event) = self.events.recv().await {
+                match event {
+                    Ok(MqttEvent::Outgoing(Sent::Publish(_))) => self.delivery.wrote_publish(),
+                    Ok(MqttEvent::Outgoing(Sent::Disconnect)) => return true,
+                    Ok(_) => {}
+                    Err(_) => return false,
                 }
             }
-            LiveMessage::Device(summary) => match summary.status {
-                DeviceStatus::Down if !self.dead.contains(&summary.id) => {
-                    self.device_down(&summary.id, t).await?;
-                }
-                DeviceStatus::Up if self.dead.contains(&summary.id) => {
-                    let Some(device) = self.cell.device(summary.id.as_str()) else {
-                        return Ok(());
-                    };
-                    let Ok(id) = Id::new(summary.id.as_str()) else {
-                        return Ok(());
-                    };
-                    let birth = self
-                        .node
-                        .device_birth(&id, &device_metrics(&device, now), t)
-                        .map_err(|e| format!("cannot build the DBIRTH of {id}: {e}"))?;
-                    publish(self.cell, self.client, &birth).await?;
-                    self.dead.remove(&summary.id);
-                }
-                _ => {}
-            },
-            LiveMessage::Event(_) => {}
+            false
+        })
+        .await;
+        if drained == Ok(true)
+            && let Some(t) = self.delivery.closed_cleanly()
+        {
+            self.link.store_forwarded(t).await;
         }
-        Ok(())
-    }
-
-    /// The Sparkplug id of the point's device, unless the device is dead.
-    fn live_device(&self, point: &PointId) -> Option<Id> {
-        let device = DeviceId::new(point.device()).ok()?;
-        if self.dead.contains(&device) {
-            return None;
-        }
-        Id::new(device.as_str()).ok()
-    }
-
-    async fn on_command(&mut self, topic: &str, payload: &[u8]) -> Result<(), String> {
-        match self.node.handle_command(topic, payload) {
-            Ok(commands) => {
-                for command in commands {
-                    match command {
-                        Command::Rebirth => {
-                            tracing::info!("MQTT: rebirth asked on {topic}");
-                            self.births().await?;
-                        }
-                        Command::Write {
-                            device,
-                            metric,
-                            value,
-                        } => tracing::warn!(
-                            device = device.as_ref().map(Id::as_str),
-                            metric = metric.as_str(),
-                            "DCMD writes are not enabled: {metric} = {value:?} on {topic} ignored"
-                        ),
-                    }
-                }
-            }
-            Err(e) => tracing::warn!("MQTT: command on {topic} refused: {e}"),
-        }
-        Ok(())
     }
 }
 
-/// Forwards the event loop's incoming packets and its end; polling it is what drives
-/// the connection.
+/// Forwards the event loop's events and its end; polling it is what drives the
+/// connection.
 async fn pump(
     mut eventloop: EventLoop,
     events: mpsc::UnboundedSender<Result<MqttEvent, rumqttc::ConnectionError>>,
@@ -452,58 +457,10 @@ async fn pump(
     loop {
         let event = eventloop.poll().await;
         let end = event.is_err();
-        if matches!(event, Ok(MqttEvent::Outgoing(_))) {
-            continue;
-        }
         if events.send(event).is_err() || end {
             return;
         }
     }
-}
-
-async fn publish(cell: &Cell, client: &AsyncClient, message: &Publish) -> Result<(), String> {
-    client
-        .publish(
-            message.topic.to_string(),
-            qos(message.qos),
-            message.retain,
-            message.payload.clone(),
-        )
-        .await
-        .map_err(|e| format!("cannot publish {}: {e}", message.topic))?;
-    cell.metrics().mqtt_published.inc();
-    Ok(())
-}
-
-fn qos(qos: Qos) -> QoS {
-    match qos {
-        Qos::AtMostOnce => QoS::AtMostOnce,
-        Qos::AtLeastOnce => QoS::AtLeastOnce,
-    }
-}
-
-/// The node's own metrics in its NBIRTH: version, lines, history rows written.
-fn node_metrics(cell: &Cell, t: sparkplug::Timestamp) -> Vec<(MetricSpec, Sample)> {
-    let name = |n: &str| MetricName::new(n).expect("the node metric names are not empty");
-    let rows = i64::try_from(cell.store().stats().rows_written()).unwrap_or(i64::MAX);
-    let lines = i64::try_from(cell.lines().len()).unwrap_or(i64::MAX);
-    vec![
-        (
-            MetricSpec::new(name(VERSION_METRIC), DataType::String)
-                .description("cellbus gateway version"),
-            Sample::good(MetricValue::String(env!("CARGO_PKG_VERSION").to_owned()), t),
-        ),
-        (
-            MetricSpec::new(name(LINES_METRIC), DataType::Int64)
-                .description("lines the gateway polls"),
-            Sample::good(MetricValue::Int64(lines), t),
-        ),
-        (
-            MetricSpec::new(name(HISTORY_ROWS_METRIC), DataType::Int64)
-                .description("history rows written since the gateway started"),
-            Sample::good(MetricValue::Int64(rows), t),
-        ),
-    ]
 }
 
 fn event(kind: EventKind, message: String) -> Event {

@@ -1,0 +1,232 @@
+//! Store and forward: what reached the broker, and the stored changes to send after an
+//! outage.
+//!
+//! The outbox is the history itself. Every value change the gateway publishes is also a
+//! row in the history database, committed within 200 ms and kept by a `kill -9`; so the
+//! publisher only has to remember how far the broker has certainly got (the *forwarded*
+//! mark, a read time kept in the database's `settings` table) and, after an outage or a
+//! restart, send the stored changes after it (oldest first, at most `max_backlog` of the
+//! newest) before going live again.
+//!
+//! Births, data and deaths go out with QoS 0, so the broker acknowledges nothing. What it
+//! has certainly received is read from the keep-alive: rumqttc sends a PINGREQ every
+//! keep-alive whatever else it sends, the packets of one connection arrive in order, and the
+//! broker answers a PINGREQ only after it has read what came before. [`Delivery`] follows
+//! the publishes handed to the client, the publishes the client wrote, and the last
+//! PINGREQ written: when its PINGRESP arrives, everything written before it has arrived.
+//! A clean DISCONNECT confirms everything written before it in the same way.
+//!
+//! The stored changes sent after an outage start [`MARGIN`] before the mark: changes read on
+//! different lines reach the change stream in about, not exactly, their time order. A
+//! subscriber may see a change twice across an outage (at least once, never lost); both
+//! copies carry the same read time.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::time::Duration;
+
+use crate::cell::Cell;
+use crate::store::{ChangeKey, StoredChange};
+use crate::time::{Timestamp, duration_millis};
+
+/// How far before the forwarded mark the stored changes are sent again.
+pub const MARGIN: Duration = Duration::from_secs(1);
+/// Stored changes read from the database at a time.
+pub const PAGE: usize = 5_000;
+
+/// The key of the forwarded mark in the database's `settings` table.
+pub const FORWARDED_KEY: &str = "mqtt.forwarded_until";
+
+/// What the broker has certainly received, from the client's view of one connection.
+///
+/// Each publish handed to the client carries the latest read time among the changes it
+/// holds (`None` for births and deaths).
+#[derive(Debug)]
+pub struct Delivery {
+    /// Read times of publishes handed to the client and not yet written, in order.
+    queued: VecDeque<Option<Timestamp>>,
+    /// The latest read time among the publishes written.
+    written: Option<Timestamp>,
+    /// `written` when the last PINGREQ went out, if its answer is awaited.
+    at_ping: Option<Option<Timestamp>>,
+    /// The mark: every change read at or before it has reached the broker.
+    forwarded: Timestamp,
+}
+
+impl Delivery {
+    /// Starts from the mark `forwarded` (read from the database, or the start time).
+    pub fn new(forwarded: Timestamp) -> Self {
+        Self {
+            queued: VecDeque::new(),
+            written: None,
+            at_ping: None,
+            forwarded,
+        }
+    }
+
+    /// The mark.
+    pub fn forwarded(&self) -> Timestamp {
+        self.forwarded
+    }
+
+    /// A publish holding changes read up to `latest` was handed to the client.
+    pub fn handed(&mut self, latest: Option<Timestamp>) {
+        self.queued.push_back(latest);
+    }
+
+    /// The client wrote the next publish.
+    pub fn wrote_publish(&mut self) {
+        if let Some(Some(t)) = self.queued.pop_front() {
+            self.written = Some(self.written.map_or(t, |w| w.max(t)));
+        }
+    }
+
+    /// The client wrote a PINGREQ.
+    pub fn wrote_ping(&mut self) {
+        self.at_ping = Some(self.written);
+    }
+
+    /// The broker answered the PINGREQ: returns the new mark if it moved.
+    pub fn ping_answered(&mut self) -> Option<Timestamp> {
+        let confirmed = self.at_ping.take()??;
+        self.advance(confirmed)
+    }
+
+    /// The connection was closed cleanly after everything was written: returns the new
+    /// mark if it moved.
+    pub fn closed_cleanly(&mut self) -> Option<Timestamp> {
+        let written = self.written?;
+        self.advance(written)
+    }
+
+    /// The connection is gone: nothing unconfirmed counts any more.
+    pub fn lost(&mut self) {
+        self.queued.clear();
+        self.written = None;
+        self.at_ping = None;
+    }
+
+    /// The mark goes back to `at` at the latest (a primary host that went offline did not
+    /// see what the broker got before it noticed): returns the new mark if it moved.
+    pub fn rewind_to(&mut self, at: Timestamp) -> Option<Timestamp> {
+        (at < self.forwarded).then(|| {
+            self.forwarded = at;
+            at
+        })
+    }
+
+    fn advance(&mut self, to: Timestamp) -> Option<Timestamp> {
+        (to > self.forwarded).then(|| {
+            self.forwarded = to;
+            to
+        })
+    }
+}
+
+/// The stored changes to send after an outage, read page by page.
+#[derive(Debug)]
+pub struct Backlog {
+    cell: Arc<Cell>,
+    next: ChangeKey,
+    until: Timestamp,
+    /// Changes not sent because of `max_backlog`.
+    pub skipped: u64,
+    /// Changes to send.
+    pub total: u64,
+}
+
+impl Backlog {
+    /// The changes read after `MARGIN` before `forwarded` and up to `until`, at most the
+    /// newest `max`. Commits what the history has queued first, so every change before
+    /// `until` is there.
+    pub async fn open(
+        cell: &Arc<Cell>,
+        forwarded: Timestamp,
+        until: Timestamp,
+        max: u64,
+    ) -> Result<Self, String> {
+        cell.store()
+            .flush()
+            .await
+            .map_err(|e| format!("the history cannot be committed: {e}"))?;
+        let from = ChangeKey::before(Timestamp(forwarded.0 - duration_millis(MARGIN) + 1));
+        let store = cell.store().clone();
+        let (count, start) =
+            tokio::task::spawn_blocking(move || store.count_changes(from, until, max))
+                .await
+                .map_err(|e| e.to_string())?
+                .map_err(|e| format!("the stored changes cannot be counted: {e}"))?;
+        let (next, skipped, total) = match start {
+            Some(start) => (start, count - max, max),
+            None => (from, 0, count),
+        };
+        Ok(Self {
+            cell: Arc::clone(cell),
+            next,
+            until,
+            skipped,
+            total,
+        })
+    }
+
+    /// The next page, oldest first; empty when all were read.
+    pub async fn next_page(&mut self) -> Result<Vec<StoredChange>, String> {
+        let store = self.cell.store().clone();
+        let (after, until) = (self.next, self.until);
+        let page = tokio::task::spawn_blocking(move || store.changes(after, until, PAGE))
+            .await
+            .map_err(|e| e.to_string())?
+            .map_err(|e| format!("the stored changes cannot be read: {e}"))?;
+        if let Some(last) = page.last() {
+            self.next = last.key;
+        }
+        Ok(page)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_ping_answered_confirms_what_was_written_before_it() {
+        let mut d = Delivery::new(Timestamp(100));
+        d.handed(Some(Timestamp(200)));
+        d.handed(None);
+        d.handed(Some(Timestamp(300)));
+        d.wrote_publish();
+        d.wrote_publish();
+        d.wrote_ping();
+        d.wrote_publish(); // after the ping: not confirmed by its answer
+        assert_eq!(d.ping_answered(), Some(Timestamp(200)));
+        assert_eq!(d.forwarded(), Timestamp(200));
+        d.wrote_ping();
+        assert_eq!(d.ping_answered(), Some(Timestamp(300)));
+    }
+
+    #[test]
+    fn nothing_is_confirmed_without_an_answer_or_after_a_loss() {
+        let mut d = Delivery::new(Timestamp(100));
+        d.handed(Some(Timestamp(200)));
+        d.wrote_publish();
+        assert_eq!(d.ping_answered(), None, "no ping was written");
+        d.wrote_ping();
+        d.lost();
+        assert_eq!(d.ping_answered(), None);
+        assert_eq!(d.closed_cleanly(), None);
+        assert_eq!(d.forwarded(), Timestamp(100));
+    }
+
+    #[test]
+    fn a_clean_close_confirms_everything_written_and_the_mark_never_goes_back_by_itself() {
+        let mut d = Delivery::new(Timestamp(500));
+        d.handed(Some(Timestamp(400)));
+        d.wrote_publish();
+        assert_eq!(d.closed_cleanly(), None, "older than the mark");
+        d.handed(Some(Timestamp(600)));
+        d.wrote_publish();
+        assert_eq!(d.closed_cleanly(), Some(Timestamp(600)));
+        assert_eq!(d.rewind_to(Timestamp(550)), Some(Timestamp(550)));
+        assert_eq!(d.rewind_to(Timestamp(700)), None);
+    }
+}

@@ -1,0 +1,326 @@
+//! JSON mode, for Node-RED, Telegraf and home-made consumers: one topic per point.
+//!
+//! | topic | payload | QoS, retained |
+//! |---|---|---|
+//! | `{prefix}/{device}/{point}` | `{"t":ms,"value":…,"unit":"°C","quality":"good"}` | 1, retained |
+//! | `{prefix}/{device}/status` | `online` or `offline` | 1, retained |
+//! | `{prefix}/status` | `online`; `offline` as the gateway's Will | 1, retained |
+//! | `{prefix}/events` | an event as the API shows it | 1, not retained |
+//!
+//! `value` is `null` unless the quality is `good` (a stale or bad point is never published
+//! with its last good value). After an outage the changes stored since the forwarded mark
+//! go first, not retained and with `"historical":true`, then every point's current value
+//! (retained), then the change stream.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use rumqttc::QoS;
+use serde_json::json;
+use tokio::sync::broadcast;
+
+use super::forward::Backlog;
+use super::{Connection, End, Link, Mode, Outgoing, Step};
+use crate::cell::{Cell, DeviceStatus, LiveMessage};
+use crate::point::{PointId, Quality, Value};
+use crate::time::Timestamp;
+
+/// JSON mode has no timer work; the tick only has to exist.
+const TICK: Duration = Duration::from_secs(3600);
+
+/// The JSON publisher of one gateway.
+pub struct Publisher {
+    cell: Arc<Cell>,
+    prefix: String,
+    /// The snapshot was published in this connection.
+    born: bool,
+    /// The latest read time handed to the client in this connection.
+    published: Option<Timestamp>,
+}
+
+impl Publisher {
+    /// The publisher of the `[mqtt]` table in `link`.
+    pub fn new(link: &Link) -> Self {
+        Self {
+            cell: Arc::clone(link.cell()),
+            prefix: link.config().prefix.clone(),
+            born: false,
+            published: None,
+        }
+    }
+
+    fn status(&self, online: bool) -> Outgoing {
+        Outgoing {
+            topic: format!("{}/status", self.prefix),
+            payload: if online { "online" } else { "offline" }.into(),
+            qos: QoS::AtLeastOnce,
+            retain: true,
+            latest: None,
+        }
+    }
+}
+
+impl Mode for Publisher {
+    async fn prepare(&mut self, _link: &Link) -> Outgoing {
+        self.status(false)
+    }
+
+    async fn serve(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+    ) -> End {
+        loop {
+            let step = match conn.next(live, self.born).await {
+                Ok(step) => step,
+                Err(end) => return end,
+            };
+            let done = match step {
+                Step::Connected => {
+                    let from = conn.forwarded();
+                    let done = self.snapshot(conn, live, from).await;
+                    conn.serving(format!(
+                        "MQTT connected; publishing JSON under {}/",
+                        self.prefix
+                    ));
+                    done
+                }
+                Step::Live(Ok(message)) => self.on_change(conn, message).await,
+                Step::Live(Err(broadcast::error::RecvError::Lagged(missed))) => {
+                    tracing::warn!("MQTT: {missed} changes missed; publishing every point again");
+                    let from = self.published.unwrap_or(conn.forwarded());
+                    self.snapshot(conn, live, from).await
+                }
+                Step::Live(Err(broadcast::error::RecvError::Closed)) => return End::Stop,
+                Step::Message { .. } | Step::Tick => Ok(()),
+            };
+            if let Err(why) = done {
+                return End::Lost(why);
+            }
+        }
+    }
+
+    fn lost(&mut self) {
+        self.born = false;
+        self.published = None;
+    }
+
+    fn tick(&self) -> Duration {
+        TICK
+    }
+}
+
+impl Publisher {
+    /// `online`, the changes stored since `from`, then every point and device status.
+    async fn snapshot(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+        from: Timestamp,
+    ) -> Result<(), String> {
+        *live = live.resubscribe();
+        let now = Timestamp::now();
+        conn.publish(self.status(true)).await?;
+        self.backlog(conn, from, now).await?;
+        for device in self.cell.devices() {
+            for point in &device.points {
+                let view = &point.view;
+                let message =
+                    self.point_message(&view.id, view.value.as_ref(), view.quality, view.t, false);
+                conn.publish(message).await?;
+            }
+            conn.publish(self.device_status(device.summary.id.as_str(), device.summary.status))
+                .await?;
+        }
+        self.born = true;
+        Ok(())
+    }
+
+    async fn backlog(
+        &mut self,
+        conn: &mut Connection<'_>,
+        from: Timestamp,
+        until: Timestamp,
+    ) -> Result<(), String> {
+        let max = conn.link.config().max_backlog;
+        let mut backlog = match Backlog::open(&self.cell, from, until, max).await {
+            Ok(b) => b,
+            Err(e) => {
+                tracing::warn!("MQTT: the stored changes cannot be sent: {e}");
+                return Ok(());
+            }
+        };
+        if backlog.skipped > 0 {
+            tracing::warn!(
+                "MQTT: {} stored changes are older than the newest {max} (max_backlog) and \
+                 are not sent",
+                backlog.skipped
+            );
+        }
+        loop {
+            let page = match backlog.next_page().await {
+                Ok(page) if page.is_empty() => return Ok(()),
+                Ok(page) => page,
+                Err(e) => {
+                    tracing::warn!("MQTT: sending stored changes stopped: {e}");
+                    return Ok(());
+                }
+            };
+            let sent = page.len() as u64;
+            for change in page {
+                let Ok(point) = PointId::parse(&change.point) else {
+                    continue;
+                };
+                let message = self.point_message(
+                    &point,
+                    change.value.as_ref(),
+                    Some(change.quality),
+                    Some(change.key.t),
+                    true,
+                );
+                conn.publish(message).await?;
+                self.mark(change.key.t);
+            }
+            self.cell.metrics().mqtt_forwarded.inc_by(sent);
+        }
+    }
+
+    async fn on_change(
+        &mut self,
+        conn: &mut Connection<'_>,
+        message: LiveMessage,
+    ) -> Result<(), String> {
+        match message {
+            LiveMessage::Value(view) => {
+                let message =
+                    self.point_message(&view.id, view.value.as_ref(), view.quality, view.t, false);
+                conn.publish(message).await?;
+                if let Some(t) = view.t {
+                    self.mark(t);
+                }
+            }
+            LiveMessage::Device(summary) => {
+                conn.publish(self.device_status(summary.id.as_str(), summary.status))
+                    .await?;
+            }
+            LiveMessage::Event(event) => {
+                let payload = serde_json::to_vec(&event).unwrap_or_default();
+                conn.publish(Outgoing {
+                    topic: format!("{}/events", self.prefix),
+                    payload,
+                    qos: QoS::AtLeastOnce,
+                    retain: false,
+                    latest: None,
+                })
+                .await?;
+            }
+        }
+        Ok(())
+    }
+
+    fn mark(&mut self, t: Timestamp) {
+        self.published = Some(self.published.map_or(t, |p| p.max(t)));
+    }
+
+    fn device_status(&self, device: &str, status: DeviceStatus) -> Outgoing {
+        let online = status != DeviceStatus::Down;
+        Outgoing {
+            topic: format!("{}/{device}/status", self.prefix),
+            payload: if online { "online" } else { "offline" }.into(),
+            qos: QoS::AtLeastOnce,
+            retain: true,
+            latest: None,
+        }
+    }
+
+    /// A point's message: retained when live, not retained and marked when historical.
+    fn point_message(
+        &self,
+        point: &PointId,
+        value: Option<&Value>,
+        quality: Option<Quality>,
+        t: Option<Timestamp>,
+        historical: bool,
+    ) -> Outgoing {
+        let unit = self.cell.point(point).and_then(|p| p.unit.clone());
+        let payload = point_payload(value, quality, t, unit.as_deref(), historical);
+        Outgoing {
+            topic: format!("{}/{}/{}", self.prefix, point.device(), point.name()),
+            payload,
+            qos: QoS::AtLeastOnce,
+            retain: !historical,
+            latest: t,
+        }
+    }
+}
+
+/// `{"t":ms,"value":…,"unit":…,"quality":…}` (plus `"historical":true` for a stored
+/// change); the value only when the quality is good.
+pub fn point_payload(
+    value: Option<&Value>,
+    quality: Option<Quality>,
+    t: Option<Timestamp>,
+    unit: Option<&str>,
+    historical: bool,
+) -> Vec<u8> {
+    let quality_word = match quality {
+        Some(Quality::Good) => "good",
+        Some(Quality::Stale) => "stale",
+        Some(Quality::Bad) => "bad",
+        None => "unknown",
+    };
+    let value = match (quality, value) {
+        (Some(Quality::Good), Some(Value::Number(n))) => json!(n),
+        (Some(Quality::Good), Some(Value::Text(t))) => json!(t),
+        _ => serde_json::Value::Null,
+    };
+    let mut body = json!({
+        "t": t.map(|t| t.0),
+        "value": value,
+        "unit": unit,
+        "quality": quality_word,
+    });
+    if historical {
+        body["historical"] = json!(true);
+    }
+    serde_json::to_vec(&body).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parsed(bytes: &[u8]) -> serde_json::Value {
+        serde_json::from_slice(bytes).unwrap()
+    }
+
+    #[test]
+    fn a_good_point_carries_its_value_unit_and_read_time() {
+        let p = point_payload(
+            Some(&Value::Number(350.0)),
+            Some(Quality::Good),
+            Some(Timestamp(1_700_000_000_000)),
+            Some("°C"),
+            false,
+        );
+        assert_eq!(
+            parsed(&p),
+            json!({"t": 1_700_000_000_000_i64, "value": 350.0, "unit": "°C", "quality": "good"})
+        );
+    }
+
+    #[test]
+    fn a_stale_point_is_published_without_its_last_good_value() {
+        let p = point_payload(
+            Some(&Value::Number(350.0)),
+            Some(Quality::Stale),
+            Some(Timestamp(5)),
+            None,
+            true,
+        );
+        assert_eq!(
+            parsed(&p),
+            json!({"t": 5, "value": null, "unit": null, "quality": "stale", "historical": true})
+        );
+    }
+}

@@ -1,0 +1,762 @@
+//! The Sparkplug B edge node: [`sparkplug::EdgeNode`] decides what to publish.
+//!
+//! Per connection:
+//!
+//! 1. the next `bdSeq` is stored before connecting; the Will is the NDEATH with this one;
+//! 2. on ConnAck: subscribe to NCMD and DCMD, and to the primary host's STATE when
+//!    `primary_host` is set; without a primary host, or once it says it is online, a
+//!    *birth cycle*: NBIRTH, a DBIRTH per device (from a fresh change-stream subscription,
+//!    so nothing falls between), then the stored changes since the forwarded mark as
+//!    historical DDATA, then a DDEATH for each device that is down;
+//! 3. live: changes become DDATA by alias (changed metrics only, one DDATA per device for
+//!    what arrived together), a device going down a DDEATH and coming back a DBIRTH, the
+//!    node's history row count an NDATA every 10 s; a lagging change stream, or an NCMD
+//!    `Node Control/Rebirth`, gives a new birth cycle;
+//! 4. the primary host going offline ends the connection (NDEATH, DISCONNECT) and moves
+//!    the forwarded mark back by twice the keep-alive: the host may have been gone that
+//!    long before the broker noticed, and what it missed is sent again once it is back.
+//!
+//! DCMD writes go through the gateway's one audited write path
+//! ([`crate::write::Attempt`]) when the gateway runs with `--allow-writes` and the
+//! `[mqtt]` table says `commands = true`; otherwise they are refused, counted and logged
+//! (throttled), and nothing is stored, as for an HTTP write without the switch.
+
+use std::collections::HashSet;
+use std::sync::Arc;
+use std::time::Duration;
+
+use rumqttc::QoS;
+use sparkplug::{
+    BdSeq, Command, DataType, Delivery, EdgeNode, HostState, Id, MessageKind, MetricName,
+    MetricSpec, MetricValue, Publish, Qos, Sample, Topic,
+};
+use tokio::sync::broadcast;
+
+use super::forward::Backlog;
+use super::{Connection, End, Link, Mode, Outgoing, Step};
+use crate::cell::{Cell, DeviceStatus, LiveMessage};
+use crate::metrics::WriteLabels;
+use crate::northbound::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
+use crate::point::{DeviceId, PointId, Value};
+use crate::time::{Timestamp, duration_millis};
+use crate::write::Attempt;
+
+/// The key of the stored `bdSeq` in the history database's `settings` table.
+pub const BD_SEQ_KEY: &str = "mqtt.bd_seq";
+
+/// Node metric: the gateway's version.
+pub const VERSION_METRIC: &str = "Gateway/Version";
+/// Node metric: the number of lines.
+pub const LINES_METRIC: &str = "Gateway/Lines";
+/// Node metric: history rows written since start.
+pub const HISTORY_ROWS_METRIC: &str = "Gateway/History rows";
+
+/// How often the node metrics are published when they changed.
+const NODE_DATA_EVERY: Duration = Duration::from_secs(10);
+/// Most metrics in one historical DDATA.
+const HISTORICAL_BATCH: usize = 500;
+/// At most one log line about refused DCMD writes this often.
+const REFUSAL_LOG_EVERY: Duration = Duration::from_secs(10);
+
+/// The edge node of one gateway.
+pub struct Node {
+    cell: Arc<Cell>,
+    node: EdgeNode,
+    primary_host: Option<Id>,
+    /// Whether DCMD writes are carried out (`--allow-writes` and `commands = true`).
+    writes: bool,
+    /// The newest STATE timestamp seen from the primary host.
+    host_seen: u64,
+    /// Devices with a DDEATH since their last DBIRTH.
+    dead: HashSet<DeviceId>,
+    /// Births published in this connection.
+    born: bool,
+    /// The latest read time handed to the client in this connection.
+    published: Option<Timestamp>,
+    /// The history row count last published.
+    rows_published: i64,
+    /// Refused DCMDs since the last log line, and when that was.
+    refused: (u64, Option<tokio::time::Instant>),
+    keep_alive: Duration,
+    /// Whether the stored `bdSeq` was read (before the first connection).
+    bd_seq_read: bool,
+}
+
+impl Node {
+    /// The edge node of the `[mqtt]` table in `link`.
+    pub fn new(link: &Link, allow_writes: bool) -> anyhow::Result<Self> {
+        let config = link.config();
+        let group = Id::new(config.group_id.as_str())
+            .map_err(|e| anyhow::anyhow!("MQTT group_id {:?}: {e}", config.group_id))?;
+        let edge_node = Id::new(config.edge_node_id.as_str())
+            .map_err(|e| anyhow::anyhow!("MQTT edge_node_id {:?}: {e}", config.edge_node_id))?;
+        let primary_host = config
+            .primary_host
+            .as_deref()
+            .map(Id::new)
+            .transpose()
+            .map_err(|e| anyhow::anyhow!("MQTT primary_host: {e}"))?;
+        Ok(Self {
+            cell: Arc::clone(link.cell()),
+            // The stored bdSeq is read before the first connection (`prepare`).
+            node: EdgeNode::new(group, edge_node, BdSeq::new(0)),
+            primary_host,
+            writes: allow_writes && config.commands,
+            host_seen: 0,
+            dead: HashSet::new(),
+            born: false,
+            published: None,
+            rows_published: -1,
+            refused: (0, None),
+            keep_alive: config.keep_alive,
+            bd_seq_read: false,
+        })
+    }
+}
+
+impl Mode for Node {
+    async fn prepare(&mut self, link: &Link) -> Outgoing {
+        if !self.bd_seq_read {
+            self.bd_seq_read = true;
+            match link.read_setting(BD_SEQ_KEY).await {
+                Ok(stored) => {
+                    let n = u8::try_from(stored.unwrap_or(0).rem_euclid(256)).unwrap_or(0);
+                    self.node = EdgeNode::new(
+                        self.node.group().clone(),
+                        self.node.edge_node().clone(),
+                        BdSeq::new(n),
+                    );
+                }
+                Err(e) => {
+                    tracing::warn!("cannot read the stored MQTT bdSeq ({e}); starting from 0")
+                }
+            }
+        }
+        let next = self.node.next_bd_seq();
+        if let Err(e) = link
+            .write_setting(BD_SEQ_KEY, i64::from(next.value()))
+            .await
+        {
+            tracing::warn!(
+                "cannot store the next MQTT bdSeq ({e}); a restart may repeat bdSeq {}",
+                self.node.bd_seq().value()
+            );
+        }
+        outgoing(self.node.will(), None)
+    }
+
+    async fn serve(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+    ) -> End {
+        loop {
+            let step = match conn.next(live, self.born).await {
+                Ok(step) => step,
+                Err(end) => return end,
+            };
+            let done = match step {
+                Step::Connected => self.on_connect(conn, live).await,
+                Step::Message { topic, payload } => {
+                    self.on_message(conn, live, &topic, &payload).await
+                }
+                Step::Live(Ok(message)) => self.on_change(conn, live, message).await,
+                Step::Live(Err(broadcast::error::RecvError::Lagged(missed))) => {
+                    tracing::warn!("MQTT: {missed} changes missed; publishing births again");
+                    let from = self.published.unwrap_or(conn.forwarded());
+                    self.birth_cycle(conn, live, from).await
+                }
+                Step::Live(Err(broadcast::error::RecvError::Closed)) => return End::Stop,
+                Step::Tick => self.node_data(conn).await,
+            };
+            if let Err(end) = done {
+                return end;
+            }
+        }
+    }
+
+    fn lost(&mut self) {
+        self.node.on_disconnect();
+        self.born = false;
+        self.published = None;
+        self.dead.clear();
+    }
+
+    fn tick(&self) -> Duration {
+        NODE_DATA_EVERY
+    }
+}
+
+type Done = Result<(), End>;
+
+fn lost(why: String) -> End {
+    End::Lost(why)
+}
+
+impl Node {
+    async fn on_connect(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+    ) -> Done {
+        self.node.on_connect();
+        for filter in self.node.command_filters() {
+            conn.subscribe(filter).await.map_err(lost)?;
+        }
+        match &self.primary_host {
+            Some(host) => {
+                conn.subscribe(Topic::State { host: host.clone() }.to_string())
+                    .await
+                    .map_err(lost)?;
+                let bd_seq = self.session_bd_seq();
+                conn.serving(format!(
+                    "MQTT connected as spBv1.0/{}/{} (bdSeq {bd_seq}); waiting for primary \
+                     host {host} to be online before the births",
+                    self.node.group(),
+                    self.node.edge_node()
+                ));
+                Ok(())
+            }
+            None => {
+                let from = conn.forwarded();
+                self.birth_cycle(conn, live, from).await?;
+                let bd_seq = self.session_bd_seq();
+                conn.serving(format!(
+                    "MQTT connected as spBv1.0/{}/{} (bdSeq {bd_seq}); births published",
+                    self.node.group(),
+                    self.node.edge_node()
+                ));
+                Ok(())
+            }
+        }
+    }
+
+    fn session_bd_seq(&self) -> u8 {
+        self.node.bd_seq().value().wrapping_sub(1)
+    }
+
+    /// NBIRTH, a DBIRTH per device, the changes stored since `from` as historical DDATA,
+    /// then a DDEATH for each device that is down.
+    async fn birth_cycle(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+        from: Timestamp,
+    ) -> Done {
+        // A fresh receiver: the births are a snapshot taken after it.
+        *live = live.resubscribe();
+        let now = Timestamp::now();
+        let t = sparkplug_time(now);
+        let (metrics, rows) = node_metrics(&self.cell, t);
+        let birth = self
+            .node
+            .node_birth(&metrics, t)
+            .map_err(|e| lost(format!("cannot build the NBIRTH: {e}")))?;
+        conn.publish(outgoing(birth, None)).await.map_err(lost)?;
+        self.rows_published = rows;
+        self.dead.clear();
+        let devices = self.cell.devices();
+        for device in &devices {
+            let Ok(id) = Id::new(device.summary.id.as_str()) else {
+                continue;
+            };
+            let birth = self
+                .node
+                .device_birth(&id, &device_metrics(device, now), t)
+                .map_err(|e| lost(format!("cannot build the DBIRTH of {id}: {e}")))?;
+            conn.publish(outgoing(birth, None)).await.map_err(lost)?;
+        }
+        self.born = true;
+        self.forward_backlog(conn, from, now).await?;
+        for device in &devices {
+            if device.summary.status == DeviceStatus::Down {
+                self.device_down(conn, &device.summary.id, t).await?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The changes stored after `from` and up to `until`, as historical DDATA in time
+    /// order (consecutive changes of one device in one message).
+    async fn forward_backlog(
+        &mut self,
+        conn: &mut Connection<'_>,
+        from: Timestamp,
+        until: Timestamp,
+    ) -> Done {
+        let max = conn.link.config().max_backlog;
+        let mut backlog = match Backlog::open(&self.cell, from, until, max).await {
+            Ok(b) => b,
+            Err(e) => {
+                tracing::warn!("MQTT: the stored changes cannot be sent: {e}");
+                return Ok(());
+            }
+        };
+        if backlog.skipped > 0 {
+            tracing::warn!(
+                "MQTT: {} stored changes are older than the newest {max} (max_backlog) and \
+                 are not sent",
+                backlog.skipped
+            );
+        }
+        if backlog.total > 0 {
+            tracing::info!(
+                "MQTT: sending {} stored changes as historical",
+                backlog.total
+            );
+        }
+        let mut sent = 0_u64;
+        loop {
+            let page = match backlog.next_page().await {
+                Ok(page) if page.is_empty() => break,
+                Ok(page) => page,
+                Err(e) => {
+                    tracing::warn!("MQTT: sending stored changes stopped: {e}");
+                    break;
+                }
+            };
+            let mut batch: Vec<(String, Sample)> = Vec::new();
+            let mut batch_device: Option<DeviceId> = None;
+            let mut latest = None;
+            for change in page {
+                let Ok(point) = PointId::parse(&change.point) else {
+                    continue;
+                };
+                let Some(spec) = self.cell.point(&point) else {
+                    continue; // a point no longer configured
+                };
+                let sample = sample_of_stored(
+                    &spec.kind,
+                    change.value.as_ref(),
+                    change.quality,
+                    change.key.t,
+                );
+                let device = DeviceId::new(point.device()).ok();
+                if device != batch_device || batch.len() >= HISTORICAL_BATCH {
+                    sent += self
+                        .historical(conn, &batch_device, &mut batch, latest)
+                        .await?;
+                    batch_device = device;
+                }
+                latest = Some(change.key.t);
+                batch.push((point.name().to_owned(), sample));
+            }
+            sent += self
+                .historical(conn, &batch_device, &mut batch, latest)
+                .await?;
+        }
+        if sent > 0 {
+            self.cell.metrics().mqtt_forwarded.inc_by(sent);
+        }
+        Ok(())
+    }
+
+    async fn historical(
+        &mut self,
+        conn: &mut Connection<'_>,
+        device: &Option<DeviceId>,
+        batch: &mut Vec<(String, Sample)>,
+        latest: Option<Timestamp>,
+    ) -> Result<u64, End> {
+        let changes = std::mem::take(batch);
+        let (Some(device), false) = (device, changes.is_empty()) else {
+            return Ok(0);
+        };
+        let Ok(id) = Id::new(device.as_str()) else {
+            return Ok(0);
+        };
+        let named: Vec<(&str, Sample)> = changes
+            .iter()
+            .map(|(n, s)| (n.as_str(), s.clone()))
+            .collect();
+        let t = sparkplug_time(Timestamp::now());
+        match self.node.device_data(&id, &named, t, Delivery::Historical) {
+            Ok(Some(data)) => {
+                conn.publish(outgoing(data, latest)).await.map_err(lost)?;
+                self.mark(latest);
+                Ok(named.len() as u64)
+            }
+            Ok(None) => Ok(0),
+            Err(e) => {
+                tracing::debug!("MQTT: no historical DDATA for {id}: {e}");
+                Ok(0)
+            }
+        }
+    }
+
+    fn mark(&mut self, latest: Option<Timestamp>) {
+        if let Some(t) = latest {
+            self.published = Some(self.published.map_or(t, |p| p.max(t)));
+        }
+    }
+
+    async fn device_down(
+        &mut self,
+        conn: &mut Connection<'_>,
+        device: &DeviceId,
+        t: sparkplug::Timestamp,
+    ) -> Done {
+        let Ok(id) = Id::new(device.as_str()) else {
+            return Ok(());
+        };
+        if let Ok(death) = self.node.device_death(&id, t) {
+            conn.publish(outgoing(death, None)).await.map_err(lost)?;
+        }
+        self.dead.insert(device.clone());
+        Ok(())
+    }
+
+    /// One change, and every change already waiting behind it: value changes become one
+    /// DDATA per device.
+    async fn on_change(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+        first: LiveMessage,
+    ) -> Done {
+        let mut values: Vec<(DeviceId, Vec<(String, Sample)>, Timestamp)> = Vec::new();
+        let mut next = Some(first);
+        while let Some(message) = next.take() {
+            match message {
+                LiveMessage::Value(view) => {
+                    if let (Some(spec), Ok(device)) =
+                        (self.cell.point(&view.id), DeviceId::new(view.id.device()))
+                    {
+                        let now = Timestamp::now();
+                        let sample = sample_of(&spec.kind, &view, now);
+                        let read = view.t.unwrap_or(now);
+                        let name = view.id.name().to_owned();
+                        match values.iter_mut().find(|(d, _, _)| *d == device) {
+                            Some((_, changes, latest)) => {
+                                changes.push((name, sample));
+                                *latest = (*latest).max(read);
+                            }
+                            None => values.push((device, vec![(name, sample)], read)),
+                        }
+                    }
+                }
+                other => {
+                    // Keep the order: what came before a status change goes out first.
+                    self.device_data(conn, std::mem::take(&mut values)).await?;
+                    self.on_status(conn, other).await?;
+                }
+            }
+            next = match live.try_recv() {
+                Ok(message) => Some(message),
+                Err(broadcast::error::TryRecvError::Lagged(missed)) => {
+                    self.device_data(conn, values).await?;
+                    tracing::warn!("MQTT: {missed} changes missed; publishing births again");
+                    let from = self.published.unwrap_or(conn.forwarded());
+                    return self.birth_cycle(conn, live, from).await;
+                }
+                Err(_) => None,
+            };
+        }
+        self.device_data(conn, values).await
+    }
+
+    async fn device_data(
+        &mut self,
+        conn: &mut Connection<'_>,
+        values: Vec<(DeviceId, Vec<(String, Sample)>, Timestamp)>,
+    ) -> Done {
+        let t = sparkplug_time(Timestamp::now());
+        for (device, changes, latest) in values {
+            if self.dead.contains(&device) {
+                continue;
+            }
+            let Ok(id) = Id::new(device.as_str()) else {
+                continue;
+            };
+            let named: Vec<(&str, Sample)> = changes
+                .iter()
+                .map(|(n, s)| (n.as_str(), s.clone()))
+                .collect();
+            match self.node.device_data(&id, &named, t, Delivery::Live) {
+                Ok(Some(data)) => {
+                    conn.publish(outgoing(data, Some(latest)))
+                        .await
+                        .map_err(lost)?;
+                    self.mark(Some(latest));
+                }
+                Ok(None) => {}
+                Err(e) => tracing::debug!("MQTT: no DDATA for {id}: {e}"),
+            }
+        }
+        Ok(())
+    }
+
+    async fn on_status(&mut self, conn: &mut Connection<'_>, message: LiveMessage) -> Done {
+        let LiveMessage::Device(summary) = message else {
+            return Ok(());
+        };
+        let now = Timestamp::now();
+        let t = sparkplug_time(now);
+        match summary.status {
+            DeviceStatus::Down if !self.dead.contains(&summary.id) => {
+                self.device_down(conn, &summary.id, t).await
+            }
+            DeviceStatus::Up if self.dead.contains(&summary.id) => {
+                let (Some(device), Ok(id)) = (
+                    self.cell.device(summary.id.as_str()),
+                    Id::new(summary.id.as_str()),
+                ) else {
+                    return Ok(());
+                };
+                let birth = self
+                    .node
+                    .device_birth(&id, &device_metrics(&device, now), t)
+                    .map_err(|e| lost(format!("cannot build the DBIRTH of {id}: {e}")))?;
+                conn.publish(outgoing(birth, None)).await.map_err(lost)?;
+                self.dead.remove(&summary.id);
+                Ok(())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// An NDATA with the history row count, when it changed.
+    async fn node_data(&mut self, conn: &mut Connection<'_>) -> Done {
+        if !self.born {
+            return Ok(());
+        }
+        let rows = history_rows(&self.cell);
+        if rows == self.rows_published {
+            return Ok(());
+        }
+        let t = sparkplug_time(Timestamp::now());
+        let sample = Sample::good(MetricValue::Int64(rows), t);
+        match self
+            .node
+            .node_data(&[(HISTORY_ROWS_METRIC, sample)], t, Delivery::Live)
+        {
+            Ok(Some(data)) => {
+                conn.publish(outgoing(data, None)).await.map_err(lost)?;
+                self.rows_published = rows;
+            }
+            Ok(None) => {}
+            Err(e) => tracing::debug!("MQTT: no NDATA: {e}"),
+        }
+        Ok(())
+    }
+
+    async fn on_message(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+        topic: &str,
+        payload: &[u8],
+    ) -> Done {
+        if let Some(host) = &self.primary_host
+            && topic == (Topic::State { host: host.clone() }).to_string()
+        {
+            return self.on_host_state(conn, live, payload).await;
+        }
+        let commands = match self.node.handle_command(topic, payload) {
+            Ok(commands) => commands,
+            Err(e) => {
+                tracing::warn!("MQTT: command on {topic} refused: {e}");
+                self.audit_refused_command(topic, &e.to_string()).await;
+                return Ok(());
+            }
+        };
+        for command in commands {
+            match command {
+                Command::Rebirth => {
+                    tracing::info!("MQTT: rebirth asked on {topic}");
+                    let from = self.published.unwrap_or(conn.forwarded());
+                    self.birth_cycle(conn, live, from).await?;
+                }
+                Command::Write {
+                    device,
+                    metric,
+                    value,
+                } => self.on_write(topic, device, &metric, value),
+            }
+        }
+        Ok(())
+    }
+
+    async fn on_host_state(
+        &mut self,
+        conn: &mut Connection<'_>,
+        live: &mut broadcast::Receiver<LiveMessage>,
+        payload: &[u8],
+    ) -> Done {
+        let state = match HostState::from_json(payload) {
+            Ok(state) => state,
+            Err(e) => {
+                tracing::warn!("MQTT: primary host STATE ignored: {e}");
+                return Ok(());
+            }
+        };
+        if state.timestamp < self.host_seen {
+            return Ok(()); // an older state than one already seen
+        }
+        self.host_seen = state.timestamp;
+        match (state.online, self.born) {
+            (true, false) => {
+                let from = conn.forwarded();
+                self.birth_cycle(conn, live, from).await?;
+                tracing::info!("MQTT: primary host online; births published");
+                Ok(())
+            }
+            (false, true) => {
+                let window = i64::try_from(duration_millis(self.keep_alive * 2)).unwrap_or(0);
+                conn.rewind_forwarded(Timestamp(Timestamp::now().0 - window))
+                    .await;
+                Err(End::Again(
+                    "the primary host went offline; storing until it is back".to_owned(),
+                ))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Carries out a DCMD write in a task of its own (the audit records how it ended), or
+    /// refuses it when writes are off.
+    fn on_write(
+        &mut self,
+        topic: &str,
+        device: Option<Id>,
+        metric: &MetricName,
+        value: MetricValue,
+    ) {
+        let Some(device) = device else {
+            tracing::warn!(
+                "MQTT: NCMD {metric} on {topic} refused: the node has no writable metrics"
+            );
+            return;
+        };
+        if !self.writes {
+            self.refuse(topic, &device, metric.as_str());
+            return;
+        }
+        let value = match value {
+            MetricValue::String(text) => Value::Text(text),
+            other => match other.as_f64() {
+                Some(n) => Value::Number(n),
+                None => {
+                    tracing::warn!("MQTT: DCMD {metric} on {topic}: {other:?} is not a number");
+                    return;
+                }
+            },
+        };
+        let json = match &value {
+            Value::Number(n) => serde_json::json!(n),
+            Value::Text(t) => serde_json::json!(t),
+        };
+        let source = format!("mqtt {topic}");
+        let attempt = Attempt::new(
+            Arc::clone(&self.cell),
+            source,
+            device.as_str(),
+            metric.as_str(),
+            json,
+        );
+        let point = DeviceId::new(device.as_str())
+            .ok()
+            .and_then(|d| PointId::new(&d, metric.as_str()).ok());
+        tokio::spawn(async move {
+            let Some(point) = point else {
+                attempt.refuse("no such point", None).await;
+                return;
+            };
+            match attempt.carry_out(point.clone(), value).await {
+                Ok(done) => tracing::info!("MQTT: {}", done.detail),
+                Err(e) => tracing::warn!("MQTT: DCMD write of {point} failed: {e}"),
+            }
+        });
+    }
+
+    /// A DCMD the node refused (a value of the wrong type or out of range, an unknown
+    /// metric): one audit row when writes are on, else counted like any refused write.
+    async fn audit_refused_command(&mut self, topic: &str, why: &str) {
+        let Ok(Topic::Device {
+            kind: MessageKind::Command,
+            device,
+            ..
+        }) = topic.parse::<Topic>()
+        else {
+            return;
+        };
+        if !self.writes {
+            self.refuse(topic, &device, "(refused command)");
+            return;
+        }
+        let attempt = Attempt::new(
+            Arc::clone(&self.cell),
+            format!("mqtt {topic}"),
+            device.as_str(),
+            "",
+            serde_json::Value::Null,
+        );
+        attempt.refuse(why, None).await;
+    }
+
+    fn refuse(&mut self, topic: &str, device: &Id, metric: &str) {
+        self.cell
+            .metrics()
+            .writes
+            .get_or_create(&WriteLabels {
+                result: "unauthorised".to_owned(),
+            })
+            .inc();
+        let now = tokio::time::Instant::now();
+        self.refused.0 += 1;
+        if self.refused.1.is_some_and(|t| now < t + REFUSAL_LOG_EVERY) {
+            return;
+        }
+        let count = std::mem::take(&mut self.refused.0);
+        self.refused.1 = Some(now);
+        tracing::warn!(
+            "refused {count} MQTT write(s) in the last {} s; the latest: {device}.{metric} on \
+             {topic}: DCMD writes need --allow-writes and commands = true in [mqtt]",
+            REFUSAL_LOG_EVERY.as_secs()
+        );
+    }
+}
+
+/// A Sparkplug message as the client's.
+fn outgoing(message: Publish, latest: Option<Timestamp>) -> Outgoing {
+    Outgoing {
+        topic: message.topic.to_string(),
+        payload: message.payload,
+        qos: match message.qos {
+            Qos::AtMostOnce => QoS::AtMostOnce,
+            Qos::AtLeastOnce => QoS::AtLeastOnce,
+        },
+        retain: message.retain,
+        latest,
+    }
+}
+
+fn history_rows(cell: &Cell) -> i64 {
+    i64::try_from(cell.store().stats().rows_written()).unwrap_or(i64::MAX)
+}
+
+/// The node's own metrics in its NBIRTH (version, lines, history rows written), and the
+/// row count in it.
+fn node_metrics(cell: &Cell, t: sparkplug::Timestamp) -> (Vec<(MetricSpec, Sample)>, i64) {
+    let name = |n: &str| MetricName::new(n).expect("the node metric names are not empty");
+    let rows = history_rows(cell);
+    let lines = i64::try_from(cell.lines().len()).unwrap_or(i64::MAX);
+    let metrics = vec![
+        (
+            MetricSpec::new(name(VERSION_METRIC), DataType::String)
+                .description("cellbus gateway version"),
+            Sample::good(MetricValue::String(env!("CARGO_PKG_VERSION").to_owned()), t),
+        ),
+        (
+            MetricSpec::new(name(LINES_METRIC), DataType::Int64)
+                .description("lines the gateway polls"),
+            Sample::good(MetricValue::Int64(lines), t),
+        ),
+        (
+            MetricSpec::new(name(HISTORY_ROWS_METRIC), DataType::Int64)
+                .description("history rows written since the gateway started"),
+            Sample::good(MetricValue::Int64(rows), t),
+        ),
+    ];
+    (metrics, rows)
+}
