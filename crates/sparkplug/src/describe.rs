@@ -23,7 +23,7 @@ use serde::ser::{SerializeMap, Serializer};
 use crate::metric::{
     DOCUMENTATION, DataType, ENG_UNIT, MetricValue, Quality, WRITABLE, WRITE_MAX, WRITE_MIN,
 };
-use crate::proto::{Metric, Payload, PropertySet, PropertyValue, property_value};
+use crate::proto::{Metric, Payload, PropertySet, PropertyValue, metric, property_value};
 use crate::topic::{Id, MessageKind, NAMESPACE, Topic};
 
 /// What one message says.
@@ -143,6 +143,14 @@ pub enum Value {
     Value(MetricValue),
     /// `is_null`, or no value field at all in a death or a metric of unknown type.
     Null,
+    /// A value whose datatype is not known (an alias whose birth was not seen): the
+    /// field it came in and its plain reading (integers unsigned, bytes as hex).
+    Raw {
+        /// The protobuf field: `double_value`, `int_value`, …
+        field: &'static str,
+        /// Its content.
+        value: serde_json::Value,
+    },
     /// A value that does not match the datatype, or a datatype this crate cannot read.
     Unreadable(String),
 }
@@ -299,7 +307,7 @@ fn value(m: &Metric, datatype: Option<u32>) -> Value {
     let Some(code) = datatype else {
         return match &m.value {
             None => Value::Null,
-            Some(raw) => Value::Unreadable(format!("{raw:?} without a datatype (no birth seen)")),
+            Some(raw) => raw_value(raw),
         };
     };
     let datatype = match DataType::from_code(code) {
@@ -313,6 +321,24 @@ fn value(m: &Metric, datatype: Option<u32>) -> Value {
         Ok(v) => Value::Value(v),
         Err(e) => Value::Unreadable(e.to_string()),
     }
+}
+
+fn raw_value(raw: &metric::Value) -> Value {
+    use metric::Value as V;
+    use serde_json::Value as J;
+    let (field, value) = match raw {
+        &V::IntValue(n) => ("int_value", J::from(n)),
+        &V::LongValue(n) => ("long_value", J::from(n)),
+        &V::FloatValue(f) => ("float_value", J::from(f)),
+        &V::DoubleValue(d) => ("double_value", J::from(d)),
+        &V::BooleanValue(b) => ("boolean_value", J::from(b)),
+        V::StringValue(s) => ("string_value", J::from(s.as_str())),
+        V::BytesValue(b) => ("bytes_value", J::from(hex(b))),
+        V::DatasetValue(b) => ("dataset_value", J::from(hex(b))),
+        V::TemplateValue(b) => ("template_value", J::from(hex(b))),
+        V::ExtensionValue(b) => ("extension_value", J::from(hex(b))),
+    };
+    Value::Raw { field, value }
 }
 
 fn property_list(set: &PropertySet) -> Vec<(String, serde_json::Value)> {
@@ -453,6 +479,7 @@ impl Value {
     fn text(&self) -> String {
         match self {
             Self::Value(v) => value_text(v),
+            Self::Raw { value, .. } => value.to_string(),
             Self::Null => "null".to_owned(),
             Self::Unreadable(why) => format!("unreadable ({why})"),
         }
@@ -461,6 +488,7 @@ impl Value {
     fn json(&self) -> serde_json::Value {
         match self {
             Self::Value(v) => value_json(v),
+            Self::Raw { value, .. } => value.clone(),
             Self::Null | Self::Unreadable(_) => serde_json::Value::Null,
         }
     }
@@ -520,7 +548,11 @@ impl MetricDescription {
     /// for a birth its unit and whether it is writable (and within what).
     pub fn to_text(&self, birth: bool) -> String {
         let mut line = self.label();
-        let datatype = self.datatype.map_or_else(|| "?".to_owned(), datatype_name);
+        let datatype = match (self.datatype, &self.value) {
+            (Some(code), _) => datatype_name(code),
+            (None, Value::Raw { field, .. }) => (*field).to_owned(),
+            (None, _) => "?".to_owned(),
+        };
         let _ = write!(line, ": {datatype} {}", self.value.text());
         if let Some(quality) = self.quality {
             let _ = write!(line, " {}", quality_word(quality));

@@ -140,7 +140,7 @@ fn data_by_alias_is_resolved_to_the_names_of_the_birth_seen_before() {
 }
 
 #[test]
-fn data_without_a_birth_seen_shows_the_bare_alias_and_does_not_fail() {
+fn data_without_a_birth_seen_shows_the_bare_alias_and_the_raw_value() {
     let (mut node, _, _) = running();
     let ddata = node
         .device_data(
@@ -157,13 +157,23 @@ fn data_without_a_birth_seen_shows_the_bare_alias_and_does_not_fail() {
     let m = sparkplug(describe(&mut Describer::new(), &ddata));
     let metric = &m.metrics[0];
     assert_eq!(metric.name, None);
-    assert!(matches!(metric.value, Value::Unreadable(_)));
+    assert_eq!(
+        metric.value,
+        Value::Raw {
+            field: "double_value",
+            value: serde_json::json!(312.5)
+        }
+    );
+    let alias = metric.alias.unwrap();
+    let json = Description::Sparkplug(m.clone()).to_json();
+    assert_eq!(json["metrics"][0]["name"], serde_json::Value::Null);
+    assert_eq!(json["metrics"][0]["datatype"], serde_json::Value::Null);
+    assert_eq!(json["metrics"][0]["value"], 312.5);
     let text = Description::Sparkplug(m).to_text();
-    let line = text.lines().nth(1).unwrap();
-    assert!(line.starts_with("  alias "), "{line}");
-    assert!(
-        line.contains("312.5"),
-        "the raw value is still shown: {line}"
+    assert_eq!(
+        text.lines().nth(1),
+        Some(format!("  alias {alias}: double_value 312.5 at 2025-11-24T16:00:00.500Z").as_str()),
+        "{text}"
     );
 }
 
