@@ -8,6 +8,7 @@ mod decode;
 mod demo;
 mod jbc_cmd;
 mod jbus_cmd;
+mod mqtt_cmd;
 mod output;
 mod panasonic_cmd;
 mod serve_cmd;
@@ -60,6 +61,10 @@ enum Command {
     /// for commands, Port 2 for its R messages): status, programs, production data,
     /// remote start and reset, events.
     Panasonic(panasonic_cmd::PanasonicArgs),
+    /// Watch an MQTT broker: `mqtt sub` prints what the gateway (or anyone) publishes,
+    /// Sparkplug B decoded into metrics.
+    #[command(subcommand)]
+    Mqtt(mqtt_cmd::MqttCommand),
     /// Run a simulated device on a TCP port or a PTY.
     #[command(subcommand)]
     Sim(sim::SimCommand),
@@ -91,6 +96,7 @@ fn main() -> ExitCode {
             Command::Cross(args) => jbus_cmd::run_cross(args).await,
             Command::Thermosald(args) => thermosald_cmd::run(args).await,
             Command::Panasonic(args) => panasonic_cmd::run(args).await,
+            Command::Mqtt(command) => mqtt_cmd::run(command).await,
             Command::Sim(command) => sim::run(command).await,
             Command::Decode(command) => decode::run(command),
         }

@@ -10,15 +10,19 @@
 //! - [`node`][]: [`EdgeNode`], the edge node's state machine: Will, births, data,
 //!   deaths, `seq` and `bdSeq`, aliases, commands.
 //! - [`state`][]: a host application's STATE JSON.
+//! - [`describe`][]: what a received message says, in words or JSON, with data
+//!   messages' aliases resolved against the births seen ([`Describer`]).
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod describe;
 pub mod metric;
 pub mod node;
 pub mod proto;
 pub mod state;
 pub mod topic;
 
+pub use describe::{Describer, Description};
 pub use metric::{
     DataType, MetricName, MetricSpec, MetricValue, Quality, Reading, Sample, Timestamp, ValueError,
     Writable, WriteRange,

@@ -1,0 +1,183 @@
+//! `cellbus mqtt sub`: what a broker carries, as a plant engineer wants to see it. The
+//! decoding into words and JSON is `sparkplug::describe`; this module connects,
+//! subscribes and prints.
+
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{Context as _, anyhow};
+use clap::{Args, Subcommand};
+use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS, SubscribeFilter, SubscribeReasonCode};
+use sparkplug::Describer;
+
+use crate::output::{self, usage};
+
+/// Births are large: accept packets up to this size.
+const MAX_PACKET: usize = 16 << 20;
+
+#[derive(Debug, Subcommand)]
+pub enum MqttCommand {
+    /// Subscribe and print every message as it arrives: Sparkplug B payloads decoded into
+    /// metrics (data messages' aliases named from the births seen by this run), STATE as
+    /// its JSON, anything else as text (hex if it is not UTF-8).
+    ///
+    /// Exit codes: 0 after --count messages, 1 when the broker cannot be reached or goes
+    /// away or --timeout passes without a message, 2 bad arguments.
+    Sub(SubArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct SubArgs {
+    /// The broker: mqtt://HOST[:PORT] (port 1883 by default).
+    #[arg(long, value_name = "URL")]
+    broker: String,
+    /// One JSON object per message and line, instead of words.
+    #[arg(long)]
+    json: bool,
+    /// Exit (0) after this many messages.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    count: Option<u64>,
+    /// Exit (1) when no message arrives within this time (`10s`, `2m`), counted from the
+    /// start and again from each message.
+    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
+    timeout: Option<Duration>,
+    /// The MQTT user name.
+    #[arg(long)]
+    username: Option<String>,
+    /// The environment variable that holds the password (never the password itself).
+    #[arg(long, value_name = "VAR", requires = "username")]
+    password_env: Option<String>,
+    /// MQTT topic filters, subscribed with QoS 1.
+    #[arg(value_name = "TOPIC", default_value = "spBv1.0/#")]
+    topics: Vec<String>,
+}
+
+pub async fn run(command: MqttCommand) -> anyhow::Result<ExitCode> {
+    match command {
+        MqttCommand::Sub(args) => sub(args).await,
+    }
+}
+
+async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
+    let (host, port) =
+        gateway::config::parse_broker(&args.broker).map_err(|m| usage(format!("--broker: {m}")))?;
+    let broker = format!("mqtt://{host}:{port}");
+    for topic in &args.topics {
+        if !rumqttc::valid_filter(topic) {
+            return Err(usage(format!(
+                "{topic:?} is not an MQTT topic filter (`#` only last, `+` and `#` only as whole levels)"
+            )));
+        }
+    }
+    let password = match &args.password_env {
+        Some(var) => Some(std::env::var(var).map_err(|_| {
+            usage(format!(
+                "--password-env {var}: the environment variable {var} is not set (or not UTF-8)"
+            ))
+        })?),
+        None => None,
+    };
+    let mut options = MqttOptions::new(client_id(), host, port);
+    options
+        .set_clean_session(true)
+        .set_keep_alive(Duration::from_secs(30))
+        .set_max_packet_size(MAX_PACKET, MAX_PACKET);
+    if let Some(user) = &args.username {
+        options.set_credentials(user, password.unwrap_or_default());
+    }
+    let (client, mut eventloop) = AsyncClient::new(options, 16);
+    let filters: Vec<SubscribeFilter> = args
+        .topics
+        .iter()
+        .map(|t| SubscribeFilter::new(t.clone(), QoS::AtLeastOnce))
+        .collect();
+
+    let mut describer = Describer::new();
+    let mut connected = false;
+    let mut received = 0u64;
+    let mut deadline = args
+        .timeout
+        .map(|limit| tokio::time::Instant::now() + limit);
+    loop {
+        let event = match (deadline, args.timeout) {
+            (Some(deadline), Some(limit)) => {
+                match tokio::time::timeout_at(deadline, eventloop.poll()).await {
+                    Ok(event) => event,
+                    Err(_) => {
+                        let what = if received == 0 {
+                            "no message".to_owned()
+                        } else {
+                            format!("no further message after {received}")
+                        };
+                        return Err(anyhow!(
+                            "{what} from {broker} on {} within {}",
+                            args.topics.join(" "),
+                            humantime::format_duration(limit)
+                        ));
+                    }
+                }
+            }
+            _ => eventloop.poll().await,
+        };
+        match event {
+            Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                connected = true;
+                client
+                    .subscribe_many(filters.clone())
+                    .await
+                    .with_context(|| format!("cannot subscribe on {broker}"))?;
+            }
+            Ok(Event::Incoming(Packet::SubAck(ack))) => {
+                if let Some(i) = ack
+                    .return_codes
+                    .iter()
+                    .position(|c| matches!(c, SubscribeReasonCode::Failure))
+                {
+                    let topic = args.topics.get(i).map_or("?", String::as_str);
+                    return Err(anyhow!(
+                        "broker {broker} refused the subscription to {topic}"
+                    ));
+                }
+                // On stderr: stdout is for the messages only.
+                eprintln!(
+                    "cellbus: subscribed to {} on {broker}",
+                    args.topics.join(" ")
+                );
+            }
+            Ok(Event::Incoming(Packet::Publish(p))) => {
+                let description = describer.describe(&p.topic, &p.payload);
+                if args.json {
+                    output::line(description.to_json())?;
+                } else {
+                    output::line(description.to_text())?;
+                }
+                received += 1;
+                deadline = args
+                    .timeout
+                    .map(|limit| tokio::time::Instant::now() + limit);
+                if args.count.is_some_and(|n| received >= n) {
+                    // Acknowledge what came (QoS 1) and leave politely, within a bound.
+                    let _ = client.try_disconnect();
+                    let _ = tokio::time::timeout(Duration::from_secs(1), async {
+                        while eventloop.poll().await.is_ok() {}
+                    })
+                    .await;
+                    return Ok(ExitCode::SUCCESS);
+                }
+            }
+            Ok(_) => {}
+            Err(e) if connected => {
+                return Err(anyhow!("lost the connection to broker {broker}: {e}"));
+            }
+            Err(e) => return Err(anyhow!("cannot connect to broker {broker}: {e}")),
+        }
+    }
+}
+
+/// A client id no other client of the broker has: the broker would drop the older one.
+fn client_id() -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    format!("cellbus-sub-{}-{nanos:x}", std::process::id())
+}

@@ -1,0 +1,341 @@
+//! `cellbus mqtt sub` end to end: a real mosquitto, `cellbus serve --mqtt` (the demo cell)
+//! and `cellbus mqtt sub` as child processes.
+
+mod common;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use common::{Gateway, cellbus, run, stderr};
+use prost::Message as _;
+use sparkplug::proto::{Metric, Payload, metric::Value};
+use testkit::{Mosquitto, Subscriber};
+
+/// Waits for MQTT: generous, for a loaded 2-core machine.
+const LIMIT: Duration = Duration::from_secs(60);
+
+/// A running `cellbus mqtt sub`, killed on drop; its stdout and stderr lines as they come.
+struct Sub {
+    child: Child,
+    stdout: mpsc::Receiver<String>,
+    stderr: mpsc::Receiver<String>,
+}
+
+impl Sub {
+    /// Starts `cellbus mqtt sub ARGS…` and returns once it says it has subscribed.
+    fn start(args: &[&str]) -> Sub {
+        let mut child = cellbus()
+            .args(["mqtt", "sub"])
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("cellbus runs");
+        let stdout = lines(child.stdout.take().expect("piped"));
+        let stderr = lines(child.stderr.take().expect("piped"));
+        let sub = Sub {
+            child,
+            stdout,
+            stderr,
+        };
+        let line = sub
+            .stderr
+            .recv_timeout(LIMIT)
+            .unwrap_or_else(|e| panic!("cellbus mqtt sub said nothing on stderr: {e}"));
+        assert!(
+            line.starts_with("cellbus: subscribed to "),
+            "first stderr line: {line:?}"
+        );
+        sub
+    }
+
+    /// The next stdout line, within [`LIMIT`].
+    fn line(&self) -> String {
+        self.stdout.recv_timeout(LIMIT).unwrap_or_else(|e| {
+            let err: Vec<String> = self.stderr.try_iter().collect();
+            panic!("no line from cellbus mqtt sub within {LIMIT:?} ({e}); stderr: {err:?}")
+        })
+    }
+
+    /// Waits (bounded) for the process to end; its exit code.
+    fn wait(&mut self) -> Option<i32> {
+        let deadline = Instant::now() + LIMIT;
+        while Instant::now() < deadline {
+            if let Some(status) = self.child.try_wait().expect("the child can be waited for") {
+                return status.code();
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        panic!("cellbus mqtt sub did not end within {LIMIT:?}");
+    }
+}
+
+impl Drop for Sub {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The lines of `reader`, read by a thread, as a channel (closed at end of file).
+fn lines(reader: impl std::io::Read + Send + 'static) -> mpsc::Receiver<String> {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(reader).lines() {
+            let Ok(line) = line else { break };
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+/// Every device of the gateway's `/api/devices`: point name → (unit, Sparkplug datatype).
+fn api_devices(
+    gateway: &Gateway,
+) -> BTreeMap<String, BTreeMap<String, (Option<String>, &'static str)>> {
+    let (status, body) = gateway.get("/api/devices");
+    assert_eq!(status, 200, "{body}");
+    let body: serde_json::Value = serde_json::from_str(&body).unwrap();
+    body["devices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| {
+            let device = d["id"].as_str().unwrap().to_owned();
+            let points = d["points"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| {
+                    let id = p["id"].as_str().unwrap();
+                    let name = id.split_once('.').unwrap().1.to_owned();
+                    let unit = p["unit"].as_str().map(str::to_owned);
+                    let datatype = match p["kind"]["type"].as_str().unwrap() {
+                        "numeric" => "Double",
+                        "enum" => "Int32",
+                        "text" => "String",
+                        other => panic!("{id}: kind {other}"),
+                    };
+                    (name, (unit, datatype))
+                })
+                .collect();
+            (device, points)
+        })
+        .collect()
+}
+
+/// An NCMD that asks the demo node for its births again.
+fn rebirth() -> Vec<u8> {
+    Payload {
+        timestamp: Some(0),
+        metrics: vec![Metric {
+            name: Some("Node Control/Rebirth".into()),
+            datatype: Some(sparkplug::DataType::Boolean.code()),
+            value: Some(Value::BooleanValue(true)),
+            ..Metric::default()
+        }],
+        ..Payload::default()
+    }
+    .encode_to_vec()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sub_json_shows_every_demo_device_birth_with_each_point_its_unit_and_datatype() {
+    let broker = Mosquitto::start();
+    let mut node = Subscriber::start(broker.port(), "spBv1.0/cellbus/+/demo").await;
+    let data = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start_with(data.path(), &["--mqtt", &broker.url()]);
+    node.next_where("the gateway's NBIRTH", LIMIT, |m| m.kind() == "NBIRTH")
+        .await;
+    let devices = api_devices(&gateway);
+    let count = devices.len().to_string();
+
+    // Births are not retained: subscribe, then ask the node for them again.
+    let mut sub = Sub::start(&[
+        "--broker",
+        &broker.url(),
+        "--json",
+        "--count",
+        &count,
+        "--timeout",
+        "60s",
+        "spBv1.0/cellbus/DBIRTH/#",
+    ]);
+    node.publish("spBv1.0/cellbus/NCMD/demo", rebirth()).await;
+
+    let mut births = BTreeMap::new();
+    for _ in 0..devices.len() {
+        let line = sub.line();
+        let birth: serde_json::Value =
+            serde_json::from_str(&line).unwrap_or_else(|e| panic!("{e}: {line}"));
+        assert_eq!(birth["kind"], "DBIRTH", "{line}");
+        assert_eq!(birth["group"], "cellbus");
+        assert_eq!(birth["edge_node"], "demo");
+        assert!(
+            birth["seq"].is_u64() && birth["timestamp"].is_u64(),
+            "{line}"
+        );
+        births.insert(birth["device"].as_str().unwrap().to_owned(), birth);
+    }
+    assert_eq!(sub.wait(), Some(0), "--count {count} ends the run with 0");
+    assert_eq!(
+        births.keys().collect::<BTreeSet<_>>(),
+        devices.keys().collect::<BTreeSet<_>>()
+    );
+    for (device, points) in &devices {
+        let metrics = births[device]["metrics"].as_array().unwrap();
+        for (point, (unit, datatype)) in points {
+            let metric = metrics
+                .iter()
+                .find(|m| m["name"] == point.as_str())
+                .unwrap_or_else(|| panic!("{device}.{point} is not in its DBIRTH"));
+            assert_eq!(metric["datatype"], *datatype, "{device}.{point}");
+            assert!(metric["alias"].is_u64(), "{device}.{point}: {metric}");
+            assert_eq!(
+                metric["properties"]["engUnit"].as_str(),
+                unit.as_deref(),
+                "{device}.{point}"
+            );
+        }
+    }
+    let unit = |device: &str, name: &str| {
+        births[device]["metrics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|m| m["name"] == name)
+            .map(|m| m["properties"]["engUnit"].clone())
+    };
+    assert_eq!(unit("jbc1", "air_temperature"), Some("°C".into()));
+}
+
+#[test]
+fn sub_in_words_prints_births_then_data_with_aliases_named_from_the_births() {
+    let broker = Mosquitto::start();
+    let sub = Sub::start(&[
+        "--broker",
+        &broker.url(),
+        "--timeout",
+        "60s",
+        "spBv1.0/cellbus/#",
+    ]);
+    let data = tempfile::tempdir().unwrap();
+    let _gateway = Gateway::start_with(data.path(), &["--mqtt", &broker.url()]);
+
+    let head = sub.line();
+    assert!(
+        head.starts_with("spBv1.0/cellbus/NBIRTH/demo seq=0 timestamp=20")
+            && head.ends_with(" metrics)"),
+        "{head}"
+    );
+    assert!(sub.line().starts_with("  bdSeq: Int64 "));
+    // Lines arrive as messages do (stdout is flushed per message): read until a DDATA
+    // whose device's DBIRTH came before it.
+    let mut born = BTreeSet::new();
+    let mut device = String::new();
+    let mut kind = String::new();
+    let mut birth_lines = Vec::new();
+    loop {
+        let line = sub.line();
+        if let Some(metric) = line.strip_prefix("  ") {
+            if kind == "DBIRTH" {
+                birth_lines.push(metric.to_owned());
+            }
+            if kind == "DDATA" && born.contains(&device) {
+                assert!(
+                    metric.contains(" (alias ") && !metric.starts_with("alias "),
+                    "a DDATA metric after its DBIRTH is named: {line}"
+                );
+                break;
+            }
+            continue;
+        }
+        let topic = line.split(' ').next().unwrap();
+        let levels: Vec<&str> = topic.split('/').collect();
+        assert!(line.contains(" seq="), "{line}");
+        kind = levels[2].to_owned();
+        device = levels.get(4).copied().unwrap_or_default().to_owned();
+        if kind == "DBIRTH" {
+            born.insert(device.clone());
+        }
+    }
+    assert!(
+        birth_lines
+            .iter()
+            .any(|l| l.starts_with("air_temperature (alias ") && l.contains(" unit °C ")),
+        "jbc1's air temperature in °C: {birth_lines:#?}"
+    );
+    assert!(
+        birth_lines
+            .iter()
+            .any(|l| l.contains(" writable 150..450 ")),
+        "a write range in a birth: {birth_lines:#?}"
+    );
+}
+
+#[test]
+fn sub_with_a_bad_broker_url_exits_2_naming_it() {
+    let out = run(&["mqtt", "sub", "--broker", "htp://127.0.0.1:1883"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("htp://127.0.0.1:1883"),
+        "{}",
+        stderr(&out)
+    );
+
+    let out = run(&["mqtt", "sub", "--broker", "mqtt://127.0.0.1:1883", "a/#/b"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("\"a/#/b\""), "{}", stderr(&out));
+}
+
+#[test]
+fn sub_to_a_closed_port_exits_1_naming_the_broker() {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .unwrap()
+        .port();
+    let url = format!("mqtt://127.0.0.1:{port}");
+    let out = run(&["mqtt", "sub", "--broker", &url, "--timeout", "30s"]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(&format!("cannot connect to broker {url}")),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn sub_exits_1_when_its_timeout_passes_without_a_message_and_when_the_broker_goes() {
+    let mut broker = Mosquitto::start();
+    let url = broker.url();
+    let out = run(&[
+        "mqtt",
+        "sub",
+        "--broker",
+        &url,
+        "--timeout",
+        "300ms",
+        "nobody/#",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(&format!("no message from {url} on nobody/# within 300ms")),
+        "{}",
+        stderr(&out)
+    );
+
+    let mut sub = Sub::start(&["--broker", &url, "nobody/#"]);
+    broker.kill();
+    assert_eq!(sub.wait(), Some(1));
+    let err: String = sub.stderr.try_iter().collect();
+    assert!(
+        err.contains(&format!("lost the connection to broker {url}")),
+        "{err}"
+    );
+}
