@@ -65,6 +65,21 @@ impl Mosquitto {
     /// An outage: stops the broker (SIGTERM, so it saves its sessions; every client loses
     /// its connection) and starts it again on the same port.
     pub fn restart(&mut self) {
+        self.stop();
+        self.launch();
+    }
+
+    /// The end of an outage begun by [`Mosquitto::stop`]: starts the broker again on the
+    /// same port, with the sessions it saved.
+    pub fn start_again(&mut self) {
+        if self.child.is_none() {
+            self.launch();
+        }
+    }
+
+    /// The start of an outage: stops the broker (SIGTERM, so it saves its sessions; every
+    /// client loses its connection).
+    pub fn stop(&mut self) {
         if let Some(mut child) = self.child.take() {
             let stopped = Command::new("kill")
                 .arg("-TERM")
@@ -76,7 +91,6 @@ impl Mosquitto {
             }
             let _ = child.wait();
         }
-        self.launch();
     }
 
     fn launch(&mut self) {
