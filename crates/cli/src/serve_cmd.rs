@@ -44,8 +44,9 @@ pub struct ServeArgs {
     #[arg(long, value_name = "TOKEN")]
     pub read_token: Option<String>,
     /// Publish the cell as a Sparkplug B edge node to this MQTT broker
-    /// (mqtt://HOST:PORT; TLS is not built yet). The demo cell publishes as group
-    /// `cellbus`, edge node `demo`; with --config it replaces the [mqtt] table's broker.
+    /// (mqtt://HOST:PORT, or mqtts://HOST:PORT for TLS: the [mqtt] table's ca_file, else
+    /// the system's roots). The demo cell publishes as group `cellbus`, edge node `demo`;
+    /// with --config it replaces the [mqtt] table's broker.
     #[arg(long, value_name = "URL")]
     pub mqtt: Option<String>,
 }

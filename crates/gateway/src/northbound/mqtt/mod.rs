@@ -25,7 +25,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
-use rumqttc::{AsyncClient, Event as MqttEvent, EventLoop, LastWill, MqttOptions, Packet, QoS};
+use rumqttc::{
+    AsyncClient, Event as MqttEvent, EventLoop, LastWill, MqttOptions, Packet, QoS, Transport,
+};
 use sparkplug::{
     BdSeq, Command, DataType, Delivery, EdgeNode, Id, MetricName, MetricSpec, MetricValue, Publish,
     Qos, Sample,
@@ -39,6 +41,8 @@ use crate::config::MqttConfig;
 use crate::event::{Event, EventKind};
 use crate::point::{DeviceId, PointId};
 use crate::time::Timestamp;
+
+pub mod tls;
 
 /// The key of the stored `bdSeq` in the history database's `settings` table.
 pub const BD_SEQ_KEY: &str = "mqtt.bd_seq";
@@ -64,7 +68,8 @@ pub const HISTORY_ROWS_METRIC: &str = "Gateway/History rows";
 
 /// Starts publishing `cell` to the broker in `config` until `stop` turns true; `data_dir`
 /// holds the database that keeps `bdSeq`. Fails at once only for what no retry can fix
-/// (an id Sparkplug refuses, a password variable that is not set).
+/// (an id Sparkplug refuses, a password variable that is not set, TLS files that do not
+/// make a TLS setup).
 pub fn start(
     cell: Arc<Cell>,
     config: MqttConfig,
@@ -81,12 +86,17 @@ pub fn start(
         .map_err(|e| anyhow::anyhow!("MQTT group_id {:?}: {e}", config.group_id))?;
     let edge_node = Id::new(config.edge_node_id.as_str())
         .map_err(|e| anyhow::anyhow!("MQTT edge_node_id {:?}: {e}", config.edge_node_id))?;
+    let transport = match &config.tls {
+        Some(files) => tls::transport(&tls::client_config(files).context("MQTT TLS")?),
+        None => Transport::Tcp,
+    };
     cell.set_mqtt(MqttLink::Disconnected("not connected yet".to_owned()));
     let link = Link {
         cell,
         config,
         password,
         data_dir,
+        transport,
     };
     Ok(tokio::spawn(link.run(group, edge_node, stop)))
 }
@@ -96,6 +106,8 @@ struct Link {
     config: MqttConfig,
     password: Option<String>,
     data_dir: PathBuf,
+    /// TCP, or TLS for `mqtts://`.
+    transport: Transport,
 }
 
 /// Why a connection ended.
@@ -202,6 +214,7 @@ impl Link {
             .set_keep_alive(c.keep_alive)
             .set_clean_session(true)
             .set_max_packet_size(MAX_PACKET, MAX_PACKET)
+            .set_transport(self.transport.clone())
             .set_last_will(LastWill::new(
                 will.topic.to_string(),
                 will.payload.clone(),
@@ -251,7 +264,7 @@ struct Session<'a> {
 impl Session<'_> {
     async fn serve(
         &mut self,
-        mut events: mpsc::UnboundedReceiver<Result<MqttEvent, rumqttc::ConnectionError>>,
+        mut events: mpsc::UnboundedReceiver<Result<MqttEvent, String>>,
         live: &mut broadcast::Receiver<LiveMessage>,
         stop: &mut watch::Receiver<bool>,
         connections: &mut u64,
@@ -278,7 +291,7 @@ impl Session<'_> {
                         self.on_command(&p.topic, &p.payload).await
                     }
                     Some(Ok(_)) => Ok(()),
-                    Some(Err(e)) => return End::Lost(e.to_string()),
+                    Some(Err(why)) => return End::Lost(why),
                     None => return End::Lost("the MQTT client stopped".to_owned()),
                 },
                 message = live.recv(), if self.connected => match message {
@@ -443,14 +456,14 @@ impl Session<'_> {
     }
 }
 
-/// Forwards the event loop's incoming packets and its end; polling it is what drives
-/// the connection.
-async fn pump(
-    mut eventloop: EventLoop,
-    events: mpsc::UnboundedSender<Result<MqttEvent, rumqttc::ConnectionError>>,
-) {
+/// Forwards the event loop's incoming packets and its end (described, a failed TLS
+/// handshake as one); polling it is what drives the connection.
+async fn pump(mut eventloop: EventLoop, events: mpsc::UnboundedSender<Result<MqttEvent, String>>) {
     loop {
-        let event = eventloop.poll().await;
+        let event = eventloop.poll().await.map_err(|e| {
+            let (host, port) = eventloop.mqtt_options.broker_address();
+            tls::describe(&e, &host, port)
+        });
         let end = event.is_err();
         if matches!(event, Ok(MqttEvent::Outgoing(_))) {
             continue;
