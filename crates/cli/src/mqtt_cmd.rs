@@ -28,9 +28,20 @@ pub enum MqttCommand {
 
 #[derive(Debug, Args)]
 pub struct SubArgs {
-    /// The broker: mqtt://HOST[:PORT] (port 1883 by default).
+    /// The broker: mqtt://HOST[:PORT] (port 1883 by default) or mqtts://HOST[:PORT] (TLS,
+    /// port 8883 by default).
     #[arg(long, value_name = "URL")]
     broker: String,
+    /// For mqtts://: the CA certificates (PEM) that sign the broker's; without it, the
+    /// system's roots.
+    #[arg(long, value_name = "FILE")]
+    ca_file: Option<std::path::PathBuf>,
+    /// For mqtts://: a client certificate (PEM) to show a broker that asks for one.
+    #[arg(long, value_name = "FILE", requires = "client_key")]
+    client_cert: Option<std::path::PathBuf>,
+    /// The client certificate's private key (PEM).
+    #[arg(long, value_name = "FILE", requires = "client_cert")]
+    client_key: Option<std::path::PathBuf>,
     /// One JSON object per message and line, instead of words.
     #[arg(long)]
     json: bool,
@@ -59,9 +70,30 @@ pub async fn run(command: MqttCommand) -> anyhow::Result<ExitCode> {
 }
 
 async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
-    let (host, port) =
+    let gateway::config::Broker { host, port, tls } =
         gateway::config::parse_broker(&args.broker).map_err(|m| usage(format!("--broker: {m}")))?;
-    let broker = format!("mqtt://{host}:{port}");
+    let scheme = if tls { "mqtts" } else { "mqtt" };
+    let broker = format!("{scheme}://{host}:{port}");
+    let transport = if tls {
+        let files = gateway::config::MqttTls {
+            ca_file: args.ca_file.clone(),
+            client: args
+                .client_cert
+                .clone()
+                .zip(args.client_key.clone())
+                .map(|(cert, key)| gateway::config::MqttClientCert { cert, key }),
+        };
+        let config = gateway::northbound::mqtt::tls::client_config(&files)
+            .map_err(|e| usage(format!("--broker {broker}: {e}")))?;
+        Some(gateway::northbound::mqtt::tls::transport(&config))
+    } else {
+        if args.ca_file.is_some() || args.client_cert.is_some() {
+            return Err(usage(format!(
+                "--ca-file, --client-cert and --client-key are for mqtts://; the broker is {broker}"
+            )));
+        }
+        None
+    };
     for topic in &args.topics {
         if !rumqttc::valid_filter(topic) {
             return Err(usage(format!(
@@ -82,6 +114,9 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
         .set_clean_session(true)
         .set_keep_alive(Duration::from_secs(30))
         .set_max_packet_size(MAX_PACKET, MAX_PACKET);
+    if let Some(transport) = transport {
+        options.set_transport(transport);
+    }
     if let Some(user) = &args.username {
         options.set_credentials(user, password.unwrap_or_default());
     }

@@ -43,8 +43,9 @@ pub struct ServeArgs {
     /// can reach the port reads the cell.
     #[arg(long, value_name = "TOKEN")]
     pub read_token: Option<String>,
-    /// Publish the cell to this MQTT broker (mqtt://HOST:PORT), as a Sparkplug B edge node
-    /// or as JSON (--mqtt-mode). The demo cell publishes as group `cellbus`, edge node
+    /// Publish the cell to this MQTT broker (mqtt://HOST:PORT, or mqtts://HOST:PORT for
+    /// TLS: the [mqtt] table's ca_file, else the system's roots), as a Sparkplug B edge
+    /// node or as JSON (--mqtt-mode). The demo cell publishes as group `cellbus`, edge node
     /// `demo` (JSON under `cellbus/demo/`); with --config it replaces the [mqtt] table's
     /// broker.
     #[arg(long, value_name = "URL")]

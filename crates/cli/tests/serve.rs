@@ -49,7 +49,7 @@ async fn serve_mqtt_publishes_the_demo_and_a_killed_gateway_leaves_its_will_with
 }
 
 #[test]
-fn serve_refuses_an_mqtts_broker_saying_tls_is_not_built_yet() {
+fn serve_refuses_a_broker_url_that_is_neither_mqtt_nor_mqtts() {
     let data = tempfile::tempdir().unwrap();
     let output = run(&[
         "serve",
@@ -58,11 +58,14 @@ fn serve_refuses_an_mqtts_broker_saying_tls_is_not_built_yet() {
         "--data",
         data.path().to_str().unwrap(),
         "--mqtt",
-        "mqtts://127.0.0.1:8883",
+        "ws://127.0.0.1:8883",
     ]);
     assert!(!output.status.success());
     let err = stderr(&output);
-    assert!(err.contains("TLS) is not built yet"), "{err}");
+    assert!(
+        err.contains("write mqtt://host:1883 or mqtts://host:8883"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -113,6 +113,39 @@ pub struct MqttConfig {
     pub primary_host: Option<String>,
     /// The most stored changes sent after an outage (the newest are kept).
     pub max_backlog: u64,
+    /// TLS to the broker (`mqtts://`); `None` for `mqtt://`.
+    pub tls: Option<MqttTls>,
+}
+
+/// TLS to the broker (`mqtts://`): whom to trust and what to show. The files are PEM; a
+/// relative path in the config file is relative to the file's directory.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MqttTls {
+    /// `ca_file`: the CA certificates that sign the broker's; `None`: the system's roots.
+    pub ca_file: Option<PathBuf>,
+    /// `client_cert` and `client_key`: the certificate (chain) and private key the gateway
+    /// shows a broker that asks for one.
+    pub client: Option<MqttClientCert>,
+}
+
+/// A client certificate for the broker: `client_cert` and `client_key`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MqttClientCert {
+    /// The certificate, then any intermediates (PEM).
+    pub cert: PathBuf,
+    /// Its private key (PEM: PKCS#8, PKCS#1 or SEC1).
+    pub key: PathBuf,
+}
+
+/// A broker URL, read by [`parse_broker`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Broker {
+    /// The host.
+    pub host: String,
+    /// The port (1883 for `mqtt://`, 8883 for `mqtts://` when the URL has none).
+    pub port: u16,
+    /// `mqtts://`: TLS.
+    pub tls: bool,
 }
 
 /// What the gateway publishes on MQTT.
@@ -151,10 +184,11 @@ impl MqttMode {
 pub const DEFAULT_MQTT_BACKLOG: u64 = 1_000_000;
 
 impl MqttConfig {
-    /// The broker at `url` (`mqtt://host:port`) with every other field at its default and
-    /// the edge node id `edge_node_id`.
+    /// The broker at `url` (`mqtt://host:port`, or `mqtts://host:port` trusting the
+    /// system's roots) with every other field at its default and the edge node id
+    /// `edge_node_id`.
     pub fn for_broker(url: &str, edge_node_id: &str) -> Result<Self, String> {
-        let (host, port) = parse_broker(url)?;
+        let Broker { host, port, tls } = parse_broker(url)?;
         Ok(Self {
             host,
             port,
@@ -169,28 +203,25 @@ impl MqttConfig {
             commands: false,
             primary_host: None,
             max_backlog: DEFAULT_MQTT_BACKLOG,
+            tls: tls.then(MqttTls::default),
         })
     }
 }
 
-/// Reads `mqtt://host[:port]` (port 1883 by default). `mqtts://` is refused: TLS is not
-/// built yet.
-pub fn parse_broker(text: &str) -> Result<(String, u16), String> {
+/// Reads `mqtt://host[:port]` (port 1883 by default) or `mqtts://host[:port]` (TLS, port
+/// 8883 by default).
+pub fn parse_broker(text: &str) -> Result<Broker, String> {
     let url = url::Url::parse(text.trim())
         .map_err(|e| format!("broker {text:?} is not a URL ({e}); write mqtt://host:1883"))?;
-    match url.scheme() {
-        "mqtt" => {}
-        "mqtts" => {
-            return Err(format!(
-                "broker {text:?}: mqtts:// (TLS) is not built yet; use mqtt:// to a broker on a trusted network"
-            ));
-        }
+    let (tls, default_port) = match url.scheme() {
+        "mqtt" => (false, 1883),
+        "mqtts" => (true, 8883),
         other => {
             return Err(format!(
-                "broker {text:?} has scheme {other:?}; write mqtt://host:1883"
+                "broker {text:?} has scheme {other:?}; write mqtt://host:1883 or mqtts://host:8883"
             ));
         }
-    }
+    };
     let host = url
         .host_str()
         .filter(|h| !h.is_empty())
@@ -204,7 +235,11 @@ pub fn parse_broker(text: &str) -> Result<(String, u16), String> {
         .trim_start_matches('[')
         .trim_end_matches(']')
         .to_owned();
-    Ok((host, url.port().unwrap_or(1883)))
+    Ok(Broker {
+        host,
+        port: url.port().unwrap_or(default_port),
+        tls,
+    })
 }
 
 /// This machine's host name as a Sparkplug id, else `cellbus`.
@@ -446,7 +481,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
             ));
         }
     }
-    let mqtt = raw.mqtt.map(|m| check_mqtt(m, &at)).transpose()?;
+    let mqtt = raw.mqtt.map(|m| check_mqtt(m, path, &at)).transpose()?;
     Ok(CellConfig {
         source: Some(path.to_owned()),
         token: raw.token.map(Spanned::into_inner),
@@ -458,9 +493,12 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
 
 fn check_mqtt(
     raw: RawMqtt,
+    path: &Path,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<MqttConfig, ConfigError> {
-    let (host, port) = parse_broker(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
+    let Broker { host, port, tls } =
+        parse_broker(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
+    let tls = check_mqtt_tls(&raw, tls, path, at)?;
     let group_id =
         id_opt(&raw.group_id, "group_id", at)?.unwrap_or_else(|| DEFAULT_MQTT_GROUP.to_owned());
     let edge_node_id =
@@ -544,6 +582,7 @@ fn check_mqtt(
         commands: raw.commands.map(Spanned::into_inner).unwrap_or(false),
         primary_host,
         max_backlog,
+        tls,
     })
 }
 
@@ -566,6 +605,79 @@ fn id_opt(
                 })
         })
         .transpose()
+}
+
+/// The `[mqtt]` table's TLS keys, for an `mqtts://` broker (`tls`). The files are read
+/// here, so `cellbus config check` reports a missing file or bad PEM; the gateway reads
+/// them again when it starts.
+fn check_mqtt_tls(
+    raw: &RawMqtt,
+    tls: bool,
+    path: &Path,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Option<MqttTls>, ConfigError> {
+    let keys = [
+        ("ca_file", &raw.ca_file),
+        ("client_cert", &raw.client_cert),
+        ("client_key", &raw.client_key),
+    ];
+    if !tls {
+        if let Some((key, Some(value))) = keys.iter().find(|(_, v)| v.is_some()) {
+            return Err(at(
+                value.span(),
+                format!(
+                    "{key} is for TLS: the broker is mqtt://; write mqtts://host:8883 or remove {key}"
+                ),
+            ));
+        }
+        return Ok(None);
+    }
+    let base = path.parent().unwrap_or(Path::new(""));
+    for (key, value) in keys {
+        if let Some(value) = value
+            && value.get_ref().trim().is_empty()
+        {
+            return Err(at(
+                value.span(),
+                format!("{key} is empty; name a PEM file or remove {key}"),
+            ));
+        }
+    }
+    let file = |value: &Spanned<String>| base.join(value.get_ref().trim());
+    let client = match (&raw.client_cert, &raw.client_key) {
+        (Some(cert), Some(key)) => Some(MqttClientCert {
+            cert: file(cert),
+            key: file(key),
+        }),
+        (None, None) => None,
+        (Some(cert), None) => {
+            return Err(at(
+                cert.span(),
+                "client_cert needs client_key (its private key, PEM)".into(),
+            ));
+        }
+        (None, Some(key)) => {
+            return Err(at(
+                key.span(),
+                "client_key needs client_cert (its certificate, PEM)".into(),
+            ));
+        }
+    };
+    let tls = MqttTls {
+        ca_file: raw.ca_file.as_ref().map(file),
+        client,
+    };
+    crate::northbound::mqtt::tls::check_files(&tls).map_err(|e| {
+        let span = match e.key {
+            "ca_file" => raw.ca_file.as_ref(),
+            "client_cert" => raw.client_cert.as_ref(),
+            "client_key" => raw.client_key.as_ref(),
+            _ => None,
+        }
+        .map_or(raw.broker.span(), Spanned::span);
+        at(span, e.message)
+    })?;
+    Ok(Some(tls))
 }
 
 fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
@@ -909,6 +1021,9 @@ struct RawMqtt {
     commands: Option<Spanned<bool>>,
     primary_host: Option<Spanned<String>>,
     max_backlog: Option<Spanned<i64>>,
+    ca_file: Option<Spanned<String>>,
+    client_cert: Option<Spanned<String>>,
+    client_key: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -1390,12 +1505,6 @@ writable = { min = 5.0, max = 30.0 }
     fn mqtt_mistakes_are_refused_where_they_are() {
         let at = |table: &str| format!("{ONE}\n[mqtt]\n{table}");
         refused(
-            &at("broker = \"mqtts://b:8883\"\n"),
-            11,
-            10,
-            "TLS) is not built yet",
-        );
-        refused(
             &at("broker = \"http://b\"\n"),
             11,
             10,
@@ -1419,6 +1528,107 @@ writable = { min = 5.0, max = 30.0 }
             14,
             "keep_alive",
         );
+    }
+
+    #[test]
+    fn an_mqtts_broker_takes_port_8883_and_trusts_the_systems_roots_by_default() {
+        let text = format!("{ONE}\n[mqtt]\nbroker = \"mqtts://broker.local\"\n");
+        let mqtt = parse(&text).unwrap().mqtt.unwrap();
+        assert_eq!((mqtt.host.as_str(), mqtt.port), ("broker.local", 8883));
+        assert_eq!(mqtt.tls, Some(MqttTls::default()));
+        let cli = MqttConfig::for_broker("mqtts://b:18883", "cell").unwrap();
+        assert_eq!((cli.port, cli.tls), (18883, Some(MqttTls::default())));
+        let plain = MqttConfig::for_broker("mqtt://b", "cell").unwrap();
+        assert_eq!((plain.port, plain.tls), (1883, None));
+    }
+
+    #[test]
+    fn tls_keys_with_an_mqtt_broker_are_refused_naming_the_key() {
+        let at = |table: &str| format!("{ONE}\n[mqtt]\nbroker = \"mqtt://b\"\n{table}");
+        refused(&at("ca_file = \"ca.pem\"\n"), 12, 11, "ca_file is for TLS");
+        refused(
+            &at("client_key = \"k.pem\"\n"),
+            12,
+            14,
+            "client_key is for TLS",
+        );
+    }
+
+    #[test]
+    fn a_client_cert_without_its_key_is_refused_and_the_other_way_round() {
+        let at = |table: &str| format!("{ONE}\n[mqtt]\nbroker = \"mqtts://b\"\n{table}");
+        refused(
+            &at("client_cert = \"c.pem\"\n"),
+            12,
+            15,
+            "client_cert needs client_key",
+        );
+        refused(
+            &at("client_key = \"k.pem\"\n"),
+            12,
+            14,
+            "client_key needs client_cert",
+        );
+    }
+
+    #[test]
+    fn tls_files_are_read_relative_to_the_config_file_and_named_when_missing() {
+        let text = format!("{ONE}\n[mqtt]\nbroker = \"mqtts://b\"\nca_file = \"certs/ca.pem\"\n");
+        let err = parse_config(&text, Path::new("/nonexistent/cellbus/cell.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(":12:11: ca_file /nonexistent/cellbus/certs/ca.pem: cannot be read"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn tls_files_that_are_not_pem_are_refused_without_showing_a_key() {
+        let dir = tempfile::tempdir().unwrap();
+        let key = rcgen::KeyPair::generate().unwrap();
+        let cert = rcgen::CertificateParams::new(vec!["gateway".to_owned()])
+            .unwrap()
+            .self_signed(&key)
+            .unwrap();
+        std::fs::write(dir.path().join("ca.pem"), cert.pem()).unwrap();
+        std::fs::write(dir.path().join("gateway.pem"), cert.pem()).unwrap();
+        std::fs::write(dir.path().join("gateway.key"), key.serialize_pem()).unwrap();
+        std::fs::write(dir.path().join("notes.txt"), "no PEM here").unwrap();
+        let secret = key.serialize_pem().replace("PRIVATE KEY", "PRIVAT KEY");
+        std::fs::write(dir.path().join("mangled.key"), &secret).unwrap();
+        let path = dir.path().join("cell.toml");
+        let at = |table: &str| format!("{ONE}\n[mqtt]\nbroker = \"mqtts://b\"\n{table}");
+
+        let good = parse_config(
+            &at("ca_file = \"ca.pem\"\nclient_cert = \"gateway.pem\"\nclient_key = \"gateway.key\"\n"),
+            &path,
+        )
+        .unwrap();
+        let tls = good.mqtt.unwrap().tls.unwrap();
+        assert_eq!(tls.ca_file, Some(dir.path().join("ca.pem")));
+        assert_eq!(
+            tls.client,
+            Some(MqttClientCert {
+                cert: dir.path().join("gateway.pem"),
+                key: dir.path().join("gateway.key"),
+            })
+        );
+
+        let err = parse_config(&at("ca_file = \"notes.txt\"\n"), &path)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("notes.txt holds no certificate"), "{err}");
+        let err = parse_config(
+            &at("client_cert = \"gateway.pem\"\nclient_key = \"mangled.key\"\n"),
+            &path,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains(":13:14: client_key "), "{err}");
+        assert!(err.contains("mangled.key: "), "{err}");
+        let body: String = secret.lines().filter(|l| !l.starts_with("-----")).collect();
+        assert!(!err.contains(&body[..16]), "{err}");
     }
 
     #[test]

@@ -67,9 +67,10 @@ pub struct ServeOptions {
     /// The read token every API route then needs; else `CELLBUS_READ_TOKEN`, else the
     /// config's `read_token`; none: reading is open.
     pub read_token: Option<String>,
-    /// `--mqtt mqtt://HOST:PORT`: publish the cell as a Sparkplug B edge node to this
-    /// broker (the demo cell as group `cellbus`, edge node `demo`); with a config, it
-    /// replaces the `[mqtt]` table's broker.
+    /// `--mqtt mqtt://HOST:PORT` (or `mqtts://HOST:PORT`, TLS): publish the cell as a
+    /// Sparkplug B edge node to this broker (the demo cell as group `cellbus`, edge node
+    /// `demo`); with a config, it replaces the `[mqtt]` table's broker (keeping its TLS
+    /// files for `mqtts://`; without a table, TLS trusts the system's roots).
     pub mqtt: Option<String>,
     /// `--mqtt-mode`: Sparkplug B or JSON, overriding the `[mqtt]` table's `mode`.
     pub mqtt_mode: Option<MqttMode>,
@@ -319,10 +320,12 @@ fn mqtt_config(
         }
         (None, Some(table)) => table.clone(),
         (Some(url), Some(table)) => {
-            let (host, port) = parse_broker(url).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?;
+            let broker = parse_broker(url).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?;
             MqttConfig {
-                host,
-                port,
+                host: broker.host,
+                port: broker.port,
+                // mqtts:// keeps the table's CA and client certificate, if it has them.
+                tls: broker.tls.then(|| table.tls.clone().unwrap_or_default()),
                 ..table.clone()
             }
         }

@@ -1,7 +1,7 @@
 //! Test and bench tools shared by the cellbus crates.
 //!
 //! - `mosquitto` (feature `mqtt`): `Mosquitto`, a real MQTT broker on a free loopback
-//!   port, killed on drop.
+//!   port (and a TLS listener on a second one with `TlsFiles`), killed on drop.
 //! - `sparkplug_sub` (feature `mqtt`): `Subscriber`, a Sparkplug B subscriber that decodes
 //!   payloads with the `sparkplug` crate and survives broker restarts.
 //! - [`noise`]: [`Noise`], a seeded, sans-IO byte mangler with the trouble of a bad
@@ -25,7 +25,7 @@ pub mod sparkplug_sub;
 pub mod tricks;
 
 #[cfg(feature = "mqtt")]
-pub use mosquitto::Mosquitto;
+pub use mosquitto::{Mosquitto, TlsFiles};
 pub use noise::{Noise, NoiseConfig, NoiseCounts};
 pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
 #[cfg(feature = "mqtt")]

@@ -5,8 +5,11 @@
 //! for a subscriber with a persistent session, so a test subscriber that reconnects after
 //! the outage still receives what a faster client published before it was back: the test
 //! can judge what was sent without racing the client under test.
+//!
+//! [`Mosquitto::start_tls`] adds a TLS listener on a second port, with the plain one kept
+//! for the test's own subscriber.
 
-use std::net::{Ipv4Addr, SocketAddr, TcpListener, TcpStream};
+use std::net::{Ipv4Addr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -20,6 +23,21 @@ pub struct Mosquitto {
     child: Option<Child>,
     port: u16,
     dir: tempfile::TempDir,
+    /// The TLS listener's port and files.
+    tls: Option<(u16, TlsFiles)>,
+}
+
+/// The PEM files of a TLS listener.
+#[derive(Debug, Clone)]
+pub struct TlsFiles {
+    /// The CA certificates that sign the clients' certificates.
+    pub ca: PathBuf,
+    /// The broker's certificate.
+    pub cert: PathBuf,
+    /// Its private key.
+    pub key: PathBuf,
+    /// Whether a client must show a certificate signed by `ca`.
+    pub require_certificate: bool,
 }
 
 impl Mosquitto {
@@ -30,23 +48,61 @@ impl Mosquitto {
     /// When mosquitto is not installed (the message says what to install) or does not
     /// start in 20 s.
     pub fn start() -> Self {
-        let port = TcpListener::bind((Ipv4Addr::LOCALHOST, 0))
-            .and_then(|l| l.local_addr())
-            .expect("a free loopback port")
-            .port();
+        Self::launched(None)
+    }
+
+    /// Starts mosquitto with a plain listener on [`Mosquitto::port`] and a TLS listener
+    /// with `files` on [`Mosquitto::tls_port`], both on loopback, and waits until both
+    /// accept connections.
+    ///
+    /// # Panics
+    ///
+    /// As [`Mosquitto::start`].
+    pub fn start_tls(files: &TlsFiles) -> Self {
+        Self::launched(Some(files.clone()))
+    }
+
+    fn launched(files: Option<TlsFiles>) -> Self {
         let dir = tempfile::tempdir().expect("a temporary directory for mosquitto");
         let mut broker = Self {
             child: None,
-            port,
+            port: 0,
             dir,
+            tls: None,
         };
-        broker.launch();
-        broker
+        let deadline = Instant::now() + START_LIMIT;
+        loop {
+            // Fresh ports for every try: a port that another process took between the
+            // pick and mosquitto's bind (a client's or a server's, of a test running
+            // alongside) is not tried again.
+            let (plain, tls) = two_free_ports();
+            broker.port = plain;
+            broker.tls = files.clone().map(|files| (tls, files));
+            if broker.try_launch(deadline) {
+                return broker;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "mosquitto did not start on loopback within {START_LIMIT:?}"
+            );
+        }
     }
 
-    /// The broker's port on 127.0.0.1.
+    /// The broker's (plain) port on 127.0.0.1.
     pub fn port(&self) -> u16 {
         self.port
+    }
+
+    /// The TLS listener's port on 127.0.0.1.
+    ///
+    /// # Panics
+    ///
+    /// When the broker was not started with [`Mosquitto::start_tls`].
+    pub fn tls_port(&self) -> u16 {
+        self.tls
+            .as_ref()
+            .expect("a broker started with Mosquitto::start_tls")
+            .0
     }
 
     /// `mqtt://127.0.0.1:PORT`.
@@ -93,43 +149,60 @@ impl Mosquitto {
         }
     }
 
+    /// Starts the broker again on its ports.
     fn launch(&mut self) {
-        let binary = binary();
-        let config = self.dir.path().join("mosquitto.conf");
-        std::fs::write(
-            &config,
-            format!(
-                "listener {} 127.0.0.1\nallow_anonymous true\nuser root\n\
-                 persistence true\npersistence_location {}/\nqueue_qos0_messages true\n\
-                 message_size_limit 0\n",
-                self.port,
-                self.dir.path().display()
-            ),
-        )
-        .expect("mosquitto's config file can be written");
         let deadline = Instant::now() + START_LIMIT;
-        loop {
-            let child = Command::new(&binary)
-                .arg("-c")
-                .arg(&config)
-                .stdin(Stdio::null())
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()
-                .unwrap_or_else(|e| panic!("cannot start {}: {e}", binary.display()));
-            self.child = Some(child);
-            if wait_for_port(self.port, self.child.as_mut().expect("just set"), deadline) {
-                return;
-            }
-            // The port may still be held by the previous broker's socket: try again.
-            self.kill();
+        while !self.try_launch(deadline) {
+            // A port may still be held by the previous broker's socket: try again.
             assert!(
                 Instant::now() < deadline,
-                "mosquitto did not accept connections on 127.0.0.1:{} within {START_LIMIT:?}",
+                "mosquitto did not start again on 127.0.0.1:{} within {START_LIMIT:?}",
                 self.port
             );
             std::thread::sleep(Duration::from_millis(100));
         }
+    }
+
+    /// Starts mosquitto on its ports; whether it runs (every listener open) before
+    /// `deadline`.
+    fn try_launch(&mut self, deadline: Instant) -> bool {
+        let binary = binary();
+        let config = self.dir.path().join("mosquitto.conf");
+        let log = self.dir.path().join("mosquitto.log");
+        let mut text = format!(
+            "listener {} 127.0.0.1\nallow_anonymous true\nuser root\n\
+             persistence true\npersistence_location {}/\nqueue_qos0_messages true\n\
+             message_size_limit 0\nlog_dest file {}\n",
+            self.port,
+            self.dir.path().display(),
+            log.display()
+        );
+        if let Some((port, files)) = &self.tls {
+            text.push_str(&format!(
+                "listener {port} 127.0.0.1\ncafile {}\ncertfile {}\nkeyfile {}\n\
+                 require_certificate {}\n",
+                files.ca.display(),
+                files.cert.display(),
+                files.key.display(),
+                files.require_certificate
+            ));
+        }
+        std::fs::write(&config, text).expect("mosquitto's config file can be written");
+        let _ = std::fs::remove_file(&log);
+        let child = Command::new(&binary)
+            .arg("-c")
+            .arg(&config)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start {}: {e}", binary.display()));
+        let child = self.child.insert(child);
+        if wait_until_running(&log, child, deadline) {
+            return true;
+        }
+        self.kill();
+        false
     }
 }
 
@@ -137,6 +210,14 @@ impl Drop for Mosquitto {
     fn drop(&mut self) {
         self.kill();
     }
+}
+
+/// Two different free loopback ports (both held at once while picked).
+fn two_free_ports() -> (u16, u16) {
+    let bind = || TcpListener::bind((Ipv4Addr::LOCALHOST, 0)).expect("a free loopback port");
+    let (a, b) = (bind(), bind());
+    let port = |l: &TcpListener| l.local_addr().expect("a bound port").port();
+    (port(&a), port(&b))
 }
 
 /// The mosquitto binary, from PATH or Debian's place.
@@ -158,11 +239,11 @@ fn binary() -> PathBuf {
         })
 }
 
-/// Whether the broker accepts TCP connections before `deadline`; false if it exited.
-fn wait_for_port(port: u16, child: &mut Child, deadline: Instant) -> bool {
-    let addr = SocketAddr::from((Ipv4Addr::LOCALHOST, port));
+/// Whether mosquitto logs that it runs (after opening every listener; a port taken
+/// makes it exit instead) before `deadline`; false if it exited.
+fn wait_until_running(log: &Path, child: &mut Child, deadline: Instant) -> bool {
     while Instant::now() < deadline {
-        if TcpStream::connect_timeout(&addr, Duration::from_millis(200)).is_ok() {
+        if std::fs::read_to_string(log).is_ok_and(|text| text.contains(" running")) {
             return true;
         }
         if matches!(child.try_wait(), Ok(Some(_))) {

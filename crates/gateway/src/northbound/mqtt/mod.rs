@@ -19,6 +19,7 @@
 pub mod forward;
 pub mod json;
 pub mod sparkplug;
+pub mod tls;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -27,7 +28,7 @@ use std::time::Duration;
 use anyhow::Context;
 use rumqttc::{
     AsyncClient, Event as MqttEvent, EventLoop, LastWill, MqttOptions, Outgoing as Sent, Packet,
-    QoS,
+    QoS, Transport,
 };
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio::task::JoinHandle;
@@ -54,7 +55,7 @@ const STOP_GRACE: Duration = Duration::from_secs(3);
 /// holds the database that keeps `bdSeq` and the forwarded mark. `allow_writes` is the
 /// gateway's `--allow-writes`: with the config's `commands = true`, DCMD writes are
 /// carried out. Fails at once only for what no retry can fix (an id Sparkplug refuses, a
-/// password variable that is not set).
+/// password variable that is not set, TLS files that do not make a TLS setup).
 pub fn start(
     cell: Arc<Cell>,
     config: MqttConfig,
@@ -68,6 +69,10 @@ pub fn start(
         })?),
         None => None,
     };
+    let transport = match &config.tls {
+        Some(files) => tls::transport(&tls::client_config(files).context("MQTT TLS")?),
+        None => Transport::Tcp,
+    };
     cell.set_mqtt(MqttLink::Disconnected("not connected yet".to_owned()));
     let mode = config.mode;
     let link = Link {
@@ -75,6 +80,7 @@ pub fn start(
         config,
         password,
         data_dir,
+        transport,
     };
     Ok(match mode {
         MqttMode::Sparkplug => {
@@ -94,6 +100,8 @@ pub struct Link {
     config: MqttConfig,
     password: Option<String>,
     data_dir: PathBuf,
+    /// TCP, or TLS for `mqtts://`.
+    transport: Transport,
 }
 
 /// A message to publish, with the latest read time among the changes it holds.
@@ -264,6 +272,7 @@ impl Link {
             .set_keep_alive(c.keep_alive)
             .set_clean_session(true)
             .set_max_packet_size(MAX_PACKET, MAX_PACKET)
+            .set_transport(self.transport.clone())
             .set_last_will(LastWill::new(
                 will.topic.clone(),
                 will.payload.clone(),
@@ -326,7 +335,7 @@ impl Link {
 pub struct Connection<'a> {
     link: &'a Link,
     client: AsyncClient,
-    events: mpsc::UnboundedReceiver<Result<MqttEvent, rumqttc::ConnectionError>>,
+    events: mpsc::UnboundedReceiver<Result<MqttEvent, String>>,
     delivery: &'a mut Delivery,
     stop: &'a mut watch::Receiver<bool>,
     tick: tokio::time::Interval,
@@ -376,7 +385,7 @@ impl Connection<'_> {
                 Some(Ok(MqttEvent::Outgoing(Sent::Publish(_)))) => self.delivery.wrote_publish(),
                 Some(Ok(MqttEvent::Outgoing(Sent::PingReq))) => self.delivery.wrote_ping(),
                 Some(Ok(_)) => {}
-                Some(Err(e)) => return Err(End::Lost(e.to_string())),
+                Some(Err(why)) => return Err(End::Lost(why)),
                 None => return Err(End::Lost("the MQTT client stopped".to_owned())),
             }
         }
@@ -448,14 +457,14 @@ impl Connection<'_> {
     }
 }
 
-/// Forwards the event loop's events and its end; polling it is what drives the
-/// connection.
-async fn pump(
-    mut eventloop: EventLoop,
-    events: mpsc::UnboundedSender<Result<MqttEvent, rumqttc::ConnectionError>>,
-) {
+/// Forwards the event loop's events and its end (described, a failed TLS handshake as
+/// one); polling it is what drives the connection.
+async fn pump(mut eventloop: EventLoop, events: mpsc::UnboundedSender<Result<MqttEvent, String>>) {
     loop {
-        let event = eventloop.poll().await;
+        let event = eventloop.poll().await.map_err(|e| {
+            let (host, port) = eventloop.mqtt_options.broker_address();
+            tls::describe(&e, &host, port)
+        });
         let end = event.is_err();
         if events.send(event).is_err() || end {
             return;

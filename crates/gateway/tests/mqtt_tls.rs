@@ -1,0 +1,294 @@
+//! The cell on MQTT over TLS (`mqtts://`), against a real mosquitto with a TLS listener and
+//! certificates made here (rcgen): the gateway's births arrive with the broker's CA in
+//! `ca_file`; a broker the CA does not vouch for is refused with a clear status and the
+//! gateway keeps trying; a broker that wants a client certificate takes `client_cert`.
+//!
+//! The test's subscriber uses the broker's plain listener.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use gateway::cell::{Cell, MqttLink};
+use gateway::{Gateway, ServeOptions};
+use rcgen::{
+    BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose, IsCa,
+    KeyPair, KeyUsagePurpose,
+};
+use testkit::{Mosquitto, Subscriber, TlsFiles};
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+
+/// Generous: a loaded 2-core machine.
+const LIMIT: Duration = Duration::from_secs(60);
+const NODE: &str = "spBv1.0/cellbus/+/tls";
+
+/// A certificate authority made for one test.
+struct Ca(CertifiedIssuer<'static, KeyPair>);
+
+impl Ca {
+    fn new(name: &str) -> Self {
+        let mut params = CertificateParams::new(Vec::<String>::new()).unwrap();
+        params.distinguished_name.push(DnType::CommonName, name);
+        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        params.key_usages = vec![
+            KeyUsagePurpose::KeyCertSign,
+            KeyUsagePurpose::CrlSign,
+            KeyUsagePurpose::DigitalSignature,
+        ];
+        Self(CertifiedIssuer::self_signed(params, KeyPair::generate().unwrap()).unwrap())
+    }
+
+    /// Writes this CA's certificate to `dir/name.pem`.
+    fn write(&self, dir: &Path, name: &str) -> PathBuf {
+        let path = dir.join(format!("{name}.pem"));
+        std::fs::write(&path, self.0.pem()).unwrap();
+        path
+    }
+
+    /// Signs a certificate for `names` (its first as common name) and writes it to
+    /// `dir/name.pem` and its key to `dir/name.key`.
+    fn sign(
+        &self,
+        dir: &Path,
+        name: &str,
+        names: &[&str],
+        usage: ExtendedKeyUsagePurpose,
+    ) -> (PathBuf, PathBuf) {
+        let key = KeyPair::generate().unwrap();
+        let alt_names: Vec<String> = names.iter().map(|n| (*n).to_owned()).collect();
+        let mut params = CertificateParams::new(alt_names).unwrap();
+        params
+            .distinguished_name
+            .push(DnType::CommonName, names.first().copied().unwrap_or(name));
+        params.extended_key_usages = vec![usage];
+        let cert = params.signed_by(&key, &self.0).unwrap();
+        let (cert_path, key_path) = (
+            dir.join(format!("{name}.pem")),
+            dir.join(format!("{name}.key")),
+        );
+        std::fs::write(&cert_path, cert.pem()).unwrap();
+        std::fs::write(&key_path, key.serialize_pem()).unwrap();
+        (cert_path, key_path)
+    }
+
+    /// A broker certificate for 127.0.0.1 and localhost, as `dir/broker.pem` and `.key`.
+    fn broker(&self, dir: &Path) -> (PathBuf, PathBuf) {
+        self.sign(
+            dir,
+            "broker",
+            &["127.0.0.1", "localhost"],
+            ExtendedKeyUsagePurpose::ServerAuth,
+        )
+    }
+}
+
+/// A mosquitto with a TLS listener whose certificate `broker_ca` signs; it trusts
+/// `client_ca`'s client certificates, and requires one if `require_certificate`.
+fn broker(
+    dir: &Path,
+    broker_ca: &Ca,
+    client_ca: &Ca,
+    require_certificate: bool,
+) -> (Mosquitto, TlsFiles) {
+    let (cert, key) = broker_ca.broker(dir);
+    let files = TlsFiles {
+        ca: client_ca.write(dir, "clients-ca"),
+        cert,
+        key,
+        require_certificate,
+    };
+    (Mosquitto::start_tls(&files), files)
+}
+
+struct Running {
+    cell: Arc<Cell>,
+    stop: oneshot::Sender<()>,
+    task: JoinHandle<anyhow::Result<()>>,
+}
+
+impl Running {
+    async fn stop(self) {
+        let _ = self.stop.send(());
+        self.task.await.unwrap().unwrap();
+    }
+}
+
+/// A gateway with a cell of one (absent) station whose `[mqtt]` table is `mqtt`, from a
+/// config file in `dir`, so relative paths in `mqtt` are relative to `dir`.
+async fn start(dir: &Path, mqtt: &str) -> Running {
+    let nobody = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let config = dir.join("cell.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[[line]]\nname = \"bench\"\nendpoint = \"tcp://127.0.0.1:{nobody}\"\n\n\
+             [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n\n\
+             [mqtt]\nedge_node_id = \"tls\"\n{mqtt}"
+        ),
+    )
+    .unwrap();
+    let gateway = Gateway::start(ServeOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        config: Some(config),
+        data_dir: dir.join("data"),
+        ..ServeOptions::default()
+    })
+    .await
+    .unwrap();
+    let cell = Arc::clone(gateway.cell());
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(gateway.run(async {
+        let _ = stopped.await;
+    }));
+    Running { cell, stop, task }
+}
+
+/// Bounded polling of the cell's MQTT state.
+async fn wait_for_link(cell: &Cell, what: &str, wanted: impl Fn(&Option<MqttLink>) -> bool) {
+    let deadline = Instant::now() + LIMIT;
+    while !wanted(&cell.mqtt()) {
+        assert!(
+            Instant::now() < deadline,
+            "MQTT never {what}: {:?}",
+            cell.mqtt()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// The refusal reported in the cell's MQTT state, once there is one.
+async fn refusal(cell: &Cell) -> String {
+    wait_for_link(
+        cell,
+        "reported the refused connection",
+        |l| matches!(l, Some(MqttLink::Disconnected(why)) if why != "not connected yet"),
+    )
+    .await;
+    match cell.mqtt() {
+        Some(MqttLink::Disconnected(why)) => why,
+        other => panic!("not a refusal: {other:?}"),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_gateway_publishes_its_births_over_mqtts_trusting_the_given_ca_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let ca = Ca::new("cellbus test CA");
+    ca.write(dir.path(), "ca");
+    let (broker, _files) = broker(dir.path(), &ca, &ca, false);
+    let mut node = Subscriber::start(broker.port(), NODE).await;
+    let gateway = start(
+        dir.path(),
+        &format!(
+            "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n",
+            broker.tls_port()
+        ),
+    )
+    .await;
+
+    let birth = node
+        .next_where("an NBIRTH over TLS", LIMIT, |m| m.kind() == "NBIRTH")
+        .await;
+    assert!(birth.bd_seq().is_some());
+    wait_for_link(&gateway.cell, "connected", |l| {
+        matches!(l, Some(MqttLink::Connected))
+    })
+    .await;
+    gateway.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broker_the_ca_file_does_not_vouch_for_is_refused_clearly_and_the_gateway_keeps_trying() {
+    let dir = tempfile::tempdir().unwrap();
+    let ours = Ca::new("cellbus test CA");
+    ours.write(dir.path(), "ca");
+    let strangers = Ca::new("someone else's CA");
+    let (mut broker, _files) = broker(dir.path(), &strangers, &strangers, false);
+    let mut node = Subscriber::start(broker.port(), NODE).await;
+    let gateway = start(
+        dir.path(),
+        &format!(
+            "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n",
+            broker.tls_port()
+        ),
+    )
+    .await;
+
+    let why = refusal(&gateway.cell).await;
+    let expected = format!(
+        "TLS handshake with broker 127.0.0.1:{} failed: ",
+        broker.tls_port()
+    );
+    assert!(why.starts_with(&expected), "{why}");
+    assert!(why.contains("UnknownIssuer"), "{why}");
+    assert!(why.contains("check ca_file"), "{why}");
+
+    // The same broker with a certificate our CA signed: the gateway, still trying, gets in.
+    ours.broker(dir.path());
+    broker.restart();
+    node.next_where("an NBIRTH once the broker is vouched for", LIMIT, |m| {
+        m.kind() == "NBIRTH"
+    })
+    .await;
+    gateway.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broker_that_wants_a_client_certificate_takes_the_gateways_client_cert() {
+    let dir = tempfile::tempdir().unwrap();
+    let ca = Ca::new("cellbus test CA");
+    ca.write(dir.path(), "ca");
+    ca.sign(
+        dir.path(),
+        "gateway",
+        &[],
+        ExtendedKeyUsagePurpose::ClientAuth,
+    );
+    let (broker, _files) = broker(dir.path(), &ca, &ca, true);
+    let mut node = Subscriber::start(broker.port(), NODE).await;
+    let gateway = start(
+        dir.path(),
+        &format!(
+            "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n\
+             client_cert = \"gateway.pem\"\nclient_key = \"gateway.key\"\n",
+            broker.tls_port()
+        ),
+    )
+    .await;
+
+    node.next_where("an NBIRTH with a client certificate", LIMIT, |m| {
+        m.kind() == "NBIRTH"
+    })
+    .await;
+    gateway.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broker_that_wants_a_client_certificate_refuses_a_gateway_without_one_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let ca = Ca::new("cellbus test CA");
+    ca.write(dir.path(), "ca");
+    let (broker, _files) = broker(dir.path(), &ca, &ca, true);
+    let gateway = start(
+        dir.path(),
+        &format!(
+            "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n",
+            broker.tls_port()
+        ),
+    )
+    .await;
+
+    let why = refusal(&gateway.cell).await;
+    let expected = format!(
+        "TLS handshake with broker 127.0.0.1:{} failed: ",
+        broker.tls_port()
+    );
+    assert!(why.starts_with(&expected), "{why}");
+    assert!(why.contains("client_cert"), "{why}");
+    gateway.stop().await;
+}
