@@ -161,6 +161,14 @@ impl Subscriber {
         }
     }
 
+    /// Publishes `payload` on `topic` (QoS 1, retained), e.g. a host application's STATE.
+    pub async fn publish_retained(&self, topic: &str, payload: Vec<u8>) {
+        self.client
+            .publish(topic, QoS::AtLeastOnce, true, payload)
+            .await
+            .expect("the subscriber's client is running");
+    }
+
     /// Publishes `payload` on `topic` (QoS 1), e.g. an NCMD.
     pub async fn publish(&self, topic: &str, payload: Vec<u8>) {
         self.client

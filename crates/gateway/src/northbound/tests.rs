@@ -284,3 +284,122 @@ async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
     stop_tx.send(true).unwrap();
     tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
 }
+
+/// The next event of `kind` on the cell's change stream.
+async fn next_event(
+    live: &mut tokio::sync::broadcast::Receiver<crate::cell::LiveMessage>,
+    kind: crate::event::EventKind,
+) -> crate::event::Event {
+    tokio::time::timeout(LIMIT, async {
+        loop {
+            match live.recv().await {
+                Ok(crate::cell::LiveMessage::Event(e)) if e.kind == kind => return e,
+                Ok(_) | Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
+                Err(e) => panic!("the change stream ended: {e}"),
+            }
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("no {kind:?} event within {LIMIT:?}"))
+}
+
+fn host_state(online: bool) -> Vec<u8> {
+    sparkplug::HostState::new(online, sparkplug::Timestamp::from_millis(now_ms())).to_json()
+}
+
+fn now_ms() -> u64 {
+    u64::try_from(crate::time::Timestamp::now().0).unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes_as_history() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(1);
+    let mut live = rig.cell.subscribe();
+    let (stop_tx, stop) = watch::channel(false);
+    let config = MqttConfig {
+        primary_host: Some("scada".into()),
+        ..config(&broker)
+    };
+    let task = super::mqtt::start(
+        rig.cell.clone(),
+        config,
+        rig.dir.path().join("mqtt"),
+        false,
+        stop,
+    )
+    .unwrap();
+
+    // Connected, but silent until the host says it is online.
+    next_event(&mut live, crate::event::EventKind::MqttConnected).await;
+    let online_at = now_ms();
+    sub.publish_retained("spBv1.0/STATE/scada", host_state(true))
+        .await;
+    let birth = sub
+        .next_where("the NBIRTH once the host is online", LIMIT, |m| {
+            m.kind() == "NBIRTH"
+        })
+        .await;
+    assert!(
+        birth.payload.timestamp.unwrap() >= online_at,
+        "no birth before the host was online"
+    );
+    let dbirth = sub
+        .next_where("the DBIRTH of jbc1", LIMIT, |m| m.kind() == "DBIRTH")
+        .await;
+    let bd_seq = birth.bd_seq().unwrap();
+
+    // The host goes away: the node ends its session (NDEATH with the session's bdSeq) and
+    // keeps reading the station meanwhile.
+    sub.publish_retained("spBv1.0/STATE/scada", host_state(false))
+        .await;
+    let death = sub
+        .next_where("the NDEATH when the host went offline", LIMIT, |m| {
+            m.kind() == "NDEATH"
+        })
+        .await;
+    assert_eq!(death.bd_seq(), Some(bd_seq));
+    let offline_at = now_ms();
+    // The node is connected again (a new session), still silent: wait for some readings.
+    next_event(&mut live, crate::event::EventKind::MqttConnected).await;
+    // Changes while it is away: the station stops answering (its points go bad) and
+    // answers again.
+    rig.plugged[0].store(false, Ordering::SeqCst);
+    next_event(&mut live, crate::event::EventKind::DeviceDown).await;
+    rig.plugged[0].store(true, Ordering::SeqCst);
+    next_event(&mut live, crate::event::EventKind::DeviceUp).await;
+    let back_at = now_ms();
+    sub.publish_retained("spBv1.0/STATE/scada", host_state(true))
+        .await;
+    let again = sub
+        .next_where("the NBIRTH when the host is back", LIMIT, |m| {
+            m.kind() == "NBIRTH"
+        })
+        .await;
+    assert!(again.bd_seq().unwrap() > bd_seq);
+    // What changed while the host was away comes as history, with its own read times.
+    let history = sub
+        .next_where("historical DDATA", LIMIT, |m| {
+            m.kind() == "DDATA"
+                && m.payload
+                    .metrics
+                    .iter()
+                    .any(|x| x.is_historical == Some(true))
+        })
+        .await;
+    let times: Vec<u64> = history
+        .payload
+        .metrics
+        .iter()
+        .map(|m| m.timestamp.unwrap())
+        .collect();
+    assert!(
+        times.iter().any(|&t| t > offline_at && t < back_at),
+        "readings from the offline time {offline_at}..{back_at}: {times:?}"
+    );
+    assert!(dbirth.payload.metrics.len() > 5);
+
+    stop_tx.send(true).unwrap();
+    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
+}
