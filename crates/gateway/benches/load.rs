@@ -5,6 +5,7 @@
 //! ```text
 //! cargo bench -p gateway --bench load                                   # 100 devices, 10 lines, 10 s
 //! nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
+//! nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60 --mqtt
 //! cargo bench -p gateway --bench load -- --help                         # every option
 //! ```
 //!
@@ -48,8 +49,25 @@
 //! their operator). Thermosald regulators and CROSS switches join this way when their
 //! gateway drivers merge.
 //!
+//! # MQTT
+//!
+//! With `--mqtt` the gateway also publishes the cell as a Sparkplug B edge node
+//! (`--mqtt URL` of `cellbus serve`, edge node `loadbench`) to a mosquitto the bench
+//! starts on a free loopback port (testkit's), and a third process (the bench again, with
+//! `--mqtt-counter PORT`: `support/mqtt_counter.rs`) subscribes to `spBv1.0/#`, decodes
+//! every payload (prost) and counts messages and metrics. The broker and the subscriber
+//! are processes of their own, so the gateway's CPU share is still its own: the cost of
+//! publishing is the difference between a run with `--mqtt` and one without. The report
+//! adds the messages the gateway handed to its client (`cellbus_mqtt_published`), the
+//! messages and metrics the subscriber received, both processes' CPU, and after the
+//! stop the totals published and received (a difference is a message lost, e.g. dropped
+//! by mosquitto for a slow subscriber; its `$SYS` dropped count is printed too).
+//! `--live-period 200ms` polls the live group faster than the driver's 1 s, for more
+//! value changes per second. The publisher alone, without polling, is measured by the
+//! `mqtt_backlog` bench.
+//!
 //! Under `cargo test --benches` (no `--bench` flag) it runs a one-second smoke test with
-//! four devices.
+//! four devices, publishing to MQTT.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -73,6 +91,14 @@ use jbc::message::{Reply, Request};
 use link::SerialSettings;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use wire::device::{Bus, Device, SharedModel};
+
+#[path = "support/mqtt_counter.rs"]
+mod mqtt_counter;
+#[path = "support/process.rs"]
+mod process;
+
+use mqtt_counter::Counter;
+use process::{ProcessUse, ticks_per_second};
 
 /// Devices simulated when `--devices` is not given.
 const DEFAULT_DEVICES: usize = 100;
@@ -109,6 +135,11 @@ usage: cargo bench -p gateway --bench load -- [options]
                       loopback speed)
   --reply-delay D     station processing time before each reply (default 1ms; the
                       JTSE model's own is 5ms)
+  --live-period D     poll period of the live group (default: the driver's, 1s; at
+                      least 50ms)
+  --mqtt              also publish the cell as a Sparkplug B edge node to a local
+                      mosquitto, with a subscriber counting what arrives (both in
+                      processes of their own)
 
 1,000 devices over 50 lines for a minute:
   nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
@@ -116,6 +147,16 @@ usage: cargo bench -p gateway --bench load -- [options]
 
 fn main() -> ExitCode {
     let raw: Vec<String> = std::env::args().skip(1).collect();
+    if let Some(port) = mqtt_counter::port_in(&raw) {
+        let counted = port.map_err(anyhow::Error::msg).and_then(mqtt_counter::run);
+        return match counted {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("load: MQTT counter: {e:#}");
+                ExitCode::from(1)
+            }
+        };
+    }
     // `cargo bench` passes --bench; `cargo test --benches` does not: then a smoke run.
     let benching = raw.iter().any(|a| a == "--bench");
     let simulators = raw.iter().any(|a| a == SIMULATORS_FLAG);
@@ -140,6 +181,7 @@ fn main() -> ExitCode {
             lines: 2,
             seconds: Duration::from_secs(1),
             warmup: Duration::from_secs(1),
+            mqtt: true,
             ..args
         };
         println!("load: smoke run (cargo bench -p gateway --bench load for the benchmark)");
@@ -169,6 +211,8 @@ struct Args {
     mix: Vec<(Kind, u32)>,
     baud: Option<u32>,
     reply_delay: Duration,
+    live_period: Option<Duration>,
+    mqtt: bool,
 }
 
 impl Args {
@@ -181,9 +225,15 @@ impl Args {
             mix: vec![(Kind::Jbc, 1)],
             baud: None,
             reply_delay: DEFAULT_REPLY_DELAY,
+            live_period: None,
+            mqtt: false,
         };
         let mut it = raw.iter();
         while let Some(flag) = it.next() {
+            if flag == "--mqtt" {
+                args.mqtt = true;
+                continue;
+            }
             let value = it
                 .next()
                 .ok_or_else(|| format!("{flag} needs a value"))?
@@ -210,6 +260,14 @@ impl Args {
                 "--reply-delay" => {
                     args.reply_delay = humantime::parse_duration(value)
                         .map_err(|e| format!("--reply-delay {value:?}: {e}; e.g. 1ms"))?;
+                }
+                "--live-period" => {
+                    let period = humantime::parse_duration(value)
+                        .map_err(|e| format!("--live-period {value:?}: {e}; e.g. 200ms"))?;
+                    if period < gateway::config::MIN_PERIOD {
+                        return Err(format!("--live-period {value}: at least 50ms"));
+                    }
+                    args.live_period = Some(period);
                 }
                 other => return Err(format!("unknown option {other:?}")),
             }
@@ -617,61 +675,12 @@ fn config_text(args: &Args, plans: &[LinePlan], ports: &[u16]) -> String {
                 "\n[[line.device]]\nid = \"l{i:02}-{kind}{address:02}\"\nprotocol = \"{kind}\"\naddress = {address}\n",
                 kind = plan.kind.protocol()
             );
+            if let Some(period) = args.live_period {
+                let _ = writeln!(text, "poll = {{ live = \"{}ms\" }}", period.as_millis());
+            }
         }
     }
     text
-}
-
-/// CPU time and peak memory of a process, from `/proc`.
-#[derive(Debug, Clone, Copy, Default)]
-struct ProcessUse {
-    cpu: Duration,
-    peak_rss_kib: u64,
-}
-
-impl ProcessUse {
-    fn of(pid: &str, ticks_per_second: u64) -> anyhow::Result<Self> {
-        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))
-            .with_context(|| format!("cannot read /proc/{pid}/stat"))?;
-        // Fields after the command name (which may hold spaces) in parentheses: state is
-        // field 3, utime 14, stime 15.
-        let after = stat
-            .rsplit_once(')')
-            .map(|(_, rest)| rest)
-            .context("/proc/PID/stat without a command name")?;
-        let fields: Vec<&str> = after.split_whitespace().collect();
-        let ticks = |n: usize| -> anyhow::Result<u64> {
-            fields
-                .get(n - 3)
-                .and_then(|f| f.parse().ok())
-                .with_context(|| format!("/proc/{pid}/stat field {n}"))
-        };
-        let total = ticks(14)? + ticks(15)?;
-        let status = std::fs::read_to_string(format!("/proc/{pid}/status"))
-            .with_context(|| format!("cannot read /proc/{pid}/status"))?;
-        let peak_rss_kib = status
-            .lines()
-            .find_map(|l| l.strip_prefix("VmHWM:"))
-            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-            .context("no VmHWM in /proc/PID/status")?;
-        Ok(Self {
-            cpu: Duration::from_secs_f64(total as f64 / ticks_per_second as f64),
-            peak_rss_kib,
-        })
-    }
-}
-
-/// Clock ticks per second of `/proc/PID/stat` (USER_HZ; 100 on Linux unless `getconf`
-/// says otherwise).
-fn ticks_per_second() -> u64 {
-    Command::new("getconf")
-        .arg("CLK_TCK")
-        .output()
-        .ok()
-        .and_then(|o| String::from_utf8(o.stdout).ok())
-        .and_then(|s| s.trim().parse().ok())
-        .filter(|t| *t > 0)
-        .unwrap_or(100)
 }
 
 /// The gateway's counters at one moment.
@@ -690,16 +699,76 @@ struct Counters {
     busy: Vec<f64>,
     gateway: ProcessUse,
     simulators: ProcessUse,
+    mqtt: Option<MqttCounters>,
+}
+
+/// With `--mqtt`: the broker and the counting subscriber, each a process of its own.
+struct MqttSide {
+    // Dropped first: the counter ends before the broker it listens to.
+    counter: Counter,
+    broker: testkit::Mosquitto,
+}
+
+impl MqttSide {
+    fn start() -> anyhow::Result<Self> {
+        let broker = testkit::Mosquitto::start();
+        let counter = Counter::start(broker.port())?;
+        Ok(Self { broker, counter })
+    }
+
+    /// The subscriber's counts once they stop moving (everything published has arrived),
+    /// waiting at most `limit`.
+    fn settled(&mut self, limit: Duration) -> anyhow::Result<mqtt_counter::Counts> {
+        let deadline = Instant::now() + limit;
+        let mut last = self.counter.counts()?;
+        loop {
+            std::thread::sleep(Duration::from_millis(200));
+            let now = self.counter.counts()?;
+            if now == last || Instant::now() > deadline {
+                return Ok(now);
+            }
+            last = now;
+        }
+    }
+}
+
+/// The MQTT side's counters at one moment.
+#[derive(Debug, Clone, Copy, Default)]
+struct MqttCounters {
+    /// Messages the gateway handed to its MQTT client (`cellbus_mqtt_published`).
+    published: u64,
+    /// What the subscriber received.
+    received: mqtt_counter::Counts,
+    broker: ProcessUse,
+    counter: ProcessUse,
 }
 
 impl Counters {
-    fn take(cell: &Cell, simulators: u32, ticks: u64) -> anyhow::Result<Self> {
+    fn take(
+        cell: &Cell,
+        simulators: u32,
+        ticks: u64,
+        mqtt: Option<&mut MqttSide>,
+    ) -> anyhow::Result<Self> {
         let metrics = cell.metrics();
         let stats = cell.store().stats();
+        let mqtt = match mqtt {
+            Some(side) => Some(MqttCounters {
+                published: metrics.mqtt_published.get(),
+                received: side.counter.counts()?,
+                broker: match side.broker.pid() {
+                    Some(pid) => ProcessUse::of(&pid.to_string(), ticks)?,
+                    None => ProcessUse::default(),
+                },
+                counter: ProcessUse::of(&side.counter.pid().to_string(), ticks)?,
+            }),
+            None => None,
+        };
         let mut c = Counters {
             at: Some(Instant::now()),
             gateway: ProcessUse::of("self", ticks)?,
             simulators: ProcessUse::of(&simulators.to_string(), ticks)?,
+            mqtt,
             value_changes: metrics.value_changes.get(),
             events: metrics.events.get(),
             rows: stats.rows_written(),
@@ -886,6 +955,9 @@ struct Report {
     stop_took: Duration,
     rows_at_stop: u64,
     integrity: String,
+    /// With `--mqtt`, after the stop: messages the gateway published in all, and what the
+    /// subscriber received in all.
+    mqtt_totals: Option<(u64, mqtt_counter::Counts)>,
 }
 
 fn run_bench(args: &Args) -> anyhow::Result<Report> {
@@ -906,10 +978,17 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     std::fs::write(&config, config_text(args, &plans, &simulators.ports))
         .context("cannot write the generated cell.toml")?;
     let data_dir: PathBuf = dir.path().join("data");
+    let mut mqtt = if args.mqtt {
+        Some(MqttSide::start()?)
+    } else {
+        None
+    };
     let options = ServeOptions {
         listen: "127.0.0.1:0".parse().expect("a valid socket address"),
         config: Some(config),
         data_dir: data_dir.clone(),
+        mqtt: mqtt.as_ref().map(|m| m.broker.url()),
+        mqtt_node: mqtt.as_ref().map(|_| "loadbench".to_owned()),
         ..ServeOptions::default()
     };
     // The same runtime as `cellbus serve`: multi-threaded, one worker per core.
@@ -928,10 +1007,11 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         }));
         let sampler = Sampler::start(Arc::clone(&cell));
         tokio::time::sleep(args.warmup).await;
-        let before = Counters::take(&cell, pid, ticks)?;
+        let published = cell.metrics().mqtt_published.clone();
+        let before = Counters::take(&cell, pid, ticks, mqtt.as_mut())?;
         sampler.measure();
         tokio::time::sleep(args.seconds).await;
-        let after = Counters::take(&cell, pid, ticks)?;
+        let after = Counters::take(&cell, pid, ticks, mqtt.as_mut())?;
         let groups = sampler.finish().await?;
         let load_after = loadavg();
         // After the window: what a dashboard and a Prometheus scrape cost with this cell.
@@ -945,11 +1025,18 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         let _ = stop.send(());
         run.await.context("the gateway task failed")??;
         let stop_took = stopping.elapsed();
-        anyhow::Ok((before, after, groups, load_after, scrapes, stop_took))
+        anyhow::Ok((
+            before, after, groups, load_after, scrapes, stop_took, published,
+        ))
     })?;
     runtime.shutdown_timeout(Duration::from_secs(5));
     drop(simulators);
-    let (before, after, groups, load_after, scrapes, stop_took) = report;
+    let (before, after, groups, load_after, scrapes, stop_took, published) = report;
+    let mqtt_totals = match &mut mqtt {
+        Some(side) => Some((published.get(), side.settled(Duration::from_secs(10))?)),
+        None => None,
+    };
+    drop(mqtt);
     // Reopen the history the gateway closed: every row it committed is there.
     let store = gateway::store::Store::open(&data_dir, gateway::store::StoreOptions::default())?;
     let integrity = store.handle().integrity_check()?;
@@ -975,6 +1062,7 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         stop_took,
         rows_at_stop,
         integrity,
+        mqtt_totals,
     })
 }
 
@@ -1026,7 +1114,7 @@ impl std::fmt::Display for Report {
         writeln!(f, "gateway load benchmark")?;
         writeln!(
             f,
-            "  cell         {} devices ({}) on {} lines, {}{} per line; lines {}, reply delay {}",
+            "  cell         {} devices ({}) on {} lines, {}{} per line; lines {}, reply delay {}, live period {}{}",
             self.args.devices,
             kinds.join(", "),
             self.args.lines,
@@ -1042,6 +1130,16 @@ impl std::fmt::Display for Report {
                     "paced at {b} baud"
                 )),
             humantime::format_duration(self.args.reply_delay),
+            self.args
+                .live_period
+                .map_or("1s (the driver's)".to_owned(), |p| {
+                    humantime::format_duration(p).to_string()
+                }),
+            if self.args.mqtt {
+                "; publishing to a local mosquitto (--mqtt)"
+            } else {
+                ""
+            },
         )?;
         writeln!(
             f,
@@ -1140,6 +1238,43 @@ impl std::fmt::Display for Report {
             s * 100.0 / self.cores as f64,
             mib(a.simulators.peak_rss_kib)
         )?;
+        if let (Some(ma), Some(mb)) = (&a.mqtt, &b.mqtt) {
+            let (ra, rb) = (&ma.received, &mb.received);
+            let messages = rate(ra.messages, rb.messages);
+            let metrics = rate(ra.metrics, rb.metrics);
+            writeln!(
+                f,
+                "  mqtt         gateway published {:.0} messages/s (cellbus_mqtt_published) for {:.0} value changes/s",
+                rate(ma.published, mb.published),
+                rate(a.value_changes, b.value_changes),
+            )?;
+            writeln!(
+                f,
+                "  subscriber   received {messages:.0} messages/s ({:.0} DDATA/s), {metrics:.0} metrics/s ({:.1} per message, {:.0} B per message), {} historical, {} undecodable; CPU {:.2} cores (separate process)",
+                rate(ra.ddata, rb.ddata),
+                metrics / messages.max(f64::MIN_POSITIVE),
+                ra.bytes.saturating_sub(rb.bytes) as f64
+                    / ra.messages.saturating_sub(rb.messages).max(1) as f64,
+                ra.historical.saturating_sub(rb.historical),
+                ra.bad.saturating_sub(rb.bad),
+                cpu(&ma.counter, &mb.counter),
+            )?;
+            writeln!(
+                f,
+                "  mosquitto    CPU {:.2} cores, peak RSS {:.1} MiB (separate process)",
+                cpu(&ma.broker, &mb.broker),
+                mib(ma.broker.peak_rss_kib)
+            )?;
+        }
+        if let Some((published, received)) = &self.mqtt_totals {
+            writeln!(
+                f,
+                "  mqtt totals  {published} messages published, {} received ({} lost); broker's $SYS dropped count {}",
+                received.messages,
+                published.saturating_sub(received.messages),
+                received.dropped
+            )?;
+        }
         for (path, status, size, took) in &self.scrapes {
             writeln!(
                 f,

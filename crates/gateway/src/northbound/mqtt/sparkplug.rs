@@ -53,6 +53,9 @@ pub const HISTORY_ROWS_METRIC: &str = "Gateway/History rows";
 
 /// How often the node metrics are published when they changed.
 const NODE_DATA_EVERY: Duration = Duration::from_secs(10);
+/// Value changes of one device taken together, with the latest read time among them.
+type DeviceChanges = (DeviceId, Vec<(String, Sample)>, Timestamp);
+
 /// Most metrics in one historical DDATA.
 const HISTORICAL_BATCH: usize = 500;
 /// At most one log line about refused DCMD writes this often.
@@ -414,7 +417,7 @@ impl Node {
         live: &mut broadcast::Receiver<LiveMessage>,
         first: LiveMessage,
     ) -> Done {
-        let mut values: Vec<(DeviceId, Vec<(String, Sample)>, Timestamp)> = Vec::new();
+        let mut values: Vec<DeviceChanges> = Vec::new();
         let mut next = Some(first);
         while let Some(message) = next.take() {
             match message {
@@ -455,11 +458,7 @@ impl Node {
         self.device_data(conn, values).await
     }
 
-    async fn device_data(
-        &mut self,
-        conn: &mut Connection<'_>,
-        values: Vec<(DeviceId, Vec<(String, Sample)>, Timestamp)>,
-    ) -> Done {
+    async fn device_data(&mut self, conn: &mut Connection<'_>, values: Vec<DeviceChanges>) -> Done {
         let t = sparkplug_time(Timestamp::now());
         for (device, changes, latest) in values {
             if self.dead.contains(&device) {
@@ -602,7 +601,7 @@ impl Node {
                 Ok(())
             }
             (false, true) => {
-                let window = i64::try_from(duration_millis(self.keep_alive * 2)).unwrap_or(0);
+                let window = duration_millis(self.keep_alive * 2);
                 conn.rewind_forwarded(Timestamp(Timestamp::now().0 - window))
                     .await;
                 Err(End::Again(
