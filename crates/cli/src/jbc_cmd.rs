@@ -72,6 +72,7 @@ pub enum JbcAction {
 
 pub async fn run(args: JbcArgs) -> anyhow::Result<ExitCode> {
     let endpoint = Endpoint::parse(&args.endpoint, JBC_LINE).map_err(usage)?;
+    crate::output::refuse_modbus_tcp(&endpoint, "a JBC station")?;
     let route = (!args.no_address).then_some(Route {
         source: args.robot_address,
         target: args.address,

@@ -8,7 +8,8 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use jbus::client::{
-    Client, ClientConfig, ClientError, DEFAULT_RETRIES, DEFAULT_TURNAROUND, UnitRefusal,
+    Client, ClientConfig, ClientError, DEFAULT_RETRIES, DEFAULT_TIMEOUT, DEFAULT_TURNAROUND,
+    Framing, UnitRefusal,
 };
 use jbus::cross::device::CrossTwin;
 use jbus::cross::{Amount, CrossState, Discrete, MEASURES, NamedBit, Quantity, RATINGS, Source};
@@ -37,15 +38,17 @@ pub const DEFAULT_SLAVE_UNIT: u8 = 1;
 pub struct LineArgs {
     /// Where the line is: serial:///dev/ttyUSB0?baud=9600&framing=8N1, or tcp://host:port (a
     /// serial server or `cellbus sim`), optionally tcp://host:port?baud=9600 to keep the
-    /// serial line's timing behind it. Serial defaults: 9600 baud, 8N1.
-    #[arg(long, value_name = "URL")]
-    pub endpoint: String,
-    /// Time to wait for each answer, on top of the frames' time on the wire.
-    #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
-    pub timeout: Duration,
+    /// serial line's timing behind it, or modbus-tcp://host[:502] for Modbus TCP (a PLC, a
+    /// Modbus gateway, `cellbus sim … --framing tcp`). Serial defaults: 9600 baud, 8N1.
+    #[arg(long, value_name = "URL", global = true)]
+    pub endpoint: Option<String>,
+    /// Time to wait for each answer, on top of the frames' time on the wire [default: 500ms;
+    /// scan: 200ms].
+    #[arg(long, value_parser = humantime::parse_duration, global = true)]
+    pub timeout: Option<Duration>,
     /// Retries after no answer, a damaged answer or one that does not match (never after an
     /// exception: that is the device's answer).
-    #[arg(long, default_value_t = DEFAULT_RETRIES)]
+    #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
     /// Print JSON instead of text.
     #[arg(long, global = true)]
@@ -54,20 +57,31 @@ pub struct LineArgs {
 
 impl LineArgs {
     fn endpoint(&self) -> anyhow::Result<Endpoint> {
-        Endpoint::parse(&self.endpoint, JBUS_LINE).map_err(usage)
+        let Some(text) = &self.endpoint else {
+            return Err(usage(
+                "--endpoint URL is needed: serial:///dev/ttyUSB0, tcp://host:port or modbus-tcp://host:port",
+            ));
+        };
+        Endpoint::parse(text, JBUS_LINE).map_err(usage)
     }
 
     fn config(&self) -> ClientConfig {
         ClientConfig {
-            timeout: self.timeout,
+            timeout: self.timeout.unwrap_or(DEFAULT_TIMEOUT),
             retries: self.retries,
             turnaround: DEFAULT_TURNAROUND,
+            framing: Framing::Rtu,
         }
     }
 }
 
+/// A client on `endpoint`, framing Modbus TCP when the endpoint is `modbus-tcp://`.
 async fn open(endpoint: &Endpoint, config: ClientConfig) -> anyhow::Result<Client> {
     let line = Line::open(endpoint).await?;
+    let config = ClientConfig {
+        framing: Framing::of(endpoint),
+        ..config
+    };
     Ok(Client::new(SharedLine::new(line), config))
 }
 
@@ -78,9 +92,9 @@ pub struct ModbusArgs {
     #[command(flatten)]
     pub line: LineArgs,
     /// The unit number: 1–247 (JBUS devices: up to 255); 0 sends a write to every unit at
-    /// once (broadcast: nobody answers).
+    /// once (broadcast: nobody answers). Needed by every action but `scan`.
     #[arg(long, value_name = "N")]
-    pub unit: u8,
+    pub unit: Option<u8>,
     #[command(subcommand)]
     pub action: ModbusAction,
 }
@@ -145,6 +159,13 @@ pub enum ModbusAction {
         #[arg(value_parser = parse_bit_value, value_name = "1|0", required = true)]
         values: Vec<bool>,
     },
+    /// List the units that answer: one read of holding register 0 per unit, one attempt
+    /// each (an exception is an answer too). `--json` gives {"units":[…]}.
+    Scan {
+        /// The units to try: FIRST-LAST or one number, within 1–255.
+        #[arg(long, value_name = "FIRST-LAST", default_value = "1-247", value_parser = parse_units)]
+        units: std::ops::RangeInclusive<u8>,
+    },
 }
 
 /// What `cellbus modbus` sends, checked before the line is opened.
@@ -155,9 +176,15 @@ enum Send {
 
 pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
     let endpoint = args.line.endpoint()?;
+    if let ModbusAction::Scan { units } = &args.action {
+        return scan(&endpoint, &args.line, units.clone()).await;
+    }
+    let Some(unit) = args.unit else {
+        return Err(usage("--unit N is needed: the unit number to ask (1-247)"));
+    };
     // Build the request before opening the line: bad arguments never touch the device.
     let request = modbus_request(&args.action).map_err(usage)?;
-    let send = if args.unit == 0 {
+    let send = if unit == 0 {
         match request {
             Request::WriteSingleCoil(w) => Send::Broadcast(Broadcast(Write::SingleCoil(w))),
             Request::WriteSingleRegister(w) => Send::Broadcast(Broadcast(Write::SingleRegister(w))),
@@ -173,10 +200,7 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
             }
         }
     } else {
-        Send::To(Addressed::new(
-            UnitId::jbus(args.unit).map_err(usage)?,
-            request,
-        ))
+        Send::To(Addressed::new(UnitId::jbus(unit).map_err(usage)?, request))
     };
     let mut client = open(&endpoint, args.line.config()).await?;
     match send {
@@ -226,7 +250,73 @@ fn modbus_request(action: &ModbusAction) -> Result<Request, jbus::rtu::InvalidVa
         ModbusAction::WriteCoils { address, values } => {
             Request::write_multiple_coils(*address, values.clone())
         }
+        ModbusAction::Scan { .. } => unreachable!("scan sends no single request"),
     }
+}
+
+/// The timeout of each unit's read in a scan unless `--timeout` says otherwise.
+const SCAN_TIMEOUT: Duration = Duration::from_millis(200);
+
+/// `cellbus modbus scan`: the units in `units` that answer a read of holding register 0.
+async fn scan(
+    endpoint: &Endpoint,
+    line: &LineArgs,
+    units: std::ops::RangeInclusive<u8>,
+) -> anyhow::Result<ExitCode> {
+    let config = ClientConfig {
+        timeout: line.timeout.unwrap_or(SCAN_TIMEOUT),
+        retries: 0,
+        ..line.config()
+    };
+    let mut client = open(endpoint, config).await?;
+    let (first, last) = (*units.start(), *units.end());
+    let mut answering = Vec::new();
+    for number in units {
+        let unit = UnitId::jbus(number).map_err(usage)?;
+        match client.read_holding_registers(unit, 0, 1).await {
+            Ok(_) => answering.push((number, None)),
+            Err(ClientError::Refused { refusal, .. }) => {
+                answering.push((number, Some(refusal.exception.code)));
+            }
+            Err(err @ ClientError::Line { .. }) => return Err(output::failure(err)),
+            Err(err) => tracing::debug!(unit = number, "no answer: {err}"),
+        }
+    }
+    if line.json {
+        let units: Vec<u8> = answering.iter().map(|(n, _)| *n).collect();
+        output::line(json!({ "units": units }))?;
+    } else if answering.is_empty() {
+        output::line(format!("no unit of {first}-{last} answered on {endpoint}"))?;
+    } else {
+        for (number, refused) in &answering {
+            match refused {
+                None => output::line(format!("unit {number} answers"))?,
+                Some(code) => output::line(format!(
+                    "unit {number} answers (refused the read of holding register 0: {code})"
+                ))?,
+            }
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `FIRST-LAST` or one unit number, within 1–255, first no greater than last.
+fn parse_units(text: &str) -> Result<std::ops::RangeInclusive<u8>, String> {
+    let bad = || {
+        format!(
+            "{text:?} is not a range of unit numbers: write FIRST-LAST within 1-255, e.g. 1-247"
+        )
+    };
+    let (first, last) = match text.split_once('-') {
+        Some((first, last)) => (first.trim(), last.trim()),
+        None => (text.trim(), text.trim()),
+    };
+    let first: u8 = first.parse().map_err(|_| bad())?;
+    let last: u8 = last.parse().map_err(|_| bad())?;
+    if first == 0 || first > last {
+        return Err(bad());
+    }
+    Ok(first..=last)
 }
 
 /// An exception also goes to stdout as JSON when asked, so scripts see its number.
@@ -555,10 +645,23 @@ fn amount_json(amount: Amount, unit: Option<&str>) -> Value {
 
 // --- cellbus sim cross | modbus ---
 
+/// How a Modbus simulator frames its messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SimFraming {
+    /// Modbus RTU frames (with their CRC), as on a serial line or behind a serial server.
+    Rtu,
+    /// Modbus TCP (MBAP header, no CRC); needs --listen.
+    Tcp,
+}
+
 #[derive(Debug, Args)]
 pub struct SimCrossArgs {
     #[command(flatten)]
     pub serve: ServeArgs,
+    /// rtu: RTU frames over TCP or the PTY; tcp: Modbus TCP (prints `listening on
+    /// modbus-tcp://IP:PORT`), answering every unit the simulator answers on RTU.
+    #[arg(long, value_enum, default_value_t = SimFraming::Rtu)]
+    pub framing: SimFraming,
     /// The switch's unit number (1–255).
     #[arg(long, value_name = "N", default_value_t = DEFAULT_CROSS_UNIT)]
     pub unit: u8,
@@ -572,6 +675,10 @@ pub struct SimCrossArgs {
 pub struct SimModbusArgs {
     #[command(flatten)]
     pub serve: ServeArgs,
+    /// rtu: RTU frames over TCP or the PTY; tcp: Modbus TCP (prints `listening on
+    /// modbus-tcp://IP:PORT`), answering every unit the simulator answers on RTU.
+    #[arg(long, value_enum, default_value_t = SimFraming::Rtu)]
+    pub framing: SimFraming,
     /// The unit number (1–255); overrides the map's `unit` line. Default: the map's, or 1.
     #[arg(long, value_name = "N")]
     pub unit: Option<u8>,
@@ -583,7 +690,39 @@ pub struct SimModbusArgs {
     pub map: Option<PathBuf>,
 }
 
+/// Refuses Modbus TCP on a PTY: a serial line has no MBAP.
+fn check_framing(serve: &ServeArgs, framing: SimFraming) -> anyhow::Result<()> {
+    if framing == SimFraming::Tcp && serve.pty.is_some() {
+        return Err(usage(
+            "--framing tcp is Modbus TCP, which a serial line (--pty) does not carry: use --listen, or --framing rtu",
+        ));
+    }
+    Ok(())
+}
+
+/// Serves the RTU device `make` gives, in `framing`.
+async fn serve_modbus<D, F>(
+    serve_args: &ServeArgs,
+    framing: SimFraming,
+    make: F,
+) -> anyhow::Result<ExitCode>
+where
+    D: wire::Device,
+    F: Fn() -> D + std::marker::Send + 'static,
+{
+    match framing {
+        SimFraming::Rtu => serve(serve_args, JBUS_LINE, make).await,
+        SimFraming::Tcp => {
+            crate::sim::serve_as(serve_args, JBUS_LINE, "modbus-tcp", move || {
+                jbus::tcp::MbapServer::new(make())
+            })
+            .await
+        }
+    }
+}
+
 pub async fn sim_cross(args: SimCrossArgs) -> anyhow::Result<ExitCode> {
+    check_framing(&args.serve, args.framing)?;
     let unit = UnitId::jbus(args.unit).map_err(usage)?;
     if args.cycle_outage.is_some_and(|d| d.is_zero()) {
         return Err(usage("--cycle-outage must be longer than 0"));
@@ -600,10 +739,11 @@ pub async fn sim_cross(args: SimCrossArgs) -> anyhow::Result<ExitCode> {
             }
         });
     }
-    serve(&args.serve, JBUS_LINE, move || twin.line()).await
+    serve_modbus(&args.serve, args.framing, move || twin.line()).await
 }
 
 pub async fn sim_modbus(args: SimModbusArgs) -> anyhow::Result<ExitCode> {
+    check_framing(&args.serve, args.framing)?;
     let map = match &args.map {
         Some(path) => {
             let text = std::fs::read_to_string(path)
@@ -618,7 +758,7 @@ pub async fn sim_modbus(args: SimModbusArgs) -> anyhow::Result<ExitCode> {
         None => map,
     };
     let slave = SharedModel::new(Slave::new(map));
-    serve(&args.serve, JBUS_LINE, move || slave.line()).await
+    serve_modbus(&args.serve, args.framing, move || slave.line()).await
 }
 
 #[cfg(test)]
@@ -653,6 +793,16 @@ mod tests {
         assert_eq!(parse_word("-32768"), Ok(0x8000));
         assert!(parse_word("-32769").is_err());
         assert_eq!(parse_word("0xBEEF"), Ok(0xBEEF));
+    }
+
+    #[test]
+    fn unit_ranges_are_first_to_last_within_1_to_255() {
+        assert_eq!(parse_units("1-247"), Ok(1..=247));
+        assert_eq!(parse_units("5"), Ok(5..=5));
+        assert_eq!(parse_units("200-255"), Ok(200..=255));
+        for bad in ["0-3", "9-2", "1-256", "a-b", ""] {
+            assert!(parse_units(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

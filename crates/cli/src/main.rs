@@ -48,7 +48,7 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Talk to a JBC JTSE hot-air station (RS-232 robot protocol).
     Jbc(jbc_cmd::JbcArgs),
-    /// Talk to any Modbus RTU / JBUS device: read and write coils and registers (functions
+    /// Talk to any Modbus RTU / JBUS or Modbus TCP device: read and write coils and registers (functions
     /// 1-6, 15, 16). Serial defaults: 9600 baud, 8N1.
     Modbus(jbus_cmd::ModbusArgs),
     /// Read a Chloride CROSS static transfer switch over JBUS: its state in words, or its

@@ -16,6 +16,17 @@ pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
     UsageError(message.to_string()).into()
 }
 
+/// Refuses a `modbus-tcp://` endpoint for a device that does not speak Modbus (`what`:
+/// "a JBC station").
+pub fn refuse_modbus_tcp(endpoint: &link::Endpoint, what: &str) -> anyhow::Result<()> {
+    if endpoint.is_mbap() {
+        return Err(usage(format!(
+            "{endpoint}: modbus-tcp:// is for Modbus devices; {what} is reached over serial:// or tcp://"
+        )));
+    }
+    Ok(())
+}
+
 /// A client's error as the command's error, classified by its [`Failure::kind`]: our own
 /// bad request is a usage error (exit 2), anything the device or its line did exits 1.
 pub fn failure<E: Failure + Send + Sync + 'static>(error: E) -> anyhow::Error {

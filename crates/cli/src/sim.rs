@@ -107,11 +107,40 @@ where
     serve_then(args, framing, make, || ()).await
 }
 
+/// Like [`serve`], printing `listening on SCHEME://IP:PORT` (`modbus-tcp` for a device
+/// that frames Modbus TCP itself).
+pub async fn serve_as<D, F>(
+    args: &ServeArgs,
+    framing: SerialSettings,
+    scheme: &str,
+    make: F,
+) -> anyhow::Result<ExitCode>
+where
+    D: Device,
+    F: Fn() -> D + Send + 'static,
+{
+    serve_scheme_then(args, framing, scheme, make, || ()).await
+}
+
 /// Like [`serve`], calling `listening` right after the `listening on …` line is out (to
 /// start a control channel whose answers must come after it).
 pub async fn serve_then<D, F>(
     args: &ServeArgs,
     framing: SerialSettings,
+    make: F,
+    listening: impl FnOnce(),
+) -> anyhow::Result<ExitCode>
+where
+    D: Device,
+    F: Fn() -> D + Send + 'static,
+{
+    serve_scheme_then(args, framing, "tcp", make, listening).await
+}
+
+async fn serve_scheme_then<D, F>(
+    args: &ServeArgs,
+    framing: SerialSettings,
+    scheme: &str,
     make: F,
     listening: impl FnOnce(),
 ) -> anyhow::Result<ExitCode>
@@ -166,7 +195,10 @@ where
             };
             anyhow::anyhow!("cannot listen on {addr}: {e}{hint}")
         })?;
-        output::line(format!("listening on tcp://{}", listener.local_addr()?))?;
+        output::line(format!(
+            "listening on {scheme}://{}",
+            listener.local_addr()?
+        ))?;
         listening();
         tokio::select! {
             served = serve_tcp(listener, faulty, pace) => served.context("the listener failed"),

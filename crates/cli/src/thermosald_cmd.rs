@@ -131,6 +131,7 @@ pub struct DecodeInput {
 pub async fn run(args: ThermosaldArgs) -> anyhow::Result<ExitCode> {
     // Everything is checked before the line is opened: a bad argument never reaches it.
     let endpoint = Endpoint::parse(&args.endpoint, THERMOSALD_LINE).map_err(usage)?;
+    crate::output::refuse_modbus_tcp(&endpoint, "a Thermosald regulator")?;
     if let Some(timeout) = args.timeout.filter(|t| *t <= ANSWER_AFTER_RECEPTION) {
         return Err(usage(format!(
             "--timeout {} can never see an answer: a regulator answers {} ms after the question",

@@ -602,9 +602,14 @@ struct PyServer {
 
 impl PyServer {
     fn start() -> Self {
+        Self::start_script("pymodbus_server.py")
+    }
+
+    /// Runs an interop server script that prints `listening on URL` first.
+    fn start_script(script: &str) -> Self {
         require_pymodbus();
         let mut child = std::process::Command::new("python3")
-            .arg(interop_script("pymodbus_server.py"))
+            .arg(interop_script(script))
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
@@ -829,4 +834,223 @@ fn our_client_reports_a_pymodbus_servers_exceptions_in_words() {
     assert!(text.contains("exception 1 (illegal function"), "{text}");
     let (code, _) = refused(&["read-coils", "1600", "1"]);
     assert_eq!(code, 2);
+}
+
+// --- Modbus TCP ---
+
+/// The port of a `…://IP:PORT` endpoint.
+fn port_of(endpoint: &str) -> String {
+    endpoint.rsplit(':').next().expect("…://IP:PORT").to_owned()
+}
+
+#[test]
+fn sim_modbus_and_cross_with_tcp_framing_print_a_modbus_tcp_address_first() {
+    for device in ["modbus", "cross"] {
+        let sim = Sim::start(&[device, "--listen", "127.0.0.1:0", "--framing", "tcp"]);
+        assert!(
+            sim.endpoint.starts_with("modbus-tcp://127.0.0.1:"),
+            "{device}: {}",
+            sim.endpoint
+        );
+    }
+}
+
+#[test]
+fn tcp_framing_on_a_pty_is_a_usage_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tty");
+    let out = run(&[
+        "sim",
+        "modbus",
+        "--pty",
+        path.to_str().unwrap(),
+        "--framing",
+        "tcp",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--framing tcp"), "{}", stderr(&out));
+}
+
+#[test]
+fn modbus_over_modbus_tcp_writes_and_reads_the_simulator() {
+    let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0", "--framing", "tcp"]);
+    let out = modbus(&sim, "1", &["write-registers", "3", "7", "-1"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = modbus(&sim, "1", &["write-coil", "4", "on"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = modbus(&sim, "1", &["--json", "read-holding", "2", "3"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(json_of(&out)["values"], json!([0, 7, 65535]));
+    let out = modbus(&sim, "1", &["--json", "read-coils", "3", "2"]);
+    assert_eq!(json_of(&out)["values"], json!([false, true]));
+}
+
+#[test]
+fn cross_status_works_over_modbus_tcp() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0", "--framing", "tcp"]);
+    let out = cross(&sim, &["status", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(json_of(&out)["source"], "S1");
+}
+
+#[test]
+fn scan_lists_the_units_that_answer_and_exits_0_when_none_does() {
+    let sim = Sim::start(&[
+        "modbus",
+        "--listen",
+        "127.0.0.1:0",
+        "--framing",
+        "tcp",
+        "--unit",
+        "3",
+    ]);
+    let scan = |units: &str, json: bool| {
+        let mut args = vec![
+            "modbus",
+            "scan",
+            "--endpoint",
+            &sim.endpoint,
+            "--units",
+            units,
+        ];
+        if json {
+            args.push("--json");
+        }
+        run(&args)
+    };
+    let out = scan("1-4", true);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(json_of(&out), json!({"units": [3]}));
+    let out = scan("3", false);
+    assert_eq!(stdout(&out).trim(), "unit 3 answers");
+    let out = scan("4-5", false);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stdout(&out).contains("no unit of 4-5 answered"),
+        "{}",
+        stdout(&out)
+    );
+    let out = scan("5-4", false);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+}
+
+#[test]
+fn scan_over_rtu_counts_an_exception_as_an_answer() {
+    // A map without holding register 0: unit 9 answers the scan's read with exception 2.
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("map.txt");
+    std::fs::write(&map, "unit 9\ncoil 0 = 1\n").unwrap();
+    let sim = Sim::start(&[
+        "modbus",
+        "--listen",
+        "127.0.0.1:0",
+        "--map",
+        map.to_str().unwrap(),
+    ]);
+    let out = run(&[
+        "modbus",
+        "scan",
+        "--endpoint",
+        &sim.endpoint,
+        "--units",
+        "8-9",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains("unit 9 answers (refused"), "{text}");
+    assert!(!text.contains("unit 8"), "{text}");
+}
+
+#[test]
+fn a_modbus_tcp_endpoint_is_refused_by_the_jbc_command() {
+    let out = run(&[
+        "jbc",
+        "--endpoint",
+        "modbus-tcp://127.0.0.1:9",
+        "read",
+        "AT1",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("modbus-tcp:// is for Modbus devices"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn pymodbus_reads_and_writes_registers_and_coils_of_our_modbus_tcp_simulator() {
+    require_pymodbus();
+    let sim = Sim::start(&[
+        "modbus",
+        "--listen",
+        "127.0.0.1:0",
+        "--framing",
+        "tcp",
+        "--unit",
+        "5",
+    ]);
+    let out = std::process::Command::new("python3")
+        .args([
+            &interop_script("pymodbus_tcp_client.py"),
+            &port_of(&sim.endpoint),
+            "5",
+        ])
+        .stdin(Stdio::null())
+        .output()
+        .expect("python3 runs");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report = json_of(&out);
+    assert_eq!(report["pymodbus"], PYMODBUS);
+    assert_eq!(report["registers"], json!([111, 222, 65535, 4242]));
+    assert_eq!(report["coils"], json!([true, false, true, true]));
+    // What pymodbus wrote, read back by our client.
+    let out = modbus(&sim, "5", &["--json", "read-holding", "10", "4"]);
+    assert_eq!(json_of(&out)["values"], json!([111, 222, 65535, 4242]));
+}
+
+#[test]
+fn our_client_reads_and_writes_two_units_of_a_pymodbus_tcp_server_on_one_port() {
+    let server = PyServer::start_script("pymodbus_tcp_server.py");
+    assert!(
+        server.endpoint.starts_with("modbus-tcp://"),
+        "{}",
+        server.endpoint
+    );
+    let run_ok = |unit: &str, args: &[&str]| {
+        let mut all = vec!["modbus", "--endpoint", &server.endpoint, "--unit", unit];
+        all.extend_from_slice(args);
+        let out = run(&all);
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        out
+    };
+    let out = run_ok("1", &["--json", "read-holding", "0", "3"]);
+    assert_eq!(json_of(&out)["values"], json!([0, 10, 20]));
+    let out = run_ok("2", &["--json", "read-holding", "0", "3"]);
+    assert_eq!(json_of(&out)["values"], json!([0, 20, 40]));
+    run_ok("1", &["write-register", "1", "777"]);
+    run_ok("2", &["write-registers", "1", "8", "-2"]);
+    let out = run_ok("1", &["--json", "read-holding", "0", "3"]);
+    assert_eq!(json_of(&out)["values"], json!([0, 777, 20]));
+    let out = run_ok("2", &["--json", "read-holding", "0", "3"]);
+    assert_eq!(json_of(&out)["values"], json!([0, 8, 65534]));
+    run_ok("1", &["write-coils", "2", "1", "0", "1"]);
+    run_ok("2", &["write-coil", "0", "on"]);
+    let out = run_ok("1", &["--json", "read-coils", "0", "5"]);
+    assert_eq!(
+        json_of(&out)["values"],
+        json!([false, false, true, false, true])
+    );
+    let out = run_ok("2", &["--json", "read-coils", "0", "3"]);
+    assert_eq!(json_of(&out)["values"], json!([true, false, false]));
+    let out = run(&[
+        "modbus",
+        "scan",
+        "--endpoint",
+        &server.endpoint,
+        "--units",
+        "1-2",
+        "--json",
+    ]);
+    assert_eq!(json_of(&out), json!({"units": [1, 2]}));
 }

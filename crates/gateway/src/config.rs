@@ -388,6 +388,15 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
         let protocol = protocol_of(&first.protocol).map_err(|m| at(first.protocol.span(), m))?;
         let endpoint = Endpoint::parse(line.endpoint.get_ref(), protocol.default_serial())
             .map_err(|e| at(line.endpoint.span(), e.to_string()))?;
+        if endpoint.is_mbap() && !matches!(protocol, Protocol::Modbus | Protocol::Cross) {
+            return Err(at(
+                line.endpoint.span(),
+                format!(
+                    "modbus-tcp:// is for Modbus devices (modbus, cross); a {} line is serial:// or tcp://",
+                    protocol.as_str()
+                ),
+            ));
+        }
         if protocol.owns_connections() && !matches!(endpoint, Endpoint::Tcp { .. }) {
             return Err(at(
                 line.endpoint.span(),
@@ -778,7 +787,7 @@ fn check_device(
         timeout,
         retries,
         event_port,
-        endpoint: protocol.owns_connections().then(|| endpoint.clone()),
+        endpoint: (protocol.owns_connections() || endpoint.is_mbap()).then(|| endpoint.clone()),
         registers,
     };
     let known: Vec<String> = driver::build(&driver_config)
@@ -1440,6 +1449,36 @@ writable = { min = 5.0, max = 30.0 }
         );
         assert_eq!(supply.unit.as_deref(), Some("°C"));
         assert_eq!(driver.registers[1].writable, Some((5.0, 30.0)));
+    }
+
+    #[test]
+    fn a_modbus_tcp_line_parses_and_gives_its_modbus_devices_the_endpoint() {
+        let config =
+            parse(&CHILLER.replace("tcp://192.0.2.60:4001", "modbus-tcp://192.0.2.60:502"))
+                .unwrap();
+        let line = &config.lines[0];
+        assert!(line.endpoint.is_mbap());
+        assert_eq!(
+            line.devices[0]
+                .driver
+                .endpoint
+                .as_ref()
+                .map(Endpoint::is_mbap),
+            Some(true),
+            "the driver frames Modbus TCP"
+        );
+        let raw = parse(CHILLER).unwrap();
+        assert_eq!(raw.lines[0].devices[0].driver.endpoint, None);
+    }
+
+    #[test]
+    fn a_modbus_tcp_endpoint_for_a_device_that_is_not_modbus_is_refused() {
+        refused(
+            &ONE.replace("serial:///dev/ttyUSB0", "modbus-tcp://192.0.2.9"),
+            4,
+            12,
+            "modbus-tcp:// is for Modbus devices (modbus, cross); a jbc line",
+        );
     }
 
     #[test]

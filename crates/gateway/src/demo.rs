@@ -282,6 +282,7 @@ pub async fn start_panasonic(demo: &mut DemoCell, id: &str, name: &str) -> std::
         host: command.ip().to_string(),
         port: command.port(),
         line: None,
+        framing: link::TcpFraming::Raw,
     };
     let id = device_id(id)?;
     let mut device = device(id.clone(), Protocol::Panasonic, 0, name);

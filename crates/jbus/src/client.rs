@@ -1,5 +1,12 @@
-//! The async Modbus RTU client: typed requests to the units on a [`link`] line, with a
-//! response timeout, retries, the line's inter-frame silence and checked answers.
+//! The async Modbus client: typed requests to the units on a [`link`] line, with a
+//! response timeout, retries, the line's inter-frame silence and checked answers, in RTU
+//! framing or Modbus TCP's ([`Framing`]).
+//!
+//! - **Modbus TCP** ([`Framing::Tcp`], `modbus-tcp://` endpoints): each request carries a
+//!   new transaction id (increasing, wrapping at 65535, shared by a client's clones); only a
+//!   response with the same transaction id and unit is taken, any other (a late answer to
+//!   an earlier request) is dropped. No CRC and no inter-frame silence; several units share
+//!   one connection, one request at a time. Everything else below holds for both.
 //!
 //! - **One request in flight per line.** A [`Client`] holds a [`SharedLine`]; clones of it
 //!   and clients made on the same shared line queue for it in order, so units that share
@@ -25,17 +32,20 @@
 //! - **A dead unit costs its own timeouts only**: every attempt starts on a clean line
 //!   (stale input dropped), so the next unit's exchange is unaffected.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU16, Ordering};
 use std::time::Duration;
 
-use link::{Line, LineError, SharedLine};
+use link::{Endpoint, Line, LineError, SharedLine};
 use tokio::time::Instant;
 use wire::exchange::{AttemptEnd, Matcher, Policy, Verdict, VerdictOf};
 use wire::{Exchange, Failure, FailureKind};
 
 use crate::rtu::{
     Addressed, Answer, Broadcast, DecodeError, Exception, ExceptionCode, InvalidValue, LineTiming,
-    Mismatch, Request, ResponseAdu, ResponseCodec, UnitId, check_response, find_frame,
+    Mismatch, Request, RequestAdu, ResponseAdu, ResponseCodec, UnitId, check_response, find_frame,
 };
+use crate::tcp::{self, Mbap, TransactionId};
 
 /// Default time to wait for an answer after the request has left, on top of the wire time
 /// of the request and the answer at the line's speed (when known): Modbus devices answer
@@ -64,15 +74,41 @@ pub struct ClientConfig {
     pub retries: u8,
     /// Quiet time after a broadcast.
     pub turnaround: Duration,
+    /// How frames are framed on the line.
+    pub framing: Framing,
 }
 
 impl Default for ClientConfig {
-    /// 500 ms, 2 retries, 100 ms turnaround after broadcasts.
+    /// 500 ms, 2 retries, 100 ms turnaround after broadcasts, RTU framing.
     fn default() -> Self {
         Self {
             timeout: DEFAULT_TIMEOUT,
             retries: DEFAULT_RETRIES,
             turnaround: DEFAULT_TURNAROUND,
+            framing: Framing::Rtu,
+        }
+    }
+}
+
+/// How Modbus messages are framed on a line.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub enum Framing {
+    /// Modbus RTU: unit, PDU, CRC, frames told apart by silence (serial lines, and TCP
+    /// serial servers: `serial://`, `tcp://`).
+    #[default]
+    Rtu,
+    /// Modbus TCP: an MBAP header (transaction id, length, unit id) before the PDU, no CRC
+    /// (`modbus-tcp://`).
+    Tcp,
+}
+
+impl Framing {
+    /// The framing an endpoint's URL asks for: Modbus TCP for `modbus-tcp://`, else RTU.
+    pub fn of(endpoint: &Endpoint) -> Self {
+        if endpoint.is_mbap() {
+            Self::Tcp
+        } else {
+            Self::Rtu
         }
     }
 }
@@ -84,7 +120,61 @@ pub type ClientError = wire::ExchangeError<InvalidValue, UnitRefusal, Trouble, L
 /// Line trouble on one attempt, what makes the client retry: silence, a damaged frame (bad
 /// CRC, or a good CRC around invalid content), bytes the line's silence cut short, or
 /// well-formed frames none of which answers the request.
-pub type Trouble = wire::Trouble<DecodeError, Mismatch>;
+pub type Trouble = wire::Trouble<Damage, Mismatch>;
+
+/// Why bytes that came back are not a frame, in the line's framing.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Damage {
+    /// An RTU frame: a bad CRC, a good CRC around invalid content, an unknown function.
+    #[error(transparent)]
+    Rtu(#[from] DecodeError),
+    /// A Modbus TCP frame: a bad header, a length that does not add up, invalid content.
+    #[error(transparent)]
+    Tcp(#[from] tcp::DecodeError),
+}
+
+impl wire::Resync for Damage {
+    fn drop_len(&self) -> usize {
+        match self {
+            Self::Rtu(e) => e.drop_len(),
+            Self::Tcp(e) => e.drop_len(),
+        }
+    }
+}
+
+/// RTU responses, their errors as [`Damage`].
+#[derive(Debug, Clone, Copy, Default)]
+struct RtuResponses;
+
+impl wire::Codec for RtuResponses {
+    type Frame = ResponseAdu;
+    type Error = Damage;
+
+    fn decode(&self, buf: &[u8]) -> Result<Option<(ResponseAdu, usize)>, Damage> {
+        Ok(ResponseCodec.decode(buf)?)
+    }
+
+    fn encode(&self, frame: &ResponseAdu, out: &mut Vec<u8>) {
+        ResponseCodec.encode(frame, out);
+    }
+}
+
+/// Modbus TCP responses, their errors as [`Damage`].
+#[derive(Debug, Clone, Copy, Default)]
+struct TcpResponses;
+
+impl wire::Codec for TcpResponses {
+    type Frame = Mbap<ResponseAdu>;
+    type Error = Damage;
+
+    fn decode(&self, buf: &[u8]) -> Result<Option<(Mbap<ResponseAdu>, usize)>, Damage> {
+        Ok(tcp::ResponseCodec.decode(buf)?)
+    }
+
+    fn encode(&self, frame: &Mbap<ResponseAdu>, out: &mut Vec<u8>) {
+        tcp::ResponseCodec.encode(frame, out);
+    }
+}
 
 /// A unit understood the request and refused it with an exception.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -120,18 +210,41 @@ pub fn exception_code(error: &ClientError) -> Option<ExceptionCode> {
     error.refusal().map(|refusal| refusal.exception.code)
 }
 
-/// A Modbus RTU master on one (possibly shared) line. Clone it to give each task its own
-/// handle: clones queue for the same line.
+/// A Modbus master on one (possibly shared) line. Clone it to give each task its own
+/// handle: clones queue for the same line (and, over Modbus TCP, share the transaction
+/// ids).
 #[derive(Debug, Clone)]
 pub struct Client {
     line: SharedLine,
     config: ClientConfig,
+    /// The last Modbus TCP transaction id given out.
+    transaction: Arc<AtomicU16>,
 }
 
 impl Client {
     /// A client on `line`.
     pub fn new(line: SharedLine, config: ClientConfig) -> Self {
-        Self { line, config }
+        Self {
+            line,
+            config,
+            transaction: Arc::new(AtomicU16::new(0)),
+        }
+    }
+
+    /// The next Modbus TCP transaction id: 1 first, wrapping after 65535.
+    fn next_transaction(&self) -> TransactionId {
+        TransactionId(self.transaction.fetch_add(1, Ordering::Relaxed)).next()
+    }
+
+    /// The bytes of `adu` in the client's framing (a new transaction id for Modbus TCP).
+    fn frame(&self, adu: RequestAdu) -> (Vec<u8>, TransactionId) {
+        match self.config.framing {
+            Framing::Rtu => (adu.to_bytes(), TransactionId::default()),
+            Framing::Tcp => {
+                let transaction = self.next_transaction();
+                (Mbap { transaction, adu }.to_bytes(), transaction)
+            }
+        }
     }
 
     /// The client's settings.
@@ -235,8 +348,20 @@ impl Client {
     /// Sends `request` to its unit and returns the checked answer (never
     /// [`Answer::Exception`]: a refusal is [`ClientError::Exception`]).
     pub async fn request(&mut self, request: &Addressed) -> Result<Answer, ClientError> {
-        let bytes = request.to_adu().to_bytes();
+        let (bytes, transaction) = self.frame(request.to_adu());
         let mut line = self.line.lock().await;
+        if self.config.framing == Framing::Tcp {
+            // No CRC, no silence, no character time: the answer comes whole, or a header
+            // says how much is missing; a half frame is damage once the line falls quiet.
+            let policy =
+                Policy::new(self.config.retries, self.config.timeout).with_quiet_gap(MIN_QUIET_GAP);
+            let matcher = TcpAnswering {
+                request: request.clone(),
+                transaction,
+            };
+            let mut exchange = Exchange::new(matcher, TcpResponses, bytes, policy);
+            return link::exchange::run(&mut line, &mut exchange).await;
+        }
         let silence = inter_frame_silence(&line);
         let timeout = self.config.timeout
             + line.wire_time(bytes.len() + expected_answer_len(&request.request));
@@ -246,14 +371,14 @@ impl Client {
             request: request.clone(),
             silence,
         };
-        let mut exchange = Exchange::new(matcher, ResponseCodec, bytes, policy);
+        let mut exchange = Exchange::new(matcher, RtuResponses, bytes, policy);
         link::exchange::run(&mut line, &mut exchange).await
     }
 
     /// Sends a write to every unit on the line (unit 0). Nobody answers; the line is then
     /// kept quiet for [`ClientConfig::turnaround`] and the inter-frame silence.
     pub async fn broadcast(&mut self, write: &Broadcast) -> Result<(), ClientError> {
-        let bytes = write.to_adu().to_bytes();
+        let (bytes, _) = self.frame(write.to_adu());
         let mut line = self.line.lock().await;
         let sent = async {
             line.discard_input().await?;
@@ -332,6 +457,22 @@ pub fn expected_answer_len(request: &Request) -> usize {
     }
 }
 
+/// The verdict on a well-formed response to `request`: what [`check_response`] says.
+fn verdict(request: &Addressed, adu: &ResponseAdu) -> Verdict<Answer, UnitRefusal, Trouble> {
+    match check_response(request, adu) {
+        Ok(Answer::Exception(exception)) => Verdict::Refused(UnitRefusal {
+            unit: request.unit.get(),
+            request: request.request.to_string(),
+            exception,
+        }),
+        Ok(answer) => Verdict::Answer(answer),
+        Err(mismatch) => {
+            tracing::debug!(%mismatch, "skipping a frame that does not answer the request");
+            Verdict::Note(Trouble::Mismatch(mismatch))
+        }
+    }
+}
+
 /// What answers one request: a frame [`check_response`] accepts.
 struct Answering {
     request: Addressed,
@@ -339,34 +480,17 @@ struct Answering {
     silence: Duration,
 }
 
-impl Answering {
-    fn verdict(&self, adu: &ResponseAdu) -> VerdictOf<Self> {
-        match check_response(&self.request, adu) {
-            Ok(Answer::Exception(exception)) => Verdict::Refused(UnitRefusal {
-                unit: self.request.unit.get(),
-                request: self.request.request.to_string(),
-                exception,
-            }),
-            Ok(answer) => Verdict::Answer(answer),
-            Err(mismatch) => {
-                tracing::debug!(%mismatch, "skipping a frame that does not answer the request");
-                Verdict::Note(Trouble::Mismatch(mismatch))
-            }
-        }
-    }
-}
-
 impl Matcher for Answering {
-    type Codec = ResponseCodec;
+    type Codec = RtuResponses;
     type Answer = Answer;
     type Refusal = UnitRefusal;
     type Mismatch = Mismatch;
 
-    fn judge(&mut self, input: Result<ResponseAdu, DecodeError>) -> VerdictOf<Self> {
+    fn judge(&mut self, input: Result<ResponseAdu, Damage>) -> VerdictOf<Self> {
         match input {
-            Ok(adu) => self.verdict(&adu),
+            Ok(adu) => verdict(&self.request, &adu),
             // A byte that starts no frame: noise between frames.
-            Err(DecodeError::UnknownFunction { .. }) => Verdict::Noise,
+            Err(Damage::Rtu(DecodeError::UnknownFunction { .. })) => Verdict::Noise,
             // Probably the answer, damaged: retry as soon as the line falls quiet.
             Err(damage) => Verdict::RetryWhenQuiet(Trouble::Damaged(damage)),
         }
@@ -375,13 +499,69 @@ impl Matcher for Answering {
     /// The silence ended a frame: look past its head.
     fn look_past(&mut self, buffered: &[u8]) -> Option<(usize, VerdictOf<Self>)> {
         let (offset, adu, len) = find_frame(&ResponseCodec, buffered)?;
-        Some((offset + len, self.verdict(&adu)))
+        Some((offset + len, verdict(&self.request, &adu)))
     }
 
     /// Whatever happened, the next frame on this line waits for the silence (a zero wait
     /// would still cost a timer tick: tokio rounds deadlines up to 1 ms).
     fn quiet_after(&mut self, attempt: &AttemptEnd) -> Option<std::time::Instant> {
         (!self.silence.is_zero()).then(|| attempt.ended + self.silence)
+    }
+
+    fn device(&self) -> String {
+        format!("unit {}", self.request.unit.get())
+    }
+
+    fn request_in_words(&self) -> Option<String> {
+        Some(self.request.request.to_string())
+    }
+}
+
+/// What answers one request over Modbus TCP: a frame of the same transaction and unit that
+/// [`check_response`] accepts. Frames of other transactions or units are dropped.
+struct TcpAnswering {
+    request: Addressed,
+    transaction: TransactionId,
+}
+
+impl TcpAnswering {
+    fn judge_frame(&self, frame: &Mbap<ResponseAdu>) -> VerdictOf<Self> {
+        let unit = self.request.unit.get();
+        if frame.transaction != self.transaction || frame.adu.unit != unit {
+            tracing::debug!(
+                expected_transaction = %self.transaction,
+                transaction = %frame.transaction,
+                expected_unit = unit,
+                unit = frame.adu.unit,
+                "dropping a Modbus TCP frame of another transaction or unit"
+            );
+            return Verdict::Skip;
+        }
+        verdict(&self.request, &frame.adu)
+    }
+}
+
+impl Matcher for TcpAnswering {
+    type Codec = TcpResponses;
+    type Answer = Answer;
+    type Refusal = UnitRefusal;
+    type Mismatch = Mismatch;
+
+    fn judge(&mut self, input: Result<Mbap<ResponseAdu>, Damage>) -> VerdictOf<Self> {
+        match input {
+            Ok(frame) => self.judge_frame(&frame),
+            // Bytes that are no MBAP header: noise (or a stream out of step).
+            Err(Damage::Tcp(
+                tcp::DecodeError::Protocol { .. } | tcp::DecodeError::Length { .. },
+            )) => Verdict::Noise,
+            Err(damage) => Verdict::RetryWhenQuiet(Trouble::Damaged(damage)),
+        }
+    }
+
+    /// The line fell quiet inside what a header announced: a frame behind it, if any.
+    fn look_past(&mut self, buffered: &[u8]) -> Option<(usize, VerdictOf<Self>)> {
+        let (offset, frame, len) = find_frame(&tcp::ResponseCodec, buffered)?;
+        Some((offset + len, self.judge_frame(&frame)))
     }
 
     fn device(&self) -> String {
@@ -763,7 +943,8 @@ mod tests {
                 err,
                 ClientError::NoAnswer {
                     attempts: 3,
-                    last: Trouble::Damaged(DecodeError::Crc { .. }) | Trouble::Incomplete { .. },
+                    last: Trouble::Damaged(Damage::Rtu(DecodeError::Crc { .. }))
+                        | Trouble::Incomplete { .. },
                     ..
                 }
             ),
@@ -966,6 +1147,248 @@ mod tests {
             .expect_err("closed");
         assert!(matches!(err, ClientError::Line { .. }), "{err}");
         assert!(err.to_string().contains("gone line"), "{err}");
+    }
+
+    // --- Modbus TCP ---
+
+    fn over_tcp() -> ClientConfig {
+        ClientConfig {
+            framing: Framing::Tcp,
+            ..ClientConfig::default()
+        }
+    }
+
+    /// `device` (RTU) served over Modbus TCP, with `tricks` on its MBAP replies.
+    fn tcp_bench<D: Device>(device: D, tricks: Vec<Trick>) -> Bench {
+        bench(
+            crate::tcp::MbapServer::new(device),
+            tricks,
+            None,
+            over_tcp(),
+        )
+    }
+
+    /// Unit 1's answer to a read of `values.len()` holding registers, in transaction `t`.
+    fn registers_in(t: u16, values: Vec<u16>) -> Vec<u8> {
+        Mbap {
+            transaction: TransactionId(t),
+            adu: ResponseAdu {
+                unit: 1,
+                response: Response::ReadHoldingRegisters(
+                    RegisterValues::new(values).expect("test values"),
+                ),
+            },
+        }
+        .to_bytes()
+    }
+
+    /// The transaction ids of the requests the device heard.
+    fn transactions(tap: &Tap) -> Vec<u16> {
+        tap.traffic()
+            .iter()
+            .filter(|t| !t.from_device)
+            .map(|t| u16::from_be_bytes([t.bytes[0], t.bytes[1]]))
+            .collect()
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn every_function_reads_and_writes_a_generic_server_over_modbus_tcp() {
+        let server = slave();
+        let mut b = tcp_bench(server.line(), vec![]);
+        let c = &mut b.client;
+        c.write_single_coil(unit(1), 3, true)
+            .await
+            .expect("written");
+        c.write_multiple_coils(unit(1), 10, &[true, false, true])
+            .await
+            .expect("written");
+        assert_eq!(
+            c.read_coils(unit(1), 2, 10).await.expect("read"),
+            [
+                false, true, false, false, false, false, false, false, true, false
+            ]
+        );
+        c.write_single_register(unit(1), 100, 0xBEEF)
+            .await
+            .expect("written");
+        c.write_multiple_registers(unit(1), 101, &[1, 2])
+            .await
+            .expect("written");
+        assert_eq!(
+            c.read_holding_registers(unit(1), 100, 3)
+                .await
+                .expect("read"),
+            [0xBEEF, 1, 2]
+        );
+        server.lock().set(Table::InputRegisters, 30, 4242);
+        assert_eq!(
+            c.read_input_registers(unit(1), 30, 1).await.expect("read"),
+            [4242]
+        );
+        assert_eq!(
+            c.read_discrete_inputs(unit(1), 0, 2).await.expect("read"),
+            [false, false]
+        );
+        assert_eq!(b.requests(), 8);
+        assert_eq!(transactions(&b.tap), [1, 2, 3, 4, 5, 6, 7, 8]);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_response_with_another_transaction_id_is_dropped_and_the_right_one_after_it_taken() {
+        // A late answer to an earlier transaction, same unit and function, other values.
+        let stale = Trick::Before(registers_in(0x7777, vec![0xDEAD, 0xBEEF]));
+        let mut b = tcp_bench(slave().line(), vec![stale]);
+        let started = Instant::now();
+        let words = b
+            .client
+            .read_holding_registers(unit(1), 0, 2)
+            .await
+            .expect("the right answer follows");
+        assert_eq!(words, [0, 0], "the server's registers, not the stale ones");
+        assert_eq!(b.requests(), 1, "not retried");
+        assert_eq!(started.elapsed(), DEFAULT_REPLY_DELAY);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn only_responses_of_another_transaction_are_no_answer() {
+        let stale = Trick::Replace(registers_in(0x7777, vec![1, 2]));
+        let mut b = tcp_bench(slave().line(), vec![stale; 3]);
+        let err = b
+            .client
+            .read_holding_registers(unit(1), 0, 2)
+            .await
+            .expect_err("never the right transaction");
+        assert!(
+            matches!(
+                err,
+                ClientError::NoAnswer {
+                    attempts: 3,
+                    last: Trouble::Silence,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert_eq!(
+            transactions(&b.tap),
+            [1, 1, 1],
+            "retries repeat the request"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn two_units_share_one_modbus_tcp_connection() {
+        let first = SharedModel::new(Slave::all_writable(unit(1)));
+        let second = SharedModel::new(Slave::all_writable(unit(2)));
+        let bus = wire::device::Bus(vec![Box::new(first.line()), Box::new(second.line())]);
+        let mut b = tcp_bench(bus, vec![]);
+        let c = &mut b.client;
+        c.write_single_register(unit(1), 5, 111)
+            .await
+            .expect("unit 1");
+        c.write_single_register(unit(2), 5, 222)
+            .await
+            .expect("unit 2");
+        assert_eq!(
+            c.read_holding_registers(unit(1), 5, 1).await.expect("1"),
+            [111]
+        );
+        assert_eq!(
+            c.read_holding_registers(unit(2), 5, 1).await.expect("2"),
+            [222]
+        );
+        assert_eq!(first.lock().get(Table::HoldingRegisters, 5), Some(111));
+        assert_eq!(second.lock().get(Table::HoldingRegisters, 5), Some(222));
+        let err = c
+            .read_holding_registers(unit(3), 5, 1)
+            .await
+            .expect_err("nobody is unit 3");
+        assert!(err.to_string().contains("unit 3"), "{err}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_half_modbus_tcp_frame_then_silence_is_retried_when_the_line_falls_quiet() {
+        let whole = registers_in(1, vec![0, 0]);
+        let half = Trick::Replace(whole[..9].to_vec());
+        let mut b = tcp_bench(slave().line(), vec![half]);
+        let started = Instant::now();
+        let words = b
+            .client
+            .read_holding_registers(unit(1), 0, 2)
+            .await
+            .expect("answered on the second attempt");
+        assert_eq!(words, [0, 0]);
+        assert_eq!(b.requests(), 2);
+        assert_eq!(
+            started.elapsed(),
+            DEFAULT_REPLY_DELAY + MIN_QUIET_GAP + DEFAULT_REPLY_DELAY
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_half_modbus_tcp_frame_every_time_is_reported_as_incomplete() {
+        let half = Trick::Replace(registers_in(1, vec![0, 0])[..9].to_vec());
+        let mut b = tcp_bench(slave().line(), vec![half; 3]);
+        let err = b
+            .client
+            .read_holding_registers(unit(1), 0, 2)
+            .await
+            .expect_err("never whole");
+        assert!(
+            matches!(
+                err,
+                ClientError::NoAnswer {
+                    last: Trouble::Incomplete { bytes: 9 },
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_exception_over_modbus_tcp_is_the_units_refusal() {
+        let map = SlaveMap::parse("unit 1\nholding 0 = 1 2 3\n").expect("valid map");
+        let mut b = tcp_bench(SharedModel::new(Slave::new(map)).line(), vec![]);
+        let err = b
+            .client
+            .read_holding_registers(unit(1), 2, 2)
+            .await
+            .expect_err("3 is not in the map");
+        assert_eq!(
+            exception_code(&err),
+            Some(ExceptionCode::ILLEGAL_DATA_ADDRESS)
+        );
+        assert_eq!(b.requests(), 1);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn clones_share_the_transaction_ids_which_wrap_after_65535() {
+        let mut b = tcp_bench(slave().line(), vec![]);
+        b.client.transaction.store(65534, Ordering::Relaxed);
+        let mut clone = b.client.clone();
+        b.client
+            .read_coils(unit(1), 0, 1)
+            .await
+            .expect("transaction 65535");
+        clone
+            .read_coils(unit(1), 0, 1)
+            .await
+            .expect("transaction 0");
+        b.client
+            .read_coils(unit(1), 0, 1)
+            .await
+            .expect("transaction 1");
+        assert_eq!(transactions(&b.tap), [65535, 0, 1]);
+    }
+
+    #[test]
+    fn a_modbus_tcp_endpoint_asks_for_tcp_framing() {
+        let line = link::SerialSettings::new_8n1(9600);
+        let mbap = Endpoint::parse("modbus-tcp://127.0.0.1:502", line).expect("valid");
+        let raw = Endpoint::parse("tcp://127.0.0.1:4001", line).expect("valid");
+        assert_eq!(Framing::of(&mbap), Framing::Tcp);
+        assert_eq!(Framing::of(&raw), Framing::Rtu);
     }
 
     #[tokio::test(start_paused = true)]

@@ -24,6 +24,7 @@ pub mod client;
 pub mod cross;
 pub mod rtu;
 pub mod slave;
+pub mod tcp;
 
 #[doc(hidden)]
 pub mod fuzzing;

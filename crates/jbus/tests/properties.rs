@@ -442,3 +442,107 @@ proptest! {
         }
     }
 }
+
+// --- Modbus TCP (MBAP) ---
+
+mod tcp {
+    use super::*;
+    use jbus::tcp::{self, Mbap, TransactionId};
+
+    /// Any request frame that fits an MBAP frame (a unit id and 253 PDU bytes at most).
+    fn request() -> impl Strategy<Value = Mbap<RequestAdu>> {
+        (any::<u16>(), raw_request())
+            .prop_map(|(t, adu)| Mbap {
+                transaction: TransactionId(t),
+                adu,
+            })
+            .prop_filter("fits an MBAP frame", |frame| {
+                frame.to_bytes().len() <= 6 + 254
+            })
+    }
+
+    fn response() -> impl Strategy<Value = Mbap<ResponseAdu>> {
+        (any::<u16>(), response_adu()).prop_map(|(t, adu)| Mbap {
+            transaction: TransactionId(t),
+            adu,
+        })
+    }
+
+    /// Bytes of 0xFF before and between frames: a protocol id is never 0 in them, and the
+    /// bytes next to a frame never make a valid length, so they frame nothing.
+    fn filler() -> impl Strategy<Value = Vec<u8>> {
+        (0usize..12).prop_map(|n| vec![0xFF; n])
+    }
+
+    fn stream<C: Codec>(codec: &C, frames: &[C::Frame], filler: &[Vec<u8>]) -> Vec<u8> {
+        let mut stream = Vec::new();
+        for (i, frame) in frames.iter().enumerate() {
+            stream.extend(filler.get(i).cloned().unwrap_or_default());
+            stream.extend(encode(codec, frame));
+        }
+        stream
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+        #[test]
+        fn every_tcp_request_round_trips_through_its_bytes(frame in request()) {
+            let bytes = encode(&tcp::RequestCodec, &frame);
+            prop_assert_eq!(tcp::RequestCodec.decode(&bytes), Ok(Some((frame, bytes.len()))));
+        }
+
+        #[test]
+        fn every_tcp_response_round_trips_through_its_bytes(frame in response()) {
+            let bytes = encode(&tcp::ResponseCodec, &frame);
+            prop_assert_eq!(tcp::ResponseCodec.decode(&bytes), Ok(Some((frame, bytes.len()))));
+        }
+
+        #[test]
+        fn a_tcp_prefix_asks_for_more_bytes(request in request(), response in response(), cut in any::<usize>()) {
+            let bytes = encode(&tcp::RequestCodec, &request);
+            prop_assert_eq!(tcp::RequestCodec.decode(&bytes[..cut % bytes.len()]), Ok(None));
+            let bytes = encode(&tcp::ResponseCodec, &response);
+            prop_assert_eq!(tcp::ResponseCodec.decode(&bytes[..cut % bytes.len()]), Ok(None));
+        }
+
+        #[test]
+        fn tcp_request_streams_split_anywhere_give_the_frames_sent(
+            frames in prop::collection::vec(request(), 1..5),
+            filler in prop::collection::vec(filler(), 5),
+            cuts in prop::collection::vec(any::<usize>(), 0..12),
+        ) {
+            let stream = stream(&tcp::RequestCodec, &frames, &filler);
+            let got: Vec<_> = deframe(&tcp::RequestCodec, &stream, &cuts)
+                .into_iter()
+                .filter_map(Result::ok)
+                .collect();
+            prop_assert_eq!(got, frames);
+        }
+
+        #[test]
+        fn tcp_response_streams_split_anywhere_give_the_frames_sent(
+            frames in prop::collection::vec(response(), 1..5),
+            filler in prop::collection::vec(filler(), 5),
+            cuts in prop::collection::vec(any::<usize>(), 0..12),
+        ) {
+            let stream = stream(&tcp::ResponseCodec, &frames, &filler);
+            let got: Vec<_> = deframe(&tcp::ResponseCodec, &stream, &cuts)
+                .into_iter()
+                .filter_map(Result::ok)
+                .collect();
+            prop_assert_eq!(got, frames);
+        }
+
+        #[test]
+        fn tcp_and_rtu_carry_the_same_request(unit in unit(), request in super::request(), t in any::<u16>()) {
+            let adu = Addressed::new(unit, request).to_adu();
+            let frame = Mbap { transaction: TransactionId(t), adu: adu.clone() };
+            let bytes = frame.to_bytes();
+            let rtu = adu.to_bytes();
+            // The MBAP body is the RTU frame without its CRC.
+            prop_assert_eq!(&bytes[6..], &rtu[..rtu.len() - 2]);
+            prop_assert_eq!(usize::from(u16::from_be_bytes([bytes[4], bytes[5]])), rtu.len() - 2);
+        }
+    }
+}

@@ -6,7 +6,13 @@
 //! /dev/ttyUSB0                      (a bare device path is a serial endpoint)
 //! tcp://192.0.2.10:4001             (raw bytes over TCP: ser2net, Moxa NPort, our simulators)
 //! tcp://127.0.0.1:5020?baud=9600    (…behind which is a 9600-baud line: timing follows it)
+//! modbus-tcp://192.0.2.20:502       (TCP whose protocol frames its own messages: Modbus TCP)
+//! modbus-tcp://192.0.2.20           (port 502 unless given)
 //! ```
+//!
+//! `link` frames nothing itself: a `modbus-tcp://` endpoint is a TCP line like any other,
+//! and [`TcpFraming::Mbap`] tells the protocol crate that reads the endpoint to frame its
+//! messages with the Modbus TCP (MBAP) header instead of sending raw serial frames.
 //!
 //! Settings a URL leaves out come from the protocol's defaults (JBC: 19200 8E1;
 //! Thermosald and CROSS: 9600 8N1).
@@ -41,8 +47,25 @@ pub enum Endpoint {
         /// The serial line behind the TCP server, when the URL names one (`?baud=…`): the
         /// clients derive their timing from it.
         line: Option<SerialSettings>,
+        /// How messages are framed on the connection: raw serial frames (`tcp://`) or
+        /// Modbus TCP (`modbus-tcp://`).
+        framing: TcpFraming,
     },
 }
+
+/// How the bytes on a TCP endpoint are framed: the URL's scheme says it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub enum TcpFraming {
+    /// `tcp://`: the serial frames as they are on the line behind a serial server.
+    #[default]
+    Raw,
+    /// `modbus-tcp://`: Modbus TCP, each message behind an MBAP header (transaction id,
+    /// length, unit id), no CRC.
+    Mbap,
+}
+
+/// The Modbus TCP port a `modbus-tcp://` URL without a port connects to.
+pub const MODBUS_TCP_PORT: u16 = 502;
 
 /// What is wrong with an endpoint URL.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -50,7 +73,7 @@ pub enum Endpoint {
 pub enum EndpointError {
     /// Not a URL at all.
     #[error(
-        "endpoint {url:?} is not a URL ({reason}); write serial:///dev/ttyUSB0 or tcp://host:port"
+        "endpoint {url:?} is not a URL ({reason}); write serial:///dev/ttyUSB0, tcp://host:port or modbus-tcp://host:port"
     )]
     NotAUrl {
         /// The text given.
@@ -58,8 +81,10 @@ pub enum EndpointError {
         /// What the URL parser said.
         reason: String,
     },
-    /// A scheme other than `serial` or `tcp`.
-    #[error("endpoint {url:?} has scheme {scheme:?}; cellbus speaks serial:// and tcp://")]
+    /// A scheme other than `serial`, `tcp` or `modbus-tcp`.
+    #[error(
+        "endpoint {url:?} has scheme {scheme:?}; cellbus speaks serial://, tcp:// and modbus-tcp://"
+    )]
     Scheme {
         /// The text given.
         url: String,
@@ -104,6 +129,7 @@ pub enum EndpointError {
 
 const SERIAL_OPTIONS: &str = "baud, framing, rs485, echo";
 const TCP_OPTIONS: &str = "baud, framing";
+const MODBUS_TCP_OPTIONS: &str = "none: Modbus TCP carries no serial settings";
 
 impl Endpoint {
     /// Parses `text`, taking the settings it leaves out from `defaults`.
@@ -119,6 +145,7 @@ impl Endpoint {
         match url.scheme() {
             "serial" => Self::parse_serial(text, &url, defaults),
             "tcp" => Self::parse_tcp(text, &url, defaults),
+            "modbus-tcp" => Self::parse_modbus_tcp(text, &url),
             other => Err(EndpointError::Scheme {
                 url: text.to_owned(),
                 scheme: other.to_owned(),
@@ -205,7 +232,48 @@ impl Endpoint {
                 }
             }
         }
-        Ok(Self::Tcp { host, port, line })
+        Ok(Self::Tcp {
+            host,
+            port,
+            line,
+            framing: TcpFraming::Raw,
+        })
+    }
+
+    fn parse_modbus_tcp(text: &str, url: &Url) -> Result<Self, EndpointError> {
+        let host = url
+            .host_str()
+            .filter(|h| !h.is_empty())
+            .ok_or_else(|| EndpointError::NoHostPort {
+                url: text.to_owned(),
+            })?
+            .trim_start_matches('[')
+            .trim_end_matches(']')
+            .to_owned();
+        if let Some((key, _)) = url.query_pairs().next() {
+            return Err(EndpointError::UnknownOption {
+                url: text.to_owned(),
+                option: key.to_string(),
+                known: MODBUS_TCP_OPTIONS,
+            });
+        }
+        Ok(Self::Tcp {
+            host,
+            port: url.port().unwrap_or(MODBUS_TCP_PORT),
+            line: None,
+            framing: TcpFraming::Mbap,
+        })
+    }
+
+    /// Whether the endpoint carries Modbus TCP (`modbus-tcp://`).
+    pub fn is_mbap(&self) -> bool {
+        matches!(
+            self,
+            Self::Tcp {
+                framing: TcpFraming::Mbap,
+                ..
+            }
+        )
     }
 
     /// The serial line's settings, where the endpoint has or names one.
@@ -239,11 +307,20 @@ impl fmt::Display for Endpoint {
                 }
                 Ok(())
             }
-            Self::Tcp { host, port, line } => {
+            Self::Tcp {
+                host,
+                port,
+                line,
+                framing,
+            } => {
+                let scheme = match framing {
+                    TcpFraming::Raw => "tcp",
+                    TcpFraming::Mbap => "modbus-tcp",
+                };
                 if host.contains(':') {
-                    write!(f, "tcp://[{host}]:{port}")?;
+                    write!(f, "{scheme}://[{host}]:{port}")?;
                 } else {
-                    write!(f, "tcp://{host}:{port}")?;
+                    write!(f, "{scheme}://{host}:{port}")?;
                 }
                 if let Some(settings) = line {
                     write!(f, "?baud={}&framing={}", settings.baud, settings.framing())?;
@@ -555,12 +632,46 @@ mod tests {
             Endpoint::Tcp {
                 host: "127.0.0.1".into(),
                 port: 4001,
-                line: None
+                line: None,
+                framing: TcpFraming::Raw,
             }
         );
+        assert!(!e.is_mbap());
         let e = Endpoint::parse("tcp://[::1]:4001?baud=9600&framing=8N1", JBC).unwrap();
         assert_eq!(e.line_settings(), Some(SerialSettings::new_8n1(9600)));
         assert_eq!(e.to_string(), "tcp://[::1]:4001?baud=9600&framing=8N1");
+    }
+
+    #[test]
+    fn modbus_tcp_url_takes_host_and_port_502_unless_given() {
+        let e = Endpoint::parse("modbus-tcp://192.0.2.20:1502", JBC).unwrap();
+        assert_eq!(
+            e,
+            Endpoint::Tcp {
+                host: "192.0.2.20".into(),
+                port: 1502,
+                line: None,
+                framing: TcpFraming::Mbap,
+            }
+        );
+        assert!(e.is_mbap());
+        assert_eq!(e.line_settings(), None, "no serial timing on Modbus TCP");
+        assert_eq!(e.to_string(), "modbus-tcp://192.0.2.20:1502");
+        let e = Endpoint::parse("modbus-tcp://plc.local", JBC).unwrap();
+        assert_eq!(e.to_string(), "modbus-tcp://plc.local:502");
+        let e = Endpoint::parse("modbus-tcp://[::1]:5020", JBC).unwrap();
+        assert_eq!(e.to_string(), "modbus-tcp://[::1]:5020");
+    }
+
+    #[test]
+    fn modbus_tcp_url_refuses_serial_options_and_a_missing_host() {
+        let err = |t| Endpoint::parse(t, JBC).unwrap_err().to_string();
+        assert!(
+            err("modbus-tcp://127.0.0.1:502?baud=9600").contains("unknown option \"baud\""),
+            "{}",
+            err("modbus-tcp://127.0.0.1:502?baud=9600")
+        );
+        assert!(err("modbus-tcp://").contains("needs a host"));
     }
 
     #[test]

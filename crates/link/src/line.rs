@@ -139,7 +139,9 @@ impl Line {
                 })?;
                 Ok(line)
             }
-            Endpoint::Tcp { host, port, line } => {
+            Endpoint::Tcp {
+                host, port, line, ..
+            } => {
                 let connect = TcpStream::connect((host.as_str(), *port));
                 let connected = tokio::time::timeout(TCP_CONNECT_TIMEOUT, connect)
                     .await

@@ -25,7 +25,7 @@
 
 use std::time::Duration;
 
-use jbus::client::{Client, ClientConfig, ClientError};
+use jbus::client::{Client, ClientConfig, ClientError, Framing};
 use jbus::cross::points::{self, Amount, Phase, Quantity};
 use jbus::cross::{
     Area, Change, Discrete, Feed, InternalState, Measures, Ratings, Source, Transfer,
@@ -227,6 +227,7 @@ impl CrossDriver {
             config: ClientConfig {
                 timeout: config.timeout.unwrap_or(defaults.timeout),
                 retries: config.retries.unwrap_or(defaults.retries),
+                framing: config.endpoint.as_ref().map_or(Framing::Rtu, Framing::of),
                 ..defaults
             },
             client: None,

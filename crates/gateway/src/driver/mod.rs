@@ -379,7 +379,8 @@ pub struct DriverConfig {
     /// endpoint names Port 1.
     pub event_port: Option<u16>,
     /// The line's endpoint, for drivers whose client keeps its own connections
-    /// ([`Protocol::owns_connections`]).
+    /// ([`Protocol::owns_connections`]) and for Modbus devices on a `modbus-tcp://` line
+    /// (their client frames Modbus TCP).
     pub endpoint: Option<link::Endpoint>,
     /// Generic Modbus: the registers the config names (empty for other protocols).
     pub registers: Vec<modbus::RegisterConfig>,

@@ -31,7 +31,7 @@
 
 use std::time::Duration;
 
-use jbus::client::{Client, ClientConfig, ClientError};
+use jbus::client::{Client, ClientConfig, ClientError, Framing};
 
 use jbus::rtu::UnitId;
 use link::{SerialSettings, SharedLine};
@@ -176,6 +176,7 @@ impl ModbusDriver {
             config: ClientConfig {
                 timeout: config.timeout.unwrap_or(defaults.timeout),
                 retries: config.retries.unwrap_or(defaults.retries),
+                framing: config.endpoint.as_ref().map_or(Framing::Rtu, Framing::of),
                 ..defaults
             },
             client: None,

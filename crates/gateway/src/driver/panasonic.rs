@@ -465,6 +465,7 @@ mod tests {
                 host: "127.0.0.1".into(),
                 port: twin.command_addr().port(),
                 line: None,
+                framing: link::TcpFraming::Raw,
             }),
             registers: Vec::new(),
         })
@@ -608,6 +609,7 @@ mod tests {
                 host: "127.0.0.1".into(),
                 port,
                 line: None,
+                framing: link::TcpFraming::Raw,
             }),
             registers: Vec::new(),
         })

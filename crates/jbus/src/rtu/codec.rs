@@ -307,6 +307,13 @@ pub fn decode_response(buf: &[u8]) -> Result<Option<(ResponseAdu, usize)>, Decod
 /// Appends a request frame to `out`.
 pub fn encode_request(frame: &RequestAdu, out: &mut Vec<u8>) {
     let start = out.len();
+    encode_request_body(frame, out);
+    append_crc(out, start);
+}
+
+/// Appends a request's unit, function and data, without a CRC (Modbus TCP frames the
+/// same bytes behind its own header).
+pub(crate) fn encode_request_body(frame: &RequestAdu, out: &mut Vec<u8>) {
     out.push(frame.unit);
     out.push(frame.pdu.function_byte());
     match &frame.pdu {
@@ -339,12 +346,17 @@ pub fn encode_request(frame: &RequestAdu, out: &mut Vec<u8>) {
         }
         RequestPdu::Other(other) => out.extend_from_slice(other.data()),
     }
-    append_crc(out, start);
 }
 
 /// Appends a response frame to `out`.
 pub fn encode_response(frame: &ResponseAdu, out: &mut Vec<u8>) {
     let start = out.len();
+    encode_response_body(frame, out);
+    append_crc(out, start);
+}
+
+/// Appends a response's unit, function and data, without a CRC.
+pub(crate) fn encode_response_body(frame: &ResponseAdu, out: &mut Vec<u8>) {
     out.push(frame.unit);
     match &frame.response {
         Response::Exception(e) => {
@@ -387,7 +399,6 @@ pub fn encode_response(frame: &ResponseAdu, out: &mut Vec<u8>) {
             }
         }
     }
-    append_crc(out, start);
 }
 
 /// The first complete frame with a good CRC anywhere in `buf`: `(offset, frame, length)`.
@@ -511,7 +522,7 @@ impl<'a> Fields<'a> {
 
 /// Parses a request body (unit, function, data) whose length and CRC were checked.
 /// `None` only if the data is longer than any request of another function can be.
-fn parse_request(body: &[u8]) -> Option<RequestPdu> {
+pub(crate) fn parse_request(body: &[u8]) -> Option<RequestPdu> {
     let mut f = Fields(body);
     let (_unit, function) = (f.u8()?, f.u8()?);
     Some(match function {
@@ -561,7 +572,7 @@ fn parse_request(body: &[u8]) -> Option<RequestPdu> {
 }
 
 /// Parses a response body (unit, function, data) whose length and CRC were checked.
-fn parse_response(body: &[u8]) -> Result<Response, Malformed> {
+pub(crate) fn parse_response(body: &[u8]) -> Result<Response, Malformed> {
     // The length checks made these fields present; a short body reads as zeros, which the
     // checks below refuse or which cannot occur.
     let mut f = Fields(body);

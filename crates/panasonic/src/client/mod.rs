@@ -127,6 +127,7 @@ impl ClientConfig {
             host: self.host.clone(),
             port,
             line: None,
+            framing: link::TcpFraming::Raw,
         }
     }
 }

@@ -1,0 +1,41 @@
+"""A pymodbus Modbus TCP server with two units on one port, for cellbus's tests.
+
+Usage: python3 pymodbus_tcp_server.py
+
+Serves Modbus TCP (MBAP framing) at 127.0.0.1 on a free port, prints
+`listening on modbus-tcp://127.0.0.1:PORT` and runs until killed. Units 1 and 2 have their
+own tables: unit 1's holding register i holds 10 * i, unit 2's 20 * i (0-99); coils 0-99
+are all off on both.
+"""
+
+import asyncio
+
+from pymodbus.datastore import (
+    ModbusDeviceContext,
+    ModbusSequentialDataBlock,
+    ModbusServerContext,
+)
+from pymodbus.server import ModbusTcpServer
+
+
+def device(step):
+    # ModbusSequentialDataBlock(1, values): register 0 holds the first value.
+    return ModbusDeviceContext(
+        co=ModbusSequentialDataBlock(1, [False] * 100),
+        di=ModbusSequentialDataBlock(1, [False] * 100),
+        hr=ModbusSequentialDataBlock(1, [step * i for i in range(100)]),
+        ir=ModbusSequentialDataBlock(1, [0] * 100),
+    )
+
+
+async def main():
+    context = ModbusServerContext(devices={1: device(10), 2: device(20)}, single=False)
+    server = ModbusTcpServer(context, address=("127.0.0.1", 0))
+    await server.serve_forever(background=True)
+    port = server.transport.sockets[0].getsockname()[1]
+    print(f"listening on modbus-tcp://127.0.0.1:{port}", flush=True)
+    await server.serving
+
+
+if __name__ == "__main__":
+    asyncio.run(main())
