@@ -747,7 +747,8 @@ pub struct SimModbusArgs {
     #[arg(long, value_name = "N")]
     pub unit: Option<u8>,
     /// Which coils, discrete inputs, holding and input registers exist, with their first
-    /// values (lines like `holding 0x0000 = 1 2 3`, `coil 10 = 1 0 1`, `unit 17`; see the
+    /// values (lines like `holding 0x0000 = 1 2 3`, `coil 10 = 1 0 1`, `unit 17`, typed
+    /// `holding 0x0100 float32 CDAB = 229.7` or `input 0x20 string:4 = "PUMP 7"`; see the
     /// jbus crate's slave::map). Without it every address of every table exists, holds 0,
     /// and coils and holding registers are writable.
     #[arg(long, value_name = "FILE")]
