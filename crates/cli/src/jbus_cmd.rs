@@ -13,6 +13,7 @@ use jbus::client::{
 };
 use jbus::cross::device::CrossTwin;
 use jbus::cross::{Amount, CrossState, Discrete, MEASURES, NamedBit, Quantity, RATINGS, Source};
+use jbus::data::{DataType, Format, Order, TypedValue};
 use jbus::rtu::{Addressed, Answer, Broadcast, Request, UnitId, Write};
 use jbus::slave::{Slave, SlaveMap};
 use link::{Endpoint, Line, SerialSettings, SharedLine};
@@ -102,19 +103,25 @@ pub struct ModbusArgs {
 /// Addresses and values are decimal or 0x hex.
 #[derive(Debug, Subcommand)]
 pub enum ModbusAction {
-    /// Function 3: read COUNT (1–125) holding registers from ADDR.
+    /// Function 3: read COUNT values (1–125 registers in all) of holding registers from
+    /// ADDR: plain registers, or values of --type.
     ReadHolding {
         #[arg(value_parser = parse_address)]
         address: u16,
         #[arg(value_parser = parse_address)]
         count: u16,
+        #[command(flatten)]
+        typed: TypeArgs,
     },
-    /// Function 4: read COUNT (1–125) input registers from ADDR.
+    /// Function 4: read COUNT values (1–125 registers in all) of input registers from
+    /// ADDR: plain registers, or values of --type.
     ReadInput {
         #[arg(value_parser = parse_address)]
         address: u16,
         #[arg(value_parser = parse_address)]
         count: u16,
+        #[command(flatten)]
+        typed: TypeArgs,
     },
     /// Function 1: read COUNT (1–2000) coils from ADDR.
     ReadCoils {
@@ -138,12 +145,16 @@ pub enum ModbusAction {
         #[arg(value_parser = parse_word, allow_negative_numbers = true)]
         value: u16,
     },
-    /// Function 16: write 1–123 values to the holding registers from ADDR on.
+    /// Function 16: write values to the holding registers from ADDR on (1–123 registers
+    /// in all): plain registers (0–65535, 0x hex, or -32768–-1), or values of --type, each
+    /// encoded in its registers.
     WriteRegisters {
         #[arg(value_parser = parse_address)]
         address: u16,
-        #[arg(value_parser = parse_word, allow_negative_numbers = true, required = true)]
-        values: Vec<u16>,
+        #[command(flatten)]
+        typed: TypeArgs,
+        #[arg(value_name = "VALUE", allow_negative_numbers = true, required = true)]
+        values: Vec<String>,
     },
     /// Function 5: switch the coil at ADDR on or off.
     WriteCoil {
@@ -168,6 +179,45 @@ pub enum ModbusAction {
     },
 }
 
+/// The type of each value a read or write of registers carries.
+#[derive(Debug, Clone, Copy, Args)]
+pub struct TypeArgs {
+    /// Each value's type: int16, uint16, int32, uint32, int64, uint64, float32, float64,
+    /// string:N (N registers of ASCII), bit:N (bit N, 0–15, of each register; reads only).
+    /// Default: plain registers.
+    #[arg(long = "type", value_name = "TYPE")]
+    pub data_type: Option<DataType>,
+    /// Byte and word order of each value: ABCD (default: big-endian), CDAB (words
+    /// swapped), BADC (bytes swapped in each word), DCBA (both).
+    #[arg(long, value_name = "ORDER")]
+    pub order: Option<Order>,
+}
+
+impl TypeArgs {
+    /// The format asked for, if --type or --order was given (the type defaults to uint16,
+    /// the order to ABCD).
+    fn format(&self) -> Option<Format> {
+        (self.data_type.is_some() || self.order.is_some()).then(|| {
+            Format::new(
+                self.data_type.unwrap_or_default(),
+                self.order.unwrap_or_default(),
+            )
+        })
+    }
+}
+
+impl ModbusAction {
+    /// The format of the values, for the actions that take --type.
+    fn format(&self) -> Option<Format> {
+        match self {
+            Self::ReadHolding { typed, .. }
+            | Self::ReadInput { typed, .. }
+            | Self::WriteRegisters { typed, .. } => typed.format(),
+            _ => None,
+        }
+    }
+}
+
 /// What `cellbus modbus` sends, checked before the line is opened.
 enum Send {
     To(Addressed),
@@ -183,7 +233,7 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
         return Err(usage("--unit N is needed: the unit number to ask (1-247)"));
     };
     // Build the request before opening the line: bad arguments never touch the device.
-    let request = modbus_request(&args.action).map_err(usage)?;
+    let request = modbus_request(&args.action)?;
     let send = if unit == 0 {
         match request {
             Request::WriteSingleCoil(w) => Send::Broadcast(Broadcast(Write::SingleCoil(w))),
@@ -208,7 +258,11 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
             client.broadcast(&write).await?;
             let request = Request::from(write.0.clone());
             if args.line.json {
-                output::line(values_json(0, &request, written_values(&request)))?;
+                output::line(values_json(
+                    0,
+                    &request,
+                    written_json(&args.action, &request)?,
+                ))?;
             } else {
                 output::line(format!(
                     "broadcast to every unit (no answer is expected): {request}"
@@ -220,19 +274,21 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
                 Ok(answer) => answer,
                 Err(err) => return Err(refusal(err, &addressed, args.line.json)?),
             };
-            print_answer(&addressed, &answer, args.line.json)?;
+            print_answer(&addressed, &answer, &args.action, args.line.json)?;
         }
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn modbus_request(action: &ModbusAction) -> Result<Request, jbus::rtu::InvalidValue> {
+/// The request, or a usage error.
+fn modbus_request(action: &ModbusAction) -> anyhow::Result<Request> {
+    let format = action.format();
     match action {
-        &ModbusAction::ReadHolding { address, count } => {
-            Request::read_holding_registers(address, count)
+        &ModbusAction::ReadHolding { address, count, .. } => {
+            Request::read_holding_registers(address, registers_for(count, format)?)
         }
-        &ModbusAction::ReadInput { address, count } => {
-            Request::read_input_registers(address, count)
+        &ModbusAction::ReadInput { address, count, .. } => {
+            Request::read_input_registers(address, registers_for(count, format)?)
         }
         &ModbusAction::ReadCoils { address, count } => Request::read_coils(address, count),
         &ModbusAction::ReadDiscrete { address, count } => {
@@ -241,9 +297,9 @@ fn modbus_request(action: &ModbusAction) -> Result<Request, jbus::rtu::InvalidVa
         &ModbusAction::WriteRegister { address, value } => {
             Ok(Request::write_single_register(address, value))
         }
-        ModbusAction::WriteRegisters { address, values } => {
-            Request::write_multiple_registers(*address, values.clone())
-        }
+        ModbusAction::WriteRegisters {
+            address, values, ..
+        } => Request::write_multiple_registers(*address, registers_to_write(values, format)?),
         &ModbusAction::WriteCoil { address, state } => {
             Ok(Request::write_single_coil(address, state))
         }
@@ -251,6 +307,51 @@ fn modbus_request(action: &ModbusAction) -> Result<Request, jbus::rtu::InvalidVa
             Request::write_multiple_coils(*address, values.clone())
         }
         ModbusAction::Scan { .. } => unreachable!("scan sends no single request"),
+    }
+    .map_err(usage)
+}
+
+/// How many registers COUNT values of the format take (COUNT registers without one).
+fn registers_for(count: u16, format: Option<Format>) -> anyhow::Result<u16> {
+    let Some(format) = format else {
+        return Ok(count);
+    };
+    let registers = u32::from(count) * u32::from(format.registers());
+    u16::try_from(registers)
+        .ok()
+        .filter(|&r| r <= jbus::rtu::ReadRegisterCount::MAX)
+        .ok_or_else(|| {
+            usage(format!(
+                "{count} values of {} take {registers} registers, and one read takes at most {}",
+                format.data_type,
+                jbus::rtu::ReadRegisterCount::MAX
+            ))
+        })
+}
+
+/// The registers that carry the values of `write-registers`.
+fn registers_to_write(values: &[String], format: Option<Format>) -> anyhow::Result<Vec<u16>> {
+    let Some(format) = format else {
+        return values
+            .iter()
+            .map(|v| parse_word(v).map_err(usage))
+            .collect();
+    };
+    let mut registers = Vec::new();
+    for value in values {
+        registers.extend(format.encode_text(value).map_err(usage)?);
+    }
+    Ok(registers)
+}
+
+/// A typed value as JSON: a number, a string or a boolean.
+fn typed_json(value: &TypedValue) -> Value {
+    match value {
+        TypedValue::Int(i) => json!(i),
+        TypedValue::Uint(u) => json!(u),
+        TypedValue::Float(f) => json!(f),
+        TypedValue::Text(text) => json!(text),
+        TypedValue::Bool(b) => json!(b),
     }
 }
 
@@ -334,9 +435,28 @@ fn refusal(err: ClientError, request: &Addressed, json: bool) -> anyhow::Result<
     Ok(output::failure(err))
 }
 
-fn print_answer(request: &Addressed, answer: &Answer, json: bool) -> anyhow::Result<()> {
+fn print_answer(
+    request: &Addressed,
+    answer: &Answer,
+    action: &ModbusAction,
+    json: bool,
+) -> anyhow::Result<()> {
     let unit = request.unit.get();
     let address = request.request.address();
+    match (answer, action.format()) {
+        (Answer::Registers(values), Some(format)) => {
+            return print_typed(unit, address, values, format, json);
+        }
+        (Answer::Written | Answer::Exception(_), Some(_)) if json => {
+            output::line(values_json(
+                unit,
+                &request.request,
+                written_json(action, &request.request)?,
+            ))?;
+            return Ok(());
+        }
+        _ => {}
+    }
     match (answer, json) {
         (Answer::Registers(values), true) => {
             output::line(json!({ "unit": unit, "address": address, "values": values }))?;
@@ -367,6 +487,57 @@ fn print_answer(request: &Addressed, answer: &Answer, json: bool) -> anyhow::Res
         }
     }
     Ok(())
+}
+
+/// Registers read as values of `format`: one line each (its first register's address and
+/// the value), or `{"unit","address","type","values"}`.
+fn print_typed(
+    unit: u8,
+    address: u16,
+    registers: &[u16],
+    format: Format,
+    json: bool,
+) -> anyhow::Result<()> {
+    let width = usize::from(format.registers());
+    let values = registers
+        .chunks(width)
+        .map(|chunk| format.decode(chunk))
+        .collect::<Result<Vec<_>, _>>()
+        .with_context(|| {
+            format!(
+                "unit {unit}, registers from {address} (0x{address:04X}) as {}",
+                format.data_type
+            )
+        })?;
+    if json {
+        let values: Vec<Value> = values.iter().map(typed_json).collect();
+        output::line(json!({
+            "unit": unit,
+            "address": address,
+            "type": format.data_type.to_string(),
+            "values": values,
+        }))?;
+        return Ok(());
+    }
+    for (index, value) in values.iter().enumerate() {
+        let a = usize::from(address) + index * width;
+        output::line(format!("{a:>5} (0x{a:04X}) = {value}"))?;
+    }
+    Ok(())
+}
+
+/// What a write carried, as JSON: the typed values as given with --type, else the
+/// registers or coils.
+fn written_json(action: &ModbusAction, request: &Request) -> anyhow::Result<Value> {
+    if let (ModbusAction::WriteRegisters { values, .. }, Some(format)) = (action, action.format()) {
+        let typed = values
+            .iter()
+            .map(|v| format.data_type.parse_value(v).map(|t| typed_json(&t)))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(usage)?;
+        return Ok(json!(typed));
+    }
+    Ok(written_values(request))
 }
 
 fn values_json(unit: u8, request: &Request, values: Value) -> Value {
@@ -683,7 +854,8 @@ pub struct SimModbusArgs {
     #[arg(long, value_name = "N")]
     pub unit: Option<u8>,
     /// Which coils, discrete inputs, holding and input registers exist, with their first
-    /// values (lines like `holding 0x0000 = 1 2 3`, `coil 10 = 1 0 1`, `unit 17`; see the
+    /// values (lines like `holding 0x0000 = 1 2 3`, `coil 10 = 1 0 1`, `unit 17`, typed
+    /// `holding 0x0100 float32 CDAB = 229.7` or `input 0x20 string:4 = "PUMP 7"`; see the
     /// jbus crate's slave::map). Without it every address of every table exists, holds 0,
     /// and coils and holding registers are writable.
     #[arg(long, value_name = "FILE")]

@@ -255,6 +255,216 @@ fn a_map_file_defines_the_simulators_tables_and_unit() {
     assert_eq!(json_of(&out)["values"], json!([true]));
 }
 
+/// A generic simulator serving `map` (unit 1).
+fn sim_with_map(dir: &tempfile::TempDir, map: &str) -> Sim {
+    let path = dir.path().join("typed.map");
+    std::fs::write(&path, map).unwrap();
+    Sim::start(&[
+        "modbus",
+        "--listen",
+        "127.0.0.1:0",
+        "--map",
+        path.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn typed_values_in_a_map_read_back_with_their_type_and_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = sim_with_map(
+        &dir,
+        "holding 0x0100 float32 CDAB = 229.7\n\
+         holding 0x0110 int32 = -2 70000\n\
+         holding 0x0120 string:4 = \"PUMP 7\"\n\
+         holding 0x0130 uint64 DCBA = 0x0102030405060708\n\
+         holding 0x0140 = 0x0009\n\
+         input 0x10 float64 = 1.5 -2.25\n",
+    );
+    let read = |args: &[&str]| {
+        let out = modbus(&sim, "1", args);
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        out
+    };
+    let out = read(&[
+        "--json",
+        "read-holding",
+        "0x100",
+        "1",
+        "--type",
+        "float32",
+        "--order",
+        "CDAB",
+    ]);
+    assert_eq!(
+        json_of(&out),
+        json!({"unit": 1, "address": 256, "type": "float32", "values": [229.7]})
+    );
+    // The registers as they stand: 229.7 = 0x4365B333, words swapped.
+    let out = read(&["--json", "read-holding", "0x100", "2"]);
+    assert_eq!(json_of(&out)["values"], json!([0xB333, 0x4365]));
+    let out = read(&[
+        "read-holding",
+        "0x100",
+        "1",
+        "--type",
+        "float32",
+        "--order",
+        "cdab",
+    ]);
+    assert_eq!(stdout(&out).trim(), "256 (0x0100) = 229.7");
+    let out = read(&["--json", "read-holding", "0x110", "2", "--type", "int32"]);
+    assert_eq!(json_of(&out)["values"], json!([-2, 70000]));
+    let out = read(&["read-holding", "0x110", "2", "--type", "int32"]);
+    assert_eq!(
+        stdout(&out),
+        "  272 (0x0110) = -2\n  274 (0x0112) = 70000\n"
+    );
+    let out = read(&["--json", "read-holding", "0x120", "1", "--type", "string:4"]);
+    assert_eq!(json_of(&out)["values"], json!(["PUMP 7"]));
+    let out = read(&[
+        "--json",
+        "read-holding",
+        "0x130",
+        "1",
+        "--type",
+        "uint64",
+        "--order",
+        "DCBA",
+    ]);
+    assert_eq!(json_of(&out)["values"], json!([0x0102_0304_0506_0708u64]));
+    let out = read(&["--json", "read-holding", "0x140", "1", "--type", "bit:3"]);
+    assert_eq!(json_of(&out)["values"], json!([true]));
+    let out = read(&["--json", "read-holding", "0x140", "1", "--type", "bit:1"]);
+    assert_eq!(json_of(&out)["values"], json!([false]));
+    let out = read(&["--json", "read-input", "0x10", "2", "--type", "float64"]);
+    assert_eq!(
+        json_of(&out),
+        json!({"unit": 1, "address": 16, "type": "float64", "values": [1.5, -2.25]})
+    );
+}
+
+#[test]
+fn typed_writes_encode_each_value_in_its_registers() {
+    let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0"]);
+    let ok = |args: &[&str]| {
+        let out = modbus(&sim, "1", args);
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        out
+    };
+    let out = ok(&[
+        "--json",
+        "write-registers",
+        "0x10",
+        "--type",
+        "int32",
+        "-2",
+        "70000",
+    ]);
+    assert_eq!(
+        json_of(&out),
+        json!({"unit": 1, "address": 16, "values": [-2, 70000]})
+    );
+    // 70000 = 0x00011170.
+    let out = ok(&["--json", "read-holding", "0x10", "4"]);
+    assert_eq!(
+        json_of(&out)["values"],
+        json!([0xFFFF, 0xFFFE, 0x0001, 0x1170])
+    );
+    let out = ok(&["--json", "read-holding", "0x10", "2", "--type", "int32"]);
+    assert_eq!(json_of(&out)["values"], json!([-2, 70000]));
+
+    ok(&[
+        "write-registers",
+        "0x20",
+        "--type",
+        "float32",
+        "--order",
+        "CDAB",
+        "229.7",
+    ]);
+    let out = ok(&["--json", "read-holding", "0x20", "2"]);
+    assert_eq!(json_of(&out)["values"], json!([0xB333, 0x4365]));
+
+    ok(&["write-registers", "0x30", "--type", "string:3", "Hi!"]);
+    let out = ok(&["--json", "read-holding", "0x30", "3"]);
+    assert_eq!(json_of(&out)["values"], json!([0x4869, 0x2100, 0]));
+    let out = ok(&["--json", "read-holding", "0x30", "1", "--type", "string:3"]);
+    assert_eq!(json_of(&out)["values"], json!(["Hi!"]));
+
+    // --order alone: plain registers with their bytes swapped.
+    ok(&["write-registers", "0x40", "--order", "BADC", "0x1234"]);
+    let out = ok(&["--json", "read-holding", "0x40", "1"]);
+    assert_eq!(json_of(&out)["values"], json!([0x3412]));
+}
+
+#[test]
+fn bad_types_orders_and_typed_values_exit_2_naming_the_text_and_the_choices() {
+    // No simulator: nothing reaches a line.
+    let endpoint = "tcp://127.0.0.1:9";
+    let usage = |args: &[&str], expected: &[&str]| {
+        let mut all = vec!["modbus", "--endpoint", endpoint, "--unit", "1"];
+        all.extend_from_slice(args);
+        let out = run(&all);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+        for text in expected {
+            assert!(
+                stderr(&out).contains(text),
+                "{text:?} missing: {}",
+                stderr(&out)
+            );
+        }
+    };
+    usage(
+        &["read-holding", "0", "1", "--type", "float"],
+        &[
+            "`float` is not a data type",
+            "int16, uint16, int32",
+            "float32",
+            "string:N",
+        ],
+    );
+    usage(
+        &[
+            "read-holding",
+            "0",
+            "1",
+            "--type",
+            "float32",
+            "--order",
+            "ACBD",
+        ],
+        &["`ACBD` is not a byte order", "ABCD, CDAB, BADC, DCBA"],
+    );
+    usage(
+        &["write-registers", "0", "--type", "int16", "40000"],
+        &["40000 does not fit int16 (-32768 to 32767)"],
+    );
+    usage(
+        &["write-registers", "0", "--type", "uint16", "-1"],
+        &["-1 does not fit uint16"],
+    );
+    usage(
+        &["write-registers", "0", "--type", "int32", "1.5"],
+        &["1.5 is not a whole number"],
+    );
+    usage(
+        &["write-registers", "0", "--type", "string:1", "ABC"],
+        &["holds at most 2"],
+    );
+    usage(
+        &["write-registers", "0", "--type", "bit:3", "1"],
+        &["bit 3"],
+    );
+    usage(
+        &["read-holding", "0", "63", "--type", "float32"],
+        &["63 values of float32 take 126 registers"],
+    );
+    usage(
+        &["read-holding", "0", "1", "--type", "string:200"],
+        &["1 to 125 registers"],
+    );
+}
+
 #[test]
 fn a_bad_map_file_exits_2_naming_the_line() {
     let dir = tempfile::tempdir().unwrap();

@@ -11,6 +11,10 @@
 //! - [`client`]: the async master over a `link` line: one request in flight per line,
 //!   timeouts, retries, the inter-frame silence, answers checked before they are accepted.
 //! - [`annotate`]: frames of a capture in words, requests and responses told apart.
+//! - [`data`]: values spanning registers (16-, 32-, 64-bit integers, floats, strings,
+//!   bits) in a device's byte and word order, with a linear scale.
+//! - [`plan`]: the fewest reads that fetch a set of wanted registers and bits, split
+//!   further when a device refuses a merged range.
 //!
 //! Apart from [`client`], nothing here reads a clock or touches a port: time comes in as
 //! `now`, bytes through `wire::Codec`s and `wire::device::Model`s, which the `link` crate
@@ -22,6 +26,8 @@ pub mod annotate;
 #[cfg(feature = "io")]
 pub mod client;
 pub mod cross;
+pub mod data;
+pub mod plan;
 pub mod rtu;
 pub mod slave;
 pub mod tcp;

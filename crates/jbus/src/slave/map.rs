@@ -9,14 +9,22 @@
 //! coil 10 = 1 0 1             # coils 10, 11, 12 (values 0 or 1)
 //! discrete 0x20 = 0 1         # discrete inputs 0x20, 0x21
 //! holding 0x1000..=0x10FF     # a block of holding registers, all 0
+//! holding 0x0100 float32 CDAB = 229.7 -1.5   # typed values: 4 registers from 0x0100
+//! input 0x200 int32 = -2       # order ABCD unless given
+//! holding 0x300 string:4 = "PUMP 7"           # 4 registers, NUL-padded
 //! ```
 //!
 //! Numbers are decimal or `0x` hex. An address defined twice is an error, so a typo
-//! cannot hide a register.
+//! cannot hide a register. Holding and input registers take typed values
+//! (`TABLE ADDR TYPE [ORDER] = VALUE…`, types and orders of [`crate::data`]): each value
+//! fills the type's registers, one after the other. A string takes the rest of the line,
+//! in double quotes if it has spaces at its ends (a `#` inside quotes is text, not a
+//! comment). A single bit (`bit:N`) is not a map value: give its register's value.
 
 use std::fmt;
 use std::str::FromStr;
 
+use crate::data::{DataType, Format, Order, ParseTypeError};
 use crate::rtu::{ADDRESS_SPACE, InvalidValue, UnitId};
 
 /// One of the four Modbus tables.
@@ -162,6 +170,33 @@ pub enum MapProblem {
     /// A bad unit number.
     #[error("bad unit: {0}")]
     UnitId(InvalidValue),
+    /// A type or order that is not one.
+    #[error("{0}")]
+    BadType(ParseTypeError),
+    /// A type on a table of bits.
+    #[error(
+        "{table} hold single bits: a type such as `{data_type}` is for holding and input registers"
+    )]
+    TypeOnBits {
+        /// The table.
+        table: Table,
+        /// The type given.
+        data_type: DataType,
+    },
+    /// `bit:N` as a map value.
+    #[error(
+        "`{data_type}` is one bit of a register: give the register's value instead (e.g. `= 0x0008` for bit 3)"
+    )]
+    BitValue {
+        /// The type given.
+        data_type: DataType,
+    },
+    /// A value that its type cannot hold, in words.
+    #[error("{problem}")]
+    BadValue {
+        /// What is wrong with it.
+        problem: String,
+    },
 }
 
 /// The addresses of one table that exist, and their values.
@@ -302,7 +337,7 @@ impl SlaveMap {
     }
 
     fn parse_line(&mut self, raw: &str, line: usize) -> Result<(), MapProblem> {
-        let text = raw.split('#').next().unwrap_or_default();
+        let text = strip_comment(raw);
         let mut words = text.split_whitespace();
         let Some(keyword) = words.next() else {
             return Ok(());
@@ -336,15 +371,18 @@ impl SlaveMap {
         let values: Vec<u16> = match last {
             Some(last) => vec![0; usize::from(last - first) + 1],
             None => {
-                match words.next() {
-                    Some("=") => {}
+                let values = match words.next() {
+                    Some("=") => words
+                        .map(|w| parse_value(w, table))
+                        .collect::<Result<Vec<u16>, _>>()?,
+                    // A type starts with a letter; anything else is a missing `=`.
+                    Some(word) if word.starts_with(|c: char| c.is_ascii_alphabetic()) => {
+                        parse_typed(text, word, &mut words, table)?
+                    }
                     other => {
                         return Err(expected("`=` and values, or a range `FIRST..=LAST`", other));
                     }
-                }
-                let values = words
-                    .map(|w| parse_value(w, table))
-                    .collect::<Result<Vec<u16>, _>>()?;
+                };
                 if values.is_empty() {
                     return Err(expected("values after `=`", None));
                 }
@@ -425,6 +463,71 @@ fn parse_number(word: Option<&str>, what: &'static str, max: u64) -> Result<u64,
 fn parse_address(word: Option<&str>) -> Result<u16, MapProblem> {
     let value = parse_number(word, "address", u64::from(u16::MAX))?;
     Ok(u16::try_from(value).unwrap_or(u16::MAX))
+}
+
+/// The line without its comment: from the first `#` outside double quotes.
+fn strip_comment(raw: &str) -> &str {
+    let mut quoted = false;
+    for (index, character) in raw.char_indices() {
+        match character {
+            '"' => quoted = !quoted,
+            '#' if !quoted => return &raw[..index],
+            _ => {}
+        }
+    }
+    raw
+}
+
+/// The registers of `TYPE [ORDER] = VALUE…`, `type_word` being the type and `words` the
+/// rest of `text`'s words.
+fn parse_typed<'a>(
+    text: &'a str,
+    type_word: &str,
+    words: &mut impl Iterator<Item = &'a str>,
+    table: Table,
+) -> Result<Vec<u16>, MapProblem> {
+    let data_type: DataType = type_word.parse().map_err(MapProblem::BadType)?;
+    if table.holds_bits() {
+        return Err(MapProblem::TypeOnBits { table, data_type });
+    }
+    if matches!(data_type, DataType::Bit(_)) {
+        return Err(MapProblem::BitValue { data_type });
+    }
+    let order = match words.next() {
+        Some("=") => Order::default(),
+        Some(word) => {
+            let order: Order = word.parse().map_err(MapProblem::BadType)?;
+            match words.next() {
+                Some("=") => order,
+                other => return Err(expected("`=` and values", other)),
+            }
+        }
+        None => return Err(expected("an order or `=` and values", None)),
+    };
+    let format = Format::new(data_type, order);
+    let bad = |e: crate::data::EncodeError| MapProblem::BadValue {
+        problem: e.to_string(),
+    };
+    if matches!(data_type, DataType::String(_)) {
+        // The rest of the line after the `=` (the first one: the line is not a range).
+        let rest = text.split_once('=').map_or("", |(_, rest)| rest).trim();
+        if rest.is_empty() {
+            return Err(expected("values after `=`", None));
+        }
+        let unquoted = rest
+            .strip_prefix('"')
+            .and_then(|r| r.strip_suffix('"'))
+            .unwrap_or(rest);
+        return format.encode_text(unquoted).map_err(bad);
+    }
+    let mut registers = Vec::new();
+    for word in words {
+        registers.extend(format.encode_text(word).map_err(bad)?);
+    }
+    if registers.is_empty() {
+        return Err(expected("values after `=`", None));
+    }
+    Ok(registers)
 }
 
 fn parse_value(word: &str, table: Table) -> Result<u16, MapProblem> {
@@ -553,6 +656,90 @@ mod tests {
             }
         );
         assert_eq!(problem("\n\nunit 5 6").line, 3);
+    }
+
+    #[test]
+    fn typed_values_fill_their_registers_in_their_order() {
+        let map = SlaveMap::parse(
+            "holding 0x0100 float32 CDAB = 229.7 -2\n\
+             input 0x200 INT32 = -2   # order ABCD by default\n\
+             holding 0x300 string:4 = \"PUMP #7\"  # a '#' in quotes is text\n\
+             holding 0x310 string:2 = AB\n\
+             input 0 uint64 dcba = 0x0102030405060708\n\
+             holding 0x400 = 1\n",
+        )
+        .expect("a good map");
+        let holding = |a| map.get(Table::HoldingRegisters, a);
+        let input = |a| map.get(Table::InputRegisters, a);
+        // 229.7 = 0x4365B333, words swapped; -2.0 = 0xC0000000.
+        assert_eq!(holding(0x100), Some(0xB333));
+        assert_eq!(holding(0x101), Some(0x4365));
+        assert_eq!(holding(0x102), Some(0x0000));
+        assert_eq!(holding(0x103), Some(0xC000));
+        assert_eq!(holding(0x104), None);
+        assert_eq!(input(0x200), Some(0xFFFF));
+        assert_eq!(input(0x201), Some(0xFFFE));
+        assert_eq!(
+            (0x300..0x304).map(holding).collect::<Vec<_>>(),
+            [Some(0x5055), Some(0x4D50), Some(0x2023), Some(0x3700)]
+        );
+        assert_eq!(holding(0x310), Some(0x4142));
+        assert_eq!(holding(0x311), Some(0));
+        assert_eq!(
+            (0..4).map(input).collect::<Vec<_>>(),
+            [Some(0x0807), Some(0x0605), Some(0x0403), Some(0x0201)]
+        );
+        assert_eq!(holding(0x400), Some(1));
+    }
+
+    #[test]
+    fn typed_values_that_do_not_fit_are_refused_naming_value_and_type() {
+        assert_eq!(
+            problem("holding 0 int16 = 40000").to_string(),
+            "line 1: 40000 does not fit int16 (-32768 to 32767)"
+        );
+        assert!(
+            problem("holding 0 flaot32 = 1")
+                .to_string()
+                .contains("`flaot32` is not a data type: choose one of int16")
+        );
+        assert!(
+            problem("holding 0 float32 ACBD = 1")
+                .to_string()
+                .contains("choose one of ABCD, CDAB, BADC, DCBA")
+        );
+        assert!(matches!(
+            problem("coil 0 float32 = 1").problem,
+            MapProblem::TypeOnBits { .. }
+        ));
+        assert!(matches!(
+            problem("holding 0 bit:3 = 1").problem,
+            MapProblem::BitValue { .. }
+        ));
+        assert!(
+            problem("holding 0 string:1 = ABC")
+                .to_string()
+                .contains("holds at most 2")
+        );
+        assert_eq!(
+            problem("holding 0 float32 CDAB").to_string(),
+            "line 1: expected `=` and values, found end of line"
+        );
+        assert_eq!(
+            problem("holding 0 float32 =").to_string(),
+            "line 1: expected values after `=`, found end of line"
+        );
+        assert_eq!(
+            problem("holding 0 = 1\nholding 0xFFFF float32 = 1").problem,
+            MapProblem::PastLastAddress {
+                address: 0xFFFF,
+                count: 2
+            }
+        );
+        assert!(matches!(
+            problem("holding 0 = 1\nholding 0 int32 = 1").problem,
+            MapProblem::Duplicate { .. }
+        ));
     }
 
     #[test]
