@@ -11,10 +11,11 @@
 //! Births, data and deaths go out with QoS 0, so the broker acknowledges nothing. What it
 //! has certainly received is read from the keep-alive: rumqttc sends a PINGREQ every
 //! keep-alive whatever else it sends, the packets of one connection arrive in order, and the
-//! broker answers a PINGREQ only after it has read what came before. [`Delivery`] follows
-//! the publishes handed to the client, the publishes the client wrote, and the last
-//! PINGREQ written: when its PINGRESP arrives, everything written before it has arrived.
-//! A clean DISCONNECT confirms everything written before it in the same way.
+//! broker answers a PINGREQ only after it has read what came before. [`Delivery`] numbers
+//! the publishes handed to the client; the client's event loop counts the publishes it
+//! wrote and reports the count with each PINGREQ: when its PINGRESP arrives, everything
+//! written before it has arrived. A clean DISCONNECT confirms everything written before it
+//! in the same way.
 //!
 //! The stored changes sent after an outage start [`MARGIN`] before the mark: changes read on
 //! different lines reach the change stream in about, not exactly, their time order. A
@@ -39,16 +40,17 @@ pub const FORWARDED_KEY: &str = "mqtt.forwarded_until";
 
 /// What the broker has certainly received, from the client's view of one connection.
 ///
-/// Each publish handed to the client carries the latest read time among the changes it
-/// holds (`None` for births and deaths).
+/// Each publish handed to the client is numbered (0, 1, …, per connection) with the latest
+/// read time among the changes it holds; the client's event loop counts the publishes it
+/// has written and reports the count with each PINGREQ and the DISCONNECT.
 #[derive(Debug)]
 pub struct Delivery {
-    /// Read times of publishes handed to the client and not yet written, in order.
-    queued: VecDeque<Option<Timestamp>>,
-    /// The latest read time among the publishes written.
-    written: Option<Timestamp>,
-    /// `written` when the last PINGREQ went out, if its answer is awaited.
-    at_ping: Option<Option<Timestamp>>,
+    /// Publishes handed to the client in this connection.
+    handed: u64,
+    /// (number, latest read time) of publishes holding changes, not yet confirmed.
+    unconfirmed: VecDeque<(u64, Timestamp)>,
+    /// Publishes written when the last PINGREQ went out, if its answer is awaited.
+    at_ping: Option<u64>,
     /// The mark: every change read at or before it has reached the broker.
     forwarded: Timestamp,
 }
@@ -57,8 +59,8 @@ impl Delivery {
     /// Starts from the mark `forwarded` (read from the database, or the start time).
     pub fn new(forwarded: Timestamp) -> Self {
         Self {
-            queued: VecDeque::new(),
-            written: None,
+            handed: 0,
+            unconfirmed: VecDeque::new(),
             at_ping: None,
             forwarded,
         }
@@ -69,40 +71,37 @@ impl Delivery {
         self.forwarded
     }
 
-    /// A publish holding changes read up to `latest` was handed to the client.
+    /// A publish holding changes read up to `latest` (none for births and deaths) was
+    /// handed to the client.
     pub fn handed(&mut self, latest: Option<Timestamp>) {
-        self.queued.push_back(latest);
-    }
-
-    /// The client wrote the next publish.
-    pub fn wrote_publish(&mut self) {
-        if let Some(Some(t)) = self.queued.pop_front() {
-            self.written = Some(self.written.map_or(t, |w| w.max(t)));
+        if let Some(t) = latest {
+            self.unconfirmed.push_back((self.handed, t));
         }
+        self.handed += 1;
     }
 
-    /// The client wrote a PINGREQ.
-    pub fn wrote_ping(&mut self) {
-        self.at_ping = Some(self.written);
+    /// The client wrote a PINGREQ after writing `written` publishes.
+    pub fn wrote_ping(&mut self, written: u64) {
+        self.at_ping = Some(written);
     }
 
     /// The broker answered the PINGREQ: returns the new mark if it moved.
     pub fn ping_answered(&mut self) -> Option<Timestamp> {
-        let confirmed = self.at_ping.take()??;
-        self.advance(confirmed)
+        let written = self.at_ping.take()?;
+        self.confirm(written)
     }
 
-    /// The connection was closed cleanly after everything was written: returns the new
-    /// mark if it moved.
-    pub fn closed_cleanly(&mut self) -> Option<Timestamp> {
-        let written = self.written?;
-        self.advance(written)
+    /// The client wrote the DISCONNECT after `written` publishes, and the connection was
+    /// closed cleanly: returns the new mark if it moved.
+    pub fn closed_cleanly(&mut self, written: u64) -> Option<Timestamp> {
+        self.confirm(written)
     }
 
-    /// The connection is gone: nothing unconfirmed counts any more.
+    /// The connection is gone: nothing unconfirmed counts any more, and the next
+    /// connection numbers its publishes from 0.
     pub fn lost(&mut self) {
-        self.queued.clear();
-        self.written = None;
+        self.handed = 0;
+        self.unconfirmed.clear();
         self.at_ping = None;
     }
 
@@ -115,7 +114,17 @@ impl Delivery {
         })
     }
 
-    fn advance(&mut self, to: Timestamp) -> Option<Timestamp> {
+    /// The first `written` publishes have arrived.
+    fn confirm(&mut self, written: u64) -> Option<Timestamp> {
+        let mut latest = None;
+        while let Some(&(number, t)) = self.unconfirmed.front() {
+            if number >= written {
+                break;
+            }
+            latest = Some(latest.map_or(t, |l: Timestamp| l.max(t)));
+            self.unconfirmed.pop_front();
+        }
+        let to = latest?;
         (to > self.forwarded).then(|| {
             self.forwarded = to;
             to
@@ -194,13 +203,10 @@ mod tests {
         d.handed(Some(Timestamp(200)));
         d.handed(None);
         d.handed(Some(Timestamp(300)));
-        d.wrote_publish();
-        d.wrote_publish();
-        d.wrote_ping();
-        d.wrote_publish(); // after the ping: not confirmed by its answer
+        d.wrote_ping(2); // the third publish was written after the ping
         assert_eq!(d.ping_answered(), Some(Timestamp(200)));
         assert_eq!(d.forwarded(), Timestamp(200));
-        d.wrote_ping();
+        d.wrote_ping(3);
         assert_eq!(d.ping_answered(), Some(Timestamp(300)));
     }
 
@@ -208,24 +214,25 @@ mod tests {
     fn nothing_is_confirmed_without_an_answer_or_after_a_loss() {
         let mut d = Delivery::new(Timestamp(100));
         d.handed(Some(Timestamp(200)));
-        d.wrote_publish();
         assert_eq!(d.ping_answered(), None, "no ping was written");
-        d.wrote_ping();
+        d.wrote_ping(1);
         d.lost();
         assert_eq!(d.ping_answered(), None);
-        assert_eq!(d.closed_cleanly(), None);
+        assert_eq!(d.closed_cleanly(1), None);
         assert_eq!(d.forwarded(), Timestamp(100));
+        // The next connection numbers from 0 again.
+        d.handed(Some(Timestamp(400)));
+        d.wrote_ping(1);
+        assert_eq!(d.ping_answered(), Some(Timestamp(400)));
     }
 
     #[test]
     fn a_clean_close_confirms_everything_written_and_the_mark_never_goes_back_by_itself() {
         let mut d = Delivery::new(Timestamp(500));
         d.handed(Some(Timestamp(400)));
-        d.wrote_publish();
-        assert_eq!(d.closed_cleanly(), None, "older than the mark");
+        assert_eq!(d.closed_cleanly(1), None, "older than the mark");
         d.handed(Some(Timestamp(600)));
-        d.wrote_publish();
-        assert_eq!(d.closed_cleanly(), Some(Timestamp(600)));
+        assert_eq!(d.closed_cleanly(2), Some(Timestamp(600)));
         assert_eq!(d.rewind_to(Timestamp(550)), Some(Timestamp(550)));
         assert_eq!(d.rewind_to(Timestamp(700)), None);
     }

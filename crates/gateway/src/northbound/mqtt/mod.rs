@@ -335,7 +335,7 @@ impl Link {
 pub struct Connection<'a> {
     link: &'a Link,
     client: AsyncClient,
-    events: mpsc::UnboundedReceiver<Result<MqttEvent, String>>,
+    events: mpsc::UnboundedReceiver<Pumped>,
     delivery: &'a mut Delivery,
     stop: &'a mut watch::Receiver<bool>,
     tick: tokio::time::Interval,
@@ -364,28 +364,27 @@ impl Connection<'_> {
                 _ = self.tick.tick() => return Ok(Step::Tick),
             };
             match event {
-                Some(Ok(MqttEvent::Incoming(Packet::ConnAck(_)))) => {
+                Some(Pumped::Event(MqttEvent::Incoming(Packet::ConnAck(_)))) => {
                     *self.connections += 1;
                     if *self.connections > 1 {
                         self.link.cell.metrics().mqtt_reconnects.inc();
                     }
                     return Ok(Step::Connected);
                 }
-                Some(Ok(MqttEvent::Incoming(Packet::Publish(p)))) => {
+                Some(Pumped::Event(MqttEvent::Incoming(Packet::Publish(p)))) => {
                     return Ok(Step::Message {
                         topic: p.topic,
                         payload: p.payload.to_vec(),
                     });
                 }
-                Some(Ok(MqttEvent::Incoming(Packet::PingResp))) => {
+                Some(Pumped::Event(MqttEvent::Incoming(Packet::PingResp))) => {
                     if let Some(t) = self.delivery.ping_answered() {
                         self.link.store_forwarded(t).await;
                     }
                 }
-                Some(Ok(MqttEvent::Outgoing(Sent::Publish(_)))) => self.delivery.wrote_publish(),
-                Some(Ok(MqttEvent::Outgoing(Sent::PingReq))) => self.delivery.wrote_ping(),
-                Some(Ok(_)) => {}
-                Some(Err(why)) => return Err(End::Lost(why)),
+                Some(Pumped::Ping { written }) => self.delivery.wrote_ping(written),
+                Some(Pumped::Event(_) | Pumped::Disconnected { .. }) => {}
+                Some(Pumped::End(why)) => return Err(End::Lost(why)),
                 None => return Err(End::Lost("the MQTT client stopped".to_owned())),
             }
         }
@@ -440,33 +439,63 @@ impl Connection<'_> {
         let drained = tokio::time::timeout(STOP_GRACE, async {
             while let Some(event) = self.events.recv().await {
                 match event {
-                    Ok(MqttEvent::Outgoing(Sent::Publish(_))) => self.delivery.wrote_publish(),
-                    Ok(MqttEvent::Outgoing(Sent::Disconnect)) => return true,
-                    Ok(_) => {}
-                    Err(_) => return false,
+                    Pumped::Disconnected { written } => return Some(written),
+                    Pumped::End(_) => return None,
+                    Pumped::Event(_) | Pumped::Ping { .. } => {}
                 }
             }
-            false
+            None
         })
         .await;
-        if drained == Ok(true)
-            && let Some(t) = self.delivery.closed_cleanly()
+        if let Ok(Some(written)) = drained
+            && let Some(t) = self.delivery.closed_cleanly(written)
         {
             self.link.store_forwarded(t).await;
         }
     }
 }
 
-/// Forwards the event loop's events and its end (described, a failed TLS handshake as
-/// one); polling it is what drives the connection.
-async fn pump(mut eventloop: EventLoop, events: mpsc::UnboundedSender<Result<MqttEvent, String>>) {
+/// What the event loop reports to the connection's task.
+#[derive(Debug)]
+pub enum Pumped {
+    /// An incoming packet (or an outgoing one the task does not count).
+    Event(MqttEvent),
+    /// A PINGREQ went out after this many publishes of the connection.
+    Ping {
+        /// Publishes written before it.
+        written: u64,
+    },
+    /// The DISCONNECT went out after this many publishes of the connection.
+    Disconnected {
+        /// Publishes written before it.
+        written: u64,
+    },
+    /// The connection ended, described (a failed TLS handshake as one).
+    End(String),
+}
+
+/// Drives the event loop (polling it is what drives the connection) and reports to the
+/// connection's task. Written publishes are only counted, not reported one by one: at
+/// tens of thousands a second, a message per publish would cost more than the publish.
+async fn pump(mut eventloop: EventLoop, events: mpsc::UnboundedSender<Pumped>) {
+    let mut written = 0_u64;
     loop {
-        let event = eventloop.poll().await.map_err(|e| {
-            let (host, port) = eventloop.mqtt_options.broker_address();
-            tls::describe(&e, &host, port)
-        });
-        let end = event.is_err();
-        if events.send(event).is_err() || end {
+        let report = match eventloop.poll().await {
+            Ok(MqttEvent::Outgoing(Sent::Publish(_))) => {
+                written += 1;
+                continue;
+            }
+            Ok(MqttEvent::Outgoing(Sent::PingReq)) => Pumped::Ping { written },
+            Ok(MqttEvent::Outgoing(Sent::Disconnect)) => Pumped::Disconnected { written },
+            Ok(MqttEvent::Outgoing(_)) => continue,
+            Ok(event) => Pumped::Event(event),
+            Err(e) => {
+                let (host, port) = eventloop.mqtt_options.broker_address();
+                let _ = events.send(Pumped::End(tls::describe(&e, &host, port)));
+                return;
+            }
+        };
+        if events.send(report).is_err() {
             return;
         }
     }
