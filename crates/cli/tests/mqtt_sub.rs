@@ -339,3 +339,91 @@ fn sub_exits_1_when_its_timeout_passes_without_a_message_and_when_the_broker_goe
         "{err}"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn json_mode_keeps_a_retained_message_per_point_and_the_will_says_offline() {
+    let broker = Mosquitto::start();
+    let data = tempfile::tempdir().unwrap();
+    let url = broker.url();
+    let gateway = Gateway::start_with(data.path(), &["--mqtt", &url, "--mqtt-mode", "json"]);
+    // The gateway's status and every point are retained: a subscriber that comes later
+    // gets them at once. Waiting for `online` first makes sure the points were published.
+    let mut status = Sub::start(&[
+        "--broker",
+        &url,
+        "--json",
+        "--count",
+        "1",
+        "cellbus/demo/status",
+    ]);
+    let line = status.line();
+    let message: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(message["payload"], "online", "{line}");
+    assert_eq!(status.wait(), Some(0));
+
+    let devices = api_devices(&gateway);
+    let points: usize = devices.values().map(BTreeMap::len).sum();
+    let statuses = devices.len();
+    let mut all = Sub::start(&[
+        "--broker",
+        &url,
+        "--json",
+        "--count",
+        &(points + statuses).to_string(),
+        "cellbus/demo/+/+",
+    ]);
+    let mut seen = BTreeSet::new();
+    for _ in 0..points + statuses {
+        let line = all.line();
+        let message: serde_json::Value = serde_json::from_str(&line).unwrap();
+        let topic = message["topic"].as_str().unwrap().to_owned();
+        let (device, point) = topic
+            .strip_prefix("cellbus/demo/")
+            .and_then(|rest| rest.split_once('/'))
+            .unwrap_or_else(|| panic!("{topic}"));
+        let payload = message["payload"].as_str().unwrap();
+        if point == "status" {
+            assert!(["online", "offline"].contains(&payload), "{line}");
+        } else {
+            let (unit, _) = &devices[device][point];
+            let value: serde_json::Value = serde_json::from_str(payload).unwrap();
+            assert_eq!(value["unit"].as_str(), unit.as_deref(), "{line}");
+            assert!(value["t"].is_i64() || value["t"].is_null(), "{line}");
+            let quality = value["quality"].as_str().unwrap();
+            assert!(
+                ["good", "stale", "bad", "unknown"].contains(&quality),
+                "{line}"
+            );
+            assert_eq!(
+                value["value"].is_null(),
+                quality != "good",
+                "a value only when good: {line}"
+            );
+        }
+        seen.insert(topic);
+    }
+    assert_eq!(all.wait(), Some(0));
+    assert_eq!(
+        seen.len(),
+        points + statuses,
+        "one retained message per topic"
+    );
+
+    // kill -9: the broker publishes the Will, which stays as the gateway's status.
+    drop(gateway);
+    let mut status = Sub::start(&[
+        "--broker",
+        &url,
+        "--json",
+        "--timeout",
+        "60s",
+        "cellbus/demo/status",
+    ]);
+    loop {
+        let line = status.line();
+        let message: serde_json::Value = serde_json::from_str(&line).unwrap();
+        if message["payload"] == "offline" {
+            break;
+        }
+    }
+}
