@@ -9,20 +9,24 @@ use std::process::Command;
 use common::Gateway;
 
 #[test]
-fn the_page_shows_every_demo_device_and_a_value_changes_by_itself() {
-    let seen = open_the_page(None);
+fn the_page_shows_every_demo_device_a_value_changing_by_itself_and_the_mqtt_link() {
+    let broker = testkit::Mosquitto::start();
+    let seen = open_the_page(None, Some(&broker.url()));
     assert_eq!(seen["asked"], 0, "no prompt without a read token");
+    assert_eq!(seen["mqtt"], "MQTT", "the MQTT link shows as up");
 }
 
 #[test]
 fn a_gateway_with_a_read_token_is_asked_for_it_once_and_then_shows_the_cell() {
-    let seen = open_the_page(Some("look-only"));
+    let seen = open_the_page(Some("look-only"), None);
     assert_eq!(seen["asked"], 1, "one prompt");
+    assert_eq!(seen["mqtt"], serde_json::Value::Null, "no MQTT, no MQTT badge");
 }
 
-/// Starts the demo gateway (with `read_token` if given), opens its page in Chromium and
-/// checks a card for every device and a value that changes; returns what the page saw.
-fn open_the_page(read_token: Option<&str>) -> serde_json::Value {
+/// Starts the demo gateway (with `read_token` if given, publishing to the MQTT broker
+/// `mqtt` if given), opens its page in Chromium and checks a card for every device and a
+/// value that changes; returns what the page saw.
+fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Value {
     let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/web");
     assert!(
         web.join("node_modules/playwright-core").is_dir(),
@@ -36,7 +40,10 @@ fn open_the_page(read_token: Option<&str>) -> serde_json::Value {
     );
 
     let data = tempfile::tempdir().unwrap();
-    let args: Vec<&str> = read_token.map_or(vec![], |t| vec!["--read-token", t]);
+    let mut args: Vec<&str> = read_token.map_or(vec![], |t| vec!["--read-token", t]);
+    if let Some(url) = mqtt {
+        args.extend(["--mqtt", url]);
+    }
     let gateway = Gateway::start_with(data.path(), &args);
     let screenshot = data.path().join("page.png");
     let out = Command::new("node")
@@ -45,6 +52,7 @@ fn open_the_page(read_token: Option<&str>) -> serde_json::Value {
         .arg(&screenshot)
         .env("CHROMIUM", &chromium)
         .env("READ_TOKEN", read_token.unwrap_or(""))
+        .env("MQTT", if mqtt.is_some() { "1" } else { "" })
         .output()
         .expect("node runs (install Node.js: it comes with npm)");
     let stdout = String::from_utf8_lossy(&out.stdout);

@@ -3,6 +3,7 @@
 // Usage: node page.mjs http://127.0.0.1:PORT screenshot.png
 // With READ_TOKEN set, the gateway needs it: the page must ask for it (a prompt, answered
 // here) before it shows anything.
+// With MQTT set, the gateway publishes to a broker: the page must show the MQTT link up.
 // Prints one JSON line with what it saw; exits non-zero with a reason otherwise.
 import { chromium } from 'playwright-core';
 
@@ -55,9 +56,20 @@ try {
     { timeout: 20000, polling: 100 },
   );
   const change = await changed.jsonValue();
+  if (process.env.MQTT) {
+    await page.waitForFunction(
+      () => document.getElementById('mqtt').textContent === 'MQTT',
+      null,
+      { timeout: 30000, polling: 100 },
+    );
+  }
+  const mqtt = await page.evaluate(() => {
+    const badge = document.getElementById('mqtt');
+    return badge.hidden ? null : badge.textContent;
+  });
   if (screenshot) await page.screenshot({ path: screenshot, fullPage: true });
   if (errors.length) throw new Error(`the page threw: ${errors.join('; ')}`);
-  console.log(JSON.stringify({ devices: ids, points: before.length, change, asked }));
+  console.log(JSON.stringify({ devices: ids, points: before.length, change, asked, mqtt }));
 } finally {
   await browser.close();
 }

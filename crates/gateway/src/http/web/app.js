@@ -272,7 +272,26 @@ async function refreshLines() {
   }
 }
 
+// The MQTT link as /healthz says it (hidden when the gateway publishes nothing).
+async function refreshMqtt() {
+  try {
+    const response = await api('/healthz');
+    if (!response.ok) return;
+    const link = (await response.json()).mqtt;
+    const badge = document.getElementById('mqtt');
+    badge.hidden = !link;
+    if (!link) return;
+    const connected = link === 'connected';
+    badge.dataset.state = connected ? 'live' : 'lost';
+    badge.textContent = connected ? 'MQTT' : 'MQTT down';
+    badge.title = `MQTT ${link}`;
+  } catch (e) {
+    console.warn('mqtt', e);
+  }
+}
+
 function addEvent(event, atTop = true) {
+  if (atTop && event.kind && event.kind.startsWith('mqtt_')) refreshMqtt();
   const list = document.getElementById('events');
   const item = el('li');
   item.dataset.kind = event.kind;
@@ -452,6 +471,8 @@ connect();
 tick();
 setInterval(tick, 1000);
 setInterval(refreshLines, 5000);
+refreshMqtt();
+setInterval(refreshMqtt, 10000);
 setInterval(scrollAllPlots, 2000);
 (function frame() {
   drawDirtyPlots();
