@@ -630,8 +630,34 @@ impl DeviceEntry {
         }
     }
 
-    fn view(&self, now: Timestamp) -> DeviceView {
+    /// The device as the API shows it.
+    pub fn view(&self, now: Timestamp) -> DeviceView {
+        self.build_view(now, true)
+    }
+
+    /// The device without its points (cheaper, for listings that leave them out).
+    pub fn view_without_points(&self, now: Timestamp) -> DeviceView {
+        self.build_view(now, false)
+    }
+
+    /// Status and points from one look at the state, so they agree.
+    fn build_view(&self, now: Timestamp, with_points: bool) -> DeviceView {
         let state = self.read();
+        let points = if with_points {
+            state
+                .points
+                .iter()
+                .enumerate()
+                .map(|(i, p)| PointDetail {
+                    view: self.point_view(i, p, now),
+                    kind: self.points[i].kind.clone(),
+                    group: self.points[i].group.clone(),
+                    writable: self.points[i].writable,
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         let summary = summary_of(&self.id, &state);
         DeviceView {
             name: self.name.clone(),
@@ -648,17 +674,7 @@ impl DeviceEntry {
                     period_ms: duration_millis(g.period),
                 })
                 .collect(),
-            points: state
-                .points
-                .iter()
-                .enumerate()
-                .map(|(i, p)| PointDetail {
-                    view: self.point_view(i, p, now),
-                    kind: self.points[i].kind.clone(),
-                    group: self.points[i].group.clone(),
-                    writable: self.points[i].writable,
-                })
-                .collect(),
+            points,
         }
     }
 }

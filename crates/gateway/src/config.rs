@@ -1571,9 +1571,7 @@ writable = { min = 5.0, max = 30.0 }
 
     #[test]
     fn the_mqtt_modes_commands_primary_host_and_backlog_are_read_with_their_defaults() {
-        let text = format!(
-            "{ONE}\n[mqtt]\nbroker = \"mqtt://b\"\nedge_node_id = \"cell-7\"\n"
-        );
+        let text = format!("{ONE}\n[mqtt]\nbroker = \"mqtt://b\"\nedge_node_id = \"cell-7\"\n");
         let mqtt = parse(&text).unwrap().mqtt.unwrap();
         assert_eq!(mqtt.mode, MqttMode::Sparkplug);
         assert_eq!(mqtt.prefix, "cellbus/cell-7");
@@ -1595,7 +1593,12 @@ writable = { min = 5.0, max = 30.0 }
     #[test]
     fn mqtt_mode_prefix_primary_host_and_backlog_mistakes_are_refused_where_they_are() {
         let at = |line: &str| format!("{ONE}\n[mqtt]\nbroker = \"mqtt://b\"\n{line}\n");
-        refused(&at("mode = \"xml\""), 12, 8, "write \"sparkplug\" or \"json\"");
+        refused(
+            &at("mode = \"xml\""),
+            12,
+            8,
+            "write \"sparkplug\" or \"json\"",
+        );
         refused(&at("prefix = \"a/#\""), 12, 10, "not a usable topic prefix");
         refused(&at("primary_host = \"a+b\""), 12, 16, "primary_host");
         refused(&at("max_backlog = 0"), 12, 15, "outside 1–100000000");

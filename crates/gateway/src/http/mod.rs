@@ -332,8 +332,118 @@ async fn metrics(State(s): State<AppState>) -> Response {
         .into_response()
 }
 
-async fn devices(State(s): State<AppState>) -> Json<serde_json::Value> {
-    Json(json!({ "devices": s.cell.devices(), "writes_enabled": s.writes.enabled }))
+/// Query of `/api/devices`: which devices, which of their fields, which page.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct DevicesQuery {
+    /// Only the devices on this line.
+    line: Option<String>,
+    /// Only these devices (ids separated by commas).
+    device: Option<String>,
+    /// Only these fields of each device (names separated by commas; `id` always).
+    fields: Option<String>,
+    /// Devices to skip (after the filters).
+    offset: Option<usize>,
+    /// Most devices to return.
+    limit: Option<usize>,
+}
+
+/// The fields of a device in `/api/devices`.
+const DEVICE_FIELDS: &[&str] = &[
+    "id",
+    "name",
+    "protocol",
+    "line",
+    "address",
+    "status",
+    "since",
+    "error",
+    "last_ok",
+    "failures",
+    "next_try_at",
+    "next_try_in_ms",
+    "groups",
+    "points",
+];
+
+async fn devices(
+    State(s): State<AppState>,
+    query: Result<Query<DevicesQuery>, QueryRejection>,
+) -> ApiResult<Json<serde_json::Value>> {
+    let Query(q) = query?;
+    let entries: Vec<_> = s.cell.device_entries().collect();
+    if let Some(line) = &q.line
+        && !entries.iter().any(|d| &d.line == line)
+    {
+        let lines: Vec<String> = s.cell.lines().into_iter().map(|l| l.name).collect();
+        return Err(ApiError::not_found(format!(
+            "no line {line:?}; lines: {}",
+            lines.join(", ")
+        )));
+    }
+    let wanted: Option<Vec<&str>> = q
+        .device
+        .as_deref()
+        .map(|d| d.split(',').map(str::trim).collect());
+    if let Some(ids) = &wanted
+        && let Some(missing) = ids
+            .iter()
+            .find(|id| !entries.iter().any(|d| d.id.as_str() == **id))
+    {
+        return Err(unknown_device(&s.cell, missing));
+    }
+    let fields: Option<Vec<&str>> = q
+        .fields
+        .as_deref()
+        .map(|f| f.split(',').map(str::trim).collect());
+    if let Some(fields) = &fields
+        && let Some(unknown) = fields.iter().find(|f| !DEVICE_FIELDS.contains(f))
+    {
+        return Err(ApiError::bad_request(format!(
+            "fields: no device field {unknown:?}; fields: {}",
+            DEVICE_FIELDS.join(", ")
+        )));
+    }
+    let matching: Vec<_> = entries
+        .into_iter()
+        .filter(|d| q.line.as_ref().is_none_or(|line| &d.line == line))
+        .filter(|d| {
+            wanted
+                .as_ref()
+                .is_none_or(|ids| ids.contains(&d.id.as_str()))
+        })
+        .collect();
+    let total = matching.len();
+    let now = Timestamp::now();
+    let page = matching
+        .into_iter()
+        .skip(q.offset.unwrap_or(0))
+        .take(q.limit.unwrap_or(usize::MAX));
+    let devices: Vec<serde_json::Value> = match &fields {
+        // Without `points`, the points' live state is never built.
+        Some(fields) => page
+            .map(|d| {
+                let view = if fields.contains(&"points") {
+                    d.view(now)
+                } else {
+                    d.view_without_points(now)
+                };
+                let mut value = serde_json::to_value(view).unwrap_or_default();
+                if let serde_json::Value::Object(map) = &mut value {
+                    map.retain(|k, _| k == "id" || fields.contains(&k.as_str()));
+                }
+                value
+            })
+            .collect(),
+        None => page
+            .map(|d| serde_json::to_value(d.view(now)).unwrap_or_default())
+            .collect(),
+    };
+    Ok(Json(json!({
+        "devices": devices,
+        "total": total,
+        "writes_enabled": s.writes.enabled,
+    })))
 }
 
 async fn device(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Response> {

@@ -172,6 +172,53 @@ async fn devices_show_points_with_value_unit_quality_and_time() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn devices_can_be_filtered_by_line_and_id_cut_to_fields_and_paged() {
+    let rig = rig(3);
+    let app = app(&rig, false);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let ids = |body: &Json| -> Vec<String> {
+        body["devices"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| d["id"].as_str().unwrap().to_owned())
+            .collect()
+    };
+    let (status, all) = get(&app, "/api/devices").await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(ids(&all), ["jbc1", "jbc2", "jbc3"]);
+    assert_eq!(all["total"], 3);
+    let line = all["devices"][0]["line"].as_str().unwrap().to_owned();
+
+    let (_, some) = get(&app, "/api/devices?device=jbc3,jbc1").await;
+    assert_eq!(ids(&some), ["jbc1", "jbc3"], "in the cell's order");
+    let (_, on_line) = get(&app, &format!("/api/devices?line={line}")).await;
+    assert_eq!(on_line["total"], 3);
+
+    let (_, paged) = get(&app, "/api/devices?offset=1&limit=1").await;
+    assert_eq!(ids(&paged), ["jbc2"]);
+    assert_eq!(paged["total"], 3, "the total counts every match");
+
+    let (_, slim) = get(&app, "/api/devices?fields=status,line").await;
+    let first = slim["devices"][0].as_object().unwrap();
+    let mut keys: Vec<&str> = first.keys().map(String::as_str).collect();
+    keys.sort_unstable();
+    assert_eq!(keys, ["id", "line", "status"]);
+
+    let (status, body) = get(&app, "/api/devices?line=nope").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(body["error"].as_str().unwrap().contains(&line), "{body}");
+    let (status, body) = get(&app, "/api/devices?device=jbc1,jbc9").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(body["error"].as_str().unwrap().contains("jbc9"), "{body}");
+    let (status, body) = get(&app, "/api/devices?fields=colour").await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+    assert!(body["error"].as_str().unwrap().contains("colour"), "{body}");
+    let (status, _) = get(&app, "/api/devices?limit=-1").await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+}
+
+#[tokio::test(start_paused = true)]
 async fn unknown_ids_and_routes_are_404_with_json_that_says_what_exists() {
     let rig = rig(1);
     let app = app(&rig, false);
