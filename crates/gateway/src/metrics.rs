@@ -72,7 +72,7 @@ pub struct WriteLabels {
     pub result: String,
 }
 
-type HistogramFamily = Family<DeviceLabels, Histogram, fn() -> Histogram>;
+type HistogramFamily = Family<LineLabels, Histogram, fn() -> Histogram>;
 
 /// Every metric of the gateway.
 #[derive(Debug)]
@@ -340,7 +340,12 @@ mod tests {
                 result: PollResult::ok,
             })
             .inc();
-        metrics.poll_seconds.get_or_create(&device).observe(0.02);
+        metrics
+            .poll_seconds
+            .get_or_create(&LineLabels {
+                line: device.line.clone(),
+            })
+            .observe(0.02);
         let stats = StoreStats::default();
         stats
             .samples_written

@@ -36,6 +36,7 @@ use std::time::Duration;
 
 use link::{Line, SharedLine};
 use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::Histogram;
 use tokio::sync::{mpsc, watch};
@@ -124,11 +125,44 @@ struct BackedOff {
 
 struct SlotMetrics {
     ok: Counter,
-    failed: Counter,
-    timeouts: Counter,
+    /// The line's poll duration histogram (per line, not per device: 1,000 devices' buckets
+    /// would be most of `/metrics`).
     latency: Histogram,
     up: Gauge,
-    errors: Vec<(ErrorKind, Counter)>,
+    failures: FailureMetrics,
+}
+
+/// A device's failure counters, created at its first failure of each kind, so that a
+/// thousand healthy devices do not fill `/metrics` with zeros.
+#[derive(Debug)]
+struct FailureMetrics {
+    polls: Family<PollLabels, Counter>,
+    timeouts: Family<DeviceLabels, Counter>,
+    errors: Family<ErrorLabels, Counter>,
+    labels: DeviceLabels,
+}
+
+impl FailureMetrics {
+    fn count(&self, kind: ErrorKind) {
+        let DeviceLabels { line, device } = &self.labels;
+        self.polls
+            .get_or_create(&PollLabels {
+                line: line.clone(),
+                device: device.clone(),
+                result: PollResult::error,
+            })
+            .inc();
+        if kind == ErrorKind::Timeout {
+            self.timeouts.get_or_create(&self.labels).inc();
+        }
+        self.errors
+            .get_or_create(&ErrorLabels {
+                line: line.clone(),
+                device: device.clone(),
+                kind: kind.as_str().to_owned(),
+            })
+            .inc();
+    }
 }
 
 #[derive(Debug)]
@@ -166,6 +200,12 @@ impl LineTask {
         let shared = Arc::clone(&cell);
         let metrics = shared.metrics();
         let now = Instant::now();
+        let line_latency = metrics
+            .poll_seconds
+            .get_or_create(&LineLabels {
+                line: line.name.clone(),
+            })
+            .clone();
         let slots = devices
             .into_iter()
             .map(|(entry, driver)| {
@@ -173,36 +213,23 @@ impl LineTask {
                     line: line.name.clone(),
                     device: entry.id.to_string(),
                 };
-                let poll = |result| {
-                    metrics
+                let m = SlotMetrics {
+                    ok: metrics
                         .polls
                         .get_or_create(&PollLabels {
                             line: line.name.clone(),
                             device: entry.id.to_string(),
-                            result,
+                            result: PollResult::ok,
                         })
-                        .clone()
-                };
-                let m = SlotMetrics {
-                    ok: poll(PollResult::ok),
-                    failed: poll(PollResult::error),
-                    timeouts: metrics.timeouts.get_or_create(&labels).clone(),
-                    latency: metrics.poll_seconds.get_or_create(&labels).clone(),
+                        .clone(),
                     up: metrics.device_up.get_or_create(&labels).clone(),
-                    errors: ErrorKind::ALL
-                        .into_iter()
-                        .map(|kind| {
-                            let counter = metrics
-                                .errors
-                                .get_or_create(&ErrorLabels {
-                                    line: line.name.clone(),
-                                    device: entry.id.to_string(),
-                                    kind: kind.as_str().to_owned(),
-                                })
-                                .clone();
-                            (kind, counter)
-                        })
-                        .collect(),
+                    latency: line_latency.clone(),
+                    failures: FailureMetrics {
+                        polls: metrics.polls.clone(),
+                        timeouts: metrics.timeouts.clone(),
+                        errors: metrics.errors.clone(),
+                        labels,
+                    },
                 };
                 let clocks: Vec<Clock> = entry
                     .groups
@@ -410,17 +437,13 @@ impl LineTask {
                 record_events(&self.cell, &entry, slot.driver.take_events());
             }
             Err(error) => {
-                slot.m.failed.inc();
+                slot.m.failures.count(error.kind);
                 self.window.errors += 1;
                 if error.kind == ErrorKind::Timeout {
-                    slot.m.timeouts.inc();
                     slot.timeouts_in_a_row += 1;
                 } else {
                     // An answer, even a refusal or a damaged one: the line carries bytes.
                     slot.timeouts_in_a_row = 0;
-                }
-                if let Some((_, counter)) = slot.m.errors.iter().find(|(k, _)| *k == error.kind) {
-                    counter.inc();
                 }
                 slot.m.up.set(0);
                 let failures = slot.entry.read().failures + 1;

@@ -417,14 +417,16 @@ async fn metrics_and_health_report_polls_and_history() {
     .unwrap();
     for expected in [
         r#"cellbus_polls_total{line="bench",device="jbc1",result="ok"}"#,
-        r#"cellbus_errors_total{line="bench",device="jbc1",kind="timeout"} 0"#,
-        r#"cellbus_poll_duration_seconds_count{line="bench",device="jbc1"}"#,
+        r#"cellbus_poll_duration_seconds_count{line="bench"}"#,
         r#"cellbus_line_busy_seconds_total{line="bench"}"#,
         r#"cellbus_device_up{line="bench",device="jbc1"} 1"#,
         "cellbus_history_rows_written_total",
     ] {
         assert!(text.contains(expected), "missing {expected} in\n{text}");
     }
+    // A healthy device's failure counters are not there until it fails (a thousand
+    // devices' zeros would be most of the page).
+    assert!(!text.contains("cellbus_errors_total{"), "{text}");
     let (status, body) = get(&app, "/healthz").await;
     assert_eq!(status, StatusCode::OK);
     assert_eq!(body["status"], "ok");
