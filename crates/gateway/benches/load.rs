@@ -1016,7 +1016,13 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         let load_after = loadavg();
         // After the window: what a dashboard and a Prometheus scrape cost with this cell.
         let mut scrapes = Vec::new();
-        for path in ["/metrics", "/api/devices", "/healthz"] {
+        for path in [
+            "/metrics",
+            "/api/devices",
+            "/api/devices?fields=id,status,line",
+            "/api/devices?line=line00",
+            "/healthz",
+        ] {
             let (status, size, took) = get(addr, path).await?;
             scrapes.push((path.to_owned(), status, size, took));
         }
