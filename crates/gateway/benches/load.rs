@@ -81,7 +81,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use gateway::cell::Cell;
 use gateway::driver::ErrorKind;
-use gateway::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollResult};
+use gateway::metrics::{LineLabels, PollResult};
 use gateway::point::Quality;
 use gateway::{Gateway, ServeOptions};
 use jbc::code::{Code, Port, ToolError};
@@ -789,22 +789,10 @@ impl Counters {
                 c.polls_ok += metrics.poll_count(&line.name, device.as_str(), PollResult::ok);
                 c.polls_failed +=
                     metrics.poll_count(&line.name, device.as_str(), PollResult::error);
-                c.timeouts += metrics
-                    .timeouts
-                    .get_or_create(&DeviceLabels {
-                        line: line.name.clone(),
-                        device: device.to_string(),
-                    })
-                    .get();
+                c.timeouts += metrics.timeout_count(&line.name, device.as_str());
                 for kind in ErrorKind::ALL {
-                    *c.errors.entry(kind).or_default() += metrics
-                        .errors
-                        .get_or_create(&ErrorLabels {
-                            line: line.name.clone(),
-                            device: device.to_string(),
-                            kind: kind.as_str().to_owned(),
-                        })
-                        .get();
+                    *c.errors.entry(kind).or_default() +=
+                        metrics.error_count(&line.name, device.as_str(), kind.as_str());
                 }
             }
         }

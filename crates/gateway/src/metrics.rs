@@ -135,12 +135,34 @@ impl Metrics {
     /// Polls of `device` on `line` that ended with `result`, so far.
     pub fn poll_count(&self, line: &str, device: &str, result: PollResult) -> u64 {
         self.polls
-            .get_or_create(&PollLabels {
+            .get(&PollLabels {
                 line: line.to_owned(),
                 device: device.to_owned(),
                 result,
             })
-            .get()
+            .map_or(0, |c| c.get())
+    }
+
+    /// A device's timeouts so far (0 before its first), without creating the counter.
+    pub fn timeout_count(&self, line: &str, device: &str) -> u64 {
+        self.timeouts
+            .get(&DeviceLabels {
+                line: line.to_owned(),
+                device: device.to_owned(),
+            })
+            .map_or(0, |c| c.get())
+    }
+
+    /// A device's errors of `kind` so far (0 before its first), without creating the
+    /// counter.
+    pub fn error_count(&self, line: &str, device: &str, kind: &str) -> u64 {
+        self.errors
+            .get(&ErrorLabels {
+                line: line.to_owned(),
+                device: device.to_owned(),
+                kind: kind.to_owned(),
+            })
+            .map_or(0, |c| c.get())
     }
 
     /// Registers every metric.
