@@ -10,8 +10,6 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use common::{Gateway, cellbus, run, stderr};
-use prost::Message as _;
-use sparkplug::proto::{Metric, Payload, metric::Value};
 use testkit::{Mosquitto, Subscriber};
 
 /// Waits for MQTT: generous, for a loaded 2-core machine.
@@ -130,21 +128,6 @@ fn api_devices(
         .collect()
 }
 
-/// An NCMD that asks the demo node for its births again.
-fn rebirth() -> Vec<u8> {
-    Payload {
-        timestamp: Some(0),
-        metrics: vec![Metric {
-            name: Some("Node Control/Rebirth".into()),
-            datatype: Some(sparkplug::DataType::Boolean.code()),
-            value: Some(Value::BooleanValue(true)),
-            ..Metric::default()
-        }],
-        ..Payload::default()
-    }
-    .encode_to_vec()
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sub_json_shows_every_demo_device_birth_with_each_point_its_unit_and_datatype() {
     let broker = Mosquitto::start();
@@ -167,7 +150,8 @@ async fn sub_json_shows_every_demo_device_birth_with_each_point_its_unit_and_dat
         "60s",
         "spBv1.0/cellbus/DBIRTH/#",
     ]);
-    node.publish("spBv1.0/cellbus/NCMD/demo", rebirth()).await;
+    node.publish("spBv1.0/cellbus/NCMD/demo", testkit::rebirth_command())
+        .await;
 
     let mut births = BTreeMap::new();
     for _ in 0..devices.len() {
@@ -411,7 +395,7 @@ async fn json_mode_keeps_a_retained_message_per_point_and_the_will_says_offline(
 
     // kill -9: the broker publishes the Will, which stays as the gateway's status.
     drop(gateway);
-    let mut status = Sub::start(&[
+    let status = Sub::start(&[
         "--broker",
         &url,
         "--json",

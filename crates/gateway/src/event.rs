@@ -115,3 +115,17 @@ pub struct Event {
     /// Words for the event log.
     pub message: String,
 }
+
+impl Event {
+    /// An event of the gateway itself (no line, device or point), now.
+    pub fn of_gateway(kind: EventKind, message: String) -> Self {
+        Self {
+            t: Timestamp::now(),
+            kind,
+            line: None,
+            device: None,
+            point: None,
+            message,
+        }
+    }
+}

@@ -170,13 +170,9 @@ impl Gateway {
         let metrics = Arc::new(Metrics::new());
         let (cell, tasks) =
             Cell::new(&config, store.handle(), metrics).map_err(anyhow::Error::msg)?;
-        cell.emit(Event {
-            t: Timestamp::now(),
-            kind: EventKind::GatewayStarted,
-            line: None,
-            device: None,
-            point: None,
-            message: format!(
+        cell.emit(Event::of_gateway(
+            EventKind::GatewayStarted,
+            format!(
                 "gateway started on http://{addr} with {} (devices: {}, lines: {}); writes {}",
                 match &config.source {
                     Some(path) => format!("config {}", path.display()),
@@ -190,7 +186,7 @@ impl Gateway {
                     "disabled"
                 },
             ),
-        });
+        ));
         report_history_off(&cell, options.data_dir.clone());
         let (stop, stopped) = watch::channel(false);
         let pollers = tasks
@@ -271,14 +267,10 @@ impl Gateway {
         {
             tracing::warn!("the MQTT task did not stop in {STOP_GRACE:?}");
         }
-        cell.emit(Event {
-            t: Timestamp::now(),
-            kind: EventKind::GatewayStopped,
-            line: None,
-            device: None,
-            point: None,
-            message: "gateway stopped".to_owned(),
-        });
+        cell.emit(Event::of_gateway(
+            EventKind::GatewayStopped,
+            "gateway stopped".to_owned(),
+        ));
         let flushed = cell.store().flush().await;
         // With the history off there is nothing to commit; its start already said why.
         let history_off = matches!(
@@ -370,18 +362,14 @@ fn report_history_off(cell: &Arc<Cell>, data_dir: PathBuf) {
         let HistoryState::Off(reason) = cell.store().health(Timestamp::now()).history else {
             return;
         };
-        cell.emit(Event {
-            t: Timestamp::now(),
-            kind: EventKind::HistoryFailed,
-            line: None,
-            device: None,
-            point: None,
-            message: format!(
+        cell.emit(Event::of_gateway(
+            EventKind::HistoryFailed,
+            format!(
                 "history is off (data directory {}): {reason}; live values are served but not \
                  stored; fix the data directory and restart",
                 data_dir.display()
             ),
-        });
+        ));
     });
 }
 

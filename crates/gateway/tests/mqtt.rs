@@ -8,8 +8,6 @@ use std::time::{Duration, Instant};
 
 use gateway::cell::{Cell, MqttLink};
 use gateway::{Gateway, ServeOptions};
-use prost::Message as _;
-use sparkplug::proto::{Metric, Payload, metric::Value};
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::oneshot;
@@ -123,20 +121,6 @@ fn names(m: &SparkplugMessage) -> BTreeSet<String> {
         .collect()
 }
 
-fn rebirth_command() -> Vec<u8> {
-    Payload {
-        timestamp: Some(0),
-        metrics: vec![Metric {
-            name: Some("Node Control/Rebirth".into()),
-            datatype: Some(sparkplug::DataType::Boolean.code()),
-            value: Some(Value::BooleanValue(true)),
-            ..Metric::default()
-        }],
-        ..Payload::default()
-    }
-    .encode_to_vec()
-}
-
 /// Bounded polling of the cell's MQTT state.
 async fn wait_for_link(cell: &Cell, what: &str, wanted: impl Fn(&Option<MqttLink>) -> bool) {
     let deadline = Instant::now() + LIMIT;
@@ -214,7 +198,7 @@ async fn births_describe_every_point_changes_arrive_by_alias_and_rebirth_and_dea
     );
 
     // Rebirth on request: a fresh NBIRTH (same session, same bdSeq) and every DBIRTH.
-    node.publish("spBv1.0/cellbus/NCMD/demo", rebirth_command())
+    node.publish("spBv1.0/cellbus/NCMD/demo", testkit::rebirth_command())
         .await;
     let again = node
         .next_where("an NBIRTH after the rebirth command", LIMIT, nbirth)

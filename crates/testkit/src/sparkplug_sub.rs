@@ -48,6 +48,21 @@ impl SparkplugMessage {
     }
 }
 
+/// An NCMD payload that asks a node for its births again (`Node Control/Rebirth` = true).
+pub fn rebirth_command() -> Vec<u8> {
+    Payload {
+        timestamp: Some(0),
+        metrics: vec![Metric {
+            name: Some("Node Control/Rebirth".into()),
+            datatype: Some(sparkplug::DataType::Boolean.code()),
+            value: Some(Value::BooleanValue(true)),
+            ..Metric::default()
+        }],
+        ..Payload::default()
+    }
+    .encode_to_vec()
+}
+
 enum Incoming {
     Subscribed,
     Message(SparkplugMessage),

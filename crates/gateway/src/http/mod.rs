@@ -369,7 +369,7 @@ const DEVICE_FIELDS: &[&str] = &[
 async fn devices(
     State(s): State<AppState>,
     query: Result<Query<DevicesQuery>, QueryRejection>,
-) -> ApiResult<Json<serde_json::Value>> {
+) -> ApiResult<Response> {
     let Query(q) = query?;
     let entries: Vec<_> = s.cell.device_entries().collect();
     if let Some(line) = &q.line
@@ -419,31 +419,47 @@ async fn devices(
         .into_iter()
         .skip(q.offset.unwrap_or(0))
         .take(q.limit.unwrap_or(usize::MAX));
-    let devices: Vec<serde_json::Value> = match &fields {
+    let writes_enabled = s.writes.enabled;
+    Ok(match &fields {
         // Without `points`, the points' live state is never built.
-        Some(fields) => page
-            .map(|d| {
-                let view = if fields.contains(&"points") {
-                    d.view(now)
-                } else {
-                    d.view_without_points(now)
-                };
-                let mut value = serde_json::to_value(view).unwrap_or_default();
-                if let serde_json::Value::Object(map) = &mut value {
-                    map.retain(|k, _| k == "id" || fields.contains(&k.as_str()));
-                }
-                value
+        Some(fields) => {
+            let devices: Vec<serde_json::Value> = page
+                .map(|d| {
+                    let view = if fields.contains(&"points") {
+                        d.view(now)
+                    } else {
+                        d.view_without_points(now)
+                    };
+                    let mut value = serde_json::to_value(view).unwrap_or_default();
+                    if let serde_json::Value::Object(map) = &mut value {
+                        map.retain(|k, _| k == "id" || fields.contains(&k.as_str()));
+                    }
+                    value
+                })
+                .collect();
+            Json(DevicesBody {
+                devices,
+                total,
+                writes_enabled,
             })
-            .collect(),
-        None => page
-            .map(|d| serde_json::to_value(d.view(now)).unwrap_or_default())
-            .collect(),
-    };
-    Ok(Json(json!({
-        "devices": devices,
-        "total": total,
-        "writes_enabled": s.writes.enabled,
-    })))
+            .into_response()
+        }
+        // Serialised straight from the views, without a JSON value tree in between.
+        None => Json(DevicesBody {
+            devices: page.map(|d| d.view(now)).collect::<Vec<_>>(),
+            total,
+            writes_enabled,
+        })
+        .into_response(),
+    })
+}
+
+/// The body of `/api/devices`.
+#[derive(Debug, serde::Serialize)]
+struct DevicesBody<D> {
+    devices: Vec<D>,
+    total: usize,
+    writes_enabled: bool,
 }
 
 async fn device(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Response> {

@@ -59,7 +59,7 @@ pub(super) fn run_writer(
                 prunes: VecDeque::new(),
             };
             if let Some((aside, fault)) = open.moved_aside {
-                writer.push(Row::Event(history_event(
+                writer.push(Row::Event(Event::of_gateway(
                     EventKind::HistoryReset,
                     format!(
                         "the history file was damaged ({fault}); it was moved aside as {} and \
@@ -100,17 +100,6 @@ fn discard(rx: &mpsc::Receiver<Command>, stats: &StoreStats, reason: &str) {
             Command::FillDisk(_) => {}
             Command::Shutdown => return,
         }
-    }
-}
-
-fn history_event(kind: EventKind, message: String) -> Event {
-    Event {
-        t: Timestamp::now(),
-        kind,
-        line: None,
-        device: None,
-        point: None,
-        message,
     }
 }
 
@@ -336,7 +325,7 @@ impl Writer {
                         recovery.last_error
                     );
                     tracing::warn!("history {}: {message}", self.path.display());
-                    let event = [Row::Event(history_event(
+                    let event = [Row::Event(Event::of_gateway(
                         EventKind::HistoryRecovered,
                         message,
                     ))];
@@ -363,7 +352,7 @@ impl Writer {
                     );
                 }
                 if failure.first {
-                    self.push(Row::Event(history_event(
+                    self.push(Row::Event(Event::of_gateway(
                         EventKind::HistoryFailed,
                         format!(
                             "history commits fail: {error}; rows are kept (at most \

@@ -178,6 +178,42 @@ impl Backlog {
         })
     }
 
+    /// [`Backlog::open`], with what goes wrong or is left out logged: `None` when the
+    /// stored changes cannot be read (the live data goes on).
+    pub async fn start(
+        cell: &Arc<Cell>,
+        forwarded: Timestamp,
+        until: Timestamp,
+        max: u64,
+    ) -> Option<Self> {
+        let backlog = match Self::open(cell, forwarded, until, max).await {
+            Ok(b) => b,
+            Err(e) => {
+                tracing::warn!("MQTT: the stored changes cannot be sent: {e}");
+                return None;
+            }
+        };
+        if backlog.skipped > 0 {
+            tracing::warn!(
+                "MQTT: {} stored changes are older than the newest {max} (max_backlog) and \
+                 are not sent",
+                backlog.skipped
+            );
+        }
+        if backlog.total > 0 {
+            tracing::info!("MQTT: sending {} stored changes", backlog.total);
+        }
+        Some(backlog)
+    }
+
+    /// The next page, oldest first; empty when all were read or reading failed (logged).
+    pub async fn next_page_or_end(&mut self) -> Vec<StoredChange> {
+        self.next_page().await.unwrap_or_else(|e| {
+            tracing::warn!("MQTT: sending stored changes stopped: {e}");
+            Vec::new()
+        })
+    }
+
     /// The next page, oldest first; empty when all were read.
     pub async fn next_page(&mut self) -> Result<Vec<StoredChange>, String> {
         let store = self.cell.store().clone();

@@ -143,29 +143,14 @@ impl Publisher {
         until: Timestamp,
     ) -> Result<(), String> {
         let max = conn.link.config().max_backlog;
-        let mut backlog = match Backlog::open(&self.cell, from, until, max).await {
-            Ok(b) => b,
-            Err(e) => {
-                tracing::warn!("MQTT: the stored changes cannot be sent: {e}");
+        let Some(mut backlog) = Backlog::start(&self.cell, from, until, max).await else {
+            return Ok(());
+        };
+        loop {
+            let page = backlog.next_page_or_end().await;
+            if page.is_empty() {
                 return Ok(());
             }
-        };
-        if backlog.skipped > 0 {
-            tracing::warn!(
-                "MQTT: {} stored changes are older than the newest {max} (max_backlog) and \
-                 are not sent",
-                backlog.skipped
-            );
-        }
-        loop {
-            let page = match backlog.next_page().await {
-                Ok(page) if page.is_empty() => return Ok(()),
-                Ok(page) => page,
-                Err(e) => {
-                    tracing::warn!("MQTT: sending stored changes stopped: {e}");
-                    return Ok(());
-                }
-            };
             let sent = page.len() as u64;
             for change in page {
                 let Ok(point) = PointId::parse(&change.point) else {

@@ -256,7 +256,7 @@ impl Link {
         } else {
             "cannot connect to the MQTT broker"
         };
-        self.cell.emit(event(
+        self.cell.emit(Event::of_gateway(
             EventKind::MqttDisconnected,
             format!(
                 "{what} ({}:{}): {why}; retrying",
@@ -428,7 +428,7 @@ impl Connection<'_> {
         let cell = &self.link.cell;
         cell.metrics().mqtt_connected.set(1);
         cell.set_mqtt(MqttLink::Connected);
-        cell.emit(event(EventKind::MqttConnected, words));
+        cell.emit(Event::of_gateway(EventKind::MqttConnected, words));
     }
 
     /// Publishes `will`, disconnects, and waits (bounded) until everything is written; a
@@ -498,16 +498,5 @@ async fn pump(mut eventloop: EventLoop, events: mpsc::UnboundedSender<Pumped>) {
         if events.send(report).is_err() {
             return;
         }
-    }
-}
-
-fn event(kind: EventKind, message: String) -> Event {
-    Event {
-        t: Timestamp::now(),
-        kind,
-        line: None,
-        device: None,
-        point: None,
-        message,
     }
 }

@@ -288,36 +288,15 @@ impl Node {
         until: Timestamp,
     ) -> Done {
         let max = conn.link.config().max_backlog;
-        let mut backlog = match Backlog::open(&self.cell, from, until, max).await {
-            Ok(b) => b,
-            Err(e) => {
-                tracing::warn!("MQTT: the stored changes cannot be sent: {e}");
-                return Ok(());
-            }
+        let Some(mut backlog) = Backlog::start(&self.cell, from, until, max).await else {
+            return Ok(());
         };
-        if backlog.skipped > 0 {
-            tracing::warn!(
-                "MQTT: {} stored changes are older than the newest {max} (max_backlog) and \
-                 are not sent",
-                backlog.skipped
-            );
-        }
-        if backlog.total > 0 {
-            tracing::info!(
-                "MQTT: sending {} stored changes as historical",
-                backlog.total
-            );
-        }
         let mut sent = 0_u64;
         loop {
-            let page = match backlog.next_page().await {
-                Ok(page) if page.is_empty() => break,
-                Ok(page) => page,
-                Err(e) => {
-                    tracing::warn!("MQTT: sending stored changes stopped: {e}");
-                    break;
-                }
-            };
+            let page = backlog.next_page_or_end().await;
+            if page.is_empty() {
+                break;
+            }
             let mut batch: Vec<(String, Sample)> = Vec::new();
             let mut batch_device: Option<DeviceId> = None;
             let mut latest = None;
