@@ -46,7 +46,7 @@ use crate::cell::{Cell, DeviceEntry, DeviceStatus, LineEntry, LiveMessage, Write
 use crate::driver::{BoxFuture, DeviceError, DeviceEvent, Driver, ErrorKind, Reading, WriteError};
 use crate::event::{Event, EventKind};
 use crate::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
-use crate::point::{Quality, Value};
+use crate::point::{Deadband, Quality, Value};
 use crate::store::Sample;
 use crate::time::Timestamp;
 
@@ -129,6 +129,8 @@ struct SlotMetrics {
     latency: Histogram,
     up: Gauge,
     errors: Vec<(ErrorKind, Counter)>,
+    /// Drivers that plan their reads (generic Modbus): requests of the last poll.
+    requests_per_poll: Option<Gauge>,
 }
 
 #[derive(Debug)]
@@ -189,6 +191,14 @@ impl LineTask {
                     timeouts: metrics.timeouts.get_or_create(&labels).clone(),
                     latency: metrics.poll_seconds.get_or_create(&labels).clone(),
                     up: metrics.device_up.get_or_create(&labels).clone(),
+                    requests_per_poll: (entry.protocol == crate::driver::Protocol::Modbus).then(
+                        || {
+                            metrics
+                                .modbus_requests_per_poll
+                                .get_or_create(&labels)
+                                .clone()
+                        },
+                    ),
                     errors: ErrorKind::ALL
                         .into_iter()
                         .map(|kind| {
@@ -405,6 +415,11 @@ impl LineTask {
                 }
                 let entry = Arc::clone(&slot.entry);
                 slot.m.up.set(1);
+                if let (Some(gauge), Some(requests)) =
+                    (&slot.m.requests_per_poll, slot.driver.requests_per_poll())
+                {
+                    gauge.set(i64::try_from(requests).unwrap_or(i64::MAX));
+                }
                 apply_readings(&self.cell, &entry, readings);
                 mark_up(&self.cell, &entry);
                 record_events(&self.cell, &entry, slot.driver.take_events());
@@ -672,8 +687,9 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
             };
             let changed = match reading.value {
                 Ok(value) => {
-                    let changed = point.value.as_ref() != Some(&value)
-                        || point.quality != Some(Quality::Good);
+                    let deadband = entry.deadbands.get(i).copied().flatten();
+                    let changed = point.quality != Some(Quality::Good)
+                        || moved_enough(point.recorded.as_ref(), &value, deadband);
                     let alarm = spec.is_alarm(&value);
                     if alarm != point.alarm {
                         let text = spec
@@ -717,6 +733,7 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
                 }
             };
             if changed {
+                point.recorded = point.value.clone();
                 samples.push(Sample {
                     point: spec.id.clone(),
                     t: now,
@@ -739,6 +756,19 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
     }
     for event in events {
         cell.emit(event);
+    }
+}
+
+/// Whether a good value is to be recorded against the last recorded one: any change, or
+/// under a deadband a move at least as big as the band (numbers only).
+fn moved_enough(recorded: Option<&Value>, value: &Value, deadband: Option<Deadband>) -> bool {
+    match (recorded, deadband) {
+        (None, _) => true,
+        (Some(recorded), None) => recorded != value,
+        (Some(recorded), Some(band)) => match (recorded.as_number(), value.as_number()) {
+            (Some(before), Some(now)) => before != now && band.passes(before, now),
+            _ => recorded != value,
+        },
     }
 }
 
