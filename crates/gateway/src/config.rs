@@ -1906,6 +1906,345 @@ writable = { min = 5.0, max = 30.0 }
         refused(bare, 7, 6, "needs its registers");
     }
 
+    const METER: &str = r#"
+[[line]]
+name = "utilities"
+endpoint = "modbus-tcp://192.0.2.61"
+
+[[line.device]]
+id = "meter1"
+protocol = "modbus"
+max_registers_per_request = 60
+max_bits_per_request = 800
+one_request_per_register = true
+delay_between_requests = "50ms"
+delay_after_connect = "1s"
+deadband = 0.5
+
+[[line.device.register]]
+name = "voltage"
+table = "input"
+address = 0x0100
+type = "float32"
+order = "CDAB"
+unit = "V"
+
+[[line.device.register]]
+name = "energy"
+table = "input"
+address = 0x0200
+type = "uint32"
+scale = 0.01
+offset = 5
+deadband_percent = 1
+
+[[line.device.register]]
+name = "limit"
+address = 0x0300
+type = "int32"
+writable = { min = -1000, max = 1000 }
+
+[[line.device.register]]
+name = "pump"
+table = "coil"
+address = 3
+writable = true
+
+[[line.device.register]]
+name = "door"
+table = "discrete"
+address = 0x20
+
+[[line.device.register]]
+name = "label"
+address = 0x0400
+type = "string:4"
+"#;
+
+    #[test]
+    fn modbus_types_orders_tables_pacing_and_deadbands_are_read() {
+        let config = parse(METER).unwrap();
+        let device = &config.lines[0].devices[0];
+        let driver = &device.driver;
+        assert_eq!(device.deadband, Some(Deadband::Absolute(0.5)));
+        let options = driver.modbus;
+        assert_eq!(options.plan.max_registers.get(), 60);
+        assert_eq!(options.plan.max_bits.get(), 800);
+        assert!(options.plan.one_request_per_item);
+        assert_eq!(options.delay_between_requests, Duration::from_millis(50));
+        assert_eq!(options.delay_after_connect, Duration::from_secs(1));
+        let r = |name: &str| driver.registers.iter().find(|r| r.name == name).unwrap();
+        assert_eq!(
+            r("voltage").format,
+            Format::new(DataType::Float32, Order::Cdab)
+        );
+        assert_eq!(
+            r("voltage").deadband,
+            Some(Deadband::Absolute(0.5)),
+            "the device's deadband"
+        );
+        assert_eq!(r("energy").format.scaling, Scaling::new(0.01, 5.0).unwrap());
+        assert_eq!(r("energy").deadband, Some(Deadband::Percent(1.0)));
+        assert_eq!(r("limit").writable, Some((-1000.0, 1000.0)));
+        assert_eq!(
+            (r("pump").table, r("pump").writable),
+            (RegisterTable::Coil, Some((0.0, 1.0)))
+        );
+        assert_eq!(r("door").table, RegisterTable::Discrete);
+        assert_eq!(r("door").deadband, None, "bits have no deadband");
+        assert_eq!(r("label").deadband, None, "text has no deadband");
+        let defaults = parse(CHILLER).unwrap();
+        let chiller = &defaults.lines[0].devices[0];
+        assert_eq!(chiller.deadband, None);
+        assert_eq!(chiller.driver.modbus, ModbusOptions::default());
+        assert_eq!(chiller.driver.modbus.plan.max_registers.get(), 125);
+        assert_eq!(chiller.driver.modbus.plan.max_bits.get(), 2000);
+    }
+
+    #[test]
+    fn a_deadband_applies_to_any_protocol() {
+        let config = parse(&format!("{ONE}deadband_percent = 2\n")).unwrap();
+        assert_eq!(
+            config.lines[0].devices[0].deadband,
+            Some(Deadband::Percent(2.0))
+        );
+    }
+
+    #[test]
+    fn modbus_field_mistakes_are_refused_naming_register_field_and_place() {
+        let cases: [(&str, &str, usize, usize, &str); 14] = [
+            (
+                "type = \"float32\"\norder",
+                "type = \"float33\"\norder",
+                20,
+                8,
+                "register voltage: `float33` is not a data type",
+            ),
+            (
+                "order = \"CDAB\"",
+                "order = \"ACBD\"",
+                21,
+                9,
+                "register voltage: `ACBD` is not a byte order",
+            ),
+            (
+                "offset = 5",
+                "offset = nan",
+                30,
+                10,
+                "register energy: offset NaN must be a number",
+            ),
+            (
+                "deadband_percent = 1\n",
+                "deadband_percent = 1\ndeadband = 2\n",
+                31,
+                20,
+                "deadband and deadband_percent both given",
+            ),
+            (
+                "deadband_percent = 1\n",
+                "deadband_percent = 150\n",
+                31,
+                20,
+                "deadband_percent 150 is out of range",
+            ),
+            (
+                "deadband = 0.5",
+                "deadband = -1",
+                14,
+                12,
+                "deadband -1 must be a number of at least 0",
+            ),
+            (
+                "max_registers_per_request = 60",
+                "max_registers_per_request = 126",
+                9,
+                29,
+                "max_registers_per_request 126 is out of range: 1 to 125",
+            ),
+            (
+                "max_bits_per_request = 800",
+                "max_bits_per_request = 0",
+                10,
+                24,
+                "max_bits_per_request 0 is out of range: 1 to 2000",
+            ),
+            (
+                "delay_between_requests = \"50ms\"",
+                "delay_between_requests = \"fast\"",
+                12,
+                26,
+                "delay_between_requests \"fast\" is not a duration",
+            ),
+            (
+                "delay_after_connect = \"1s\"",
+                "delay_after_connect = \"2m\"",
+                13,
+                23,
+                "delay_after_connect 2m is out of range",
+            ),
+            (
+                "table = \"discrete\"\naddress = 0x20\n",
+                "table = \"discrete\"\naddress = 0x20\nwritable = true\n",
+                49,
+                12,
+                "register door: only holding registers and coils can be written; discrete inputs are read-only",
+            ),
+            (
+                "type = \"string:4\"\n",
+                "type = \"string:4\"\nwritable = true\n",
+                54,
+                12,
+                "register label: a string:4 register is read-only here",
+            ),
+            (
+                "table = \"coil\"\naddress = 3\n",
+                "table = \"coil\"\naddress = 3\ntype = \"int16\"\n",
+                43,
+                8,
+                "register pump: type is for holding and input registers; a coil is a single bit",
+            ),
+            (
+                "address = 0x0400",
+                "address = 65534",
+                52,
+                11,
+                "register label: a string:4 at 65534 runs past the last address 65535",
+            ),
+        ];
+        for (from, to, line, column, words) in cases {
+            assert!(METER.contains(from), "{from}");
+            refused(&METER.replacen(from, to, 1), line, column, words);
+        }
+        refused(
+            &CHILLER.replace("signed = true", "signed = true\ntype = \"int32\""),
+            17,
+            10,
+            "register supply: signed is the old way of saying type = \"int16\"; give type only",
+        );
+        refused(
+            &format!("{ONE}one_request_per_register = true\n"),
+            9,
+            28,
+            "one_request_per_register is for modbus devices only, not jbc devices",
+        );
+        refused(
+            &format!("{ONE}registers_csv = \"x.csv\"\n"),
+            9,
+            17,
+            "registers_csv is for modbus devices only",
+        );
+        refused(
+            &METER.replace(
+                "deadband = 0.5",
+                "deadband = 0.5\nregisters_csv = \"meter.csv\"",
+            ),
+            15,
+            17,
+            "registers_csv and [[line.device.register]] tables both given",
+        );
+    }
+
+    fn csv_cell(dir: &Path, csv: &str) -> Result<CellConfig, ConfigError> {
+        std::fs::write(dir.join("meter.csv"), csv).unwrap();
+        let toml = format!(
+            "[[line]]\nname = \"utilities\"\nendpoint = \"modbus-tcp://192.0.2.61\"\n\n\
+             [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\nregisters_csv = \"meter.csv\"\n"
+        );
+        let path = dir.join("cell.toml");
+        std::fs::write(&path, toml).unwrap();
+        check_config(&path)
+    }
+
+    #[test]
+    fn a_csv_register_list_is_read_relative_to_the_config_file_with_columns_in_any_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let config = csv_cell(
+            dir.path(),
+            "# a meter\nunit,address,name,type,order,table,scale,writable_min,writable_max,title\n\
+             V,0x0000,voltage_l1,float32,CDAB,input,,,,Voltage L1-N\n\
+             kW,256,limit,uint16,,,0.1,0,200,\n",
+        )
+        .unwrap();
+        let registers = &config.lines[0].devices[0].driver.registers;
+        assert_eq!(registers.len(), 2);
+        assert_eq!(registers[0].title, "Voltage L1-N");
+        assert_eq!(registers[0].table, RegisterTable::Input);
+        assert_eq!(
+            registers[0].format,
+            Format::new(DataType::Float32, Order::Cdab)
+        );
+        assert_eq!(registers[1].address, 256);
+        assert_eq!(registers[1].table, RegisterTable::Holding, "empty: default");
+        assert_eq!(registers[1].writable, Some((0.0, 200.0)));
+        assert_eq!(registers[1].unit.as_deref(), Some("kW"));
+    }
+
+    #[test]
+    fn csv_mistakes_name_the_file_row_and_column() {
+        let dir = tempfile::tempdir().unwrap();
+        let header = "name,table,address,type\n";
+        for (rows, words) in [
+            (
+                "a,input,0x10,float32\nb,input,0x1G,float32\n",
+                "meter.csv: row 3: column \"address\": \"0x1G\" is not an address",
+            ),
+            (
+                "a,input,0x10,float32\nb,inputs,0x12,float32\n",
+                "meter.csv: row 3: column \"table\": register b: table \"inputs\" is not one",
+            ),
+            (
+                "a,input,0x10,float99\n",
+                "meter.csv: row 2: column \"type\": register a: `float99` is not a data type",
+            ),
+            (
+                "a,input,0x10,float32\na,input,0x12,float32\n",
+                "meter.csv: row 3: column \"name\": register name \"a\" is used twice",
+            ),
+            (
+                ",input,0x10,float32\n",
+                "meter.csv: row 2: column \"name\": empty",
+            ),
+            ("a,input,0x10\n", "meter.csv: row 2: "),
+        ] {
+            let err = csv_cell(dir.path(), &format!("{header}{rows}")).unwrap_err();
+            let shown = err.to_string();
+            assert!(shown.contains(words), "{shown}\nwanted: {words}");
+        }
+        let err = csv_cell(dir.path(), "name,adress\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("row 1: column \"adress\" is not one cellbus knows"),
+            "{err}"
+        );
+        let err = csv_cell(dir.path(), "name,title\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("row 1: no column \"address\""), "{err}");
+        std::fs::remove_file(dir.path().join("meter.csv")).unwrap();
+        let err = check_config(&dir.path().join("cell.toml")).unwrap_err();
+        assert_eq!(err.position(), Some((8, 17)), "{err}");
+        assert!(
+            err.to_string().contains("cannot read registers_csv"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_example_energy_meter_csv_becomes_toml_that_parses_to_the_same_registers() {
+        let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/energy-meter.csv");
+        let registers = registers_from_csv(&csv).unwrap();
+        assert!(registers.len() >= 12, "{}", registers.len());
+        let toml = registers_toml(&registers);
+        let config = parse(&format!(
+            "[[line]]\nname = \"l\"\nendpoint = \"modbus-tcp://192.0.2.61\"\n\n\
+             [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\n\n{toml}"
+        ))
+        .unwrap();
+        assert_eq!(config.lines[0].devices[0].driver.registers, registers);
+    }
+
     #[test]
     fn no_mqtt_table_means_no_mqtt() {
         assert_eq!(parse(ONE).unwrap().mqtt, None);
