@@ -2147,9 +2147,9 @@ type = "string:4"
 
     fn csv_cell(dir: &Path, csv: &str) -> Result<CellConfig, ConfigError> {
         std::fs::write(dir.join("meter.csv"), csv).unwrap();
-        let toml = format!(
+        let toml = String::from(
             "[[line]]\nname = \"utilities\"\nendpoint = \"modbus-tcp://192.0.2.61\"\n\n\
-             [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\nregisters_csv = \"meter.csv\"\n"
+             [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\nregisters_csv = \"meter.csv\"\n",
         );
         let path = dir.join("cell.toml");
         std::fs::write(&path, toml).unwrap();

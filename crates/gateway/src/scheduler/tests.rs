@@ -537,7 +537,7 @@ async fn record(
                 None => Err(DeviceError::new(ErrorKind::Timeout, "no answer")),
             },
         };
-        apply_readings(&cell, &entry, vec![reading]);
+        apply_readings(&cell, entry, vec![reading]);
     }
     cell.store().flush().await.unwrap();
     let history = cell
