@@ -77,6 +77,12 @@ pub enum ConfigCommand {
     },
     /// Print an example configuration for a real cell.
     Example,
+    /// Print a CSV register list (name,title,table,address,type,order,scale,offset,unit,
+    /// writable_min,writable_max; columns in any order) as [[line.device.register]] tables.
+    ImportCsv {
+        /// The CSV file.
+        file: PathBuf,
+    },
 }
 
 pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
@@ -106,6 +112,11 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
     match command {
         ConfigCommand::Example => {
             print!("{}", gateway::EXAMPLE_CONFIG);
+            Ok(ExitCode::SUCCESS)
+        }
+        ConfigCommand::ImportCsv { file } => {
+            let registers = gateway::config::registers_from_csv(&file).map_err(usage)?;
+            print!("{}", gateway::config::registers_toml(&registers));
             Ok(ExitCode::SUCCESS)
         }
         ConfigCommand::Check { file } => {

@@ -17,7 +17,7 @@ use crate::config::CellConfig;
 use crate::driver::{self, DeviceError, Driver, PollGroup, Protocol, WriteError};
 use crate::event::{Event, EventKind};
 use crate::metrics::Metrics;
-use crate::point::{DeviceId, PointId, PointKind, PointSpec, Quality, Value};
+use crate::point::{Deadband, DeviceId, PointId, PointKind, PointSpec, Quality, Value};
 use crate::scheduler::{LineTask, Opener};
 use crate::store::StoreHandle;
 use crate::time::{Timestamp, duration_millis};
@@ -72,6 +72,8 @@ pub struct DeviceEntry {
     pub address: Option<i64>,
     /// Its points.
     pub points: Vec<PointSpec>,
+    /// Each point's deadband (numeric points only), in the order of `points`.
+    pub deadbands: Vec<Option<Deadband>>,
     /// Its poll groups, with the periods in force.
     pub groups: Vec<PollGroup>,
     index: HashMap<String, usize>,
@@ -124,6 +126,9 @@ pub struct PointState {
     pub error: Option<String>,
     /// Whether the value is in alarm.
     pub alarm: bool,
+    /// The last value stored and published: a value within the point's deadband of it
+    /// updates only `value`.
+    pub recorded: Option<Value>,
 }
 
 /// One line and its health.
@@ -373,6 +378,21 @@ impl Cell {
                         name: g.name,
                     })
                     .collect();
+                let deadbands = points
+                    .iter()
+                    .map(|p| {
+                        let register = device
+                            .driver
+                            .registers
+                            .iter()
+                            .find(|r| r.name == p.id.name());
+                        match register {
+                            Some(r) => r.deadband,
+                            None => device.deadband,
+                        }
+                        .filter(|_| p.kind == PointKind::Numeric)
+                    })
+                    .collect();
                 let index = points
                     .iter()
                     .enumerate()
@@ -394,6 +414,7 @@ impl Cell {
                         points: vec![PointState::default(); points.len()],
                     }),
                     points,
+                    deadbands,
                     groups,
                     index,
                     writes: writes_tx.clone(),

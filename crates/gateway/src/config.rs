@@ -42,9 +42,14 @@ use link::Endpoint;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::driver::modbus::{RegisterConfig, RegisterTable};
+use jbus::data::{DataType, Format, Order, Scaling};
+use jbus::rtu::{ReadBitCount, ReadRegisterCount};
+
+use crate::driver::modbus::{ModbusOptions, RegisterConfig, RegisterTable};
 use crate::driver::{self, DriverConfig, Protocol};
-use crate::point::DeviceId;
+use crate::point::{Deadband, DeviceId};
+
+mod register_csv;
 
 /// An example configuration for a real cell (`cellbus config example` prints it); the
 /// same file is `crates/gateway/examples/cell.toml`.
@@ -277,6 +282,9 @@ pub struct DeviceConfig {
     pub period: Option<Duration>,
     /// Periods of named poll groups.
     pub groups: BTreeMap<String, Duration>,
+    /// Deadband of its numeric points that name none of their own (`deadband` or
+    /// `deadband_percent` in the device table).
+    pub deadband: Option<Deadband>,
 }
 
 /// Why a configuration was refused.
@@ -305,12 +313,23 @@ pub enum ConfigError {
         /// The text of the line, for the caret display.
         source_line: String,
     },
+    /// A register list (`registers_csv`) that is not valid, at a row (its line in the
+    /// file, the header being row 1) and column.
+    #[error("{}: row {row}: {message}", path.display())]
+    Csv {
+        /// The CSV file.
+        path: PathBuf,
+        /// The row (line of the file), from 1.
+        row: u64,
+        /// What is wrong, naming the column.
+        message: String,
+    },
 }
 
 impl ConfigError {
     fn describe(&self) -> String {
         match self {
-            ConfigError::Read { .. } => self.to_string(),
+            ConfigError::Read { .. } | ConfigError::Csv { .. } => self.to_string(),
             ConfigError::Invalid {
                 path,
                 line,
@@ -334,7 +353,7 @@ impl ConfigError {
     pub fn position(&self) -> Option<(usize, usize)> {
         match self {
             ConfigError::Invalid { line, column, .. } => Some((*line, *column)),
-            ConfigError::Read { .. } => None,
+            ConfigError::Read { .. } | ConfigError::Csv { .. } => None,
         }
     }
 }
@@ -426,7 +445,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 .address
                 .as_ref()
                 .map_or(id_span.clone(), Spanned::span);
-            let device = check_device(device, this, &endpoint, &at)?;
+            let device = check_device(device, this, &endpoint, path, &at)?;
             if let Some(address) = device.driver.address
                 && !addresses.insert(address)
             {
@@ -703,6 +722,7 @@ fn check_device(
     raw: RawDevice,
     protocol: Protocol,
     endpoint: &Endpoint,
+    path: &Path,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<DeviceConfig, ConfigError> {
     let id = DeviceId::new(raw.id.get_ref()).map_err(|e| {
@@ -779,7 +799,9 @@ fn check_device(
                 })?,
         ),
     };
-    let registers = check_registers(&raw, protocol, at)?;
+    let deadband = check_deadband(&raw.deadband, &raw.deadband_percent, at)?;
+    let modbus = check_modbus_options(&raw, protocol, at)?;
+    let registers = check_registers(&raw, protocol, path, deadband, at)?;
     let driver_config = DriverConfig {
         id: id.clone(),
         protocol,
@@ -789,6 +811,7 @@ fn check_device(
         event_port,
         endpoint: (protocol.owns_connections() || endpoint.is_mbap()).then(|| endpoint.clone()),
         registers,
+        modbus,
     };
     let known: Vec<String> = driver::build(&driver_config)
         .map_err(|m| at(raw.id.span(), m))?
@@ -819,13 +842,156 @@ fn check_device(
         driver: driver_config,
         period,
         groups,
+        deadband,
     })
 }
 
-/// The registers of a generic Modbus device.
+/// Longest pacing delay accepted (`delay_between_requests`, `delay_after_connect`).
+pub const MAX_PACING_DELAY: Duration = Duration::from_secs(60);
+
+/// A deadband from `deadband` (absolute) or `deadband_percent`, never both.
+fn check_deadband(
+    absolute: &Option<Spanned<f64>>,
+    percent: &Option<Spanned<f64>>,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Option<Deadband>, ConfigError> {
+    match (absolute, percent) {
+        (Some(_), Some(p)) => Err(at(
+            p.span(),
+            "deadband and deadband_percent both given: choose one".into(),
+        )),
+        (Some(d), None) => {
+            let band = *d.get_ref();
+            if band.is_finite() && band >= 0.0 {
+                Ok(Some(Deadband::Absolute(band)))
+            } else {
+                Err(at(
+                    d.span(),
+                    format!("deadband {band} must be a number of at least 0 (in the point's unit)"),
+                ))
+            }
+        }
+        (None, Some(p)) => {
+            let percent = *p.get_ref();
+            if percent > 0.0 && percent <= 100.0 {
+                Ok(Some(Deadband::Percent(percent)))
+            } else {
+                Err(at(
+                    p.span(),
+                    format!("deadband_percent {percent} is out of range: above 0, at most 100"),
+                ))
+            }
+        }
+        (None, None) => Ok(None),
+    }
+}
+
+/// The device-level Modbus settings: request sizes and pacing.
+fn check_modbus_options(
+    raw: &RawDevice,
+    protocol: Protocol,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<ModbusOptions, ConfigError> {
+    let spans = [
+        (
+            "max_registers_per_request",
+            raw.max_registers_per_request.as_ref().map(Spanned::span),
+        ),
+        (
+            "max_bits_per_request",
+            raw.max_bits_per_request.as_ref().map(Spanned::span),
+        ),
+        (
+            "one_request_per_register",
+            raw.one_request_per_register.as_ref().map(Spanned::span),
+        ),
+        (
+            "delay_between_requests",
+            raw.delay_between_requests.as_ref().map(Spanned::span),
+        ),
+        (
+            "delay_after_connect",
+            raw.delay_after_connect.as_ref().map(Spanned::span),
+        ),
+        (
+            "registers_csv",
+            raw.registers_csv.as_ref().map(Spanned::span),
+        ),
+    ];
+    if protocol != Protocol::Modbus {
+        if let Some((field, Some(span))) = spans.into_iter().find(|(_, span)| span.is_some()) {
+            return Err(at(
+                span,
+                format!(
+                    "{field} is for modbus devices only, not {} devices",
+                    protocol.as_str()
+                ),
+            ));
+        }
+        return Ok(ModbusOptions::default());
+    }
+    let mut options = ModbusOptions::default();
+    if let Some(n) = &raw.max_registers_per_request {
+        options.plan.max_registers = u16::try_from(*n.get_ref())
+            .ok()
+            .and_then(|n| ReadRegisterCount::new(n).ok())
+            .ok_or_else(|| {
+                at(
+                    n.span(),
+                    format!(
+                        "max_registers_per_request {} is out of range: 1 to {}",
+                        n.get_ref(),
+                        ReadRegisterCount::MAX
+                    ),
+                )
+            })?;
+    }
+    if let Some(n) = &raw.max_bits_per_request {
+        options.plan.max_bits = u16::try_from(*n.get_ref())
+            .ok()
+            .and_then(|n| ReadBitCount::new(n).ok())
+            .ok_or_else(|| {
+                at(
+                    n.span(),
+                    format!(
+                        "max_bits_per_request {} is out of range: 1 to {}",
+                        n.get_ref(),
+                        ReadBitCount::MAX
+                    ),
+                )
+            })?;
+    }
+    if let Some(one) = &raw.one_request_per_register {
+        options.plan.one_request_per_item = *one.get_ref();
+    }
+    if let Some(d) = &raw.delay_between_requests {
+        options.delay_between_requests = duration(
+            d,
+            Duration::ZERO,
+            MAX_PACING_DELAY,
+            "delay_between_requests",
+            at,
+        )?;
+    }
+    if let Some(d) = &raw.delay_after_connect {
+        options.delay_after_connect = duration(
+            d,
+            Duration::ZERO,
+            MAX_PACING_DELAY,
+            "delay_after_connect",
+            at,
+        )?;
+    }
+    Ok(options)
+}
+
+/// The registers of a generic Modbus device: its `[[line.device.register]]` tables, or
+/// the rows of its `registers_csv` file (relative to the config file's directory).
 fn check_registers(
     raw: &RawDevice,
     protocol: Protocol,
+    path: &Path,
+    deadband: Option<Deadband>,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<Vec<RegisterConfig>, ConfigError> {
     if protocol != Protocol::Modbus {
@@ -840,93 +1006,281 @@ fn check_registers(
             None => Ok(Vec::new()),
         };
     }
-    if raw.register.is_empty() {
-        return Err(at(
-            raw.id.span(),
-            "a modbus device needs its registers: add [[line.device.register]] tables with name and address"
+    match (&raw.registers_csv, raw.register.first()) {
+        (Some(csv), Some(_)) => Err(at(
+            csv.span(),
+            "registers_csv and [[line.device.register]] tables both given: name the registers in one place"
                 .into(),
-        ));
+        )),
+        (Some(csv), None) => {
+            let file = path
+                .parent()
+                .unwrap_or_else(|| Path::new(""))
+                .join(csv.get_ref().trim());
+            let text = std::fs::read_to_string(&file).map_err(|e| {
+                at(
+                    csv.span(),
+                    format!("cannot read registers_csv {}: {e}", file.display()),
+                )
+            })?;
+            let table = register_csv::CsvRegisters::parse(&text, &file)?;
+            check_register_list(&table.rows, deadband, &|span, message| {
+                table.error(span, message)
+            })
+        }
+        (None, Some(_)) => check_register_list(&raw.register, deadband, at),
+        (None, None) => Err(at(
+            raw.id.span(),
+            "a modbus device needs its registers: add [[line.device.register]] tables with name and address, or registers_csv"
+                .into(),
+        )),
     }
+}
+
+/// The registers of a CSV register list (`cellbus config import-csv`), checked as a
+/// device's would be.
+pub fn registers_from_csv(file: &Path) -> Result<Vec<RegisterConfig>, ConfigError> {
+    let text = std::fs::read_to_string(file).map_err(|source| ConfigError::Read {
+        path: file.to_owned(),
+        source,
+    })?;
+    let table = register_csv::CsvRegisters::parse(&text, file)?;
+    check_register_list(&table.rows, None, &|span, message| {
+        table.error(span, message)
+    })
+}
+
+/// `registers` as `[[line.device.register]]` tables (defaults left out).
+pub fn registers_toml(registers: &[RegisterConfig]) -> String {
+    register_csv::to_toml(registers)
+}
+
+fn check_register_list(
+    raw: &[RawRegister],
+    deadband: Option<Deadband>,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Vec<RegisterConfig>, ConfigError> {
     let mut names = HashSet::new();
     let mut registers = Vec::new();
-    for r in &raw.register {
+    for r in raw {
         let name = r.name.get_ref();
-        DeviceId::new(name).map_err(|e| {
-            at(
-                r.name.span(),
-                format!("register name {name:?} is not valid: {}", e.rule),
-            )
-        })?;
         if !names.insert(name.clone()) {
             return Err(at(
                 r.name.span(),
                 format!("register name {name:?} is used twice"),
             ));
         }
-        let address = u16::try_from(*r.address.get_ref()).map_err(|_| {
-            at(
-                r.address.span(),
-                format!(
-                    "register address {} is out of range: 0 to 65535",
-                    r.address.get_ref()
-                ),
-            )
-        })?;
-        let table = match &r.table {
-            None => RegisterTable::Holding,
-            Some(t) => RegisterTable::parse(t.get_ref()).ok_or_else(|| {
-                at(
-                    t.span(),
-                    format!(
-                        "table {:?} is not one a register can be in: write \"holding\" or \"input\"",
-                        t.get_ref()
-                    ),
-                )
-            })?,
-        };
-        let scale = match &r.scale {
-            None => 1.0,
-            Some(s) if s.get_ref().is_finite() && *s.get_ref() > 0.0 => *s.get_ref(),
-            Some(s) => {
-                return Err(at(
-                    s.span(),
-                    format!("scale {} must be a number above 0", s.get_ref()),
-                ));
-            }
-        };
-        let mut register = RegisterConfig {
-            name: name.clone(),
-            title: r.title.clone().unwrap_or_else(|| name.clone()),
-            table,
-            address,
-            scale,
-            unit: r.unit.clone(),
-            signed: r.signed.unwrap_or(false),
-            writable: None,
-        };
-        if let Some(w) = &r.writable {
-            if table != RegisterTable::Holding {
-                return Err(at(
-                    w.span(),
-                    "only holding registers can be written; input registers are read-only".into(),
-                ));
-            }
-            let (low, high) = register.representable();
-            let range = w.get_ref();
-            if !(range.min < range.max && range.min >= low && range.max <= high) {
-                return Err(at(
-                    w.span(),
-                    format!(
-                        "writable range {} to {} must be increasing and within what the register holds ({low} to {high})",
-                        range.min, range.max
-                    ),
-                ));
-            }
-            register.writable = Some((range.min, range.max));
-        }
-        registers.push(register);
+        registers.push(check_register(r, deadband, at)?);
     }
     Ok(registers)
+}
+
+/// One register, with `deadband` (the device's) when it names none.
+fn check_register(
+    r: &RawRegister,
+    deadband: Option<Deadband>,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<RegisterConfig, ConfigError> {
+    let name = r.name.get_ref();
+    DeviceId::new(name).map_err(|e| {
+        at(
+            r.name.span(),
+            format!("register name {name:?} is not valid: {}", e.rule),
+        )
+    })?;
+    let address = u16::try_from(*r.address.get_ref()).map_err(|_| {
+        at(
+            r.address.span(),
+            format!(
+                "register {name}: address {} is out of range: 0 to 65535",
+                r.address.get_ref()
+            ),
+        )
+    })?;
+    let table = match &r.table {
+        None => RegisterTable::Holding,
+        Some(t) => RegisterTable::parse(t.get_ref()).ok_or_else(|| {
+            at(
+                t.span(),
+                format!(
+                    "register {name}: table {:?} is not one a register can be in: write {}",
+                    t.get_ref(),
+                    RegisterTable::CHOICES
+                ),
+            )
+        })?,
+    };
+    if table.holds_bits() {
+        let word_fields = [
+            ("type", r.data_type.as_ref().map(Spanned::span)),
+            ("order", r.order.as_ref().map(Spanned::span)),
+            ("scale", r.scale.as_ref().map(Spanned::span)),
+            ("offset", r.offset.as_ref().map(Spanned::span)),
+            ("signed", r.signed.as_ref().map(Spanned::span)),
+        ];
+        if let Some((field, Some(span))) = word_fields.into_iter().find(|(_, s)| s.is_some()) {
+            return Err(at(
+                span,
+                format!(
+                    "register {name}: {field} is for holding and input registers; a {} is a single bit (off or on)",
+                    table.as_str()
+                ),
+            ));
+        }
+    }
+    let data_type = match (&r.data_type, &r.signed) {
+        (Some(_), Some(signed)) => {
+            return Err(at(
+                signed.span(),
+                format!(
+                    "register {name}: signed is the old way of saying type = \"int16\"; give type only"
+                ),
+            ));
+        }
+        (Some(t), None) => t
+            .get_ref()
+            .trim()
+            .parse::<DataType>()
+            .map_err(|e| at(t.span(), format!("register {name}: {e}")))?,
+        (None, Some(signed)) if *signed.get_ref() => DataType::Int16,
+        (None, _) => DataType::Uint16,
+    };
+    let order = match &r.order {
+        None => Order::default(),
+        Some(o) => o
+            .get_ref()
+            .parse::<Order>()
+            .map_err(|e| at(o.span(), format!("register {name}: {e}")))?,
+    };
+    if !data_type.is_number() {
+        for (field, value) in [("scale", &r.scale), ("offset", &r.offset)] {
+            if let Some(v) = value {
+                return Err(at(
+                    v.span(),
+                    format!(
+                        "register {name}: {field} is for numbers; a {data_type} register is not one"
+                    ),
+                ));
+            }
+        }
+    }
+    let scale = match &r.scale {
+        None => 1.0,
+        Some(s) if s.get_ref().is_finite() && *s.get_ref() > 0.0 => *s.get_ref(),
+        Some(s) => {
+            return Err(at(
+                s.span(),
+                format!(
+                    "register {name}: scale {} must be a number above 0",
+                    s.get_ref()
+                ),
+            ));
+        }
+    };
+    let offset = match &r.offset {
+        None => 0.0,
+        Some(o) if o.get_ref().is_finite() => *o.get_ref(),
+        Some(o) => {
+            return Err(at(
+                o.span(),
+                format!("register {name}: offset {} must be a number", o.get_ref()),
+            ));
+        }
+    };
+    let scaling = Scaling::new(scale, offset).map_err(|e| {
+        let span = r.scale.as_ref().map_or(r.name.span(), Spanned::span);
+        at(span, format!("register {name}: {e}"))
+    })?;
+    let own_deadband = check_deadband(&r.deadband, &r.deadband_percent, at)?;
+    let mut register = RegisterConfig {
+        name: name.clone(),
+        title: r.title.clone().unwrap_or_else(|| name.clone()),
+        table,
+        address,
+        format: Format::new(data_type, order).scaled(scaling),
+        unit: r.unit.clone(),
+        writable: None,
+        deadband: None,
+    };
+    if u32::from(address) + u32::from(register.length()) > 0x1_0000 {
+        return Err(at(
+            r.address.span(),
+            format!("register {name}: a {data_type} at {address} runs past the last address 65535"),
+        ));
+    }
+    if own_deadband.is_some() && !register.is_numeric() {
+        let span = r
+            .deadband
+            .as_ref()
+            .or(r.deadband_percent.as_ref())
+            .map_or(r.name.span(), Spanned::span);
+        return Err(at(
+            span,
+            format!("register {name}: a deadband is for numbers; this register is not one"),
+        ));
+    }
+    register.deadband = if register.is_numeric() {
+        own_deadband.or(deadband)
+    } else {
+        None
+    };
+    if let Some(w) = &r.writable {
+        register.writable = check_writable(&register, w, at)?;
+    }
+    Ok(register)
+}
+
+/// The write range of a register: coils are on/off, holding registers of any number type
+/// take a range within what they hold.
+fn check_writable(
+    register: &RegisterConfig,
+    w: &Spanned<RawWritable>,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Option<(f64, f64)>, ConfigError> {
+    let name = &register.name;
+    match register.table {
+        RegisterTable::Input | RegisterTable::Discrete => {
+            return Err(at(
+                w.span(),
+                format!(
+                    "register {name}: only holding registers and coils can be written; {} are read-only",
+                    register.table.table()
+                ),
+            ));
+        }
+        RegisterTable::Holding if !register.is_numeric() => {
+            return Err(at(
+                w.span(),
+                format!(
+                    "register {name}: a {} register is read-only here; numbers and coils can be written",
+                    register.format.data_type
+                ),
+            ));
+        }
+        _ => {}
+    }
+    let (low, high) = register.representable();
+    match w.get_ref() {
+        RawWritable::Flag(false) => Ok(None),
+        RawWritable::Flag(true) => Ok(Some((low, high))),
+        RawWritable::Range(range) => {
+            if range.min < range.max && range.min >= low && range.max <= high {
+                Ok(Some(if register.is_bool() {
+                    (0.0, 1.0)
+                } else {
+                    (range.min, range.max)
+                }))
+            } else {
+                Err(at(
+                    w.span(),
+                    format!(
+                        "register {name}: writable range {} to {} must be increasing and within what the register holds ({low} to {high})",
+                        range.min, range.max
+                    ),
+                ))
+            }
+        }
+    }
 }
 
 fn duration(
@@ -1058,6 +1412,14 @@ struct RawDevice {
     #[serde(default)]
     poll: BTreeMap<String, Spanned<String>>,
     event_port: Option<Spanned<i64>>,
+    deadband: Option<Spanned<f64>>,
+    deadband_percent: Option<Spanned<f64>>,
+    max_registers_per_request: Option<Spanned<i64>>,
+    max_bits_per_request: Option<Spanned<i64>>,
+    one_request_per_register: Option<Spanned<bool>>,
+    delay_between_requests: Option<Spanned<String>>,
+    delay_after_connect: Option<Spanned<String>>,
+    registers_csv: Option<Spanned<String>>,
     #[serde(default)]
     register: Vec<RawRegister>,
 }
@@ -1069,10 +1431,24 @@ struct RawRegister {
     title: Option<String>,
     table: Option<Spanned<String>>,
     address: Spanned<i64>,
+    #[serde(rename = "type")]
+    data_type: Option<Spanned<String>>,
+    order: Option<Spanned<String>>,
     scale: Option<Spanned<f64>>,
+    offset: Option<Spanned<f64>>,
     unit: Option<String>,
-    signed: Option<bool>,
-    writable: Option<Spanned<RawRange>>,
+    signed: Option<Spanned<bool>>,
+    writable: Option<Spanned<RawWritable>>,
+    deadband: Option<Spanned<f64>>,
+    deadband_percent: Option<Spanned<f64>>,
+}
+
+/// `writable = true`, or `writable = { min = …, max = … }`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum RawWritable {
+    Flag(bool),
+    Range(RawRange),
 }
 
 #[derive(Debug, Deserialize)]
@@ -1444,9 +1820,16 @@ writable = { min = 5.0, max = 30.0 }
         assert_eq!(driver.registers.len(), 2);
         let supply = &driver.registers[0];
         assert_eq!(
-            (supply.table, supply.address, supply.scale, supply.signed),
-            (RegisterTable::Input, 0x10, 0.1, true)
+            (
+                supply.table,
+                supply.address,
+                supply.format.scaling.scale(),
+                supply.format.data_type
+            ),
+            (RegisterTable::Input, 0x10, 0.1, DataType::Int16),
+            "the old signed = true is an int16"
         );
+        assert_eq!(driver.registers[1].format.data_type, DataType::Uint16);
         assert_eq!(supply.unit.as_deref(), Some("°C"));
         assert_eq!(driver.registers[1].writable, Some((5.0, 30.0)));
     }
@@ -1487,13 +1870,13 @@ writable = { min = 5.0, max = 30.0 }
             &CHILLER.replace("table = \"input\"", "table = \"coils\""),
             13,
             9,
-            "write \"holding\" or \"input\"",
+            "write \"holding\", \"input\", \"coil\" or \"discrete\"",
         );
         refused(
             &CHILLER.replace("address = 0x20", "address = 70000"),
             21,
             11,
-            "register address 70000 is out of range: 0 to 65535",
+            "register setpoint: address 70000 is out of range: 0 to 65535",
         );
         refused(
             &CHILLER.replace("name = \"setpoint\"", "name = \"supply\""),
@@ -1521,6 +1904,345 @@ writable = { min = 5.0, max = 30.0 }
         );
         let bare = CHILLER.split("[[line.device.register]]").next().unwrap();
         refused(bare, 7, 6, "needs its registers");
+    }
+
+    const METER: &str = r#"
+[[line]]
+name = "utilities"
+endpoint = "modbus-tcp://192.0.2.61"
+
+[[line.device]]
+id = "meter1"
+protocol = "modbus"
+max_registers_per_request = 60
+max_bits_per_request = 800
+one_request_per_register = true
+delay_between_requests = "50ms"
+delay_after_connect = "1s"
+deadband = 0.5
+
+[[line.device.register]]
+name = "voltage"
+table = "input"
+address = 0x0100
+type = "float32"
+order = "CDAB"
+unit = "V"
+
+[[line.device.register]]
+name = "energy"
+table = "input"
+address = 0x0200
+type = "uint32"
+scale = 0.01
+offset = 5
+deadband_percent = 1
+
+[[line.device.register]]
+name = "limit"
+address = 0x0300
+type = "int32"
+writable = { min = -1000, max = 1000 }
+
+[[line.device.register]]
+name = "pump"
+table = "coil"
+address = 3
+writable = true
+
+[[line.device.register]]
+name = "door"
+table = "discrete"
+address = 0x20
+
+[[line.device.register]]
+name = "label"
+address = 0x0400
+type = "string:4"
+"#;
+
+    #[test]
+    fn modbus_types_orders_tables_pacing_and_deadbands_are_read() {
+        let config = parse(METER).unwrap();
+        let device = &config.lines[0].devices[0];
+        let driver = &device.driver;
+        assert_eq!(device.deadband, Some(Deadband::Absolute(0.5)));
+        let options = driver.modbus;
+        assert_eq!(options.plan.max_registers.get(), 60);
+        assert_eq!(options.plan.max_bits.get(), 800);
+        assert!(options.plan.one_request_per_item);
+        assert_eq!(options.delay_between_requests, Duration::from_millis(50));
+        assert_eq!(options.delay_after_connect, Duration::from_secs(1));
+        let r = |name: &str| driver.registers.iter().find(|r| r.name == name).unwrap();
+        assert_eq!(
+            r("voltage").format,
+            Format::new(DataType::Float32, Order::Cdab)
+        );
+        assert_eq!(
+            r("voltage").deadband,
+            Some(Deadband::Absolute(0.5)),
+            "the device's deadband"
+        );
+        assert_eq!(r("energy").format.scaling, Scaling::new(0.01, 5.0).unwrap());
+        assert_eq!(r("energy").deadband, Some(Deadband::Percent(1.0)));
+        assert_eq!(r("limit").writable, Some((-1000.0, 1000.0)));
+        assert_eq!(
+            (r("pump").table, r("pump").writable),
+            (RegisterTable::Coil, Some((0.0, 1.0)))
+        );
+        assert_eq!(r("door").table, RegisterTable::Discrete);
+        assert_eq!(r("door").deadband, None, "bits have no deadband");
+        assert_eq!(r("label").deadband, None, "text has no deadband");
+        let defaults = parse(CHILLER).unwrap();
+        let chiller = &defaults.lines[0].devices[0];
+        assert_eq!(chiller.deadband, None);
+        assert_eq!(chiller.driver.modbus, ModbusOptions::default());
+        assert_eq!(chiller.driver.modbus.plan.max_registers.get(), 125);
+        assert_eq!(chiller.driver.modbus.plan.max_bits.get(), 2000);
+    }
+
+    #[test]
+    fn a_deadband_applies_to_any_protocol() {
+        let config = parse(&format!("{ONE}deadband_percent = 2\n")).unwrap();
+        assert_eq!(
+            config.lines[0].devices[0].deadband,
+            Some(Deadband::Percent(2.0))
+        );
+    }
+
+    #[test]
+    fn modbus_field_mistakes_are_refused_naming_register_field_and_place() {
+        let cases: [(&str, &str, usize, usize, &str); 14] = [
+            (
+                "type = \"float32\"\norder",
+                "type = \"float33\"\norder",
+                20,
+                8,
+                "register voltage: `float33` is not a data type",
+            ),
+            (
+                "order = \"CDAB\"",
+                "order = \"ACBD\"",
+                21,
+                9,
+                "register voltage: `ACBD` is not a byte order",
+            ),
+            (
+                "offset = 5",
+                "offset = nan",
+                30,
+                10,
+                "register energy: offset NaN must be a number",
+            ),
+            (
+                "deadband_percent = 1\n",
+                "deadband_percent = 1\ndeadband = 2\n",
+                31,
+                20,
+                "deadband and deadband_percent both given",
+            ),
+            (
+                "deadband_percent = 1\n",
+                "deadband_percent = 150\n",
+                31,
+                20,
+                "deadband_percent 150 is out of range",
+            ),
+            (
+                "deadband = 0.5",
+                "deadband = -1",
+                14,
+                12,
+                "deadband -1 must be a number of at least 0",
+            ),
+            (
+                "max_registers_per_request = 60",
+                "max_registers_per_request = 126",
+                9,
+                29,
+                "max_registers_per_request 126 is out of range: 1 to 125",
+            ),
+            (
+                "max_bits_per_request = 800",
+                "max_bits_per_request = 0",
+                10,
+                24,
+                "max_bits_per_request 0 is out of range: 1 to 2000",
+            ),
+            (
+                "delay_between_requests = \"50ms\"",
+                "delay_between_requests = \"fast\"",
+                12,
+                26,
+                "delay_between_requests \"fast\" is not a duration",
+            ),
+            (
+                "delay_after_connect = \"1s\"",
+                "delay_after_connect = \"2m\"",
+                13,
+                23,
+                "delay_after_connect 2m is out of range",
+            ),
+            (
+                "table = \"discrete\"\naddress = 0x20\n",
+                "table = \"discrete\"\naddress = 0x20\nwritable = true\n",
+                49,
+                12,
+                "register door: only holding registers and coils can be written; discrete inputs are read-only",
+            ),
+            (
+                "type = \"string:4\"\n",
+                "type = \"string:4\"\nwritable = true\n",
+                54,
+                12,
+                "register label: a string:4 register is read-only here",
+            ),
+            (
+                "table = \"coil\"\naddress = 3\n",
+                "table = \"coil\"\naddress = 3\ntype = \"int16\"\n",
+                43,
+                8,
+                "register pump: type is for holding and input registers; a coil is a single bit",
+            ),
+            (
+                "address = 0x0400",
+                "address = 65534",
+                52,
+                11,
+                "register label: a string:4 at 65534 runs past the last address 65535",
+            ),
+        ];
+        for (from, to, line, column, words) in cases {
+            assert!(METER.contains(from), "{from}");
+            refused(&METER.replacen(from, to, 1), line, column, words);
+        }
+        refused(
+            &CHILLER.replace("signed = true", "signed = true\ntype = \"int32\""),
+            17,
+            10,
+            "register supply: signed is the old way of saying type = \"int16\"; give type only",
+        );
+        refused(
+            &format!("{ONE}one_request_per_register = true\n"),
+            9,
+            28,
+            "one_request_per_register is for modbus devices only, not jbc devices",
+        );
+        refused(
+            &format!("{ONE}registers_csv = \"x.csv\"\n"),
+            9,
+            17,
+            "registers_csv is for modbus devices only",
+        );
+        refused(
+            &METER.replace(
+                "deadband = 0.5",
+                "deadband = 0.5\nregisters_csv = \"meter.csv\"",
+            ),
+            15,
+            17,
+            "registers_csv and [[line.device.register]] tables both given",
+        );
+    }
+
+    fn csv_cell(dir: &Path, csv: &str) -> Result<CellConfig, ConfigError> {
+        std::fs::write(dir.join("meter.csv"), csv).unwrap();
+        let toml = String::from(
+            "[[line]]\nname = \"utilities\"\nendpoint = \"modbus-tcp://192.0.2.61\"\n\n\
+             [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\nregisters_csv = \"meter.csv\"\n",
+        );
+        let path = dir.join("cell.toml");
+        std::fs::write(&path, toml).unwrap();
+        check_config(&path)
+    }
+
+    #[test]
+    fn a_csv_register_list_is_read_relative_to_the_config_file_with_columns_in_any_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let config = csv_cell(
+            dir.path(),
+            "# a meter\nunit,address,name,type,order,table,scale,writable_min,writable_max,title\n\
+             V,0x0000,voltage_l1,float32,CDAB,input,,,,Voltage L1-N\n\
+             kW,256,limit,uint16,,,0.1,0,200,\n",
+        )
+        .unwrap();
+        let registers = &config.lines[0].devices[0].driver.registers;
+        assert_eq!(registers.len(), 2);
+        assert_eq!(registers[0].title, "Voltage L1-N");
+        assert_eq!(registers[0].table, RegisterTable::Input);
+        assert_eq!(
+            registers[0].format,
+            Format::new(DataType::Float32, Order::Cdab)
+        );
+        assert_eq!(registers[1].address, 256);
+        assert_eq!(registers[1].table, RegisterTable::Holding, "empty: default");
+        assert_eq!(registers[1].writable, Some((0.0, 200.0)));
+        assert_eq!(registers[1].unit.as_deref(), Some("kW"));
+    }
+
+    #[test]
+    fn csv_mistakes_name_the_file_row_and_column() {
+        let dir = tempfile::tempdir().unwrap();
+        let header = "name,table,address,type\n";
+        for (rows, words) in [
+            (
+                "a,input,0x10,float32\nb,input,0x1G,float32\n",
+                "meter.csv: row 3: column \"address\": \"0x1G\" is not an address",
+            ),
+            (
+                "a,input,0x10,float32\nb,inputs,0x12,float32\n",
+                "meter.csv: row 3: column \"table\": register b: table \"inputs\" is not one",
+            ),
+            (
+                "a,input,0x10,float99\n",
+                "meter.csv: row 2: column \"type\": register a: `float99` is not a data type",
+            ),
+            (
+                "a,input,0x10,float32\na,input,0x12,float32\n",
+                "meter.csv: row 3: column \"name\": register name \"a\" is used twice",
+            ),
+            (
+                ",input,0x10,float32\n",
+                "meter.csv: row 2: column \"name\": empty",
+            ),
+            ("a,input,0x10\n", "meter.csv: row 2: "),
+        ] {
+            let err = csv_cell(dir.path(), &format!("{header}{rows}")).unwrap_err();
+            let shown = err.to_string();
+            assert!(shown.contains(words), "{shown}\nwanted: {words}");
+        }
+        let err = csv_cell(dir.path(), "name,adress\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("row 1: column \"adress\" is not one cellbus knows"),
+            "{err}"
+        );
+        let err = csv_cell(dir.path(), "name,title\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("row 1: no column \"address\""), "{err}");
+        std::fs::remove_file(dir.path().join("meter.csv")).unwrap();
+        let err = check_config(&dir.path().join("cell.toml")).unwrap_err();
+        assert_eq!(err.position(), Some((8, 17)), "{err}");
+        assert!(
+            err.to_string().contains("cannot read registers_csv"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_example_energy_meter_csv_becomes_toml_that_parses_to_the_same_registers() {
+        let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/energy-meter.csv");
+        let registers = registers_from_csv(&csv).unwrap();
+        assert!(registers.len() >= 12, "{}", registers.len());
+        let toml = registers_toml(&registers);
+        let config = parse(&format!(
+            "[[line]]\nname = \"l\"\nendpoint = \"modbus-tcp://192.0.2.61\"\n\n\
+             [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\n\n{toml}"
+        ))
+        .unwrap();
+        assert_eq!(config.lines[0].devices[0].driver.registers, registers);
     }
 
     #[test]

@@ -144,10 +144,12 @@ fn device(id: DeviceId, protocol: Protocol, address: i64, name: &str) -> DeviceC
             event_port: None,
             endpoint: None,
             registers: Vec::new(),
+            modbus: Default::default(),
         },
         name: name.to_owned(),
         period: None,
         groups: BTreeMap::new(),
+        deadband: None,
     }
 }
 

@@ -1,7 +1,7 @@
 //! Prometheus metrics, served as text at `/metrics`.
 //!
 //! Per line and device: polls (by result), errors by kind, timeouts, poll latency, whether
-//! the device is up. Per line: busy seconds (its rate is the line's utilisation) and the
+//! the device is up, requests per poll (generic Modbus). Per line: busy seconds (its rate is the line's utilisation) and the
 //! utilisation over the last window. For the gateway: history rows written, events, write
 //! attempts by result, open event streams.
 
@@ -88,6 +88,9 @@ pub struct Metrics {
     pub poll_seconds: HistogramFamily,
     /// 1 while the device answers.
     pub device_up: Family<DeviceLabels, Gauge>,
+    /// Generic Modbus devices: requests the last answered poll sent (the read plan's
+    /// reads, more while a refused read is being split).
+    pub modbus_requests_per_poll: Family<DeviceLabels, Gauge>,
     /// Time the line spent on requests, seconds.
     pub line_busy_seconds: Family<LineLabels, Counter<f64, AtomicU64>>,
     /// Share of the last window the line was busy (0–1).
@@ -173,6 +176,7 @@ impl Metrics {
         let timeouts = Family::<DeviceLabels, Counter>::default();
         let poll_seconds = HistogramFamily::new_with_constructor(latency_histogram);
         let device_up = Family::<DeviceLabels, Gauge>::default();
+        let modbus_requests_per_poll = Family::<DeviceLabels, Gauge>::default();
         let line_busy_seconds = Family::<LineLabels, Counter<f64, AtomicU64>>::default();
         let line_utilisation = Family::<LineLabels, Gauge<f64, AtomicU64>>::default();
         let line_open = Family::<LineLabels, Gauge>::default();
@@ -206,6 +210,11 @@ impl Metrics {
             poll_seconds.clone(),
         );
         registry.register("device_up", "1 while the device answers", device_up.clone());
+        registry.register(
+            "modbus_requests_per_poll",
+            "Requests the last answered poll of a generic Modbus device sent",
+            modbus_requests_per_poll.clone(),
+        );
         registry.register(
             "line_busy_seconds",
             "Time the line spent on requests (its rate is the line's utilisation)",
@@ -281,6 +290,7 @@ impl Metrics {
             timeouts,
             poll_seconds,
             device_up,
+            modbus_requests_per_poll,
             line_busy_seconds,
             line_utilisation,
             line_open,

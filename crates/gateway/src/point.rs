@@ -251,6 +251,29 @@ impl AlarmRule {
     }
 }
 
+/// How far a good number must move from the last recorded value before it is recorded
+/// (stored and published) again; smaller moves only update the live value.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Deadband {
+    /// A move of at least this much, in the point's unit.
+    Absolute(f64),
+    /// A move of at least this share (in percent) of the last recorded value's magnitude.
+    Percent(f64),
+}
+
+impl Deadband {
+    /// Whether a move from `recorded` to `value` is big enough to be recorded. A move from
+    /// 0 under a percentage passes: 0's share is 0.
+    pub fn passes(self, recorded: f64, value: f64) -> bool {
+        let moved = (value - recorded).abs();
+        match self {
+            Deadband::Absolute(band) => moved >= band,
+            Deadband::Percent(percent) => moved >= recorded.abs() * percent / 100.0,
+        }
+    }
+}
+
 /// What a point is.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PointSpec {
@@ -601,6 +624,15 @@ mod tests {
             spec.check_write(&Value::Number(300.0)),
             Err(ValueError::ReadOnly { .. })
         ));
+    }
+
+    #[test]
+    fn a_deadband_lets_through_moves_at_least_as_big_as_its_band() {
+        assert!(!Deadband::Absolute(0.5).passes(230.0, 230.4));
+        assert!(Deadband::Absolute(0.5).passes(230.0, 229.5));
+        assert!(!Deadband::Percent(1.0).passes(200.0, 201.9));
+        assert!(Deadband::Percent(1.0).passes(-200.0, -202.0));
+        assert!(Deadband::Percent(1.0).passes(0.0, 0.001));
     }
 
     #[test]

@@ -47,7 +47,7 @@ use crate::cell::{Cell, DeviceEntry, DeviceStatus, LineEntry, LiveMessage, Write
 use crate::driver::{BoxFuture, DeviceError, DeviceEvent, Driver, ErrorKind, Reading, WriteError};
 use crate::event::{Event, EventKind};
 use crate::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
-use crate::point::{Quality, Value};
+use crate::point::{Deadband, Quality, Value};
 use crate::store::Sample;
 use crate::time::Timestamp;
 
@@ -130,6 +130,8 @@ struct SlotMetrics {
     latency: Histogram,
     up: Gauge,
     failures: FailureMetrics,
+    /// Drivers that plan their reads (generic Modbus): requests of the last poll.
+    requests_per_poll: Option<Gauge>,
 }
 
 /// A device's failure counters, created at its first failure of each kind, so that a
@@ -223,6 +225,14 @@ impl LineTask {
                         })
                         .clone(),
                     up: metrics.device_up.get_or_create(&labels).clone(),
+                    requests_per_poll: (entry.protocol == crate::driver::Protocol::Modbus).then(
+                        || {
+                            metrics
+                                .modbus_requests_per_poll
+                                .get_or_create(&labels)
+                                .clone()
+                        },
+                    ),
                     latency: line_latency.clone(),
                     failures: FailureMetrics {
                         polls: metrics.polls.clone(),
@@ -432,6 +442,11 @@ impl LineTask {
                 }
                 let entry = Arc::clone(&slot.entry);
                 slot.m.up.set(1);
+                if let (Some(gauge), Some(requests)) =
+                    (&slot.m.requests_per_poll, slot.driver.requests_per_poll())
+                {
+                    gauge.set(i64::try_from(requests).unwrap_or(i64::MAX));
+                }
                 apply_readings(&self.cell, &entry, readings);
                 mark_up(&self.cell, &entry);
                 record_events(&self.cell, &entry, slot.driver.take_events());
@@ -695,8 +710,9 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
             };
             let changed = match reading.value {
                 Ok(value) => {
-                    let changed = point.value.as_ref() != Some(&value)
-                        || point.quality != Some(Quality::Good);
+                    let deadband = entry.deadbands.get(i).copied().flatten();
+                    let changed = point.quality != Some(Quality::Good)
+                        || moved_enough(point.recorded.as_ref(), &value, deadband);
                     let alarm = spec.is_alarm(&value);
                     if alarm != point.alarm {
                         let text = spec
@@ -740,6 +756,7 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
                 }
             };
             if changed {
+                point.recorded = point.value.clone();
                 samples.push(Sample {
                     point: spec.id.clone(),
                     t: now,
@@ -762,6 +779,19 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
     }
     for event in events {
         cell.emit(event);
+    }
+}
+
+/// Whether a good value is to be recorded against the last recorded one: any change, or
+/// under a deadband a move at least as big as the band (numbers only).
+fn moved_enough(recorded: Option<&Value>, value: &Value, deadband: Option<Deadband>) -> bool {
+    match (recorded, deadband) {
+        (None, _) => true,
+        (Some(recorded), None) => recorded != value,
+        (Some(recorded), Some(band)) => match (recorded.as_number(), value.as_number()) {
+            (Some(before), Some(now)) => before != now && band.passes(before, now),
+            _ => recorded != value,
+        },
     }
 }
 

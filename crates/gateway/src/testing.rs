@@ -79,10 +79,12 @@ pub fn device(id: &str, address: i64) -> DeviceConfig {
             event_port: None,
             endpoint: None,
             registers: Vec::new(),
+            modbus: Default::default(),
         },
         name: format!("Station {id}"),
         period: None,
         groups: BTreeMap::new(),
+        deadband: None,
     }
 }
 

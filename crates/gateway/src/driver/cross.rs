@@ -492,6 +492,7 @@ mod tests {
             event_port: None,
             endpoint: None,
             registers: Vec::new(),
+            modbus: Default::default(),
         }
     }
 

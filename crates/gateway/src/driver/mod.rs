@@ -77,6 +77,12 @@ pub trait Driver: Send {
     fn take_events(&mut self) -> Vec<DeviceEvent> {
         Vec::new()
     }
+
+    /// How many requests the last poll sent, for drivers that plan their reads (generic
+    /// Modbus); shown in `/metrics` as `cellbus_modbus_requests_per_poll`.
+    fn requests_per_poll(&self) -> Option<u64> {
+        None
+    }
 }
 
 /// Something a device did that is worth an entry in the event log.
@@ -384,6 +390,8 @@ pub struct DriverConfig {
     pub endpoint: Option<link::Endpoint>,
     /// Generic Modbus: the registers the config names (empty for other protocols).
     pub registers: Vec<modbus::RegisterConfig>,
+    /// Generic Modbus: how reads are planned and paced (defaults for other protocols).
+    pub modbus: modbus::ModbusOptions,
 }
 
 /// The driver for a device.

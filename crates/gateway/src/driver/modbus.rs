@@ -1,45 +1,72 @@
-//! Any Modbus RTU / JBUS device, with its registers named in the configuration, through
-//! `jbus::client`.
+//! Any Modbus RTU / JBUS / Modbus TCP device, with its registers named in the
+//! configuration (or in a CSV file, `registers_csv`), through `jbus::client`.
 //!
 //! ```toml
 //! [[line.device]]
 //! id = "chiller1"
 //! protocol = "modbus"
 //! address = 17                   # unit 1-255
+//! max_registers_per_request = 125   # 1-125: some devices take less
+//! max_bits_per_request = 2000       # 1-2000, coils and discrete inputs
+//! one_request_per_register = false  # true: every register alone (devices that refuse holes)
+//! delay_between_requests = "0ms"    # wait between two of this device's requests
+//! delay_after_connect = "0ms"       # wait after the line (re)opens, before the first request
+//! deadband = 0.5                    # any protocol: default deadband of numeric points
 //!
 //! [[line.device.register]]
 //! name = "supply_temperature"    # the point's name: a-z, 0-9, _ and -
 //! title = "Supply temperature"   # words for people (default: the name)
-//! table = "input"                # "holding" (default, functions 3/6) or "input" (4)
-//! address = 0x0010               # register address (0-65535)
-//! scale = 0.1                    # value = register × scale (default 1)
+//! table = "input"                # holding (default), input, coil or discrete
+//! address = 0x0010               # first register (or bit) address, 0-65535
+//! type = "int16"                 # int16, uint16 (default), int32, uint32, int64, uint64,
+//!                                # float32, float64, string:N, bit:N
+//! order = "ABCD"                 # ABCD (default), CDAB, BADC, DCBA
+//! scale = 0.1                    # value = raw × scale + offset (default 1 and 0)
+//! offset = 0
 //! unit = "°C"
-//! signed = true                  # two's complement (default false)
+//! deadband = 0.2                 # or deadband_percent = 1 (of the last recorded value)
 //!
 //! [[line.device.register]]
 //! name = "setpoint"
 //! address = 0x0020
-//! scale = 0.1
-//! unit = "°C"
-//! writable = { min = 5.0, max = 30.0 }   # holding registers only
+//! type = "float32"
+//! writable = { min = 5.0, max = 30.0 }   # holding registers: function 6 or 16
+//!
+//! [[line.device.register]]
+//! name = "pump"
+//! table = "coil"
+//! address = 3
+//! writable = true                # coils: function 5
 //! ```
 //!
-//! One group, `live` (1 s): registers at consecutive addresses of one table are read
-//! together (up to 125 per read). An exception marks the points of its read only; silence
-//! or damage marks the device down. A write is checked against its range and the register's
-//! step (`scale`) before it goes out as function 6.
+//! One group, `live` (1 s). The registers are planned once into the fewest reads
+//! ([`jbus::plan`]): each poll sends the plan's reads. A merged read that the device
+//! refuses with exception 2 (illegal data address: a hole in its map) is split for good
+//! (logged once) and the rest of the poll goes on with the parts; a read of a single
+//! register that is refused marks that register's point bad with the exception in words,
+//! as does any other exception for its read's points. Silence or damage marks the device
+//! down. Coils, discrete inputs and `bit:N` registers are enumerations `0` off / `1` on;
+//! `string:N` registers are text.
+//!
+//! Pacing: the driver waits `delay_between_requests` between two of its own requests (the
+//! line is free for other devices meanwhile) and `delay_after_connect` before its first
+//! request after the scheduler (re)attached the line, which it does after every (re)open.
 
 use std::time::Duration;
 
 use jbus::client::{Client, ClientConfig, ClientError, Framing};
-
-use jbus::rtu::UnitId;
+use jbus::data::{DataType, Format, TypedValue};
+use jbus::plan::{Item, Plan, PlanOptions, Split};
+use jbus::rtu::{ExceptionCode, UnitId};
+use jbus::slave::Table;
 use link::{SerialSettings, SharedLine};
+use tokio::time::Instant;
 
 use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
+    enum_states,
 };
-use crate::point::{DeviceId, PointId, PointKind, PointSpec, Value, WriteRange};
+use crate::point::{Deadband, DeviceId, PointId, PointKind, PointSpec, Value, WriteRange};
 
 /// A Modbus line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
@@ -50,83 +77,219 @@ pub const DEFAULT_UNIT: i64 = 1;
 /// The only group.
 pub const LIVE: &str = "live";
 
-/// Most registers one read asks for (Modbus's limit for function 3/4).
-const MAX_READ: u16 = 125;
-
 /// Which table a register is in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum RegisterTable {
-    /// Holding registers: read with function 3, written with 6.
+    /// Holding registers: read with function 3, written with 6 or 16.
     Holding,
     /// Input registers: read-only, function 4.
     Input,
+    /// Coils: bits read with function 1, written with 5.
+    Coil,
+    /// Discrete inputs: read-only bits, function 2.
+    Discrete,
 }
 
 impl RegisterTable {
-    /// The table for its config name (`holding`, `input`).
+    /// The names the config takes, for messages.
+    pub const CHOICES: &'static str = "\"holding\", \"input\", \"coil\" or \"discrete\"";
+
+    /// The table for its config name (`holding`, `input`, `coil`, `discrete`).
     pub fn parse(text: &str) -> Option<Self> {
-        match text {
+        match text.trim() {
             "holding" => Some(Self::Holding),
             "input" => Some(Self::Input),
+            "coil" => Some(Self::Coil),
+            "discrete" => Some(Self::Discrete),
             _ => None,
         }
     }
+
+    /// The config name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Holding => "holding",
+            Self::Input => "input",
+            Self::Coil => "coil",
+            Self::Discrete => "discrete",
+        }
+    }
+
+    /// The Modbus table.
+    pub fn table(self) -> Table {
+        match self {
+            Self::Holding => Table::HoldingRegisters,
+            Self::Input => Table::InputRegisters,
+            Self::Coil => Table::Coils,
+            Self::Discrete => Table::DiscreteInputs,
+        }
+    }
+
+    /// Whether it holds single bits (coils, discrete inputs).
+    pub fn holds_bits(self) -> bool {
+        self.table().holds_bits()
+    }
 }
 
-/// One register as the configuration names it.
+/// One register (or bit) as the configuration names it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RegisterConfig {
     /// The point's name.
     pub name: String,
     /// Words for people.
     pub title: String,
-    /// The table it is in (holding or input registers).
+    /// The table it is in.
     pub table: RegisterTable,
-    /// Its register address, from 0.
+    /// Its first register (or bit) address, from 0.
     pub address: u16,
-    /// What one step of the register is worth.
-    pub scale: f64,
+    /// Type, order and scale of its value (unused for bits).
+    pub format: Format,
     /// The symbol of its unit of measure (`°C`, `kW`).
     pub unit: Option<String>,
-    /// Two's complement.
-    pub signed: bool,
-    /// The range a write must fall into, if writable.
+    /// The range a write must fall into, if writable (`0` to `1` for a coil).
     pub writable: Option<(f64, f64)>,
+    /// How far its value must move before it is recorded again, if not every change.
+    pub deadband: Option<Deadband>,
 }
 
 impl RegisterConfig {
-    /// The lowest and highest value the register can hold, in its unit.
-    pub fn representable(&self) -> (f64, f64) {
-        let (low, high) = if self.signed {
-            (f64::from(i16::MIN), f64::from(i16::MAX))
-        } else {
-            (0.0, f64::from(u16::MAX))
-        };
-        (low * self.scale, high * self.scale)
-    }
-
-    fn value(&self, word: u16) -> f64 {
-        let raw = if self.signed {
-            f64::from(i16::from_ne_bytes(word.to_ne_bytes()))
-        } else {
-            f64::from(word)
-        };
-        round(raw * self.scale)
-    }
-
-    /// The word for `value`, already checked against the range and step.
-    fn word(&self, value: f64) -> Option<u16> {
-        let steps = (value / self.scale).round();
-        if self.signed {
-            (f64::from(i16::MIN)..=f64::from(i16::MAX))
-                .contains(&steps)
-                .then(|| u16::from_ne_bytes((steps as i16).to_ne_bytes()))
-        } else {
-            (0.0..=f64::from(u16::MAX))
-                .contains(&steps)
-                .then_some(steps as u16)
+    /// A plain `uint16` holding register, read-only, unscaled.
+    pub fn holding(name: &str, address: u16) -> Self {
+        Self {
+            name: name.to_owned(),
+            title: name.to_owned(),
+            table: RegisterTable::Holding,
+            address,
+            format: Format::default(),
+            unit: None,
+            writable: None,
+            deadband: None,
         }
     }
+
+    /// Whether its value is on or off: a coil, a discrete input or a `bit:N` register.
+    pub fn is_bool(&self) -> bool {
+        self.table.holds_bits() || matches!(self.format.data_type, DataType::Bit(_))
+    }
+
+    /// Whether its value is a number with a unit (not a bit, not text).
+    pub fn is_numeric(&self) -> bool {
+        !self.table.holds_bits() && self.format.data_type.is_number()
+    }
+
+    /// How many registers (or bits) it takes.
+    pub fn length(&self) -> u16 {
+        if self.table.holds_bits() {
+            1
+        } else {
+            self.format.registers()
+        }
+    }
+
+    /// The point kind: on/off enumeration, text or number.
+    pub fn kind(&self) -> PointKind {
+        if self.is_bool() {
+            enum_states([(0, "off".to_owned()), (1, "on".to_owned())])
+        } else if self.is_numeric() {
+            PointKind::Numeric
+        } else {
+            PointKind::Text
+        }
+    }
+
+    /// The lowest and highest value the register can hold, in its unit.
+    pub fn representable(&self) -> (f64, f64) {
+        if !self.is_numeric() {
+            return (0.0, 1.0);
+        }
+        let (low, high) = match self.format.data_type {
+            DataType::Int16 => (f64::from(i16::MIN), f64::from(i16::MAX)),
+            DataType::Int32 => (f64::from(i32::MIN), f64::from(i32::MAX)),
+            DataType::Uint32 => (0.0, f64::from(u32::MAX)),
+            DataType::Int64 => (i64::MIN as f64, i64::MAX as f64),
+            DataType::Uint64 => (0.0, u64::MAX as f64),
+            DataType::Float32 => (f64::from(f32::MIN), f64::from(f32::MAX)),
+            DataType::Float64 => (f64::MIN, f64::MAX),
+            _ => (0.0, f64::from(u16::MAX)),
+        };
+        let scaling = self.format.scaling;
+        let (a, b) = (
+            low * scaling.scale() + scaling.offset(),
+            high * scaling.scale() + scaling.offset(),
+        );
+        (a.min(b), a.max(b))
+    }
+
+    /// The write range a point shows: whole numbers for integer types on a whole scale,
+    /// the scale as step when it is not 1.
+    fn write_range(&self, (min, max): (f64, f64)) -> WriteRange {
+        if self.is_bool() {
+            return WriteRange {
+                min: 0.0,
+                max: 1.0,
+                integer: true,
+                step: None,
+            };
+        }
+        let float = matches!(self.format.data_type, DataType::Float32 | DataType::Float64);
+        let scaling = self.format.scaling;
+        WriteRange {
+            min,
+            max,
+            integer: !float && scaling.scale().fract() == 0.0 && scaling.offset().fract() == 0.0,
+            step: (!float && scaling.scale() != 1.0).then_some(scaling.scale()),
+        }
+    }
+
+    /// The point's value for its registers (or bit).
+    fn value(&self, answer: &Answer) -> Result<Value, DeviceError> {
+        match answer {
+            Answer::Bits(bits) => bits
+                .first()
+                .map(|&on| Value::Number(f64::from(u8::from(on))))
+                .ok_or_else(|| missing(self)),
+            Answer::Words(words) => {
+                let typed = self
+                    .format
+                    .decode(words)
+                    .map_err(|e| DeviceError::new(ErrorKind::Decode, e))?;
+                match typed {
+                    TypedValue::Text(text) => Ok(Value::Text(text)),
+                    TypedValue::Bool(on) => Ok(Value::Number(f64::from(u8::from(on)))),
+                    other => {
+                        let number = other.as_f64().ok_or_else(|| missing(self))?;
+                        if !number.is_finite() {
+                            return Err(DeviceError::new(
+                                ErrorKind::Decode,
+                                format_args!(
+                                    "register {} holds {number}, not a number",
+                                    self.address
+                                ),
+                            ));
+                        }
+                        Ok(Value::Number(if self.format.scaling.is_identity() {
+                            number
+                        } else {
+                            round(number)
+                        }))
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// How a Modbus device is read, beyond its registers.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ModbusOptions {
+    /// How reads are planned: the most registers and bits per request
+    /// (`max_registers_per_request`, `max_bits_per_request`) and
+    /// `one_request_per_register`.
+    pub plan: PlanOptions,
+    /// Waited between two of the device's requests.
+    pub delay_between_requests: Duration,
+    /// Waited after the line (re)opens, before the device's first request.
+    pub delay_after_connect: Duration,
 }
 
 /// Checks a unit number: 1–255.
@@ -146,6 +309,14 @@ pub fn check_address(address: Option<i64>) -> Result<(), String> {
     }
 }
 
+/// The plan's items for `registers`, in their order: one per register.
+pub fn plan_items(registers: &[RegisterConfig]) -> Vec<Item> {
+    registers
+        .iter()
+        .map(|r| Item::new(r.table.table(), r.address, r.length()))
+        .collect()
+}
+
 /// A Modbus device with configured registers.
 pub struct ModbusDriver {
     device: DeviceId,
@@ -153,8 +324,22 @@ pub struct ModbusDriver {
     config: ClientConfig,
     client: Option<Client>,
     registers: Vec<RegisterConfig>,
-    /// Reads covering every register: `(table, first address, count)`.
-    plan: Vec<(RegisterTable, u16, u16)>,
+    /// The reads, item `i` being register `i`; splits are kept across polls.
+    plan: Plan,
+    options: ModbusOptions,
+    /// When the last request ended, for `delay_between_requests`.
+    last_request: Option<Instant>,
+    /// The line was (re)attached since the last request: `delay_after_connect` is due.
+    fresh_line: bool,
+    /// Requests the last poll sent.
+    requests: Option<u64>,
+}
+
+/// A read's answer.
+#[derive(Debug, Clone, PartialEq)]
+enum Answer {
+    Words(Vec<u16>),
+    Bits(Vec<bool>),
 }
 
 impl ModbusDriver {
@@ -169,6 +354,13 @@ impl ModbusDriver {
         for r in &config.registers {
             PointId::new(&config.id, &r.name).map_err(|e| e.to_string())?;
         }
+        let plan =
+            Plan::new(&plan_items(&config.registers), config.modbus.plan).map_err(
+                |e| match config.registers.get(plan_error_index(&e)) {
+                    Some(r) => format!("register {}: {e}", r.name),
+                    None => e.to_string(),
+                },
+            )?;
         let defaults = ClientConfig::default();
         Ok(Self {
             device: config.id.clone(),
@@ -180,52 +372,116 @@ impl ModbusDriver {
                 ..defaults
             },
             client: None,
-            plan: plan(&config.registers),
+            plan,
+            options: config.modbus,
             registers: config.registers.clone(),
+            last_request: None,
+            fresh_line: false,
+            requests: None,
         })
+    }
+
+    /// The reads each poll sends (fewer registers per read after splits).
+    pub fn plan(&self) -> &Plan {
+        &self.plan
     }
 
     fn point_id(&self, register: &RegisterConfig) -> PointId {
         PointId::new(&self.device, &register.name).expect("register names are checked in new")
     }
 
-    async fn poll_live(&mut self) -> Result<Vec<Reading>, DeviceError> {
-        let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
-        let mut blocks = Vec::new();
-        for &(table, start, count) in &self.plan {
-            let read = match table {
-                RegisterTable::Holding => {
-                    client.read_holding_registers(self.unit, start, count).await
-                }
-                RegisterTable::Input => client.read_input_registers(self.unit, start, count).await,
-            };
-            let words = match read {
-                Ok(words) => Ok(words),
-                Err(e @ ClientError::Refused { .. }) => Err(DeviceError::of(&e)),
-                Err(e) => return Err(DeviceError::of(&e)),
-            };
-            blocks.push((table, start, count, words));
+    /// Waits what the pacing asks before a request.
+    async fn pace(&mut self) {
+        if std::mem::take(&mut self.fresh_line) {
+            if !self.options.delay_after_connect.is_zero() {
+                tokio::time::sleep(self.options.delay_after_connect).await;
+            }
+        } else if let Some(last) = self.last_request
+            && !self.options.delay_between_requests.is_zero()
+        {
+            tokio::time::sleep_until(last + self.options.delay_between_requests).await;
         }
+    }
+
+    /// Sends read `index` of the plan.
+    async fn read(&mut self, index: usize) -> Result<Answer, ClientError> {
+        self.pace().await;
+        let read = self.plan.reads()[index].clone();
+        let (unit, address, count) = (self.unit, read.address(), read.count());
+        let client = self
+            .client
+            .as_mut()
+            .expect("poll_live checks that the line is attached");
+        let answer = match read.table() {
+            Table::HoldingRegisters => client
+                .read_holding_registers(unit, address, count)
+                .await
+                .map(Answer::Words),
+            Table::InputRegisters => client
+                .read_input_registers(unit, address, count)
+                .await
+                .map(Answer::Words),
+            Table::Coils => client
+                .read_coils(unit, address, count)
+                .await
+                .map(Answer::Bits),
+            Table::DiscreteInputs => client
+                .read_discrete_inputs(unit, address, count)
+                .await
+                .map(Answer::Bits),
+        };
+        self.last_request = Some(Instant::now());
+        answer
+    }
+
+    async fn poll_live(&mut self) -> Result<Vec<Reading>, DeviceError> {
+        if self.client.is_none() {
+            return Err(DeviceError::not_attached());
+        }
+        let mut answers: Vec<Result<Answer, DeviceError>> = Vec::new();
+        let mut requests = 0u64;
+        while answers.len() < self.plan.reads().len() {
+            let index = answers.len();
+            requests += 1;
+            match self.read(index).await {
+                Ok(answer) => answers.push(Ok(answer)),
+                Err(e)
+                    if jbus::client::exception_code(&e)
+                        == Some(ExceptionCode::ILLEGAL_DATA_ADDRESS) =>
+                {
+                    match self.plan.split(index) {
+                        Some(split @ Split::Into { .. }) => {
+                            tracing::warn!(device = %self.device, "{split}");
+                        }
+                        _ => answers.push(Err(DeviceError::of(&e))),
+                    }
+                }
+                Err(e @ ClientError::Refused { .. }) => answers.push(Err(DeviceError::of(&e))),
+                Err(e) => {
+                    self.requests = Some(requests);
+                    return Err(DeviceError::of(&e));
+                }
+            }
+        }
+        self.requests = Some(requests);
         Ok(self
             .registers
             .iter()
-            .map(|r| {
-                let covers = |(table, start, count, _): &&(
-                    RegisterTable,
-                    u16,
-                    u16,
-                    Result<Vec<u16>, DeviceError>,
-                )| {
-                    *table == r.table
-                        && (u32::from(*start)..u32::from(*start) + u32::from(*count))
-                            .contains(&u32::from(r.address))
-                };
-                let value = match blocks.iter().find(covers) {
-                    Some((_, start, _, Ok(words))) => words
-                        .get(usize::from(r.address - *start))
-                        .map(|&w| Value::Number(r.value(w)))
-                        .ok_or_else(|| missing(r)),
-                    Some((_, _, _, Err(e))) => Err(e.clone()),
+            .enumerate()
+            .map(|(i, r)| {
+                let value = match self.plan.locate(i) {
+                    Some(at) => match answers.get(at.read) {
+                        Some(Ok(Answer::Words(words))) => at
+                            .slice(words)
+                            .ok_or_else(|| missing(r))
+                            .and_then(|words| r.value(&Answer::Words(words.to_vec()))),
+                        Some(Ok(Answer::Bits(bits))) => at
+                            .slice(bits)
+                            .ok_or_else(|| missing(r))
+                            .and_then(|bits| r.value(&Answer::Bits(bits.to_vec()))),
+                        Some(Err(e)) => Err(e.clone()),
+                        None => Err(missing(r)),
+                    },
                     None => Err(missing(r)),
                 };
                 Reading {
@@ -241,14 +497,15 @@ impl ModbusDriver {
             .registers
             .iter()
             .find(|r| r.name == point.id.name())
+            .cloned()
             .ok_or_else(|| WriteError::UnknownPoint {
                 point: point.id.clone(),
             })?;
         let checked = point.check_write(value)?;
         let number = checked
             .as_number()
-            .expect("check_write gives numbers for numeric points");
-        let word = register.word(number).ok_or_else(|| {
+            .expect("check_write gives numbers for numeric and enumeration points");
+        let out_of_range = || {
             let (min, max) = register.representable();
             WriteError::Invalid(crate::point::ValueError::OutOfRange {
                 point: point.id.clone(),
@@ -258,13 +515,26 @@ impl ModbusDriver {
                 max,
                 unit: String::new(),
             })
-        })?;
+        };
+        let words = match register.table {
+            RegisterTable::Coil => None,
+            _ => Some(
+                register
+                    .format
+                    .encode(&TypedValue::Float(number))
+                    .map_err(|_| out_of_range())?,
+            ),
+        };
+        self.pace().await;
         let (unit, address) = (self.unit, register.address);
         let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
-        client
-            .write_single_register(unit, address, word)
-            .await
-            .map_err(|e| WriteError::Device(DeviceError::of(&e)))
+        let sent = match words.as_deref() {
+            None => client.write_single_coil(unit, address, number != 0.0).await,
+            Some([word]) => client.write_single_register(unit, address, *word).await,
+            Some(words) => client.write_multiple_registers(unit, address, words).await,
+        };
+        self.last_request = Some(Instant::now());
+        sent.map_err(|e| WriteError::Device(DeviceError::of(&e)))
     }
 }
 
@@ -276,14 +546,9 @@ impl Driver for ModbusDriver {
                 id: self.point_id(r),
                 name: r.title.clone(),
                 unit: r.unit.clone(),
-                kind: PointKind::Numeric,
+                kind: r.kind(),
                 group: LIVE.to_owned(),
-                writable: r.writable.map(|(min, max)| WriteRange {
-                    min,
-                    max,
-                    integer: r.scale.fract() == 0.0,
-                    step: (r.scale != 1.0).then_some(r.scale),
-                }),
+                writable: r.writable.map(|range| r.write_range(range)),
                 alarm: None,
             })
             .collect()
@@ -298,6 +563,7 @@ impl Driver for ModbusDriver {
 
     fn attach(&mut self, line: SharedLine) {
         self.client = Some(Client::new(line, self.config));
+        self.fresh_line = true;
     }
 
     fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>> {
@@ -320,29 +586,20 @@ impl Driver for ModbusDriver {
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(self.write_point(point, value))
     }
+
+    fn requests_per_poll(&self) -> Option<u64> {
+        self.requests
+    }
 }
 
-/// The fewest reads covering every register: runs of consecutive addresses in one table,
-/// up to [`MAX_READ`] long.
-fn plan(registers: &[RegisterConfig]) -> Vec<(RegisterTable, u16, u16)> {
-    let mut wanted: Vec<(RegisterTable, u16)> =
-        registers.iter().map(|r| (r.table, r.address)).collect();
-    wanted.sort_unstable();
-    wanted.dedup();
-    let mut plan: Vec<(RegisterTable, u16, u16)> = Vec::new();
-    for (table, address) in wanted {
-        match plan.last_mut() {
-            Some((t, start, count))
-                if *t == table
-                    && u32::from(*start) + u32::from(*count) == u32::from(address)
-                    && *count < MAX_READ =>
-            {
-                *count += 1;
-            }
-            _ => plan.push((table, address, 1)),
-        }
+/// The register a plan error is about.
+fn plan_error_index(error: &jbus::plan::PlanError) -> usize {
+    match error {
+        jbus::plan::PlanError::Empty { index, .. }
+        | jbus::plan::PlanError::TooLong { index, .. }
+        | jbus::plan::PlanError::PastLastAddress { index, .. } => *index,
+        _ => usize::MAX,
     }
-    plan
 }
 
 fn missing(register: &RegisterConfig) -> DeviceError {
@@ -354,51 +611,66 @@ fn missing(register: &RegisterConfig) -> DeviceError {
 
 /// Scaled register values as the nearest short decimal.
 fn round(value: f64) -> f64 {
-    (value * 1e6).round() / 1e6
+    if value.abs() < 1e9 {
+        (value * 1e6).round() / 1e6
+    } else {
+        value
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use jbus::data::Order;
     use jbus::slave::{Slave, SlaveMap};
     use wire::device::SharedModel;
 
     fn register(name: &str, table: RegisterTable, address: u16) -> RegisterConfig {
         RegisterConfig {
-            name: name.into(),
-            title: name.into(),
             table,
-            address,
-            scale: 1.0,
-            unit: None,
-            signed: false,
-            writable: None,
+            ..RegisterConfig::holding(name, address)
+        }
+    }
+
+    fn typed(name: &str, table: RegisterTable, address: u16, data_type: &str) -> RegisterConfig {
+        RegisterConfig {
+            format: Format::new(data_type.parse().unwrap(), Order::Abcd),
+            ..register(name, table, address)
+        }
+    }
+
+    fn scaled(register: RegisterConfig, scale: f64) -> RegisterConfig {
+        RegisterConfig {
+            format: register
+                .format
+                .scaled(jbus::data::Scaling::new(scale, 0.0).unwrap()),
+            ..register
         }
     }
 
     fn registers() -> Vec<RegisterConfig> {
         vec![
             RegisterConfig {
-                scale: 0.1,
                 unit: Some("°C".into()),
-                signed: true,
-                ..register("supply", RegisterTable::Input, 100)
+                ..scaled(typed("supply", RegisterTable::Input, 100, "int16"), 0.1)
             },
             register("flow", RegisterTable::Input, 101),
             RegisterConfig {
-                scale: 0.1,
                 writable: Some((5.0, 30.0)),
-                ..register("setpoint", RegisterTable::Holding, 0)
+                ..scaled(register("setpoint", RegisterTable::Holding, 0), 0.1)
             },
             register("mode", RegisterTable::Holding, 7),
         ]
     }
 
-    fn rig() -> (ModbusDriver, SharedModel<Slave>) {
-        let map =
-            SlaveMap::parse("unit 17\nholding 0 = 215\nholding 7 = 2\ninput 100 = 0xFFF6 42\n")
-                .unwrap();
-        let slave = SharedModel::new(Slave::new(map));
+    const MAP: &str = "unit 17\nholding 0 = 215\nholding 7 = 2\ninput 100 = 0xFFF6 42\n";
+
+    fn rig_with(
+        map: &str,
+        registers: Vec<RegisterConfig>,
+        options: ModbusOptions,
+    ) -> (ModbusDriver, SharedModel<Slave>) {
+        let slave = SharedModel::new(Slave::new(SlaveMap::parse(map).unwrap()));
         let (a, b) = tokio::io::duplex(1024);
         tokio::spawn(link::serve::serve_stream(b, slave.line(), None));
         let mut driver = ModbusDriver::new(&DriverConfig {
@@ -409,7 +681,8 @@ mod tests {
             retries: Some(1),
             event_port: None,
             endpoint: None,
-            registers: registers(),
+            registers,
+            modbus: options,
         })
         .unwrap();
         driver.attach(SharedLine::new(link::Line::from_stream(
@@ -418,6 +691,10 @@ mod tests {
             Some(DEFAULT_SERIAL),
         )));
         (driver, slave)
+    }
+
+    fn rig() -> (ModbusDriver, SharedModel<Slave>) {
+        rig_with(MAP, registers(), ModbusOptions::default())
     }
 
     fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
@@ -429,16 +706,41 @@ mod tests {
             .clone()
     }
 
-    #[test]
-    fn consecutive_registers_of_one_table_are_read_together() {
+    fn spans(driver: &ModbusDriver) -> Vec<(Table, u16, u16)> {
+        driver
+            .plan()
+            .reads()
+            .iter()
+            .map(|r| (r.table(), r.address(), r.count()))
+            .collect()
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn registers_close_together_in_one_table_are_planned_into_one_read() {
+        let (driver, _slave) = rig_with(MAP, registers(), ModbusOptions::default());
         assert_eq!(
-            plan(&registers()),
+            spans(&driver),
             vec![
-                (RegisterTable::Holding, 0, 1),
-                (RegisterTable::Holding, 7, 1),
-                (RegisterTable::Input, 100, 2),
+                (Table::HoldingRegisters, 0, 8),
+                (Table::InputRegisters, 100, 2),
             ]
         );
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn one_request_per_register_reads_every_register_alone() {
+        let options = ModbusOptions {
+            plan: PlanOptions {
+                one_request_per_item: true,
+                ..PlanOptions::default()
+            },
+            ..ModbusOptions::default()
+        };
+        let (mut driver, _slave) = rig_with(MAP, registers(), options);
+        assert_eq!(driver.plan().reads().len(), 4);
+        let live = driver.poll(LIVE).await.unwrap();
+        assert_eq!(value(&live, "mode"), Ok(Value::Number(2.0)));
+        assert_eq!(driver.requests_per_poll(), Some(4));
     }
 
     #[tokio::test(start_paused = true)]
@@ -449,6 +751,140 @@ mod tests {
         assert_eq!(value(&live, "flow"), Ok(Value::Number(42.0)));
         assert_eq!(value(&live, "setpoint"), Ok(Value::Number(21.5)));
         assert_eq!(value(&live, "mode"), Ok(Value::Number(2.0)));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_merged_read_refused_for_a_hole_is_split_once_and_the_poll_goes_on() {
+        // Holding 0 and 7 are one planned read of 8 registers; 1-6 do not exist.
+        let (mut driver, slave) = rig();
+        let live = driver.poll(LIVE).await.unwrap();
+        assert_eq!(value(&live, "setpoint"), Ok(Value::Number(21.5)));
+        assert_eq!(value(&live, "mode"), Ok(Value::Number(2.0)));
+        assert_eq!(value(&live, "supply"), Ok(Value::Number(-1.0)));
+        // The refused read, its two parts, and the input registers.
+        assert_eq!(driver.requests_per_poll(), Some(4));
+        assert_eq!(
+            spans(&driver),
+            vec![
+                (Table::HoldingRegisters, 0, 1),
+                (Table::HoldingRegisters, 7, 1),
+                (Table::InputRegisters, 100, 2),
+            ]
+        );
+        driver.poll(LIVE).await.unwrap();
+        assert_eq!(driver.requests_per_poll(), Some(3), "the split is kept");
+        drop(slave);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_register_the_device_does_not_have_is_bad_with_the_exception_in_words() {
+        let mut registers = registers();
+        registers.push(register("ghost", RegisterTable::Holding, 500));
+        let (mut driver, _slave) = rig_with(MAP, registers, ModbusOptions::default());
+        let live = driver.poll(LIVE).await.unwrap();
+        let ghost = value(&live, "ghost").unwrap_err();
+        assert_eq!(ghost.kind, ErrorKind::Refused, "{ghost}");
+        assert!(ghost.message.contains("illegal data address"), "{ghost}");
+        assert_eq!(value(&live, "flow"), Ok(Value::Number(42.0)));
+        assert_eq!(value(&live, "mode"), Ok(Value::Number(2.0)));
+    }
+
+    const TYPED: &str = "unit 17\n\
+        input 0x0100 float32 CDAB = 229.7 -1.5\n\
+        input 0x0104 int32 = -70000\n\
+        holding 0x0200 float32 = 12.5\n\
+        holding 0x0300 string:4 = \"PUMP 7\"\n\
+        holding 0x0310 = 0x0008\n\
+        coil 3 = 1 0\n\
+        discrete 0x20 = 0 1\n";
+
+    fn typed_registers() -> Vec<RegisterConfig> {
+        vec![
+            RegisterConfig {
+                format: Format::new(DataType::Float32, Order::Cdab),
+                unit: Some("V".into()),
+                ..register("voltage", RegisterTable::Input, 0x0100)
+            },
+            RegisterConfig {
+                format: Format::new(DataType::Float32, Order::Cdab),
+                ..register("current", RegisterTable::Input, 0x0102)
+            },
+            typed("energy", RegisterTable::Input, 0x0104, "int32"),
+            RegisterConfig {
+                writable: Some((0.0, 100.0)),
+                ..typed("limit", RegisterTable::Holding, 0x0200, "float32")
+            },
+            typed("label", RegisterTable::Holding, 0x0300, "string:4"),
+            typed("alarm_bit", RegisterTable::Holding, 0x0310, "bit:3"),
+            RegisterConfig {
+                writable: Some((0.0, 1.0)),
+                ..register("pump", RegisterTable::Coil, 3)
+            },
+            register("door", RegisterTable::Discrete, 0x21),
+        ]
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn typed_registers_coils_and_discrete_inputs_are_read_as_their_kinds() {
+        let (mut driver, _slave) = rig_with(TYPED, typed_registers(), ModbusOptions::default());
+        let live = driver.poll(LIVE).await.unwrap();
+        assert_eq!(value(&live, "voltage"), Ok(Value::Number(229.7)));
+        assert_eq!(value(&live, "current"), Ok(Value::Number(-1.5)));
+        assert_eq!(value(&live, "energy"), Ok(Value::Number(-70000.0)));
+        assert_eq!(value(&live, "limit"), Ok(Value::Number(12.5)));
+        assert_eq!(value(&live, "label"), Ok(Value::Text("PUMP 7".into())));
+        assert_eq!(value(&live, "alarm_bit"), Ok(Value::Number(1.0)));
+        assert_eq!(value(&live, "pump"), Ok(Value::Number(1.0)));
+        assert_eq!(value(&live, "door"), Ok(Value::Number(1.0)));
+        let points = driver.points();
+        let kind = |name: &str| {
+            points
+                .iter()
+                .find(|p| p.id.name() == name)
+                .unwrap()
+                .kind
+                .clone()
+        };
+        assert_eq!(kind("voltage"), PointKind::Numeric);
+        assert_eq!(kind("label"), PointKind::Text);
+        for on_off in ["pump", "door", "alarm_bit"] {
+            assert!(
+                matches!(kind(on_off), PointKind::Enum { ref states } if states.len() == 2),
+                "{on_off}"
+            );
+        }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_float_is_written_with_function_16_and_a_coil_with_function_5() {
+        let (mut driver, slave) = rig_with(TYPED, typed_registers(), ModbusOptions::default());
+        let points = driver.points();
+        let point = |name: &str| points.iter().find(|p| p.id.name() == name).unwrap();
+        driver
+            .write(point("limit"), &Value::Number(42.25))
+            .await
+            .unwrap();
+        let words = {
+            let slave = slave.lock();
+            [
+                slave.get(Table::HoldingRegisters, 0x0200).unwrap(),
+                slave.get(Table::HoldingRegisters, 0x0201).unwrap(),
+            ]
+        };
+        assert_eq!(
+            Format::new(DataType::Float32, Order::Abcd).decode(&words),
+            Ok(TypedValue::Float(42.25))
+        );
+        driver
+            .write(point("pump"), &Value::Text("off".into()))
+            .await
+            .unwrap();
+        assert_eq!(slave.lock().get(Table::Coils, 3), Some(0));
+        let err = driver
+            .write(point("voltage"), &Value::Number(1.0))
+            .await
+            .unwrap_err();
+        assert!(matches!(err, WriteError::Invalid(_)), "{err}");
     }
 
     #[tokio::test(start_paused = true)]
@@ -466,33 +902,38 @@ mod tests {
             .await
             .unwrap_err();
         assert!(err.to_string().contains("multiple of 0.1"), "{err}");
-        assert_eq!(
-            slave
-                .lock()
-                .get(jbus::slave::map::Table::HoldingRegisters, 0),
-            Some(215)
-        );
+        assert_eq!(slave.lock().get(Table::HoldingRegisters, 0), Some(215));
         driver.write(setpoint, &Value::Number(22.5)).await.unwrap();
-        assert_eq!(
-            slave
-                .lock()
-                .get(jbus::slave::map::Table::HoldingRegisters, 0),
-            Some(225)
-        );
+        assert_eq!(slave.lock().get(Table::HoldingRegisters, 0), Some(225));
         let mode = points.iter().find(|p| p.id.name() == "mode").unwrap();
         assert!(driver.write(mode, &Value::Number(1.0)).await.is_err());
     }
 
     #[tokio::test(start_paused = true)]
-    async fn an_exception_marks_only_the_points_of_its_read() {
-        let (mut driver, _slave) = rig();
-        driver
-            .registers
-            .push(register("ghost", RegisterTable::Holding, 500));
-        driver.plan = plan(&driver.registers);
-        let live = driver.poll(LIVE).await.unwrap();
-        let ghost = value(&live, "ghost").unwrap_err();
-        assert_eq!(ghost.kind, ErrorKind::Refused, "{ghost}");
-        assert_eq!(value(&live, "flow"), Ok(Value::Number(42.0)));
+    async fn requests_are_paced_after_the_line_is_attached_and_between_each_other() {
+        let options = ModbusOptions {
+            plan: PlanOptions {
+                one_request_per_item: true,
+                ..PlanOptions::default()
+            },
+            delay_between_requests: Duration::from_millis(50),
+            delay_after_connect: Duration::from_secs(2),
+        };
+        let (mut driver, _slave) = rig_with(MAP, registers(), options);
+        let started = Instant::now();
+        driver.poll(LIVE).await.unwrap();
+        let first = started.elapsed();
+        // 2 s after the attach, then 3 gaps of 50 ms between the 4 requests.
+        assert!(
+            first >= Duration::from_millis(2150) && first < Duration::from_millis(2500),
+            "{first:?}"
+        );
+        let started = Instant::now();
+        driver.poll(LIVE).await.unwrap();
+        let second = started.elapsed();
+        assert!(
+            second >= Duration::from_millis(150) && second < Duration::from_millis(500),
+            "{second:?}"
+        );
     }
 }

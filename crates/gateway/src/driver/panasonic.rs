@@ -468,6 +468,7 @@ mod tests {
                 framing: link::TcpFraming::Raw,
             }),
             registers: Vec::new(),
+            modbus: Default::default(),
         })
         .unwrap();
         (driver, twin)
@@ -534,6 +535,7 @@ mod tests {
             event_port: None,
             endpoint: None,
             registers: Vec::new(),
+            modbus: Default::default(),
         })
         .unwrap();
         let points = driver.points();
@@ -612,6 +614,7 @@ mod tests {
                 framing: link::TcpFraming::Raw,
             }),
             registers: Vec::new(),
+            modbus: Default::default(),
         })
         .unwrap();
         let err = driver.poll(LIVE).await.unwrap_err();

@@ -45,10 +45,12 @@ fn device(id: &str, protocol: Protocol, address: i64) -> DeviceConfig {
             event_port: None,
             endpoint: None,
             registers: Vec::new(),
+            modbus: Default::default(),
         },
         name: format!("Device {id}"),
         period: None,
         groups: BTreeMap::new(),
+        deadband: None,
     }
 }
 

@@ -484,3 +484,137 @@ async fn an_overloaded_line_slows_every_group_by_the_same_factor() {
         "live read {live} times, settings {settings} times"
     );
 }
+
+/// A cell of one JBC station whose numeric points have `deadband`; its line is never
+/// opened, so only the readings a test applies reach it.
+fn cell_with_deadband(deadband: Deadband) -> (Arc<Cell>, crate::store::Store, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    let store =
+        crate::store::Store::open(dir.path(), crate::store::StoreOptions::default()).unwrap();
+    let mut device = crate::testing::device("jbc1", 1);
+    device.deadband = Some(deadband);
+    let config = crate::config::CellConfig {
+        source: None,
+        mqtt: None,
+        token: None,
+        read_token: None,
+        lines: vec![crate::config::LineConfig {
+            reopen_after_timeouts: 3,
+            name: "bench".into(),
+            endpoint: link::Endpoint::parse(
+                "tcp://127.0.0.1:9",
+                crate::driver::jbc::DEFAULT_SERIAL,
+            )
+            .unwrap(),
+            devices: vec![device],
+        }],
+    };
+    let opener: Opener = Arc::new(|| Box::pin(async { Err("never opened".to_owned()) }));
+    let (cell, _tasks) = Cell::with_openers(
+        &config,
+        store.handle(),
+        Arc::new(crate::metrics::Metrics::new()),
+        |_| Arc::clone(&opener),
+    )
+    .unwrap();
+    (cell, store, dir)
+}
+
+/// Applies `values` to jbc1.air_temperature one by one (`None`: a failed read) and
+/// returns what was stored, what was published, and the live value at the end.
+async fn record(
+    deadband: Deadband,
+    values: &[Option<f64>],
+) -> (Vec<Option<Value>>, usize, Option<Value>) {
+    let (cell, _store, _dir) = cell_with_deadband(deadband);
+    let mut live = cell.subscribe();
+    let entry = cell.device_entry("jbc1").unwrap();
+    for value in values {
+        let reading = Reading {
+            point: point("jbc1.air_temperature"),
+            value: match value {
+                Some(v) => Ok(Value::Number(*v)),
+                None => Err(DeviceError::new(ErrorKind::Timeout, "no answer")),
+            },
+        };
+        apply_readings(&cell, entry, vec![reading]);
+    }
+    cell.store().flush().await.unwrap();
+    let history = cell
+        .store()
+        .history(
+            &point("jbc1.air_temperature"),
+            Timestamp(0),
+            Timestamp(i64::MAX),
+            None,
+        )
+        .unwrap();
+    let Series::Samples(samples) = history.series else {
+        panic!("raw samples expected")
+    };
+    let mut published = 0;
+    while let Ok(message) = live.try_recv() {
+        published += usize::from(matches!(message, LiveMessage::Value(_)));
+    }
+    (
+        samples.into_iter().map(|s| s.value).collect(),
+        published,
+        value(&cell, "jbc1.air_temperature"),
+    )
+}
+
+#[tokio::test]
+async fn a_value_within_the_deadband_of_the_last_recorded_one_is_neither_stored_nor_published() {
+    let (stored, published, live) = record(
+        Deadband::Absolute(0.5),
+        &[
+            Some(230.0),
+            Some(230.3),
+            Some(230.6),
+            Some(230.9),
+            Some(230.4),
+        ],
+    )
+    .await;
+    // 230.3 is 0.3 from 230; 230.6 is 0.6 from it; 230.9 and 230.4 are within 0.5 of 230.6
+    // (each compared with the last recorded value, not the last read).
+    assert_eq!(
+        stored,
+        vec![Some(Value::Number(230.0)), Some(Value::Number(230.6))]
+    );
+    assert_eq!(published, 2);
+    assert_eq!(
+        live,
+        Some(Value::Number(230.4)),
+        "the live value stays exact"
+    );
+}
+
+#[tokio::test]
+async fn quality_changes_pass_the_deadband() {
+    let (stored, _, live) = record(
+        Deadband::Absolute(10.0),
+        &[Some(230.0), None, Some(231.0), Some(232.0)],
+    )
+    .await;
+    assert_eq!(
+        stored,
+        vec![Some(Value::Number(230.0)), None, Some(Value::Number(231.0))],
+        "bad, then good again, are recorded whatever the value"
+    );
+    assert_eq!(live, Some(Value::Number(232.0)));
+}
+
+#[tokio::test]
+async fn a_percent_deadband_is_a_share_of_the_last_recorded_value() {
+    let (stored, _, _) = record(
+        Deadband::Percent(1.0),
+        &[Some(200.0), Some(201.5), Some(202.0), Some(203.9)],
+    )
+    .await;
+    // 1 % of 200 is 2; then 1 % of 202 is 2.02.
+    assert_eq!(
+        stored,
+        vec![Some(Value::Number(200.0)), Some(Value::Number(202.0))]
+    );
+}

@@ -29,7 +29,7 @@ use std::time::Duration;
 
 use gateway::cell::{Cell, LiveMessage};
 use gateway::config::{CellConfig, DeviceConfig, LineConfig};
-use gateway::driver::modbus::{RegisterConfig, RegisterTable};
+use gateway::driver::modbus::RegisterConfig;
 use gateway::driver::{DriverConfig, Protocol};
 use gateway::metrics::{Metrics, PollResult};
 use gateway::point::{DeviceId, PointId, Quality, Value};
@@ -434,14 +434,16 @@ impl CellSet {
             let mut meter = device(&format!("meter{g}"), Protocol::Modbus, 1, options);
             meter.driver.registers = (0u16..8)
                 .map(|address| RegisterConfig {
-                    name: format!("r{address}"),
                     title: format!("Register {address}"),
-                    table: RegisterTable::Holding,
-                    address,
-                    scale: 1.0,
-                    unit: None,
-                    signed: address == 5,
-                    writable: None,
+                    format: jbus::data::Format::new(
+                        if address == 5 {
+                            jbus::data::DataType::Int16
+                        } else {
+                            jbus::data::DataType::Uint16
+                        },
+                        jbus::data::Order::Abcd,
+                    ),
+                    ..RegisterConfig::holding(&format!("r{address}"), address)
                 })
                 .collect();
             let devices = vec![
@@ -536,10 +538,12 @@ fn device(id: &str, protocol: Protocol, address: i64, options: &SoakOptions) -> 
             event_port: None,
             endpoint: None,
             registers: Vec::new(),
+            modbus: Default::default(),
         },
         name: id.to_owned(),
         period: Some(options.period),
         groups: BTreeMap::new(),
+        deadband: None,
     }
 }
 
