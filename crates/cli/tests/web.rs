@@ -20,7 +20,11 @@ fn the_page_shows_every_demo_device_a_value_changing_by_itself_and_the_mqtt_link
 fn a_gateway_with_a_read_token_is_asked_for_it_once_and_then_shows_the_cell() {
     let seen = open_the_page(Some("look-only"), None);
     assert_eq!(seen["asked"], 1, "one prompt");
-    assert_eq!(seen["mqtt"], serde_json::Value::Null, "no MQTT, no MQTT badge");
+    assert_eq!(
+        seen["mqtt"],
+        serde_json::Value::Null,
+        "no MQTT, no MQTT badge"
+    );
 }
 
 /// Starts the demo gateway (with `read_token` if given, publishing to the MQTT broker
