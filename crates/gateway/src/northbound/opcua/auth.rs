@@ -182,12 +182,14 @@ mod tests {
         let node = NodeId::new(2, "jbc1.air_temperature");
         let on = users(true);
         assert_eq!(
-            on.effective_user_access_level(&UserToken("viewer".into()), level, &node),
-            AccessLevel::CURRENT_READ
+            on.effective_user_access_level(&UserToken("viewer".into()), level, &node)
+                .bits(),
+            AccessLevel::CURRENT_READ.bits()
         );
         assert_eq!(
-            on.effective_user_access_level(&UserToken("op".into()), level, &node),
-            level
+            on.effective_user_access_level(&UserToken("op".into()), level, &node)
+                .bits(),
+            level.bits()
         );
     }
 
