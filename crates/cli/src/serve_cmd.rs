@@ -62,6 +62,14 @@ pub struct ServeArgs {
     /// spBv1.0/STATE/ID message) before publishing; while it is away, store and forward.
     #[arg(long, value_name = "ID")]
     pub mqtt_primary_host: Option<String>,
+    /// Serve the cell over OPC UA on this address (port 0 picks a free port); the second
+    /// line printed is `opcua on opc.tcp://IP:PORT`. The demo cell on loopback offers
+    /// security None and anonymous reading next to Basic256Sha256, and the user `operator`
+    /// whose password is the write token; with --config it replaces the [opcua] table's
+    /// endpoint (without a table: Basic256Sha256 only, anonymous reading while writes are
+    /// off).
+    #[arg(long, value_name = "IP:PORT")]
+    pub opcua: Option<SocketAddr>,
 }
 
 fn parse_mqtt_mode(text: &str) -> Result<gateway::config::MqttMode, String> {
@@ -103,6 +111,7 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
         mqtt_mode: args.mqtt_mode,
         mqtt_node: args.mqtt_node,
         mqtt_primary_host: args.mqtt_primary_host,
+        opcua: args.opcua,
     };
     gateway::serve(options, shutdown_signal()).await?;
     Ok(ExitCode::SUCCESS)

@@ -76,6 +76,7 @@ impl DemoCell {
             config: CellConfig {
                 source: None,
                 mqtt: None,
+                opcua: None,
                 token: None,
                 read_token: None,
                 lines: Vec::new(),

@@ -13,7 +13,8 @@ use tokio::task::JoinHandle;
 
 use crate::cell::Cell;
 use crate::config::{
-    CellConfig, MqttConfig, MqttMode, check_config, default_edge_node_id, parse_broker,
+    CellConfig, MqttConfig, MqttMode, OpcuaConfig, OpcuaSecurity, check_config,
+    default_edge_node_id, parse_broker,
 };
 use crate::demo::DemoCell;
 use crate::event::{Event, EventKind};
@@ -78,6 +79,9 @@ pub struct ServeOptions {
     pub mqtt_node: Option<String>,
     /// `--mqtt-primary-host`: the Sparkplug primary host whose STATE gates the births.
     pub mqtt_primary_host: Option<String>,
+    /// `--opcua IP:PORT`: serve the cell over OPC UA there (port 0: any free port); with
+    /// a config, it replaces the `[opcua]` table's endpoint.
+    pub opcua: Option<SocketAddr>,
 }
 
 impl Default for ServeOptions {
@@ -95,6 +99,7 @@ impl Default for ServeOptions {
             mqtt_mode: None,
             mqtt_node: None,
             mqtt_primary_host: None,
+            opcua: None,
         }
     }
 }
@@ -103,7 +108,8 @@ impl Default for ServeOptions {
 /// commits the history and returns.
 ///
 /// Its first line on standard output, once the port is bound, is exactly
-/// `listening on http://IP:PORT`; other tools wait for it.
+/// `listening on http://IP:PORT`; other tools wait for it. With OPC UA, the second is
+/// `opcua on opc.tcp://IP:PORT`.
 pub async fn serve(
     options: ServeOptions,
     shutdown: impl Future<Output = ()>,
@@ -112,6 +118,10 @@ pub async fn serve(
     {
         let mut out = std::io::stdout().lock();
         writeln!(out, "listening on http://{}", gateway.local_addr())
+            .and_then(|()| match &gateway.opcua {
+                Some(opcua) => writeln!(out, "opcua on {}", opcua.url),
+                None => Ok(()),
+            })
             .and_then(|()| out.flush())
             .context("cannot write to standard output")?;
     }
@@ -129,6 +139,7 @@ pub struct Gateway {
     stop: watch::Sender<bool>,
     pollers: Vec<JoinHandle<()>>,
     mqtt: Option<JoinHandle<()>>,
+    opcua: Option<northbound::opcua::Started>,
     _demo: Option<DemoCell>,
 }
 
@@ -152,6 +163,7 @@ impl Gateway {
         };
         let writes = write_policy(&options, &config)?;
         let mqtt = mqtt_config(&options, &config, demo.is_some())?;
+        let opcua = opcua_config(&options, &config, demo.is_some(), &writes)?;
         let store = Store::start(
             &options.data_dir,
             StoreOptions {
@@ -204,6 +216,13 @@ impl Gateway {
                 )
             })
             .transpose()?;
+        let opcua = match opcua {
+            Some((config, opcua_options)) => Some(
+                northbound::opcua::start(Arc::clone(&cell), config, opcua_options, stopped.clone())
+                    .await?,
+            ),
+            None => None,
+        };
         Ok(Self {
             listener,
             addr,
@@ -213,6 +232,7 @@ impl Gateway {
             stop,
             pollers,
             mqtt,
+            opcua,
             _demo: demo,
         })
     }
@@ -220,6 +240,11 @@ impl Gateway {
     /// The address the gateway listens on.
     pub fn local_addr(&self) -> SocketAddr {
         self.addr
+    }
+
+    /// The OPC UA endpoint URL, when the server runs.
+    pub fn opcua_url(&self) -> Option<&str> {
+        self.opcua.as_ref().map(|o| o.url.as_str())
     }
 
     /// The live cell.
@@ -237,6 +262,7 @@ impl Gateway {
             stop,
             pollers,
             mqtt,
+            opcua,
             _demo,
             ..
         } = self;
@@ -266,6 +292,11 @@ impl Gateway {
             && tokio::time::timeout(STOP_GRACE, mqtt).await.is_err()
         {
             tracing::warn!("the MQTT task did not stop in {STOP_GRACE:?}");
+        }
+        if let Some(opcua) = opcua
+            && tokio::time::timeout(STOP_GRACE, opcua.task).await.is_err()
+        {
+            tracing::warn!("the OPC UA server did not stop in {STOP_GRACE:?}");
         }
         cell.emit(Event::of_gateway(
             EventKind::GatewayStopped,
@@ -350,6 +381,60 @@ fn mqtt_config(
         mqtt.primary_host = Some(host.clone());
     }
     Ok(Some(mqtt))
+}
+
+/// The demo cell's OPC UA user: its password is the write token.
+pub const DEMO_OPCUA_USER: &str = "operator";
+
+/// The OPC UA server to start, if any: `--opcua` (the demo cell's, or replacing the
+/// config's endpoint), else the config's `[opcua]` table. The demo cell on loopback also
+/// offers security None, anonymous reading, and the user `operator` whose password is the
+/// write token (writing with `--allow-writes`). Elsewhere anonymous reading is on only
+/// while writes are off, unless the table says otherwise.
+fn opcua_config(
+    options: &ServeOptions,
+    config: &CellConfig,
+    demo: bool,
+    writes: &WritePolicy,
+) -> anyhow::Result<Option<(OpcuaConfig, northbound::opcua::Options)>> {
+    let table = match (options.opcua, &config.opcua) {
+        (None, None) => return Ok(None),
+        (None, Some(table)) => table.clone(),
+        (Some(addr), Some(table)) => OpcuaConfig {
+            host: addr.ip().to_string(),
+            port: addr.port(),
+            ..table.clone()
+        },
+        (Some(addr), None) => OpcuaConfig::at(&addr.ip().to_string(), addr.port()),
+    };
+    let mut users = northbound::opcua::users_of(&table)?;
+    let loopback = table
+        .host
+        .parse::<std::net::IpAddr>()
+        .is_ok_and(|ip| ip.is_loopback());
+    let mut table = table;
+    let anonymous = if demo && config.opcua.is_none() && loopback {
+        table.security.insert(0, OpcuaSecurity::NONE);
+        if let Some(token) = &writes.token {
+            users.push(northbound::opcua::auth::User {
+                name: DEMO_OPCUA_USER.to_owned(),
+                password: token.clone(),
+                write: true,
+            });
+        }
+        true
+    } else {
+        table.anonymous.unwrap_or(!options.allow_writes)
+    };
+    Ok(Some((
+        table,
+        northbound::opcua::Options {
+            data_dir: options.data_dir.clone(),
+            allow_writes: options.allow_writes,
+            users,
+            anonymous,
+        },
+    )))
 }
 
 /// Once the history has opened (or failed to), emits a `history_failed` event if it is off,

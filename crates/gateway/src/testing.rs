@@ -142,6 +142,7 @@ pub fn rig(count: u8) -> Rig {
     let config = CellConfig {
         source: None,
         mqtt: None,
+        opcua: None,
         token: None,
         read_token: None,
         lines: vec![LineConfig {

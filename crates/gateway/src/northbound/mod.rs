@@ -7,6 +7,7 @@
 //!
 //! - [`mqtt`]: the cell on an MQTT broker (rumqttc), as a Sparkplug B edge node
 //!   ([`sparkplug::EdgeNode`]) or as plain JSON, with store and forward.
+//! - [`opcua`]: the cell as an OPC UA server (async-opcua).
 //!
 //! This module holds the sans-IO mapping from the cell's points to Sparkplug metrics:
 //!
@@ -23,6 +24,7 @@
 //! `writable`, `writeMin`, `writeMax`.
 
 pub mod mqtt;
+pub mod opcua;
 #[cfg(test)]
 mod tests;
 

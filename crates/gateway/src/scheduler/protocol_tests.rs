@@ -106,6 +106,7 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
     let config = CellConfig {
         source: None,
         mqtt: None,
+        opcua: None,
         token: None,
         read_token: None,
         lines: vec![

@@ -496,6 +496,7 @@ fn cell_with_deadband(deadband: Deadband) -> (Arc<Cell>, crate::store::Store, te
     let config = crate::config::CellConfig {
         source: None,
         mqtt: None,
+        opcua: None,
         token: None,
         read_token: None,
         lines: vec![crate::config::LineConfig {

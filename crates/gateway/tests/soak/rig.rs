@@ -372,6 +372,7 @@ impl CellSet {
             config: CellConfig {
                 source: None,
                 mqtt: None,
+                opcua: None,
                 token: None,
                 read_token: None,
                 lines: Vec::new(),

@@ -1,0 +1,150 @@
+//! `cellbus serve --opcua` checked by an OPC UA client that is not ours: Python's asyncua
+//! (`crates/cli/tests/opcua/opcua_check.py`), against the demo cell.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+/// The version scripts/test installs.
+const PIP: &str = "asyncua==2.1.0";
+/// Ours: the script's own limit (120 s) and Python's start.
+const LIMIT: Duration = Duration::from_secs(180);
+
+fn script() -> String {
+    format!("{}/tests/opcua/opcua_check.py", env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Fails (never skips) when python3 or asyncua is missing: scripts/test installs it.
+fn require_asyncua() {
+    let found = Command::new("python3")
+        .args(["-c", "import asyncua"])
+        .output();
+    let hint = format!("run scripts/test, which installs it, or: python3 -m pip install {PIP}");
+    match found {
+        Err(e) => panic!("python3 is needed for the OPC UA interoperability test ({e}); {hint}"),
+        Ok(out) if !out.status.success() => panic!(
+            "asyncua is not installed for python3 ({}); {hint}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ),
+        Ok(_) => {}
+    }
+}
+
+/// `cellbus serve` on the demo cell with OPC UA, killed when dropped.
+struct Served {
+    child: Child,
+    http: String,
+    opcua: String,
+}
+
+impl Served {
+    fn start(data: &std::path::Path, args: &[&str], token: Option<&str>) -> Served {
+        let mut command = common::cellbus();
+        command
+            .args([
+                "serve",
+                "--listen",
+                "127.0.0.1:0",
+                "--opcua",
+                "127.0.0.1:0",
+                "--data",
+            ])
+            .arg(data)
+            .args(args)
+            .env_remove("CELLBUS_TOKEN")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit());
+        if let Some(token) = token {
+            command.env("CELLBUS_TOKEN", token);
+        }
+        let mut child = command.spawn().expect("cellbus runs");
+        let mut stdout = BufReader::new(child.stdout.take().expect("piped"));
+        let mut line = |what: &str| {
+            let mut text = String::new();
+            stdout.read_line(&mut text).expect("a line");
+            text.trim_end()
+                .strip_prefix(what)
+                .unwrap_or_else(|| panic!("a line `{what}…`, got {text:?}"))
+                .to_owned()
+        };
+        let http = line("listening on http://");
+        let opcua = line("opcua on ");
+        Served { child, http, opcua }
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs the script with `args`; panics with its output unless it succeeds.
+fn run_script(args: &[&str]) -> String {
+    let mut child = Command::new("python3")
+        .arg(script())
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("python3 runs");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let mut stdout = child.stdout.take().expect("piped");
+    let mut stderr = child.stderr.take().expect("piped");
+    std::thread::spawn(move || {
+        let mut out = String::new();
+        let mut err = String::new();
+        let _ = std::io::Read::read_to_string(&mut stdout, &mut out);
+        let _ = std::io::Read::read_to_string(&mut stderr, &mut err);
+        let _ = tx.send((out, err));
+    });
+    let Ok((out, err)) = rx.recv_timeout(LIMIT) else {
+        let _ = child.kill();
+        panic!("the asyncua script did not finish in {LIMIT:?}");
+    };
+    let status = child.wait().expect("python3 ends");
+    assert!(status.success(), "the asyncua script failed:\n{out}\n{err}");
+    out
+}
+
+#[test]
+fn an_independent_opcua_client_browses_reads_subscribes_and_is_refused_writes_without_allow_writes()
+{
+    require_asyncua();
+    let data = tempfile::tempdir().expect("a temporary directory");
+    let served = Served::start(data.path(), &[], None);
+    let out = run_script(&["read", &served.opcua, &served.http]);
+    for expected in [
+        "devices and",
+        "points read Good",
+        "arrived on a subscription",
+        "BadUserAccessDenied",
+    ] {
+        assert!(out.contains(expected), "{expected:?} not in:\n{out}");
+    }
+}
+
+#[test]
+fn a_trusted_client_certificate_and_user_write_in_range_are_audited_and_history_matches_the_api() {
+    require_asyncua();
+    let data = tempfile::tempdir().expect("a temporary directory");
+    let token = "opcua-test-secret";
+    let served = Served::start(data.path(), &["--allow-writes"], Some(token));
+    let dir = data.path().to_str().expect("a UTF-8 path");
+    let out = run_script(&["write", &served.opcua, &served.http, dir, token]);
+    for expected in [
+        "untrusted client certificate was refused",
+        "SignAndEncrypt",
+        "BadOutOfRange",
+        "written to",
+        "audit log",
+        "HistoryRead raw",
+        "HistoryRead Average",
+    ] {
+        assert!(out.contains(expected), "{expected:?} not in:\n{out}");
+    }
+}

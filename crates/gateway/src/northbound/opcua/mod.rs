@@ -1,0 +1,372 @@
+//! The cell as an OPC UA server (async-opcua): `Objects/Cell/{line}/{device}/{point}`,
+//! values with their quality from the change stream, writes through the audited write
+//! path, HistoryRead from the history.
+//!
+//! - [`space`]: the sans-IO mapping (node ids, data types, status codes, units, times).
+//! - [`nodes`]: the node manager that builds the address space, writes and reads history.
+//! - [`history`]: HistoryRead raw and processed (Average, Minimum, Maximum), sans-IO.
+//! - [`auth`]: anonymous sessions read only; users log in on secure endpoints.
+//!
+//! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
+//! monitored items are the server's own over those values (no second polling). The
+//! application certificate is made on first start in `<data>/opcua/pki/own/cert.der`
+//! (key in `private/`); client certificates are trusted when they are in
+//! `pki/trusted`, and an unknown one is put in `pki/rejected` for an
+//! administrator to move.
+
+pub mod auth;
+pub mod history;
+pub mod nodes;
+pub mod space;
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use ::opcua::crypto::{CertificateStore, SecurityPolicy, X509Data};
+use ::opcua::server::{ANONYMOUS_USER_TOKEN_ID, ServerBuilder, ServerEndpoint, ServerHandle};
+use ::opcua::types::{
+    ApplicationDescription, ApplicationType, BuildInfo, DataValue, DateTime, LocalizedText,
+    MessageSecurityMode, UAString, Variant,
+};
+use anyhow::Context;
+use tokio::sync::{broadcast, watch};
+use tokio::task::JoinHandle;
+
+use self::auth::{User, Users};
+use self::nodes::CellManager;
+use self::space::ids;
+use crate::cell::{Cell, LiveMessage};
+use crate::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
+use crate::time::Timestamp;
+
+/// How often the gateway object's history row count is refreshed.
+const GATEWAY_TICK: Duration = Duration::from_secs(10);
+/// The path of every endpoint.
+const ENDPOINT_PATH: &str = "/";
+
+/// A started OPC UA server.
+#[derive(Debug)]
+pub struct Started {
+    /// The address it listens on (the actual port when 0 was asked).
+    pub addr: SocketAddr,
+    /// The endpoint URL clients use.
+    pub url: String,
+    /// Ends when the server has stopped.
+    pub task: JoinHandle<()>,
+}
+
+/// What the server needs besides the `[opcua]` table.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The data directory (`<data>/opcua/pki` holds the certificates).
+    pub data_dir: PathBuf,
+    /// `--allow-writes`.
+    pub allow_writes: bool,
+    /// The users with their passwords, read at start.
+    pub users: Vec<User>,
+    /// Whether anonymous sessions are allowed (read only).
+    pub anonymous: bool,
+}
+
+/// The users of `config` with their passwords from the environment; fails naming the
+/// variable that is not set.
+pub fn users_of(config: &OpcuaConfig) -> anyhow::Result<Vec<User>> {
+    config
+        .users
+        .iter()
+        .map(|u| {
+            let password = std::env::var(&u.password_env).with_context(|| {
+                format!(
+                    "the OPC UA password of user {:?}: environment variable {} is not set",
+                    u.name, u.password_env
+                )
+            })?;
+            Ok(User {
+                name: u.name.clone(),
+                password,
+                write: u.write,
+            })
+        })
+        .collect()
+}
+
+/// Binds the endpoint, makes the application certificate if there is none, and serves
+/// `cell` until `stop` turns true.
+pub async fn start(
+    cell: Arc<Cell>,
+    config: OpcuaConfig,
+    options: Options,
+    mut stop: watch::Receiver<bool>,
+) -> anyhow::Result<Started> {
+    let bind_to = format!("{}:{}", config.host, config.port);
+    let listener = tokio::net::TcpListener::bind(&bind_to)
+        .await
+        .with_context(|| {
+            format!(
+                "cannot listen for OPC UA on {bind_to}; choose another port with --opcua \
+                 (127.0.0.1:0 for any free port) or endpoint in [opcua]"
+            )
+        })?;
+    let addr = listener
+        .local_addr()
+        .context("cannot read the OPC UA server's bound address")?;
+    let config = OpcuaConfig {
+        port: addr.port(),
+        ..config
+    };
+    let url = config.endpoint();
+    let pki = options.data_dir.join("opcua").join("pki");
+    let pki_for_cert = pki.clone();
+    let cert_config = config.clone();
+    tokio::task::spawn_blocking(move || ensure_certificate(&pki_for_cert, &cert_config))
+        .await
+        .context("the certificate task failed")??;
+    let users = Users::new(options.users, options.anonymous, options.allow_writes);
+    let (server, handle) = builder(&config, &pki, &url, users.clone())
+        .with_node_manager(nodes::builder(Arc::clone(&cell), users))
+        .build()
+        .map_err(|e| anyhow::anyhow!("the OPC UA server's configuration is refused: {e}"))?;
+    let manager = handle
+        .node_managers()
+        .get_of_type::<CellManager>()
+        .context("the OPC UA server has no node manager for the cell")?;
+    let ns = manager.inner().namespace();
+    let live = cell.subscribe();
+    let follow = tokio::spawn(follow(
+        Arc::clone(&cell),
+        handle.clone(),
+        manager,
+        ns,
+        live,
+        stop.clone(),
+    ));
+    let cancel = handle.clone();
+    let task = tokio::spawn(async move {
+        let run = server.run_with(listener);
+        tokio::pin!(run);
+        tokio::select! {
+            ended = &mut run => {
+                if let Err(e) = ended {
+                    tracing::error!("the OPC UA server stopped: {e}");
+                }
+            }
+            () = stopped(&mut stop) => {
+                cancel.cancel();
+                if let Err(e) = run.await {
+                    tracing::error!("the OPC UA server stopped: {e}");
+                }
+            }
+        }
+        follow.abort();
+    });
+    tracing::info!(
+        "OPC UA server on {url} ({})",
+        config
+            .security
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(Started { addr, url, task })
+}
+
+fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerBuilder {
+    let anonymous = users.anonymous();
+    let mut builder = ServerBuilder::new()
+        .application_name(config.application_name.clone())
+        .application_uri(config.application_uri.clone())
+        .product_uri("urn:cellbus")
+        .build_info(BuildInfo {
+            product_uri: "urn:cellbus".into(),
+            manufacturer_name: "cellbus".into(),
+            product_name: "cellbus gateway".into(),
+            software_version: env!("CARGO_PKG_VERSION").into(),
+            build_number: env!("CARGO_PKG_VERSION").into(),
+            build_date: DateTime::now(),
+        })
+        .pki_dir(pki)
+        .create_sample_keypair(false)
+        .trust_client_certs(config.trust_all_clients)
+        .host(config.host.clone())
+        .port(config.port)
+        .discovery_urls(vec![url.to_owned()])
+        .with_authenticator(Arc::new(users));
+    let tokens: Vec<String> = if anonymous {
+        vec![ANONYMOUS_USER_TOKEN_ID.to_owned()]
+    } else {
+        Vec::new()
+    };
+    for security in &config.security {
+        let (policy, mode) = opc_security(security);
+        builder = builder.add_endpoint(
+            endpoint_id(security),
+            ServerEndpoint::new(ENDPOINT_PATH, policy, mode, &tokens),
+        );
+    }
+    builder
+}
+
+/// The endpoint's id in the server's configuration.
+fn endpoint_id(security: &OpcuaSecurity) -> String {
+    security.to_string().replace(' ', "_")
+}
+
+fn opc_security(security: &OpcuaSecurity) -> (SecurityPolicy, MessageSecurityMode) {
+    let policy = match security.policy {
+        OpcuaPolicy::None => SecurityPolicy::None,
+        OpcuaPolicy::Basic256Sha256 => SecurityPolicy::Basic256Sha256,
+        OpcuaPolicy::Aes128Sha256RsaOaep => SecurityPolicy::Aes128Sha256RsaOaep,
+        OpcuaPolicy::Aes256Sha256RsaPss => SecurityPolicy::Aes256Sha256RsaPss,
+    };
+    let mode = match security.mode {
+        OpcuaMode::None => MessageSecurityMode::None,
+        OpcuaMode::Sign => MessageSecurityMode::Sign,
+        OpcuaMode::SignAndEncrypt => MessageSecurityMode::SignAndEncrypt,
+    };
+    (policy, mode)
+}
+
+/// Makes the self-signed application certificate and its key on first start, and the
+/// trusted and rejected folders.
+fn ensure_certificate(pki: &Path, config: &OpcuaConfig) -> anyhow::Result<()> {
+    let store = CertificateStore::new(pki);
+    store.ensure_pki_path().map_err(|e| {
+        anyhow::anyhow!(
+            "cannot make the OPC UA certificate folders in {}: {e}",
+            pki.display()
+        )
+    })?;
+    if store.read_own_cert().is_ok() && store.read_own_pkey().is_ok() {
+        return Ok(());
+    }
+    let description = ApplicationDescription {
+        application_uri: UAString::from(config.application_uri.as_str()),
+        application_name: LocalizedText::new("", &config.application_name),
+        application_type: ApplicationType::Server,
+        product_uri: UAString::from("urn:cellbus"),
+        gateway_server_uri: UAString::null(),
+        discovery_profile_uri: UAString::null(),
+        discovery_urls: None,
+    };
+    let mut names = vec![config.host.clone()];
+    names.extend(X509Data::computer_hostnames());
+    let data = X509Data::from((description, Some(names)));
+    store
+        .create_and_store_application_instance_cert(&data, false)
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "cannot make the OPC UA application certificate in {}: {e}",
+                pki.display()
+            )
+        })?;
+    tracing::info!(
+        "made the OPC UA application certificate {}",
+        store.own_certificate_path().display()
+    );
+    Ok(())
+}
+
+/// Follows the change stream and sets the variables; after a lag, sets every value again
+/// from the cell.
+async fn follow(
+    cell: Arc<Cell>,
+    handle: ServerHandle,
+    manager: Arc<CellManager>,
+    ns: u16,
+    mut live: broadcast::Receiver<LiveMessage>,
+    mut stop: watch::Receiver<bool>,
+) {
+    let subscriptions = Arc::clone(handle.subscriptions());
+    let mut tick = tokio::time::interval(GATEWAY_TICK);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    // Changes between the address space's build and this subscription are caught up here.
+    resync(&cell, &manager, &subscriptions, ns);
+    loop {
+        tokio::select! {
+            message = live.recv() => match message {
+                Ok(LiveMessage::Value(view)) => {
+                    let Some(spec) = cell.point(&view.id) else { continue };
+                    let value = space::data_value(&spec.kind, &view, Timestamp::now());
+                    let node = ids::point(ns, view.id.as_str());
+                    set_values(&manager, &subscriptions, vec![(node, value)]);
+                }
+                Ok(LiveMessage::Device(summary)) => {
+                    let id = summary.id.as_str();
+                    let now = DateTime::now();
+                    set_values(&manager, &subscriptions, vec![
+                        (ids::device_status(ns, id), DataValue::new_at(space::device_status(&summary), now)),
+                        (ids::device_error(ns, id), DataValue::new_at(space::device_error(&summary), now)),
+                    ]);
+                }
+                Ok(LiveMessage::Event(_)) => {}
+                Err(broadcast::error::RecvError::Lagged(missed)) => {
+                    tracing::warn!("the OPC UA server missed {missed} changes; reading the cell again");
+                    resync(&cell, &manager, &subscriptions, ns);
+                }
+                Err(broadcast::error::RecvError::Closed) => return,
+            },
+            _ = tick.tick() => {
+                let rows = cell.store().stats().rows_written();
+                set_values(&manager, &subscriptions, vec![(
+                    ids::gateway(ns, Some(nodes::HISTORY_ROWS)),
+                    DataValue::new_now(Variant::UInt64(rows)),
+                )]);
+            }
+            () = stopped(&mut stop) => return,
+        }
+    }
+}
+
+/// Resolves once `stop` turns true (or its sender is gone).
+async fn stopped(stop: &mut watch::Receiver<bool>) {
+    let _ = stop.wait_for(|stopped| *stopped).await;
+}
+
+/// Sets every variable from the cell's current state.
+fn resync(
+    cell: &Cell,
+    manager: &CellManager,
+    subscriptions: &::opcua::server::SubscriptionCache,
+    ns: u16,
+) {
+    let now = Timestamp::now();
+    let t = space::opc_time(now);
+    let mut values = Vec::new();
+    for device in cell.devices() {
+        let id = device.summary.id.as_str();
+        values.push((
+            ids::device_status(ns, id),
+            DataValue::new_at(space::device_status(&device.summary), t),
+        ));
+        values.push((
+            ids::device_error(ns, id),
+            DataValue::new_at(space::device_error(&device.summary), t),
+        ));
+        for point in &device.points {
+            values.push((
+                ids::point(ns, point.view.id.as_str()),
+                space::data_value(&point.kind, &point.view, now),
+            ));
+        }
+    }
+    set_values(manager, subscriptions, values);
+}
+
+fn set_values(
+    manager: &CellManager,
+    subscriptions: &::opcua::server::SubscriptionCache,
+    values: Vec<(::opcua::types::NodeId, DataValue)>,
+) {
+    let result = manager.set_values(
+        subscriptions,
+        values
+            .iter()
+            .map(|(node, value)| (node, None, value.clone())),
+    );
+    if let Err(status) = result {
+        tracing::warn!("an OPC UA value was not set: {status}");
+    }
+}

@@ -1,0 +1,498 @@
+//! The cell's node manager: builds `Objects/Cell/{line}/{device}/{point}` and the gateway
+//! object, takes writes through the audited write path and answers HistoryRead from the
+//! history.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Duration;
+
+use ::opcua::server::address_space::{
+    AccessLevel, AddressSpace, NodeType, ObjectBuilder, VariableBuilder,
+};
+use ::opcua::server::diagnostics::NamespaceMetadata;
+use ::opcua::server::node_manager::memory::{
+    InMemoryNodeManager, InMemoryNodeManagerBuilder, InMemoryNodeManagerImpl,
+};
+use ::opcua::server::node_manager::{
+    HistoryNode, NodeManagerBuilder, RequestContext, ServerContext, WriteNode,
+};
+use ::opcua::sync::RwLock;
+use ::opcua::types::{
+    AttributeId, DataTypeId, DataValue, ExtensionObject, HistoryData, NodeId, NumericRange,
+    ObjectId, ObjectTypeId, QualifiedName, ReadProcessedDetails, ReadRawModifiedDetails,
+    StatusCode, TimestampsToReturn, VariableTypeId, Variant,
+};
+
+use super::auth::Users;
+use super::history::{self, Aggregate};
+use super::space::{self, ids};
+use crate::cell::{Cell, DeviceView};
+use crate::driver::{ErrorKind, WriteError};
+use crate::point::{PointId, PointKind, ValueError};
+use crate::time::Timestamp;
+use crate::write::Attempt;
+
+/// The node manager of the cell.
+pub type CellManager = InMemoryNodeManager<CellNodes>;
+
+/// The cell's nodes: what the address space holds and how to reach the cell.
+pub struct CellNodes {
+    cell: Arc<Cell>,
+    users: Users,
+    ns: u16,
+    /// Point variables by node id.
+    points: HashMap<NodeId, PointId>,
+}
+
+/// The builder the server takes: registers the namespace and builds the nodes.
+pub fn builder(cell: Arc<Cell>, users: Users) -> impl NodeManagerBuilder {
+    InMemoryNodeManagerBuilder::new(move |context: ServerContext, space: &mut AddressSpace| {
+        let ns = context
+            .type_tree
+            .write()
+            .namespaces_mut()
+            .add_namespace(space::NAMESPACE_URI);
+        space.add_namespace(space::NAMESPACE_URI, ns);
+        let points = build(space, ns, &cell, Timestamp::now());
+        CellNodes {
+            cell,
+            users,
+            ns,
+            points,
+        }
+    })
+}
+
+impl CellNodes {
+    /// The namespace index of the cell's nodes.
+    pub fn namespace(&self) -> u16 {
+        self.ns
+    }
+}
+
+/// Builds the cell's nodes; returns the point variables by node id.
+fn build(
+    space: &mut AddressSpace,
+    ns: u16,
+    cell: &Cell,
+    now: Timestamp,
+) -> HashMap<NodeId, PointId> {
+    let mut points = HashMap::new();
+    let cell_id = ids::cell(ns);
+    ObjectBuilder::new(&cell_id, QualifiedName::new(ns, "Cell"), "Cell")
+        .description("The production cell: a folder per line, an object per device")
+        .is_folder()
+        .organized_by(ObjectId::ObjectsFolder)
+        .insert(space);
+    let devices = cell.devices();
+    for line in cell.lines() {
+        let line_id = ids::line(ns, &line.name);
+        ObjectBuilder::new(&line_id, QualifiedName::new(ns, &line.name), &line.name)
+            .description(format!("Line {} on {}", line.name, line.endpoint))
+            .is_folder()
+            .organized_by(cell_id.clone())
+            .insert(space);
+        for device in devices.iter().filter(|d| d.line == line.name) {
+            build_device(space, ns, &line_id, device, now, &mut points);
+        }
+    }
+    build_gateway(space, ns, cell);
+    points
+}
+
+fn build_device(
+    space: &mut AddressSpace,
+    ns: u16,
+    line_id: &NodeId,
+    device: &DeviceView,
+    now: Timestamp,
+    points: &mut HashMap<NodeId, PointId>,
+) {
+    let id = device.summary.id.as_str();
+    let device_id = ids::device(ns, id);
+    ObjectBuilder::new(&device_id, QualifiedName::new(ns, id), id)
+        .description(device.name.as_str())
+        .has_type_definition(ObjectTypeId::BaseObjectType)
+        .organized_by(line_id.clone())
+        .insert(space);
+    let text = |space: &mut AddressSpace, node: NodeId, name: &str, words: &str, value: String| {
+        VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
+            .description(words)
+            .data_type(DataTypeId::String)
+            .value_rank(-1)
+            .access_level(AccessLevel::CURRENT_READ)
+            .user_access_level(AccessLevel::CURRENT_READ)
+            .has_type_definition(VariableTypeId::BaseDataVariableType)
+            .component_of(device_id.clone())
+            .insert(space);
+        set(space, &node, DataValue::new_at(value, space::opc_time(now)));
+    };
+    text(
+        space,
+        ids::device_status(ns, id),
+        "Status",
+        "Whether the device answers: up, down, backed off or connecting",
+        space::device_status(&device.summary).to_owned(),
+    );
+    text(
+        space,
+        ids::device_error(ns, id),
+        "Error",
+        "Why the device is down, or its last refusal (empty when none)",
+        space::device_error(&device.summary),
+    );
+    for point in &device.points {
+        let point_id = point.view.id.as_str();
+        let node = ids::point(ns, point_id);
+        let mut access = AccessLevel::CURRENT_READ | AccessLevel::HISTORY_READ;
+        if point.writable.is_some() {
+            access |= AccessLevel::CURRENT_WRITE;
+        }
+        let type_definition = match (&point.kind, &point.view.unit, &point.writable) {
+            (PointKind::Numeric, _, Some(_)) => VariableTypeId::AnalogItemType,
+            (PointKind::Numeric, Some(_), None) => VariableTypeId::AnalogUnitType,
+            _ => VariableTypeId::BaseDataVariableType,
+        };
+        let name = point.view.id.name();
+        VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
+            .description(point.view.name.as_str())
+            .data_type(space::data_type(&point.kind))
+            .value_rank(-1)
+            .access_level(access)
+            .user_access_level(access)
+            .historizing(true)
+            .minimum_sampling_interval(point.view.period_ms as f64)
+            .has_type_definition(type_definition)
+            .component_of(device_id.clone())
+            .insert(space);
+        set(
+            space,
+            &node,
+            space::data_value(&point.kind, &point.view, now),
+        );
+        points.insert(node.clone(), point.view.id.clone());
+        if let Some(unit) = &point.view.unit {
+            property(
+                space,
+                ns,
+                &node,
+                point_id,
+                "EngineeringUnits",
+                DataTypeId::EUInformation,
+                ExtensionObject::from_message(space::eu_information(unit)),
+            );
+        }
+        if let (PointKind::Numeric, Some(range)) = (&point.kind, &point.writable) {
+            property(
+                space,
+                ns,
+                &node,
+                point_id,
+                "EURange",
+                DataTypeId::Range,
+                ExtensionObject::from_message(space::eu_range(range)),
+            );
+        }
+    }
+}
+
+/// The gateway object: its version, its lines and the history rows written.
+fn build_gateway(space: &mut AddressSpace, ns: u16, cell: &Cell) {
+    let gateway = ids::gateway(ns, None);
+    ObjectBuilder::new(&gateway, QualifiedName::new(ns, "Gateway"), "Gateway")
+        .description("The cellbus gateway serving this cell")
+        .has_type_definition(ObjectTypeId::BaseObjectType)
+        .organized_by(ObjectId::ObjectsFolder)
+        .insert(space);
+    let lines: Vec<String> = cell.lines().into_iter().map(|l| l.name).collect();
+    let variables: [(&str, &str, DataTypeId, i32, Variant); 3] = [
+        (
+            "Version",
+            "The gateway's version",
+            DataTypeId::String,
+            -1,
+            Variant::from(env!("CARGO_PKG_VERSION")),
+        ),
+        (
+            "Lines",
+            "The names of the lines the gateway polls",
+            DataTypeId::String,
+            1,
+            Variant::from(lines),
+        ),
+        (
+            HISTORY_ROWS,
+            "History rows written since the gateway started",
+            DataTypeId::UInt64,
+            -1,
+            Variant::UInt64(cell.store().stats().rows_written()),
+        ),
+    ];
+    for (name, words, data_type, rank, value) in variables {
+        let node = ids::gateway(ns, Some(name));
+        VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
+            .description(words)
+            .data_type(data_type)
+            .value_rank(rank)
+            .access_level(AccessLevel::CURRENT_READ)
+            .user_access_level(AccessLevel::CURRENT_READ)
+            .has_type_definition(VariableTypeId::BaseDataVariableType)
+            .component_of(gateway.clone())
+            .insert(space);
+        set(space, &node, DataValue::new_now(value));
+    }
+}
+
+/// The gateway variable counting history rows.
+pub const HISTORY_ROWS: &str = "HistoryRows";
+
+fn property(
+    space: &mut AddressSpace,
+    ns: u16,
+    parent: &NodeId,
+    point: &str,
+    name: &str,
+    data_type: DataTypeId,
+    value: ExtensionObject,
+) {
+    let node = ids::property(ns, point, name);
+    VariableBuilder::new(&node, QualifiedName::new(0, name), name)
+        .data_type(data_type)
+        .value_rank(-1)
+        .access_level(AccessLevel::CURRENT_READ)
+        .user_access_level(AccessLevel::CURRENT_READ)
+        .has_type_definition(VariableTypeId::PropertyType)
+        .property_of(parent.clone())
+        .insert(space);
+    set(space, &node, DataValue::new_now(Variant::from(value)));
+}
+
+fn set(space: &mut AddressSpace, node: &NodeId, value: DataValue) {
+    if let Some(NodeType::Variable(variable)) = space.find_mut(node) {
+        variable.set_data_value(value);
+    }
+}
+
+#[async_trait::async_trait]
+impl InMemoryNodeManagerImpl for CellNodes {
+    async fn init(&self, _space: &mut AddressSpace, _context: ServerContext) {}
+
+    fn name(&self) -> &str {
+        "cellbus"
+    }
+
+    fn namespaces(&self) -> Vec<NamespaceMetadata> {
+        vec![NamespaceMetadata {
+            namespace_uri: space::NAMESPACE_URI.to_owned(),
+            namespace_index: self.ns,
+            ..NamespaceMetadata::default()
+        }]
+    }
+
+    async fn write(
+        &self,
+        context: &RequestContext,
+        _space: &RwLock<AddressSpace>,
+        nodes_to_write: &mut [&mut WriteNode],
+    ) -> Result<(), StatusCode> {
+        let client = client_text(context);
+        for node in nodes_to_write {
+            let status = self.write_one(context, &client, node.value()).await;
+            node.set_status(status);
+        }
+        Ok(())
+    }
+
+    async fn history_read_raw_modified(
+        &self,
+        _context: &RequestContext,
+        details: &ReadRawModifiedDetails,
+        nodes: &mut [&mut &mut HistoryNode],
+        _timestamps: TimestampsToReturn,
+    ) -> Result<(), StatusCode> {
+        if details.is_read_modified {
+            return Err(StatusCode::BadHistoryOperationUnsupported);
+        }
+        let range =
+            history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now());
+        let limit = usize::try_from(details.num_values_per_node).unwrap_or(usize::MAX);
+        for node in nodes.iter_mut() {
+            let Some((point, kind)) = self.point_of(node.node_id()) else {
+                node.set_status(StatusCode::BadNodeIdUnknown);
+                continue;
+            };
+            match self.read_history(point, range, None).await {
+                Ok(stored) => {
+                    let values = history::raw(&kind, &stored, range, limit);
+                    node.set_result(HistoryData {
+                        data_values: Some(values),
+                    });
+                    node.set_status(StatusCode::Good);
+                }
+                Err(status) => node.set_status(status),
+            }
+        }
+        Ok(())
+    }
+
+    async fn history_read_processed(
+        &self,
+        _context: &RequestContext,
+        details: &ReadProcessedDetails,
+        nodes: &mut [&mut &mut HistoryNode],
+        _timestamps: TimestampsToReturn,
+    ) -> Result<(), StatusCode> {
+        let range =
+            history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now());
+        let interval = Duration::from_secs_f64((details.processing_interval / 1000.0).max(0.0));
+        let aggregates = details.aggregate_type.clone().unwrap_or_default();
+        for (i, node) in nodes.iter_mut().enumerate() {
+            let Some(aggregate) = aggregates.get(i).and_then(Aggregate::of) else {
+                node.set_status(StatusCode::BadAggregateNotSupported);
+                continue;
+            };
+            let Some((point, kind)) = self.point_of(node.node_id()) else {
+                node.set_status(StatusCode::BadNodeIdUnknown);
+                continue;
+            };
+            if !matches!(kind, PointKind::Numeric) {
+                node.set_status(StatusCode::BadAggregateInvalidInputs);
+                continue;
+            }
+            let Some(step) = history::check_interval(range, interval) else {
+                node.set_status(StatusCode::BadAggregateInvalidInputs);
+                continue;
+            };
+            match self.read_history(point, range, None).await {
+                Ok(stored) => {
+                    let values = history::processed(&stored, range, step, aggregate);
+                    node.set_result(HistoryData {
+                        data_values: Some(values),
+                    });
+                    node.set_status(StatusCode::Good);
+                }
+                Err(status) => node.set_status(status),
+            }
+        }
+        Ok(())
+    }
+}
+
+impl CellNodes {
+    fn point_of(&self, node: &NodeId) -> Option<(PointId, PointKind)> {
+        let point = self.points.get(node)?;
+        let spec = self.cell.point(point)?;
+        Some((point.clone(), spec.kind.clone()))
+    }
+
+    async fn read_history(
+        &self,
+        point: PointId,
+        range: history::TimeRange,
+        step: Option<Duration>,
+    ) -> Result<crate::store::History, StatusCode> {
+        let cell = Arc::clone(&self.cell);
+        tokio::task::spawn_blocking(move || {
+            cell.store().history(&point, range.from, range.to, step)
+        })
+        .await
+        .map_err(|_| StatusCode::BadInternalError)?
+        .map_err(|e| {
+            tracing::warn!("OPC UA history read failed: {e}");
+            StatusCode::BadHistoryOperationUnsupported
+        })
+    }
+
+    /// One write: refused before anything is stored unless writes are on and the user may
+    /// write; from there through the audited write path.
+    async fn write_one(
+        &self,
+        context: &RequestContext,
+        client: &str,
+        write: &::opcua::server::node_manager::ParsedWriteValue,
+    ) -> StatusCode {
+        if write.attribute_id != AttributeId::Value {
+            return StatusCode::BadNotWritable;
+        }
+        let Some((point, kind)) = self.point_of(&write.node_id) else {
+            return if write.node_id.namespace == self.ns {
+                StatusCode::BadNotWritable
+            } else {
+                StatusCode::BadNodeIdUnknown
+            };
+        };
+        if !self.users.may_write(&context.token) {
+            tracing::info!(
+                "OPC UA write to {point} refused: {}",
+                if context.token.is_anonymous() {
+                    "anonymous sessions do not write".to_owned()
+                } else {
+                    format!("user {} may not write (or writes are off)", context.token.0)
+                }
+            );
+            return StatusCode::BadUserAccessDenied;
+        }
+        if write.index_range != NumericRange::None {
+            return StatusCode::BadIndexRangeInvalid;
+        }
+        let given = write.value.value.clone().unwrap_or(Variant::Empty);
+        let Some((value, json)) = space::written_value(&kind, &given) else {
+            let attempt = Attempt::new(
+                Arc::clone(&self.cell),
+                client,
+                point.device(),
+                point.name(),
+                serde_json::Value::String(format!("{given:?}")),
+            );
+            let words = format!(
+                "{point} takes {:?}, not {:?}",
+                space::data_type(&kind),
+                given.scalar_type_id()
+            );
+            attempt.refuse(&words, None).await;
+            return StatusCode::BadTypeMismatch;
+        };
+        let attempt = Attempt::new(
+            Arc::clone(&self.cell),
+            client,
+            point.device(),
+            point.name(),
+            json,
+        );
+        // A task of its own: the write and its audit rows finish even if the client leaves.
+        let done = tokio::spawn(attempt.carry_out(point, value));
+        match done.await {
+            Ok(Ok(_)) => StatusCode::Good,
+            Ok(Err(error)) => write_status(&error),
+            Err(_) => StatusCode::BadInternalError,
+        }
+    }
+}
+
+/// The status code of a refused or failed write.
+pub fn write_status(error: &WriteError) -> StatusCode {
+    match error {
+        WriteError::Invalid(ValueError::ReadOnly { .. }) => StatusCode::BadNotWritable,
+        WriteError::Invalid(ValueError::WrongType { .. }) => StatusCode::BadTypeMismatch,
+        WriteError::Invalid(_) => StatusCode::BadOutOfRange,
+        WriteError::UnknownPoint { .. } => StatusCode::BadNodeIdUnknown,
+        WriteError::Device(e) if e.kind == ErrorKind::Refused => StatusCode::BadOutOfRange,
+        WriteError::Device(e) if e.kind == ErrorKind::Usage => StatusCode::BadOutOfRange,
+        WriteError::Device(_) | WriteError::NotRunning { .. } => StatusCode::BadCommunicationError,
+    }
+}
+
+/// Who writes, for the audit log: `opcua user op (session 3, urn:client:app)`.
+fn client_text(context: &RequestContext) -> String {
+    let session = context.session.read();
+    let user = if context.token.is_anonymous() {
+        "anonymous".to_owned()
+    } else {
+        format!("user {}", context.token.0)
+    };
+    format!(
+        "opcua {user} (session {}, {})",
+        context.session_id,
+        session.application_description().application_uri.as_ref()
+    )
+}

@@ -1,0 +1,380 @@
+//! The sans-IO mapping from the cell to OPC UA: node ids, data types, values with their
+//! status codes and timestamps, engineering units and ranges.
+//!
+//! | point kind | OPC UA data type | value |
+//! |---|---|---|
+//! | numeric | Double | the number |
+//! | enumeration | Int32 | the state's number (labels are in the gateway's API) |
+//! | text | String | the text |
+//!
+//! | point quality | StatusCode | value |
+//! |---|---|---|
+//! | good | Good | the value |
+//! | stale | Uncertain_LastUsableValue | the last good value |
+//! | bad (the read failed, the device is down) | Bad_CommunicationError | none |
+//! | never read | Bad_NoCommunication | none |
+//!
+//! The source timestamp is when the device was read; the server timestamp when the
+//! server took the change.
+
+use ::opcua::types::{
+    DataTypeId, DataValue, DateTime, EUInformation, LocalizedText, NodeId, Range, StatusCode,
+    Variant,
+};
+
+use crate::cell::{DeviceStatus, DeviceSummary, PointView};
+use crate::point::{PointKind, Quality, Value};
+use crate::time::Timestamp;
+
+/// The namespace of the cell's nodes.
+pub const NAMESPACE_URI: &str = "urn:cellbus:cell";
+
+/// UNECE's namespace for `EUInformation.unitId` (OPC UA Part 8).
+pub const UNECE_NAMESPACE: &str = "http://www.opcfoundation.org/UA/units/un/cefact";
+
+/// OPC UA ticks (100 ns since 1601-01-01) at 1970-01-01.
+const TICKS_AT_UNIX_EPOCH: i64 = 116_444_736_000_000_000;
+/// Ticks per millisecond.
+const TICKS_PER_MS: i64 = 10_000;
+
+/// Where each part of the cell lives in the namespace (string node ids).
+pub mod ids {
+    use super::NodeId;
+
+    /// The `Cell` folder under `Objects`.
+    pub fn cell(ns: u16) -> NodeId {
+        NodeId::new(ns, "cell")
+    }
+
+    /// A line's folder.
+    pub fn line(ns: u16, line: &str) -> NodeId {
+        NodeId::new(ns, format!("line:{line}"))
+    }
+
+    /// A device's object (its id: `jbc1`).
+    pub fn device(ns: u16, device: &str) -> NodeId {
+        NodeId::new(ns, device.to_owned())
+    }
+
+    /// A device's `Status` variable.
+    pub fn device_status(ns: u16, device: &str) -> NodeId {
+        NodeId::new(ns, format!("{device}/Status"))
+    }
+
+    /// A device's `Error` variable.
+    pub fn device_error(ns: u16, device: &str) -> NodeId {
+        NodeId::new(ns, format!("{device}/Error"))
+    }
+
+    /// A point's variable (its id: `jbc1.air_temperature`).
+    pub fn point(ns: u16, point: &str) -> NodeId {
+        NodeId::new(ns, point.to_owned())
+    }
+
+    /// A property of a point (`EngineeringUnits`, `EURange`).
+    pub fn property(ns: u16, point: &str, property: &str) -> NodeId {
+        NodeId::new(ns, format!("{point}/{property}"))
+    }
+
+    /// The gateway object, and its variables by name.
+    pub fn gateway(ns: u16, variable: Option<&str>) -> NodeId {
+        match variable {
+            Some(name) => NodeId::new(ns, format!("gateway/{name}")),
+            None => NodeId::new(ns, "gateway"),
+        }
+    }
+}
+
+/// The OPC UA data type of a point of `kind`.
+pub fn data_type(kind: &PointKind) -> DataTypeId {
+    match kind {
+        PointKind::Numeric => DataTypeId::Double,
+        PointKind::Enum { .. } => DataTypeId::Int32,
+        PointKind::Text => DataTypeId::String,
+    }
+}
+
+/// The status code of a point's quality (`None`: never read).
+pub fn status_code(quality: Option<Quality>) -> StatusCode {
+    match quality {
+        Some(Quality::Good) => StatusCode::Good,
+        Some(Quality::Stale) => StatusCode::UncertainLastUsableValue,
+        Some(Quality::Bad) => StatusCode::BadCommunicationError,
+        None => StatusCode::BadNoCommunication,
+    }
+}
+
+/// A point's reading as an OPC UA data value: the value with Good, the last good value
+/// with Uncertain_LastUsableValue when stale, no value when bad or never read; the source
+/// timestamp when the device was read, the server timestamp `now`.
+pub fn data_value(kind: &PointKind, view: &PointView, now: Timestamp) -> DataValue {
+    stored_data_value(kind, view.value.as_ref(), view.quality, view.t, now)
+}
+
+/// A reading (live or stored) as an OPC UA data value (see [`data_value`]).
+pub fn stored_data_value(
+    kind: &PointKind,
+    value: Option<&Value>,
+    quality: Option<Quality>,
+    t: Option<Timestamp>,
+    now: Timestamp,
+) -> DataValue {
+    let mut status = status_code(quality);
+    let value = match quality {
+        Some(Quality::Good | Quality::Stale) => match value.map(|v| variant(kind, v)) {
+            Some(Some(v)) => Some(v),
+            // A value the data type cannot carry is not a reading.
+            _ => {
+                status = StatusCode::BadCommunicationError;
+                None
+            }
+        },
+        _ => None,
+    };
+    DataValue {
+        value,
+        status: Some(status),
+        source_timestamp: t.map(opc_time),
+        server_timestamp: Some(opc_time(now)),
+        ..DataValue::default()
+    }
+}
+
+/// A point's value as the variant of its data type; `None` when it cannot be one.
+pub fn variant(kind: &PointKind, value: &Value) -> Option<Variant> {
+    match (kind, value) {
+        (PointKind::Numeric, Value::Number(n)) => Some(Variant::Double(*n)),
+        (PointKind::Enum { .. }, Value::Number(n)) => {
+            let whole = n.round();
+            (whole == *n && whole >= f64::from(i32::MIN) && whole <= f64::from(i32::MAX))
+                .then_some(Variant::Int32(whole as i32))
+        }
+        (PointKind::Text, Value::Text(t)) => Some(Variant::from(t.as_str())),
+        (PointKind::Text, Value::Number(n)) => Some(Variant::from(n.to_string())),
+        _ => None,
+    }
+}
+
+/// A written variant as a point value, and the JSON the audit log shows; `None` when the
+/// variant is not a value of the point's data type (Bad_TypeMismatch).
+pub fn written_value(kind: &PointKind, variant: &Variant) -> Option<(Value, serde_json::Value)> {
+    let number = |n: f64| Some((Value::Number(n), serde_json::json!(n)));
+    match (kind, variant) {
+        (PointKind::Text, Variant::String(s)) => {
+            let text = s.as_ref().to_owned();
+            Some((Value::Text(text.clone()), serde_json::Value::String(text)))
+        }
+        (PointKind::Text, _) => None,
+        (PointKind::Numeric | PointKind::Enum { .. }, v) => match v {
+            Variant::Double(n) => number(*n),
+            Variant::Float(n) => number(f64::from(*n)),
+            Variant::Int32(n) => number(f64::from(*n)),
+            Variant::Int16(n) => number(f64::from(*n)),
+            Variant::UInt16(n) => number(f64::from(*n)),
+            Variant::UInt32(n) => number(f64::from(*n)),
+            Variant::SByte(n) => number(f64::from(*n)),
+            Variant::Byte(n) => number(f64::from(*n)),
+            Variant::Int64(n) => number(*n as f64),
+            Variant::UInt64(n) => number(*n as f64),
+            _ => None,
+        },
+    }
+}
+
+/// A point's unit as `EUInformation`, with its UNECE code when it is a common one.
+pub fn eu_information(unit: &str) -> EUInformation {
+    EUInformation {
+        namespace_uri: UNECE_NAMESPACE.into(),
+        unit_id: unece_unit_id(unit).unwrap_or(-1),
+        display_name: LocalizedText::new("", unit),
+        description: LocalizedText::new("", unit),
+    }
+}
+
+/// The write range as an `EURange`.
+pub fn eu_range(range: &crate::point::WriteRange) -> Range {
+    Range {
+        low: range.min,
+        high: range.max,
+    }
+}
+
+/// A device's status in words: `up`, `down`, `backed off` or `connecting`.
+pub fn device_status(summary: &DeviceSummary) -> &'static str {
+    match (summary.status, summary.next_try_at) {
+        (DeviceStatus::Connecting, _) => "connecting",
+        (DeviceStatus::Up, _) => "up",
+        (DeviceStatus::Down, Some(_)) => "backed off",
+        (DeviceStatus::Down, None) => "down",
+    }
+}
+
+/// A device's error in words (empty when it has none).
+pub fn device_error(summary: &DeviceSummary) -> String {
+    summary
+        .error
+        .as_ref()
+        .map(|e| e.message.clone())
+        .unwrap_or_default()
+}
+
+/// A gateway time as an OPC UA time.
+pub fn opc_time(t: Timestamp) -> DateTime {
+    DateTime::from(
+        t.0.saturating_mul(TICKS_PER_MS)
+            .saturating_add(TICKS_AT_UNIX_EPOCH),
+    )
+}
+
+/// An OPC UA time as a gateway time (milliseconds; null and far times are clamped).
+pub fn gateway_time(t: &DateTime) -> Timestamp {
+    let ticks = t.checked_ticks();
+    Timestamp((ticks - TICKS_AT_UNIX_EPOCH).div_euclid(TICKS_PER_MS))
+}
+
+/// The UNECE common code of a unit as OPC UA Part 8 encodes it (the code's characters,
+/// 8 bits each).
+fn unece_unit_id(unit: &str) -> Option<i32> {
+    let code = match unit {
+        "°C" => "CEL",
+        "K" => "KEL",
+        "%" => "P1",
+        "V" => "VLT",
+        "A" => "AMP",
+        "mA" => "4K",
+        "W" => "WTT",
+        "kW" => "KWT",
+        "kVA" => "KVA",
+        "kWh" => "KWH",
+        "Hz" => "HTZ",
+        "s" => "SEC",
+        "ms" => "C26",
+        "min" => "MIN",
+        "h" => "HUR",
+        "mm" => "MMT",
+        "bar" => "BAR",
+        "kPa" => "KPA",
+        "l/min" => "L2",
+        _ => return None,
+    };
+    Some(
+        code.bytes()
+            .fold(0_i32, |id, byte| (id << 8) | i32::from(byte)),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::point::{DeviceId, EnumState, PointId};
+
+    fn view(value: Option<Value>, quality: Option<Quality>) -> PointView {
+        let device = DeviceId::new("jbc1").unwrap();
+        PointView {
+            id: PointId::new(&device, "air_temperature").unwrap(),
+            name: "Air temperature".into(),
+            unit: Some("°C".into()),
+            value,
+            text: None,
+            quality,
+            t: Some(Timestamp(1_000)),
+            error: None,
+            alarm: false,
+            period_ms: 1000,
+        }
+    }
+
+    #[test]
+    fn a_good_number_is_a_good_double_timed_when_the_device_was_read() {
+        let v = data_value(
+            &PointKind::Numeric,
+            &view(Some(Value::Number(21.5)), Some(Quality::Good)),
+            Timestamp(9_000),
+        );
+        assert_eq!(v.value, Some(Variant::Double(21.5)));
+        assert_eq!(v.status, Some(StatusCode::Good));
+        assert_eq!(
+            v.source_timestamp.map(|t| gateway_time(&t)),
+            Some(Timestamp(1_000))
+        );
+        assert_eq!(
+            v.server_timestamp.map(|t| gateway_time(&t)),
+            Some(Timestamp(9_000))
+        );
+    }
+
+    #[test]
+    fn a_stale_value_is_uncertain_never_good() {
+        let v = data_value(
+            &PointKind::Numeric,
+            &view(Some(Value::Number(21.5)), Some(Quality::Stale)),
+            Timestamp(9_000),
+        );
+        assert_eq!(v.status, Some(StatusCode::UncertainLastUsableValue));
+        assert_eq!(v.value, Some(Variant::Double(21.5)));
+    }
+
+    #[test]
+    fn a_bad_or_never_read_point_has_a_bad_status_and_no_value() {
+        let bad = data_value(
+            &PointKind::Numeric,
+            &view(Some(Value::Number(21.5)), Some(Quality::Bad)),
+            Timestamp(9_000),
+        );
+        assert_eq!(bad.status, Some(StatusCode::BadCommunicationError));
+        assert_eq!(bad.value, None);
+        let never = data_value(&PointKind::Numeric, &view(None, None), Timestamp(9_000));
+        assert_eq!(never.status, Some(StatusCode::BadNoCommunication));
+        assert_eq!(never.value, None);
+    }
+
+    #[test]
+    fn an_enumeration_is_an_int32_and_text_a_string() {
+        let kind = PointKind::Enum {
+            states: vec![EnumState {
+                value: 9,
+                label: "No tool".into(),
+            }],
+        };
+        assert_eq!(data_type(&kind), DataTypeId::Int32);
+        assert_eq!(variant(&kind, &Value::Number(9.0)), Some(Variant::Int32(9)));
+        assert_eq!(variant(&kind, &Value::Number(9.5)), None);
+        assert_eq!(data_type(&PointKind::Text), DataTypeId::String);
+        assert_eq!(
+            variant(&PointKind::Text, &Value::Text("P-12".into())),
+            Some(Variant::from("P-12"))
+        );
+    }
+
+    #[test]
+    fn written_numbers_of_any_width_become_point_values_and_text_only_text() {
+        assert_eq!(
+            written_value(&PointKind::Numeric, &Variant::Float(2.5)).map(|(v, _)| v),
+            Some(Value::Number(2.5))
+        );
+        assert_eq!(
+            written_value(&PointKind::Numeric, &Variant::Int32(350)),
+            Some((Value::Number(350.0), serde_json::json!(350.0)))
+        );
+        assert_eq!(
+            written_value(&PointKind::Numeric, &Variant::from("350")),
+            None
+        );
+        assert_eq!(written_value(&PointKind::Text, &Variant::Double(1.0)), None);
+    }
+
+    #[test]
+    fn units_carry_their_unece_code_and_unknown_units_minus_one() {
+        let celsius = eu_information("°C");
+        assert_eq!(celsius.unit_id, 4_408_652); // "CEL"
+        assert_eq!(celsius.display_name.text.as_ref(), "°C");
+        assert_eq!(eu_information("strokes").unit_id, -1);
+    }
+
+    #[test]
+    fn gateway_and_opc_ua_times_round_trip_in_milliseconds() {
+        for ms in [0, 1, 1_700_000_000_123, -5_000] {
+            assert_eq!(gateway_time(&opc_time(Timestamp(ms))), Timestamp(ms));
+        }
+    }
+}
