@@ -138,7 +138,7 @@ async def read(url, addr):
     devices = http(addr, "/api/devices")["devices"]
     async with Client(url, timeout=LIMIT) as client:
         ns, tree = await check_tree(client, devices)
-        good = timed = 0
+        good = 0
         for d in devices:
             for p in d["points"]:
                 node = tree[d["id"]][1][p["id"].split(".", 1)[1]]
@@ -149,10 +149,12 @@ async def read(url, addr):
                 [value] = await client.uaclient.read(params)
                 if value.StatusCode.is_good():
                     good += 1
-                    timed += value.SourceTimestamp is not None
-        assert good > 0 and timed > 0, (good, timed)
-        # TODO: some good values come without a source timestamp (under investigation).
-        ok(f"{good} points read Good, {timed} with a source timestamp")
+                    # Good means a reading: a value and when the device was read (a point
+                    # never read, or whose read failed, is Bad, never an empty Good).
+                    assert value.SourceTimestamp is not None, (p["id"], value)
+                    assert value.Value.VariantType != ua.VariantType.Null, (p["id"], value)
+        assert good > 0, good
+        ok(f"{good} points read Good, each with its value and source timestamp")
         await check_subscription(client, tree, devices)
         d, p = writable_numeric(devices)
         node = tree[d["id"]][1][p["id"].split(".", 1)[1]]

@@ -132,7 +132,9 @@ pub fn stored_data_value(
         _ => None,
     };
     DataValue {
-        value,
+        // Always a value, Empty when there is none: async-opcua 0.19 answers a read of a
+        // data value without one with no status at all, which a client takes for Good.
+        value: Some(value.unwrap_or(Variant::Empty)),
         status: Some(status),
         source_timestamp: t.map(opc_time),
         server_timestamp: Some(opc_time(now)),
@@ -315,17 +317,17 @@ mod tests {
     }
 
     #[test]
-    fn a_bad_or_never_read_point_has_a_bad_status_and_no_value() {
+    fn a_bad_or_never_read_point_has_a_bad_status_and_an_empty_value() {
         let bad = data_value(
             &PointKind::Numeric,
             &view(Some(Value::Number(21.5)), Some(Quality::Bad)),
             Timestamp(9_000),
         );
         assert_eq!(bad.status, Some(StatusCode::BadCommunicationError));
-        assert_eq!(bad.value, None);
+        assert_eq!(bad.value, Some(Variant::Empty), "not the last good value");
         let never = data_value(&PointKind::Numeric, &view(None, None), Timestamp(9_000));
         assert_eq!(never.status, Some(StatusCode::BadNoCommunication));
-        assert_eq!(never.value, None);
+        assert_eq!(never.value, Some(Variant::Empty));
     }
 
     #[test]
