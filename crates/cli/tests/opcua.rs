@@ -129,7 +129,8 @@ fn an_independent_opcua_client_browses_reads_subscribes_and_is_refused_writes_wi
 }
 
 #[test]
-fn a_trusted_client_certificate_and_user_write_in_range_are_audited_and_history_matches_the_api() {
+fn a_trusted_client_certificate_and_user_write_in_range_are_audited_raise_an_opcua_event_and_history_matches_the_api()
+ {
     require_asyncua();
     let data = tempfile::tempdir().expect("a temporary directory");
     let token = "opcua-test-secret";
@@ -142,6 +143,8 @@ fn a_trusted_client_certificate_and_user_write_in_range_are_audited_and_history_
         "BadOutOfRange",
         "written to",
         "audit log",
+        "the write's event arrived on the device object",
+        "the write's event arrived on the Server object",
         "HistoryRead raw",
         "HistoryRead Average",
     ] {

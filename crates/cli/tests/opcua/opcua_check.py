@@ -8,8 +8,10 @@
 subscription, and is refused a write (no --allow-writes). `write`: connects with
 Basic256Sha256 SignAndEncrypt and a client certificate (refused until the certificate is
 moved from the server's rejected folder to its trusted folder), logs in as `operator`,
-is refused an out-of-range write, writes a valid one, finds both in /api/audit, and
-compares HistoryRead raw and Average with /api/history.
+is refused an out-of-range write, writes a valid one, finds both in /api/audit, receives
+the write's event (BaseEventType: message, severity, source, time as in /api/events) on
+event subscriptions to the device's object and to the Server object, and compares
+HistoryRead raw and Average with /api/history.
 
 Prints `ok: ...` lines; any failure raises (exit 1). Every wait is bounded.
 """
@@ -106,6 +108,34 @@ class Changes:
 
     def datachange_notification(self, node, val, data):
         self.seen.put_nowait((node, val, data))
+
+
+class Events:
+    def __init__(self):
+        self.seen = asyncio.Queue()
+
+    def event_notification(self, event):
+        self.seen.put_nowait(event)
+
+
+async def subscribe_events(client, node):
+    handler = Events()
+    sub = await client.create_subscription(100, handler)
+    await sub.subscribe_events(node, ua.ObjectIds.BaseEventType)
+    return sub, handler
+
+
+async def event_of(handler, source, message):
+    """The first event from `source` with `message` (bounded: LIMIT)."""
+    others = []
+    try:
+        while True:
+            event = await asyncio.wait_for(handler.seen.get(), LIMIT)
+            if event.SourceName == source and event.Message.Text == message:
+                return event
+            others.append((event.SourceName, event.Message.Text))
+    except asyncio.TimeoutError:
+        raise AssertionError(f"no event {message!r} from {source}; others: {others}") from None
 
 
 async def check_subscription(client, tree, devices):
@@ -217,9 +247,24 @@ async def write(url, addr, data_dir, password):
         except ua.UaStatusCodeError as e:
             assert e.code == ua.StatusCodes.BadOutOfRange, e
         ok(f"{too_high} for {p['id']} was refused: BadOutOfRange")
+        device_node = await node.get_parent()
+        on_device = await subscribe_events(client, device_node)
+        on_server = await subscribe_events(client, client.nodes.server)
         value = float(p["writable"]["min"])
         await node.write_value(ua.DataValue(ua.Variant(value, ua.VariantType.Double)))
         ok(f"{value} written to {p['id']}")
+        [logged] = http(addr, f"/api/events?kind=write&device={d['id']}")["events"]
+        for where, (sub, handler) in [("device object", on_device), ("Server object", on_server)]:
+            event = await event_of(handler, d["id"], logged["message"])
+            assert event.Severity == 200, event.Severity
+            assert event.SourceNode == device_node.nodeid, (event.SourceNode, device_node)
+            assert event.EventType == ua.NodeId(ua.ObjectIds.BaseEventType), event.EventType
+            t = int(event.Time.replace(tzinfo=timezone.utc).timestamp() * 1000 + 0.5)
+            assert t == ms(logged["t"]), (event.Time, logged["t"])
+            assert event.ReceiveTime >= event.Time, (event.ReceiveTime, event.Time)
+            assert event.EventId, event
+            await sub.delete()
+            ok(f"the write's event arrived on the {where}: {event.Message.Text!r}, severity {event.Severity}")
         audit = http(addr, f"/api/audit?device={d['id']}")["audit"]
         rows = [r for r in audit if "opcua user operator" in r["client"]]
         results = sorted({r["result"] for r in rows})

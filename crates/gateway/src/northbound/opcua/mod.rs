@@ -8,7 +8,10 @@
 //! - [`auth`]: anonymous sessions read only; users log in on secure endpoints.
 //!
 //! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
-//! monitored items are the server's own over those values (no second polling). The
+//! monitored items are the server's own over those values (no second polling). The same
+//! task raises each of the gateway's events as a BaseEventType event on the device's
+//! object (the gateway object for the gateway's own), which the server also delivers to
+//! event subscriptions on the Server object. The
 //! application certificate is made on first start in `<data>/opcua/pki/own/cert.der`
 //! (key in `private/`); client certificates are trusted when they are in
 //! `pki/trusted`, and an unknown one is put in `pki/rejected` for an
@@ -280,6 +283,9 @@ async fn follow(
     mut stop: watch::Receiver<bool>,
 ) {
     let subscriptions = Arc::clone(handle.subscriptions());
+    // Event ids: this task's start and the event's number.
+    let started = Timestamp::now();
+    let mut numbered: u64 = 0;
     let mut tick = tokio::time::interval(GATEWAY_TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     // Changes between the address space's build and this subscription are caught up here.
@@ -301,7 +307,15 @@ async fn follow(
                         (ids::device_error(ns, id), DataValue::new_at(space::device_error(&summary), now)),
                     ]);
                 }
-                Ok(LiveMessage::Event(_)) => {}
+                Ok(LiveMessage::Event(event)) => {
+                    numbered += 1;
+                    let id = space::event_id(started, numbered);
+                    let raised = space::base_event(ns, &event, id, Timestamp::now());
+                    subscriptions.notify_events(std::iter::once((
+                        &raised as &dyn ::opcua::nodes::Event,
+                        &raised.source_node,
+                    )));
+                }
                 Err(broadcast::error::RecvError::Lagged(missed)) => {
                     tracing::warn!("the OPC UA server missed {missed} changes; reading the cell again");
                     resync(&cell, &manager, &subscriptions, ns);

@@ -1,5 +1,5 @@
 //! The cell's node manager: builds `Objects/Cell/{line}/{device}/{point}` and the gateway
-//! object, takes writes through the audited write path and answers HistoryRead from the
+//! object (device objects and the gateway object notify events), takes writes through the audited write path and answers HistoryRead from the
 //! history.
 
 use std::collections::HashMap;
@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use ::opcua::server::address_space::{
-    AccessLevel, AddressSpace, NodeType, ObjectBuilder, VariableBuilder,
+    AccessLevel, AddressSpace, EventNotifier, NodeType, ObjectBuilder, VariableBuilder,
 };
 use ::opcua::server::diagnostics::NamespaceMetadata;
 use ::opcua::server::node_manager::memory::{
@@ -113,6 +113,7 @@ fn build_device(
     ObjectBuilder::new(&device_id, QualifiedName::new(ns, id), id)
         .description(device.name.as_str())
         .has_type_definition(ObjectTypeId::BaseObjectType)
+        .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
         .organized_by(line_id.clone())
         .insert(space);
     let text = |space: &mut AddressSpace, node: NodeId, name: &str, words: &str, value: String| {
@@ -202,6 +203,7 @@ fn build_gateway(space: &mut AddressSpace, ns: u16, cell: &Cell) {
     ObjectBuilder::new(&gateway, QualifiedName::new(ns, "Gateway"), "Gateway")
         .description("The cellbus gateway serving this cell")
         .has_type_definition(ObjectTypeId::BaseObjectType)
+        .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
         .organized_by(ObjectId::ObjectsFolder)
         .insert(space);
     let lines: Vec<String> = cell.lines().into_iter().map(|l| l.name).collect();

@@ -16,13 +16,27 @@
 //!
 //! The source timestamp is when the device was read; the server timestamp when the
 //! server took the change.
+//!
+//! The gateway's events are BaseEventType events on the device's object (the gateway
+//! object when they concern no device), with a severity by kind ([`severity`]):
+//!
+//! | kind | severity |
+//! |---|---|
+//! | alarm_raised, device_down, line_down, history_failed | 700 |
+//! | history_reset | 600 |
+//! | state_changed (a transfer, a machine's state), line_reopened, mqtt_disconnected | 500 |
+//! | device_event (an R message) | 400 |
+//! | alarm_cleared, device_up, line_up, history_recovered | 300 |
+//! | write, gateway_started, gateway_stopped, mqtt_connected | 200 |
 
+use ::opcua::nodes::BaseEventType;
 use ::opcua::types::{
-    DataTypeId, DataValue, DateTime, EUInformation, LocalizedText, NodeId, Range, StatusCode,
-    Variant,
+    ByteString, DataTypeId, DataValue, DateTime, EUInformation, LocalizedText, NodeId,
+    ObjectTypeId, Range, StatusCode, UAString, Variant,
 };
 
 use crate::cell::{DeviceStatus, DeviceSummary, PointView};
+use crate::event::{Event, EventKind};
 use crate::point::{PointKind, Quality, Value};
 use crate::time::Timestamp;
 
@@ -234,6 +248,59 @@ pub fn gateway_time(t: &DateTime) -> Timestamp {
     Timestamp((ticks - TICKS_AT_UNIX_EPOCH).div_euclid(TICKS_PER_MS))
 }
 
+/// The OPC UA severity (1 to 1000) of an event of `kind`.
+pub fn severity(kind: EventKind) -> u16 {
+    match kind {
+        EventKind::AlarmRaised
+        | EventKind::DeviceDown
+        | EventKind::LineDown
+        | EventKind::HistoryFailed => 700,
+        EventKind::HistoryReset => 600,
+        EventKind::StateChanged | EventKind::LineReopened | EventKind::MqttDisconnected => 500,
+        EventKind::DeviceEvent => 400,
+        EventKind::AlarmCleared
+        | EventKind::DeviceUp
+        | EventKind::LineUp
+        | EventKind::HistoryRecovered => 300,
+        EventKind::Write
+        | EventKind::GatewayStarted
+        | EventKind::GatewayStopped
+        | EventKind::MqttConnected => 200,
+    }
+}
+
+/// The source name of the gateway's own events (and a line's).
+pub const GATEWAY_SOURCE: &str = "gateway";
+
+/// A unique event id: the server's start (ms since 1970) and the event's number since,
+/// 8 bytes each, big-endian.
+pub fn event_id(start: Timestamp, number: u64) -> ByteString {
+    let mut bytes = start.0.to_be_bytes().to_vec();
+    bytes.extend_from_slice(&number.to_be_bytes());
+    ByteString::from(bytes)
+}
+
+/// A gateway event as an OPC UA BaseEventType event: its source the device's object (the
+/// gateway object when it concerns no device), its time when it happened, its receive
+/// time `now`.
+pub fn base_event(ns: u16, event: &Event, id: ByteString, now: Timestamp) -> BaseEventType {
+    let (node, name) = match &event.device {
+        Some(device) => (ids::device(ns, device.as_str()), device.as_str()),
+        None => (ids::gateway(ns, None), GATEWAY_SOURCE),
+    };
+    let mut e = BaseEventType::new(
+        ObjectTypeId::BaseEventType,
+        id,
+        LocalizedText::new("", &event.message),
+        opc_time(event.t),
+    )
+    .set_source_node(node)
+    .set_source_name(UAString::from(name))
+    .set_receive_time(opc_time(now));
+    e.severity = severity(event.kind);
+    e
+}
+
 /// The UNECE common code of a unit as OPC UA Part 8 encodes it (the code's characters,
 /// 8 bits each).
 fn unece_unit_id(unit: &str) -> Option<i32> {
@@ -284,6 +351,55 @@ mod tests {
             alarm: false,
             period_ms: 1000,
         }
+    }
+
+    #[test]
+    fn every_event_kind_has_a_severity_alarms_above_transfers_above_clears_above_writes() {
+        for kind in EventKind::ALL {
+            assert!((1..=1000).contains(&severity(kind)), "{kind:?}");
+        }
+        assert_eq!(severity(EventKind::AlarmRaised), 700);
+        assert_eq!(severity(EventKind::DeviceDown), 700);
+        assert_eq!(severity(EventKind::StateChanged), 500);
+        assert_eq!(severity(EventKind::DeviceEvent), 400);
+        assert_eq!(severity(EventKind::AlarmCleared), 300);
+        assert_eq!(severity(EventKind::DeviceUp), 300);
+        assert_eq!(severity(EventKind::Write), 200);
+    }
+
+    #[test]
+    fn an_event_of_a_device_comes_from_its_object_and_one_of_the_gateway_from_the_gateway() {
+        let device = DeviceId::new("cross1").unwrap();
+        let event = Event {
+            t: Timestamp(1_000),
+            kind: EventKind::AlarmRaised,
+            line: Some("line1".into()),
+            device: Some(device.clone()),
+            point: None,
+            message: "cross1: source lost".into(),
+        };
+        let id = event_id(Timestamp(5), 7);
+        let e = base_event(2, &event, id.clone(), Timestamp(2_000));
+        assert_eq!(e.event_id, id);
+        assert_eq!(e.event_type, NodeId::from(ObjectTypeId::BaseEventType));
+        assert_eq!(e.source_node, ids::device(2, "cross1"));
+        assert_eq!(e.source_name, UAString::from("cross1"));
+        assert_eq!(e.message, LocalizedText::new("", "cross1: source lost"));
+        assert_eq!(e.severity, 700);
+        assert_eq!(gateway_time(&e.time), Timestamp(1_000));
+        assert_eq!(gateway_time(&e.receive_time), Timestamp(2_000));
+        let started = Event::of_gateway(EventKind::GatewayStarted, "started".into());
+        let e = base_event(2, &started, event_id(Timestamp(5), 8), Timestamp(2_000));
+        assert_eq!(e.source_node, ids::gateway(2, None));
+        assert_eq!(e.source_name, UAString::from(GATEWAY_SOURCE));
+        assert_eq!(e.severity, 200);
+    }
+
+    #[test]
+    fn event_ids_differ_by_number_and_by_start() {
+        assert_ne!(event_id(Timestamp(5), 1), event_id(Timestamp(5), 2));
+        assert_ne!(event_id(Timestamp(5), 1), event_id(Timestamp(6), 1));
+        assert_eq!(event_id(Timestamp(5), 1).as_ref().len(), 16);
     }
 
     #[test]
