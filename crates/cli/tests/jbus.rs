@@ -1264,3 +1264,124 @@ fn our_client_reads_and_writes_two_units_of_a_pymodbus_tcp_server_on_one_port() 
     ]);
     assert_eq!(json_of(&out), json!({"units": [1, 2]}));
 }
+
+/// pymodbus reads `count` values of `data_type` (float32, int32) in word `order` from
+/// holding register `address` of `unit`, decoded by Python's struct; their JSON.
+fn pymodbus_reads_typed(
+    server: &PyServer,
+    unit: &str,
+    address: u16,
+    count: usize,
+    data_type: &str,
+    order: &str,
+) -> Value {
+    let out = std::process::Command::new("python3")
+        .args([
+            &interop_script("pymodbus_tcp_read_typed.py"),
+            &port_of(&server.endpoint),
+            unit,
+            &address.to_string(),
+            &count.to_string(),
+            data_type,
+            order,
+        ])
+        .stdin(Stdio::null())
+        .output()
+        .expect("python3 runs");
+    assert!(out.status.success(), "{}", stderr(&out));
+    json_of(&out)["values"].clone()
+}
+
+#[test]
+fn our_client_reads_and_writes_float32_cdab_and_int32_values_of_a_pymodbus_tcp_server() {
+    let server = PyServer::start_script("pymodbus_tcp_server.py");
+    let run_ok = |unit: &str, args: &[&str]| {
+        let mut all = vec!["modbus", "--endpoint", &server.endpoint, "--unit", unit];
+        all.extend_from_slice(args);
+        let out = run(&all);
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        out
+    };
+    // What the server script packed with struct: float32 CDAB from 100, int32 ABCD from 104.
+    // Our client shows a float32 as the shortest decimal that is that float32 (229.7, not
+    // 229.6999969482422 as struct widens it).
+    let floats = [229.7, -1.5];
+    for unit in ["1", "2"] {
+        let out = run_ok(
+            unit,
+            &[
+                "--json",
+                "read-holding",
+                "100",
+                "2",
+                "--type",
+                "float32",
+                "--order",
+                "CDAB",
+            ],
+        );
+        let read = json_of(&out);
+        assert_eq!(read["type"], "float32");
+        assert_eq!(read["values"], json!(floats), "unit {unit}");
+        let out = run_ok(
+            unit,
+            &["--json", "read-holding", "104", "3", "--type", "int32"],
+        );
+        assert_eq!(
+            json_of(&out)["values"],
+            json!([-123_456, 2_000_000_000, 70_000]),
+            "unit {unit}"
+        );
+    }
+    // Typed writes (function 16), read back by pymodbus and decoded by struct.
+    run_ok(
+        "1",
+        &[
+            "write-registers",
+            "110",
+            "--type",
+            "float32",
+            "--order",
+            "CDAB",
+            "--",
+            "12.25",
+            "-0.1",
+            "1e-3",
+        ],
+    );
+    run_ok(
+        "2",
+        &[
+            "write-registers",
+            "110",
+            "--type",
+            "int32",
+            "--",
+            "-7",
+            "123456789",
+            "-2147483648",
+        ],
+    );
+    assert_eq!(
+        pymodbus_reads_typed(&server, "1", 110, 3, "float32", "CDAB"),
+        json!([12.25, f64::from(-0.1_f32), f64::from(1e-3_f32)])
+    );
+    assert_eq!(
+        pymodbus_reads_typed(&server, "2", 110, 3, "int32", "ABCD"),
+        json!([-7, 123_456_789, -2_147_483_648_i64])
+    );
+    // Each write stopped at its last register (116-121 still hold 0), and our typed reads
+    // agree with struct.
+    assert_eq!(
+        pymodbus_reads_typed(&server, "1", 116, 3, "int32", "ABCD"),
+        json!([0, 0, 0])
+    );
+    let out = run_ok(
+        "2",
+        &["--json", "read-holding", "110", "3", "--type", "int32"],
+    );
+    assert_eq!(
+        json_of(&out)["values"],
+        json!([-7, 123_456_789, -2_147_483_648_i64])
+    );
+}

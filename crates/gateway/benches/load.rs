@@ -6,6 +6,7 @@
 //! cargo bench -p gateway --bench load                                   # 100 devices, 10 lines, 10 s
 //! nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
 //! nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60 --mqtt
+//! cargo bench -p gateway --bench load -- --mix modbus=1 --devices 1000 --lines 50 --seconds 30
 //! cargo bench -p gateway --bench load -- --help                         # every option
 //! ```
 //!
@@ -27,6 +28,15 @@
 //!   polls the stations of a line in turn over one connection, as it would a real bus.
 //!   Real JBC stations are RS-232, one per port: until the Thermosald and CROSS drivers
 //!   land, JTSE stations stand in for multi-drop devices here.
+//! - **Modbus lines** (`--mix modbus=1`) are Modbus TCP gateways: one `modbus-tcp://`
+//!   listener per line, a [`jbus::tcp::MbapServer`] in front of a bus of generic Modbus
+//!   servers ([`jbus::slave::Slave`], units 1, 2, …), so the gateway polls every unit of
+//!   the line over one connection, one request at a time, as behind a Moxa MGate. Each
+//!   device has 100 `float32` input registers (0, 2, … 198, word order CDAB), named in a
+//!   register list every device shares (`registers_csv`), which the gateway plans into two
+//!   reads (of at most 125 registers) per poll of its 1 s `live` group. Its process moves
+//!   15 of its 100 points a second (each point every 6.7 s, a small random step): 15 %.
+//!   `--baud` does not pace Modbus TCP lines.
 //! - **Timing.** By default the lines are not paced (a serial server at loopback speed) and
 //!   the stations answer after [`DEFAULT_REPLY_DELAY`] instead of the model's 5 ms, so that
 //!   20 stations fit on one line at the driver's periods (live 1 s, settings 10 s, info
@@ -35,7 +45,8 @@
 //!   periods, and the report shows the periods the scheduler could keep.
 //! - **A working cell.** An operator script in the simulator process works every station
 //!   (set points, tool on and off, the suction pedal, an occasional air-flow fault), each
-//!   on its own phase, so temperatures move and the history grows as in production.
+//!   on its own phase, so temperatures move and the history grows as in production; the
+//!   Modbus devices' values drift (above).
 //! - **Measured** over `--seconds` after `--warmup` (connections, first reads of every
 //!   group): counters from the gateway's own metrics ([`gateway::metrics::Metrics`]) and
 //!   history writer ([`gateway::store::StoreStats`]); CPU time (user + system) from
@@ -45,8 +56,8 @@
 //!
 //! The device mix is `--mix jbc=1` (weights per line). A kind is one [`Kind`] variant with
 //! its arms in [`Kind::parse`], [`Kind::protocol`], [`Kind::max_per_line`],
-//! [`Kind::line_serial`] and [`simulate_line`] (its simulator models behind the bus, and
-//! their operator). Thermosald regulators and CROSS switches join this way when their
+//! [`Kind::line_serial`], [`Kind::scheme`] and [`simulate_line`] (its simulator models
+//! behind the bus, and their operator); [`config_text`] for keys of its own. Thermosald regulators and CROSS switches join this way when their
 //! gateway drivers merge.
 //!
 //! # MQTT
@@ -67,7 +78,9 @@
 //! `mqtt_backlog` bench.
 //!
 //! Under `cargo test --benches` (no `--bench` flag) it runs a one-second smoke test with
-//! four devices, publishing to MQTT.
+//! four devices (two JTSEs on one line, two Modbus units behind one Modbus TCP gateway),
+//! publishing to MQTT, and fails unless both kinds answered and each Modbus poll took two
+//! reads.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -81,13 +94,18 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use gateway::cell::Cell;
 use gateway::driver::ErrorKind;
-use gateway::metrics::{LineLabels, PollResult};
+use gateway::driver::Protocol;
+use gateway::metrics::{DeviceLabels, LineLabels, PollResult};
 use gateway::point::Quality;
 use gateway::{Gateway, ServeOptions};
 use jbc::code::{Code, Port, ToolError};
 use jbc::device::{Station, StationConfig};
 use jbc::frame::{Address, Route};
 use jbc::message::{Reply, Request};
+use jbus::data::{DataType, Order, TypedValue};
+use jbus::rtu::UnitId;
+use jbus::slave::{Slave, SlaveMap, Table};
+use jbus::tcp::MbapServer;
 use link::SerialSettings;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use wire::device::{Bus, Device, SharedModel};
@@ -116,6 +134,15 @@ const SAMPLE_EVERY: Duration = Duration::from_millis(100);
 const OPERATOR_TICK: Duration = Duration::from_millis(250);
 /// One round of the operator's routine.
 const ROUTINE: Duration = Duration::from_secs(120);
+/// Points (`float32` input registers 0, 2, … 198) of each simulated Modbus device.
+const MODBUS_POINTS: usize = 100;
+/// Word order of the simulated Modbus devices' `float32` values (as many meters have it).
+const MODBUS_ORDER: Order = Order::Cdab;
+/// Points of a simulated Modbus device that take a new value each second: 15 of its 100.
+const MODBUS_CHANGES_PER_SECOND: f64 = 15.0;
+/// The register list every simulated Modbus device shares (`registers_csv`), next to the
+/// generated `cell.toml`.
+const MODBUS_CSV: &str = "modbus-registers.csv";
 /// The flag that makes the process the simulators' one.
 const SIMULATORS_FLAG: &str = "--simulators";
 /// What the simulator process prints once every line listens.
@@ -130,9 +157,10 @@ usage: cargo bench -p gateway --bench load -- [options]
   --lines M           lines they share, each a multi-drop bus (default 10)
   --seconds S         measured time, e.g. 60 or 60s (default 10 s)
   --warmup S          time before measuring (default 5 s)
-  --mix KIND=W,...    device kinds, by weight per line (default jbc=1; known: jbc)
-  --baud B|none       pace each line like a serial line of B baud (default none:
-                      loopback speed)
+  --mix KIND=W,...    device kinds, by weight per line (default jbc=1; known: jbc,
+                      modbus: 100 float32 points behind a Modbus TCP gateway)
+  --baud B|none       pace each serial line like one of B baud (default none:
+                      loopback speed; Modbus TCP lines are never paced)
   --reply-delay D     station processing time before each reply (default 1ms; the
                       JTSE model's own is 5ms)
   --live-period D     poll period of the live group (default: the driver's, 1s; at
@@ -143,6 +171,8 @@ usage: cargo bench -p gateway --bench load -- [options]
 
 1,000 devices over 50 lines for a minute:
   nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
+1,000 Modbus devices x 100 float32 points at 1 s:
+  cargo bench -p gateway --bench load -- --mix modbus=1 --devices 1000 --lines 50 --seconds 30
 ";
 
 fn main() -> ExitCode {
@@ -175,12 +205,15 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    if !benching && !simulators && rest.is_empty() {
+    let smoke = !benching && !simulators && rest.is_empty();
+    if smoke {
+        // A line of each kind, so CI goes through every simulator and driver path.
         args = Args {
             devices: 4,
             lines: 2,
             seconds: Duration::from_secs(1),
             warmup: Duration::from_secs(1),
+            mix: vec![(Kind::Jbc, 1), (Kind::Modbus, 1)],
             mqtt: true,
             ..args
         };
@@ -189,7 +222,10 @@ fn main() -> ExitCode {
     let result = if simulators {
         run_simulators(&args)
     } else {
-        run_bench(&args).map(|report| print!("{report}"))
+        run_bench(&args).and_then(|report| {
+            print!("{report}");
+            if smoke { report.check_smoke() } else { Ok(()) }
+        })
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -355,14 +391,19 @@ fn mix(value: &str) -> Result<Vec<(Kind, u32)>, String> {
 enum Kind {
     /// JBC JTSE hot-air station.
     Jbc,
+    /// A generic Modbus device ([`jbus::slave::Slave`]) with [`MODBUS_POINTS`] `float32`
+    /// input registers, behind a Modbus TCP gateway: the line is one `modbus-tcp://`
+    /// endpoint answering every unit on it.
+    Modbus,
 }
 
 impl Kind {
-    const KNOWN: &'static str = "jbc";
+    const KNOWN: &'static str = "jbc, modbus";
 
     fn parse(name: &str) -> Option<Kind> {
         match name {
             "jbc" => Some(Kind::Jbc),
+            "modbus" => Some(Kind::Modbus),
             _ => None,
         }
     }
@@ -371,6 +412,7 @@ impl Kind {
     fn protocol(self) -> &'static str {
         match self {
             Kind::Jbc => "jbc",
+            Kind::Modbus => "modbus",
         }
     }
 
@@ -379,20 +421,32 @@ impl Kind {
         match self {
             // 01-99; 00 is the robot's (the gateway's) own address.
             Kind::Jbc => usize::from(Address::MAX),
+            // Units 1-247.
+            Kind::Modbus => usize::from(jbus::rtu::UnitId::MAX),
         }
     }
 
     /// The device address of the `index`-th device on a line.
     fn address(self, index: usize) -> i64 {
         match self {
-            Kind::Jbc => index as i64 + 1,
+            Kind::Jbc | Kind::Modbus => index as i64 + 1,
         }
     }
 
-    /// The line's character framing at `baud`, when the line is paced.
-    fn line_serial(self, baud: u32) -> SerialSettings {
+    /// The line's character framing at `baud`, when the line is paced; `None` for a line
+    /// that is not serial (Modbus TCP), which `--baud` leaves at loopback speed.
+    fn line_serial(self, baud: u32) -> Option<SerialSettings> {
         match self {
-            Kind::Jbc => SerialSettings::new_8e1(baud),
+            Kind::Jbc => Some(SerialSettings::new_8e1(baud)),
+            Kind::Modbus => None,
+        }
+    }
+
+    /// The scheme of the line's endpoint in the config.
+    fn scheme(self) -> &'static str {
+        match self {
+            Kind::Jbc => "tcp",
+            Kind::Modbus => "modbus-tcp",
         }
     }
 }
@@ -479,6 +533,104 @@ fn simulate_line(
             });
             Ok((bus, operator))
         }
+        Kind::Modbus => {
+            let mut devices = Vec::with_capacity(plan.devices);
+            for i in 0..plan.devices {
+                let unit = u8::try_from(plan.kind.address(i))
+                    .ok()
+                    .and_then(|u| UnitId::new(u).ok())
+                    .context("a Modbus unit out of range (plan checks it)")?;
+                let map = SlaveMap::parse(&format!(
+                    "unit {}\ninput 0..={}\n",
+                    unit.get(),
+                    2 * MODBUS_POINTS - 1
+                ))
+                .context("the simulated Modbus device's map")?;
+                let mut slave = Slave::new(map).with_reply_delay(reply_delay);
+                let operator = ModbusOperator::new(&mut slave, (line * 1000 + i) as u64);
+                devices.push((SharedModel::new(slave), operator));
+            }
+            let models: Vec<SharedModel<Slave>> = devices.iter().map(|(m, _)| m.clone()).collect();
+            // A Modbus TCP gateway: MBAP off the connection, RTU frames to every unit of
+            // its line, the addressed unit's answer back behind the request's header. (A
+            // one-device bus, to keep one type for every kind's connections.)
+            let bus = Arc::new(move || {
+                let units = Bus(models
+                    .iter()
+                    .map(|m| Box::new(m.line()) as Box<dyn Device>)
+                    .collect());
+                Bus(vec![Box::new(MbapServer::new(units)) as Box<dyn Device>])
+            });
+            let mut last = std::time::Instant::now();
+            let operator = Box::new(move |now: std::time::Instant| {
+                let elapsed = now.saturating_duration_since(last);
+                last = now;
+                for (model, op) in &mut devices {
+                    op.act(&mut model.lock(), elapsed);
+                }
+            });
+            Ok((bus, operator))
+        }
+    }
+}
+
+/// The process behind one simulated Modbus device: [`MODBUS_CHANGES_PER_SECOND`] of its
+/// points take a new value each second, in turn, each a small random step from the last
+/// (a slow process: temperatures, pressures, flows), so every point changes every
+/// `MODBUS_POINTS / MODBUS_CHANGES_PER_SECOND` seconds.
+struct ModbusOperator {
+    values: Vec<f32>,
+    next: usize,
+    due: f64,
+    rng: fastrand::Rng,
+}
+
+impl ModbusOperator {
+    /// The operator of `slave`, whose registers it fills with their first values.
+    fn new(slave: &mut Slave, seed: u64) -> Self {
+        let mut rng = fastrand::Rng::with_seed(seed);
+        let values: Vec<f32> = (0..MODBUS_POINTS)
+            .map(|_| (rng.f32() * 1000.0).round() / 10.0)
+            .collect();
+        for (point, &value) in values.iter().enumerate() {
+            write_float32(slave, point, value);
+        }
+        // Devices start at different fractions of a change, not all in step.
+        let due = rng.f64();
+        Self {
+            values,
+            next: 0,
+            due,
+            rng,
+        }
+    }
+
+    fn act(&mut self, slave: &mut Slave, elapsed: Duration) {
+        self.due += MODBUS_CHANGES_PER_SECOND * elapsed.as_secs_f64();
+        while self.due >= 1.0 {
+            self.due -= 1.0;
+            // 37 and 100 have no common factor: every point in turn, spread over the map.
+            let point = (self.next * 37) % MODBUS_POINTS;
+            self.next += 1;
+            let step = (self.rng.f32() - 0.5) * 2.0;
+            let value = ((self.values[point] + step) * 100.0).round() / 100.0;
+            self.values[point] = value;
+            write_float32(slave, point, value);
+        }
+    }
+}
+
+/// Puts `value` in the two input registers of `point`, in [`MODBUS_ORDER`].
+fn write_float32(slave: &mut Slave, point: usize, value: f32) {
+    let words = DataType::Float32
+        .encode(MODBUS_ORDER, &TypedValue::Float(f64::from(value)))
+        .expect("any f32 encodes as a float32");
+    for (register, word) in (point * 2..).zip(words) {
+        let address = u16::try_from(register).expect("the map's registers are below 200");
+        assert!(
+            slave.set(Table::InputRegisters, address, word),
+            "register {address} is mapped"
+        );
     }
 }
 
@@ -571,7 +723,7 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
                 .await
                 .context("cannot listen on 127.0.0.1")?;
             let port = listener.local_addr()?.port();
-            let pace = args.baud.map(|b| plan.kind.line_serial(b));
+            let pace = args.baud.and_then(|b| plan.kind.line_serial(b));
             tokio::spawn(async move {
                 if let Err(e) = link::serve::serve_tcp(listener, move || bus(), pace).await {
                     eprintln!("load: simulated line {i} stopped: {e}");
@@ -657,16 +809,21 @@ impl Drop for Simulators {
 
 // ---- the gateway and the measurement -----------------------------------------------------
 
-/// The cell configuration for the simulated lines, as a file for `cellbus serve --config`.
+/// The cell configuration for the simulated lines, as a file for `cellbus serve --config`
+/// (Modbus devices name [`MODBUS_CSV`], written by [`modbus_csv`] next to it).
 fn config_text(args: &Args, plans: &[LinePlan], ports: &[u16]) -> String {
     let mut text = String::from("# Generated by the gateway load benchmark.\n");
     for (i, (plan, port)) in plans.iter().zip(ports).enumerate() {
-        let timing = args.baud.map_or(String::new(), |b| {
-            format!("?baud={b}&framing={}", plan.kind.line_serial(b).framing())
-        });
+        let timing = args
+            .baud
+            .and_then(|b| plan.kind.line_serial(b))
+            .map_or(String::new(), |serial| {
+                format!("?baud={}&framing={}", serial.baud, serial.framing())
+            });
         let _ = write!(
             text,
-            "\n[[line]]\nname = \"line{i:02}\"\nendpoint = \"tcp://127.0.0.1:{port}{timing}\"\n"
+            "\n[[line]]\nname = \"line{i:02}\"\nendpoint = \"{}://127.0.0.1:{port}{timing}\"\n",
+            plan.kind.scheme()
         );
         for d in 0..plan.devices {
             let address = plan.kind.address(d);
@@ -675,10 +832,27 @@ fn config_text(args: &Args, plans: &[LinePlan], ports: &[u16]) -> String {
                 "\n[[line.device]]\nid = \"l{i:02}-{kind}{address:02}\"\nprotocol = \"{kind}\"\naddress = {address}\n",
                 kind = plan.kind.protocol()
             );
+            if plan.kind == Kind::Modbus {
+                let _ = writeln!(text, "registers_csv = \"{MODBUS_CSV}\"");
+            }
             if let Some(period) = args.live_period {
                 let _ = writeln!(text, "poll = {{ live = \"{}ms\" }}", period.as_millis());
             }
         }
+    }
+    text
+}
+
+/// The register list of the simulated Modbus devices: [`MODBUS_POINTS`] `float32` input
+/// registers, `p00` at 0, `p01` at 2, …
+fn modbus_csv() -> String {
+    let mut text = String::from("name,table,address,type,order\n");
+    for point in 0..MODBUS_POINTS {
+        let _ = writeln!(
+            text,
+            "p{point:02},input,{},float32,{MODBUS_ORDER}",
+            point * 2
+        );
     }
     text
 }
@@ -697,6 +871,11 @@ struct Counters {
     samples: u64,
     commits: u64,
     busy: Vec<f64>,
+    /// Answered polls per protocol, since the start.
+    polls_by_protocol: HashMap<&'static str, u64>,
+    /// Each Modbus device's `cellbus_modbus_requests_per_poll`, with its polls (answered
+    /// and failed) since the start.
+    modbus_requests: Vec<(i64, u64)>,
     gateway: ProcessUse,
     simulators: ProcessUse,
     mqtt: Option<MqttCounters>,
@@ -786,9 +965,25 @@ impl Counters {
                     .get(),
             );
             for device in &line.devices {
-                c.polls_ok += metrics.poll_count(&line.name, device.as_str(), PollResult::ok);
-                c.polls_failed +=
-                    metrics.poll_count(&line.name, device.as_str(), PollResult::error);
+                let ok = metrics.poll_count(&line.name, device.as_str(), PollResult::ok);
+                let failed = metrics.poll_count(&line.name, device.as_str(), PollResult::error);
+                c.polls_ok += ok;
+                c.polls_failed += failed;
+                if let Some(entry) = cell.device_entry(device.as_str()) {
+                    *c.polls_by_protocol
+                        .entry(entry.protocol.as_str())
+                        .or_default() += ok;
+                    if entry.protocol == Protocol::Modbus {
+                        let requests = metrics
+                            .modbus_requests_per_poll
+                            .get_or_create(&DeviceLabels {
+                                line: line.name.clone(),
+                                device: device.as_str().to_owned(),
+                            })
+                            .get();
+                        c.modbus_requests.push((requests, ok + failed));
+                    }
+                }
                 c.timeouts += metrics.timeout_count(&line.name, device.as_str());
                 for kind in ErrorKind::ALL {
                     *c.errors.entry(kind).or_default() +=
@@ -837,14 +1032,16 @@ impl Sampler {
                         continue;
                     };
                     let points = device.points.iter().filter(|p| p.group == g.name).count();
+                    // Per kind of device: a Modbus device's live group is not a JTSE's.
+                    let name = format!("{} {}", device.protocol.as_str(), g.name);
                     let group = match groups
                         .iter()
-                        .position(|(name, seen)| *name == g.name && seen.period == g.period)
+                        .position(|(n, seen)| *n == name && seen.period == g.period)
                     {
                         Some(i) => i,
                         None => {
                             groups.push((
-                                g.name.clone(),
+                                name,
                                 GroupSeen {
                                     period: g.period,
                                     ..GroupSeen::default()
@@ -965,6 +1162,8 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     let config = dir.path().join("cell.toml");
     std::fs::write(&config, config_text(args, &plans, &simulators.ports))
         .context("cannot write the generated cell.toml")?;
+    std::fs::write(dir.path().join(MODBUS_CSV), modbus_csv())
+        .context("cannot write the generated register list")?;
     let data_dir: PathBuf = dir.path().join("data");
     let mut mqtt = if args.mqtt {
         Some(MqttSide::start()?)
@@ -1058,6 +1257,34 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         integrity,
         mqtt_totals,
     })
+}
+
+impl Report {
+    /// What the smoke run must show: every kind of device answered, and each Modbus
+    /// device's 100 `float32` points (200 registers) took two reads (at most 125 each).
+    fn check_smoke(&self) -> anyhow::Result<()> {
+        for (kind, _) in &self.args.mix {
+            let answered = self
+                .after
+                .polls_by_protocol
+                .get(kind.protocol())
+                .copied()
+                .unwrap_or(0);
+            if answered == 0 {
+                bail!("no {} device answered a poll", kind.protocol());
+            }
+        }
+        let reads = i64::try_from((2 * MODBUS_POINTS).div_ceil(125)).unwrap_or(i64::MAX);
+        if let Some((requests, _)) = self
+            .after
+            .modbus_requests
+            .iter()
+            .find(|(requests, _)| *requests != reads)
+        {
+            bail!("a Modbus device took {requests} requests per poll, not {reads}");
+        }
+        Ok(())
+    }
 }
 
 /// Rows in the history tables.
@@ -1180,6 +1407,27 @@ impl std::fmt::Display for Report {
             self.rows_at_stop,
             self.integrity
         )?;
+        if !a.modbus_requests.is_empty() {
+            let per_poll: Vec<i64> = a.modbus_requests.iter().map(|(r, _)| *r).collect();
+            let mean = per_poll.iter().sum::<i64>() as f64 / per_poll.len() as f64;
+            // Requests sent in the window: each device's polls times its reads per poll.
+            let requests: u64 = a
+                .modbus_requests
+                .iter()
+                .zip(&b.modbus_requests)
+                .map(|((r, after), (_, before))| {
+                    u64::try_from(*r).unwrap_or(0) * after.saturating_sub(*before)
+                })
+                .sum();
+            writeln!(
+                f,
+                "  modbus       {mean:.2} requests per poll (cellbus_modbus_requests_per_poll: {} to {} over {} devices), {:.0} requests/s",
+                per_poll.iter().min().copied().unwrap_or(0),
+                per_poll.iter().max().copied().unwrap_or(0),
+                per_poll.len(),
+                requests as f64 / secs,
+            )?;
+        }
         for (name, g) in &self.groups {
             let mut sorted = g.intervals_ms.clone();
             sorted.sort_unstable();
@@ -1187,7 +1435,7 @@ impl std::fmt::Display for Report {
             let show = |p: Option<i64>| p.map_or("-".to_owned(), |v| format!("{v}"));
             writeln!(
                 f,
-                "  {name:<12} period {} ms: {:.1} polls/s of {:.1} due; interval p50 {} ms, p99 {} ms, max {} ms ({} intervals)",
+                "  {name:<15} period {} ms: {:.1} polls/s of {:.1} due; interval p50 {} ms, p99 {} ms, max {} ms ({} intervals)",
                 period,
                 g.reads as f64 / secs,
                 g.devices as f64 / g.period.as_secs_f64(),
