@@ -258,23 +258,27 @@ impl Node {
         conn.publish(outgoing(birth, None)).await.map_err(lost)?;
         self.rows_published = rows;
         self.dead.clear();
-        let devices = self.cell.devices();
-        for device in &devices {
+        // One device's view at a time: a large cell's views together are tens of MB.
+        let entries: Vec<_> = self.cell.device_entries().cloned().collect();
+        let mut down = Vec::new();
+        for entry in entries {
+            let device = entry.view(now);
             let Ok(id) = Id::new(device.summary.id.as_str()) else {
                 continue;
             };
             let birth = self
                 .node
-                .device_birth(&id, &device_metrics(device, now), t)
+                .device_birth(&id, &device_metrics(&device, now), t)
                 .map_err(|e| lost(format!("cannot build the DBIRTH of {id}: {e}")))?;
             conn.publish(outgoing(birth, None)).await.map_err(lost)?;
+            if device.summary.status == DeviceStatus::Down {
+                down.push(device.summary.id);
+            }
         }
         self.born = true;
         self.forward_backlog(conn, from, now).await?;
-        for device in &devices {
-            if device.summary.status == DeviceStatus::Down {
-                self.device_down(conn, &device.summary.id, t).await?;
-            }
+        for device in &down {
+            self.device_down(conn, device, t).await?;
         }
         Ok(())
     }
