@@ -175,3 +175,24 @@ pub fn rig(count: u8) -> Rig {
         dir,
     }
 }
+
+/// jbc1's air temperature (°C, read at 1 s) with `value` and `quality`: a point view for
+/// the northbound mappings' tests.
+pub fn air_temperature_view(
+    value: Option<crate::point::Value>,
+    quality: Option<crate::point::Quality>,
+) -> crate::cell::PointView {
+    let device = DeviceId::new("jbc1").unwrap();
+    crate::cell::PointView {
+        id: crate::point::PointId::new(&device, "air_temperature").unwrap(),
+        name: "Air temperature".into(),
+        unit: Some("°C".into()),
+        value,
+        text: None,
+        quality,
+        t: Some(crate::time::Timestamp(1_000)),
+        error: None,
+        alarm: false,
+        period_ms: 1000,
+    }
+}

@@ -132,23 +132,9 @@ fn metric_value(kind: &PointKind, value: &Value) -> Option<MetricValue> {
 #[cfg(test)]
 mod mapping_tests {
     use super::*;
-    use crate::point::{DeviceId, EnumState, PointId};
+    use crate::point::EnumState;
 
-    fn view(value: Option<Value>, quality: Option<Quality>) -> PointView {
-        let device = DeviceId::new("jbc1").unwrap();
-        PointView {
-            id: PointId::new(&device, "air_temperature").unwrap(),
-            name: "Air temperature".into(),
-            unit: Some("°C".into()),
-            value,
-            text: None,
-            quality,
-            t: Some(Timestamp(1_000)),
-            error: None,
-            alarm: false,
-            period_ms: 1000,
-        }
-    }
+    use crate::testing::air_temperature_view as view;
 
     #[test]
     fn a_good_number_is_a_double_timed_when_it_was_read() {

@@ -335,23 +335,9 @@ fn unece_unit_id(unit: &str) -> Option<i32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::point::{DeviceId, EnumState, PointId};
+    use crate::point::{DeviceId, EnumState};
 
-    fn view(value: Option<Value>, quality: Option<Quality>) -> PointView {
-        let device = DeviceId::new("jbc1").unwrap();
-        PointView {
-            id: PointId::new(&device, "air_temperature").unwrap(),
-            name: "Air temperature".into(),
-            unit: Some("°C".into()),
-            value,
-            text: None,
-            quality,
-            t: Some(Timestamp(1_000)),
-            error: None,
-            alarm: false,
-            period_ms: 1000,
-        }
-    }
+    use crate::testing::air_temperature_view as view;
 
     #[test]
     fn every_event_kind_has_a_severity_alarms_above_transfers_above_clears_above_writes() {
