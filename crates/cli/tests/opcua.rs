@@ -151,3 +151,78 @@ fn a_trusted_client_certificate_and_user_write_in_range_are_audited_raise_an_opc
         assert!(out.contains(expected), "{expected:?} not in:\n{out}");
     }
 }
+
+/// A cell of one simulated JBC station (`sim`'s endpoint) with `opcua` as its `[opcua]`
+/// table, written in `dir`.
+fn station_cell(dir: &std::path::Path, endpoint: &str, opcua: &str) -> std::path::PathBuf {
+    let path = dir.join("cell.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "[[line]]\nname = \"rework\"\nendpoint = \"{endpoint}\"\n\n\
+             [[line.device]]\nid = \"jbc1\"\nname = \"Station\"\nprotocol = \"jbc\"\naddress = 1\n\
+             timeout = \"200ms\"\npoll = {{ live = \"1s\", settings = \"10s\", info = \"1m\" }}\n\n\
+             [opcua]\n{opcua}\n"
+        ),
+    )
+    .expect("the config is written");
+    path
+}
+
+#[test]
+fn a_device_that_stops_answering_turns_its_opcua_values_bad_without_a_value() {
+    require_asyncua();
+    let data = tempfile::tempdir().expect("a temporary directory");
+    let mut sim = Some(common::Sim::start(&["jbc", "--listen", "127.0.0.1:0"]));
+    let endpoint = sim.as_ref().map(|s| s.endpoint.clone()).unwrap_or_default();
+    let config = station_cell(
+        data.path(),
+        &endpoint,
+        "security = [\"None\"]\nanonymous = true",
+    );
+    let config = config.to_str().expect("a UTF-8 path");
+    let served = Served::start(data.path(), &["--config", config], None);
+
+    let mut child = Command::new("python3")
+        .args([&script(), "down", &served.opcua, "jbc1", "air_temperature"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("python3 runs");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let stdout = child.stdout.take().expect("piped");
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let first = rx.recv_timeout(LIMIT).expect("the script subscribes");
+    assert_eq!(first, "subscribed");
+    // The station is switched off: the gateway marks its points bad.
+    drop(sim.take());
+    let said = rx
+        .recv_timeout(LIMIT)
+        .expect("the script sees the value turn bad");
+    assert!(said.contains("turned Bad"), "{said}");
+    let status = child.wait().expect("python3 ends");
+    assert!(status.success(), "the asyncua script failed after: {said}");
+}
+
+#[test]
+fn anonymous_sessions_are_refused_when_the_config_says_so() {
+    require_asyncua();
+    let data = tempfile::tempdir().expect("a temporary directory");
+    let sim = common::Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
+    let config = station_cell(
+        data.path(),
+        &sim.endpoint,
+        "security = [\"None\"]\nanonymous = false",
+    );
+    let config = config.to_str().expect("a UTF-8 path");
+    let served = Served::start(data.path(), &["--config", config], None);
+    let out = run_script(&["anonymous-refused", &served.opcua]);
+    assert!(out.contains("anonymous session was refused"), "{out}");
+}

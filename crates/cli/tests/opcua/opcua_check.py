@@ -2,6 +2,8 @@
 
     opcua_check.py read  OPC_URL HTTP_ADDR
     opcua_check.py write OPC_URL HTTP_ADDR DATA_DIR PASSWORD
+    opcua_check.py down  OPC_URL DEVICE POINT
+    opcua_check.py anonymous-refused OPC_URL
 
 `read`: browses Objects/Cell and compares every device and point with /api/devices
 (data type, description, unit, range, access), sees a change within a poll period on a
@@ -12,6 +14,10 @@ is refused an out-of-range write, writes a valid one, finds both in /api/audit, 
 the write's event (BaseEventType: message, severity, source, time as in /api/events) on
 event subscriptions to the device's object and to the Server object, and compares
 HistoryRead raw and Average with /api/history.
+
+`down`: subscribes anonymously to DEVICE's POINT, prints `subscribed` once it is Good, and
+waits for it to turn Bad (the test stops the device meanwhile), with no value.
+`anonymous-refused`: an anonymous session must be refused.
 
 Prints `ok: ...` lines; any failure raises (exit 1). Every wait is bounded.
 """
@@ -300,8 +306,58 @@ async def write(url, addr, data_dir, password):
         ok(f"HistoryRead Average gives the {len(theirs)} buckets of /api/history")
 
 
+async def down(url, device, point):
+    async with Client(url, timeout=LIMIT) as client:
+        _, tree = await cell_tree(client)
+        node = tree[device][1][point]
+        handler = Changes()
+        sub = await client.create_subscription(200, handler)
+        await sub.subscribe_data_change([node])
+        while True:
+            _, _, data = await asyncio.wait_for(handler.seen.get(), 2 * LIMIT)
+            if data.monitored_item.Value.StatusCode.is_good():
+                break
+        print("subscribed", flush=True)
+        while True:
+            _, val, data = await asyncio.wait_for(handler.seen.get(), 2 * LIMIT)
+            value = data.monitored_item.Value
+            if value.StatusCode.is_bad():
+                assert val is None, f"a bad reading carries no value, got {val}"
+                ok(f"{device}.{point} turned {value.StatusCode.name} when {device} stopped answering")
+                break
+            assert not value.StatusCode.is_good() or val is not None, value
+        await sub.delete()
+
+
+async def anonymous_refused(url):
+    # The server answers (its endpoints are listed), but offers no anonymous login, or
+    # refuses the session.
+    endpoints = await Client(url, timeout=LIMIT).connect_and_get_server_endpoints()
+    assert endpoints, "the server lists no endpoint"
+    offered = [
+        t.TokenType
+        for e in endpoints
+        for t in e.UserIdentityTokens
+        if t.TokenType == ua.UserTokenType.Anonymous
+    ]
+    client = Client(url, timeout=LIMIT)
+    try:
+        await client.connect()
+    except ua.UaError as e:
+        ok(f"an anonymous session was refused ({len(offered)} anonymous policies offered): {e!r}")
+        return
+    await client.disconnect()
+    raise AssertionError("an anonymous session was accepted")
+
+
 def main():
     mode = sys.argv[1]
+    if mode == "down":
+        asyncio.run(asyncio.wait_for(down(*sys.argv[2:5]), 240))
+        return
+    if mode == "anonymous-refused":
+        asyncio.run(asyncio.wait_for(anonymous_refused(sys.argv[2]), 60))
+        return
     if mode == "read":
         asyncio.run(asyncio.wait_for(read(sys.argv[2], sys.argv[3]), 120))
     elif mode == "write":
