@@ -712,6 +712,31 @@ fn check_mqtt_tls(
     Ok(Some(tls))
 }
 
+/// Largest register list read from a CSV file.
+pub const MAX_REGISTERS_CSV: u64 = 4 << 20;
+
+/// The bytes of the regular file at `path`, refused when larger than `max` (a config that
+/// names `/dev/zero` or a huge file must not hang or exhaust the gateway); the error says
+/// why in words.
+pub fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read as _;
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot be read: {e}"))?;
+    let meta = file
+        .metadata()
+        .map_err(|e| format!("cannot be read: {e}"))?;
+    if !meta.is_file() {
+        return Err("is not a file".into());
+    }
+    let mut bytes = Vec::new();
+    file.take(max + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot be read: {e}"))?;
+    if bytes.len() as u64 > max {
+        return Err(format!("is larger than {} MiB", max >> 20));
+    }
+    Ok(bytes)
+}
+
 fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
     Protocol::parse(text.get_ref()).ok_or_else(|| {
         format!(
@@ -1021,12 +1046,16 @@ fn check_registers(
                 .parent()
                 .unwrap_or_else(|| Path::new(""))
                 .join(csv.get_ref().trim());
-            let text = std::fs::read_to_string(&file).map_err(|e| {
-                at(
-                    csv.span(),
-                    format!("cannot read registers_csv {}: {e}", file.display()),
-                )
-            })?;
+            let text = read_bounded(&file, MAX_REGISTERS_CSV)
+                .and_then(|bytes| {
+                    String::from_utf8(bytes).map_err(|_| "is not UTF-8 text".to_owned())
+                })
+                .map_err(|why| {
+                    at(
+                        csv.span(),
+                        format!("registers_csv {}: {why}", file.display()),
+                    )
+                })?;
             let table = register_csv::CsvRegisters::parse(&text, &file)?;
             check_register_list(&table.rows, deadband, &|span, message| {
                 table.error(span, message)
@@ -2593,6 +2622,32 @@ type = "string:4"
         assert_eq!(registers[1].table, RegisterTable::Holding, "empty: default");
         assert_eq!(registers[1].writable, Some((0.0, 200.0)));
         assert_eq!(registers[1].unit.as_deref(), Some("kW"));
+    }
+
+    #[test]
+    fn a_registers_csv_that_is_not_a_small_file_is_refused_without_reading_it_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cell.toml");
+        for (csv, words) in [
+            ("/dev/zero", "is not a file"),
+            (".", "is not a file"),
+            ("missing.csv", "cannot be read"),
+        ] {
+            std::fs::write(
+                &path,
+                format!(
+                    "[[line]]\nname = \"utilities\"\nendpoint = \"modbus-tcp://192.0.2.61\"\n\n\
+                     [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\nregisters_csv = \"{csv}\"\n"
+                ),
+            )
+            .unwrap();
+            let error = check_config(&path).unwrap_err().to_string();
+            assert!(error.contains(words), "{csv}: {error}");
+        }
+        let big = dir.path().join("big.csv");
+        std::fs::write(&big, vec![b'a'; (MAX_REGISTERS_CSV + 1) as usize]).unwrap();
+        let error = read_bounded(&big, MAX_REGISTERS_CSV).unwrap_err();
+        assert!(error.contains("larger than 4 MiB"), "{error}");
     }
 
     #[test]

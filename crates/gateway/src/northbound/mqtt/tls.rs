@@ -6,8 +6,7 @@
 //! The errors name the key, the file and what is wrong, never what a key file holds; a
 //! failed handshake reads "TLS handshake with broker HOST:PORT failed: …".
 
-use std::fs::File;
-use std::io::{self, Read};
+use std::io;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -179,25 +178,14 @@ fn pem_problem(e: &pem::Error) -> String {
 }
 
 fn read(key: &'static str, path: &Path) -> Result<Vec<u8>, TlsSetupError> {
-    let fail = |what: String| error(key, format!("{key} {}: {what}", path.display()));
-    let file = File::open(path).map_err(|e| fail(format!("cannot be read: {e}")))?;
-    let meta = file
-        .metadata()
-        .map_err(|e| fail(format!("cannot be read: {e}")))?;
-    if !meta.is_file() {
-        return Err(fail("is not a file".into()));
-    }
-    let mut bytes = Vec::new();
-    file.take(MAX_PEM + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| fail(format!("cannot be read: {e}")))?;
-    if bytes.len() as u64 > MAX_PEM {
-        return Err(fail(format!(
-            "is larger than {} MiB: not a PEM file",
-            MAX_PEM >> 20
-        )));
-    }
-    Ok(bytes)
+    crate::config::read_bounded(path, MAX_PEM).map_err(|why| {
+        let why = if why.starts_with("is larger") {
+            format!("{why}: not a PEM file")
+        } else {
+            why
+        };
+        error(key, format!("{key} {}: {why}", path.display()))
+    })
 }
 
 /// What a lost or refused connection to `host:port` says; a TLS failure reads
