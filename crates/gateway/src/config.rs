@@ -2696,7 +2696,8 @@ type = "string:4"
         let err = check_config(&dir.path().join("cell.toml")).unwrap_err();
         assert_eq!(err.position(), Some((8, 17)), "{err}");
         assert!(
-            err.to_string().contains("cannot read registers_csv"),
+            err.to_string().contains("registers_csv")
+                && err.to_string().contains("meter.csv: cannot be read"),
             "{err}"
         );
     }
