@@ -29,5 +29,5 @@ pub use mosquitto::{Mosquitto, TlsFiles};
 pub use noise::{Noise, NoiseConfig, NoiseCounts};
 pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
 #[cfg(feature = "mqtt")]
-pub use sparkplug_sub::{SparkplugMessage, Subscriber, rebirth_command};
+pub use sparkplug_sub::{SparkplugMessage, Subscriber, command_payload, rebirth_command};
 pub use tricks::{At, Tap, Trick, Tricky};

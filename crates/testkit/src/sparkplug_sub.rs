@@ -48,19 +48,28 @@ impl SparkplugMessage {
     }
 }
 
-/// An NCMD payload that asks a node for its births again (`Node Control/Rebirth` = true).
-pub fn rebirth_command() -> Vec<u8> {
+/// A command payload (NCMD or DCMD) setting `metric`, named, of `datatype`, to `value`.
+pub fn command_payload(metric: &str, datatype: sparkplug::DataType, value: Value) -> Vec<u8> {
     Payload {
         timestamp: Some(0),
         metrics: vec![Metric {
-            name: Some("Node Control/Rebirth".into()),
-            datatype: Some(sparkplug::DataType::Boolean.code()),
-            value: Some(Value::BooleanValue(true)),
+            name: Some(metric.into()),
+            datatype: Some(datatype.code()),
+            value: Some(value),
             ..Metric::default()
         }],
         ..Payload::default()
     }
     .encode_to_vec()
+}
+
+/// An NCMD payload that asks a node for its births again (`Node Control/Rebirth` = true).
+pub fn rebirth_command() -> Vec<u8> {
+    command_payload(
+        "Node Control/Rebirth",
+        sparkplug::DataType::Boolean,
+        Value::BooleanValue(true),
+    )
 }
 
 enum Incoming {

@@ -5,9 +5,8 @@
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use prost::Message as _;
 use sparkplug::Quality as SpQuality;
-use sparkplug::proto::{Metric, Payload, metric::Value as SpValue};
+use sparkplug::proto::metric::Value as SpValue;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 use tokio::sync::watch;
 
@@ -25,6 +24,37 @@ fn config(broker: &Mosquitto) -> MqttConfig {
     }
 }
 
+/// The MQTT side of `rig`'s cell, running until [`Node::stop`].
+struct Node {
+    task: tokio::task::JoinHandle<()>,
+    stop: watch::Sender<bool>,
+}
+
+impl Node {
+    /// Starts publishing `rig`'s cell with `config`; `allow_writes` is `--allow-writes`.
+    fn start(rig: &crate::testing::Rig, config: MqttConfig, allow_writes: bool) -> Self {
+        let (stop, stopped) = watch::channel(false);
+        let task = super::mqtt::start(
+            rig.cell.clone(),
+            config,
+            rig.dir.path().join("mqtt"),
+            allow_writes,
+            stopped,
+        )
+        .unwrap();
+        Self { task, stop }
+    }
+
+    /// Stops it gracefully and waits (bounded) for the end.
+    async fn stop(self) {
+        self.stop.send(true).unwrap();
+        tokio::time::timeout(LIMIT, self.task)
+            .await
+            .unwrap()
+            .unwrap();
+    }
+}
+
 fn of_jbc2(m: &SparkplugMessage) -> bool {
     m.device() == Some("jbc2")
 }
@@ -34,15 +64,7 @@ async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answe
     let broker = Mosquitto::start();
     let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
     let rig = rig(2);
-    let (stop_tx, stop) = watch::channel(false);
-    let task = super::mqtt::start(
-        rig.cell.clone(),
-        config(&broker),
-        rig.dir.path().join("mqtt"),
-        false,
-        stop,
-    )
-    .unwrap();
+    let node = Node::start(&rig, config(&broker), false);
 
     // Born, then read: a DDATA with good values.
     sub.next_where("the DBIRTH of jbc2", LIMIT, |m| {
@@ -88,24 +110,9 @@ async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answe
         "born again with values"
     );
 
-    stop_tx.send(true).unwrap();
-    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
+    node.stop().await;
     sub.next_where("the NDEATH at the stop", LIMIT, |m| m.kind() == "NDEATH")
         .await;
-}
-
-fn command(metric: &str, datatype: sparkplug::DataType, value: SpValue) -> Vec<u8> {
-    Payload {
-        timestamp: Some(0),
-        metrics: vec![Metric {
-            name: Some(metric.into()),
-            datatype: Some(datatype.code()),
-            value: Some(value),
-            ..Metric::default()
-        }],
-        ..Payload::default()
-    }
-    .encode_to_vec()
 }
 
 /// A writable number of jbc1 once it has been read: its name, value, and a value to write.
@@ -134,27 +141,19 @@ async fn a_dcmd_write_is_refused_without_allow_writes_and_nothing_is_stored() {
     let broker = Mosquitto::start();
     let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
     let rig = rig(1);
-    let (stop_tx, stop) = watch::channel(false);
     // The table asks for commands, but the gateway runs without --allow-writes.
     let config = MqttConfig {
         commands: true,
         ..config(&broker)
     };
-    let task = super::mqtt::start(
-        rig.cell.clone(),
-        config,
-        rig.dir.path().join("mqtt"),
-        false,
-        stop,
-    )
-    .unwrap();
+    let node = Node::start(&rig, config, false);
     sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
         .await;
     let (name, old, target) = writable_number(&rig);
 
     sub.publish(
         "spBv1.0/rig/DCMD/cell/jbc1",
-        command(
+        testkit::command_payload(
             &name,
             sparkplug::DataType::Double,
             SpValue::DoubleValue(target),
@@ -165,7 +164,7 @@ async fn a_dcmd_write_is_refused_without_allow_writes_and_nothing_is_stored() {
     // handled, and the birth shows the value unchanged.
     sub.publish(
         "spBv1.0/rig/NCMD/cell",
-        command(
+        testkit::command_payload(
             "Node Control/Rebirth",
             sparkplug::DataType::Boolean,
             SpValue::BooleanValue(true),
@@ -207,8 +206,7 @@ async fn a_dcmd_write_is_refused_without_allow_writes_and_nothing_is_stored() {
         .get();
     assert_eq!(refused, 1, "counted");
 
-    stop_tx.send(true).unwrap();
-    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
+    node.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -217,19 +215,11 @@ async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
     let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
     let rig = rig(1);
     let mut live = rig.cell.subscribe();
-    let (stop_tx, stop) = watch::channel(false);
     let config = MqttConfig {
         commands: true,
         ..config(&broker)
     };
-    let task = super::mqtt::start(
-        rig.cell.clone(),
-        config,
-        rig.dir.path().join("mqtt"),
-        true,
-        stop,
-    )
-    .unwrap();
+    let node = Node::start(&rig, config, true);
     sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
         .await;
     let (name, old, target) = writable_number(&rig);
@@ -237,7 +227,7 @@ async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
     // Outside the point's range: refused before the wire, with one audit row.
     sub.publish(
         "spBv1.0/rig/DCMD/cell/jbc1",
-        command(
+        testkit::command_payload(
             &name,
             sparkplug::DataType::Double,
             SpValue::DoubleValue(1e9),
@@ -246,7 +236,7 @@ async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
     .await;
     sub.publish(
         "spBv1.0/rig/DCMD/cell/jbc1",
-        command(
+        testkit::command_payload(
             &name,
             sparkplug::DataType::Double,
             SpValue::DoubleValue(target),
@@ -281,8 +271,7 @@ async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
     assert_eq!(audit[0].old_value, Some(serde_json::json!(old)));
     assert!(audit[0].detail.contains(&name), "{}", audit[0].detail);
 
-    stop_tx.send(true).unwrap();
-    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
+    node.stop().await;
 }
 
 /// The next event of `kind` on the cell's change stream.
@@ -317,19 +306,11 @@ async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes
     let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
     let rig = rig(1);
     let mut live = rig.cell.subscribe();
-    let (stop_tx, stop) = watch::channel(false);
     let config = MqttConfig {
         primary_host: Some("scada".into()),
         ..config(&broker)
     };
-    let task = super::mqtt::start(
-        rig.cell.clone(),
-        config,
-        rig.dir.path().join("mqtt"),
-        false,
-        stop,
-    )
-    .unwrap();
+    let node = Node::start(&rig, config, false);
 
     // Connected, but silent until the host says it is online.
     next_event(&mut live, crate::event::EventKind::MqttConnected).await;
@@ -400,6 +381,5 @@ async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes
     );
     assert!(dbirth.payload.metrics.len() > 5);
 
-    stop_tx.send(true).unwrap();
-    tokio::time::timeout(LIMIT, task).await.unwrap().unwrap();
+    node.stop().await;
 }
