@@ -431,9 +431,9 @@ impl EdgeNode {
     }
 
     /// An NDATA with the node metrics in `changes` that changed, or `None` when none did.
-    pub fn node_data(
+    pub fn node_data<N: AsRef<str>>(
         &mut self,
-        changes: &[(&str, Sample)],
+        changes: &[(N, Sample)],
         now: Timestamp,
         delivery: Delivery,
     ) -> Result<Option<Publish>, NodeError> {
@@ -446,10 +446,10 @@ impl EdgeNode {
 
     /// A DDATA with the metrics of `device` in `changes` that changed, by alias only, or
     /// `None` when none did. Nothing is recorded when an error is returned.
-    pub fn device_data(
+    pub fn device_data<N: AsRef<str>>(
         &mut self,
         device: &Id,
-        changes: &[(&str, Sample)],
+        changes: &[(N, Sample)],
         now: Timestamp,
         delivery: Delivery,
     ) -> Result<Option<Publish>, NodeError> {
@@ -674,22 +674,23 @@ fn check_type(spec: &MetricSpec, sample: &Sample) -> Result<(), NodeError> {
 
 /// The data metrics for `changes`; records them as the last readings only when all
 /// are valid.
-fn data(
+fn data<N: AsRef<str>>(
     table: &mut Table,
     device: Option<&Id>,
-    changes: &[(&str, Sample)],
+    changes: &[(N, Sample)],
     delivery: Delivery,
 ) -> Result<Vec<Metric>, NodeError> {
     let historical = delivery == Delivery::Historical;
     let mut metrics = Vec::new();
     let mut updates = Vec::new();
     for (name, sample) in changes {
-        let alias = MetricName::new(*name)
+        let name = name.as_ref();
+        let alias = MetricName::new(name)
             .ok()
             .and_then(|n| table.by_name.get(&n).copied())
             .ok_or_else(|| NodeError::UnknownMetric {
                 device: device.cloned(),
-                name: (*name).to_owned(),
+                name: name.to_owned(),
             })?;
         let entry = &table.entries[&alias];
         check_type(&entry.spec, sample)?;

@@ -351,16 +351,15 @@ impl Node {
         let Ok(id) = Id::new(device.as_str()) else {
             return Ok(0);
         };
-        let named: Vec<(&str, Sample)> = changes
-            .iter()
-            .map(|(n, s)| (n.as_str(), s.clone()))
-            .collect();
         let t = sparkplug_time(Timestamp::now());
-        match self.node.device_data(&id, &named, t, Delivery::Historical) {
+        match self
+            .node
+            .device_data(&id, &changes, t, Delivery::Historical)
+        {
             Ok(Some(data)) => {
                 conn.publish(outgoing(data, latest)).await.map_err(lost)?;
                 self.mark(latest);
-                Ok(named.len() as u64)
+                Ok(changes.len() as u64)
             }
             Ok(None) => Ok(0),
             Err(e) => {
@@ -450,11 +449,7 @@ impl Node {
             let Ok(id) = Id::new(device.as_str()) else {
                 continue;
             };
-            let named: Vec<(&str, Sample)> = changes
-                .iter()
-                .map(|(n, s)| (n.as_str(), s.clone()))
-                .collect();
-            match self.node.device_data(&id, &named, t, Delivery::Live) {
+            match self.node.device_data(&id, &changes, t, Delivery::Live) {
                 Ok(Some(data)) => {
                     conn.publish(outgoing(data, Some(latest)))
                         .await
