@@ -3,50 +3,27 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::net::SocketAddr;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use gateway::cell::{Cell, MqttLink};
-use gateway::{Gateway, ServeOptions};
+use gateway::ServeOptions;
+use gateway::cell::MqttLink;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::sync::oneshot;
-use tokio::task::JoinHandle;
 
-/// Generous: a loaded 2-core machine.
-const LIMIT: Duration = Duration::from_secs(60);
+mod running;
+use running::{LIMIT, Running};
+
 const NODE: &str = "spBv1.0/cellbus/+/demo";
 const DEVICES: &str = "spBv1.0/cellbus/+/demo/#";
 
-struct Running {
-    cell: Arc<Cell>,
-    addr: SocketAddr,
-    stop: oneshot::Sender<()>,
-    task: JoinHandle<anyhow::Result<()>>,
-}
-
 /// The demo cell, publishing to `broker`, with its data in `dir`.
 async fn start(broker: &Mosquitto, dir: &std::path::Path) -> Running {
-    let gateway = Gateway::start(ServeOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
+    Running::start(ServeOptions {
         data_dir: dir.join("data"),
         mqtt: Some(broker.url()),
         ..ServeOptions::default()
     })
     .await
-    .unwrap();
-    let cell = Arc::clone(gateway.cell());
-    let addr = gateway.local_addr();
-    let (stop, stopped) = oneshot::channel::<()>();
-    let task = tokio::spawn(gateway.run(async {
-        let _ = stopped.await;
-    }));
-    Running {
-        cell,
-        addr,
-        stop,
-        task,
-    }
 }
 
 async fn subscribe(broker: &Mosquitto) -> (Subscriber, Subscriber) {
@@ -119,19 +96,6 @@ fn names(m: &SparkplugMessage) -> BTreeSet<String> {
         .iter()
         .filter_map(|m| m.name.clone())
         .collect()
-}
-
-/// Bounded polling of the cell's MQTT state.
-async fn wait_for_link(cell: &Cell, what: &str, wanted: impl Fn(&Option<MqttLink>) -> bool) {
-    let deadline = Instant::now() + LIMIT;
-    while !wanted(&cell.mqtt()) {
-        assert!(
-            Instant::now() < deadline,
-            "MQTT never {what}: {:?}",
-            cell.mqtt()
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -212,8 +176,7 @@ async fn births_describe_every_point_changes_arrive_by_alias_and_rebirth_and_dea
     );
 
     // A graceful stop publishes the NDEATH with the session's bdSeq.
-    let _ = gateway.stop.send(());
-    gateway.task.await.unwrap().unwrap();
+    gateway.stop().await;
     let death = node
         .next_where("an NDEATH", LIMIT, |m| m.kind() == "NDEATH")
         .await;
@@ -228,10 +191,9 @@ async fn after_a_broker_outage_the_gateway_reconnects_and_births_again_with_the_
     let gateway = start(&broker, dir.path()).await;
     let first = node.next_where("an NBIRTH", LIMIT, nbirth).await;
     let first_bd_seq = first.bd_seq().unwrap();
-    wait_for_link(&gateway.cell, "connected", |l| {
-        l == &Some(MqttLink::Connected)
-    })
-    .await;
+    gateway
+        .wait_for_link("connected", |l| l == &Some(MqttLink::Connected))
+        .await;
 
     broker.restart();
 
@@ -239,13 +201,11 @@ async fn after_a_broker_outage_the_gateway_reconnects_and_births_again_with_the_
         .next_where("an NBIRTH after the outage", LIMIT, nbirth)
         .await;
     assert_eq!(second.bd_seq(), Some(first_bd_seq + 1));
-    wait_for_link(&gateway.cell, "reconnected", |l| {
-        l == &Some(MqttLink::Connected)
-    })
-    .await;
+    gateway
+        .wait_for_link("reconnected", |l| l == &Some(MqttLink::Connected))
+        .await;
     assert!(gateway.cell.metrics().mqtt_reconnects.get() >= 1);
-    let _ = gateway.stop.send(());
-    gateway.task.await.unwrap().unwrap();
+    gateway.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -260,8 +220,7 @@ async fn bd_seq_survives_a_restart_on_the_same_data_directory() {
         .await
         .bd_seq()
         .unwrap();
-    let _ = gateway.stop.send(());
-    gateway.task.await.unwrap().unwrap();
+    gateway.stop().await;
 
     let gateway = start(&broker, dir.path()).await;
     let second = node
@@ -273,8 +232,7 @@ async fn bd_seq_survives_a_restart_on_the_same_data_directory() {
         second > first,
         "bdSeq {second} after a restart, {first} before"
     );
-    let _ = gateway.stop.send(());
-    gateway.task.await.unwrap().unwrap();
+    gateway.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -286,26 +244,19 @@ async fn an_unreachable_broker_shows_in_healthz_and_events_and_nothing_else_stop
         .unwrap()
         .port();
     let dir = tempfile::tempdir().unwrap();
-    let gateway = Gateway::start(ServeOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
+    let gateway = Running::start(ServeOptions {
         data_dir: dir.path().join("data"),
         mqtt: Some(format!("mqtt://127.0.0.1:{port}")),
         ..ServeOptions::default()
     })
-    .await
-    .unwrap();
-    let cell = Arc::clone(gateway.cell());
-    let addr = gateway.local_addr();
-    let (stop, stopped) = oneshot::channel::<()>();
-    let task = tokio::spawn(gateway.run(async {
-        let _ = stopped.await;
-    }));
-    wait_for_link(
-        &cell,
-        "reported the refused connection",
-        |l| matches!(l, Some(MqttLink::Disconnected(why)) if why != "not connected yet"),
-    )
     .await;
+    let addr = gateway.addr;
+    gateway
+        .wait_for_link(
+            "reported the refused connection",
+            |l| matches!(l, Some(MqttLink::Disconnected(why)) if why != "not connected yet"),
+        )
+        .await;
     let health: serde_json::Value = serde_json::from_str(&get(addr, "/healthz").await).unwrap();
     let shown = health["mqtt"].as_str().unwrap();
     assert!(shown.starts_with("disconnected: "), "{shown}");
@@ -322,6 +273,5 @@ async fn an_unreachable_broker_shows_in_healthz_and_events_and_nothing_else_stop
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
-    let _ = stop.send(());
-    task.await.unwrap().unwrap();
+    gateway.stop().await;
 }

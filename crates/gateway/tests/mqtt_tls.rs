@@ -6,21 +6,19 @@
 //! The test's subscriber uses the broker's plain listener.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::time::{Duration, Instant};
 
-use gateway::cell::{Cell, MqttLink};
-use gateway::{Gateway, ServeOptions};
+use gateway::ServeOptions;
+use gateway::cell::MqttLink;
 use rcgen::{
     BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose, IsCa,
     KeyPair, KeyUsagePurpose,
 };
 use testkit::{Mosquitto, Subscriber, TlsFiles};
-use tokio::sync::oneshot;
-use tokio::task::JoinHandle;
+
+mod running;
+use running::{LIMIT, Running};
 
 /// Generous: a loaded 2-core machine.
-const LIMIT: Duration = Duration::from_secs(60);
 const NODE: &str = "spBv1.0/cellbus/+/tls";
 
 /// A certificate authority made for one test.
@@ -101,19 +99,6 @@ fn broker(
     (Mosquitto::start_tls(&files), files)
 }
 
-struct Running {
-    cell: Arc<Cell>,
-    stop: oneshot::Sender<()>,
-    task: JoinHandle<anyhow::Result<()>>,
-}
-
-impl Running {
-    async fn stop(self) {
-        let _ = self.stop.send(());
-        self.task.await.unwrap().unwrap();
-    }
-}
-
 /// A gateway with a cell of one (absent) station whose `[mqtt]` table is `mqtt`, from a
 /// config file in `dir`, so relative paths in `mqtt` are relative to `dir`.
 async fn start(dir: &Path, mqtt: &str) -> Running {
@@ -132,44 +117,23 @@ async fn start(dir: &Path, mqtt: &str) -> Running {
         ),
     )
     .unwrap();
-    let gateway = Gateway::start(ServeOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
+    Running::start(ServeOptions {
         config: Some(config),
         data_dir: dir.join("data"),
         ..ServeOptions::default()
     })
     .await
-    .unwrap();
-    let cell = Arc::clone(gateway.cell());
-    let (stop, stopped) = oneshot::channel::<()>();
-    let task = tokio::spawn(gateway.run(async {
-        let _ = stopped.await;
-    }));
-    Running { cell, stop, task }
-}
-
-/// Bounded polling of the cell's MQTT state.
-async fn wait_for_link(cell: &Cell, what: &str, wanted: impl Fn(&Option<MqttLink>) -> bool) {
-    let deadline = Instant::now() + LIMIT;
-    while !wanted(&cell.mqtt()) {
-        assert!(
-            Instant::now() < deadline,
-            "MQTT never {what}: {:?}",
-            cell.mqtt()
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
 }
 
 /// The refusal reported in the cell's MQTT state, once there is one.
-async fn refusal(cell: &Cell) -> String {
-    wait_for_link(
-        cell,
-        "reported the refused connection",
-        |l| matches!(l, Some(MqttLink::Disconnected(why)) if why != "not connected yet"),
-    )
-    .await;
-    match cell.mqtt() {
+async fn refusal(gateway: &Running) -> String {
+    gateway
+        .wait_for_link(
+            "reported the refused connection",
+            |l| matches!(l, Some(MqttLink::Disconnected(why)) if why != "not connected yet"),
+        )
+        .await;
+    match gateway.cell.mqtt() {
         Some(MqttLink::Disconnected(why)) => why,
         other => panic!("not a refusal: {other:?}"),
     }
@@ -195,10 +159,9 @@ async fn the_gateway_publishes_its_births_over_mqtts_trusting_the_given_ca_file(
         .next_where("an NBIRTH over TLS", LIMIT, |m| m.kind() == "NBIRTH")
         .await;
     assert!(birth.bd_seq().is_some());
-    wait_for_link(&gateway.cell, "connected", |l| {
-        matches!(l, Some(MqttLink::Connected))
-    })
-    .await;
+    gateway
+        .wait_for_link("connected", |l| matches!(l, Some(MqttLink::Connected)))
+        .await;
     gateway.stop().await;
 }
 
@@ -219,7 +182,7 @@ async fn a_broker_the_ca_file_does_not_vouch_for_is_refused_clearly_and_the_gate
     )
     .await;
 
-    let why = refusal(&gateway.cell).await;
+    let why = refusal(&gateway).await;
     let expected = format!(
         "TLS handshake with broker 127.0.0.1:{} failed: ",
         broker.tls_port()
@@ -283,7 +246,7 @@ async fn a_broker_that_wants_a_client_certificate_refuses_a_gateway_without_one_
     )
     .await;
 
-    let why = refusal(&gateway.cell).await;
+    let why = refusal(&gateway).await;
     let expected = format!(
         "TLS handshake with broker 127.0.0.1:{} failed: ",
         broker.tls_port()
