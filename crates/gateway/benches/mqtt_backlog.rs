@@ -91,15 +91,8 @@ usage: cargo bench -p gateway --bench mqtt_backlog -- [options]
 
 fn main() -> ExitCode {
     let raw: Vec<String> = std::env::args().skip(1).collect();
-    if let Some(port) = mqtt_counter::port_in(&raw) {
-        let counted = port.map_err(anyhow::Error::msg).and_then(mqtt_counter::run);
-        return match counted {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(e) => {
-                eprintln!("mqtt_backlog: MQTT counter: {e:#}");
-                ExitCode::from(1)
-            }
-        };
+    if let Some(code) = mqtt_counter::run_if_asked(&raw, "mqtt_backlog") {
+        return code;
     }
     // `cargo bench` passes --bench; `cargo test --benches` does not: then a smoke run.
     let benching = raw.iter().any(|a| a == "--bench");

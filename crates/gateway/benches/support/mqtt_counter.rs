@@ -287,6 +287,19 @@ impl Drop for Counter {
     }
 }
 
+/// When `args` make this process the counter child (`FLAG PORT`): runs it and gives the
+/// exit code (`bench` names the bench in an error).
+pub fn run_if_asked(args: &[String], bench: &str) -> Option<std::process::ExitCode> {
+    let counted = port_in(args)?.map_err(anyhow::Error::msg).and_then(run);
+    Some(match counted {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{bench}: MQTT counter: {e:#}");
+            std::process::ExitCode::from(1)
+        }
+    })
+}
+
 /// The child's arguments: `FLAG PORT` anywhere in `args`.
 pub fn port_in(args: &[String]) -> Option<Result<u16, String>> {
     let at = args.iter().position(|a| a == FLAG)?;
