@@ -30,6 +30,37 @@ pub const MAX_VALUE: usize = 256;
 /// Longest stored detail.
 pub const MAX_DETAIL: usize = 1024;
 
+/// At most one log line about refused unauthorised writes this often.
+pub const LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Writes refused before anything is stored (writes off, a wrong token, DCMDs without
+/// `commands = true`): anyone who reaches the interface can send them by the thousand, so
+/// they are counted (`cellbus_writes_total{result="unauthorised"}`) and logged at most once
+/// every [`LOG_EVERY`], with how many there were.
+#[derive(Debug, Default)]
+pub struct Unauthorised {
+    last_log: Option<tokio::time::Instant>,
+    unlogged: u64,
+}
+
+impl Unauthorised {
+    /// Counts one refusal at `now`; returns how many to report when a log line is due.
+    pub fn refused(&mut self, cell: &Cell, now: tokio::time::Instant) -> Option<u64> {
+        cell.metrics()
+            .writes
+            .get_or_create(&crate::metrics::WriteLabels {
+                result: "unauthorised".to_owned(),
+            })
+            .inc();
+        self.unlogged += 1;
+        if self.last_log.is_some_and(|t| now < t + LOG_EVERY) {
+            return None;
+        }
+        self.last_log = Some(now);
+        Some(std::mem::take(&mut self.unlogged))
+    }
+}
+
 /// An authorised write attempt on its way to the audit table.
 #[derive(Debug)]
 pub struct Attempt {

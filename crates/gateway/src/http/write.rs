@@ -33,9 +33,10 @@ use serde_json::json;
 use tokio::time::Instant;
 
 use super::{ApiError, ApiResult, AppState, ClientAddr, unknown_device};
+use crate::cell::Cell;
 use crate::driver::{ErrorKind, WriteError};
 use crate::point::{PointId, Value};
-use crate::write::{Attempt, MAX_NAME, MAX_VALUE, cut};
+use crate::write::{Attempt, LOG_EVERY, MAX_NAME, MAX_VALUE, Unauthorised, cut};
 
 /// Largest write request body accepted.
 pub const BODY_LIMIT: usize = 4096;
@@ -43,8 +44,6 @@ pub const BODY_LIMIT: usize = 4096;
 pub const MAX_TOKEN_FAILURES: u32 = 5;
 /// The window over which wrong tokens are counted.
 pub const FAILURE_WINDOW: Duration = Duration::from_secs(60);
-/// At most one log line about unauthorised writes this often.
-pub const LOG_EVERY: Duration = Duration::from_secs(10);
 /// Client addresses whose wrong tokens are remembered at once.
 const MAX_TRACKED_CLIENTS: usize = 4096;
 
@@ -65,8 +64,7 @@ pub(super) struct Guard {
 #[derive(Debug, Default)]
 struct GuardState {
     failures: HashMap<IpAddr, Failures>,
-    last_log: Option<Instant>,
-    unlogged: u64,
+    unauthorised: Unauthorised,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -107,15 +105,12 @@ impl Guard {
         entry.count += 1;
     }
 
-    /// Logs an unauthorised attempt, at most once every [`LOG_EVERY`] (with the count).
-    fn log(&self, client: &str, why: &str, now: Instant) {
-        let mut state = self.lock();
-        state.unlogged += 1;
-        if state.last_log.is_some_and(|t| now < t + LOG_EVERY) {
+    /// Counts an unauthorised attempt and logs it, at most once every [`LOG_EVERY`] (with
+    /// the count).
+    fn refused(&self, cell: &Cell, client: &str, why: &str, now: Instant) {
+        let Some(count) = self.lock().unauthorised.refused(cell, now) else {
             return;
-        }
-        let count = std::mem::take(&mut state.unlogged);
-        state.last_log = Some(now);
+        };
         tracing::warn!(
             "refused {count} unauthorised write(s) in the last {} s; the latest from {}: {}",
             LOG_EVERY.as_secs(),
@@ -239,14 +234,7 @@ async fn refuse(attempt: &Attempt, error: ApiError) -> ApiError {
 
 /// Counts and (throttled) logs an unauthorised attempt; nothing is stored.
 fn unauthorised(s: &AppState, client: &str, error: ApiError, now: Instant) -> ApiError {
-    s.cell
-        .metrics()
-        .writes
-        .get_or_create(&crate::metrics::WriteLabels {
-            result: "unauthorised".to_owned(),
-        })
-        .inc();
-    s.guard.log(client, &error.message, now);
+    s.guard.refused(&s.cell, client, &error.message, now);
     error
 }
 

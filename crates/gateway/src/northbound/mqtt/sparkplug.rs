@@ -35,11 +35,10 @@ use tokio::sync::broadcast;
 use super::forward::Backlog;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
 use crate::cell::{Cell, DeviceStatus, LiveMessage};
-use crate::metrics::WriteLabels;
 use crate::northbound::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
 use crate::point::{DeviceId, PointId, Value};
 use crate::time::{Timestamp, duration_millis};
-use crate::write::Attempt;
+use crate::write::{Attempt, LOG_EVERY, Unauthorised};
 
 /// The key of the stored `bdSeq` in the history database's `settings` table.
 pub const BD_SEQ_KEY: &str = "mqtt.bd_seq";
@@ -58,8 +57,6 @@ type DeviceChanges = (DeviceId, Vec<(String, Sample)>, Timestamp);
 
 /// Most metrics in one historical DDATA.
 const HISTORICAL_BATCH: usize = 500;
-/// At most one log line about refused DCMD writes this often.
-const REFUSAL_LOG_EVERY: Duration = Duration::from_secs(10);
 
 /// The edge node of one gateway.
 pub struct Node {
@@ -79,7 +76,7 @@ pub struct Node {
     /// The history row count last published.
     rows_published: i64,
     /// Refused DCMDs since the last log line, and when that was.
-    refused: (u64, Option<tokio::time::Instant>),
+    refused: Unauthorised,
     keep_alive: Duration,
     /// Whether the stored `bdSeq` was read (before the first connection).
     bd_seq_read: bool,
@@ -110,7 +107,7 @@ impl Node {
             born: false,
             published: None,
             rows_published: -1,
-            refused: (0, None),
+            refused: Unauthorised::default(),
             keep_alive: config.keep_alive,
             bd_seq_read: false,
         })
@@ -672,24 +669,14 @@ impl Node {
     }
 
     fn refuse(&mut self, topic: &str, device: &Id, metric: &str) {
-        self.cell
-            .metrics()
-            .writes
-            .get_or_create(&WriteLabels {
-                result: "unauthorised".to_owned(),
-            })
-            .inc();
         let now = tokio::time::Instant::now();
-        self.refused.0 += 1;
-        if self.refused.1.is_some_and(|t| now < t + REFUSAL_LOG_EVERY) {
+        let Some(count) = self.refused.refused(&self.cell, now) else {
             return;
-        }
-        let count = std::mem::take(&mut self.refused.0);
-        self.refused.1 = Some(now);
+        };
         tracing::warn!(
             "refused {count} MQTT write(s) in the last {} s; the latest: {device}.{metric} on \
              {topic}: DCMD writes need --allow-writes and commands = true in [mqtt]",
-            REFUSAL_LOG_EVERY.as_secs()
+            LOG_EVERY.as_secs()
         );
     }
 }
