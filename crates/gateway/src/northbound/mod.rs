@@ -30,8 +30,8 @@ mod tests;
 
 use sparkplug::{DataType, MetricName, MetricSpec, MetricValue, Sample, Writable, WriteRange};
 
-use crate::cell::{DeviceView, PointView};
-use crate::point::{PointKind, PointSpec, Quality, Value};
+use crate::cell::{DeviceView, PointDetail, PointView};
+use crate::point::{PointKind, Quality, Value};
 use crate::time::Timestamp;
 
 /// The Sparkplug data type of a point of `kind`.
@@ -44,14 +44,15 @@ pub fn datatype_of(kind: &PointKind) -> DataType {
 }
 
 /// The birth description of a point.
-pub fn metric_spec(spec: &PointSpec) -> Option<MetricSpec> {
-    let name = MetricName::new(spec.id.name()).ok()?;
-    let mut metric = MetricSpec::new(name, datatype_of(&spec.kind)).description(&spec.name);
-    if let Some(unit) = &spec.unit {
+pub fn metric_spec(point: &PointDetail) -> Option<MetricSpec> {
+    let view = &point.view;
+    let name = MetricName::new(view.id.name()).ok()?;
+    let mut metric = MetricSpec::new(name, datatype_of(&point.kind)).description(&view.name);
+    if let Some(unit) = &view.unit {
         metric = metric.unit(unit);
     }
-    if let Some(range) = spec.writable {
-        let writable = match (&spec.kind, WriteRange::new(range.min, range.max)) {
+    if let Some(range) = point.writable {
+        let writable = match (&point.kind, WriteRange::new(range.min, range.max)) {
             (PointKind::Text, _) | (_, Err(_)) => Writable::Yes,
             (_, Ok(range)) => Writable::Within(range),
         };
@@ -95,18 +96,7 @@ pub fn device_metrics(device: &DeviceView, now: Timestamp) -> Vec<(MetricSpec, S
     device
         .points
         .iter()
-        .filter_map(|p| {
-            let spec = PointSpec {
-                id: p.view.id.clone(),
-                name: p.view.name.clone(),
-                unit: p.view.unit.clone(),
-                kind: p.kind.clone(),
-                group: p.group.clone(),
-                writable: p.writable,
-                alarm: None,
-            };
-            Some((metric_spec(&spec)?, sample_of(&p.kind, &p.view, now)))
-        })
+        .filter_map(|p| Some((metric_spec(p)?, sample_of(&p.kind, &p.view, now))))
         .collect()
 }
 
