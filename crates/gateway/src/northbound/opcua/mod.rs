@@ -300,12 +300,8 @@ async fn follow(
                     set_values(&manager, &subscriptions, vec![(node, value)]);
                 }
                 Ok(LiveMessage::Device(summary)) => {
-                    let id = summary.id.as_str();
-                    let now = DateTime::now();
-                    set_values(&manager, &subscriptions, vec![
-                        (ids::device_status(ns, id), DataValue::new_at(space::device_status(&summary), now)),
-                        (ids::device_error(ns, id), DataValue::new_at(space::device_error(&summary), now)),
-                    ]);
+                    let values = device_values(ns, &summary, DateTime::now());
+                    set_values(&manager, &subscriptions, values.to_vec());
                 }
                 Ok(LiveMessage::Event(event)) => {
                     numbered += 1;
@@ -350,15 +346,7 @@ fn resync(
     let t = space::opc_time(now);
     let mut values = Vec::new();
     for device in cell.devices() {
-        let id = device.summary.id.as_str();
-        values.push((
-            ids::device_status(ns, id),
-            DataValue::new_at(space::device_status(&device.summary), t),
-        ));
-        values.push((
-            ids::device_error(ns, id),
-            DataValue::new_at(space::device_error(&device.summary), t),
-        ));
+        values.extend(device_values(ns, &device.summary, t));
         for point in &device.points {
             values.push((
                 ids::point(ns, point.view.id.as_str()),
@@ -367,6 +355,25 @@ fn resync(
         }
     }
     set_values(manager, subscriptions, values);
+}
+
+/// A device's `Status` and `Error` variables' values at `t`.
+fn device_values(
+    ns: u16,
+    summary: &crate::cell::DeviceSummary,
+    t: DateTime,
+) -> [(::opcua::types::NodeId, DataValue); 2] {
+    let id = summary.id.as_str();
+    [
+        (
+            ids::device_status(ns, id),
+            DataValue::new_at(space::device_status(summary), t),
+        ),
+        (
+            ids::device_error(ns, id),
+            DataValue::new_at(space::device_error(summary), t),
+        ),
+    ]
 }
 
 fn set_values(
