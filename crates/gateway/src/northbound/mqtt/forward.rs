@@ -47,6 +47,8 @@ pub const FORWARDED_KEY: &str = "mqtt.forwarded_until";
 pub struct Delivery {
     /// Publishes handed to the client in this connection.
     handed: u64,
+    /// The latest read time handed to the client in this connection.
+    latest_handed: Option<Timestamp>,
     /// (number, latest read time) of publishes holding changes, not yet confirmed.
     unconfirmed: VecDeque<(u64, Timestamp)>,
     /// Publishes written when the last PINGREQ went out, if its answer is awaited.
@@ -60,6 +62,7 @@ impl Delivery {
     pub fn new(forwarded: Timestamp) -> Self {
         Self {
             handed: 0,
+            latest_handed: None,
             unconfirmed: VecDeque::new(),
             at_ping: None,
             forwarded,
@@ -76,8 +79,15 @@ impl Delivery {
     pub fn handed(&mut self, latest: Option<Timestamp>) {
         if let Some(t) = latest {
             self.unconfirmed.push_back((self.handed, t));
+            self.latest_handed = Some(self.latest_handed.map_or(t, |l| l.max(t)));
         }
         self.handed += 1;
+    }
+
+    /// Where a new birth cycle in this connection resumes the stored changes: the latest
+    /// read time handed to the client, else the mark.
+    pub fn catch_up_from(&self) -> Timestamp {
+        self.latest_handed.unwrap_or(self.forwarded)
     }
 
     /// The client wrote a PINGREQ after writing `written` publishes.
@@ -101,6 +111,7 @@ impl Delivery {
     /// connection numbers its publishes from 0.
     pub fn lost(&mut self) {
         self.handed = 0;
+        self.latest_handed = None;
         self.unconfirmed.clear();
         self.at_ping = None;
     }
@@ -244,6 +255,22 @@ mod tests {
         assert_eq!(d.forwarded(), Timestamp(200));
         d.wrote_ping(3);
         assert_eq!(d.ping_answered(), Some(Timestamp(300)));
+    }
+
+    #[test]
+    fn a_birth_cycle_catches_up_from_the_latest_change_handed_else_from_the_mark() {
+        let mut d = Delivery::new(Timestamp(100));
+        assert_eq!(d.catch_up_from(), Timestamp(100));
+        d.handed(Some(Timestamp(300)));
+        d.handed(None);
+        d.handed(Some(Timestamp(200)));
+        assert_eq!(d.catch_up_from(), Timestamp(300));
+        d.lost();
+        assert_eq!(
+            d.catch_up_from(),
+            Timestamp(100),
+            "a new connection starts at the mark"
+        );
     }
 
     #[test]

@@ -34,8 +34,6 @@ pub struct Publisher {
     prefix: String,
     /// The snapshot was published in this connection.
     born: bool,
-    /// The latest read time handed to the client in this connection.
-    published: Option<Timestamp>,
 }
 
 impl Publisher {
@@ -45,7 +43,6 @@ impl Publisher {
             cell: Arc::clone(link.cell()),
             prefix: link.config().prefix.clone(),
             born: false,
-            published: None,
         }
     }
 
@@ -88,7 +85,7 @@ impl Mode for Publisher {
                 Step::Live(Ok(message)) => self.on_change(conn, message).await,
                 Step::Live(Err(broadcast::error::RecvError::Lagged(missed))) => {
                     tracing::warn!("MQTT: {missed} changes missed; publishing every point again");
-                    let from = self.published.unwrap_or(conn.forwarded());
+                    let from = conn.catch_up_from();
                     self.snapshot(conn, live, from).await
                 }
                 Step::Live(Err(broadcast::error::RecvError::Closed)) => return End::Stop,
@@ -102,7 +99,6 @@ impl Mode for Publisher {
 
     fn lost(&mut self) {
         self.born = false;
-        self.published = None;
     }
 
     fn tick(&self) -> Duration {
@@ -164,7 +160,6 @@ impl Publisher {
                     true,
                 );
                 conn.publish(message).await?;
-                self.mark(change.key.t);
             }
             self.cell.metrics().mqtt_forwarded.inc_by(sent);
         }
@@ -180,9 +175,6 @@ impl Publisher {
                 let message =
                     self.point_message(&view.id, view.value.as_ref(), view.quality, view.t, false);
                 conn.publish(message).await?;
-                if let Some(t) = view.t {
-                    self.mark(t);
-                }
             }
             LiveMessage::Device(summary) => {
                 conn.publish(self.device_status(summary.id.as_str(), summary.status))
@@ -201,10 +193,6 @@ impl Publisher {
             }
         }
         Ok(())
-    }
-
-    fn mark(&mut self, t: Timestamp) {
-        self.published = Some(self.published.map_or(t, |p| p.max(t)));
     }
 
     fn device_status(&self, device: &str, status: DeviceStatus) -> Outgoing {

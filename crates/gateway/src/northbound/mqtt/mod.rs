@@ -415,6 +415,12 @@ impl Connection<'_> {
         self.delivery.forwarded()
     }
 
+    /// Where a new birth cycle in this connection resumes the stored changes (after a
+    /// lag or a rebirth): the latest change handed to the client, else the mark.
+    pub fn catch_up_from(&self) -> Timestamp {
+        self.delivery.catch_up_from()
+    }
+
     /// Moves the forwarded mark back to `at` at the latest, and stores it.
     pub async fn rewind_forwarded(&mut self, at: Timestamp) {
         if let Some(t) = self.delivery.rewind_to(at) {

@@ -71,8 +71,6 @@ pub struct Node {
     dead: HashSet<DeviceId>,
     /// Births published in this connection.
     born: bool,
-    /// The latest read time handed to the client in this connection.
-    published: Option<Timestamp>,
     /// The history row count last published.
     rows_published: i64,
     /// Refused DCMDs since the last log line, and when that was.
@@ -105,7 +103,6 @@ impl Node {
             host_seen: 0,
             dead: HashSet::new(),
             born: false,
-            published: None,
             rows_published: -1,
             refused: Unauthorised::default(),
             keep_alive: config.keep_alive,
@@ -163,7 +160,7 @@ impl Mode for Node {
                 Step::Live(Ok(message)) => self.on_change(conn, live, message).await,
                 Step::Live(Err(broadcast::error::RecvError::Lagged(missed))) => {
                     tracing::warn!("MQTT: {missed} changes missed; publishing births again");
-                    let from = self.published.unwrap_or(conn.forwarded());
+                    let from = conn.catch_up_from();
                     self.birth_cycle(conn, live, from).await
                 }
                 Step::Live(Err(broadcast::error::RecvError::Closed)) => return End::Stop,
@@ -178,7 +175,6 @@ impl Mode for Node {
     fn lost(&mut self) {
         self.node.on_disconnect();
         self.born = false;
-        self.published = None;
         self.dead.clear();
     }
 
@@ -355,7 +351,6 @@ impl Node {
         {
             Ok(Some(data)) => {
                 conn.publish(outgoing(data, latest)).await.map_err(lost)?;
-                self.mark(latest);
                 Ok(changes.len() as u64)
             }
             Ok(None) => Ok(0),
@@ -363,12 +358,6 @@ impl Node {
                 tracing::debug!("MQTT: no historical DDATA for {id}: {e}");
                 Ok(0)
             }
-        }
-    }
-
-    fn mark(&mut self, latest: Option<Timestamp>) {
-        if let Some(t) = latest {
-            self.published = Some(self.published.map_or(t, |p| p.max(t)));
         }
     }
 
@@ -428,7 +417,7 @@ impl Node {
                 Err(broadcast::error::TryRecvError::Lagged(missed)) => {
                     self.device_data(conn, values).await?;
                     tracing::warn!("MQTT: {missed} changes missed; publishing births again");
-                    let from = self.published.unwrap_or(conn.forwarded());
+                    let from = conn.catch_up_from();
                     return self.birth_cycle(conn, live, from).await;
                 }
                 Err(_) => None,
@@ -451,7 +440,6 @@ impl Node {
                     conn.publish(outgoing(data, Some(latest)))
                         .await
                         .map_err(lost)?;
-                    self.mark(Some(latest));
                 }
                 Ok(None) => {}
                 Err(e) => tracing::debug!("MQTT: no DDATA for {id}: {e}"),
@@ -538,7 +526,7 @@ impl Node {
             match command {
                 Command::Rebirth => {
                     tracing::info!("MQTT: rebirth asked on {topic}");
-                    let from = self.published.unwrap_or(conn.forwarded());
+                    let from = conn.catch_up_from();
                     self.birth_cycle(conn, live, from).await?;
                 }
                 Command::Write {
