@@ -4,6 +4,8 @@
 //!   port (and a TLS listener on a second one with `TlsFiles`), killed on drop.
 //! - `sparkplug_sub` (feature `mqtt`): `Subscriber`, a Sparkplug B subscriber that decodes
 //!   payloads with the `sparkplug` crate and survives broker restarts.
+//! - `postgres` (feature `postgres`): `Postgres`, a real, throwaway PostgreSQL cluster on
+//!   a free loopback port, with crash-restart, stop and start again; stopped on drop.
 //! - [`noise`]: [`Noise`], a seeded, sans-IO byte mangler with the trouble of a bad
 //!   serial line (flipped bits, lost, inserted and duplicated bytes, whole chunks lost,
 //!   bursts), and its counts.
@@ -19,6 +21,8 @@
 #[cfg(feature = "mqtt")]
 pub mod mosquitto;
 pub mod noise;
+#[cfg(feature = "postgres")]
+pub mod postgres;
 pub mod proxy;
 #[cfg(feature = "mqtt")]
 pub mod sparkplug_sub;
@@ -26,6 +30,8 @@ pub mod tricks;
 
 #[cfg(feature = "mqtt")]
 pub use mosquitto::{Mosquitto, TlsFiles};
+#[cfg(feature = "postgres")]
+pub use postgres::Postgres;
 pub use noise::{Noise, NoiseConfig, NoiseCounts};
 pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
 #[cfg(feature = "mqtt")]
