@@ -30,9 +30,9 @@ pub mod tricks;
 
 #[cfg(feature = "mqtt")]
 pub use mosquitto::{Mosquitto, TlsFiles};
+pub use noise::{Noise, NoiseConfig, NoiseCounts};
 #[cfg(feature = "postgres")]
 pub use postgres::Postgres;
-pub use noise::{Noise, NoiseConfig, NoiseCounts};
 pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
 #[cfg(feature = "mqtt")]
 pub use sparkplug_sub::{SparkplugMessage, Subscriber, command_payload, rebirth_command};

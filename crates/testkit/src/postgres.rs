@@ -155,7 +155,9 @@ impl Postgres {
         }
         let data = self.data_dir();
         let out = self.server_command("pg_ctl", |c| {
-            c.arg("-D").arg(&data).args(["-m", "immediate", "-w", "stop"]);
+            c.arg("-D")
+                .arg(&data)
+                .args(["-m", "immediate", "-w", "stop"]);
         });
         if out.status.success() {
             self.running = false;
@@ -336,7 +338,10 @@ mod tests {
         let mut pg = Postgres::start();
         let url = pg.create_database("kept");
         assert!(url.ends_with(&format!(":{}/kept", pg.port())), "{url}");
-        pg.psql("kept", "CREATE TABLE t (x int); INSERT INTO t VALUES (1), (2)");
+        pg.psql(
+            "kept",
+            "CREATE TABLE t (x int); INSERT INTO t VALUES (1), (2)",
+        );
         let port = pg.port();
         pg.restart();
         assert_eq!(pg.port(), port);

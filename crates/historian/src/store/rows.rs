@@ -1,0 +1,261 @@
+//! What the historian writes and what its queries return.
+
+use std::fmt;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+/// How far a sample can be trusted (the gateway's qualities; Sparkplug's `Quality`
+/// property 192 / 500 / 0).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Quality {
+    /// Read at its last poll.
+    Good,
+    /// The last good value is older than its poll period allows.
+    Stale,
+    /// The read failed, or the node or device died.
+    Bad,
+}
+
+impl Quality {
+    /// The number stored in `samples.quality` (0 good, 1 stale, 2 bad: the gateway's codes).
+    pub fn code(self) -> i16 {
+        match self {
+            Quality::Good => 0,
+            Quality::Stale => 1,
+            Quality::Bad => 2,
+        }
+    }
+
+    /// The quality of a stored number; unknown numbers read as bad (as the view does).
+    pub fn from_code(code: i16) -> Self {
+        match code {
+            0 => Quality::Good,
+            1 => Quality::Stale,
+            _ => Quality::Bad,
+        }
+    }
+
+    /// The word the view `cellbus_samples` shows (`good`, `stale`, `bad`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Quality::Good => "good",
+            Quality::Stale => "stale",
+            Quality::Bad => "bad",
+        }
+    }
+}
+
+/// The data type of a point known only from its samples (no birth seen yet).
+pub const UNKNOWN_DATATYPE: &str = "unknown";
+
+/// A point as its birth defines it. Points are named by edge node, device and metric name;
+/// a node's own metrics have the device `""`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointRow {
+    /// The Sparkplug edge node id (`cell7`).
+    pub node: String,
+    /// The device id (`jbc1`), `""` for the node's own metrics.
+    pub device: String,
+    /// The point's name (`air_temperature`).
+    pub point: String,
+    /// The Sparkplug data type's name (`Double`, `Int32`, `Boolean`, `String`), or
+    /// [`UNKNOWN_DATATYPE`].
+    pub datatype: String,
+    /// The engineering unit (`°C`), if any.
+    pub unit: Option<String>,
+    /// The point's name in words, if any.
+    pub description: Option<String>,
+    /// Whether the gateway takes writes to it.
+    pub writable: bool,
+    /// The lowest value a write may set, if limited.
+    pub write_min: Option<f64>,
+    /// The highest value a write may set, if limited.
+    pub write_max: Option<f64>,
+}
+
+impl PointRow {
+    /// A point known only by its name: unknown type, no unit, not writable (what the store
+    /// records for a sample of a point no birth has described).
+    pub fn bare(node: &str, device: &str, point: &str) -> Self {
+        Self {
+            node: node.to_owned(),
+            device: device.to_owned(),
+            point: point.to_owned(),
+            datatype: UNKNOWN_DATATYPE.to_owned(),
+            unit: None,
+            description: None,
+            writable: false,
+            write_min: None,
+            write_max: None,
+        }
+    }
+}
+
+/// One value change of a point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleRow {
+    /// The edge node id.
+    pub node: String,
+    /// The device id, `""` for the node's own metrics.
+    pub device: String,
+    /// The point's name.
+    pub point: String,
+    /// When the gateway read it (the metric's own timestamp). Stored to the microsecond;
+    /// a point has at most one sample per instant (a second one is a duplicate).
+    pub t: SystemTime,
+    /// The value as a number (booleans 0/1), if numeric and good.
+    pub value: Option<f64>,
+    /// The value as text, for text points.
+    pub text: Option<String>,
+    /// Its quality.
+    pub quality: Quality,
+}
+
+/// An event of a gateway (alarm, transfer, machine state, device down).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EventRow {
+    /// The edge node id.
+    pub node: String,
+    /// The device, if any.
+    pub device: Option<String>,
+    /// The point, if any.
+    pub point: Option<String>,
+    /// The line, if any.
+    pub line: Option<String>,
+    /// When it happened.
+    pub t: SystemTime,
+    /// What kind (`device_down`).
+    pub kind: String,
+    /// How serious (OPC UA's 1–1000 scale).
+    pub severity: i32,
+    /// Words.
+    pub message: String,
+}
+
+/// What one call of [`Store::write`](super::Store::write) commits, in one transaction.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Batch {
+    /// Points defined or redefined by births (inserted, or updated in place).
+    pub points: Vec<PointRow>,
+    /// Value changes.
+    pub samples: Vec<SampleRow>,
+    /// Events.
+    pub events: Vec<EventRow>,
+}
+
+impl Batch {
+    /// Whether there is nothing to write.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty() && self.samples.is_empty() && self.events.is_empty()
+    }
+
+    /// Rows of every kind.
+    pub fn len(&self) -> usize {
+        self.points.len() + self.samples.len() + self.events.len()
+    }
+}
+
+/// What a write committed, and what it left out.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Written {
+    /// Point rows inserted or updated from the batch's `points`.
+    pub points: u64,
+    /// Bare point rows created for samples of points no birth described.
+    pub bare_points: u64,
+    /// Samples stored.
+    pub samples: u64,
+    /// Samples already stored (same point and time): a replayed backlog.
+    pub duplicate_samples: u64,
+    /// Samples refused and not written (see [`Written::first_refusal`]).
+    pub refused_samples: u64,
+    /// Events stored.
+    pub events: u64,
+    /// Events already stored (same node, device, point, time, kind and message).
+    pub duplicate_events: u64,
+    /// Events refused and not written.
+    pub refused_events: u64,
+    /// Point rows refused and not written.
+    pub refused_points: u64,
+    /// The first row refused, and why (for the log).
+    pub first_refusal: Option<Refusal>,
+}
+
+/// A row the store refused to write.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refusal {
+    /// What it was: `sample cell7/jbc1.air_temperature`, `event cell7 device_down`.
+    pub row: String,
+    /// Its time (points have none: the epoch).
+    pub t: SystemTime,
+    /// Why.
+    pub reason: RefusalReason,
+}
+
+/// Why a row was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RefusalReason {
+    /// Its time is before 2000-01-01 (a clock not set).
+    BeforeEarliest,
+    /// Its time is more than [`MAX_AHEAD`] after the historian's clock.
+    TooFarAhead,
+    /// A text contains a NUL character, which PostgreSQL's text cannot hold.
+    NulCharacter,
+}
+
+impl fmt::Display for Refusal {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let ms = super::days::epoch_millis(self.t);
+        let why = match self.reason {
+            RefusalReason::BeforeEarliest => "its time is before 2000-01-01",
+            RefusalReason::TooFarAhead => "its time is more than a day ahead of this clock",
+            RefusalReason::NulCharacter => "a text holds a NUL character",
+        };
+        write!(f, "{} at {ms} ms since the epoch refused: {why}", self.row)
+    }
+}
+
+/// The earliest time stored, 2000-01-01T00:00:00Z, in seconds since the epoch (earlier
+/// times come from clocks never set).
+pub const EARLIEST_UNIX_SECS: u64 = 946_684_800;
+
+/// How far ahead of the historian's clock a time may be (clocks of gateways drift; a day
+/// more is a wrong clock, and would create partitions far in the future).
+pub const MAX_AHEAD: Duration = Duration::from_secs(24 * 3600);
+
+/// Whether a row at `t` may be stored when the historian's clock says `now`.
+pub fn check_time(t: SystemTime, now: SystemTime) -> Result<(), RefusalReason> {
+    if t < UNIX_EPOCH + Duration::from_secs(EARLIEST_UNIX_SECS) {
+        return Err(RefusalReason::BeforeEarliest);
+    }
+    if t > now + MAX_AHEAD {
+        return Err(RefusalReason::TooFarAhead);
+    }
+    Ok(())
+}
+
+/// A stored sample of one point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StoredSample {
+    /// When it was read.
+    pub t: SystemTime,
+    /// The value as a number, if any.
+    pub value: Option<f64>,
+    /// The value as text, if any.
+    pub text: Option<String>,
+    /// Its quality.
+    pub quality: Quality,
+}
+
+/// Statistics of the good numeric samples of one point in one time bucket.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bucket {
+    /// Start of the bucket (aligned to multiples of the step since the epoch).
+    pub t: SystemTime,
+    /// Mean of the samples in the bucket.
+    pub avg: f64,
+    /// Lowest.
+    pub min: f64,
+    /// Highest.
+    pub max: f64,
+    /// How many samples.
+    pub count: u64,
+}

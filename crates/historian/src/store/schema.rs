@@ -1,0 +1,247 @@
+//! The schema and its versioned migrations.
+//!
+//! `cellbus_schema` lists the versions applied. Each migration runs in its own transaction
+//! with its row in `cellbus_schema`, so it is applied whole or not at all. Historians that
+//! start at once serialise on a session advisory lock: the first migrates, the others then
+//! find the versions applied and run nothing.
+
+use tokio_postgres::Client;
+
+use super::StoreError;
+
+/// The newest schema version this build writes.
+pub const SCHEMA_VERSION: i32 = 1;
+
+/// The advisory lock (per database) held while migrating: "cellbus" and 1.
+const MIGRATION_LOCK: i64 = 0x6365_6c6c_6275_7301;
+
+/// The advisory lock (per database) held while creating a day partition: "cellbus" and 2.
+pub(crate) const PARTITION_LOCK: i64 = 0x6365_6c6c_6275_7302;
+
+/// How the samples are split by time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SamplesLayout {
+    /// Native range partitions of one UTC day each (`samples_2026_01_31`), created by the
+    /// store before a batch that needs them.
+    DayPartitions,
+    /// A TimescaleDB hypertable with one-day chunks, which TimescaleDB creates itself.
+    Hypertable,
+}
+
+/// One step of the schema.
+struct Migration {
+    version: i32,
+    what: &'static str,
+    statements: fn(SamplesLayout) -> Vec<&'static str>,
+}
+
+/// Every migration, oldest first. Never edit one that has shipped: add the next.
+const MIGRATIONS: &[Migration] = &[Migration {
+    version: 1,
+    what: "points, samples by day, events and the cellbus_* views",
+    statements: version_1,
+}];
+
+fn version_1(layout: SamplesLayout) -> Vec<&'static str> {
+    let samples = match layout {
+        SamplesLayout::DayPartitions => {
+            "CREATE TABLE samples (
+                point_id integer NOT NULL,
+                t timestamptz NOT NULL,
+                value double precision,
+                text text,
+                quality smallint NOT NULL,
+                PRIMARY KEY (point_id, t)
+            ) PARTITION BY RANGE (t)"
+        }
+        SamplesLayout::Hypertable => {
+            "CREATE TABLE samples (
+                point_id integer NOT NULL,
+                t timestamptz NOT NULL,
+                value double precision,
+                text text,
+                quality smallint NOT NULL,
+                PRIMARY KEY (point_id, t)
+            )"
+        }
+    };
+    let mut statements = vec![
+        "CREATE TABLE points (
+            id integer GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+            node text NOT NULL,
+            device text NOT NULL,
+            point text NOT NULL,
+            datatype text NOT NULL DEFAULT 'unknown',
+            unit text,
+            description text,
+            writable boolean NOT NULL DEFAULT false,
+            write_min double precision,
+            write_max double precision,
+            UNIQUE (node, device, point)
+        )",
+        samples,
+    ];
+    if layout == SamplesLayout::Hypertable {
+        statements.push(
+            "SELECT create_hypertable('samples', 't', chunk_time_interval => INTERVAL '1 day')",
+        );
+    }
+    statements.extend([
+        "CREATE TABLE events (
+            id bigint GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+            t timestamptz NOT NULL,
+            node text NOT NULL,
+            device text,
+            point text,
+            line text,
+            kind text NOT NULL,
+            severity integer NOT NULL,
+            message text NOT NULL
+        )",
+        // An event replayed from a backlog is the same node, device, point, time, kind and
+        // message; the message is compared by its hash (a long one would not fit a b-tree
+        // entry). NULLS NOT DISTINCT (PostgreSQL 15): an event without a device is still
+        // one event.
+        "CREATE UNIQUE INDEX events_once ON events (node, device, point, t, kind, md5(message))
+            NULLS NOT DISTINCT",
+        "CREATE INDEX events_by_time ON events (t)",
+        "CREATE VIEW cellbus_samples AS
+            SELECT p.node, p.device, p.point, s.t, s.value, s.text,
+                (CASE s.quality WHEN 0 THEN 'good' WHEN 1 THEN 'stale' ELSE 'bad' END)::text
+                    AS quality
+            FROM samples s JOIN points p ON p.id = s.point_id",
+        "CREATE VIEW cellbus_events AS
+            SELECT t, node, device, point, line, kind, severity, message FROM events",
+        "CREATE VIEW cellbus_points AS
+            SELECT node, device, point, unit, description, datatype, writable, write_min,
+                write_max
+            FROM points",
+    ]);
+    statements
+}
+
+/// Brings the schema to [`SCHEMA_VERSION`]; returns the versions it applied.
+pub(crate) async fn migrate(client: &mut Client) -> Result<Vec<i32>, StoreError> {
+    client
+        .execute("SELECT pg_advisory_lock($1)", &[&MIGRATION_LOCK])
+        .await
+        .map_err(|e| StoreError::statement("taking the migration lock", e))?;
+    let result = migrate_locked(client).await;
+    // Released with the session too, if this fails.
+    let unlocked = client
+        .execute("SELECT pg_advisory_unlock($1)", &[&MIGRATION_LOCK])
+        .await
+        .map_err(|e| StoreError::statement("releasing the migration lock", e));
+    let applied = result?;
+    unlocked?;
+    Ok(applied)
+}
+
+async fn migrate_locked(client: &mut Client) -> Result<Vec<i32>, StoreError> {
+    client
+        .batch_execute(
+            "CREATE TABLE IF NOT EXISTS cellbus_schema (
+                version integer PRIMARY KEY,
+                what text NOT NULL,
+                applied timestamptz NOT NULL DEFAULT now()
+            )",
+        )
+        .await
+        .map_err(|e| StoreError::statement("creating cellbus_schema", e))?;
+    let found: i32 = client
+        .query_one("SELECT coalesce(max(version), 0) FROM cellbus_schema", &[])
+        .await
+        .map_err(|e| StoreError::statement("reading the schema version", e))?
+        .get(0);
+    if found > SCHEMA_VERSION {
+        return Err(StoreError::SchemaTooNew {
+            found,
+            known: SCHEMA_VERSION,
+        });
+    }
+    let mut applied = Vec::new();
+    for migration in MIGRATIONS.iter().filter(|m| m.version > found) {
+        let tx = client
+            .transaction()
+            .await
+            .map_err(|e| StoreError::statement("starting a migration", e))?;
+        let layout = choose_layout(&tx).await?;
+        for statement in (migration.statements)(layout) {
+            tx.batch_execute(statement)
+                .await
+                .map_err(|e| StoreError::statement("migrating the schema", e))?;
+        }
+        tx.execute(
+            "INSERT INTO cellbus_schema (version, what) VALUES ($1, $2)",
+            &[&migration.version, &migration.what],
+        )
+        .await
+        .map_err(|e| StoreError::statement("recording a migration", e))?;
+        tx.commit()
+            .await
+            .map_err(|e| StoreError::statement("committing a migration", e))?;
+        tracing::info!(
+            version = migration.version,
+            what = migration.what,
+            ?layout,
+            "schema migrated"
+        );
+        applied.push(migration.version);
+    }
+    Ok(applied)
+}
+
+/// A hypertable when TimescaleDB is installed or can be (`CREATE EXTENSION` fails when
+/// the library is not preloaded or the user may not: then native partitions, logged).
+async fn choose_layout(tx: &tokio_postgres::Transaction<'_>) -> Result<SamplesLayout, StoreError> {
+    let available: bool = tx
+        .query_one(
+            "SELECT EXISTS (SELECT 1 FROM pg_available_extensions WHERE name = 'timescaledb')",
+            &[],
+        )
+        .await
+        .map_err(|e| StoreError::statement("looking for TimescaleDB", e))?
+        .get(0);
+    if !available {
+        return Ok(SamplesLayout::DayPartitions);
+    }
+    tx.batch_execute("SAVEPOINT timescaledb")
+        .await
+        .map_err(|e| StoreError::statement("looking for TimescaleDB", e))?;
+    match tx
+        .batch_execute("CREATE EXTENSION IF NOT EXISTS timescaledb")
+        .await
+    {
+        Ok(()) => Ok(SamplesLayout::Hypertable),
+        Err(e) => {
+            let e = StoreError::statement("creating the TimescaleDB extension", e);
+            if e.is_connection_lost() {
+                return Err(e);
+            }
+            tracing::warn!(
+                "TimescaleDB is available but cannot be used ({e}); samples go to native day partitions"
+            );
+            tx.batch_execute("ROLLBACK TO SAVEPOINT timescaledb")
+                .await
+                .map_err(|e| StoreError::statement("looking for TimescaleDB", e))?;
+            Ok(SamplesLayout::DayPartitions)
+        }
+    }
+}
+
+/// The layout of an existing `samples` table: partitioned (`relkind` p) or a hypertable.
+pub(crate) async fn layout(client: &Client) -> Result<SamplesLayout, StoreError> {
+    let kind: String = client
+        .query_one(
+            "SELECT relkind::text FROM pg_class WHERE oid = 'samples'::regclass",
+            &[],
+        )
+        .await
+        .map_err(|e| StoreError::statement("reading the samples table's kind", e))?
+        .get(0);
+    Ok(if kind == "p" {
+        SamplesLayout::DayPartitions
+    } else {
+        SamplesLayout::Hypertable
+    })
+}

@@ -1,0 +1,523 @@
+//! The historian's store against a real PostgreSQL (testkit's throwaway cluster, one per
+//! test: the restart test crashes its own).
+
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use historian::store::{SCHEMA_VERSION, SamplesLayout};
+use historian::{
+    Batch, Bucket, EventRow, PointRow, Quality, RefusalReason, SampleRow, Store, StoreError,
+    StoredSample,
+};
+use testkit::Postgres;
+use tokio_postgres::{Client, NoTls};
+
+/// 2025-03-10T00:00:00Z, in milliseconds since the epoch.
+const MIDNIGHT_MS: u64 = 20_157 * 86_400_000;
+
+fn at(ms: u64) -> SystemTime {
+    UNIX_EPOCH + Duration::from_millis(ms)
+}
+
+fn sample(device: &str, point: &str, ms: u64, value: f64) -> SampleRow {
+    SampleRow {
+        node: "cell1".into(),
+        device: device.into(),
+        point: point.into(),
+        t: at(ms),
+        value: Some(value),
+        text: None,
+        quality: Quality::Good,
+    }
+}
+
+fn temperature_point() -> PointRow {
+    PointRow {
+        node: "cell1".into(),
+        device: "jbc1".into(),
+        point: "air_temperature".into(),
+        datatype: "Double".into(),
+        unit: Some("°C".into()),
+        description: Some("Air temperature".into()),
+        writable: false,
+        write_min: None,
+        write_max: None,
+    }
+}
+
+fn event(ms: u64, message: &str) -> EventRow {
+    EventRow {
+        node: "cell1".into(),
+        device: Some("jbc1".into()),
+        point: None,
+        line: Some("bench".into()),
+        t: at(ms),
+        kind: "device_down".into(),
+        severity: 700,
+        message: message.into(),
+    }
+}
+
+/// A batch of one point's birth, `n` samples a second apart from `start_ms` and one event.
+fn batch(start_ms: u64, n: u64) -> Batch {
+    Batch {
+        points: vec![temperature_point()],
+        samples: (0..n)
+            .map(|i| {
+                sample(
+                    "jbc1",
+                    "air_temperature",
+                    start_ms + i * 1000,
+                    100.0 + i as f64,
+                )
+            })
+            .collect(),
+        events: vec![event(start_ms, "jbc1 did not answer")],
+    }
+}
+
+/// A cluster and a fresh database's URL.
+fn database() -> (Postgres, String) {
+    let pg = Postgres::start();
+    let url = pg.create_database("historian");
+    (pg, url)
+}
+
+/// A plain client for the test's own SQL.
+async fn client(url: &str) -> Client {
+    let (client, connection) = tokio_postgres::connect(url, NoTls)
+        .await
+        .expect("the test connects");
+    tokio::spawn(connection);
+    client
+}
+
+async fn column(client: &Client, sql: &str) -> Vec<String> {
+    client
+        .query(sql, &[])
+        .await
+        .unwrap_or_else(|e| panic!("{sql}: {e:?}"))
+        .iter()
+        .map(|r| r.get(0))
+        .collect()
+}
+
+#[tokio::test]
+async fn the_schema_is_created_on_first_connect_and_not_migrated_again() {
+    let (_pg, url) = database();
+    let first = Store::connect(&url).await.expect("first connect");
+    assert_eq!(first.migrated(), [SCHEMA_VERSION]);
+    assert_eq!(first.layout(), SamplesLayout::DayPartitions);
+    let second = Store::connect(&url).await.expect("second connect");
+    assert_eq!(second.migrated(), [] as [i32; 0]);
+    let sql = client(&url).await;
+    assert_eq!(
+        column(&sql, "SELECT version::text FROM cellbus_schema").await,
+        ["1"]
+    );
+}
+
+#[tokio::test]
+async fn the_views_have_exactly_the_stable_column_names_and_types() {
+    let (_pg, url) = database();
+    Store::connect(&url).await.expect("connect");
+    let sql = client(&url).await;
+    let shape = |view: &'static str| {
+        let sql = &sql;
+        async move {
+            column(
+                sql,
+                &format!(
+                    "SELECT column_name || ' ' || data_type FROM information_schema.columns \
+                     WHERE table_name = '{view}' ORDER BY ordinal_position"
+                ),
+            )
+            .await
+        }
+    };
+    assert_eq!(
+        shape("cellbus_samples").await,
+        [
+            "node text",
+            "device text",
+            "point text",
+            "t timestamp with time zone",
+            "value double precision",
+            "text text",
+            "quality text",
+        ]
+    );
+    assert_eq!(
+        shape("cellbus_events").await,
+        [
+            "t timestamp with time zone",
+            "node text",
+            "device text",
+            "point text",
+            "line text",
+            "kind text",
+            "severity integer",
+            "message text",
+        ]
+    );
+    assert_eq!(
+        shape("cellbus_points").await,
+        [
+            "node text",
+            "device text",
+            "point text",
+            "unit text",
+            "description text",
+            "datatype text",
+            "writable boolean",
+            "write_min double precision",
+            "write_max double precision",
+        ]
+    );
+}
+
+#[tokio::test]
+async fn a_batch_written_twice_stores_its_samples_and_events_once() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let batch = batch(MIDNIGHT_MS + 3_600_000, 100);
+    let first = store.write(&batch).await.expect("first write");
+    assert_eq!(
+        (
+            first.points,
+            first.samples,
+            first.duplicate_samples,
+            first.events
+        ),
+        (1, 100, 0, 1)
+    );
+    let again = store.write(&batch).await.expect("second write");
+    assert_eq!(
+        (
+            again.samples,
+            again.duplicate_samples,
+            again.events,
+            again.duplicate_events
+        ),
+        (0, 100, 0, 1)
+    );
+    assert_eq!(store.count_samples().await.expect("count"), 100);
+    let sql = client(&url).await;
+    assert_eq!(
+        column(&sql, "SELECT count(*)::text FROM cellbus_events").await,
+        ["1"]
+    );
+}
+
+#[tokio::test]
+async fn samples_across_midnight_land_in_two_day_partitions() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    // 10 samples a second apart, 5 before midnight and 5 from it.
+    let written = store
+        .write(&batch(MIDNIGHT_MS - 5_000, 10))
+        .await
+        .expect("write");
+    assert_eq!(written.samples, 10);
+    let sql = client(&url).await;
+    assert_eq!(
+        column(
+            &sql,
+            "SELECT format('%s %s', tableoid::regclass, count(*)) FROM samples \
+             GROUP BY tableoid ORDER BY 1"
+        )
+        .await,
+        ["samples_2025_03_09 5", "samples_2025_03_10 5"]
+    );
+}
+
+#[tokio::test]
+async fn two_stores_creating_the_same_day_partitions_at_once_both_write() {
+    let (_pg, url) = database();
+    let mut a = Store::connect(&url).await.expect("connect a");
+    let mut b = Store::connect(&url).await.expect("connect b");
+    // Three days each, the same days, different points.
+    let spread = |device: &str| Batch {
+        samples: (0..3)
+            .map(|day| sample(device, "p", MIDNIGHT_MS + day * 86_400_000, 1.0))
+            .collect(),
+        ..Batch::default()
+    };
+    let (batch_a, batch_b) = (spread("a"), spread("b"));
+    let (wa, wb) = tokio::join!(a.write(&batch_a), b.write(&batch_b));
+    assert_eq!(wa.expect("a writes").samples, 3);
+    assert_eq!(wb.expect("b writes").samples, 3);
+    assert_eq!(a.count_samples().await.expect("count"), 6);
+}
+
+#[tokio::test]
+async fn samples_too_old_or_far_in_the_future_are_refused_and_counted() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let future = SystemTime::now() + Duration::from_secs(2 * 86_400);
+    let future_ms = future
+        .duration_since(UNIX_EPOCH)
+        .expect("after 1970")
+        .as_millis() as u64;
+    let batch = Batch {
+        samples: vec![
+            sample("jbc1", "future", future_ms, 1.0),
+            sample("jbc1", "ok", MIDNIGHT_MS, 2.0),
+            sample("jbc1", "old", 1000, 3.0),
+        ],
+        ..Batch::default()
+    };
+    let written = store.write(&batch).await.expect("write");
+    assert_eq!((written.samples, written.refused_samples), (1, 2));
+    let refusal = written.first_refusal.expect("a refusal");
+    assert_eq!(refusal.reason, RefusalReason::TooFarAhead);
+    assert_eq!(refusal.row, "sample cell1/jbc1.future");
+    assert_eq!(store.count_samples().await.expect("count"), 1);
+    let names: Vec<String> = store
+        .points()
+        .await
+        .expect("points")
+        .into_iter()
+        .map(|p| p.point)
+        .collect();
+    assert_eq!(names, ["ok"], "no point row for refused samples");
+}
+
+#[tokio::test]
+async fn raw_and_buckets_answer_what_was_written() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let start = MIDNIGHT_MS + 7_200_000;
+    let mut batch = batch(start, 120);
+    // A stale and a bad sample, left out of the buckets.
+    batch.samples[10].quality = Quality::Stale;
+    batch.samples[20].quality = Quality::Bad;
+    batch.samples[20].value = None;
+    // A text point and another point's sample, which raw must not return.
+    batch.samples.push(SampleRow {
+        text: Some("Sealing".into()),
+        value: None,
+        ..sample("jbc1", "state", start, 0.0)
+    });
+    batch
+        .samples
+        .push(sample("jbc2", "air_temperature", start, 999.0));
+    store.write(&batch).await.expect("write");
+
+    let (from, to) = (at(start + 5_000), at(start + 65_000));
+    let raw = store
+        .raw("cell1", "jbc1", "air_temperature", from, to, 1000)
+        .await
+        .expect("raw");
+    let expected: Vec<StoredSample> = batch.samples[5..65]
+        .iter()
+        .map(|s| StoredSample {
+            t: s.t,
+            value: s.value,
+            text: None,
+            quality: s.quality,
+        })
+        .collect();
+    assert_eq!(raw, expected);
+    let limited = store
+        .raw("cell1", "jbc1", "air_temperature", from, to, 3)
+        .await
+        .expect("raw with a limit");
+    assert_eq!(limited, expected[..3]);
+    let before = store
+        .last_before("cell1", "jbc1", "air_temperature", from)
+        .await
+        .expect("before");
+    assert_eq!(before.map(|s| s.t), Some(at(start + 4_000)));
+    let text = store
+        .raw("cell1", "jbc1", "state", at(start), to, 10)
+        .await
+        .expect("text");
+    assert_eq!(text[0].text.as_deref(), Some("Sealing"));
+
+    // 30 s buckets over the first two minutes: good numeric samples only.
+    let buckets = store
+        .buckets(
+            "cell1",
+            "jbc1",
+            "air_temperature",
+            at(start),
+            at(start + 120_000),
+            Duration::from_secs(30),
+        )
+        .await
+        .expect("buckets");
+    let expected: Vec<Bucket> = (0..4u64)
+        .map(|b| {
+            let values: Vec<f64> = (b * 30..b * 30 + 30)
+                .filter(|i| *i != 10 && *i != 20)
+                .map(|i| 100.0 + i as f64)
+                .collect();
+            Bucket {
+                t: at(start + b * 30_000),
+                avg: values.iter().sum::<f64>() / values.len() as f64,
+                min: values[0],
+                max: values[values.len() - 1],
+                count: values.len() as u64,
+            }
+        })
+        .collect();
+    assert_eq!(buckets, expected);
+
+    let sql = client(&url).await;
+    assert_eq!(
+        column(
+            &sql,
+            "SELECT format('%s %s', quality, count(*)) FROM cellbus_samples \
+             WHERE point = 'air_temperature' AND device = 'jbc1' GROUP BY quality ORDER BY 1"
+        )
+        .await,
+        ["bad 1", "good 118", "stale 1"]
+    );
+    let events = store
+        .events(at(start), at(start + 1), 10)
+        .await
+        .expect("events");
+    assert_eq!(events, batch.events);
+}
+
+#[tokio::test]
+async fn a_birth_after_samples_fills_the_bare_point_in() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let early = Batch {
+        samples: vec![sample("jbc1", "air_temperature", MIDNIGHT_MS, 1.0)],
+        ..Batch::default()
+    };
+    let written = store.write(&early).await.expect("samples first");
+    assert_eq!((written.bare_points, written.samples), (1, 1));
+    let bare = store.points().await.expect("points");
+    assert_eq!(bare, [PointRow::bare("cell1", "jbc1", "air_temperature")]);
+
+    let mut birth = temperature_point();
+    birth.writable = true;
+    birth.write_min = Some(100.0);
+    birth.write_max = Some(450.0);
+    let written = store
+        .write(&Batch {
+            points: vec![birth.clone()],
+            ..Batch::default()
+        })
+        .await
+        .expect("birth");
+    assert_eq!(written.points, 1);
+    assert_eq!(store.points().await.expect("points"), [birth]);
+    // The same id: the early sample belongs to the described point.
+    let reconnected = Store::connect(&url).await.expect("reconnect");
+    assert_eq!(reconnected.count_samples().await.expect("count"), 1);
+    let raw = reconnected
+        .raw(
+            "cell1",
+            "jbc1",
+            "air_temperature",
+            at(0),
+            at(MIDNIGHT_MS + 1),
+            10,
+        )
+        .await
+        .expect("raw");
+    assert_eq!(raw.len(), 1);
+}
+
+#[tokio::test]
+async fn after_a_postgres_restart_the_connection_is_lost_and_a_new_store_writes_the_batch_once() {
+    let (mut pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let first = batch(MIDNIGHT_MS, 50);
+    store.write(&first).await.expect("before the restart");
+
+    pg.restart();
+    let both = Batch {
+        // The first batch's samples again (a replay), and 50 new ones.
+        samples: batch(MIDNIGHT_MS, 100).samples,
+        ..Batch::default()
+    };
+    let err = store
+        .write(&both)
+        .await
+        .expect_err("the old connection is gone");
+    assert!(err.is_connection_lost(), "{err}");
+    assert!(matches!(err, StoreError::ConnectionLost { .. }), "{err:?}");
+
+    let mut fresh = Store::connect(&url).await.expect("reconnect");
+    assert_eq!(fresh.migrated(), [] as [i32; 0]);
+    let written = fresh.write(&both).await.expect("the retried batch");
+    assert_eq!((written.samples, written.duplicate_samples), (50, 50));
+    assert_eq!(fresh.count_samples().await.expect("count"), 100);
+}
+
+#[tokio::test]
+async fn two_stores_migrating_at_once_both_succeed() {
+    let (_pg, url) = database();
+    let (a, b, c) = tokio::join!(
+        Store::connect(&url),
+        Store::connect(&url),
+        Store::connect(&url)
+    );
+    let stores = [a.expect("a"), b.expect("b"), c.expect("c")];
+    let applied: Vec<&[i32]> = stores.iter().map(Store::migrated).collect();
+    assert_eq!(
+        applied.iter().filter(|m| !m.is_empty()).count(),
+        1,
+        "one migrates, the others find it done: {applied:?}"
+    );
+    let sql = client(&url).await;
+    assert_eq!(
+        column(&sql, "SELECT count(*)::text FROM cellbus_schema").await,
+        ["1"]
+    );
+}
+
+#[tokio::test]
+async fn connecting_to_nothing_is_transient_and_to_a_missing_database_is_not() {
+    let pg = Postgres::start();
+    let missing = Store::connect(&pg.url_for("no_such_db"))
+        .await
+        .expect_err("no such database");
+    assert!(!missing.is_connection_lost(), "{missing}");
+    assert!(missing.to_string().contains("3D000"), "{missing}");
+    let port = pg.port();
+    drop(pg);
+    let refused = Store::connect(&format!("postgres://cellbus@127.0.0.1:{port}/postgres"))
+        .await
+        .expect_err("nothing listens");
+    assert!(refused.is_connection_lost(), "{refused}");
+    let bad = Store::connect("postgres://[").await.expect_err("bad url");
+    assert!(matches!(bad, StoreError::BadUrl { .. }), "{bad:?}");
+}
+
+#[tokio::test]
+async fn queries_with_times_beyond_the_calendar_answer_instead_of_panicking() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    store.write(&batch(MIDNIGHT_MS, 3)).await.expect("write");
+    let far = at(u64::MAX / 4);
+    let raw = store
+        .raw("cell1", "jbc1", "air_temperature", UNIX_EPOCH, far, 10)
+        .await
+        .expect("raw up to the far future");
+    assert_eq!(raw.len(), 3);
+    let before = store
+        .last_before("cell1", "jbc1", "air_temperature", far)
+        .await
+        .expect("before the far future");
+    assert_eq!(before.map(|s| s.t), Some(at(MIDNIGHT_MS + 2_000)));
+    let buckets = store
+        .buckets(
+            "cell1",
+            "jbc1",
+            "air_temperature",
+            UNIX_EPOCH,
+            far,
+            Duration::MAX,
+        )
+        .await
+        .expect("one huge bucket");
+    assert_eq!(buckets.iter().map(|b| b.count).sum::<u64>(), 3);
+    let events = store.events(UNIX_EPOCH, far, 10).await.expect("events");
+    assert_eq!(events.len(), 1);
+}
