@@ -521,3 +521,27 @@ async fn queries_with_times_beyond_the_calendar_answer_instead_of_panicking() {
     let events = store.events(UNIX_EPOCH, far, 10).await.expect("events");
     assert_eq!(events.len(), 1);
 }
+
+#[tokio::test]
+async fn two_stores_declaring_the_same_points_in_opposite_orders_both_commit() {
+    let (_pg, url) = database();
+    let mut a = Store::connect(&url).await.expect("connect a");
+    let mut b = Store::connect(&url).await.expect("connect b");
+    let points: Vec<PointRow> = (0..2_000)
+        .map(|i| PointRow::bare("cell1", "dev", &format!("p{i:04}")))
+        .collect();
+    let forward = Batch {
+        points: points.clone(),
+        ..Batch::default()
+    };
+    let backward = Batch {
+        points: points.into_iter().rev().collect(),
+        ..Batch::default()
+    };
+    for round in 0..5 {
+        let (wa, wb) = tokio::join!(a.write(&forward), b.write(&backward));
+        assert_eq!(wa.expect("a commits").points, 2_000, "round {round}");
+        assert_eq!(wb.expect("b commits").points, 2_000, "round {round}");
+    }
+    assert_eq!(a.points().await.expect("points").len(), 2_000);
+}

@@ -79,6 +79,19 @@ impl StoreError {
         }
     }
 
+    /// Whether writing the same batch again may succeed: the connection is lost (connect
+    /// first), or the server gave up on the transaction for a reason that passes
+    /// (SQLSTATE 40001 serialization failure, 40P01 deadlock, 55P03 lock not available,
+    /// 53xxx insufficient resources such as a full disk).
+    pub fn is_retryable(&self) -> bool {
+        match self {
+            StoreError::Refused {
+                code: Some(code), ..
+            } => matches!(code.as_str(), "40001" | "40P01" | "55P03") || code.starts_with("53"),
+            _ => self.is_connection_lost(),
+        }
+    }
+
     /// Whether the server refused the data itself (SQLSTATE class 22, data exception, or
     /// 23, integrity constraint violation): retrying the same batch will fail again.
     pub fn is_bad_data(&self) -> bool {

@@ -356,6 +356,9 @@ impl<'a> Accepted<'a> {
                 }
             }
         }
+        // In one order everywhere, so two historians upserting the same points lock their
+        // rows in the same order and cannot deadlock.
+        points.sort_by(|a, b| (&a.node, &a.device, &a.point).cmp(&(&b.node, &b.device, &b.point)));
         let mut samples = Vec::with_capacity(batch.samples.len());
         for s in &batch.samples {
             let verdict = if [&s.node, &s.device, &s.point].iter().any(|t| has_nul(t))
@@ -454,6 +457,7 @@ fn missing_points<'a>(
             missing.push((s.node.as_str(), s.device.as_str(), s.point.as_str()));
         }
     }
+    missing.sort_unstable(); // One lock order for every historian (see `Accepted::sort`).
     missing
 }
 
