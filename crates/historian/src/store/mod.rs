@@ -222,9 +222,9 @@ impl Store {
         } else {
             0
         };
-        written.duplicate_samples = staged - written.samples;
+        written.duplicate_samples = staged.saturating_sub(written.samples);
         written.events = insert_events(&tx, &self.statements, &accepted.events).await?;
-        written.duplicate_events = accepted.events.len() as u64 - written.events;
+        written.duplicate_events = (accepted.events.len() as u64).saturating_sub(written.events);
         tx.commit()
             .await
             .map_err(|e| StoreError::statement("committing the batch", e))?;
