@@ -11,7 +11,7 @@
 //! - **Births** (NBIRTH, DBIRTH) describe the points ([`PointInfo`]: datatype, unit,
 //!   description, write range) and give their current values as samples. An NBIRTH
 //!   forgets the node's devices (they are born again after it). `bdSeq`,
-//!   `Node Control/*` and the [`EVENT`](crate::event::EVENT) metric are not points.
+//!   `Node Control/*` and the [`EVENT`] metric are not points.
 //!   A metric of a datatype this crate does not read (DataSet, Template, arrays) is
 //!   reported once at its birth and its data is ignored.
 //! - **Data** (NDATA, DDATA) by alias or name become samples of the born points;

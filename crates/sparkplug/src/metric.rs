@@ -650,26 +650,26 @@ pub(crate) mod read {
 
     /// A Boolean property.
     pub(crate) fn boolean(set: Option<&PropertySet>, key: &str) -> Option<bool> {
-        match property(set, key)? {
-            &Value::BooleanValue(b) => Some(b),
+        match *property(set, key)? {
+            Value::BooleanValue(b) => Some(b),
             _ => None,
         }
     }
 
     /// A Double or Float property.
     pub(crate) fn number(set: Option<&PropertySet>, key: &str) -> Option<f64> {
-        match property(set, key)? {
-            &Value::DoubleValue(d) => Some(d),
-            &Value::FloatValue(f) => Some(f.into()),
+        match *property(set, key)? {
+            Value::DoubleValue(d) => Some(d),
+            Value::FloatValue(f) => Some(f.into()),
             _ => None,
         }
     }
 
     /// An unsigned integer property that fits 32 bits (UInt8–32, or a 64-bit one).
     pub(crate) fn uint32(set: Option<&PropertySet>, key: &str) -> Option<u32> {
-        match property(set, key)? {
-            &Value::IntValue(n) => Some(n),
-            &Value::LongValue(n) => u32::try_from(n).ok(),
+        match *property(set, key)? {
+            Value::IntValue(n) => Some(n),
+            Value::LongValue(n) => u32::try_from(n).ok(),
             _ => None,
         }
     }

@@ -478,7 +478,7 @@ impl EdgeNode {
         Ok(self.message(self.device_topic(MessageKind::Death, device), vec![], now))
     }
 
-    /// An NDATA carrying `event` as the node's [`EVENT`](crate::event::EVENT) metric
+    /// An NDATA carrying `event` as the node's [`EVENT`] metric
     /// (see [`crate::event`]); the NBIRTH must have described that metric
     /// ([`crate::event::spec`]). Every event is sent, equal or not to the one before.
     pub fn node_event(&mut self, event: &NodeEvent, now: Timestamp) -> Result<Publish, NodeError> {
