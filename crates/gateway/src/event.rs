@@ -93,6 +93,37 @@ impl EventKind {
         }
     }
 
+    /// How grave an event of this kind is, 1 to 1000 (OPC UA's scale): the severity of
+    /// OPC UA events and of the `severity` property of Sparkplug events.
+    ///
+    /// | kind | severity |
+    /// |---|---|
+    /// | alarm_raised, device_down, line_down, history_failed | 700 |
+    /// | history_reset | 600 |
+    /// | state_changed (a transfer, a machine's state), line_reopened, mqtt_disconnected | 500 |
+    /// | device_event (an R message) | 400 |
+    /// | alarm_cleared, device_up, line_up, history_recovered | 300 |
+    /// | write, gateway_started, gateway_stopped, mqtt_connected | 200 |
+    pub fn severity(self) -> u16 {
+        match self {
+            EventKind::AlarmRaised
+            | EventKind::DeviceDown
+            | EventKind::LineDown
+            | EventKind::HistoryFailed => 700,
+            EventKind::HistoryReset => 600,
+            EventKind::StateChanged | EventKind::LineReopened | EventKind::MqttDisconnected => 500,
+            EventKind::DeviceEvent => 400,
+            EventKind::AlarmCleared
+            | EventKind::DeviceUp
+            | EventKind::LineUp
+            | EventKind::HistoryRecovered => 300,
+            EventKind::Write
+            | EventKind::GatewayStarted
+            | EventKind::GatewayStopped
+            | EventKind::MqttConnected => 200,
+        }
+    }
+
     /// The kind for a stored name.
     pub fn parse(text: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|k| k.as_str() == text)
@@ -127,5 +158,24 @@ impl Event {
             point: None,
             message,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_event_kind_has_a_severity_alarms_above_transfers_above_clears_above_writes() {
+        for kind in EventKind::ALL {
+            assert!((1..=1000).contains(&kind.severity()), "{kind:?}");
+        }
+        assert_eq!(EventKind::AlarmRaised.severity(), 700);
+        assert_eq!(EventKind::DeviceDown.severity(), 700);
+        assert_eq!(EventKind::StateChanged.severity(), 500);
+        assert_eq!(EventKind::DeviceEvent.severity(), 400);
+        assert_eq!(EventKind::AlarmCleared.severity(), 300);
+        assert_eq!(EventKind::DeviceUp.severity(), 300);
+        assert_eq!(EventKind::Write.severity(), 200);
     }
 }

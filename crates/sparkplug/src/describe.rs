@@ -11,7 +11,12 @@
 //! Aliases: an NBIRTH or DBIRTH records alias → (name, datatype) for its node or device
 //! (an NBIRTH also forgets the node's devices: they are born again after it). NDATA,
 //! DDATA, NCMD and DCMD metrics that carry only an alias get their name and datatype
-//! from there, when that birth was seen.
+//! from there, when that birth was seen; a metric named without a datatype gets the
+//! birth's datatype.
+//!
+//! Properties: a birth's metric shows its unit, writability and documentation in words;
+//! a data metric shows every property other than `Quality` as `key=value` (a gateway
+//! event's `kind`, `severity`, `device`, …, see [`crate::event`]). JSON shows them all.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -20,8 +25,10 @@ use prost::Message as _;
 use serde::Serialize;
 use serde::ser::{SerializeMap, Serializer};
 
+use crate::births::Table;
 use crate::metric::{
-    DOCUMENTATION, DataType, ENG_UNIT, MetricValue, Quality, WRITABLE, WRITE_MAX, WRITE_MIN,
+    DOCUMENTATION, DataType, ENG_UNIT, MetricValue, QUALITY, Quality, WRITABLE, WRITE_MAX,
+    WRITE_MIN,
 };
 use crate::proto::{Metric, Payload, PropertySet, PropertyValue, metric, property_value};
 use crate::topic::{Id, MessageKind, NAMESPACE, Topic};
@@ -158,7 +165,7 @@ pub enum Value {
 /// Turns received messages into [`Description`]s, remembering the births seen.
 #[derive(Debug, Default)]
 pub struct Describer {
-    births: HashMap<Owner, HashMap<u64, Known>>,
+    births: HashMap<Owner, Table<()>>,
 }
 
 /// A node (`device: None`) or one of its devices.
@@ -167,12 +174,6 @@ struct Owner {
     group: Id,
     edge_node: Id,
     device: Option<Id>,
-}
-
-#[derive(Debug, Clone)]
-struct Known {
-    name: String,
-    datatype: Option<u32>,
 }
 
 impl Describer {
@@ -264,22 +265,13 @@ impl Describer {
             self.births
                 .retain(|o, _| o.group != owner.group || o.edge_node != owner.edge_node);
         }
-        let table = metrics
-            .iter()
-            .filter_map(|m| {
-                let known = Known {
-                    name: m.name.clone()?,
-                    datatype: m.datatype,
-                };
-                Some((m.alias?, known))
-            })
-            .collect();
-        self.births.insert(owner.clone(), table);
+        self.births
+            .insert(owner.clone(), Table::of_birth(metrics, |_, _| ()));
     }
 }
 
-fn describe_metric(m: &Metric, known: Option<&HashMap<u64, Known>>) -> MetricDescription {
-    let from_birth = m.alias.and_then(|alias| known?.get(&alias));
+fn describe_metric(m: &Metric, known: Option<&Table<()>>) -> MetricDescription {
+    let from_birth = known.and_then(|table| table.lookup(m));
     let resolved = m.name.is_none() && from_birth.is_some();
     let name = m
         .name
@@ -545,7 +537,8 @@ impl MetricDescription {
     }
 
     /// The metric on one line: label, datatype, value, quality, `historical`, time, and
-    /// for a birth its unit and whether it is writable (and within what).
+    /// for a birth its unit and whether it is writable (and within what); for data, its
+    /// properties other than `Quality` as `key=value` (JSON values).
     pub fn to_text(&self, birth: bool) -> String {
         let mut line = self.label();
         let datatype = match (self.datatype, &self.value) {
@@ -585,6 +578,10 @@ impl MetricDescription {
             }
             if let Some(doc) = self.property(DOCUMENTATION).and_then(|d| d.as_str()) {
                 let _ = write!(line, " {doc:?}");
+            }
+        } else {
+            for (key, value) in self.properties.iter().filter(|(k, _)| k != QUALITY) {
+                let _ = write!(line, " {key}={value}");
             }
         }
         line

@@ -10,12 +10,19 @@
 //! - [`node`][]: [`EdgeNode`], the edge node's state machine: Will, births, data,
 //!   deaths, `seq` and `bdSeq`, aliases, commands.
 //! - [`state`][]: a host application's STATE JSON.
+//! - [`host`][]: [`Host`], a host application's state machine: subscriptions, STATE,
+//!   births, data by alias, deaths, `seq` gaps and Rebirth requests, turned into points,
+//!   samples and events to record.
+//! - [`event`][]: a gateway's events as the node metric `Event` (cellbus's convention).
 //! - [`describe`][]: what a received message says, in words or JSON, with data
 //!   messages' aliases resolved against the births seen ([`Describer`]).
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+mod births;
 pub mod describe;
+pub mod event;
+pub mod host;
 pub mod metric;
 pub mod node;
 pub mod proto;
@@ -23,6 +30,11 @@ pub mod state;
 pub mod topic;
 
 pub use describe::{Describer, Description};
+pub use event::NodeEvent;
+pub use host::{
+    Host, HostEvent, HostProblem, HostSample, PointInfo, PointKey, Problem, Received, SampleValue,
+    Sharing, Stats, Subscription,
+};
 pub use metric::{
     DataType, MetricName, MetricSpec, MetricValue, Quality, Reading, Sample, Timestamp, ValueError,
     Writable, WriteRange,

@@ -620,16 +620,74 @@ impl Properties {
         p
     }
 
-    fn into_option(self) -> Option<PropertySet> {
+    pub(crate) fn into_option(self) -> Option<PropertySet> {
         (!self.0.keys.is_empty()).then_some(self.0)
     }
 }
 
-fn string_property(s: &str) -> PropertyValue {
+/// Typed reads of a received metric's properties: `None` when the property is absent,
+/// null, or of another kind.
+pub(crate) mod read {
+    use crate::proto::{PropertySet, property_value::Value};
+
+    fn property<'s>(set: Option<&'s PropertySet>, key: &str) -> Option<&'s Value> {
+        let set = set?;
+        let i = set.keys.iter().position(|k| k == key)?;
+        let value = set.values.get(i)?;
+        if value.is_null == Some(true) {
+            return None;
+        }
+        value.value.as_ref()
+    }
+
+    /// A String or Text property.
+    pub(crate) fn string(set: Option<&PropertySet>, key: &str) -> Option<String> {
+        match property(set, key)? {
+            Value::StringValue(s) => Some(s.clone()),
+            _ => None,
+        }
+    }
+
+    /// A Boolean property.
+    pub(crate) fn boolean(set: Option<&PropertySet>, key: &str) -> Option<bool> {
+        match *property(set, key)? {
+            Value::BooleanValue(b) => Some(b),
+            _ => None,
+        }
+    }
+
+    /// A Double or Float property.
+    pub(crate) fn number(set: Option<&PropertySet>, key: &str) -> Option<f64> {
+        match *property(set, key)? {
+            Value::DoubleValue(d) => Some(d),
+            Value::FloatValue(f) => Some(f.into()),
+            _ => None,
+        }
+    }
+
+    /// An unsigned integer property that fits 32 bits (UInt8–32, or a 64-bit one).
+    pub(crate) fn uint32(set: Option<&PropertySet>, key: &str) -> Option<u32> {
+        match *property(set, key)? {
+            Value::IntValue(n) => Some(n),
+            Value::LongValue(n) => u32::try_from(n).ok(),
+            _ => None,
+        }
+    }
+}
+
+pub(crate) fn string_property(s: &str) -> PropertyValue {
     PropertyValue {
         r#type: Some(DataType::String.code()),
         is_null: None,
         value: Some(property_value::Value::StringValue(s.to_owned())),
+    }
+}
+
+pub(crate) fn uint32_property(n: u32) -> PropertyValue {
+    PropertyValue {
+        r#type: Some(DataType::UInt32.code()),
+        is_null: None,
+        value: Some(property_value::Value::IntValue(n)),
     }
 }
 

@@ -13,7 +13,8 @@
 //!    then [`EdgeNode::device_birth`] for each device.
 //! 5. [`EdgeNode::node_data`], [`EdgeNode::device_data`], [`EdgeNode::device_death`];
 //!    [`EdgeNode::handle_command`] for what arrives on [`EdgeNode::command_filters`].
-//!    A [`Command::Rebirth`] means: steps 4 again.
+//!    A [`Command::Rebirth`] means: steps 4 again. [`EdgeNode::node_event`] publishes a
+//!    gateway event as an NDATA ([`crate::event`]).
 //!
 //! Rules kept here:
 //! - `seq` is one counter for all the node's messages (NBIRTH, NDATA, DBIRTH, DDATA,
@@ -34,6 +35,7 @@ use std::collections::{BTreeMap, HashMap};
 
 use prost::Message as _;
 
+use crate::event::{EVENT, NodeEvent};
 use crate::metric::{
     DataType, MetricName, MetricSpec, MetricValue, Quality, Reading, Sample, Timestamp, ValueError,
     Writable, birth_metric, data_metric,
@@ -476,6 +478,23 @@ impl EdgeNode {
         Ok(self.message(self.device_topic(MessageKind::Death, device), vec![], now))
     }
 
+    /// An NDATA carrying `event` as the node's [`EVENT`] metric
+    /// (see [`crate::event`]); the NBIRTH must have described that metric
+    /// ([`crate::event::spec`]). Every event is sent, equal or not to the one before.
+    pub fn node_event(&mut self, event: &NodeEvent, now: Timestamp) -> Result<Publish, NodeError> {
+        self.born()?;
+        let table = self.node.as_ref().ok_or(NodeError::NodeNotBorn)?;
+        let alias = MetricName::new(EVENT)
+            .ok()
+            .and_then(|n| table.by_name.get(&n).copied())
+            .ok_or_else(|| NodeError::UnknownMetric {
+                device: None,
+                name: EVENT.to_owned(),
+            })?;
+        let metrics = vec![crate::event::metric(alias, event)];
+        Ok(self.message(self.node_topic(MessageKind::Data), metrics, now))
+    }
+
     /// Reads an NCMD or DCMD for this node. Every metric is checked against the birth
     /// (alias or name, type, writability, range) before anything is returned: one bad
     /// metric refuses the whole command. `Node Control/Rebirth` set to false is no
@@ -645,6 +664,36 @@ impl EdgeNode {
             edge_node: self.edge_node.clone(),
             device: device.clone(),
         }
+    }
+}
+
+/// The NCMD payload a host sends to ask a node for its births again: the metric
+/// `Node Control/Rebirth` (Boolean) set to true, timestamped `now`.
+pub fn rebirth_payload(now: Timestamp) -> Vec<u8> {
+    Payload {
+        timestamp: Some(now.as_millis()),
+        metrics: vec![Metric {
+            name: Some(REBIRTH.to_owned()),
+            datatype: Some(DataType::Boolean.code()),
+            value: Some(metric::Value::BooleanValue(true)),
+            ..Metric::default()
+        }],
+        ..Payload::default()
+    }
+    .encode_to_vec()
+}
+
+/// The NCMD that asks `edge_node` of `group` for a rebirth: QoS 0, not retained.
+pub fn rebirth_request(group: &Id, edge_node: &Id, now: Timestamp) -> Publish {
+    Publish {
+        topic: Topic::Node {
+            group: group.clone(),
+            kind: MessageKind::Command,
+            edge_node: edge_node.clone(),
+        },
+        payload: rebirth_payload(now),
+        qos: Qos::AtMostOnce,
+        retain: false,
     }
 }
 

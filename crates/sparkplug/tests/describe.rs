@@ -412,3 +412,40 @@ fn iso_time_is_utc_with_milliseconds() {
     );
     assert_eq!(iso_time(4_102_444_799_000), "2099-12-31T23:59:59.000Z");
 }
+
+#[test]
+fn an_event_shows_its_message_and_properties_in_words() {
+    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+    node.on_connect();
+    let nbirth = node
+        .node_birth(
+            &[(
+                sparkplug::event::spec(),
+                Sample::good(MetricValue::String(String::new()), T0),
+            )],
+            T0,
+        )
+        .unwrap();
+    let event = sparkplug::NodeEvent {
+        t: at(250),
+        kind: "alarm_raised".into(),
+        severity: 700,
+        message: "jbc: tool error".into(),
+        line: None,
+        device: Some("jbc".into()),
+        point: Some("error".into()),
+    };
+    let ndata = node.node_event(&event, at(300)).unwrap();
+    let mut describer = Describer::new();
+    describe(&mut describer, &nbirth);
+    let text = describe(&mut describer, &ndata).to_text();
+    let line = text.lines().nth(1).unwrap();
+    assert!(
+        line.starts_with("  Event (alias ")
+            && line.ends_with(
+                ": String \"jbc: tool error\" at 2025-11-24T16:00:00.250Z \
+                 kind=\"alarm_raised\" severity=700 device=\"jbc\" point=\"error\""
+            ),
+        "{text}"
+    );
+}

@@ -6,8 +6,8 @@ use sparkplug::node::{BD_SEQ, REBIRTH};
 use sparkplug::proto::{Metric, Payload, metric::Value};
 use sparkplug::{
     BdSeq, Command, CommandError, DataType, Delivery, EdgeNode, Id, MetricName, MetricSpec,
-    MetricValue, NodeError, Publish, Qos, Quality, Sample, Timestamp, ValueError, Writable,
-    WriteRange,
+    MetricValue, NodeError, NodeEvent, Publish, Qos, Quality, Sample, Timestamp, ValueError,
+    Writable, WriteRange,
 };
 
 const T0: Timestamp = Timestamp::from_millis(1_764_000_000_000);
@@ -723,4 +723,76 @@ proptest::proptest! {
         let _ = node.handle_command("spBv1.0/cell/DCMD/gw1/jbc", &bytes);
         let _ = node.handle_command("spBv1.0/cell/NCMD/gw1", &bytes);
     }
+}
+
+fn device_down_event() -> NodeEvent {
+    NodeEvent {
+        t: at(250),
+        kind: "device_down".into(),
+        severity: 700,
+        message: "jbc: no answer".into(),
+        line: Some("line1".into()),
+        device: Some("jbc".into()),
+        point: None,
+    }
+}
+
+#[test]
+fn an_event_is_an_ndata_of_the_event_metric_by_alias_with_its_properties_and_time() {
+    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
+    node.on_connect();
+    let birth = node
+        .node_birth(
+            &[(
+                sparkplug::event::spec(),
+                Sample::good(MetricValue::String(String::new()), T0),
+            )],
+            T0,
+        )
+        .unwrap();
+    let event_alias = alias_of(&decode(&birth), sparkplug::event::EVENT);
+    assert_eq!(
+        by_name(&decode(&birth), sparkplug::event::EVENT).datatype,
+        Some(DataType::String.code())
+    );
+
+    let published = node.node_event(&device_down_event(), at(300)).unwrap();
+    assert_eq!(published.topic.to_string(), "spBv1.0/cell/NDATA/gw1");
+    let payload = decode(&published);
+    assert_eq!(payload.seq, Some(1), "an event counts in seq");
+    let [m] = &payload.metrics[..] else {
+        panic!("one metric: {payload:?}")
+    };
+    assert_eq!((m.name.as_deref(), m.alias), (None, Some(event_alias)));
+    assert_eq!(m.timestamp, Some(at(250).as_millis()), "the event's time");
+    assert_eq!(m.value, Some(Value::StringValue("jbc: no answer".into())));
+    let properties = m.properties.as_ref().unwrap();
+    assert_eq!(properties.keys, ["kind", "severity", "line", "device"]);
+    assert_eq!(
+        properties.values[1].r#type,
+        Some(DataType::UInt32.code()),
+        "severity is a UInt32"
+    );
+
+    // The same event again is published again: events are not changes.
+    let again = decode(&node.node_event(&device_down_event(), at(301)).unwrap());
+    assert_eq!(again.metrics.len(), 1);
+}
+
+#[test]
+fn an_event_needs_the_event_metric_in_the_nbirth() {
+    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
+    node.on_connect();
+    assert_eq!(
+        node.node_event(&device_down_event(), T0),
+        Err(NodeError::NodeNotBorn)
+    );
+    node.node_birth(&[], T0).unwrap();
+    assert_eq!(
+        node.node_event(&device_down_event(), T0),
+        Err(NodeError::UnknownMetric {
+            device: None,
+            name: "Event".into()
+        })
+    );
 }

@@ -63,13 +63,10 @@ pub fn command_payload(metric: &str, datatype: sparkplug::DataType, value: Value
     .encode_to_vec()
 }
 
-/// An NCMD payload that asks a node for its births again (`Node Control/Rebirth` = true).
+/// An NCMD payload that asks a node for its births again (`Node Control/Rebirth` = true),
+/// as a host application builds it ([`sparkplug::node::rebirth_payload`]).
 pub fn rebirth_command() -> Vec<u8> {
-    command_payload(
-        "Node Control/Rebirth",
-        sparkplug::DataType::Boolean,
-        Value::BooleanValue(true),
-    )
+    sparkplug::node::rebirth_payload(sparkplug::Timestamp::from_millis(0))
 }
 
 enum Incoming {

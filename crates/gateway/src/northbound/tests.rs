@@ -115,6 +115,82 @@ async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answe
         .await;
 }
 
+/// A message as received, in its encoded form again, read by a Sparkplug host.
+fn host_reads(host: &mut sparkplug::Host, m: &SparkplugMessage) -> sparkplug::Received {
+    use prost::Message as _;
+    let now = sparkplug::Timestamp::from_millis(now_ms());
+    host.receive(&m.topic, &m.payload.encode_to_vec(), now)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_device_going_down_is_an_ndata_event_with_its_kind_severity_and_device() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(2);
+    let mut live = rig.cell.subscribe();
+    let node = Node::start(&rig, config(&broker), false);
+    let id = |s: &str| sparkplug::Id::new(s).unwrap();
+    let mut host =
+        sparkplug::Host::new(id("historian"), Some(id("rig")), sparkplug::Sharing::Alone);
+
+    // The NBIRTH carries the event channel: a String metric `Event`.
+    let birth = sub
+        .next_where("the NBIRTH", LIMIT, |m| m.kind() == "NBIRTH")
+        .await;
+    let channel = birth
+        .metric("Event")
+        .expect("the NBIRTH has an Event metric");
+    assert_eq!(channel.datatype, Some(sparkplug::DataType::String.code()));
+    let alias = channel.alias.expect("an alias");
+    assert_eq!(host_reads(&mut host, &birth).problems, []);
+
+    // Every message up to jbc2's death reads cleanly: no seq gap, no unknown alias.
+    let mut jbc2_born = false;
+    let event = loop {
+        let m = sub
+            .next_where("jbc2's device_down event", LIMIT, |_| true)
+            .await;
+        let got = host_reads(&mut host, &m);
+        assert_eq!(got.problems, [], "{}", m.topic);
+        assert_eq!(got.commands, [], "{}", m.topic);
+        if of_jbc2(&m) && m.kind() == "DBIRTH" && !jbc2_born {
+            jbc2_born = true;
+            rig.plugged[1].store(false, Ordering::SeqCst);
+        }
+        if let Some(e) = got
+            .events
+            .into_iter()
+            .find(|e| e.kind.as_deref() == Some("device_down"))
+        {
+            // As published: the Event metric by alias, the message as its value.
+            assert_eq!(m.kind(), "NDATA");
+            let metric = m
+                .payload
+                .metrics
+                .iter()
+                .find(|x| x.alias == Some(alias))
+                .expect("the event by the Event metric's alias");
+            assert_eq!(metric.value, Some(SpValue::StringValue(e.message.clone())));
+            break e;
+        }
+    };
+    assert!(jbc2_born);
+    assert_eq!(event.node, id("cell"));
+    assert_eq!(event.device.as_deref(), Some("jbc2"));
+    assert_eq!(event.severity, Some(700));
+    assert!(event.line.is_some(), "the line of the device");
+    assert!(event.message.contains("jbc2"), "{}", event.message);
+    assert!(!event.historical);
+
+    // The gateway's own event, as its change stream gave it: same time, same words.
+    let recorded = next_event(&mut live, crate::event::EventKind::DeviceDown).await;
+    assert_eq!(event.t.as_millis(), u64::try_from(recorded.t.0).unwrap());
+    assert_eq!(event.message, recorded.message);
+    assert_eq!(event.line, recorded.line);
+
+    node.stop().await;
+}
+
 /// A writable number of jbc1 once it has been read: its name, value, and a value to write.
 fn writable_number(rig: &crate::testing::Rig) -> (String, f64, f64) {
     let device = rig.cell.device("jbc1").unwrap();

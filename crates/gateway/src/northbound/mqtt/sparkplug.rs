@@ -10,8 +10,11 @@
 //!    historical DDATA, then a DDEATH for each device that is down;
 //! 3. live: changes become DDATA by alias (changed metrics only, one DDATA per device for
 //!    what arrived together), a device going down a DDEATH and coming back a DBIRTH, the
-//!    node's history row count an NDATA every 10 s; a lagging change stream, or an NCMD
-//!    `Node Control/Rebirth`, gives a new birth cycle;
+//!    node's history row count an NDATA every 10 s, each gateway event an NDATA of the node
+//!    metric `Event` ([`sparkplug::event`]: the message, its time, and `kind`, `severity`,
+//!    `line`, `device`, `point` properties); a lagging change stream, or an NCMD
+//!    `Node Control/Rebirth`, gives a new birth cycle. Events are live only: those of an
+//!    outage, or missed in a lag, are not sent (the history's event log has them);
 //! 4. the primary host going offline ends the connection (NDEATH, DISCONNECT) and moves
 //!    the forwarded mark back by twice the keep-alive: the host may have been gone that
 //!    long before the broker noticed, and what it missed is sent again once it is back.
@@ -28,13 +31,14 @@ use std::time::Duration;
 use rumqttc::QoS;
 use sparkplug::{
     BdSeq, Command, DataType, Delivery, EdgeNode, HostState, Id, MessageKind, MetricName,
-    MetricSpec, MetricValue, Publish, Qos, Sample, Topic,
+    MetricSpec, MetricValue, NodeEvent, Publish, Qos, Sample, Topic,
 };
 use tokio::sync::broadcast;
 
 use super::forward::Backlog;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
-use crate::cell::{Cell, DeviceStatus, LiveMessage};
+use crate::cell::{Cell, DeviceStatus, DeviceSummary, LiveMessage};
+use crate::event::Event;
 use crate::northbound::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
 use crate::point::{DeviceId, PointId, Value};
 use crate::time::{Timestamp, duration_millis};
@@ -406,10 +410,15 @@ impl Node {
                         }
                     }
                 }
-                other => {
+                LiveMessage::Event(event) => {
+                    // Keep the order: what came before an event goes out first.
+                    self.device_data(conn, std::mem::take(&mut values)).await?;
+                    self.on_event(conn, &event).await?;
+                }
+                LiveMessage::Device(summary) => {
                     // Keep the order: what came before a status change goes out first.
                     self.device_data(conn, std::mem::take(&mut values)).await?;
-                    self.on_status(conn, other).await?;
+                    self.on_status(conn, summary).await?;
                 }
             }
             next = match live.try_recv() {
@@ -448,10 +457,7 @@ impl Node {
         Ok(())
     }
 
-    async fn on_status(&mut self, conn: &mut Connection<'_>, message: LiveMessage) -> Done {
-        let LiveMessage::Device(summary) = message else {
-            return Ok(());
-        };
+    async fn on_status(&mut self, conn: &mut Connection<'_>, summary: DeviceSummary) -> Done {
         let now = Timestamp::now();
         let t = sparkplug_time(now);
         match summary.status {
@@ -474,6 +480,18 @@ impl Node {
                 Ok(())
             }
             _ => Ok(()),
+        }
+    }
+
+    /// An NDATA with `event` as the node's `Event` metric.
+    async fn on_event(&mut self, conn: &mut Connection<'_>, event: &Event) -> Done {
+        let t = sparkplug_time(Timestamp::now());
+        match self.node.node_event(&node_event(event), t) {
+            Ok(data) => conn.publish(outgoing(data, None)).await.map_err(lost),
+            Err(e) => {
+                tracing::debug!("MQTT: no NDATA for the event: {e}");
+                Ok(())
+            }
         }
     }
 
@@ -683,12 +701,26 @@ fn outgoing(message: Publish, latest: Option<Timestamp>) -> Outgoing {
     }
 }
 
+/// A gateway event as Sparkplug's: its kind's words and severity, and the point's name
+/// within its device.
+fn node_event(event: &Event) -> NodeEvent {
+    NodeEvent {
+        t: sparkplug_time(event.t),
+        kind: event.kind.as_str().to_owned(),
+        severity: event.kind.severity().into(),
+        message: event.message.clone(),
+        line: event.line.clone(),
+        device: event.device.as_ref().map(|d| d.as_str().to_owned()),
+        point: event.point.as_ref().map(|p| p.name().to_owned()),
+    }
+}
+
 fn history_rows(cell: &Cell) -> i64 {
     i64::try_from(cell.store().stats().rows_written()).unwrap_or(i64::MAX)
 }
 
-/// The node's own metrics in its NBIRTH (version, lines, history rows written), and the
-/// row count in it.
+/// The node's own metrics in its NBIRTH (version, lines, history rows written, the event
+/// channel), and the row count in it.
 fn node_metrics(cell: &Cell, t: sparkplug::Timestamp) -> (Vec<(MetricSpec, Sample)>, i64) {
     let name = |n: &str| MetricName::new(n).expect("the node metric names are not empty");
     let rows = history_rows(cell);
@@ -708,6 +740,10 @@ fn node_metrics(cell: &Cell, t: sparkplug::Timestamp) -> (Vec<(MetricSpec, Sampl
             MetricSpec::new(name(HISTORY_ROWS_METRIC), DataType::Int64)
                 .description("history rows written since the gateway started"),
             Sample::good(MetricValue::Int64(rows), t),
+        ),
+        (
+            sparkplug::event::spec(),
+            Sample::good(MetricValue::String(String::new()), t),
         ),
     ];
     (metrics, rows)

@@ -18,16 +18,8 @@
 //! server took the change.
 //!
 //! The gateway's events are BaseEventType events on the device's object (the gateway
-//! object when they concern no device), with a severity by kind ([`severity`]):
-//!
-//! | kind | severity |
-//! |---|---|
-//! | alarm_raised, device_down, line_down, history_failed | 700 |
-//! | history_reset | 600 |
-//! | state_changed (a transfer, a machine's state), line_reopened, mqtt_disconnected | 500 |
-//! | device_event (an R message) | 400 |
-//! | alarm_cleared, device_up, line_up, history_recovered | 300 |
-//! | write, gateway_started, gateway_stopped, mqtt_connected | 200 |
+//! object when they concern no device), with the severity of their kind
+//! ([`EventKind::severity`](crate::event::EventKind::severity), shared with the Sparkplug events).
 
 use ::opcua::nodes::BaseEventType;
 use ::opcua::types::{
@@ -36,7 +28,7 @@ use ::opcua::types::{
 };
 
 use crate::cell::{DeviceStatus, DeviceSummary, PointView};
-use crate::event::{Event, EventKind};
+use crate::event::Event;
 use crate::point::{PointKind, Quality, Value};
 use crate::time::Timestamp;
 
@@ -248,27 +240,6 @@ pub fn gateway_time(t: &DateTime) -> Timestamp {
     Timestamp((ticks - TICKS_AT_UNIX_EPOCH).div_euclid(TICKS_PER_MS))
 }
 
-/// The OPC UA severity (1 to 1000) of an event of `kind`.
-pub fn severity(kind: EventKind) -> u16 {
-    match kind {
-        EventKind::AlarmRaised
-        | EventKind::DeviceDown
-        | EventKind::LineDown
-        | EventKind::HistoryFailed => 700,
-        EventKind::HistoryReset => 600,
-        EventKind::StateChanged | EventKind::LineReopened | EventKind::MqttDisconnected => 500,
-        EventKind::DeviceEvent => 400,
-        EventKind::AlarmCleared
-        | EventKind::DeviceUp
-        | EventKind::LineUp
-        | EventKind::HistoryRecovered => 300,
-        EventKind::Write
-        | EventKind::GatewayStarted
-        | EventKind::GatewayStopped
-        | EventKind::MqttConnected => 200,
-    }
-}
-
 /// The source name of the gateway's own events (and a line's).
 pub const GATEWAY_SOURCE: &str = "gateway";
 
@@ -297,7 +268,7 @@ pub fn base_event(ns: u16, event: &Event, id: ByteString, now: Timestamp) -> Bas
     .set_source_node(node)
     .set_source_name(UAString::from(name))
     .set_receive_time(opc_time(now));
-    e.severity = severity(event.kind);
+    e.severity = event.kind.severity();
     e
 }
 
@@ -335,23 +306,10 @@ fn unece_unit_id(unit: &str) -> Option<i32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::event::EventKind;
     use crate::point::{DeviceId, EnumState};
 
     use crate::testing::air_temperature_view as view;
-
-    #[test]
-    fn every_event_kind_has_a_severity_alarms_above_transfers_above_clears_above_writes() {
-        for kind in EventKind::ALL {
-            assert!((1..=1000).contains(&severity(kind)), "{kind:?}");
-        }
-        assert_eq!(severity(EventKind::AlarmRaised), 700);
-        assert_eq!(severity(EventKind::DeviceDown), 700);
-        assert_eq!(severity(EventKind::StateChanged), 500);
-        assert_eq!(severity(EventKind::DeviceEvent), 400);
-        assert_eq!(severity(EventKind::AlarmCleared), 300);
-        assert_eq!(severity(EventKind::DeviceUp), 300);
-        assert_eq!(severity(EventKind::Write), 200);
-    }
 
     #[test]
     fn an_event_of_a_device_comes_from_its_object_and_one_of_the_gateway_from_the_gateway() {

@@ -1,0 +1,1617 @@
+//! The host application's side of Sparkplug B 3.0 as a sans-IO state machine: it reads
+//! what edge nodes publish and says what to record (points, samples, events), what to
+//! send back (Rebirth requests) and what was wrong. No MQTT, no clock: the caller
+//! subscribes to [`Host::subscriptions`], publishes [`Host::will`] /
+//! [`Host::state_online`], feeds every received message to [`Host::receive`] with the
+//! time it arrived, and publishes the [`Received::commands`].
+//!
+//! Per edge node (group and node id) the host keeps what its NBIRTH and DBIRTHs said:
+//! each metric's name, alias and datatype, and the `bdSeq` and last `seq`.
+//!
+//! - **Births** (NBIRTH, DBIRTH) describe the points ([`PointInfo`]: datatype, unit,
+//!   description, write range) and give their current values as samples. An NBIRTH
+//!   forgets the node's devices (they are born again after it). `bdSeq`,
+//!   `Node Control/*` and the [`EVENT`] metric are not points.
+//!   A metric of a datatype this crate does not read (DataSet, Template, arrays) is
+//!   reported once at its birth and its data is ignored.
+//! - **Data** (NDATA, DDATA) by alias or name become samples of the born points;
+//!   `is_transient` metrics are not recorded (the spec's meaning); a node's `Event`
+//!   metric becomes a [`HostEvent`] ([`crate::event`]).
+//! - **Deaths**: an NDEATH whose `bdSeq` is the current NBIRTH's marks every point of
+//!   the node and of its devices Bad (a null sample) at the death's time (the payload's
+//!   timestamp, else the arrival time); an NDEATH with another `bdSeq` is the Will of an
+//!   older session, delivered late, and is ignored (a [`Problem::StaleDeath`]). A DDEATH
+//!   marks its device's points Bad. After a death the node or device is unborn again.
+//! - **Rebirth requests** (NCMD `Node Control/Rebirth` = true, [`rebirth_request`]):
+//!   when data, a DBIRTH or a DDEATH comes from a node whose NBIRTH was not seen (or that
+//!   died since), data from a device without a DBIRTH, a metric whose alias or name no
+//!   birth gave, or (alone only) a `seq` gap. At most one per node every
+//!   [`REBIRTH_HOLD_OFF_MS`] (5 s) until its NBIRTH arrives. What cannot be resolved is
+//!   dropped and counted ([`Stats::dropped`]).
+//! - **`seq`**: every message of a node after its NBIRTH (NDATA, DBIRTH, DDATA, DDEATH)
+//!   carries the previous one's `seq` + 1, 0–255 wrapping, across the node and all its
+//!   devices; a gap means messages were lost. The data of the message that shows the
+//!   gap is still recorded.
+//! - **Samples**: `t` is the metric's timestamp, else the payload's, else the arrival
+//!   time; booleans, integers, floats and DateTimes (ms) are numbers (64-bit integers
+//!   beyond 2^53 lose precision), String and Text are text. Quality: the `Quality`
+//!   property (192 good, 500 stale, 0 bad) when it has one of these codes; otherwise
+//!   Good with a value, Bad without one. A null value is never Good.
+//!
+//! **Shared subscriptions** ([`Sharing::Shared`]): several hosts share the data of the
+//! same nodes through `$share/{name}/…`. Births and deaths are subscribed unshared, so
+//! every host knows every metric's alias and marks deaths, and data shared, so each data
+//! message reaches one of them. Consequences: each host sees only part of a node's
+//! `seq` sequence, so **seq checking is off** in shared mode (a lost data message is not
+//! noticed); births' and deaths' samples come to every host (the store must take a
+//! sample it already has — same point and time — without a second row); each host asks
+//! for rebirths on its own, so a node may get one per host.
+//!
+//! Sparkplug 3.0 STATE: publish [`Host::will`] as the MQTT Will and, once connected,
+//! [`Host::state_online`] with the **same** `now`, so a node can tell this session's
+//! Will from an older one's.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use prost::Message as _;
+
+use crate::births::Table;
+use crate::event::{self, EVENT};
+use crate::metric::{
+    DOCUMENTATION, DataType, ENG_UNIT, MetricName, MetricValue, Quality, Timestamp, ValueError,
+    WRITABLE, WRITE_MAX, WRITE_MIN, Writable, WriteRange, read,
+};
+use crate::node::{BD_SEQ, Publish, Qos, rebirth_request};
+use crate::proto::{Metric, Payload, metric};
+use crate::state::HostState;
+use crate::topic::{Id, MessageKind, NAMESPACE, Topic, TopicError};
+
+/// The least time between two Rebirth requests to one node, until its NBIRTH arrives.
+pub const REBIRTH_HOLD_OFF_MS: u64 = 5_000;
+
+/// The folder of node metrics that control the node and are not points.
+const NODE_CONTROL: &str = "Node Control/";
+
+/// Whether the host takes all the data of its nodes or shares it with other hosts.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Sharing {
+    /// The only host: it receives every message and checks `seq`.
+    Alone,
+    /// One of several hosts that share data messages through the MQTT shared
+    /// subscription `$share/{name}/…` (births and deaths unshared); `seq` is not
+    /// checked.
+    Shared {
+        /// The share's name (without `/`, `+`, `#`).
+        name: Id,
+    },
+}
+
+/// A topic filter to subscribe to, with its QoS.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Subscription {
+    /// The MQTT topic filter.
+    pub filter: String,
+    /// QoS 1 for births and deaths (the NDEATH Will is QoS 1), 0 for data.
+    pub qos: Qos,
+}
+
+/// Which point: a metric of a node (`device: None`) or of one of its devices.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PointKey {
+    /// The group id.
+    pub group: Id,
+    /// The edge node id.
+    pub node: Id,
+    /// The device id, `None` for the node's own metrics.
+    pub device: Option<Id>,
+    /// The metric's name.
+    pub name: MetricName,
+}
+
+/// A point as a birth describes it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointInfo {
+    /// Which point; the same allocation as its samples'.
+    pub point: Arc<PointKey>,
+    /// Its datatype.
+    pub datatype: DataType,
+    /// The `engUnit` property.
+    pub unit: Option<String>,
+    /// The `Documentation` property: what the point is, in words.
+    pub description: Option<String>,
+    /// The `writable`, `writeMin` and `writeMax` properties.
+    pub writable: Writable,
+}
+
+/// A sample's value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SampleValue {
+    /// Numbers, booleans (1 or 0) and DateTimes (ms since the Unix epoch).
+    Number(f64),
+    /// String and Text.
+    Text(String),
+    /// No value: the reading was not good, or the node or device died.
+    Null,
+}
+
+impl From<MetricValue> for SampleValue {
+    fn from(value: MetricValue) -> Self {
+        match value {
+            MetricValue::String(s) | MetricValue::Text(s) => Self::Text(s),
+            MetricValue::Boolean(b) => Self::Number(if b { 1.0 } else { 0.0 }),
+            MetricValue::DateTime(t) => Self::Number(t.as_millis() as f64),
+            // A float32 as the decimal it was written as (0.1, not 0.10000000149).
+            MetricValue::Float(f) => Self::Number(f.to_string().parse().unwrap_or(f.into())),
+            other => Self::Number(other.as_f64().unwrap_or(f64::NAN)),
+        }
+    }
+}
+
+/// One value of one point at one time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostSample {
+    /// Which point.
+    pub point: Arc<PointKey>,
+    /// When it was read.
+    pub t: Timestamp,
+    /// The value.
+    pub value: SampleValue,
+    /// How far it can be trusted.
+    pub quality: Quality,
+    /// Sent with `is_historical`: stored by the node while no host was there.
+    pub historical: bool,
+}
+
+/// A gateway event received as a node's `Event` metric ([`crate::event`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HostEvent {
+    /// The group id.
+    pub group: Id,
+    /// The edge node id.
+    pub node: Id,
+    /// The `device` property.
+    pub device: Option<String>,
+    /// The `point` property: the point's name within its device.
+    pub point: Option<String>,
+    /// The `line` property.
+    pub line: Option<String>,
+    /// When it happened: the metric's timestamp, else the payload's, else arrival.
+    pub t: Timestamp,
+    /// The `kind` property (`device_down`).
+    pub kind: Option<String>,
+    /// The `severity` property, 1–1000.
+    pub severity: Option<u32>,
+    /// The value: words for the event log.
+    pub message: String,
+    /// Sent with `is_historical`.
+    pub historical: bool,
+}
+
+/// What the host made of one message.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Received {
+    /// Points a birth described (again, after a rebirth).
+    pub points: Vec<PointInfo>,
+    /// Values to record.
+    pub samples: Vec<HostSample>,
+    /// Events to record.
+    pub events: Vec<HostEvent>,
+    /// Messages to publish: Rebirth requests.
+    pub commands: Vec<Publish>,
+    /// What was wrong with the message.
+    pub problems: Vec<HostProblem>,
+}
+
+/// What was wrong with a received message, and its topic.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{topic}: {problem}")]
+pub struct HostProblem {
+    /// The MQTT topic as received.
+    pub topic: String,
+    /// What was wrong.
+    pub problem: Problem,
+}
+
+/// What can be wrong with a received message.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Problem {
+    /// The topic is not a Sparkplug topic.
+    #[error("not a Sparkplug topic: {0}")]
+    Topic(#[from] TopicError),
+    /// The payload is not a Sparkplug B protobuf payload.
+    #[error("the payload is not a Sparkplug B payload: {0}")]
+    Undecodable(#[from] prost::DecodeError),
+    /// A message of a node whose NBIRTH was not seen, or that died since.
+    #[error("a {message_type} from an edge node without a current NBIRTH: dropped")]
+    NodeNotBorn {
+        /// `NDATA`, `DBIRTH`, `DDATA` or `DDEATH`.
+        message_type: String,
+    },
+    /// Data of a device without a DBIRTH since the NBIRTH (or since its DDEATH).
+    #[error("DDATA of device {device}, which has no DBIRTH since the node's NBIRTH: dropped")]
+    DeviceNotBorn {
+        /// The device.
+        device: Id,
+    },
+    /// A data metric's alias that no birth gave.
+    #[error("{} has no metric with alias {alias} in its birth: dropped", owner(.device))]
+    UnknownAlias {
+        /// The device, `None` for the node.
+        device: Option<Id>,
+        /// The alias.
+        alias: u64,
+    },
+    /// A data metric's name that no birth gave.
+    #[error("{} has no metric {name:?} in its birth: dropped", owner(.device))]
+    UnknownMetric {
+        /// The device, `None` for the node.
+        device: Option<Id>,
+        /// The name.
+        name: String,
+    },
+    /// A metric with neither name nor alias.
+    #[error("metric {index} has neither name nor alias: dropped")]
+    NoMetricId {
+        /// Its place in the payload, from 0.
+        index: usize,
+    },
+    /// The `seq` is not the one after the node's previous message's.
+    #[error("seq {got} where {expected} was expected: messages of this node were lost")]
+    SeqGap {
+        /// The previous `seq` + 1, wrapping at 256.
+        expected: u64,
+        /// The `seq` received.
+        got: u64,
+    },
+    /// A message that needs a `seq` has none.
+    #[error("the payload has no seq")]
+    NoSeq,
+    /// An NDEATH whose `bdSeq` is not the current NBIRTH's: an older session's Will.
+    #[error(
+        "NDEATH with bdSeq {} while the NBIRTH has bdSeq {}: an older session's Will, ignored",
+        bd(.death),
+        bd(.birth)
+    )]
+    StaleDeath {
+        /// The death's `bdSeq`.
+        death: Option<u64>,
+        /// The current NBIRTH's.
+        birth: Option<u64>,
+    },
+    /// A birth metric without a name.
+    #[error("birth metric {index} has no name: left out")]
+    UnnamedBirthMetric {
+        /// Its place in the payload, from 0.
+        index: usize,
+    },
+    /// A birth metric of a datatype this crate does not read.
+    #[error("metric {metric:?} has {}, which is not recorded", datatype(.code))]
+    UnsupportedDataType {
+        /// The metric's name.
+        metric: String,
+        /// The datatype code, if any.
+        code: Option<u32>,
+    },
+    /// A data metric states another datatype than its birth.
+    #[error("metric {metric:?} is {expected} in its birth, the data says datatype {got}: dropped")]
+    DataTypeMismatch {
+        /// The metric's name.
+        metric: String,
+        /// The birth's datatype.
+        expected: DataType,
+        /// The code the data gave.
+        got: u32,
+    },
+    /// A value that cannot be read as its metric's datatype.
+    #[error("metric {metric:?}: {error}: dropped")]
+    Value {
+        /// The metric's name.
+        metric: String,
+        /// What is wrong with the value.
+        error: ValueError,
+    },
+}
+
+fn owner(device: &Option<Id>) -> String {
+    match device {
+        Some(d) => format!("device {d}"),
+        None => "the node".to_owned(),
+    }
+}
+
+fn bd(bd_seq: &Option<u64>) -> String {
+    bd_seq.map_or_else(|| "(none)".to_owned(), |n| n.to_string())
+}
+
+fn datatype(code: &Option<u32>) -> String {
+    code.map_or_else(
+        || "no datatype".to_owned(),
+        |c| format!("datatype {}", crate::describe::datatype_name(c)),
+    )
+}
+
+/// Counters for the runtime to export as metrics; they only grow.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Messages received.
+    pub messages: u64,
+    /// Samples returned.
+    pub samples: u64,
+    /// Events returned.
+    pub events: u64,
+    /// Rebirth requests returned.
+    pub rebirths: u64,
+    /// `seq` gaps seen.
+    pub seq_gaps: u64,
+    /// Messages whose topic or payload could not be read.
+    pub undecodable: u64,
+    /// Data metrics dropped: of unborn nodes or devices, unknown aliases, unreadable
+    /// values.
+    pub dropped: u64,
+    /// NDEATHs of older sessions, ignored.
+    pub stale_deaths: u64,
+    /// Problems returned.
+    pub problems: u64,
+}
+
+/// A Sparkplug B host application: what it knows of every edge node it follows.
+#[derive(Debug)]
+pub struct Host {
+    host_id: Id,
+    group: Option<Id>,
+    sharing: Sharing,
+    nodes: HashMap<(Id, Id), NodeState>,
+    stats: Stats,
+}
+
+#[derive(Debug, Default)]
+struct NodeState {
+    /// The current NBIRTH's, until the node dies.
+    birth: Option<Birth>,
+    /// When the last Rebirth was asked, since the last NBIRTH.
+    rebirth_asked: Option<Timestamp>,
+}
+
+#[derive(Debug)]
+struct Birth {
+    bd_seq: Option<u64>,
+    /// The last `seq` received.
+    last_seq: Option<u64>,
+    metrics: Table<Role>,
+    devices: HashMap<Id, Table<Role>>,
+}
+
+/// What a born metric's data becomes.
+#[derive(Debug, Clone)]
+enum Role {
+    /// Samples of this point, read as this datatype.
+    Point(Arc<PointKey>, DataType),
+    /// The node's events.
+    Event,
+    /// Nothing: `bdSeq`, `Node Control/*`, a datatype this crate does not read.
+    Ignored,
+}
+
+/// One received message's identity and default time.
+struct Message<'a> {
+    topic: &'a str,
+    group: Id,
+    node: Id,
+    device: Option<Id>,
+    /// The payload's timestamp, else the arrival time.
+    t: Timestamp,
+    now: Timestamp,
+}
+
+impl Received {
+    fn problem(&mut self, topic: &str, problem: Problem) {
+        self.problems.push(HostProblem {
+            topic: topic.to_owned(),
+            problem,
+        });
+    }
+}
+
+impl Host {
+    /// The host `host_id`, following the nodes of `group` (every group when `None`),
+    /// alone or sharing the data with other hosts.
+    pub fn new(host_id: Id, group: Option<Id>, sharing: Sharing) -> Self {
+        Self {
+            host_id,
+            group,
+            sharing,
+            nodes: HashMap::new(),
+            stats: Stats::default(),
+        }
+    }
+
+    /// The host id.
+    pub fn host_id(&self) -> &Id {
+        &self.host_id
+    }
+
+    /// The counters so far.
+    pub fn stats(&self) -> Stats {
+        self.stats
+    }
+
+    /// The topic filters to subscribe to, again after every reconnect: births and deaths
+    /// (QoS 1, never shared), data (QoS 0, shared with `$share/{name}/` when sharing).
+    /// Each names its message type, so neither STATE nor commands arrive.
+    pub fn subscriptions(&self) -> Vec<Subscription> {
+        let group = self.group.as_ref().map_or("+", Id::as_str);
+        let filter = |message_type: &str, levels: &str| {
+            format!("{NAMESPACE}/{group}/{message_type}/{levels}")
+        };
+        let unshared = |message_type, levels| Subscription {
+            filter: filter(message_type, levels),
+            qos: Qos::AtLeastOnce,
+        };
+        let data = |message_type, levels| Subscription {
+            filter: match &self.sharing {
+                Sharing::Alone => filter(message_type, levels),
+                Sharing::Shared { name } => {
+                    format!("$share/{name}/{}", filter(message_type, levels))
+                }
+            },
+            qos: Qos::AtMostOnce,
+        };
+        vec![
+            unshared("NBIRTH", "+"),
+            unshared("NDEATH", "+"),
+            unshared("DBIRTH", "+/+"),
+            unshared("DDEATH", "+/+"),
+            data("NDATA", "+"),
+            data("DDATA", "+/+"),
+        ]
+    }
+
+    /// The STATE to register as the MQTT Will: `{"online":false,"timestamp":now}` on
+    /// `spBv1.0/STATE/{host_id}`, QoS 1, retained. Also what to publish before a
+    /// clean disconnect.
+    pub fn will(&self, now: Timestamp) -> Publish {
+        HostState::new(false, now).publish(self.host_id.clone())
+    }
+
+    /// The STATE to publish once connected (after subscribing):
+    /// `{"online":true,"timestamp":now}`, QoS 1, retained; `now` the Will's.
+    pub fn state_online(&self, now: Timestamp) -> Publish {
+        HostState::new(true, now).publish(self.host_id.clone())
+    }
+
+    /// Reads one message received on `topic` at `now`. Never fails: what is wrong is
+    /// in [`Received::problems`]. STATE, NCMD and DCMD messages and other groups' are
+    /// ignored.
+    pub fn receive(&mut self, topic: &str, payload: &[u8], now: Timestamp) -> Received {
+        let mut out = Received::default();
+        self.stats.messages += 1;
+        self.read(topic, payload, now, &mut out);
+        self.stats.samples += out.samples.len() as u64;
+        self.stats.events += out.events.len() as u64;
+        self.stats.rebirths += out.commands.len() as u64;
+        self.stats.problems += out.problems.len() as u64;
+        out
+    }
+
+    fn read(&mut self, topic: &str, payload: &[u8], now: Timestamp, out: &mut Received) {
+        let parsed: Topic = match topic.parse() {
+            Ok(parsed) => parsed,
+            Err(e) => {
+                self.stats.undecodable += 1;
+                return out.problem(topic, Problem::Topic(e));
+            }
+        };
+        let (group, kind, node, device) = match parsed {
+            Topic::State { .. } => return,
+            Topic::Node {
+                group,
+                kind,
+                edge_node,
+            } => (group, kind, edge_node, None),
+            Topic::Device {
+                group,
+                kind,
+                edge_node,
+                device,
+            } => (group, kind, edge_node, Some(device)),
+        };
+        if kind == MessageKind::Command || self.group.as_ref().is_some_and(|g| *g != group) {
+            return;
+        }
+        let payload = match Payload::decode(payload) {
+            Ok(payload) => payload,
+            Err(e) => {
+                self.stats.undecodable += 1;
+                return out.problem(topic, Problem::Undecodable(e));
+            }
+        };
+        let msg = Message {
+            topic,
+            group,
+            node,
+            device,
+            t: payload.timestamp.map_or(now, Timestamp::from_millis),
+            now,
+        };
+        match (kind, msg.device.is_some()) {
+            (MessageKind::Birth, false) => self.node_birth(&msg, &payload, out),
+            (MessageKind::Death, false) => self.node_death(&msg, &payload, out),
+            (kind, _) => self.after_birth(kind, &msg, &payload, out),
+        }
+    }
+
+    fn node_birth(&mut self, msg: &Message<'_>, payload: &Payload, out: &mut Received) {
+        let bd_seq = payload
+            .metrics
+            .iter()
+            .find(|m| m.name.as_deref() == Some(BD_SEQ))
+            .and_then(|m| match m.value {
+                Some(metric::Value::LongValue(n)) => Some(n),
+                Some(metric::Value::IntValue(n)) => Some(n.into()),
+                _ => None,
+            });
+        let metrics = birth_table(msg, &payload.metrics, out);
+        let state = self
+            .nodes
+            .entry((msg.group.clone(), msg.node.clone()))
+            .or_default();
+        state.birth = Some(Birth {
+            bd_seq,
+            last_seq: payload.seq,
+            metrics,
+            devices: HashMap::new(),
+        });
+        state.rebirth_asked = None;
+    }
+
+    fn node_death(&mut self, msg: &Message<'_>, payload: &Payload, out: &mut Received) {
+        let death = payload
+            .metrics
+            .iter()
+            .find(|m| m.name.as_deref() == Some(BD_SEQ))
+            .and_then(|m| match m.value {
+                Some(metric::Value::LongValue(n)) => Some(n),
+                Some(metric::Value::IntValue(n)) => Some(n.into()),
+                _ => None,
+            });
+        let key = (msg.group.clone(), msg.node.clone());
+        let Some(state) = self.nodes.get_mut(&key) else {
+            return; // never born here: nothing to mark
+        };
+        match &state.birth {
+            None => return, // already dead
+            Some(birth) if birth.bd_seq != death => {
+                self.stats.stale_deaths += 1;
+                return out.problem(
+                    msg.topic,
+                    Problem::StaleDeath {
+                        death,
+                        birth: birth.bd_seq,
+                    },
+                );
+            }
+            Some(_) => {}
+        }
+        let Some(birth) = state.birth.take() else {
+            return;
+        };
+        mark_bad(&birth.metrics, msg.t, out);
+        for table in birth.devices.values() {
+            mark_bad(table, msg.t, out);
+        }
+    }
+
+    /// NDATA, DBIRTH, DDATA and DDEATH: messages of a born node, with a `seq`.
+    fn after_birth(
+        &mut self,
+        kind: MessageKind,
+        msg: &Message<'_>,
+        payload: &Payload,
+        out: &mut Received,
+    ) {
+        let state = self
+            .nodes
+            .entry((msg.group.clone(), msg.node.clone()))
+            .or_default();
+        let Some(birth) = &mut state.birth else {
+            let message_type = match &msg.device {
+                Some(_) => format!("D{}", suffix(kind)),
+                None => format!("N{}", suffix(kind)),
+            };
+            if kind == MessageKind::Data {
+                self.stats.dropped += payload.metrics.len() as u64;
+            }
+            out.problem(msg.topic, Problem::NodeNotBorn { message_type });
+            return ask_rebirth(state, msg, out);
+        };
+        let mut rebirth = false;
+        if self.sharing == Sharing::Alone {
+            match (birth.last_seq, payload.seq) {
+                (Some(last), Some(got)) => {
+                    let expected = (last % 256 + 1) % 256;
+                    if got != expected {
+                        self.stats.seq_gaps += 1;
+                        out.problem(msg.topic, Problem::SeqGap { expected, got });
+                        rebirth = true;
+                    }
+                }
+                (_, None) => out.problem(msg.topic, Problem::NoSeq),
+                (None, Some(_)) => {}
+            }
+        }
+        birth.last_seq = payload.seq.or(birth.last_seq);
+        match (kind, &msg.device) {
+            (MessageKind::Birth, Some(device)) => {
+                let table = birth_table(msg, &payload.metrics, out);
+                birth.devices.insert(device.clone(), table);
+            }
+            (MessageKind::Death, Some(device)) => {
+                if let Some(table) = birth.devices.remove(device) {
+                    mark_bad(&table, msg.t, out);
+                }
+            }
+            (MessageKind::Data, None) => {
+                let (dropped, unknown) = data(msg, &birth.metrics, &payload.metrics, out);
+                self.stats.dropped += dropped;
+                rebirth |= unknown;
+            }
+            (MessageKind::Data, Some(device)) => match birth.devices.get(device) {
+                Some(table) => {
+                    let (dropped, unknown) = data(msg, table, &payload.metrics, out);
+                    self.stats.dropped += dropped;
+                    rebirth |= unknown;
+                }
+                None => {
+                    self.stats.dropped += payload.metrics.len() as u64;
+                    let device = device.clone();
+                    out.problem(msg.topic, Problem::DeviceNotBorn { device });
+                    rebirth = true;
+                }
+            },
+            // NBIRTH and NDEATH are read before; commands never come here.
+            _ => {}
+        }
+        if rebirth {
+            ask_rebirth(state, msg, out);
+        }
+    }
+}
+
+fn suffix(kind: MessageKind) -> &'static str {
+    match kind {
+        MessageKind::Birth => "BIRTH",
+        MessageKind::Data => "DATA",
+        MessageKind::Death => "DEATH",
+        MessageKind::Command => "CMD",
+    }
+}
+
+/// A Rebirth request for the message's node, unless one was asked less than
+/// [`REBIRTH_HOLD_OFF_MS`] ago (a clock that went back does not hold it off).
+fn ask_rebirth(state: &mut NodeState, msg: &Message<'_>, out: &mut Received) {
+    if let Some(asked) = state.rebirth_asked
+        && asked <= msg.now
+        && msg.now.as_millis() - asked.as_millis() < REBIRTH_HOLD_OFF_MS
+    {
+        return;
+    }
+    state.rebirth_asked = Some(msg.now);
+    out.commands
+        .push(rebirth_request(&msg.group, &msg.node, msg.now));
+}
+
+/// The table of a birth's metrics; its points and their current values into `out`.
+fn birth_table(msg: &Message<'_>, metrics: &[Metric], out: &mut Received) -> Table<Role> {
+    for (index, m) in metrics.iter().enumerate() {
+        if m.name.is_none() {
+            out.problem(msg.topic, Problem::UnnamedBirthMetric { index });
+        }
+    }
+    Table::of_birth(metrics, |_, m| {
+        let name = m.name.as_deref().unwrap_or_default();
+        if msg.device.is_none() {
+            if name == BD_SEQ || name.starts_with(NODE_CONTROL) {
+                return Role::Ignored;
+            }
+            if name == EVENT {
+                return Role::Event;
+            }
+        }
+        let datatype = m.datatype.and_then(|code| DataType::from_code(code).ok());
+        let (Some(datatype), Ok(metric_name)) = (datatype, MetricName::new(name)) else {
+            out.problem(
+                msg.topic,
+                Problem::UnsupportedDataType {
+                    metric: name.to_owned(),
+                    code: m.datatype,
+                },
+            );
+            return Role::Ignored;
+        };
+        let point = Arc::new(PointKey {
+            group: msg.group.clone(),
+            node: msg.node.clone(),
+            device: msg.device.clone(),
+            name: metric_name,
+        });
+        out.points.push(point_info(&point, datatype, m));
+        match sample(&point, datatype, m, msg.t) {
+            Ok(Some(s)) => out.samples.push(s),
+            Ok(None) => {}
+            Err(error) => out.problem(
+                msg.topic,
+                Problem::Value {
+                    metric: name.to_owned(),
+                    error,
+                },
+            ),
+        }
+        Role::Point(point, datatype)
+    })
+}
+
+fn point_info(point: &Arc<PointKey>, datatype: DataType, m: &Metric) -> PointInfo {
+    let p = m.properties.as_ref();
+    let range = match (read::number(p, WRITE_MIN), read::number(p, WRITE_MAX)) {
+        (Some(min), Some(max)) => WriteRange::new(min, max).ok(),
+        _ => None,
+    };
+    let writable = match (read::boolean(p, WRITABLE), range) {
+        (Some(true), Some(range)) => Writable::Within(range),
+        (Some(true), None) => Writable::Yes,
+        _ => Writable::No,
+    };
+    PointInfo {
+        point: Arc::clone(point),
+        datatype,
+        unit: read::string(p, ENG_UNIT),
+        description: read::string(p, DOCUMENTATION),
+        writable,
+    }
+}
+
+/// A metric's sample, `None` for a transient one.
+fn sample(
+    point: &Arc<PointKey>,
+    datatype: DataType,
+    m: &Metric,
+    t: Timestamp,
+) -> Result<Option<HostSample>, ValueError> {
+    if m.is_transient == Some(true) {
+        return Ok(None);
+    }
+    let stated = Quality::of(m);
+    let (value, quality) = if m.is_null == Some(true) {
+        let quality = stated.filter(|q| *q != Quality::Good);
+        (SampleValue::Null, quality.unwrap_or(Quality::Bad))
+    } else {
+        let value = MetricValue::from_proto(datatype, m.value.as_ref())?;
+        (value.into(), stated.unwrap_or(Quality::Good))
+    };
+    Ok(Some(HostSample {
+        point: Arc::clone(point),
+        t: m.timestamp.map_or(t, Timestamp::from_millis),
+        value,
+        quality,
+        historical: m.is_historical == Some(true),
+    }))
+}
+
+/// The samples and events of a data message's metrics; the count dropped, and whether
+/// a metric's alias or name was unknown.
+fn data(
+    msg: &Message<'_>,
+    table: &Table<Role>,
+    metrics: &[Metric],
+    out: &mut Received,
+) -> (u64, bool) {
+    let mut dropped = 0;
+    let mut unknown = false;
+    for (index, m) in metrics.iter().enumerate() {
+        let Some(known) = table.lookup(m) else {
+            dropped += 1;
+            let problem = match (m.alias, &m.name) {
+                (Some(alias), _) => Problem::UnknownAlias {
+                    device: msg.device.clone(),
+                    alias,
+                },
+                (None, Some(name)) => Problem::UnknownMetric {
+                    device: msg.device.clone(),
+                    name: name.clone(),
+                },
+                (None, None) => Problem::NoMetricId { index },
+            };
+            unknown |= !matches!(problem, Problem::NoMetricId { .. });
+            out.problem(msg.topic, problem);
+            continue;
+        };
+        let read = match &known.extra {
+            Role::Ignored => continue,
+            Role::Event => node_event(msg, m).map(|e| out.events.push(e)),
+            Role::Point(point, datatype) => match m.datatype {
+                Some(got) if got != datatype.code() => {
+                    dropped += 1;
+                    out.problem(
+                        msg.topic,
+                        Problem::DataTypeMismatch {
+                            metric: known.name.clone(),
+                            expected: *datatype,
+                            got,
+                        },
+                    );
+                    continue;
+                }
+                _ => sample(point, *datatype, m, msg.t).map(|s| out.samples.extend(s)),
+            },
+        };
+        if let Err(error) = read {
+            dropped += 1;
+            let metric = known.name.clone();
+            out.problem(msg.topic, Problem::Value { metric, error });
+        }
+    }
+    (dropped, unknown)
+}
+
+/// A node's `Event` metric as an event.
+fn node_event(msg: &Message<'_>, m: &Metric) -> Result<HostEvent, ValueError> {
+    let message = match MetricValue::from_proto(DataType::String, m.value.as_ref())? {
+        MetricValue::String(s) | MetricValue::Text(s) => s,
+        // from_proto reads a String metric as a String; any other is shown as read.
+        other => format!("{other:?}"),
+    };
+    let p = m.properties.as_ref();
+    Ok(HostEvent {
+        group: msg.group.clone(),
+        node: msg.node.clone(),
+        device: read::string(p, event::DEVICE),
+        point: read::string(p, event::POINT),
+        line: read::string(p, event::LINE),
+        t: m.timestamp.map_or(msg.t, Timestamp::from_millis),
+        kind: read::string(p, event::KIND),
+        severity: read::uint32(p, event::SEVERITY),
+        message,
+        historical: m.is_historical == Some(true),
+    })
+}
+
+/// A Bad null sample at `t` for every point of `table`.
+fn mark_bad(table: &Table<Role>, t: Timestamp, out: &mut Received) {
+    for known in table.iter() {
+        if let Role::Point(point, _) = &known.extra {
+            out.samples.push(HostSample {
+                point: Arc::clone(point),
+                t,
+                value: SampleValue::Null,
+                quality: Quality::Bad,
+                historical: false,
+            });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::event::NodeEvent;
+    use crate::metric::{MetricSpec, Sample};
+    use crate::node::{BdSeq, Command, Delivery, EdgeNode, REBIRTH};
+
+    /// 2025-11-24T16:00:00.000Z.
+    const T0: Timestamp = Timestamp::from_millis(1_764_000_000_000);
+
+    fn at(offset_ms: u64) -> Timestamp {
+        Timestamp::from_millis(T0.as_millis() + offset_ms)
+    }
+
+    fn id(s: &str) -> Id {
+        Id::new(s).expect("test ids are valid")
+    }
+
+    fn name(s: &str) -> MetricName {
+        MetricName::new(s).expect("test names are not empty")
+    }
+
+    /// A station: a temperature in °C, a set point writable 100–450 °C, a heater switch
+    /// and a status text.
+    fn station() -> Vec<(MetricSpec, Sample)> {
+        vec![
+            (
+                MetricSpec::new(name("air_temp"), DataType::Double)
+                    .unit("°C")
+                    .description("air temperature at the nozzle"),
+                Sample::good(MetricValue::Double(25.5), T0),
+            ),
+            (
+                MetricSpec::new(name("set_point"), DataType::Int32)
+                    .unit("°C")
+                    .writable(Writable::Within(WriteRange::new(100.0, 450.0).unwrap())),
+                Sample::good(MetricValue::Int32(300), T0),
+            ),
+            (
+                MetricSpec::new(name("heater_on"), DataType::Boolean),
+                Sample::good(MetricValue::Boolean(true), T0),
+            ),
+            (
+                MetricSpec::new(name("status"), DataType::String),
+                Sample::good(MetricValue::String("idle".into()), T0),
+            ),
+        ]
+    }
+
+    /// The node's own metrics: the event channel and a line count.
+    fn node_metrics() -> Vec<(MetricSpec, Sample)> {
+        vec![
+            (
+                event::spec(),
+                Sample::good(MetricValue::String(String::new()), T0),
+            ),
+            (
+                MetricSpec::new(name("Gateway/Lines"), DataType::Int64),
+                Sample::good(MetricValue::Int64(3), T0),
+            ),
+        ]
+    }
+
+    fn feed(host: &mut Host, p: &Publish, now: Timestamp) -> Received {
+        host.receive(&p.topic.to_string(), &p.payload, now)
+    }
+
+    fn alone() -> Host {
+        Host::new(id("historian"), Some(id("cell")), Sharing::Alone)
+    }
+
+    /// Edge node `cell/gw1` (bdSeq 7), connected and born with devices `jbc1` and
+    /// `jbc2`; a host that has read the births.
+    fn born(host: &mut Host) -> EdgeNode {
+        born_with_will(host).0
+    }
+
+    /// [`born`], and the Will the node registered for this session.
+    fn born_with_will(host: &mut Host) -> (EdgeNode, Publish) {
+        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+        let will = node.will();
+        node.on_connect();
+        let nbirth = node.node_birth(&node_metrics(), T0).unwrap();
+        assert!(feed(host, &nbirth, T0).problems.is_empty());
+        for device in ["jbc1", "jbc2"] {
+            let dbirth = node.device_birth(&id(device), &station(), T0).unwrap();
+            assert!(feed(host, &dbirth, T0).problems.is_empty());
+        }
+        (node, will)
+    }
+
+    fn ddata(node: &mut EdgeNode, device: &str, temp: f64, t: Timestamp) -> Publish {
+        let changes = [("air_temp", Sample::good(MetricValue::Double(temp), t))];
+        node.device_data(&id(device), &changes, t, Delivery::Live)
+            .unwrap()
+            .expect("the temperature changed")
+    }
+
+    fn key(device: Option<&str>, point: &str) -> PointKey {
+        PointKey {
+            group: id("cell"),
+            node: id("gw1"),
+            device: device.map(id),
+            name: name(point),
+        }
+    }
+
+    /// Whether `p` is an NCMD that a born edge node `cell/gw1` reads as a Rebirth.
+    fn is_rebirth_of_gw1(p: &Publish) -> bool {
+        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
+        node.on_connect();
+        node.node_birth(&[], T0).unwrap();
+        p.topic.to_string() == "spBv1.0/cell/NCMD/gw1"
+            && !p.retain
+            && p.qos == Qos::AtMostOnce
+            && node.handle_command(&p.topic.to_string(), &p.payload) == Ok(vec![Command::Rebirth])
+    }
+
+    #[test]
+    fn births_define_points_with_units_and_ranges_and_ddata_by_alias_resolves_to_names() {
+        let mut host = alone();
+        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+        node.on_connect();
+        let nbirth = node.node_birth(&node_metrics(), T0).unwrap();
+        let got = feed(&mut host, &nbirth, at(5));
+        let names: Vec<_> = got.points.iter().map(|p| p.point.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["Gateway/Lines"],
+            "bdSeq, Node Control and Event are no points"
+        );
+        assert_eq!(got.samples.len(), 1);
+        assert_eq!(got.samples[0].value, SampleValue::Number(3.0));
+
+        let dbirth = node.device_birth(&id("jbc1"), &station(), T0).unwrap();
+        let got = feed(&mut host, &dbirth, at(5));
+        assert_eq!(got.problems, []);
+        let air = &got.points[0];
+        assert_eq!(*air.point, key(Some("jbc1"), "air_temp"));
+        assert_eq!(air.datatype, DataType::Double);
+        assert_eq!(air.unit.as_deref(), Some("°C"));
+        assert_eq!(
+            air.description.as_deref(),
+            Some("air temperature at the nozzle")
+        );
+        assert_eq!(air.writable, Writable::No);
+        assert_eq!(
+            got.points[1].writable,
+            Writable::Within(WriteRange::new(100.0, 450.0).unwrap())
+        );
+        let values: Vec<_> = got.samples.iter().map(|s| s.value.clone()).collect();
+        assert_eq!(
+            values,
+            [
+                SampleValue::Number(25.5),
+                SampleValue::Number(300.0),
+                SampleValue::Number(1.0),
+                SampleValue::Text("idle".into()),
+            ],
+            "births give current values; booleans and integers are numbers"
+        );
+        assert!(
+            got.samples
+                .iter()
+                .all(|s| s.t == T0 && s.quality == Quality::Good)
+        );
+
+        let data = ddata(&mut node, "jbc1", 26.0, at(1_000));
+        let got = feed(&mut host, &data, at(1_010));
+        assert_eq!(got.problems, []);
+        assert_eq!(got.commands, []);
+        assert_eq!(got.samples.len(), 1);
+        let s = &got.samples[0];
+        assert_eq!(*s.point, key(Some("jbc1"), "air_temp"));
+        assert_eq!(s.value, SampleValue::Number(26.0));
+        assert_eq!(s.t, at(1_000), "the metric's own time");
+        assert_eq!(s.quality, Quality::Good);
+        assert!(!s.historical);
+        assert!(
+            Arc::ptr_eq(&s.point, &air.point),
+            "samples share their point's key with the birth"
+        );
+        assert_eq!(host.stats().samples, 1 + 4 + 1);
+    }
+
+    #[test]
+    fn historical_ddata_keeps_its_timestamps_and_says_it_is_historical() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let changes = [
+            ("air_temp", Sample::good(MetricValue::Double(30.0), at(100))),
+            ("air_temp", Sample::good(MetricValue::Double(31.0), at(200))),
+        ];
+        let data = node
+            .device_data(&id("jbc2"), &changes, at(60_000), Delivery::Historical)
+            .unwrap()
+            .unwrap();
+        let got = feed(&mut host, &data, at(60_001));
+        let samples: Vec<_> = got
+            .samples
+            .iter()
+            .map(|s| (s.point.device.clone(), s.t, s.value.clone(), s.historical))
+            .collect();
+        assert_eq!(
+            samples,
+            [
+                (Some(id("jbc2")), at(100), SampleValue::Number(30.0), true),
+                (Some(id("jbc2")), at(200), SampleValue::Number(31.0), true),
+            ]
+        );
+    }
+
+    #[test]
+    fn stale_and_bad_readings_are_null_samples_with_their_quality_and_good_comes_back() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let mut send = |sample: Sample| {
+            let data = node
+                .device_data(&id("jbc1"), &[("status", sample)], at(1), Delivery::Live)
+                .unwrap()
+                .unwrap();
+            let got = feed(&mut host, &data, at(2));
+            let s = &got.samples[0];
+            (s.value.clone(), s.quality)
+        };
+        assert_eq!(
+            send(Sample::stale(at(1))),
+            (SampleValue::Null, Quality::Stale)
+        );
+        assert_eq!(send(Sample::bad(at(1))), (SampleValue::Null, Quality::Bad));
+        assert_eq!(
+            send(Sample::good(MetricValue::String("run".into()), at(1))),
+            (SampleValue::Text("run".into()), Quality::Good)
+        );
+    }
+
+    #[test]
+    fn a_null_value_without_a_quality_is_bad_and_with_quality_good_is_still_bad() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let data = node
+            .device_data(
+                &id("jbc1"),
+                &[("air_temp", Sample::good(MetricValue::Double(1.0), at(1)))],
+                at(1),
+                Delivery::Live,
+            )
+            .unwrap()
+            .unwrap();
+        let mut payload = Payload::decode(&data.payload[..]).unwrap();
+        let m = &mut payload.metrics[0];
+        m.value = None;
+        m.is_null = Some(true);
+        let got = host.receive(&data.topic.to_string(), &payload.encode_to_vec(), at(2));
+        assert_eq!(got.samples[0].quality, Quality::Bad);
+        let m = &mut payload.metrics[0];
+        m.properties = crate::metric::Properties::quality(Quality::Good).into_option();
+        payload.seq = payload.seq.map(|s| (s + 1) % 256);
+        let got = host.receive(&data.topic.to_string(), &payload.encode_to_vec(), at(3));
+        assert_eq!(got.problems, []);
+        assert_eq!(got.samples[0].value, SampleValue::Null);
+        assert_eq!(got.samples[0].quality, Quality::Bad);
+    }
+
+    #[test]
+    fn a_seq_gap_asks_for_one_rebirth_and_not_again_within_five_seconds() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let _lost = ddata(&mut node, "jbc1", 40.0, at(1_000));
+        let after = ddata(&mut node, "jbc2", 41.0, at(1_100));
+        let got = feed(&mut host, &after, at(1_100));
+        assert_eq!(
+            got.problems[0].problem,
+            Problem::SeqGap {
+                expected: 3,
+                got: 4
+            },
+            "NBIRTH 0, DBIRTHs 1 and 2, the lost DDATA 3"
+        );
+        assert!(
+            got.problems[0]
+                .to_string()
+                .starts_with("spBv1.0/cell/DDATA/gw1/jbc2: seq 4"),
+            "{}",
+            got.problems[0]
+        );
+        assert_eq!(got.commands.len(), 1);
+        assert!(is_rebirth_of_gw1(&got.commands[0]));
+        assert_eq!(
+            got.samples.len(),
+            1,
+            "the data of the message after the gap is kept"
+        );
+
+        // Another gap 4.9 s later: counted, no second request yet.
+        let _lost = ddata(&mut node, "jbc1", 42.0, at(5_000));
+        let got = feed(
+            &mut host,
+            &ddata(&mut node, "jbc1", 43.0, at(6_000)),
+            at(6_000),
+        );
+        assert!(matches!(got.problems[0].problem, Problem::SeqGap { .. }));
+        assert_eq!(got.commands, []);
+        // In sequence again: nothing to ask.
+        let got = feed(
+            &mut host,
+            &ddata(&mut node, "jbc1", 44.0, at(6_050)),
+            at(6_050),
+        );
+        assert_eq!((got.problems.len(), got.commands.len()), (0, 0));
+        // A gap 5 s after the request: asked again.
+        let _lost = ddata(&mut node, "jbc1", 45.0, at(6_100));
+        let got = feed(
+            &mut host,
+            &ddata(&mut node, "jbc1", 46.0, at(6_200)),
+            at(6_200),
+        );
+        assert_eq!(got.commands.len(), 1);
+        assert_eq!(host.stats().seq_gaps, 3);
+        assert_eq!(host.stats().rebirths, 2);
+
+        // The NBIRTH of the rebirth ends the hold-off: the next gap asks at once.
+        let nbirth = node.node_birth(&node_metrics(), at(6_300)).unwrap();
+        feed(&mut host, &nbirth, at(6_300));
+        let _lost = node
+            .device_birth(&id("jbc1"), &station(), at(6_300))
+            .unwrap();
+        let dbirth = node
+            .device_birth(&id("jbc2"), &station(), at(6_300))
+            .unwrap();
+        let got = feed(&mut host, &dbirth, at(6_400));
+        assert_eq!(got.commands.len(), 1);
+    }
+
+    #[test]
+    fn seq_wraps_from_255_to_0_without_a_gap() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        for i in 0..300 {
+            let t = at(i * 10);
+            let got = feed(&mut host, &ddata(&mut node, "jbc1", i as f64, t), t);
+            assert_eq!(got.problems, [], "message {i}");
+        }
+        assert_eq!(host.stats().seq_gaps, 0);
+    }
+
+    #[test]
+    fn data_before_a_birth_is_dropped_and_asks_for_a_rebirth() {
+        let mut host = alone();
+        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+        node.on_connect();
+        node.node_birth(&node_metrics(), T0).unwrap();
+        node.device_birth(&id("jbc1"), &station(), T0).unwrap();
+        let got = feed(&mut host, &ddata(&mut node, "jbc1", 50.0, at(10)), at(10));
+        assert_eq!(got.samples, []);
+        assert_eq!(
+            got.problems[0].problem,
+            Problem::NodeNotBorn {
+                message_type: "DDATA".into()
+            }
+        );
+        assert_eq!(got.commands.len(), 1);
+        assert!(is_rebirth_of_gw1(&got.commands[0]));
+        assert_eq!(host.stats().dropped, 1);
+        // More data within 5 s: dropped, no second request.
+        let got = feed(&mut host, &ddata(&mut node, "jbc1", 51.0, at(20)), at(20));
+        assert_eq!(got.commands, []);
+        assert_eq!(host.stats().dropped, 2);
+    }
+
+    #[test]
+    fn data_of_a_device_never_born_and_an_unknown_alias_ask_for_a_rebirth() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let jbc3 = node.device_birth(&id("jbc3"), &station(), T0).unwrap();
+        let _ = jbc3; // not delivered to the host
+        let got = feed(&mut host, &ddata(&mut node, "jbc3", 1.0, at(10)), at(10));
+        assert_eq!(
+            got.problems.iter().map(|p| &p.problem).collect::<Vec<_>>(),
+            [
+                &Problem::SeqGap {
+                    expected: 3,
+                    got: 4
+                },
+                &Problem::DeviceNotBorn { device: id("jbc3") }
+            ]
+        );
+        assert_eq!(got.commands.len(), 1, "one request per message");
+
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let data = ddata(&mut node, "jbc1", 60.0, at(10));
+        let mut payload = Payload::decode(&data.payload[..]).unwrap();
+        let mut unknown = payload.metrics[0].clone();
+        unknown.alias = Some(999);
+        payload.metrics.push(unknown);
+        let got = host.receive(&data.topic.to_string(), &payload.encode_to_vec(), at(10));
+        assert_eq!(got.samples.len(), 1, "the known metric is kept");
+        assert_eq!(
+            got.problems[0].problem,
+            Problem::UnknownAlias {
+                device: Some(id("jbc1")),
+                alias: 999
+            }
+        );
+        assert_eq!(
+            got.problems[0].to_string(),
+            "spBv1.0/cell/DDATA/gw1/jbc1: device jbc1 has no metric with alias 999 in its \
+             birth: dropped"
+        );
+        assert_eq!(got.commands.len(), 1);
+        assert_eq!(host.stats().dropped, 1);
+    }
+
+    #[test]
+    fn ndeath_with_the_current_bd_seq_marks_every_point_of_the_node_and_its_devices_bad() {
+        let mut host = alone();
+        let (mut node, will) = born_with_will(&mut host);
+        let got = feed(&mut host, &will, at(9_000));
+        assert_eq!(got.problems, []);
+        assert_eq!(
+            got.samples.len(),
+            1 + 4 + 4,
+            "Gateway/Lines and both stations"
+        );
+        assert!(got.samples.iter().all(|s| s.t == at(9_000)
+            && s.value == SampleValue::Null
+            && s.quality == Quality::Bad
+            && !s.historical));
+        let mut points: Vec<_> = got.samples.iter().map(|s| (*s.point).clone()).collect();
+        points.sort();
+        assert!(points.contains(&key(None, "Gateway/Lines")));
+        assert!(points.contains(&key(Some("jbc2"), "status")));
+
+        // Dead: a second death changes nothing, and its data asks for a rebirth.
+        let got = feed(&mut host, &will, at(9_001));
+        assert_eq!(got, Received::default());
+        let got = feed(
+            &mut host,
+            &ddata(&mut node, "jbc1", 1.0, at(9_002)),
+            at(9_002),
+        );
+        assert_eq!(got.samples, []);
+        assert_eq!(got.commands.len(), 1);
+    }
+
+    #[test]
+    fn a_stale_ndeath_of_an_older_session_is_ignored() {
+        let mut host = alone();
+        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+        let old_will = node.will();
+        node.on_connect();
+        feed(
+            &mut host,
+            &node.node_birth(&node_metrics(), T0).unwrap(),
+            T0,
+        );
+        // Reconnected: session 8 is born before the broker gives up on session 7.
+        let new_will = node.will();
+        node.on_connect();
+        feed(
+            &mut host,
+            &node.node_birth(&node_metrics(), at(10)).unwrap(),
+            at(10),
+        );
+        feed(
+            &mut host,
+            &node.device_birth(&id("jbc1"), &station(), at(10)).unwrap(),
+            at(10),
+        );
+
+        let got = feed(&mut host, &old_will, at(20));
+        assert_eq!(got.samples, []);
+        assert_eq!(
+            got.problems[0].problem,
+            Problem::StaleDeath {
+                death: Some(7),
+                birth: Some(8)
+            }
+        );
+        assert_eq!(host.stats().stale_deaths, 1);
+        // Still born: its data is recorded.
+        let got = feed(&mut host, &ddata(&mut node, "jbc1", 70.0, at(30)), at(30));
+        assert_eq!((got.samples.len(), got.commands.len()), (1, 0));
+        // The current session's Will marks it dead.
+        let got = feed(&mut host, &new_will, at(40));
+        assert_eq!(got.samples.len(), 1 + 4);
+    }
+
+    #[test]
+    fn ddeath_marks_that_devices_points_bad_and_its_later_data_asks_for_a_rebirth() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let death = node.device_death(&id("jbc2"), at(500)).unwrap();
+        let got = feed(&mut host, &death, at(510));
+        assert_eq!(got.problems, []);
+        assert_eq!(got.samples.len(), 4);
+        assert!(
+            got.samples
+                .iter()
+                .all(|s| s.point.device == Some(id("jbc2"))
+                    && s.t == at(500)
+                    && s.quality == Quality::Bad)
+        );
+        // jbc1 lives on.
+        let got = feed(&mut host, &ddata(&mut node, "jbc1", 80.0, at(600)), at(600));
+        assert_eq!((got.samples.len(), got.commands.len()), (1, 0));
+        // Data of the dead device (a node that ignores its own DDEATH): rebirth.
+        let mut node2 = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
+        node2.on_connect();
+        node2.node_birth(&node_metrics(), T0).unwrap();
+        node2.device_birth(&id("jbc2"), &station(), T0).unwrap();
+        let mut stray = ddata(&mut node2, "jbc2", 1.0, at(700));
+        let mut payload = Payload::decode(&stray.payload[..]).unwrap();
+        payload.seq = Some(u64::from(node.seq()));
+        stray.payload = payload.encode_to_vec();
+        let got = feed(&mut host, &stray, at(700));
+        assert_eq!(
+            got.problems[0].problem,
+            Problem::DeviceNotBorn { device: id("jbc2") }
+        );
+        assert_eq!(got.commands.len(), 1);
+    }
+
+    #[test]
+    fn a_gateway_event_arrives_with_its_kind_severity_device_point_and_line() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let event = NodeEvent {
+            t: at(123),
+            kind: "alarm_raised".into(),
+            severity: 700,
+            message: "jbc1: tool error".into(),
+            line: Some("line1".into()),
+            device: Some("jbc1".into()),
+            point: Some("error".into()),
+        };
+        let published = node.node_event(&event, at(130)).unwrap();
+        assert_eq!(published.topic.to_string(), "spBv1.0/cell/NDATA/gw1");
+        let got = feed(&mut host, &published, at(140));
+        assert_eq!(got.problems, []);
+        assert_eq!(got.samples, [], "an event is no sample");
+        assert_eq!(
+            got.events,
+            [HostEvent {
+                group: id("cell"),
+                node: id("gw1"),
+                device: Some("jbc1".into()),
+                point: Some("error".into()),
+                line: Some("line1".into()),
+                t: at(123),
+                kind: Some("alarm_raised".into()),
+                severity: Some(700),
+                message: "jbc1: tool error".into(),
+                historical: false,
+            }]
+        );
+        // Twice the same event is two events.
+        let again = node.node_event(&event, at(131)).unwrap();
+        assert_eq!(feed(&mut host, &again, at(141)).events.len(), 1);
+        assert_eq!(host.stats().events, 2);
+    }
+
+    #[test]
+    fn garbage_and_truncated_payloads_are_problems_not_panics() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let got = host.receive("spBv1.0/cell/DDATA/gw1/jbc1", &[0xff; 12], at(1));
+        assert!(matches!(got.problems[0].problem, Problem::Undecodable(_)));
+        let got = host.receive("spBv1.0/cell/NOPE/gw1", &[], at(1));
+        assert!(matches!(got.problems[0].problem, Problem::Topic(_)));
+        assert_eq!(host.stats().undecodable, 2);
+
+        let nbirth = node.node_birth(&node_metrics(), at(2)).unwrap();
+        let dbirth = node.device_birth(&id("jbc1"), &station(), at(2)).unwrap();
+        let data = ddata(&mut node, "jbc1", 9.0, at(3));
+        let mut undecodable = 0;
+        for message in [&nbirth, &dbirth, &data] {
+            let topic = message.topic.to_string();
+            for end in 0..message.payload.len() {
+                let got = host.receive(&topic, &message.payload[..end], at(4));
+                undecodable += got
+                    .problems
+                    .iter()
+                    .filter(|p| matches!(p.problem, Problem::Undecodable(_)))
+                    .count();
+            }
+        }
+        assert!(undecodable > 0, "cut inside a field is undecodable");
+        assert_eq!(host.stats().undecodable, 2 + undecodable as u64);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_bytes_on_any_topic_never_panic(
+            bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..200),
+            topic in 0usize..8,
+        ) {
+            let topics = [
+                "spBv1.0/cell/NBIRTH/gw1",
+                "spBv1.0/cell/NDATA/gw1",
+                "spBv1.0/cell/NDEATH/gw1",
+                "spBv1.0/cell/DBIRTH/gw1/jbc1",
+                "spBv1.0/cell/DDATA/gw1/jbc1",
+                "spBv1.0/cell/DDEATH/gw1/jbc1",
+                "spBv1.0/STATE/other",
+                "garbage/#",
+            ];
+            let mut host = alone();
+            born(&mut host);
+            let before = host.stats().messages;
+            let got = host.receive(topics[topic], &bytes, at(1));
+            proptest::prop_assert_eq!(host.stats().messages, before + 1);
+            proptest::prop_assert!(got.commands.len() <= 1);
+        }
+    }
+
+    #[test]
+    fn alone_subscribes_to_the_six_message_types_of_its_group_and_not_to_state_or_commands() {
+        let subscriptions = alone().subscriptions();
+        let filters: Vec<_> = subscriptions
+            .iter()
+            .map(|s| (s.filter.as_str(), s.qos))
+            .collect();
+        assert_eq!(
+            filters,
+            [
+                ("spBv1.0/cell/NBIRTH/+", Qos::AtLeastOnce),
+                ("spBv1.0/cell/NDEATH/+", Qos::AtLeastOnce),
+                ("spBv1.0/cell/DBIRTH/+/+", Qos::AtLeastOnce),
+                ("spBv1.0/cell/DDEATH/+/+", Qos::AtLeastOnce),
+                ("spBv1.0/cell/NDATA/+", Qos::AtMostOnce),
+                ("spBv1.0/cell/DDATA/+/+", Qos::AtMostOnce),
+            ]
+        );
+        let every_group = Host::new(id("h"), None, Sharing::Alone).subscriptions();
+        assert_eq!(every_group[0].filter, "spBv1.0/+/NBIRTH/+");
+    }
+
+    #[test]
+    fn shared_mode_subscribes_births_unshared_and_data_shared_and_asks_no_rebirth_on_a_gap() {
+        let sharing = Sharing::Shared { name: id("plant") };
+        let mut host = Host::new(id("historian-2"), Some(id("cell")), sharing);
+        let filters: Vec<_> = host.subscriptions().into_iter().map(|s| s.filter).collect();
+        assert_eq!(
+            filters,
+            [
+                "spBv1.0/cell/NBIRTH/+",
+                "spBv1.0/cell/NDEATH/+",
+                "spBv1.0/cell/DBIRTH/+/+",
+                "spBv1.0/cell/DDEATH/+/+",
+                "$share/plant/spBv1.0/cell/NDATA/+",
+                "$share/plant/spBv1.0/cell/DDATA/+/+",
+            ]
+        );
+        let mut node = born(&mut host);
+        let _taken_by_another_host = ddata(&mut node, "jbc1", 1.0, at(10));
+        let got = feed(&mut host, &ddata(&mut node, "jbc1", 2.0, at(20)), at(20));
+        assert_eq!((got.problems.len(), got.commands.len()), (0, 0));
+        assert_eq!(got.samples.len(), 1);
+        assert_eq!(host.stats().seq_gaps, 0);
+        // Data before a birth still asks for one.
+        let mut stranger = EdgeNode::new(id("cell"), id("gw9"), BdSeq::new(0));
+        stranger.on_connect();
+        stranger.node_birth(&[], T0).unwrap();
+        stranger.device_birth(&id("d"), &station(), T0).unwrap();
+        let got = feed(&mut host, &ddata(&mut stranger, "d", 1.0, at(30)), at(30));
+        assert_eq!(got.commands.len(), 1);
+        assert_eq!(got.commands[0].topic.to_string(), "spBv1.0/cell/NCMD/gw9");
+    }
+
+    #[test]
+    fn state_online_and_will_are_retained_qos1_json_on_the_hosts_state_topic() {
+        let host = alone();
+        let will = host.will(at(0));
+        let online = host.state_online(at(0));
+        for (p, online_flag) in [(&will, false), (&online, true)] {
+            assert_eq!(p.topic.to_string(), "spBv1.0/STATE/historian");
+            assert_eq!((p.qos, p.retain), (Qos::AtLeastOnce, true));
+            let state = HostState::from_json(&p.payload).unwrap();
+            assert_eq!(state, HostState::new(online_flag, T0));
+        }
+    }
+
+    #[test]
+    fn other_groups_state_and_commands_are_ignored() {
+        let mut host = alone();
+        born(&mut host);
+        let state = HostState::new(true, T0).publish(id("other"));
+        assert_eq!(feed(&mut host, &state, at(1)), Received::default());
+        let ncmd = rebirth_request(&id("cell"), &id("gw1"), at(1));
+        assert_eq!(feed(&mut host, &ncmd, at(1)), Received::default());
+        let mut elsewhere = EdgeNode::new(id("line2"), id("gw1"), BdSeq::new(0));
+        elsewhere.on_connect();
+        let birth = elsewhere.node_birth(&node_metrics(), T0).unwrap();
+        assert_eq!(feed(&mut host, &birth, at(1)), Received::default());
+    }
+
+    #[test]
+    fn a_rebirth_request_names_the_rebirth_metric_and_the_edge_node_reads_it() {
+        let request = rebirth_request(&id("cell"), &id("gw1"), at(5));
+        let payload = Payload::decode(&request.payload[..]).unwrap();
+        assert_eq!(payload.metrics[0].name.as_deref(), Some(REBIRTH));
+        assert_eq!(payload.timestamp, Some(at(5).as_millis()));
+        assert!(is_rebirth_of_gw1(&request));
+    }
+
+    #[test]
+    fn float32_values_are_the_decimal_they_were_written_as() {
+        assert_eq!(
+            SampleValue::from(MetricValue::Float(0.1)),
+            SampleValue::Number(0.1)
+        );
+        assert_eq!(
+            SampleValue::from(MetricValue::UInt64(u64::MAX)),
+            SampleValue::Number(u64::MAX as f64)
+        );
+        assert_eq!(
+            SampleValue::from(MetricValue::DateTime(T0)),
+            SampleValue::Number(T0.as_millis() as f64)
+        );
+    }
+}
