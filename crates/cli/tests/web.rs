@@ -3,10 +3,11 @@
 
 mod common;
 
+use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
 
-use common::Gateway;
+use common::{Gateway, Sim};
 
 #[test]
 fn the_page_shows_every_demo_device_a_value_changing_by_itself_and_the_mqtt_link() {
@@ -27,10 +28,111 @@ fn a_gateway_with_a_read_token_is_asked_for_it_once_and_then_shows_the_cell() {
     );
 }
 
-/// Starts the demo gateway (with `read_token` if given, publishing to the MQTT broker
-/// `mqtt` if given), opens its page in Chromium and checks a card for every device and a
-/// value that changes; returns what the page saw.
-fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Value {
+/// 1,000 JBC stations, 20 on each of 50 TCP lines to one `cellbus sim jbc` (each line its
+/// own connection, so its own station at address 01): on every line `jbc…` at address 01
+/// answers with live values and the 19 others time out and are backed off, as on a bus
+/// with unplugged stations. The page must show a line at a time and take only that.
+#[test]
+fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_is_shown() {
+    const LINES: usize = 50;
+    const PER_LINE: usize = 20;
+    let (web, chromium) = browser();
+    let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
+    let data = tempfile::tempdir().unwrap();
+    let mut config = String::from("# 1,000 stations for the page's test.\n");
+    for line in 1..=LINES {
+        let _ = write!(
+            config,
+            "\n[[line]]\nname = \"line{line:02}\"\nendpoint = \"{}\"\n",
+            sim.endpoint
+        );
+        for address in 1..=PER_LINE {
+            let n = (line - 1) * PER_LINE + address;
+            let _ = write!(
+                config,
+                "\n[[line.device]]\nid = \"jbc{n}\"\nprotocol = \"jbc\"\naddress = {address}\n\
+                 timeout = \"100ms\"\nretries = 0\n"
+            );
+        }
+    }
+    let path = data.path().join("cell.toml");
+    std::fs::write(&path, config).unwrap();
+    let gateway = Gateway::start_with(data.path(), &["--config", path.to_str().unwrap()]);
+
+    // The API's filtered and slim listings of a cell this size stay small and quick.
+    let (status, slim) = gateway.get("/api/devices?fields=line,status");
+    assert_eq!(status, 200, "{slim}");
+    let slim: serde_json::Value = serde_json::from_str(&slim).unwrap();
+    assert_eq!(slim["total"], LINES * PER_LINE);
+    let page: Vec<String> = (951..=1000).map(|n| format!("jbc{n}")).collect();
+    let (status, listed) = gateway.get(&format!("/api/devices?device={}", page.join(",")));
+    assert_eq!(
+        status, 200,
+        "fifty devices by id fit in one request: {listed}"
+    );
+    let listed: serde_json::Value = serde_json::from_str(&listed).unwrap();
+    assert_eq!(listed["total"], 50);
+
+    let screenshot = data.path().join("page.png");
+    let out = Command::new("node")
+        .arg(web.join("big.mjs"))
+        .arg(format!("http://{}", gateway.addr))
+        .arg(&screenshot)
+        .env("CHROMIUM", &chromium)
+        .output()
+        .expect("node runs (install Node.js: it comes with npm)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
+    assert_eq!(seen["devices"], LINES * PER_LINE);
+    assert_eq!(
+        seen["dom"]["cards"], PER_LINE,
+        "only the first line's cards"
+    );
+    assert!(screenshot.exists());
+
+    // Measured, not asserted: what a page costs with 1,000 devices.
+    let refresh = &seen["refresh"];
+    let seconds = refresh["seconds"].as_f64().unwrap();
+    let whole = &seen["whole_cell_stream"];
+    let kb = |v: &serde_json::Value| v.as_f64().unwrap_or(0.0) / 1000.0;
+    eprintln!(
+        "web page with {} devices on {} lines: first card {} ms, first line's {} cards {} ms \
+         ({} elements, {} points); search to jbc987 {} ms",
+        seen["devices"],
+        seen["lines"],
+        seen["first_card_ms"],
+        seen["dom"]["cards"],
+        seen["first_line_ms"],
+        seen["dom"]["elements"],
+        seen["dom"]["points"],
+        seen["search_ms"]
+    );
+    eprintln!(
+        "per second with a line shown: stream {:.1} kB ({:.1} messages), other requests \
+         {:.1} kB ({} in {seconds} s); the line's snapshot {:.1} kB",
+        kb(&refresh["stream_bytes"]) / seconds,
+        refresh["stream_messages"].as_f64().unwrap_or(0.0) / seconds,
+        kb(&refresh["other_bytes"]) / seconds,
+        refresh["other_requests"],
+        kb(&seen["line_snapshot_bytes"])
+    );
+    eprintln!(
+        "the whole cell's stream for comparison: snapshot {:.1} kB, then {:.1} kB/s \
+         ({:.1} messages/s)",
+        kb(&whole["snapshot_bytes"]),
+        (kb(&whole["bytes"]) - kb(&whole["snapshot_bytes"])) / whole["seconds"].as_f64().unwrap(),
+        whole["messages"].as_f64().unwrap_or(0.0) / whole["seconds"].as_f64().unwrap()
+    );
+    eprintln!("{seen}");
+}
+
+/// Where the browser test's script lives and the Chromium it drives, both checked.
+fn browser() -> (std::path::PathBuf, String) {
     let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/web");
     assert!(
         web.join("node_modules/playwright-core").is_dir(),
@@ -42,7 +144,14 @@ fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Va
         Path::new(&chromium).exists(),
         "no Chromium at {chromium}: run scripts/test once, or `apt-get install chromium`"
     );
+    (web, chromium)
+}
 
+/// Starts the demo gateway (with `read_token` if given, publishing to the MQTT broker
+/// `mqtt` if given), opens its page in Chromium and checks a card for every device and a
+/// value that changes; returns what the page saw.
+fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Value {
+    let (web, chromium) = browser();
     let data = tempfile::tempdir().unwrap();
     let mut args: Vec<&str> = read_token.map_or(vec![], |t| vec!["--read-token", t]);
     if let Some(url) = mqtt {

@@ -371,27 +371,7 @@ async fn devices(
     query: Result<Query<DevicesQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
     let Query(q) = query?;
-    let entries: Vec<_> = s.cell.device_entries().collect();
-    if let Some(line) = &q.line
-        && !entries.iter().any(|d| &d.line == line)
-    {
-        let lines: Vec<String> = s.cell.lines().into_iter().map(|l| l.name).collect();
-        return Err(ApiError::not_found(format!(
-            "no line {line:?}; lines: {}",
-            lines.join(", ")
-        )));
-    }
-    let wanted: Option<Vec<&str>> = q
-        .device
-        .as_deref()
-        .map(|d| d.split(',').map(str::trim).collect());
-    if let Some(ids) = &wanted
-        && let Some(missing) = ids
-            .iter()
-            .find(|id| !entries.iter().any(|d| d.id.as_str() == **id))
-    {
-        return Err(unknown_device(&s.cell, missing));
-    }
+    let selection = Selection::new(&s.cell, q.line.as_deref(), q.device.as_deref())?;
     let fields: Option<Vec<&str>> = q
         .fields
         .as_deref()
@@ -404,14 +384,10 @@ async fn devices(
             DEVICE_FIELDS.join(", ")
         )));
     }
-    let matching: Vec<_> = entries
-        .into_iter()
-        .filter(|d| q.line.as_ref().is_none_or(|line| &d.line == line))
-        .filter(|d| {
-            wanted
-                .as_ref()
-                .is_none_or(|ids| ids.contains(&d.id.as_str()))
-        })
+    let matching: Vec<_> = s
+        .cell
+        .device_entries()
+        .filter(|d| selection.contains(d.id.as_str()))
         .collect();
     let total = matching.len();
     let now = Timestamp::now();
@@ -454,6 +430,71 @@ async fn devices(
     })
 }
 
+/// The devices a request names: those on `line` among the ids listed in `device` (ids
+/// separated by commas; an empty list names none), each filter only when given.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Selection {
+    /// The selected ids; `None`: every device.
+    ids: Option<std::collections::HashSet<String>>,
+}
+
+impl Selection {
+    /// Checks the filters against `cell`: an unknown line or device is a 404 naming those
+    /// there are.
+    fn new(cell: &Cell, line: Option<&str>, device: Option<&str>) -> ApiResult<Selection> {
+        if let Some(line) = line
+            && !cell.device_entries().any(|d| d.line == line)
+        {
+            let lines: Vec<String> = cell.lines().into_iter().map(|l| l.name).collect();
+            return Err(ApiError::not_found(format!(
+                "no line {line:?}; lines: {}",
+                lines.join(", ")
+            )));
+        }
+        let wanted: Option<Vec<&str>> = device.map(|d| {
+            d.split(',')
+                .map(str::trim)
+                .filter(|id| !id.is_empty())
+                .collect()
+        });
+        if let Some(missing) = wanted
+            .iter()
+            .flatten()
+            .find(|id| cell.device_entry(id).is_none())
+        {
+            return Err(unknown_device(cell, missing));
+        }
+        if line.is_none() && wanted.is_none() {
+            return Ok(Selection { ids: None });
+        }
+        let ids = cell
+            .device_entries()
+            .filter(|d| line.is_none_or(|line| d.line == line))
+            .filter(|d| {
+                wanted
+                    .as_ref()
+                    .is_none_or(|ids| ids.contains(&d.id.as_str()))
+            })
+            .map(|d| d.id.to_string())
+            .collect();
+        Ok(Selection { ids: Some(ids) })
+    }
+
+    /// Whether the device `id` is selected.
+    fn contains(&self, id: &str) -> bool {
+        self.ids.as_ref().is_none_or(|ids| ids.contains(id))
+    }
+
+    /// Whether a live message concerns a selected device (events are the cell's, always).
+    fn passes(&self, message: &LiveMessage) -> bool {
+        match message {
+            LiveMessage::Value(point) => self.contains(point.id.device()),
+            LiveMessage::Device(device) => self.contains(device.id.as_str()),
+            LiveMessage::Event(_) => true,
+        }
+    }
+}
+
 /// The body of `/api/devices`.
 #[derive(Debug, serde::Serialize)]
 struct DevicesBody<D> {
@@ -470,8 +511,36 @@ async fn device(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<
     Ok(Json(view).into_response())
 }
 
-async fn lines(State(s): State<AppState>) -> Json<serde_json::Value> {
-    Json(json!({ "lines": s.cell.lines() }))
+/// Query of `/api/lines`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct LinesQuery {
+    /// Only these lines (names separated by commas).
+    line: Option<String>,
+}
+
+async fn lines(
+    State(s): State<AppState>,
+    query: Result<Query<LinesQuery>, QueryRejection>,
+) -> ApiResult<Json<serde_json::Value>> {
+    let Query(q) = query?;
+    let mut lines = s.cell.lines();
+    if let Some(wanted) = q.line.as_deref() {
+        let wanted: Vec<&str> = wanted
+            .split(',')
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .collect();
+        if let Some(unknown) = wanted.iter().find(|w| !lines.iter().any(|l| l.name == **w)) {
+            let names: Vec<&str> = lines.iter().map(|l| l.name.as_str()).collect();
+            return Err(ApiError::not_found(format!(
+                "no line {unknown:?}; lines: {}",
+                names.join(", ")
+            )));
+        }
+        lines.retain(|l| wanted.contains(&l.name.as_str()));
+    }
+    Ok(Json(json!({ "lines": lines })))
 }
 
 fn unknown_device(cell: &Cell, id: &str) -> ApiError {
@@ -720,9 +789,22 @@ enum StreamItem {
     Stop(bool),
 }
 
+/// Query of `/api/events/stream`: which devices' snapshot and changes to send.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct StreamQuery {
+    /// Only the devices on this line.
+    line: Option<String>,
+    /// Only these devices (ids separated by commas).
+    device: Option<String>,
+}
+
 async fn stream(
     State(s): State<AppState>,
+    query: Result<Query<StreamQuery>, QueryRejection>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<SseEvent, Infallible>>>> {
+    let Query(q) = query?;
+    let selection = Selection::new(&s.cell, q.line.as_deref(), q.device.as_deref())?;
     let guard = ClientGuard::new(Arc::clone(&s.cell), Arc::clone(&s.streams)).ok_or_else(|| {
         ApiError::new(
             StatusCode::SERVICE_UNAVAILABLE,
@@ -737,8 +819,15 @@ async fn stream(
             m.map_err(|tokio_stream::wrappers::errors::BroadcastStreamRecvError::Lagged(n)| n),
         )
     });
+    let now = Timestamp::now();
+    let devices: Vec<_> = s
+        .cell
+        .device_entries()
+        .filter(|d| selection.contains(d.id.as_str()))
+        .map(|d| d.view(now))
+        .collect();
     let snapshot = json!({
-        "devices": s.cell.devices(),
+        "devices": devices,
         "lines": s.cell.lines(),
         "writes_enabled": s.writes.enabled,
     });
@@ -756,6 +845,8 @@ async fn stream(
                 return None;
             }
             Some(match item {
+                // Changes of devices the client did not ask for are not sent.
+                StreamItem::Live(Ok(message)) if !selection.passes(&message) => None,
                 StreamItem::Live(Ok(message)) => Some(
                     SseEvent::default()
                         .event(message.name())

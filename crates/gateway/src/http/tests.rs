@@ -172,6 +172,21 @@ async fn devices_show_points_with_value_unit_quality_and_time() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn lines_can_be_asked_for_by_name() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    let (status, named) = get(&app, "/api/lines?line=bench").await;
+    assert_eq!(status, StatusCode::OK, "{named}");
+    assert_eq!(named["lines"].as_array().unwrap().len(), 1);
+    assert_eq!(named["lines"][0]["name"], "bench");
+    let (status, body) = get(&app, "/api/lines?line=bench,nope").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(error_of(&body).contains("\"nope\"; lines: bench"), "{body}");
+    let (status, _) = get(&app, "/api/lines?colour=red").await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+}
+
+#[tokio::test(start_paused = true)]
 async fn devices_can_be_filtered_by_line_and_id_cut_to_fields_and_paged() {
     let rig = rig(3);
     let app = app(&rig, false);
@@ -198,6 +213,9 @@ async fn devices_can_be_filtered_by_line_and_id_cut_to_fields_and_paged() {
     let (_, paged) = get(&app, "/api/devices?offset=1&limit=1").await;
     assert_eq!(ids(&paged), ["jbc2"]);
     assert_eq!(paged["total"], 3, "the total counts every match");
+    let (status, none) = get(&app, "/api/devices?device=").await;
+    assert_eq!(status, StatusCode::OK, "{none}");
+    assert_eq!(none["total"], 0, "an empty list names no device");
 
     let (_, slim) = get(&app, "/api/devices?fields=status,line").await;
     let first = slim["devices"][0].as_object().unwrap();
@@ -622,6 +640,116 @@ async fn the_event_stream_starts_with_a_snapshot_and_carries_live_values_over_a_
         assert!(n > 0, "closed without ending the body");
         seen.push_str(&String::from_utf8_lossy(&buf[..n]));
     }
+}
+
+/// The events of a stream answer, each as (name, data), until `enough` says so.
+async fn sse_events(
+    response: axum::response::Response,
+    enough: impl Fn(&[(String, Json)]) -> bool,
+) -> Vec<(String, Json)> {
+    let mut body = response.into_body().into_data_stream();
+    let mut text = String::new();
+    let mut events = Vec::new();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    while !enough(&events) {
+        let chunk = tokio::time::timeout_at(deadline, body.next())
+            .await
+            .unwrap_or_else(|_| panic!("20 s and still not enough: {events:?}"))
+            .expect("the stream goes on")
+            .unwrap();
+        text.push_str(&String::from_utf8_lossy(&chunk));
+        while let Some((event, rest)) = text.split_once("\n\n") {
+            let field = |name: &str| {
+                event
+                    .lines()
+                    .find_map(|l| l.strip_prefix(name))
+                    .unwrap_or_default()
+                    .to_owned()
+            };
+            let data = serde_json::from_str(&field("data: ")).unwrap_or(Json::Null);
+            events.push((field("event: "), data));
+            text = rest.to_owned();
+        }
+    }
+    events
+}
+
+#[tokio::test]
+async fn an_event_stream_for_some_devices_carries_only_their_snapshot_and_changes() {
+    let rig = rig(3);
+    let app = app(&rig, false);
+    let open = |uri: &str| {
+        app.clone()
+            .oneshot(Request::get(uri).body(Body::empty()).unwrap())
+    };
+
+    let response = open("/api/events/stream?device=jbc2").await.unwrap();
+    assert_eq!(response.status(), StatusCode::OK);
+    let values = |events: &[(String, Json)]| {
+        events
+            .iter()
+            .filter(|(name, _)| name == "value")
+            .map(|(_, data)| data["id"].as_str().unwrap_or_default().to_owned())
+            .collect::<Vec<_>>()
+    };
+    // The other two stations change as often: 20 values of jbc2 would hold some of theirs.
+    let events = sse_events(response, |events| values(events).len() >= 20).await;
+    assert_eq!(events[0].0, "snapshot");
+    let snapshot = &events[0].1;
+    let shown: Vec<&str> = snapshot["devices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["id"].as_str().unwrap())
+        .collect();
+    assert_eq!(shown, ["jbc2"]);
+    assert_eq!(
+        snapshot["lines"][0]["devices"].as_array().unwrap().len(),
+        3,
+        "the lines are the whole cell's"
+    );
+    for id in values(&events) {
+        assert!(id.starts_with("jbc2."), "{id} is not one of jbc2's points");
+    }
+    for (name, data) in &events {
+        if name == "device" {
+            assert_eq!(data["id"], "jbc2");
+        }
+    }
+
+    // The same filters as /api/devices: a line, an empty list, unknown names.
+    let response = open("/api/events/stream?line=bench").await.unwrap();
+    let events = sse_events(response, |events| !events.is_empty()).await;
+    assert_eq!(events[0].1["devices"].as_array().unwrap().len(), 3);
+    let response = open("/api/events/stream?device=").await.unwrap();
+    let events = sse_events(response, |events| !events.is_empty()).await;
+    assert_eq!(events[0].1["devices"], json!([]));
+    let (status, body) = call(
+        &app,
+        Request::get("/api/events/stream?line=nope")
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(error_of(&body).contains("bench"), "{body}");
+    let (status, body) = call(
+        &app,
+        Request::get("/api/events/stream?device=jbc2,jbc9")
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(error_of(&body).contains("jbc9"), "{body}");
+    let (status, _) = call(
+        &app,
+        Request::get("/api/events/stream?colour=red")
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
 }
 
 #[tokio::test]

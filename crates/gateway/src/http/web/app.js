@@ -1,6 +1,12 @@
 // cellbus cell overview: everything comes from the gateway's event stream
 // (/api/events/stream); plots start from /api/history and grow with live values.
 //
+// A large cell is shown a line (or a search's matches) at a time: the page opens the
+// stream for the shown devices only (`?line=` or `?device=`), so the gateway sends their
+// snapshot and changes and nothing of the rest; at most PAGE_SIZE cards are on the page,
+// and a plot loads its history when it scrolls into view. The view is in the address
+// (`#line=NAME`, `&q=TEXT` for a search, `&page=N`), so a link opens the same view.
+//
 // DOM contract (for tests and other tools): each device is <section class="device"
 // id="device-ID" data-status="up|down|connecting">; each point is an element with
 // id="point-DEVICE.POINT" and data-quality="good|stale|bad|none", whose .value child
@@ -9,13 +15,27 @@
 
 const PLOT_WINDOW_MS = 10 * 60 * 1000;
 const MAX_EVENTS = 200;
+/** A cell this small shows every device at once by default; a larger one its first line. */
+const SMALL_CELL = 50;
+/** Most device cards on the page at once: a longer line or search result is paged. */
+const PAGE_SIZE = 50;
+/** History queries in flight at once: the gateway runs 4 at a time and makes others wait. */
+const HISTORY_AT_ONCE = 4;
+/** The line selector's value for every line (no line is named so: names are a-z, 0-9, _, -). */
+const ALL_LINES = '*';
 
 const state = {
   writesEnabled: false,
-  devices: new Map(), // id -> device (with points by id in .byId)
+  devices: new Map(), // id -> device shown (with points by id in .byId)
   series: new Map(),  // point id -> [[t_ms, value|null], ...]
   dirty: new Set(),   // point ids whose plot needs drawing
+  visible: new Set(), // point ids whose plot is on screen
   lines: [],
+  order: [],          // every device id, line by line in poll order
+  view: null,         // { line, q, page } shown now
+  shown: [],          // ids of the devices the view shows, in order
+  streamQuery: null,  // the stream's query for them
+  generation: 0,      // counts snapshots: answers for an older one are dropped
 };
 
 // ---- helpers -------------------------------------------------------------------------
@@ -59,16 +79,36 @@ function renderDevices(devices) {
   const container = document.getElementById('devices');
   container.replaceChildren();
   state.devices.clear();
+  state.generation += 1;
+  state.series.clear();
+  state.dirty.clear();
+  state.visible.clear();
+  historyLoads.queue = [];
+  historyLoads.asked.clear();
+  if (plotObserver) plotObserver.disconnect();
   if (devices.length === 0) {
-    container.append(el('p', 'placeholder', 'No devices are configured.'));
+    const view = state.view || {};
+    const why = view.q
+      ? `No device id contains “${view.q}”.`
+      : state.order.length ? 'No devices on this line.' : 'No devices are configured.';
+    container.append(el('p', 'placeholder', why));
     return;
   }
-  for (const device of devices) {
+  // In the view's order (line by line), whatever order the gateway lists them in.
+  const position = new Map(state.shown.map((id, i) => [id, i]));
+  const ordered = [...devices].sort(
+    (a, b) => (position.get(a.id) ?? Infinity) - (position.get(b.id) ?? Infinity),
+  );
+  for (const device of ordered) {
     device.byId = new Map(device.points.map((p) => [p.id, p]));
     state.devices.set(device.id, device);
     container.append(renderDevice(device));
     updateDeviceStatus(device);
     for (const point of device.points) updatePoint(point, false);
+  }
+  for (const canvas of container.querySelectorAll('canvas')) {
+    if (plotObserver) plotObserver.observe(canvas);
+    else seen(canvas.dataset.point);
   }
 }
 
@@ -104,7 +144,9 @@ function renderTile(point) {
   tile.append(el('span', 'quality'), el('div', 'label', point.name));
   const reading = el('div', 'reading');
   reading.append(el('span', 'value', '—'), el('span', 'unit', point.unit || ''));
-  tile.append(reading, el('canvas'));
+  const canvas = el('canvas');
+  canvas.dataset.point = point.id;
+  tile.append(reading, canvas);
   return tile;
 }
 
@@ -133,7 +175,7 @@ function updatePoint(view, live = true) {
     const series = state.series.get(view.id) || [];
     const t = point.t ? Date.parse(point.t) : Date.now();
     series.push([t, point.quality === 'good' && typeof point.value === 'number' ? point.value : null]);
-    state.series.set(view.id, series);
+    state.series.set(view.id, withinWindow(series, Date.now()));
     state.dirty.add(view.id);
   }
 }
@@ -163,12 +205,46 @@ function statusDetail(device) {
 
 // ---- plots ---------------------------------------------------------------------------
 
-async function loadHistory(pointId) {
+// A plot's history is asked for when it comes into view, at most HISTORY_AT_ONCE at once.
+const historyLoads = { queue: [], running: 0, asked: new Set() };
+
+const plotObserver = 'IntersectionObserver' in window
+  ? new IntersectionObserver((entries) => {
+    for (const entry of entries) {
+      if (entry.isIntersecting) seen(entry.target.dataset.point);
+      else state.visible.delete(entry.target.dataset.point);
+    }
+  }, { rootMargin: '200px' })
+  : null;
+
+function seen(pointId) {
+  state.visible.add(pointId);
+  state.dirty.add(pointId);
+  if (historyLoads.asked.has(pointId)) return;
+  historyLoads.asked.add(pointId);
+  historyLoads.queue.push({ pointId, generation: state.generation });
+  pumpHistory();
+}
+
+function pumpHistory() {
+  while (historyLoads.running < HISTORY_AT_ONCE && historyLoads.queue.length) {
+    const job = historyLoads.queue.shift();
+    if (job.generation !== state.generation) continue;
+    historyLoads.running += 1;
+    loadHistory(job.pointId, job.generation).finally(() => {
+      historyLoads.running -= 1;
+      pumpHistory();
+    });
+  }
+}
+
+async function loadHistory(pointId, generation) {
   try {
     const response = await api(`/api/history?point=${encodeURIComponent(pointId)}&from=-10m`);
-    if (!response.ok) return;
-    const history = await response.json();
-    const samples = (history.before ? [history.before] : []).concat(history.samples || []);
+    if (!response.ok || generation !== state.generation) return;
+    const answer = await response.json();
+    if (generation !== state.generation) return;
+    const samples = (answer.before ? [answer.before] : []).concat(answer.samples || []);
     const loaded = samples.map((s) => [
       Date.parse(s.t),
       s.quality === 'good' && typeof s.value === 'number' ? s.value : null,
@@ -180,6 +256,13 @@ async function loadHistory(pointId) {
   } catch (e) {
     console.warn('history', pointId, e);
   }
+}
+
+/** `series` without what scrolled out of the plot, keeping the value held at its start. */
+function withinWindow(series, now) {
+  if (series.length < 2 || series[1][0] >= now - PLOT_WINDOW_MS) return series;
+  const firstInside = series.findIndex(([t]) => t >= now - PLOT_WINDOW_MS);
+  return firstInside === -1 ? series.slice(-1) : series.slice(Math.max(0, firstInside - 1));
 }
 
 /** Values hold until the next change: a step line from the window's start to now. */
@@ -196,10 +279,7 @@ function drawPlot(pointId) {
   ctx.clearRect(0, 0, width, height);
   const now = Date.now();
   const start = now - PLOT_WINDOW_MS;
-  let series = state.series.get(pointId) || [];
-  // Drop what scrolled out, keeping the one value held at the window's start.
-  const firstInside = series.findIndex(([t]) => t >= start);
-  if (firstInside > 1) series = series.slice(firstInside - 1);
+  const series = withinWindow(state.series.get(pointId) || [], now);
   state.series.set(pointId, series);
   const values = series.map(([, v]) => v).filter((v) => v !== null);
   if (values.length === 0) return;
@@ -224,22 +304,31 @@ function drawPlot(pointId) {
   ctx.stroke();
 }
 
+/** Draws the plots on screen that changed; one scrolling into view is drawn then. */
 function drawDirtyPlots() {
-  for (const id of state.dirty) drawPlot(id);
+  for (const id of state.dirty) {
+    if (state.visible.has(id)) drawPlot(id);
+  }
   state.dirty.clear();
 }
 
 function scrollAllPlots() {
-  for (const id of state.series.keys()) state.dirty.add(id);
+  for (const id of state.visible) state.dirty.add(id);
 }
 
 // ---- lines and events ----------------------------------------------------------------
 
+/** The line health cards: every line of a small cell, else the lines of the shown devices. */
 function renderLines(lines) {
   state.lines = lines;
+  state.order = lines.flatMap((line) => line.devices);
+  renderLineChoice();
   const container = document.getElementById('lines');
   container.replaceChildren();
+  const small = state.order.length <= SMALL_CELL;
+  const shownLines = new Set(linesShown(lines));
   for (const line of lines) {
+    if (!small && !shownLines.has(line.name)) continue;
     const card = el('div', 'line');
     card.id = `line-${line.name}`;
     card.dataset.open = String(line.open);
@@ -257,19 +346,190 @@ function renderLines(lines) {
     fill.style.width = `${Math.min(100, line.utilisation * 100)}%`;
     meter.append(fill);
     card.append(meter);
-    if (line.backed_off.length) card.append(el('div', 'backed-off', `backed off: ${line.backed_off.join(', ')}`));
+    if (line.backed_off.length) card.append(el('div', 'backed-off', backedOff(line.backed_off)));
     if (!line.open && line.error) card.append(el('div', 'backed-off', line.error));
     container.append(card);
   }
 }
 
+/** The names of the lines with a device on the page. */
+function linesShown(lines) {
+  return lines.filter((line) => line.devices.some((id) => state.devices.has(id))).map((l) => l.name);
+}
+
+/** "backed off: a, b", shortened when a long line has many. */
+function backedOff(ids) {
+  const named = ids.slice(0, 12).join(', ');
+  return `backed off: ${named}${ids.length > 12 ? ` and ${ids.length - 12} more` : ''}`;
+}
+
+/** The line selector: every line with its size and trouble, kept in step with the view. */
+function renderLineChoice() {
+  const select = document.getElementById('line-select');
+  const options = [[ALL_LINES, `All lines (${state.order.length} devices)`]].concat(
+    state.lines.map((line) => {
+      const trouble = !line.open ? ', not open'
+        : line.backed_off.length ? `, ${line.backed_off.length} backed off` : '';
+      return [line.name, `${line.name} (${line.devices.length}${trouble})`];
+    }),
+  );
+  const same = select.options.length === options.length
+    && options.every(([value], i) => select.options[i].value === value);
+  if (same) {
+    // Only the words change: an open list stays open.
+    options.forEach(([, text], i) => {
+      if (select.options[i].textContent !== text) select.options[i].textContent = text;
+    });
+  } else {
+    select.replaceChildren(...options.map(([value, text]) => {
+      const option = el('option', '', text);
+      option.value = value;
+      return option;
+    }));
+  }
+  if (state.view) select.value = state.view.line;
+}
+
+let linesRefreshed = 0;
+
+/**
+ * Every 5 s: the health of the lines on the page; every line's (for the selector) on every
+ * 6th turn, or every turn in a small cell.
+ */
 async function refreshLines() {
+  linesRefreshed += 1;
+  const shown = linesShown(state.lines);
+  const some = state.order.length > SMALL_CELL && linesRefreshed % 6 !== 0
+    && shown.length > 0 && shown.length < state.lines.length;
   try {
-    const response = await api('/api/lines');
-    if (response.ok) renderLines((await response.json()).lines);
+    const url = some ? `/api/lines?${new URLSearchParams({ line: shown.join(',') })}` : '/api/lines';
+    const response = await api(url);
+    if (!response.ok) return;
+    const { lines } = await response.json();
+    if (!some) {
+      renderLines(lines);
+      return;
+    }
+    const fresh = new Map(lines.map((line) => [line.name, line]));
+    renderLines(state.lines.map((line) => fresh.get(line.name) || line));
   } catch (e) {
     console.warn('lines', e);
   }
+}
+
+// ---- the view: which devices are shown ------------------------------------------------
+
+function viewFromAddress() {
+  const params = new URLSearchParams(window.location.hash.slice(1));
+  return {
+    line: params.get('line'),
+    q: (params.get('q') || '').trim(),
+    page: Math.max(1, Number.parseInt(params.get('page'), 10) || 1),
+  };
+}
+
+/** The view's address: the line unless it is the default "all" of a small cell. */
+function addressOf(view) {
+  const params = new URLSearchParams();
+  const small = state.order.length <= SMALL_CELL;
+  if (!(small && view.line === ALL_LINES)) params.set('line', view.line);
+  if (view.q) params.set('q', view.q);
+  if (view.page > 1) params.set('page', String(view.page));
+  const text = params.toString();
+  return text ? `#${text}` : window.location.pathname + window.location.search;
+}
+
+/** The devices a view matches, in order: a search looks through every line. */
+function matching(view) {
+  if (view.q) {
+    const q = view.q.toLowerCase();
+    return state.order.filter((id) => id.toLowerCase().includes(q));
+  }
+  if (view.line === ALL_LINES) return state.order;
+  const line = state.lines.find((l) => l.name === view.line);
+  return line ? line.devices : [];
+}
+
+/**
+ * Shows `wanted` (a view, perhaps from an address: an unknown line becomes the default,
+ * the page is clamped) and records it in the address: `how` is 'push' (a new history
+ * entry), 'replace' or null (the address is already it). Opens the stream for the shown
+ * devices when they changed.
+ */
+function showView(wanted, how) {
+  const known = state.lines.some((l) => l.name === wanted.line) || wanted.line === ALL_LINES;
+  const fallback = state.order.length <= SMALL_CELL || state.lines.length === 0
+    ? ALL_LINES : state.lines[0].name;
+  const view = { line: known ? wanted.line : fallback, q: wanted.q || '', page: wanted.page || 1 };
+  const all = matching(view);
+  const pages = Math.max(1, Math.ceil(all.length / PAGE_SIZE));
+  view.page = Math.min(view.page, pages);
+  const from = (view.page - 1) * PAGE_SIZE;
+  state.view = view;
+  state.shown = all.slice(from, from + PAGE_SIZE);
+  const address = addressOf(view);
+  const current = window.location.hash || window.location.pathname + window.location.search;
+  if (how && address !== current) window.history[`${how}State`](null, '', address);
+
+  document.getElementById('line-select').value = view.line;
+  const search = document.getElementById('search');
+  if (search.value.trim() !== view.q && document.activeElement !== search) search.value = view.q;
+  document.getElementById('shown').textContent = describeView(view, all.length, from);
+  document.getElementById('pager').hidden = pages === 1;
+  document.getElementById('previous').disabled = view.page === 1;
+  document.getElementById('next').disabled = view.page === pages;
+
+  let query;
+  if (state.shown.length === state.order.length && !view.q) query = '';
+  else if (!view.q && view.line !== ALL_LINES && state.shown.length === all.length) {
+    query = new URLSearchParams({ line: view.line }).toString();
+  } else query = new URLSearchParams({ device: state.shown.join(',') }).toString();
+  if (query !== state.streamQuery) connect(query);
+}
+
+function describeView(view, count, from) {
+  const where = view.q ? ` whose id contains “${view.q}”`
+    : view.line === ALL_LINES ? '' : ` on line ${view.line}`;
+  if (count === 0) return view.q ? `No device id contains “${view.q}”` : `No devices${where}`;
+  if (count <= PAGE_SIZE) return `${count} device${count === 1 ? '' : 's'}${where}`;
+  const to = Math.min(count, from + PAGE_SIZE);
+  return `${from + 1}–${to} of ${count} devices${where}`;
+}
+
+let searchTimer = null;
+
+function setUpToolbar() {
+  document.getElementById('line-select').addEventListener('change', (e) => {
+    document.getElementById('search').value = '';
+    showView({ line: e.target.value, q: '', page: 1 }, 'push');
+  });
+  const search = document.getElementById('search');
+  const find = () => {
+    clearTimeout(searchTimer);
+    if (!state.view) return;
+    const q = search.value.trim();
+    // Starting a search is a new history entry (Back returns to the line); typing on is not.
+    showView({ ...state.view, q, page: 1 }, state.view.q || !q ? 'replace' : 'push');
+  };
+  search.addEventListener('input', () => {
+    clearTimeout(searchTimer);
+    searchTimer = setTimeout(find, 250);
+  });
+  search.addEventListener('keydown', (e) => {
+    if (e.key === 'Enter') find();
+  });
+  const turn = (by) => {
+    if (state.view) showView({ ...state.view, page: state.view.page + by }, 'push');
+    window.scrollTo(0, 0);
+  };
+  document.getElementById('previous').addEventListener('click', () => turn(-1));
+  document.getElementById('next').addEventListener('click', () => turn(1));
+  // Back, forward, or an address typed or pasted.
+  const follow = () => {
+    if (state.view) showView(viewFromAddress(), null);
+  };
+  window.addEventListener('popstate', follow);
+  window.addEventListener('hashchange', follow);
 }
 
 // The MQTT link as /healthz says it (hidden when the gateway publishes nothing).
@@ -414,48 +674,53 @@ function askReadToken() {
 
 // ---- the stream ----------------------------------------------------------------------
 
+/** The event stream's path. */
+const STREAM = '/api/events/stream';
+
 let source = null;
 
-function connect() {
+/** Follows the stream for the devices `query` selects ('' for all); closes the last one. */
+function connect(query) {
+  if (source) source.close();
+  state.streamQuery = query;
   const connection = document.getElementById('connection');
+  const params = new URLSearchParams(query);
   const read = readToken();
-  source = new EventSource(
-    read ? `/api/events/stream?token=${encodeURIComponent(read)}` : '/api/events/stream',
-  );
-  source.onopen = () => {
+  if (read) params.set('token', read);
+  const rest = params.toString();
+  const opened = new EventSource(rest ? `${STREAM}?${rest}` : STREAM);
+  source = opened;
+  opened.onopen = () => {
     connection.dataset.state = 'live';
     connection.textContent = 'live';
   };
-  source.onerror = () => {
+  opened.onerror = () => {
+    if (source !== opened) return;
     connection.dataset.state = 'lost';
     connection.textContent = 'reconnecting…';
     // Refused for good (a read token is needed): ask for it once, then start again.
-    if (source.readyState === EventSource.CLOSED) {
+    if (opened.readyState === EventSource.CLOSED) {
       api('/api/lines').then((response) => {
-        if (response.ok) connect();
+        if (response.ok && source === opened) connect(query);
       }, () => {});
     }
   };
-  source.addEventListener('snapshot', (e) => {
+  opened.addEventListener('snapshot', (e) => {
     const snapshot = JSON.parse(e.data);
     state.writesEnabled = snapshot.writes_enabled;
     document.getElementById('writes-badge').hidden = !snapshot.writes_enabled;
+    state.lines = snapshot.lines;
+    state.order = snapshot.lines.flatMap((line) => line.devices);
     renderDevices(snapshot.devices);
     renderLines(snapshot.lines);
     loadEvents();
-    for (const device of snapshot.devices) {
-      for (const point of device.points) {
-        if (point.kind.type === 'numeric') loadHistory(point.id);
-      }
-    }
   });
-  source.addEventListener('value', (e) => updatePoint(JSON.parse(e.data)));
-  source.addEventListener('device', (e) => updateDeviceStatus(JSON.parse(e.data)));
-  source.addEventListener('event', (e) => addEvent(JSON.parse(e.data)));
-  source.addEventListener('lagged', () => {
+  opened.addEventListener('value', (e) => updatePoint(JSON.parse(e.data)));
+  opened.addEventListener('device', (e) => updateDeviceStatus(JSON.parse(e.data)));
+  opened.addEventListener('event', (e) => addEvent(JSON.parse(e.data)));
+  opened.addEventListener('lagged', () => {
     // We missed changes: start over with a fresh snapshot.
-    source.close();
-    connect();
+    if (source === opened) connect(query);
   });
 }
 
@@ -467,7 +732,30 @@ function tick() {
   }
 }
 
-connect();
+/** Learns the cell's lines (asking for the read token if needed), then shows the view. */
+async function start() {
+  let why;
+  try {
+    const response = await api('/api/lines');
+    if (response.ok) {
+      const { lines } = await response.json();
+      state.lines = lines;
+      state.order = lines.flatMap((line) => line.devices);
+      renderLineChoice();
+      showView(viewFromAddress(), 'replace');
+      return;
+    }
+    why = response.status === 401 ? 'This gateway needs its read token: reload the page to give it.'
+      : `The gateway answered ${response.status}; trying again…`;
+  } catch (e) {
+    why = `The gateway does not answer (${e}); trying again…`;
+  }
+  document.getElementById('devices').replaceChildren(el('p', 'placeholder', why));
+  setTimeout(start, 3000);
+}
+
+setUpToolbar();
+start();
 tick();
 setInterval(tick, 1000);
 setInterval(refreshLines, 5000);
