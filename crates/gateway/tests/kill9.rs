@@ -1,5 +1,7 @@
 //! A real process writing history is killed with SIGKILL mid-write; after a restart every
-//! row it reported committed is there exactly once and SQLite's integrity check passes.
+//! row it reported committed is there exactly once, the per-minute buckets (served from
+//! the rollups committed with the rows, and from the samples of the minutes still open)
+//! match those rows, and SQLite's integrity check passes.
 //!
 //! The test runs itself as the child: with `CELLBUS_KILL9_CHILD=<dir>` in its environment,
 //! the same test function becomes the writer, so no helper binary is needed.
@@ -18,6 +20,9 @@ const TEST_NAME: &str = "store_keeps_every_committed_row_after_kill_9";
 const COMMITS_BEFORE_KILL: u64 = 25;
 /// Rows between two reported commits.
 const ROWS_PER_FLUSH: u64 = 37;
+/// Milliseconds between two samples: the rows the parent waits for span several minutes,
+/// so some minutes are closed (rolled up) and some open when the child dies.
+const SAMPLE_EVERY_MS: i64 = 200;
 
 #[test]
 fn store_keeps_every_committed_row_after_kill_9() {
@@ -90,6 +95,40 @@ fn store_keeps_every_committed_row_after_kill_9() {
     for (i, v) in values.iter().enumerate() {
         assert_eq!(*v, i as u64, "row {i} is missing or duplicated");
     }
+    // Minute buckets equal what the stored rows give (integers: sums are exact).
+    let first = samples[0].t.0;
+    let mut expected: Vec<(i64, u64, f64, f64, f64)> = Vec::new();
+    for (s, v) in samples.iter().zip(&values) {
+        let (b, v) = ((s.t.0 / 60_000) * 60_000, *v as f64);
+        match expected.last_mut() {
+            Some(e) if e.0 == b => {
+                e.1 += 1;
+                e.2 += v;
+                e.4 = v;
+            }
+            _ => expected.push((b, 1, v, v, v)),
+        }
+    }
+    for e in &mut expected {
+        e.2 /= e.1 as f64;
+    }
+    let buckets = handle
+        .history(
+            &point(),
+            Timestamp(first),
+            Timestamp(i64::MAX),
+            Some(Duration::from_secs(60)),
+        )
+        .unwrap();
+    let Series::Buckets(buckets) = buckets.series else {
+        panic!("buckets expected")
+    };
+    let got: Vec<(i64, u64, f64, f64, f64)> = buckets
+        .iter()
+        .map(|b| (b.t.0, b.count, b.avg, b.min, b.max))
+        .collect();
+    assert_eq!(got, expected);
+    assert!(expected.len() >= 3, "{} minutes", expected.len());
     // The database takes writes again after the crash.
     handle.sample(Sample {
         point: point(),
@@ -125,13 +164,13 @@ fn run_child(dir: &str) {
     let started = Instant::now();
     let mut out = std::io::stdout().lock();
     // Recent times: rows of 1970 would be the retention's to delete when the parent reopens
-    // the store, racing its query.
-    let base = Timestamp::now().0;
+    // the store, racing its query. An hour back, so minutes close by the samples' times.
+    let base = Timestamp::now().0 - 3_600_000;
     let mut i: u64 = 0;
     while started.elapsed() < Duration::from_secs(120) {
         handle.sample(Sample {
             point: point(),
-            t: Timestamp(base + i as i64),
+            t: Timestamp(base + i as i64 * SAMPLE_EVERY_MS),
             value: Some(Value::Number(i as f64)),
             quality: Quality::Good,
         });

@@ -82,16 +82,16 @@ fn open_checked(path: &Path) -> Result<Connection, Checked> {
         }
         _ => Checked::Failed(e),
     };
-    let conn = Connection::open(path).map_err(damaged_or_failed)?;
+    let mut conn = Connection::open(path).map_err(damaged_or_failed)?;
     // Only a new file takes it: SQLite fixes auto_vacuum when the first table is created.
     conn.pragma_update(None, "auto_vacuum", "INCREMENTAL")
         .map_err(damaged_or_failed)?;
-    configure(&conn).map_err(damaged_or_failed)?;
+    configure_writer(&conn).map_err(damaged_or_failed)?;
     let report = quick_check(&conn).map_err(damaged_or_failed)?;
     if report != "ok" {
         return Err(Checked::Damaged(format!("quick_check found: {report}")));
     }
-    conn.execute_batch(SCHEMA).map_err(damaged_or_failed)?;
+    migrate(&mut conn).map_err(damaged_or_failed)?;
     Ok(conn)
 }
 

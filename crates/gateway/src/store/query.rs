@@ -1,6 +1,7 @@
 //! The read side: a small pool of read connections, which WAL lets read while the writer
 //! writes, and the queries the API runs.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
@@ -10,10 +11,17 @@ use rusqlite::{Connection, OptionalExtension, params};
 use crate::point::{PointId, Quality, Value};
 use crate::time::{Timestamp, duration_millis};
 
+use super::rollup::{Aggregate, MINUTE_MS, Marks, aggregate_at, minute_of, next_minute};
 use super::*;
 
 impl StoreHandle {
     /// Stored changes of `point` in `[from, to)`, raw or in buckets of `step`.
+    ///
+    /// Buckets hold the good numeric samples' mean, minimum, maximum and count. A step of
+    /// whole minutes reads the per-minute rollups for the whole minutes they cover, and
+    /// the samples only for the rest (the partial minutes at the ends, minutes still open,
+    /// minutes from before the rollups); the answer is the same either way (see
+    /// `rollup`).
     pub fn history(
         &self,
         point: &PointId,
@@ -21,7 +29,23 @@ impl StoreHandle {
         to: Timestamp,
         step: Option<Duration>,
     ) -> Result<History, StoreError> {
+        self.history_with(point, from, to, step, Rollups::Use)
+    }
+
+    /// [`StoreHandle::history`] with or without the rollups: both must give the same
+    /// answer, which the tests check.
+    pub(super) fn history_with(
+        &self,
+        point: &PointId,
+        from: Timestamp,
+        to: Timestamp,
+        step: Option<Duration>,
+        rollups: Rollups,
+    ) -> Result<History, StoreError> {
         self.readers.with(|conn| {
+            // One snapshot: the marks, the rollups and the samples agree.
+            let snapshot = conn.unchecked_transaction()?;
+            let conn: &Connection = &snapshot;
             let id: Option<i64> = conn
                 .query_row(
                     "SELECT id FROM points WHERE name = ?1",
@@ -56,23 +80,7 @@ impl StoreHandle {
                 .optional()?;
             match step_ms {
                 Some(step) => {
-                    let mut stmt = conn.prepare_cached(
-                        "SELECT (t / ?4) * ?4 AS b, avg(value), min(value), max(value), count(*) \
-                         FROM samples WHERE point = ?1 AND t >= ?2 AND t < ?3 \
-                         AND quality = 0 AND value IS NOT NULL GROUP BY b ORDER BY b",
-                    )?;
-                    let buckets = stmt
-                        .query_map(params![id, from.0, to.0, step], |r| {
-                            Ok(Bucket {
-                                t: Timestamp(r.get(0)?),
-                                avg: r.get(1)?,
-                                min: r.get(2)?,
-                                max: r.get(3)?,
-                                count: r.get::<_, i64>(4)?.unsigned_abs(),
-                            })
-                        })?
-                        .collect::<Result<Vec<_>, _>>()?;
-                    history.series = Series::Buckets(buckets);
+                    history.series = Series::Buckets(buckets(conn, id, from, to, step, rollups)?);
                 }
                 None => {
                     let mut stmt = conn.prepare_cached(
@@ -260,6 +268,112 @@ impl StoreHandle {
                 .collect::<Result<Vec<_>, _>>()?;
             Ok(lines.join("; "))
         })
+    }
+}
+
+/// Whether a bucketed query may read the per-minute rollups.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Rollups {
+    /// Where they cover the range (what the API does).
+    Use,
+    /// Never: every bucket from the samples.
+    #[cfg_attr(not(test), allow(dead_code, reason = "the tests compare both paths"))]
+    Ignore,
+}
+
+/// The buckets of `step` ms of point `id` in `[from, to)`: rollups for the whole minutes
+/// they hold, samples for the rest. A bucket starts at `(t / step) * step` (SQLite's and
+/// Rust's integer division, which truncates toward zero for times before 1970: those are
+/// only ever answered from the samples).
+fn buckets(
+    conn: &Connection,
+    id: i64,
+    from: Timestamp,
+    to: Timestamp,
+    step: i64,
+    rollups: Rollups,
+) -> rusqlite::Result<Vec<Bucket>> {
+    let mut acc: BTreeMap<i64, Aggregate> = BTreeMap::new();
+    let whole_minutes = match rollups {
+        Rollups::Use if step % MINUTE_MS == 0 && from.0 >= 0 => {
+            let marks = Marks::read(conn)?;
+            let start = next_minute(from.0).max(marks.since);
+            let end = minute_of(to.0).min(marks.until);
+            (start < end).then_some((start, end))
+        }
+        Rollups::Use | Rollups::Ignore => None,
+    };
+    match whole_minutes {
+        Some((start, end)) => {
+            add_samples(conn, id, from.0, start, step, &mut acc)?;
+            let mut stmt = conn.prepare_cached(
+                "SELECT minute, count, sum, min, max FROM minutes \
+                 WHERE point = ?1 AND minute >= ?2 AND minute < ?3",
+            )?;
+            let mut rows = stmt.query(params![id, start, end])?;
+            while let Some(r) = rows.next()? {
+                let minute: i64 = r.get(0)?;
+                add(&mut acc, (minute / step) * step, &aggregate_at(r, 1)?);
+            }
+            add_samples(conn, id, end, to.0, step, &mut acc)?;
+        }
+        None => add_samples(conn, id, from.0, to.0, step, &mut acc)?,
+    }
+    Ok(acc
+        .into_iter()
+        .map(|(t, a)| Bucket {
+            t: Timestamp(t),
+            avg: a.mean(),
+            min: a.min,
+            max: a.max,
+            count: a.count,
+        })
+        .collect())
+}
+
+/// Adds the good numeric samples of point `id` in `[from, to)` to their buckets.
+fn add_samples(
+    conn: &Connection,
+    id: i64,
+    from: i64,
+    to: i64,
+    step: i64,
+    acc: &mut BTreeMap<i64, Aggregate>,
+) -> rusqlite::Result<()> {
+    if from >= to {
+        return Ok(());
+    }
+    let mut stmt = conn.prepare_cached(
+        "SELECT t, value FROM samples WHERE point = ?1 AND t >= ?2 AND t < ?3 \
+         AND quality = 0 AND value IS NOT NULL",
+    )?;
+    let mut rows = stmt.query(params![id, from, to])?;
+    // Samples come in time order: one bucket is filled before the next starts.
+    let mut current: Option<(i64, Aggregate)> = None;
+    while let Some(r) = rows.next()? {
+        let (t, x): (i64, f64) = (r.get(0)?, r.get(1)?);
+        let bucket = (t / step) * step;
+        match &mut current {
+            Some((b, agg)) if *b == bucket => agg.add(x),
+            _ => {
+                if let Some((b, agg)) = current.replace((bucket, Aggregate::of(x))) {
+                    add(acc, b, &agg);
+                }
+            }
+        }
+    }
+    if let Some((b, agg)) = current {
+        add(acc, b, &agg);
+    }
+    Ok(())
+}
+
+fn add(acc: &mut BTreeMap<i64, Aggregate>, bucket: i64, agg: &Aggregate) {
+    match acc.get_mut(&bucket) {
+        Some(a) => a.merge(agg),
+        None => {
+            acc.insert(bucket, agg.clone());
+        }
     }
 }
 

@@ -901,3 +901,269 @@ async fn stored_changes_of_every_point_come_back_in_time_order_in_pages() {
         "the newest two are kept"
     );
 }
+
+// --- Per-minute rollups --------------------------------------------------------------------
+
+/// The bucketed query as before the rollups: SQLite's own `avg`, `min`, `max`, `count`.
+fn buckets_by_sql(dir: &std::path::Path, p: &str, from: i64, to: i64, step: i64) -> Vec<Bucket> {
+    let conn = rusqlite::Connection::open(dir.join(DB_FILE)).unwrap();
+    let mut stmt = conn
+        .prepare(
+            "SELECT (t / ?4) * ?4 AS b, avg(value), min(value), max(value), count(*) \
+             FROM samples JOIN points ON points.id = samples.point WHERE points.name = ?1 \
+             AND t >= ?2 AND t < ?3 AND quality = 0 AND value IS NOT NULL GROUP BY b ORDER BY b",
+        )
+        .unwrap();
+    stmt.query_map(rusqlite::params![p, from, to, step], |r| {
+        Ok(Bucket {
+            t: Timestamp(r.get(0)?),
+            avg: r.get(1)?,
+            min: r.get(2)?,
+            max: r.get(3)?,
+            count: r.get::<_, i64>(4)?.unsigned_abs(),
+        })
+    })
+    .unwrap()
+    .collect::<Result<_, _>>()
+    .unwrap()
+}
+
+fn buckets_of(h: History) -> Vec<Bucket> {
+    match h.series {
+        Series::Buckets(b) => b,
+        Series::Samples(_) => panic!("expected buckets"),
+    }
+}
+
+fn rollup_rows(dir: &std::path::Path) -> i64 {
+    let conn = rusqlite::Connection::open(dir.join(DB_FILE)).unwrap();
+    conn.query_row("SELECT count(*) FROM minutes", [], |r| r.get(0))
+        .unwrap()
+}
+
+/// Every bucketed query of `p` over many ranges and steps: with the rollups, without
+/// them, and by SQLite's own aggregates, all equal (bit for bit, `avg` included).
+fn assert_rollups_agree(h: &StoreHandle, dir: &std::path::Path, p: &str, end: i64) {
+    let edges = [0, 1, 59_999, 60_000, 61_234, 120_000, 179_999, 240_001];
+    let steps = [60_000, 120_000, 300_000, 90_000, 1_000];
+    let mut compared = 0;
+    for from in edges {
+        for to in edges.iter().map(|e| end - e).chain([i64::MAX]) {
+            if from >= to {
+                continue;
+            }
+            for step in steps {
+                let ask = |rollups| {
+                    h.history_with(
+                        &point(p),
+                        Timestamp(from),
+                        Timestamp(to),
+                        Some(Duration::from_millis(step as u64)),
+                        rollups,
+                    )
+                    .unwrap()
+                };
+                let with = buckets_of(ask(query::Rollups::Use));
+                let without = buckets_of(ask(query::Rollups::Ignore));
+                assert_eq!(with, without, "from {from} to {to} step {step}");
+                assert_eq!(
+                    with,
+                    buckets_by_sql(dir, p, from, to, step),
+                    "SQLite's avg: from {from} to {to} step {step}"
+                );
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared > 100, "{compared} queries compared");
+}
+
+#[tokio::test]
+async fn a_rollup_served_query_equals_the_raw_computation_at_every_edge() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    // 20 minutes of irregular samples with values that do not add up exactly in binary,
+    // stale and bad readings, a text value and a NaN in between; several batches.
+    let end = 20 * 60_000;
+    let mut t = 0;
+    let mut i = 0u64;
+    while t < end {
+        let quality = match i % 11 {
+            3 => Quality::Stale,
+            7 => Quality::Bad,
+            _ => Quality::Good,
+        };
+        let value = match i % 17 {
+            5 => Some(Value::Text("JTSE".into())),
+            9 => None,
+            13 => Some(Value::Number(f64::NAN)),
+            _ => Some(Value::Number(0.1 * (i % 97) as f64 - 3.3)),
+        };
+        h.sample(Sample {
+            point: point("a.temp"),
+            t: Timestamp(t),
+            value,
+            quality,
+        });
+        h.sample(sample("b.temp", t, 1e6 + i as f64));
+        if i % 50 == 49 {
+            h.flush().await.unwrap();
+        }
+        t += 700 + (i as i64 * 37) % 900;
+        i += 1;
+    }
+    h.flush().await.unwrap();
+    assert!(
+        rollup_rows(dir.path()) >= 2 * 17,
+        "minutes closed a minute behind the newest sample are rolled up"
+    );
+    assert_rollups_agree(&h, dir.path(), "a.temp", end);
+    assert_rollups_agree(&h, dir.path(), "b.temp", end);
+}
+
+#[tokio::test]
+async fn a_late_sample_joins_its_closed_minute_and_a_restart_rebuilds_the_open_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let end = 10 * 60_000;
+    {
+        let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+        let h = store.handle();
+        for t in (0..end).step_by(1_000) {
+            h.sample(sample("a.temp", t, (t / 1000) as f64 * 0.25));
+        }
+        h.flush().await.unwrap();
+        let closed = rollup_rows(dir.path());
+        assert!(closed >= 8, "{closed} minutes rolled up");
+        // A late reading for the second minute, long closed.
+        h.sample(sample("a.temp", 60_500, 1234.5));
+        h.flush().await.unwrap();
+        assert_eq!(rollup_rows(dir.path()), closed, "merged into its row");
+        assert_rollups_agree(&h, dir.path(), "a.temp", end);
+        store.close();
+    }
+    // The open minutes were in memory only; the new writer rebuilds them from the samples.
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    for t in (end..end + 3 * 60_000).step_by(1_500) {
+        h.sample(sample("a.temp", t, -(t as f64) / 7.0));
+    }
+    h.flush().await.unwrap();
+    assert_rollups_agree(&h, dir.path(), "a.temp", end + 3 * 60_000);
+    let minute = buckets_of(
+        h.history(
+            &point("a.temp"),
+            Timestamp(60_000),
+            Timestamp(120_000),
+            Some(Duration::from_secs(60)),
+        )
+        .unwrap(),
+    );
+    assert_eq!(minute[0].count, 61);
+    assert_eq!(minute[0].max, 1234.5);
+}
+
+#[tokio::test]
+async fn retention_prunes_the_rollups_with_the_samples_and_answers_stay_equal() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = StoreOptions {
+        retain: Duration::from_secs(5 * 60),
+        prune_chunk_rows: 7,
+        ..StoreOptions::default()
+    };
+    let store = Store::open(dir.path(), options).unwrap();
+    let h = store.handle();
+    let end = 12 * 60_000;
+    for t in (0..end).step_by(2_000) {
+        h.sample(sample("a.temp", t, (t % 7_000) as f64 / 3.0));
+    }
+    h.flush().await.unwrap();
+    // Keeps from 6.5 minutes on: the minute at 6 loses half its samples.
+    let now = 6 * 60_000 + 30_000 + 5 * 60_000;
+    let pruned = h.prune(Timestamp(now)).await.unwrap();
+    assert_eq!(pruned, (6 * 60_000 + 30_000) / 2_000);
+    let conn = rusqlite::Connection::open(dir.path().join(DB_FILE)).unwrap();
+    let oldest: i64 = conn
+        .query_row("SELECT min(minute) FROM minutes", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(oldest, 7 * 60_000, "the partly pruned minute is served raw");
+    assert_rollups_agree(&h, dir.path(), "a.temp", end);
+    let kept = buckets_of(
+        h.history(
+            &point("a.temp"),
+            Timestamp(0),
+            Timestamp(end),
+            Some(Duration::from_secs(60)),
+        )
+        .unwrap(),
+    );
+    assert_eq!(kept[0].t, Timestamp(6 * 60_000));
+    assert_eq!(kept[0].count, 15);
+}
+
+/// The tables of schema version 1 (before the rollups), as the previous release made them.
+const SCHEMA_1: &str = "
+CREATE TABLE points (id INTEGER PRIMARY KEY, name TEXT NOT NULL UNIQUE);
+CREATE TABLE samples (point INTEGER NOT NULL REFERENCES points(id), t INTEGER NOT NULL,
+    value REAL, text TEXT, quality INTEGER NOT NULL);
+CREATE INDEX samples_by_point_time ON samples(point, t);
+CREATE INDEX samples_by_time ON samples(t);
+CREATE TABLE events (id INTEGER PRIMARY KEY, t INTEGER NOT NULL, kind TEXT NOT NULL,
+    line TEXT, device TEXT, point TEXT, message TEXT NOT NULL);
+CREATE INDEX events_by_time ON events(t);
+CREATE TABLE audit (id INTEGER PRIMARY KEY, t INTEGER NOT NULL, client TEXT NOT NULL,
+    device TEXT NOT NULL, point TEXT NOT NULL, old_value TEXT, new_value TEXT NOT NULL,
+    result TEXT NOT NULL, detail TEXT NOT NULL);
+CREATE INDEX audit_by_time ON audit(t);
+PRAGMA user_version = 1;
+";
+
+#[tokio::test]
+async fn a_file_of_the_previous_schema_opens_answers_and_rolls_up_what_comes_after() {
+    let dir = tempfile::tempdir().unwrap();
+    {
+        let conn = rusqlite::Connection::open(dir.path().join(DB_FILE)).unwrap();
+        conn.pragma_update(None, "journal_mode", "WAL").unwrap();
+        conn.execute_batch(SCHEMA_1).unwrap();
+        conn.execute("INSERT INTO points (id, name) VALUES (1, 'a.temp')", [])
+            .unwrap();
+        let mut insert = conn
+            .prepare("INSERT INTO samples (point, t, value, quality) VALUES (1, ?1, ?2, 0)")
+            .unwrap();
+        for t in (0..5 * 60_000).step_by(1_000) {
+            insert
+                .execute(rusqlite::params![t, t as f64 / 1000.0])
+                .unwrap();
+        }
+    }
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    let conn = rusqlite::Connection::open(dir.path().join(DB_FILE)).unwrap();
+    let version: i64 = conn
+        .query_row("PRAGMA user_version", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(version, 2);
+    // The old minutes come from the samples, as before.
+    let old = buckets_of(
+        h.history(
+            &point("a.temp"),
+            Timestamp(0),
+            Timestamp(5 * 60_000),
+            Some(Duration::from_secs(60)),
+        )
+        .unwrap(),
+    );
+    assert_eq!(old.len(), 5);
+    assert_eq!((old[1].count, old[1].min, old[1].max), (60, 60.0, 119.0));
+    // New samples are rolled up from the first minute after the newest old one.
+    for t in (5 * 60_000..15 * 60_000).step_by(1_000) {
+        h.sample(sample("a.temp", t, t as f64 / 1000.0));
+    }
+    h.flush().await.unwrap();
+    let since: i64 = conn
+        .query_row("SELECT since FROM rollup_marks", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(since, 5 * 60_000);
+    assert!(rollup_rows(dir.path()) >= 8);
+    assert_rollups_agree(&h, dir.path(), "a.temp", 15 * 60_000);
+}

@@ -1,0 +1,109 @@
+//! Sustained history ingest: a million value changes over a thousand points sent to the
+//! store as fast as one producer can, committed by the writer thread in its batches (WAL,
+//! synchronous=FULL, per-minute rollups), one flush at the end. Prints rows per second
+//! (wall time from the first row sent to the last commit), commits made, the writer
+//! process's CPU and the file's size.
+//!
+//! ```text
+//! nice cargo bench -p gateway --bench store_ingest                       # 1M rows, 1000 points
+//! nice cargo bench -p gateway --bench store_ingest -- --rows 3000000 --points 12000
+//! nice cargo bench -p gateway --bench store_ingest -- --batch-rows 20000
+//! ```
+//!
+//! Timestamps advance 1 ms per row, points in turn: every point changes once a second,
+//! each minute of each point is rolled up. Runs `--runs` times (default 3) into the same
+//! file, so later runs write into a larger file.
+
+use std::time::{Duration, Instant};
+
+use gateway::point::{PointId, Quality, Value};
+use gateway::store::{Sample, Store, StoreOptions};
+use gateway::time::Timestamp;
+
+fn arg(name: &str, default: usize) -> usize {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn main() {
+    let smoke = std::env::args().all(|a| a != "--bench");
+    let rows = arg("--rows", if smoke { 20_000 } else { 1_000_000 });
+    let points_n = arg("--points", 1_000);
+    let runs = arg("--runs", if smoke { 1 } else { 3 });
+    let options = StoreOptions {
+        batch_rows: arg("--batch-rows", StoreOptions::default().batch_rows),
+        ..StoreOptions::default()
+    };
+    let dir = tempfile::tempdir().expect("temp dir");
+    let store = Store::open(dir.path(), options).expect("store");
+    let handle = store.handle();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .build()
+        .expect("runtime");
+    let points: Vec<PointId> = (0..points_n)
+        .map(|i| PointId::parse(&format!("dev{}.point{}", i / 20, i % 20)).expect("valid id"))
+        .collect();
+    let mut t = 0i64;
+    for run in 1..=runs {
+        let commits = handle
+            .stats()
+            .commits
+            .load(std::sync::atomic::Ordering::Relaxed);
+        let cpu = process_cpu();
+        let started = Instant::now();
+        for i in 0..rows {
+            t += 1;
+            handle.sample(Sample {
+                point: points[i % points_n].clone(),
+                t: Timestamp(t),
+                value: Some(Value::Number((t % 1000) as f64 * 0.1)),
+                quality: Quality::Good,
+            });
+        }
+        runtime.block_on(handle.flush()).expect("commit");
+        let took = started.elapsed();
+        let cpu = process_cpu().saturating_sub(cpu);
+        let commits = handle
+            .stats()
+            .commits
+            .load(std::sync::atomic::Ordering::Relaxed)
+            - commits;
+        let bytes: u64 = ["cellbus.db", "cellbus.db-wal"]
+            .iter()
+            .map(|f| std::fs::metadata(dir.path().join(f)).map_or(0, |m| m.len()))
+            .sum();
+        println!(
+            "store_ingest run {run}: {rows} rows over {points_n} points in {:.2} s: {:.0} rows/s, \
+             {commits} commits, CPU {:.2} s ({:.2} µs/row, producer included), file {:.0} MB",
+            took.as_secs_f64(),
+            rows as f64 / took.as_secs_f64(),
+            cpu.as_secs_f64(),
+            cpu.as_secs_f64() * 1e6 / rows as f64,
+            bytes as f64 / 1e6
+        );
+    }
+    store.close();
+}
+
+/// User + system CPU time of this process, from `/proc/self/stat` (zero elsewhere).
+fn process_cpu() -> Duration {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return Duration::ZERO;
+    };
+    // Fields after the command name (which may hold spaces) start after the last ')'.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    // utime and stime are fields 14 and 15 of the whole line: 11 and 12 after the name.
+    let total = ticks(11) + ticks(12);
+    Duration::from_millis(total * 10)
+}
