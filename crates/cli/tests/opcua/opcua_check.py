@@ -28,6 +28,7 @@ import os
 import shutil
 import sys
 import tempfile
+import time
 import urllib.request
 from datetime import datetime, timedelta, timezone
 
@@ -144,22 +145,97 @@ async def event_of(handler, source, message):
         raise AssertionError(f"no event {message!r} from {source}; others: {others}") from None
 
 
-async def check_subscription(client, tree, devices):
-    nodes = []
+QUALITY = {"good": "Good", "stale": "UncertainLastUsableValue", "bad": "BadCommunicationError"}
+MARGIN = 2.0  # seconds past a poll period a notification may take (the machine is shared)
+
+
+def busiest_point(addr, devices):
+    """The numeric point polled every second or faster that changed most lately."""
+    now = datetime.now(timezone.utc)
+    best, most = None, -1
     for d in devices:
+        if d["status"] != "up":
+            continue
         for p in d["points"]:
-            if p["kind"]["type"] == "numeric":
-                nodes.append(tree[d["id"]][1][p["id"].split(".", 1)[1]])
+            if p["kind"]["type"] != "numeric" or p["period_ms"] > 1000:
+                continue
+            h = http(addr, f"/api/history?point={p['id']}&from={iso(now - timedelta(seconds=20))}&to={iso(now)}")
+            if len(h["samples"]) > most:
+                best, most = (d, p), len(h["samples"])
+    assert best and most >= 2, f"no point of the demo cell changes often ({most} changes)"
+    return best
+
+
+def notified(data):
+    """A notification as (source time in ms, value, status name)."""
+    v = data.monitored_item.Value
+    t = int(v.SourceTimestamp.replace(tzinfo=timezone.utc).timestamp() * 1000 + 0.5)
+    value = v.Value.Value if v.StatusCode.is_good() or v.StatusCode.is_uncertain() else None
+    return t, value, v.StatusCode.name
+
+
+async def check_subscription(client, addr, tree, devices):
+    """Every change the history holds over a few seconds arrives on a subscription with
+    the point's poll period as sampling interval, with its value, status and source time,
+    in order, within a poll period (plus a margin) of its source time."""
+    d, p = busiest_point(addr, devices)
+    node = tree[d["id"]][1][p["id"].split(".", 1)[1]]
+    period = p["period_ms"]
     handler = Changes()
-    sub = await client.create_subscription(200, handler)
-    await sub.subscribe_data_change(nodes)
-    # The initial values first, one per node; then a change.
-    for _ in nodes:
-        await asyncio.wait_for(handler.seen.get(), LIMIT)
-    node, val, data = await asyncio.wait_for(handler.seen.get(), LIMIT)
-    status = data.monitored_item.Value.StatusCode
-    ok(f"a change of {node} arrived on a subscription ({val}, {status.name})")
+    sub = await client.create_subscription(100, handler)
+    request = ua.MonitoredItemCreateRequest()
+    request.ItemToMonitor = ua.ReadValueId(NodeId=node.nodeid, AttributeId=ua.AttributeIds.Value)
+    request.MonitoringMode = ua.MonitoringMode.Reporting
+    params = ua.MonitoringParameters()
+    params.ClientHandle = 1
+    params.SamplingInterval = float(period)
+    params.QueueSize = 10
+    params.DiscardOldest = True
+    # OPC UA's default trigger; async-opcua 0.19 compares values only without a filter.
+    params.Filter = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValue)
+    request.RequestedParameters = params
+    [created] = await sub.create_monitored_items([request])
+    assert isinstance(created, int), f"the monitored item was refused: {created}"
+    # Health while subscribed: the session, the subscription and the item are counted.
+    health = http(addr, "/healthz")["opcua"]
+    assert health and health["sessions"] >= 1 and health["subscriptions"] >= 1, health
+    assert health["monitored_items"] >= 1 and health["connections"] >= 1, health
+    metrics = urllib.request.urlopen(f"http://{addr}/metrics", timeout=LIMIT).read().decode()
+    sessions = [l for l in metrics.splitlines() if l.startswith("cellbus_opcua_sessions ")]
+    assert sessions and int(sessions[0].split()[1]) >= 1, sessions
+    ok(f"/healthz shows the OPC UA session: {health}")
+    # The initial value, then changes until enough arrive (bounded).
+    arrivals = []
+    deadline = asyncio.get_running_loop().time() + 2 * LIMIT
+    while len(arrivals) < 6:
+        left = deadline - asyncio.get_running_loop().time()
+        assert left > 0, f"only {len(arrivals)} notifications of {p['id']} in {2 * LIMIT} s"
+        _, _, data = await asyncio.wait_for(handler.seen.get(), left)
+        arrivals.append((time.time(), notified(data)))
     await sub.delete()
+    # The initial value is the node's current value; the changes after it are compared.
+    first_t = arrivals[0][1][0]
+    changes = [n for _, n in arrivals[1:]]
+    last_t = changes[-1][0]
+    window = f"point={p['id']}&from={iso(datetime.fromtimestamp((first_t + 1) / 1000, timezone.utc))}" \
+        f"&to={iso(datetime.fromtimestamp((last_t + 1) / 1000, timezone.utc))}"
+    # The history commits in batches: poll until it holds the last change (bounded).
+    while True:
+        stored = [
+            (ms(s["t"]), s["value"], QUALITY[s["quality"]])
+            for s in http(addr, f"/api/history?{window}")["samples"]
+        ]
+        if stored and stored[-1][0] == last_t:
+            break
+        assert asyncio.get_running_loop().time() < deadline, (stored, changes)
+        await asyncio.sleep(0.2)
+    assert changes == stored, f"notifications {changes} differ from /api/history {stored}"
+    for arrived, (t, _, _) in arrivals[1:]:
+        late = arrived - t / 1000
+        assert late <= period / 1000 + MARGIN, f"a change of {p['id']} arrived {late:.3f} s after it was read"
+    worst = max(arrived - t / 1000 for arrived, (t, _, _) in arrivals[1:])
+    ok(f"{len(changes)} changes of {p['id']} arrived on a subscription (sampling {period} ms) as "
+       f"/api/history holds them, each within {worst:.3f} s of its read")
 
 
 def writable_numeric(devices):
@@ -191,7 +267,7 @@ async def read(url, addr):
                     assert value.Value.VariantType != ua.VariantType.Null, (p["id"], value)
         assert good > 0, good
         ok(f"{good} points read Good, each with its value and source timestamp")
-        await check_subscription(client, tree, devices)
+        await check_subscription(client, addr, tree, devices)
         d, p = writable_numeric(devices)
         node = tree[d["id"]][1][p["id"].split(".", 1)[1]]
         try:
