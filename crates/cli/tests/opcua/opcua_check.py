@@ -6,14 +6,19 @@
     opcua_check.py anonymous-refused OPC_URL
 
 `read`: browses Objects/Cell and compares every device and point with /api/devices
-(data type, description, unit, range, access), sees a change within a poll period on a
-subscription, and is refused a write (no --allow-writes). `write`: connects with
+(data type, description, unit, range, access); subscribes to the point that changes most
+with its poll period as sampling interval and gets every change /api/history then holds,
+with its value, status and source time, in order, each within a poll period (+2 s) of
+its read; sees the session in /healthz and /metrics meanwhile; and is refused a write (no
+--allow-writes). `write`: connects with
 Basic256Sha256 SignAndEncrypt and a client certificate (refused until the certificate is
 moved from the server's rejected folder to its trusted folder), logs in as `operator`,
-is refused an out-of-range write, writes a valid one, finds both in /api/audit, receives
+is refused an out-of-range write, writes a valid one, finds both in /api/audit with its
+own address (`from 127.0.0.1:PORT`), receives
 the write's event (BaseEventType: message, severity, source, time as in /api/events) on
 event subscriptions to the device's object and to the Server object, and compares
-HistoryRead raw and Average with /api/history.
+HistoryRead raw (whole, in pages of numValuesPerNode 2 with continuation points, with
+returnBounds) and Average with /api/history.
 
 `down`: subscribes anonymously to DEVICE's POINT, prints `subscribed` once it is Good, and
 waits for it to turn Bad (the test stops the device meanwhile), with no value.
@@ -351,19 +356,23 @@ async def write(url, addr, data_dir, password):
         rows = [r for r in audit if "opcua user operator" in r["client"]]
         results = sorted({r["result"] for r in rows})
         assert {"refused", "attempted", "accepted"} <= set(results), audit
-        ok(f"the audit log has the OPC UA user's rows: {', '.join(results)}")
+        host, port = client.uaclient.protocol.transport.get_extra_info("sockname")[:2]
+        here = f"from {host}:{port})"
+        assert all(r["client"].endswith(here) for r in rows), (here, [r["client"] for r in rows])
+        ok(f"the audit log has the OPC UA user's rows: {', '.join(results)}; {rows[0]['client']}")
 
         # History: raw and Average against /api/history.
         now = datetime.now(timezone.utc)
         start = now.replace(second=0, microsecond=0) - timedelta(minutes=1)
         end = now + timedelta(seconds=1)
         h = http(addr, f"/api/history?point={p['id']}&from={iso(start)}&to={iso(end)}")
-        raw = await node.read_raw_history(start, end)
+        raw = await node.read_raw_history(start, end, return_bounds=False)
         assert len(raw) == len(h["samples"]), (len(raw), len(h["samples"]))
         for mine, theirs in zip(raw, h["samples"]):
             t = int(mine.SourceTimestamp.replace(tzinfo=timezone.utc).timestamp() * 1000 + 0.5)
             assert t == ms(theirs["t"]), (t, theirs)
         ok(f"HistoryRead raw gives the {len(raw)} changes of /api/history")
+        await check_paged_history(client, tree, addr, devices)
         step = 10_000
         h = http(addr, f"/api/history?point={p['id']}&from={iso(start)}&to={iso(end)}&step=10s")
         details = ua.ReadProcessedDetails()
@@ -380,6 +389,69 @@ async def write(url, addr, data_dir, password):
         for t, avg in theirs.items():
             assert abs(averages[t] - avg) < 1e-9, (t, averages[t], avg)
         ok(f"HistoryRead Average gives the {len(theirs)} buckets of /api/history")
+
+
+async def read_pages(node, start, end, per_call, bounds):
+    """Every value of a raw HistoryRead, following its continuation points; and the
+    number of values of each call."""
+    details = ua.ReadRawModifiedDetails()
+    details.IsReadModified = False
+    details.StartTime, details.EndTime = start, end
+    details.NumValuesPerNode, details.ReturnBounds = per_call, bounds
+    values, sizes, point = [], [], None
+    while True:
+        result = await node.history_read(details, point)
+        result.StatusCode.check()
+        page = result.HistoryData.DataValues or []
+        values += page
+        sizes.append(len(page))
+        point = result.ContinuationPoint
+        if not point:
+            return values, sizes
+        assert len(sizes) < 1000, "the continuation points never end"
+
+
+def source_ms(v):
+    return int(v.SourceTimestamp.replace(tzinfo=timezone.utc).timestamp() * 1000 + 0.5)
+
+
+async def check_paged_history(client, tree, addr, devices):
+    """numValuesPerNode with continuation points, and returnBounds, against /api/history,
+    on the point that changes most."""
+    d, p = busiest_point(addr, devices)
+    node = tree[d["id"]][1][p["id"].split(".", 1)[1]]
+    # A gateway that just started: wait (bounded) for a few changes to page through.
+    deadline = asyncio.get_running_loop().time() + 2 * LIMIT
+    while True:
+        end = datetime.now(timezone.utc).replace(microsecond=0)
+        start = end - timedelta(seconds=30)
+        h = http(addr, f"/api/history?point={p['id']}&from={iso(start)}&to={iso(end)}")
+        theirs = [ms(s["t"]) for s in h["samples"]]
+        if len(theirs) >= 5:
+            break
+        assert asyncio.get_running_loop().time() < deadline, f"too few changes of {p['id']}: {theirs}"
+        await asyncio.sleep(0.5)
+    values, sizes = await read_pages(node, start, end, 2, False)
+    assert [source_ms(v) for v in values] == theirs, (values, theirs)
+    assert max(sizes) <= 2 and len(sizes) >= 2, sizes
+    ok(f"HistoryRead raw with numValuesPerNode 2 gives the {len(values)} changes in {len(sizes)} calls")
+    # Bounds: from just after the first change to the last one, the first change is the
+    # start bound and the last (at the end time) the end bound.
+    first = datetime.fromtimestamp((theirs[0] + 1) / 1000, timezone.utc)
+    last = datetime.fromtimestamp(theirs[-1] / 1000, timezone.utc)
+    values, sizes = await read_pages(node, first, last, 2, True)
+    assert [source_ms(v) for v in values] == theirs, (values, theirs)
+    assert max(sizes) <= 2, sizes
+    # Nothing after the end: Bad_BoundNotFound at the end time.
+    later = datetime.now(timezone.utc).replace(microsecond=0) + timedelta(hours=1)
+    values, _ = await read_pages(node, later, later + timedelta(hours=1), 0, True)
+    assert len(values) == 2, values
+    # The start bound: the latest change, from before the range.
+    assert values[0].StatusCode.value != ua.StatusCodes.BadBoundNotFound, values[0]
+    assert source_ms(values[0]) < later.timestamp() * 1000, values[0]
+    assert values[1].StatusCode.value == ua.StatusCodes.BadBoundNotFound, values[1]
+    assert source_ms(values[1]) == int((later + timedelta(hours=1)).timestamp() * 1000), values[1]
+    ok("HistoryRead raw returnBounds gives the changes around the range, or BadBoundNotFound")
 
 
 async def down(url, device, point):
