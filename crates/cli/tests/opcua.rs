@@ -120,6 +120,7 @@ fn an_independent_opcua_client_browses_reads_gets_every_stored_change_on_a_subsc
     let out = run_script(&["read", &served.opcua, &served.http]);
     for expected in [
         "devices and",
+        "enumerations with EnumValues",
         "points read Good",
         "/healthz shows the OPC UA session",
         "as /api/history holds them",

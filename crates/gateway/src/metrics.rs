@@ -271,11 +271,7 @@ impl Metrics {
             "Open OPC UA TCP connections",
             opcua_connections.clone(),
         );
-        registry.register(
-            "opcua_sessions",
-            "OPC UA sessions",
-            opcua_sessions.clone(),
-        );
+        registry.register("opcua_sessions", "OPC UA sessions", opcua_sessions.clone());
         registry.register(
             "opcua_subscriptions",
             "OPC UA subscriptions",

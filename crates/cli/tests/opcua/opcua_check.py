@@ -6,7 +6,7 @@
     opcua_check.py anonymous-refused OPC_URL
 
 `read`: browses Objects/Cell and compares every device and point with /api/devices
-(data type, description, unit, range, access); subscribes to the point that changes most
+(data type, description, unit, range, access, enumeration labels); subscribes to the point that changes most
 with its poll period as sampling interval and gets every change /api/history then holds,
 with its value, status and source time, in order, each within a poll period (+2 s) of
 its read; sees the session in /healthz and /metrics meanwhile; and is refused a write (no
@@ -83,7 +83,7 @@ DATATYPES = {"numeric": ua.VariantType.Double, "enum": ua.VariantType.Int32, "te
 async def check_tree(client, devices):
     ns, tree = await cell_tree(client)
     assert set(tree) == {d["id"] for d in devices}, (sorted(tree), [d["id"] for d in devices])
-    points = 0
+    points = enums = 0
     for d in devices:
         line, children = tree[d["id"]]
         assert line == d["line"], (d["id"], line, d["line"])
@@ -109,8 +109,19 @@ async def check_tree(client, devices):
             if p["kind"]["type"] == "numeric" and p["writable"]:
                 r = await properties["EURange"].read_value()
                 assert (r.Low, r.High) == (p["writable"]["min"], p["writable"]["max"]), (p["id"], r)
+            if p["kind"]["type"] == "enum":
+                states = [(st["value"], st["label"]) for st in p["kind"]["states"]]
+                values = await properties["EnumValues"].read_value()
+                assert [(v.Value, v.DisplayName.Text) for v in values] == states, (p["id"], values)
+                if [v for v, _ in states] == list(range(len(states))):
+                    strings = await properties["EnumStrings"].read_value()
+                    assert [t.Text for t in strings] == [l for _, l in states], (p["id"], strings)
+                else:
+                    assert "EnumStrings" not in properties, p["id"]
+                enums += 1
             points += 1
-    ok(f"{len(devices)} devices and {points} points match /api/devices")
+    assert enums > 0, "the demo cell has enumeration points"
+    ok(f"{len(devices)} devices and {points} points match /api/devices ({enums} enumerations with EnumValues)")
     return ns, tree
 
 

@@ -6,11 +6,14 @@
 //! point ids in the file `ITEMS` (one a line), and monitors each point's value: one
 //! subscription per [`ITEMS_PER_SUBSCRIPTION`] points (async-opcua's default limits: 1,000
 //! monitored items a subscription and a call, 10 subscriptions a session), publishing
-//! every [`PUBLISHING_INTERVAL`], sampling at 1 s (a JTSE's live period), queue of 10. It
+//! every [`PUBLISHING_INTERVAL`], sampling at 1 s (a JTSE's live period), queue of 10,
+//! trigger StatusValue. It
 //! counts the data-change notifications and how long after its source time each arrived
-//! (the delay, in a histogram of milliseconds); nothing else. It prints `ready N` (N items
-//! created) once every item is created, then answers each line on its standard input:
-//! `reset` empties the delay histogram (the initial values arrive first), anything else
+//! (the delay, in a histogram of milliseconds), and keeps each one's source time. It prints
+//! `ready N` (N items created) once every item is created, then answers each line on its
+//! standard input: `reset` empties the delay histogram (the initial values arrive first),
+//! `between FROM TO` gets the notifications whose source time (ms since 1970) is in
+//! `[FROM, TO)` (to set against the history's changes of the same window), anything else
 //! gets one line of counts. It ends when its standard input closes. [`Counter`] is the
 //! parent's side.
 
@@ -24,8 +27,9 @@ use anyhow::{Context, bail};
 use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
 use opcua::crypto::SecurityPolicy;
 use opcua::types::{
-    DataValue, ExtensionObject, MessageSecurityMode, MonitoredItemCreateRequest, MonitoringMode,
-    MonitoringParameters, NodeId, ReadValueId, TimestampsToReturn, UserTokenPolicy,
+    DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MessageSecurityMode,
+    MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId, ReadValueId,
+    TimestampsToReturn, UserTokenPolicy,
 };
 
 /// The flag (followed by the endpoint URL and the items file) that makes the process the
@@ -86,6 +90,8 @@ impl Counts {
 struct Shared {
     notifications: AtomicU64,
     delays: Vec<AtomicU64>,
+    /// Each notification's source time, ms since 1970.
+    sources: std::sync::Mutex<Vec<i64>>,
 }
 
 impl Shared {
@@ -93,6 +99,7 @@ impl Shared {
         Self {
             notifications: AtomicU64::new(0),
             delays: (0..DELAY_BUCKETS).map(|_| AtomicU64::new(0)).collect(),
+            sources: std::sync::Mutex::new(Vec::new()),
         }
     }
 
@@ -101,12 +108,23 @@ impl Shared {
         let Some(source) = value.source_timestamp else {
             return;
         };
+        self.sources
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(source.as_chrono().timestamp_millis());
         let now = opcua::types::DateTime::now();
         let delay_ms = (now.checked_ticks() - source.checked_ticks()).max(0) / 10_000;
-        let bucket = usize::try_from(delay_ms).map_or(DELAY_BUCKETS - 1, |d| {
-            d.min(DELAY_BUCKETS - 1)
-        });
+        let bucket =
+            usize::try_from(delay_ms).map_or(DELAY_BUCKETS - 1, |d| d.min(DELAY_BUCKETS - 1));
         self.delays[bucket].fetch_add(1, Ordering::Relaxed);
+    }
+
+    fn between(&self, from: i64, to: i64) -> u64 {
+        let sources = self
+            .sources
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        sources.iter().filter(|t| (from..to).contains(*t)).count() as u64
     }
 
     fn reset(&self) {
@@ -163,6 +181,13 @@ pub fn run(url: &str, items: &str) -> anyhow::Result<()> {
     stdout.flush()?;
     for line in std::io::stdin().lock().lines() {
         let Ok(line) = line else { break };
+        let words: Vec<&str> = line.split_whitespace().collect();
+        if let ["between", from, to] = words[..] {
+            let (from, to) = (from.parse().unwrap_or(0), to.parse().unwrap_or(0));
+            writeln!(stdout, "{}", shared.between(from, to))?;
+            stdout.flush()?;
+            continue;
+        }
         if line.trim() == "reset" {
             shared.reset();
         }
@@ -189,7 +214,9 @@ async fn subscribe(
         .create_sample_keypair(false)
         .trust_server_certs(true)
         .session_retry_limit(3)
-        // 1,000 notifications of a publish response are about 40 kB; leave room.
+        // A publish response carries every notification a subscription queued: far more
+        // than async-opcua's default limit of 1,000 array elements and 5 chunks.
+        .max_array_length(1 << 20)
         .max_message_size(64 << 20)
         .max_chunk_count(4096)
         .client()
@@ -241,7 +268,13 @@ async fn subscribe(
                 requested_parameters: MonitoringParameters {
                     client_handle: (chunk * ITEMS_PER_SUBSCRIPTION + i) as u32 + 1,
                     sampling_interval: SAMPLING_MS,
-                    filter: ExtensionObject::null(),
+                    // OPC UA's default trigger, said explicitly: without a filter,
+                    // async-opcua 0.19 reports value changes only (not Good → stale).
+                    filter: ExtensionObject::from_message(DataChangeFilter {
+                        trigger: DataChangeTrigger::StatusValue,
+                        deadband_type: 0,
+                        deadband_value: 0.0,
+                    }),
                     queue_size: 10,
                     discard_oldest: true,
                 },
@@ -309,6 +342,31 @@ impl Counter {
         Counts::parse(&line).with_context(|| format!("unexpected counts {line:?}"))
     }
 
+    /// Notifications whose source time (ms since 1970) is in `[from, to)`, once the count
+    /// stops moving (what was sent has arrived), waiting at most `limit`.
+    pub fn settled_between(&mut self, from: i64, to: i64, limit: Duration) -> anyhow::Result<u64> {
+        let deadline = std::time::Instant::now() + limit;
+        let mut last = self.between(from, to)?;
+        loop {
+            std::thread::sleep(Duration::from_millis(500));
+            let now = self.between(from, to)?;
+            if now == last || std::time::Instant::now() > deadline {
+                return Ok(now);
+            }
+            last = now;
+        }
+    }
+
+    fn between(&mut self, from: i64, to: i64) -> anyhow::Result<u64> {
+        writeln!(self.stdin, "between {from} {to}")?;
+        self.stdin.flush()?;
+        let mut line = String::new();
+        self.stdout.read_line(&mut line)?;
+        line.trim()
+            .parse()
+            .with_context(|| format!("unexpected count {line:?}"))
+    }
+
     /// Its process id.
     pub fn pid(&self) -> u32 {
         self.child.id()
@@ -328,7 +386,9 @@ pub fn run_if_asked(args: &[String], bench: &str) -> Option<std::process::ExitCo
     let at = args.iter().position(|a| a == FLAG)?;
     let counted = match (args.get(at + 1), args.get(at + 2)) {
         (Some(url), Some(items)) => run(url, items),
-        _ => Err(anyhow::anyhow!("{FLAG} needs the endpoint URL and the items file")),
+        _ => Err(anyhow::anyhow!(
+            "{FLAG} needs the endpoint URL and the items file"
+        )),
     };
     Some(match counted {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -147,8 +147,11 @@ impl StoreHandle {
                          ORDER BY t DESC, rowid DESC LIMIT ?6",
                     )?;
                     let highest = to.0.min(after.t.0);
-                    stmt.query_map(params![id, from.0, highest, after.t.0, after.row, limit], read)?
-                        .collect::<Result<Vec<_>, _>>()?
+                    stmt.query_map(
+                        params![id, from.0, highest, after.t.0, after.row, limit],
+                        read,
+                    )?
+                    .collect::<Result<Vec<_>, _>>()?
                 }
             };
             Ok(rows)

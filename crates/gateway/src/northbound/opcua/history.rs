@@ -132,7 +132,11 @@ impl RawRead {
         let per_call = usize::try_from(num_values_per_node).unwrap_or(usize::MAX);
         Self {
             range,
-            per_call: if per_call == 0 { PAGE_MAX } else { per_call.min(PAGE_MAX) },
+            per_call: if per_call == 0 {
+                PAGE_MAX
+            } else {
+                per_call.min(PAGE_MAX)
+            },
             bounds,
             after: None,
             started: false,
@@ -320,7 +324,15 @@ mod tests {
         let rows: Vec<(SampleCursor, HistorySample)> = samples
             .iter()
             .enumerate()
-            .map(|(i, s)| (SampleCursor { t: s.t, row: i as i64 }, s.clone()))
+            .map(|(i, s)| {
+                (
+                    SampleCursor {
+                        t: s.t,
+                        row: i as i64,
+                    },
+                    s.clone(),
+                )
+            })
             .collect();
         let (from, to) = (read.range.from, read.range.to);
         let nearest = |t: Timestamp, later: bool| {
@@ -430,10 +442,19 @@ mod tests {
         let sizes: Vec<_> = calls.iter().map(Vec::len).collect();
         assert_eq!(sizes, [2, 2, 1]);
         let values: Vec<_> = calls.concat().into_iter().map(|v| v.value).collect();
-        let expected: Vec<_> = (1..=5).map(|n| Some(Variant::Double(f64::from(n)))).collect();
-        assert_eq!(values, expected, "two changes at one millisecond are both given, once");
+        let expected: Vec<_> = (1..=5)
+            .map(|n| Some(Variant::Double(f64::from(n))))
+            .collect();
+        assert_eq!(
+            values, expected,
+            "two changes at one millisecond are both given, once"
+        );
         let exact = read_all(RawRead::new(range(0, 10_000), 5, false), &stored);
-        assert_eq!(exact.len(), 1, "no continuation when the last call had room");
+        assert_eq!(
+            exact.len(),
+            1,
+            "no continuation when the last call had room"
+        );
     }
 
     #[test]
@@ -446,10 +467,16 @@ mod tests {
         ]);
         let all = |read| read_all(read, &stored).concat();
         // The last change before the start and the first at or after the end.
-        assert_eq!(times(&all(RawRead::new(range(2_000, 6_000), 0, true))), [1_000, 3_000, 5_000, 7_000]);
+        assert_eq!(
+            times(&all(RawRead::new(range(2_000, 6_000), 0, true))),
+            [1_000, 3_000, 5_000, 7_000]
+        );
         // A change at the start time is the start bound itself; one at the end time is
         // the end bound (the end is outside the range).
-        assert_eq!(times(&all(RawRead::new(range(3_000, 5_000), 0, true))), [3_000, 5_000]);
+        assert_eq!(
+            times(&all(RawRead::new(range(3_000, 5_000), 0, true))),
+            [3_000, 5_000]
+        );
         // Nothing before or after: Bad_BoundNotFound at the start and end times.
         let values = all(RawRead::new(range(0, 9_000), 0, true));
         assert_eq!(times(&values), [0, 1_000, 3_000, 5_000, 7_000, 9_000]);
@@ -457,8 +484,14 @@ mod tests {
         assert_eq!(values[0].value, None);
         assert_eq!(values[5].status(), StatusCode::BadBoundNotFound);
         // Backward: from the later time down to the earlier one.
-        assert_eq!(times(&all(RawRead::new(range(6_000, 2_000), 0, true))), [7_000, 5_000, 3_000, 1_000]);
-        assert_eq!(times(&all(RawRead::new(range(5_000, 3_000), 0, false))), [5_000]);
+        assert_eq!(
+            times(&all(RawRead::new(range(6_000, 2_000), 0, true))),
+            [7_000, 5_000, 3_000, 1_000]
+        );
+        assert_eq!(
+            times(&all(RawRead::new(range(5_000, 3_000), 0, false))),
+            [5_000]
+        );
     }
 
     #[test]
@@ -471,8 +504,15 @@ mod tests {
         ]);
         for per_call in 1..=5 {
             let calls = read_all(RawRead::new(range(2_000, 6_000), per_call, true), &stored);
-            assert!(calls.iter().all(|c| c.len() <= per_call as usize), "{per_call}");
-            assert_eq!(times(&calls.concat()), [1_000, 3_000, 5_000, 7_000], "{per_call}");
+            assert!(
+                calls.iter().all(|c| c.len() <= per_call as usize),
+                "{per_call}"
+            );
+            assert_eq!(
+                times(&calls.concat()),
+                [1_000, 3_000, 5_000, 7_000],
+                "{per_call}"
+            );
         }
     }
 
@@ -491,7 +531,11 @@ mod tests {
 
     #[test]
     fn only_an_end_time_reads_backward_from_it() {
-        let end = TimeRange::of(&DateTime::null(), &opc_time(Timestamp(5_000)), Timestamp(9_000));
+        let end = TimeRange::of(
+            &DateTime::null(),
+            &opc_time(Timestamp(5_000)),
+            Timestamp(9_000),
+        );
         assert!(end.reverse);
         assert_eq!(end.start(), Timestamp(5_000));
     }

@@ -10,7 +10,11 @@
 //!   loopback, to know each secure channel's client address (for the audit log).
 //!
 //! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
-//! monitored items are the server's own over those values (no second polling). The same
+//! monitored items are the server's own over those values (no second polling). A point's
+//! monitored item asked to sample at its poll period or faster gets
+//! [`nodes::EVERY_CHANGE_MS`]: every change, with the time it was read. `/healthz` and
+//! `/metrics` read the server's connections, sessions, subscriptions and monitored items
+//! through [`Cell::opcua`]. The same
 //! task raises each of the gateway's events as a BaseEventType event on the device's
 //! object (the gateway object for the gateway's own), which the server also delivers to
 //! event subscriptions on the Server object. The
@@ -140,18 +144,19 @@ pub async fn start(
     let users = Users::new(options.users, options.anonymous, options.allow_writes);
     let peers = Arc::new(Peers::default());
     let (server, handle) = builder(&config, &pki, &url, users.clone())
-        .with_node_manager(nodes::builder(
-            Arc::clone(&cell),
-            users,
-            Arc::clone(&peers),
-        ))
+        .with_node_manager(nodes::builder(Arc::clone(&cell), users, Arc::clone(&peers)))
         .build()
         .map_err(|e| anyhow::anyhow!("the OPC UA server's configuration is refused: {e}"))?;
     let manager = handle
         .node_managers()
         .get_of_type::<CellManager>()
         .context("the OPC UA server has no node manager for the cell")?;
-    cell.set_opcua(probe(url.clone(), handle.clone(), Arc::clone(&manager), Arc::clone(&peers)));
+    cell.set_opcua(probe(
+        url.clone(),
+        handle.clone(),
+        Arc::clone(&manager),
+        Arc::clone(&peers),
+    ));
     let ns = manager.inner().namespace();
     let live = cell.subscribe();
     let follow = tokio::spawn(follow(

@@ -218,6 +218,32 @@ fn build_device(
                 ExtensionObject::from_message(space::eu_information(unit)),
             );
         }
+        if let PointKind::Enum { states } = &point.kind {
+            let values: Vec<ExtensionObject> = space::enum_values(states)
+                .into_iter()
+                .map(ExtensionObject::from_message)
+                .collect();
+            array_property(
+                space,
+                ns,
+                &node,
+                point_id,
+                "EnumValues",
+                DataTypeId::EnumValueType,
+                Variant::from(values),
+            );
+            if let Some(strings) = space::enum_strings(states) {
+                array_property(
+                    space,
+                    ns,
+                    &node,
+                    point_id,
+                    "EnumStrings",
+                    DataTypeId::LocalizedText,
+                    Variant::from(strings),
+                );
+            }
+        }
         if let (PointKind::Numeric, Some(range)) = (&point.kind, &point.writable) {
             property(
                 space,
@@ -292,16 +318,52 @@ fn property(
     data_type: DataTypeId,
     value: ExtensionObject,
 ) {
+    property_of_rank(
+        space,
+        ns,
+        parent,
+        point,
+        name,
+        data_type,
+        -1,
+        Variant::from(value),
+    );
+}
+
+/// A one-dimensional array property (`EnumValues`, `EnumStrings`).
+fn array_property(
+    space: &mut AddressSpace,
+    ns: u16,
+    parent: &NodeId,
+    point: &str,
+    name: &str,
+    data_type: DataTypeId,
+    value: Variant,
+) {
+    property_of_rank(space, ns, parent, point, name, data_type, 1, value);
+}
+
+#[allow(clippy::too_many_arguments)] // the parts of a property node, each needed
+fn property_of_rank(
+    space: &mut AddressSpace,
+    ns: u16,
+    parent: &NodeId,
+    point: &str,
+    name: &str,
+    data_type: DataTypeId,
+    rank: i32,
+    value: Variant,
+) {
     let node = ids::property(ns, point, name);
     VariableBuilder::new(&node, QualifiedName::new(0, name), name)
         .data_type(data_type)
-        .value_rank(-1)
+        .value_rank(rank)
         .access_level(AccessLevel::CURRENT_READ)
         .user_access_level(AccessLevel::CURRENT_READ)
         .has_type_definition(VariableTypeId::PropertyType)
         .property_of(parent.clone())
         .insert(space);
-    set(space, &node, DataValue::new_now(Variant::from(value)));
+    set(space, &node, DataValue::new_now(value));
 }
 
 fn set(space: &mut AddressSpace, node: &NodeId, value: DataValue) {

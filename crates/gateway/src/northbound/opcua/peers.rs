@@ -110,7 +110,9 @@ impl ChannelSniffer {
                 break;
             }
             if self.skip > 0 {
-                let n = usize::try_from(self.skip).unwrap_or(usize::MAX).min(bytes.len());
+                let n = usize::try_from(self.skip)
+                    .unwrap_or(usize::MAX)
+                    .min(bytes.len());
                 self.skip -= n as u64;
                 self.seen += n as u64;
                 bytes = &bytes[n..];
@@ -280,7 +282,11 @@ mod tests {
         for split in 0..bytes.len() {
             let mut sniffer = ChannelSniffer::new();
             sniffer.feed(&bytes[..split]);
-            assert_eq!(sniffer.feed(&bytes[split..]), Sniffed::Channel(7), "{split}");
+            assert_eq!(
+                sniffer.feed(&bytes[split..]),
+                Sniffed::Channel(7),
+                "{split}"
+            );
         }
         let mut sniffer = ChannelSniffer::new();
         for b in &bytes {
