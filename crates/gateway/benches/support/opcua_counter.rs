@@ -342,13 +342,15 @@ impl Counter {
         Counts::parse(&line).with_context(|| format!("unexpected counts {line:?}"))
     }
 
-    /// Notifications whose source time (ms since 1970) is in `[from, to)`, once the count
-    /// stops moving (what was sent has arrived), waiting at most `limit`.
+    /// Notifications whose source time (ms since 1970) is in `[from, to)`, once what the
+    /// server sent has arrived: after two publishing intervals and a second, then once the
+    /// count stops moving, waiting at most `limit`. Ask while the server still runs.
     pub fn settled_between(&mut self, from: i64, to: i64, limit: Duration) -> anyhow::Result<u64> {
         let deadline = std::time::Instant::now() + limit;
+        std::thread::sleep(2 * PUBLISHING_INTERVAL + Duration::from_secs(1));
         let mut last = self.between(from, to)?;
         loop {
-            std::thread::sleep(Duration::from_millis(500));
+            std::thread::sleep(PUBLISHING_INTERVAL);
             let now = self.between(from, to)?;
             if now == last || std::time::Instant::now() > deadline {
                 return Ok(now);

@@ -177,10 +177,9 @@ impl StoreHandle {
                 "SELECT t, value, text, quality FROM samples WHERE point = ?1 AND t <= ?2 \
                  ORDER BY t DESC, rowid DESC LIMIT 1"
             };
-            Ok(conn
-                .prepare_cached(sql)?
+            conn.prepare_cached(sql)?
                 .query_row(params![id, t.0], read_sample)
-                .optional()?)
+                .optional()
         })
     }
 
