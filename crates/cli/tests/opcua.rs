@@ -119,6 +119,7 @@ fn an_independent_opcua_client_browses_reads_gets_every_stored_change_on_a_subsc
     let served = Served::start(data.path(), &[], None);
     let out = run_script(&["read", &served.opcua, &served.http]);
     for expected in [
+        "endpoints, all at",
         "devices and",
         "enumerations with EnumValues",
         "points read Good",

@@ -975,6 +975,8 @@ struct OpcuaCounters {
     t_ms: i64,
     /// `cellbus_opcua_monitored_items` as the gateway counts them.
     monitored_items: u64,
+    /// `cellbus_opcua_connections`: client connections through the gateway's relay.
+    connections: u64,
 }
 
 /// With `--mqtt`: the broker and the counting subscriber, each a process of its own.
@@ -1032,6 +1034,7 @@ impl Counters {
                 client: ProcessUse::of(&counter.pid().to_string(), ticks)?,
                 t_ms: gateway::time::Timestamp::now().0,
                 monitored_items: cell.opcua().map_or(0, |o| o.monitored_items),
+                connections: cell.opcua().map_or(0, |o| o.connections),
             }),
             None => None,
         };
@@ -1351,6 +1354,8 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
             mqtt.as_mut(),
             opcua.as_mut().map(|(c, _)| (c, false)),
         )?;
+        let groups = sampler.finish().await?;
+        let load_after = loadavg();
         // The window's notifications, counted by source time while the server still runs
         // (the last changes of the window are published after it).
         let opcua = match (opcua, &before.opcua, &after.opcua) {
@@ -1367,8 +1372,6 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
             }
             _ => None,
         };
-        let groups = sampler.finish().await?;
-        let load_after = loadavg();
         // After the window: what a dashboard and a Prometheus scrape cost with this cell.
         let mut scrapes = Vec::new();
         for path in [
@@ -1459,6 +1462,11 @@ impl Report {
             && created != points
         {
             bail!("the OPC UA server created {created} monitored items of {points}");
+        }
+        if let Some(a) = &self.after.opcua
+            && a.connections == 0
+        {
+            bail!("the OPC UA client is not connected through the gateway's relay");
         }
         if let Some(totals) = &self.opcua_totals
             && (totals.received != totals.stored || totals.stored == 0)
@@ -1716,10 +1724,11 @@ impl std::fmt::Display for Report {
         if let (Some(oa), Some(ob), Some(totals)) = (&a.opcua, &b.opcua, &self.opcua_totals) {
             writeln!(
                 f,
-                "  opcua        {} of {} monitored items created ({} counted by the gateway); the client received {:.0} notifications/s",
+                "  opcua        {} of {} monitored items created ({} counted by the gateway, over {} relayed connection(s)); the client received {:.0} notifications/s",
                 totals.created,
                 totals.points,
                 oa.monitored_items,
+                oa.connections,
                 rate(oa.received.notifications, ob.received.notifications),
             )?;
             writeln!(

@@ -265,6 +265,11 @@ def writable_numeric(devices):
 async def read(url, addr):
     devices = http(addr, "/api/devices")["devices"]
     async with Client(url, timeout=LIMIT) as client:
+        # The endpoints name the port clients reach (not the server's behind the relay).
+        endpoints = await client.get_endpoints()
+        urls = sorted({e.EndpointUrl.rstrip("/") for e in endpoints})
+        assert urls == [url.rstrip("/")], (urls, url)
+        ok(f"{len(endpoints)} endpoints, all at {urls[0]}")
         ns, tree = await check_tree(client, devices)
         good = 0
         for d in devices:

@@ -6,7 +6,7 @@
 //! point ids in the file `ITEMS` (one a line), and monitors each point's value: one
 //! subscription per [`ITEMS_PER_SUBSCRIPTION`] points (async-opcua's default limits: 1,000
 //! monitored items a subscription and a call, 10 subscriptions a session), publishing
-//! every [`PUBLISHING_INTERVAL`], sampling at 1 s (a JTSE's live period), queue of 10,
+//! every [`PUBLISHING_INTERVAL`], sampling interval 0 (every change), queue of 10,
 //! trigger StatusValue. It
 //! counts the data-change notifications and how long after its source time each arrived
 //! (the delay, in a histogram of milliseconds), and keeps each one's source time. It prints
@@ -39,8 +39,9 @@ pub const FLAG: &str = "--opcua-counter";
 pub const ITEMS_PER_SUBSCRIPTION: usize = 1000;
 /// How often each subscription publishes.
 pub const PUBLISHING_INTERVAL: Duration = Duration::from_millis(500);
-/// The sampling interval asked for: the live group's period.
-const SAMPLING_MS: f64 = 1000.0;
+/// The sampling interval asked for: as fast as the server samples (every change the
+/// gateway reads, whatever the poll period; `--live-period` may be below 1 s).
+const SAMPLING_MS: f64 = 0.0;
 /// The delay histogram's range, in milliseconds (later ones count in the last bucket).
 const DELAY_BUCKETS: usize = 10_000;
 const READY: &str = "ready";

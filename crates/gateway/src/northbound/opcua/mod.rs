@@ -32,6 +32,7 @@ pub mod space;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use ::opcua::crypto::{CertificateStore, SecurityPolicy, X509Data};
@@ -54,6 +55,8 @@ use crate::time::Timestamp;
 
 /// How often the gateway object's history row count is refreshed.
 const GATEWAY_TICK: Duration = Duration::from_secs(10);
+/// How long the server may take to start listening behind the relay.
+const SERVER_START: Duration = Duration::from_secs(10);
 /// The path of every endpoint.
 const ENDPOINT_PATH: &str = "/";
 
@@ -167,7 +170,14 @@ pub async fn start(
         live,
         stop.clone(),
     ));
-    let relay = tokio::spawn(peers::relay(listener, inner_addr, peers, stop.clone()));
+    // Clients wait in the listener's backlog until the server's own port is put back.
+    let (open, opened) = tokio::sync::oneshot::channel::<()>();
+    let relay_stop = stop.clone();
+    let relay = tokio::spawn(async move {
+        if opened.await.is_ok() {
+            peers::relay(listener, inner_addr, peers, relay_stop).await;
+        }
+    });
     let cancel = handle.clone();
     let task = tokio::spawn(async move {
         let run = server.run_with(inner);
@@ -188,6 +198,18 @@ pub async fn start(
         follow.abort();
         relay.abort();
     });
+    // `run_with` records the loopback listener's port as the server's, and endpoint
+    // descriptions (GetEndpoints, CreateSession) are built from it: put the clients' port
+    // back once it has, before the relay lets clients in.
+    let info = Arc::clone(handle.info());
+    let deadline = tokio::time::Instant::now() + SERVER_START;
+    while info.port.load(Ordering::Relaxed) != inner_addr.port()
+        && tokio::time::Instant::now() < deadline
+    {
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+    info.port.store(addr.port(), Ordering::Relaxed);
+    let _ = open.send(());
     tracing::info!(
         "OPC UA server on {url} ({})",
         config
