@@ -112,16 +112,19 @@ fn run_script(args: &[&str]) -> String {
 }
 
 #[test]
-fn an_independent_opcua_client_browses_reads_subscribes_and_is_refused_writes_without_allow_writes()
-{
+fn an_independent_opcua_client_browses_reads_gets_every_stored_change_on_a_subscription_shows_in_healthz_and_is_refused_writes()
+ {
     require_asyncua();
     let data = tempfile::tempdir().expect("a temporary directory");
     let served = Served::start(data.path(), &[], None);
     let out = run_script(&["read", &served.opcua, &served.http]);
     for expected in [
+        "endpoints, all at",
         "devices and",
+        "enumerations with EnumValues",
         "points read Good",
-        "arrived on a subscription",
+        "/healthz shows the OPC UA session",
+        "as /api/history holds them",
         "BadUserAccessDenied",
     ] {
         assert!(out.contains(expected), "{expected:?} not in:\n{out}");
@@ -129,7 +132,7 @@ fn an_independent_opcua_client_browses_reads_subscribes_and_is_refused_writes_wi
 }
 
 #[test]
-fn a_trusted_client_certificate_and_user_write_in_range_are_audited_raise_an_opcua_event_and_history_matches_the_api()
+fn a_trusted_client_certificate_and_user_write_in_range_are_audited_with_the_client_address_raise_an_opcua_event_and_history_pages_match_the_api()
  {
     require_asyncua();
     let data = tempfile::tempdir().expect("a temporary directory");
@@ -143,9 +146,12 @@ fn a_trusted_client_certificate_and_user_write_in_range_are_audited_raise_an_opc
         "BadOutOfRange",
         "written to",
         "audit log",
+        "from 127.0.0.1:",
         "the write's event arrived on the device object",
         "the write's event arrived on the Server object",
         "HistoryRead raw",
+        "numValuesPerNode 2",
+        "returnBounds",
         "HistoryRead Average",
     ] {
         assert!(out.contains(expected), "{expected:?} not in:\n{out}");

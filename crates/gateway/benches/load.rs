@@ -77,10 +77,24 @@
 //! value changes per second. The publisher alone, without polling, is measured by the
 //! `mqtt_backlog` bench.
 //!
+//! # OPC UA
+//!
+//! With `--opcua` the gateway also serves the cell over OPC UA (security None, anonymous,
+//! on a free loopback port) and a third process (the bench again, with `--opcua-counter
+//! URL ITEMS`: `support/opcua_counter.rs`, async-opcua's client) monitors `--opcua-items`
+//! points (10,000 by default: the live group's points first, as evenly over the devices as
+//! they go, e.g. 1,000 stations × 10 points) in subscriptions of 1,000 items publishing
+//! every 500 ms, and counts the data-change notifications and their delay from source
+//! time to arrival. The report adds notifications/s received against the changes/s the
+//! history holds for those points in the window (counted in the history after the stop),
+//! the delay's p50/p99/max, the counter's CPU, and `cellbus_opcua_monitored_items`. The
+//! cost of serving is the difference between runs with `--opcua` and without.
+//!
 //! Under `cargo test --benches` (no `--bench` flag) it runs a one-second smoke test with
 //! four devices (two JTSEs on one line, two Modbus units behind one Modbus TCP gateway),
-//! publishing to MQTT, and fails unless both kinds answered and each Modbus poll took two
-//! reads.
+//! publishing to MQTT and serving OPC UA to a client monitoring 100 points, and fails
+//! unless both kinds answered, each Modbus poll took two reads, and the OPC UA client got
+//! its items and, by source time, every change the history holds for them in the window.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -112,6 +126,8 @@ use wire::device::{Bus, Device, SharedModel};
 
 #[path = "support/mqtt_counter.rs"]
 mod mqtt_counter;
+#[path = "support/opcua_counter.rs"]
+mod opcua_counter;
 #[path = "support/process.rs"]
 mod process;
 
@@ -143,6 +159,8 @@ const MODBUS_CHANGES_PER_SECOND: f64 = 15.0;
 /// The register list every simulated Modbus device shares (`registers_csv`), next to the
 /// generated `cell.toml`.
 const MODBUS_CSV: &str = "modbus-registers.csv";
+/// Monitored items of the OPC UA counter when `--opcua-items` is not given.
+const DEFAULT_OPCUA_ITEMS: usize = 10_000;
 /// The flag that makes the process the simulators' one.
 const SIMULATORS_FLAG: &str = "--simulators";
 /// What the simulator process prints once every line listens.
@@ -168,6 +186,10 @@ usage: cargo bench -p gateway --bench load -- [options]
   --mqtt              also publish the cell as a Sparkplug B edge node to a local
                       mosquitto, with a subscriber counting what arrives (both in
                       processes of their own)
+  --opcua             also serve the cell over OPC UA, with a client in a process of
+                      its own monitoring --opcua-items points and counting what arrives
+  --opcua-items N     points the OPC UA client monitors (default 10000; at most
+                      10000: ten subscriptions of 1000, async-opcua's limits)
 
 1,000 devices over 50 lines for a minute:
   nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
@@ -178,6 +200,9 @@ usage: cargo bench -p gateway --bench load -- [options]
 fn main() -> ExitCode {
     let raw: Vec<String> = std::env::args().skip(1).collect();
     if let Some(code) = mqtt_counter::run_if_asked(&raw, "load") {
+        return code;
+    }
+    if let Some(code) = opcua_counter::run_if_asked(&raw, "load") {
         return code;
     }
     // `cargo bench` passes --bench; `cargo test --benches` does not: then a smoke run.
@@ -208,6 +233,8 @@ fn main() -> ExitCode {
             warmup: Duration::from_secs(1),
             mix: vec![(Kind::Jbc, 1), (Kind::Modbus, 1)],
             mqtt: true,
+            opcua: true,
+            opcua_items: 100,
             ..args
         };
         println!("load: smoke run (cargo bench -p gateway --bench load for the benchmark)");
@@ -242,6 +269,8 @@ struct Args {
     reply_delay: Duration,
     live_period: Option<Duration>,
     mqtt: bool,
+    opcua: bool,
+    opcua_items: usize,
 }
 
 impl Args {
@@ -256,11 +285,17 @@ impl Args {
             reply_delay: DEFAULT_REPLY_DELAY,
             live_period: None,
             mqtt: false,
+            opcua: false,
+            opcua_items: DEFAULT_OPCUA_ITEMS,
         };
         let mut it = raw.iter();
         while let Some(flag) = it.next() {
             if flag == "--mqtt" {
                 args.mqtt = true;
+                continue;
+            }
+            if flag == "--opcua" {
+                args.opcua = true;
                 continue;
             }
             let value = it
@@ -273,6 +308,16 @@ impl Args {
                 "--seconds" => args.seconds = seconds(flag, value)?,
                 "--warmup" => args.warmup = seconds(flag, value)?,
                 "--mix" => args.mix = mix(value)?,
+                "--opcua-items" => {
+                    args.opcua_items = count(flag, value)?;
+                    let most = 10 * opcua_counter::ITEMS_PER_SUBSCRIPTION;
+                    if args.opcua_items > most {
+                        return Err(format!(
+                            "--opcua-items {value}: at most {most} (ten subscriptions of {})",
+                            opcua_counter::ITEMS_PER_SUBSCRIPTION
+                        ));
+                    }
+                }
                 "--baud" => {
                     args.baud = match value {
                         "none" => None,
@@ -833,7 +878,51 @@ fn config_text(args: &Args, plans: &[LinePlan], ports: &[u16]) -> String {
             }
         }
     }
+    if args.opcua {
+        // The endpoint is `--opcua 127.0.0.1:0`'s; the counter reads anonymously.
+        text.push_str("\n[opcua]\nsecurity = [\"None\"]\nanonymous = true\n");
+    }
     text
+}
+
+/// The points the OPC UA counter monitors: of each device, its live group's points
+/// first, as many per device as `items` needs, at most `items` in all.
+fn opcua_items(cell: &Cell, items: usize) -> Vec<String> {
+    let devices = cell.devices();
+    let per_device = items.div_ceil(devices.len().max(1));
+    let mut chosen = Vec::with_capacity(items);
+    for device in &devices {
+        let mut points: Vec<_> = device.points.iter().collect();
+        points.sort_by_key(|p| p.group != gateway::driver::jbc::LIVE);
+        chosen.extend(
+            points
+                .into_iter()
+                .take(per_device)
+                .map(|p| p.view.id.as_str().to_owned()),
+        );
+    }
+    chosen.truncate(items);
+    chosen
+}
+
+/// Changes the history holds for `points` in `[from, to)` (ms since 1970).
+fn stored_changes(
+    data_dir: &std::path::Path,
+    points: &[String],
+    from: i64,
+    to: i64,
+) -> anyhow::Result<u64> {
+    let conn = rusqlite::Connection::open(data_dir.join(gateway::store::DB_FILE))?;
+    let mut stmt = conn.prepare(
+        "SELECT count(*) FROM samples WHERE point = (SELECT id FROM points WHERE name = ?1) \
+         AND t >= ?2 AND t < ?3",
+    )?;
+    let mut changes = 0u64;
+    for point in points {
+        let n: i64 = stmt.query_row(rusqlite::params![point, from, to], |r| r.get(0))?;
+        changes += u64::try_from(n).unwrap_or(0);
+    }
+    Ok(changes)
 }
 
 /// The register list of the simulated Modbus devices: [`MODBUS_POINTS`] `float32` input
@@ -872,6 +961,22 @@ struct Counters {
     gateway: ProcessUse,
     simulators: ProcessUse,
     mqtt: Option<MqttCounters>,
+    opcua: Option<OpcuaCounters>,
+}
+
+/// With `--opcua`: the counting client's side at one moment.
+#[derive(Debug, Clone, Copy, Default)]
+struct OpcuaCounters {
+    /// What the client received.
+    received: opcua_counter::Counts,
+    /// The client's process.
+    client: ProcessUse,
+    /// When (ms since 1970), to count the history's changes of the monitored points.
+    t_ms: i64,
+    /// `cellbus_opcua_monitored_items` as the gateway counts them.
+    monitored_items: u64,
+    /// `cellbus_opcua_connections`: client connections through the gateway's relay.
+    connections: u64,
 }
 
 /// With `--mqtt`: the broker and the counting subscriber, each a process of its own.
@@ -921,7 +1026,18 @@ impl Counters {
         simulators: u32,
         ticks: u64,
         mqtt: Option<&mut MqttSide>,
+        opcua: Option<(&mut opcua_counter::Counter, bool)>,
     ) -> anyhow::Result<Self> {
+        let opcua = match opcua {
+            Some((counter, reset)) => Some(OpcuaCounters {
+                received: counter.counts(reset)?,
+                client: ProcessUse::of(&counter.pid().to_string(), ticks)?,
+                t_ms: gateway::time::Timestamp::now().0,
+                monitored_items: cell.opcua().map_or(0, |o| o.monitored_items),
+                connections: cell.opcua().map_or(0, |o| o.connections),
+            }),
+            None => None,
+        };
         let metrics = cell.metrics();
         let stats = cell.store().stats();
         let mqtt = match mqtt {
@@ -941,6 +1057,7 @@ impl Counters {
             gateway: ProcessUse::of("self", ticks)?,
             simulators: ProcessUse::of(&simulators.to_string(), ticks)?,
             mqtt,
+            opcua,
             value_changes: metrics.value_changes.get(),
             events: metrics.events.get(),
             rows: stats.rows_written(),
@@ -1136,6 +1253,20 @@ struct Report {
     /// With `--mqtt`, after the stop: messages the gateway published in all, and what the
     /// subscriber received in all.
     mqtt_totals: Option<(u64, mqtt_counter::Counts)>,
+    /// With `--opcua`: what was monitored, stored and received.
+    opcua_totals: Option<OpcuaTotals>,
+}
+
+/// With `--opcua`, after the stop.
+struct OpcuaTotals {
+    /// Points monitored.
+    points: usize,
+    /// Monitored items the server created.
+    created: usize,
+    /// Changes the history holds for those points in the measured window.
+    stored: u64,
+    /// Notifications the client received whose source time is in the window.
+    received: u64,
 }
 
 fn run_bench(args: &Args) -> anyhow::Result<Report> {
@@ -1169,6 +1300,9 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         data_dir: data_dir.clone(),
         mqtt: mqtt.as_ref().map(|m| m.broker.url()),
         mqtt_node: mqtt.as_ref().map(|_| "loadbench".to_owned()),
+        opcua: args
+            .opcua
+            .then(|| "127.0.0.1:0".parse().expect("a valid socket address")),
         ..ServeOptions::default()
     };
     // The same runtime as `cellbus serve`: multi-threaded, one worker per core.
@@ -1177,23 +1311,67 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         .build()
         .context("cannot start the runtime")?;
     let pid = simulators.pid();
+    let items_file = dir.path().join("opcua-items.txt");
     let report = runtime.block_on(async {
         let gateway = Gateway::start(options).await?;
         let addr = gateway.local_addr();
+        let gateway_opcua = gateway.opcua_url().map(str::to_owned);
         let cell = Arc::clone(gateway.cell());
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         let run = tokio::spawn(gateway.run(async {
             let _ = stopped.await;
         }));
         let sampler = Sampler::start(Arc::clone(&cell));
+        let mut opcua = match gateway_opcua {
+            Some(url) => {
+                let points = opcua_items(&cell, args.opcua_items);
+                let file = items_file.clone();
+                std::fs::write(&file, points.join("\n"))
+                    .context("cannot write the OPC UA counter's items")?;
+                let counter =
+                    tokio::task::spawn_blocking(move || opcua_counter::Counter::start(&url, &file))
+                        .await
+                        .context("the OPC UA counter's start failed")??;
+                Some((counter, points))
+            }
+            None => None,
+        };
         tokio::time::sleep(args.warmup).await;
         let published = cell.metrics().mqtt_published.clone();
-        let before = Counters::take(&cell, pid, ticks, mqtt.as_mut())?;
+        let before = Counters::take(
+            &cell,
+            pid,
+            ticks,
+            mqtt.as_mut(),
+            opcua.as_mut().map(|(c, _)| (c, true)),
+        )?;
         sampler.measure();
         tokio::time::sleep(args.seconds).await;
-        let after = Counters::take(&cell, pid, ticks, mqtt.as_mut())?;
+        let after = Counters::take(
+            &cell,
+            pid,
+            ticks,
+            mqtt.as_mut(),
+            opcua.as_mut().map(|(c, _)| (c, false)),
+        )?;
         let groups = sampler.finish().await?;
         let load_after = loadavg();
+        // The window's notifications, counted by source time while the server still runs
+        // (the last changes of the window are published after it).
+        let opcua = match (opcua, &before.opcua, &after.opcua) {
+            (Some((mut counter, points)), Some(b), Some(a)) => {
+                let (from, to) = (b.t_ms, a.t_ms);
+                let received = tokio::task::spawn_blocking(move || {
+                    counter
+                        .settled_between(from, to, Duration::from_secs(10))
+                        .map(|n| (counter, n))
+                })
+                .await
+                .context("the OPC UA counter failed")??;
+                Some((received.0.created, received.1, points))
+            }
+            _ => None,
+        };
         // After the window: what a dashboard and a Prometheus scrape cost with this cell.
         let mut scrapes = Vec::new();
         for path in [
@@ -1212,12 +1390,12 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         run.await.context("the gateway task failed")??;
         let stop_took = stopping.elapsed();
         anyhow::Ok((
-            before, after, groups, load_after, scrapes, stop_took, published,
+            before, after, groups, load_after, scrapes, stop_took, published, opcua,
         ))
     })?;
     runtime.shutdown_timeout(Duration::from_secs(5));
     drop(simulators);
-    let (before, after, groups, load_after, scrapes, stop_took, published) = report;
+    let (before, after, groups, load_after, scrapes, stop_took, published, opcua) = report;
     let mqtt_totals = match &mut mqtt {
         Some(side) => Some((published.get(), side.settled(Duration::from_secs(10))?)),
         None => None,
@@ -1228,6 +1406,15 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     let integrity = store.handle().integrity_check()?;
     let rows_at_stop = store_rows(&data_dir)?;
     drop(store);
+    let opcua_totals = match (opcua, &before.opcua, &after.opcua) {
+        (Some((created, received, points)), Some(b), Some(a)) => Some(OpcuaTotals {
+            points: points.len(),
+            created,
+            stored: stored_changes(&data_dir, &points, b.t_ms, a.t_ms)?,
+            received,
+        }),
+        _ => None,
+    };
     if after.polls_ok <= before.polls_ok {
         bail!(
             "no poll was answered in the measured window: the gateway or the simulators are stuck"
@@ -1249,6 +1436,7 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         rows_at_stop,
         integrity,
         mqtt_totals,
+        opcua_totals,
     })
 }
 
@@ -1268,6 +1456,27 @@ impl Report {
             }
         }
         let reads = i64::try_from((2 * MODBUS_POINTS).div_ceil(125)).unwrap_or(i64::MAX);
+        if let Some(OpcuaTotals {
+            points, created, ..
+        }) = self.opcua_totals
+            && created != points
+        {
+            bail!("the OPC UA server created {created} monitored items of {points}");
+        }
+        if let Some(a) = &self.after.opcua
+            && a.connections == 0
+        {
+            bail!("the OPC UA client is not connected through the gateway's relay");
+        }
+        if let Some(totals) = &self.opcua_totals
+            && (totals.received != totals.stored || totals.stored == 0)
+        {
+            bail!(
+                "the OPC UA client received {} notifications of the {} changes the history holds for its points in the window",
+                totals.received,
+                totals.stored
+            );
+        }
         if let Some((requests, _)) = self
             .after
             .modbus_requests
@@ -1349,10 +1558,12 @@ impl std::fmt::Display for Report {
                 .map_or("1s (the driver's)".to_owned(), |p| {
                     humantime::format_duration(p).to_string()
                 }),
-            if self.args.mqtt {
-                "; publishing to a local mosquitto (--mqtt)"
-            } else {
-                ""
+            match (self.args.mqtt, self.args.opcua) {
+                (true, true) =>
+                    "; publishing to a local mosquitto (--mqtt); serving OPC UA (--opcua)",
+                (true, false) => "; publishing to a local mosquitto (--mqtt)",
+                (false, true) => "; serving OPC UA (--opcua)",
+                (false, false) => "",
             },
         )?;
         writeln!(
@@ -1508,6 +1719,35 @@ impl std::fmt::Display for Report {
                 received.messages,
                 published.saturating_sub(received.messages),
                 received.dropped
+            )?;
+        }
+        if let (Some(oa), Some(ob), Some(totals)) = (&a.opcua, &b.opcua, &self.opcua_totals) {
+            writeln!(
+                f,
+                "  opcua        {} of {} monitored items created ({} counted by the gateway, over {} relayed connection(s)); the client received {:.0} notifications/s",
+                totals.created,
+                totals.points,
+                oa.monitored_items,
+                oa.connections,
+                rate(oa.received.notifications, ob.received.notifications),
+            )?;
+            writeln!(
+                f,
+                "  opcua window the history holds {} changes of those points ({:.0}/s), the client received {} notifications with a source time in the window ({:.2} %)",
+                totals.stored,
+                totals.stored as f64 / secs,
+                totals.received,
+                totals.received as f64 * 100.0 / (totals.stored as f64).max(f64::MIN_POSITIVE),
+            )?;
+            writeln!(
+                f,
+                "  opcua client delay from source time to arrival p50 {} ms, p99 {} ms, max {} ms ({} notifications); CPU {:.2} cores, peak RSS {:.1} MiB (separate process)",
+                oa.received.p50_ms,
+                oa.received.p99_ms,
+                oa.received.max_ms,
+                oa.received.timed,
+                cpu(&oa.client, &ob.client),
+                mib(oa.client.peak_rss_kib),
             )?;
         }
         for (path, status, size, took) in &self.scrapes {

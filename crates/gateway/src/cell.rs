@@ -37,6 +37,7 @@ pub struct Cell {
     store: StoreHandle,
     metrics: Arc<Metrics>,
     mqtt: RwLock<Option<MqttLink>>,
+    opcua: RwLock<Option<Arc<OpcuaProbe>>>,
 }
 
 /// The northbound MQTT connection as `/healthz` shows it.
@@ -54,6 +55,42 @@ impl std::fmt::Display for MqttLink {
             MqttLink::Connected => f.write_str("connected"),
             MqttLink::Disconnected(why) => write!(f, "disconnected: {why}"),
         }
+    }
+}
+
+/// The OPC UA server as `/healthz` and `/metrics` show it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct OpcuaState {
+    /// The endpoint URL clients use.
+    pub endpoint: String,
+    /// Open TCP connections.
+    pub connections: u64,
+    /// Sessions (created, activated or not).
+    pub sessions: u64,
+    /// Subscriptions.
+    pub subscriptions: u64,
+    /// Monitored items on the cell's nodes (values and events).
+    pub monitored_items: u64,
+}
+
+/// Reads the OPC UA server's state when asked (the server registers one at start).
+pub struct OpcuaProbe(Box<dyn Fn() -> OpcuaState + Send + Sync>);
+
+impl OpcuaProbe {
+    /// A probe that calls `read`.
+    pub fn new(read: impl Fn() -> OpcuaState + Send + Sync + 'static) -> Self {
+        Self(Box::new(read))
+    }
+
+    /// The state now.
+    pub fn read(&self) -> OpcuaState {
+        (self.0)()
+    }
+}
+
+impl std::fmt::Debug for OpcuaProbe {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_tuple("OpcuaProbe").field(&self.read()).finish()
     }
 }
 
@@ -448,6 +485,7 @@ impl Cell {
             store,
             metrics,
             mqtt: RwLock::new(None),
+            opcua: RwLock::new(None),
         });
         let tasks = plans
             .into_iter()
@@ -532,6 +570,21 @@ impl Cell {
     /// Records the MQTT connection's state (the northbound task does).
     pub fn set_mqtt(&self, link: MqttLink) {
         *self.mqtt.write().unwrap_or_else(PoisonError::into_inner) = Some(link);
+    }
+
+    /// The OPC UA server's state now; `None` when it does not serve OPC UA.
+    pub fn opcua(&self) -> Option<OpcuaState> {
+        let probe = self
+            .opcua
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone();
+        probe.map(|p| p.read())
+    }
+
+    /// Registers how to read the OPC UA server's state (the server does at start).
+    pub fn set_opcua(&self, probe: OpcuaProbe) {
+        *self.opcua.write().unwrap_or_else(PoisonError::into_inner) = Some(Arc::new(probe));
     }
 
     /// Follows live changes.

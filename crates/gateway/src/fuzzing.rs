@@ -4,8 +4,9 @@
 //! configuration through [`parse_config`](crate::config::parse_config) (what `cellbus config
 //! check` and `serve --config` run), query-parameter times and steps through the HTTP
 //! API's parsers, and whole query strings through axum's `Query` extractor and the checks
-//! the handlers run. None may panic; refusals must be errors, and whatever is accepted
-//! must print.
+//! the handlers run; and the bytes an OPC UA connection carries through the relay's
+//! secure channel sniffer ([`opcua_sniffer`]). None may panic; refusals must be errors,
+//! and whatever is accepted must print.
 
 use std::path::Path;
 
@@ -120,6 +121,26 @@ fn query_uri(data: &[u8]) -> Option<Uri> {
     text.parse().ok()
 }
 
+/// Feeds `data` to the OPC UA relay's secure channel sniffer, split where its first byte
+/// says: the same bytes in one piece and in two must give the same answer.
+pub fn opcua_sniffer(data: &[u8]) {
+    use crate::northbound::opcua::peers::{ChannelSniffer, Sniffed};
+    let split = data.first().map_or(0, |b| usize::from(*b)).min(data.len());
+    let mut whole = ChannelSniffer::new();
+    let once = whole.feed(data);
+    let mut parts = ChannelSniffer::new();
+    parts.feed(&data[..split]);
+    let twice = if parts.state() == Sniffed::Waiting {
+        parts.feed(&data[split..])
+    } else {
+        parts.state()
+    };
+    assert_eq!(
+        once, twice,
+        "the sniffer's answer depends on how the bytes were split"
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,6 +212,29 @@ mod tests {
             config(&data);
             time(&data);
             query(&data);
+        }
+    }
+
+    #[test]
+    fn the_opcua_sniffer_body_survives_sample_and_random_inputs() {
+        let samples: [&[u8]; 5] = [
+            b"",
+            b"\x05ACKF\x0c\0\0\0\0\0\0\0OPNF\x10\0\0\0\x07\0\0\0",
+            b"OPNF\xff\xff\xff\xff\x01\x02\x03\x04",
+            b"ACKF\0\0\0\0",
+            b"ERRF\x10\0\0\0",
+        ];
+        for sample in samples {
+            opcua_sniffer(sample);
+        }
+        let mut rng = fastrand::Rng::with_seed(14);
+        let alphabet = b"ACKOPNFERRMSG\0\x01\x08\x0c\x10\xff";
+        for _ in 0..5000 {
+            let len = rng.usize(0..48);
+            let data: Vec<u8> = (0..len)
+                .map(|_| alphabet[rng.usize(..alphabet.len())])
+                .collect();
+            opcua_sniffer(&data);
         }
     }
 }

@@ -115,6 +115,10 @@ pub struct Metrics {
     pub mqtt_reconnects: Counter,
     /// Stored changes sent after an outage (Sparkplug historical metrics, JSON backlog).
     pub mqtt_forwarded: Counter,
+    opcua_connections: Gauge,
+    opcua_sessions: Gauge,
+    opcua_subscriptions: Gauge,
+    opcua_monitored_items: Gauge,
     history_rows: Counter,
     history_commit_errors: Counter,
     history_rows_dropped: Counter,
@@ -193,6 +197,10 @@ impl Metrics {
         let history_commit_errors = Counter::default();
         let history_rows_dropped = Counter::default();
         let history_pending_rows = Gauge::default();
+        let opcua_connections = Gauge::default();
+        let opcua_sessions = Gauge::default();
+        let opcua_subscriptions = Gauge::default();
+        let opcua_monitored_items = Gauge::default();
         registry.register("polls", "Polls of a device's point group", polls.clone());
         registry.register(
             "errors",
@@ -259,6 +267,22 @@ impl Metrics {
             mqtt_forwarded.clone(),
         );
         registry.register(
+            "opcua_connections",
+            "Open OPC UA TCP connections",
+            opcua_connections.clone(),
+        );
+        registry.register("opcua_sessions", "OPC UA sessions", opcua_sessions.clone());
+        registry.register(
+            "opcua_subscriptions",
+            "OPC UA subscriptions",
+            opcua_subscriptions.clone(),
+        );
+        registry.register(
+            "opcua_monitored_items",
+            "OPC UA monitored items on the cell's nodes (values and events)",
+            opcua_monitored_items.clone(),
+        );
+        registry.register(
             "sse_clients",
             "Open server-sent event streams",
             sse_clients.clone(),
@@ -303,12 +327,25 @@ impl Metrics {
             mqtt_reconnects,
             mqtt_forwarded,
             sse_clients,
+            opcua_connections,
+            opcua_sessions,
+            opcua_subscriptions,
+            opcua_monitored_items,
             history_rows,
             history_commit_errors,
             history_rows_dropped,
             history_pending_rows,
             scrape: Mutex::new(()),
         }
+    }
+
+    /// Sets the OPC UA gauges from the server's state (before a scrape).
+    pub fn set_opcua(&self, state: &crate::cell::OpcuaState) {
+        let gauge = |n: u64| i64::try_from(n).unwrap_or(i64::MAX);
+        self.opcua_connections.set(gauge(state.connections));
+        self.opcua_sessions.set(gauge(state.sessions));
+        self.opcua_subscriptions.set(gauge(state.subscriptions));
+        self.opcua_monitored_items.set(gauge(state.monitored_items));
     }
 
     /// The metrics in Prometheus text format, with the history counters brought up to date.

@@ -139,6 +139,7 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     let (status, health) = get(addr, "/healthz").await;
     assert_eq!(status, "HTTP/1.1 200 OK");
     assert_eq!(health["devices_up"], DEMO.len());
+    assert!(health["opcua"].is_null(), "no OPC UA server: {health}");
 
     stop.send(()).unwrap();
     tokio::time::timeout(Duration::from_secs(30), run)
@@ -177,6 +178,83 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     assert_eq!(kinds.first(), Some(&"gateway_stopped"), "{kinds:?}");
     assert_eq!(kinds.last(), Some(&"gateway_started"), "{kinds:?}");
     assert!(kinds.contains(&"line_up"), "{kinds:?}");
+}
+
+/// GETs `path` and returns its body as text.
+async fn get_text(addr: SocketAddr, path: &str) -> String {
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stream
+        .write_all(
+            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
+        )
+        .await
+        .unwrap();
+    let mut response = String::new();
+    stream.read_to_string(&mut response).await.unwrap();
+    response
+}
+
+/// Polls `/healthz` until its `opcua.connections` is `want` (bounded).
+async fn wait_for_opcua_connections(addr: SocketAddr, want: u64) -> serde_json::Value {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let (_, health) = get(addr, "/healthz").await;
+        if health["opcua"]["connections"] == want {
+            return health;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "/healthz never showed {want} OPC UA connections: {health}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
+    let dir = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start(ServeOptions {
+        opcua: Some("127.0.0.1:0".parse().unwrap()),
+        ..options(dir.path())
+    })
+    .await
+    .unwrap();
+    let addr = gateway.local_addr();
+    let url = gateway.opcua_url().unwrap().to_owned();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let run = tokio::spawn(gateway.run(async {
+        let _ = stopped.await;
+    }));
+
+    let health = wait_for_opcua_connections(addr, 0).await;
+    assert_eq!(health["opcua"]["endpoint"], url.as_str());
+    assert_eq!(health["opcua"]["sessions"], 0);
+    assert_eq!(health["opcua"]["subscriptions"], 0);
+    assert_eq!(health["opcua"]["monitored_items"], 0);
+    // A client's TCP connection (no OPC UA spoken yet) is counted while it is open.
+    let port = url.rsplit(':').next().unwrap().parse::<u16>().unwrap();
+    let client = tokio::net::TcpStream::connect(("127.0.0.1", port))
+        .await
+        .unwrap();
+    wait_for_opcua_connections(addr, 1).await;
+    let metrics = get_text(addr, "/metrics").await;
+    assert!(
+        metrics.lines().any(|l| l == "cellbus_opcua_connections 1"),
+        "{metrics}"
+    );
+    assert!(
+        metrics.lines().any(|l| l == "cellbus_opcua_sessions 0"),
+        "{metrics}"
+    );
+    drop(client);
+    wait_for_opcua_connections(addr, 0).await;
+
+    stop.send(()).unwrap();
+    tokio::time::timeout(Duration::from_secs(30), run)
+        .await
+        .expect("serve stops within 30 s")
+        .unwrap()
+        .unwrap();
 }
 
 #[tokio::test]

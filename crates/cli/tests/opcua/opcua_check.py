@@ -6,14 +6,19 @@
     opcua_check.py anonymous-refused OPC_URL
 
 `read`: browses Objects/Cell and compares every device and point with /api/devices
-(data type, description, unit, range, access), sees a change within a poll period on a
-subscription, and is refused a write (no --allow-writes). `write`: connects with
+(data type, description, unit, range, access, enumeration labels); subscribes to the point that changes most
+with its poll period as sampling interval and gets every change /api/history then holds,
+with its value, status and source time, in order, each within a poll period (+2 s) of
+its read; sees the session in /healthz and /metrics meanwhile; and is refused a write (no
+--allow-writes). `write`: connects with
 Basic256Sha256 SignAndEncrypt and a client certificate (refused until the certificate is
 moved from the server's rejected folder to its trusted folder), logs in as `operator`,
-is refused an out-of-range write, writes a valid one, finds both in /api/audit, receives
+is refused an out-of-range write, writes a valid one, finds both in /api/audit with its
+own address (`from 127.0.0.1:PORT`), receives
 the write's event (BaseEventType: message, severity, source, time as in /api/events) on
 event subscriptions to the device's object and to the Server object, and compares
-HistoryRead raw and Average with /api/history.
+HistoryRead raw (whole, in pages of numValuesPerNode 2 with continuation points, with
+returnBounds) and Average with /api/history.
 
 `down`: subscribes anonymously to DEVICE's POINT, prints `subscribed` once it is Good, and
 waits for it to turn Bad (the test stops the device meanwhile), with no value.
@@ -28,6 +33,7 @@ import os
 import shutil
 import sys
 import tempfile
+import time
 import urllib.request
 from datetime import datetime, timedelta, timezone
 
@@ -77,7 +83,7 @@ DATATYPES = {"numeric": ua.VariantType.Double, "enum": ua.VariantType.Int32, "te
 async def check_tree(client, devices):
     ns, tree = await cell_tree(client)
     assert set(tree) == {d["id"] for d in devices}, (sorted(tree), [d["id"] for d in devices])
-    points = 0
+    points = enums = 0
     for d in devices:
         line, children = tree[d["id"]]
         assert line == d["line"], (d["id"], line, d["line"])
@@ -103,8 +109,19 @@ async def check_tree(client, devices):
             if p["kind"]["type"] == "numeric" and p["writable"]:
                 r = await properties["EURange"].read_value()
                 assert (r.Low, r.High) == (p["writable"]["min"], p["writable"]["max"]), (p["id"], r)
+            if p["kind"]["type"] == "enum":
+                states = [(st["value"], st["label"]) for st in p["kind"]["states"]]
+                values = await properties["EnumValues"].read_value()
+                assert [(v.Value, v.DisplayName.Text) for v in values] == states, (p["id"], values)
+                if [v for v, _ in states] == list(range(len(states))):
+                    strings = await properties["EnumStrings"].read_value()
+                    assert [t.Text for t in strings] == [l for _, l in states], (p["id"], strings)
+                else:
+                    assert "EnumStrings" not in properties, p["id"]
+                enums += 1
             points += 1
-    ok(f"{len(devices)} devices and {points} points match /api/devices")
+    assert enums > 0, "the demo cell has enumeration points"
+    ok(f"{len(devices)} devices and {points} points match /api/devices ({enums} enumerations with EnumValues)")
     return ns, tree
 
 
@@ -144,22 +161,97 @@ async def event_of(handler, source, message):
         raise AssertionError(f"no event {message!r} from {source}; others: {others}") from None
 
 
-async def check_subscription(client, tree, devices):
-    nodes = []
+QUALITY = {"good": "Good", "stale": "UncertainLastUsableValue", "bad": "BadCommunicationError"}
+MARGIN = 2.0  # seconds past a poll period a notification may take (the machine is shared)
+
+
+def busiest_point(addr, devices):
+    """The numeric point polled every second or faster that changed most lately."""
+    now = datetime.now(timezone.utc)
+    best, most = None, -1
     for d in devices:
+        if d["status"] != "up":
+            continue
         for p in d["points"]:
-            if p["kind"]["type"] == "numeric":
-                nodes.append(tree[d["id"]][1][p["id"].split(".", 1)[1]])
+            if p["kind"]["type"] != "numeric" or p["period_ms"] > 1000:
+                continue
+            h = http(addr, f"/api/history?point={p['id']}&from={iso(now - timedelta(seconds=20))}&to={iso(now)}")
+            if len(h["samples"]) > most:
+                best, most = (d, p), len(h["samples"])
+    assert best and most >= 2, f"no point of the demo cell changes often ({most} changes)"
+    return best
+
+
+def notified(data):
+    """A notification as (source time in ms, value, status name)."""
+    v = data.monitored_item.Value
+    t = int(v.SourceTimestamp.replace(tzinfo=timezone.utc).timestamp() * 1000 + 0.5)
+    value = v.Value.Value if v.StatusCode.is_good() or v.StatusCode.is_uncertain() else None
+    return t, value, v.StatusCode.name
+
+
+async def check_subscription(client, addr, tree, devices):
+    """Every change the history holds over a few seconds arrives on a subscription with
+    the point's poll period as sampling interval, with its value, status and source time,
+    in order, within a poll period (plus a margin) of its source time."""
+    d, p = busiest_point(addr, devices)
+    node = tree[d["id"]][1][p["id"].split(".", 1)[1]]
+    period = p["period_ms"]
     handler = Changes()
-    sub = await client.create_subscription(200, handler)
-    await sub.subscribe_data_change(nodes)
-    # The initial values first, one per node; then a change.
-    for _ in nodes:
-        await asyncio.wait_for(handler.seen.get(), LIMIT)
-    node, val, data = await asyncio.wait_for(handler.seen.get(), LIMIT)
-    status = data.monitored_item.Value.StatusCode
-    ok(f"a change of {node} arrived on a subscription ({val}, {status.name})")
+    sub = await client.create_subscription(100, handler)
+    request = ua.MonitoredItemCreateRequest()
+    request.ItemToMonitor = ua.ReadValueId(NodeId=node.nodeid, AttributeId=ua.AttributeIds.Value)
+    request.MonitoringMode = ua.MonitoringMode.Reporting
+    params = ua.MonitoringParameters()
+    params.ClientHandle = 1
+    params.SamplingInterval = float(period)
+    params.QueueSize = 10
+    params.DiscardOldest = True
+    # OPC UA's default trigger; async-opcua 0.19 compares values only without a filter.
+    params.Filter = ua.DataChangeFilter(Trigger=ua.DataChangeTrigger.StatusValue)
+    request.RequestedParameters = params
+    [created] = await sub.create_monitored_items([request])
+    assert isinstance(created, int), f"the monitored item was refused: {created}"
+    # Health while subscribed: the session, the subscription and the item are counted.
+    health = http(addr, "/healthz")["opcua"]
+    assert health and health["sessions"] >= 1 and health["subscriptions"] >= 1, health
+    assert health["monitored_items"] >= 1 and health["connections"] >= 1, health
+    metrics = urllib.request.urlopen(f"http://{addr}/metrics", timeout=LIMIT).read().decode()
+    sessions = [l for l in metrics.splitlines() if l.startswith("cellbus_opcua_sessions ")]
+    assert sessions and int(sessions[0].split()[1]) >= 1, sessions
+    ok(f"/healthz shows the OPC UA session: {health}")
+    # The initial value, then changes until enough arrive (bounded).
+    arrivals = []
+    deadline = asyncio.get_running_loop().time() + 2 * LIMIT
+    while len(arrivals) < 6:
+        left = deadline - asyncio.get_running_loop().time()
+        assert left > 0, f"only {len(arrivals)} notifications of {p['id']} in {2 * LIMIT} s"
+        _, _, data = await asyncio.wait_for(handler.seen.get(), left)
+        arrivals.append((time.time(), notified(data)))
     await sub.delete()
+    # The initial value is the node's current value; the changes after it are compared.
+    first_t = arrivals[0][1][0]
+    changes = [n for _, n in arrivals[1:]]
+    last_t = changes[-1][0]
+    window = f"point={p['id']}&from={iso(datetime.fromtimestamp((first_t + 1) / 1000, timezone.utc))}" \
+        f"&to={iso(datetime.fromtimestamp((last_t + 1) / 1000, timezone.utc))}"
+    # The history commits in batches: poll until it holds the last change (bounded).
+    while True:
+        stored = [
+            (ms(s["t"]), s["value"], QUALITY[s["quality"]])
+            for s in http(addr, f"/api/history?{window}")["samples"]
+        ]
+        if stored and stored[-1][0] == last_t:
+            break
+        assert asyncio.get_running_loop().time() < deadline, (stored, changes)
+        await asyncio.sleep(0.2)
+    assert changes == stored, f"notifications {changes} differ from /api/history {stored}"
+    for arrived, (t, _, _) in arrivals[1:]:
+        late = arrived - t / 1000
+        assert late <= period / 1000 + MARGIN, f"a change of {p['id']} arrived {late:.3f} s after it was read"
+    worst = max(arrived - t / 1000 for arrived, (t, _, _) in arrivals[1:])
+    ok(f"{len(changes)} changes of {p['id']} arrived on a subscription (sampling {period} ms) as "
+       f"/api/history holds them, each within {worst:.3f} s of its read")
 
 
 def writable_numeric(devices):
@@ -173,6 +265,11 @@ def writable_numeric(devices):
 async def read(url, addr):
     devices = http(addr, "/api/devices")["devices"]
     async with Client(url, timeout=LIMIT) as client:
+        # The endpoints name the port clients reach (not the server's behind the relay).
+        endpoints = await client.get_endpoints()
+        urls = sorted({e.EndpointUrl.rstrip("/") for e in endpoints})
+        assert urls == [url.rstrip("/")], (urls, url)
+        ok(f"{len(endpoints)} endpoints, all at {urls[0]}")
         ns, tree = await check_tree(client, devices)
         good = 0
         for d in devices:
@@ -191,7 +288,7 @@ async def read(url, addr):
                     assert value.Value.VariantType != ua.VariantType.Null, (p["id"], value)
         assert good > 0, good
         ok(f"{good} points read Good, each with its value and source timestamp")
-        await check_subscription(client, tree, devices)
+        await check_subscription(client, addr, tree, devices)
         d, p = writable_numeric(devices)
         node = tree[d["id"]][1][p["id"].split(".", 1)[1]]
         try:
@@ -275,19 +372,23 @@ async def write(url, addr, data_dir, password):
         rows = [r for r in audit if "opcua user operator" in r["client"]]
         results = sorted({r["result"] for r in rows})
         assert {"refused", "attempted", "accepted"} <= set(results), audit
-        ok(f"the audit log has the OPC UA user's rows: {', '.join(results)}")
+        host, port = client.uaclient.protocol.transport.get_extra_info("sockname")[:2]
+        here = f"from {host}:{port})"
+        assert all(r["client"].endswith(here) for r in rows), (here, [r["client"] for r in rows])
+        ok(f"the audit log has the OPC UA user's rows: {', '.join(results)}; {rows[0]['client']}")
 
         # History: raw and Average against /api/history.
         now = datetime.now(timezone.utc)
         start = now.replace(second=0, microsecond=0) - timedelta(minutes=1)
         end = now + timedelta(seconds=1)
         h = http(addr, f"/api/history?point={p['id']}&from={iso(start)}&to={iso(end)}")
-        raw = await node.read_raw_history(start, end)
+        raw = await node.read_raw_history(start, end, return_bounds=False)
         assert len(raw) == len(h["samples"]), (len(raw), len(h["samples"]))
         for mine, theirs in zip(raw, h["samples"]):
             t = int(mine.SourceTimestamp.replace(tzinfo=timezone.utc).timestamp() * 1000 + 0.5)
             assert t == ms(theirs["t"]), (t, theirs)
         ok(f"HistoryRead raw gives the {len(raw)} changes of /api/history")
+        await check_paged_history(client, tree, addr, devices)
         step = 10_000
         h = http(addr, f"/api/history?point={p['id']}&from={iso(start)}&to={iso(end)}&step=10s")
         details = ua.ReadProcessedDetails()
@@ -304,6 +405,69 @@ async def write(url, addr, data_dir, password):
         for t, avg in theirs.items():
             assert abs(averages[t] - avg) < 1e-9, (t, averages[t], avg)
         ok(f"HistoryRead Average gives the {len(theirs)} buckets of /api/history")
+
+
+async def read_pages(node, start, end, per_call, bounds):
+    """Every value of a raw HistoryRead, following its continuation points; and the
+    number of values of each call."""
+    details = ua.ReadRawModifiedDetails()
+    details.IsReadModified = False
+    details.StartTime, details.EndTime = start, end
+    details.NumValuesPerNode, details.ReturnBounds = per_call, bounds
+    values, sizes, point = [], [], None
+    while True:
+        result = await node.history_read(details, point)
+        result.StatusCode.check()
+        page = result.HistoryData.DataValues or []
+        values += page
+        sizes.append(len(page))
+        point = result.ContinuationPoint
+        if not point:
+            return values, sizes
+        assert len(sizes) < 1000, "the continuation points never end"
+
+
+def source_ms(v):
+    return int(v.SourceTimestamp.replace(tzinfo=timezone.utc).timestamp() * 1000 + 0.5)
+
+
+async def check_paged_history(client, tree, addr, devices):
+    """numValuesPerNode with continuation points, and returnBounds, against /api/history,
+    on the point that changes most."""
+    d, p = busiest_point(addr, devices)
+    node = tree[d["id"]][1][p["id"].split(".", 1)[1]]
+    # A gateway that just started: wait (bounded) for a few changes to page through.
+    deadline = asyncio.get_running_loop().time() + 2 * LIMIT
+    while True:
+        end = datetime.now(timezone.utc).replace(microsecond=0)
+        start = end - timedelta(seconds=30)
+        h = http(addr, f"/api/history?point={p['id']}&from={iso(start)}&to={iso(end)}")
+        theirs = [ms(s["t"]) for s in h["samples"]]
+        if len(theirs) >= 5:
+            break
+        assert asyncio.get_running_loop().time() < deadline, f"too few changes of {p['id']}: {theirs}"
+        await asyncio.sleep(0.5)
+    values, sizes = await read_pages(node, start, end, 2, False)
+    assert [source_ms(v) for v in values] == theirs, (values, theirs)
+    assert max(sizes) <= 2 and len(sizes) >= 2, sizes
+    ok(f"HistoryRead raw with numValuesPerNode 2 gives the {len(values)} changes in {len(sizes)} calls")
+    # Bounds: from just after the first change to the last one, the first change is the
+    # start bound and the last (at the end time) the end bound.
+    first = datetime.fromtimestamp((theirs[0] + 1) / 1000, timezone.utc)
+    last = datetime.fromtimestamp(theirs[-1] / 1000, timezone.utc)
+    values, sizes = await read_pages(node, first, last, 2, True)
+    assert [source_ms(v) for v in values] == theirs, (values, theirs)
+    assert max(sizes) <= 2, sizes
+    # Nothing after the end: Bad_BoundNotFound at the end time.
+    later = datetime.now(timezone.utc).replace(microsecond=0) + timedelta(hours=1)
+    values, _ = await read_pages(node, later, later + timedelta(hours=1), 0, True)
+    assert len(values) == 2, values
+    # The start bound: the latest change, from before the range.
+    assert values[0].StatusCode.value != ua.StatusCodes.BadBoundNotFound, values[0]
+    assert source_ms(values[0]) < later.timestamp() * 1000, values[0]
+    assert values[1].StatusCode.value == ua.StatusCodes.BadBoundNotFound, values[1]
+    assert source_ms(values[1]) == int((later + timedelta(hours=1)).timestamp() * 1000), values[1]
+    ok("HistoryRead raw returnBounds gives the changes around the range, or BadBoundNotFound")
 
 
 async def down(url, device, point):

@@ -317,10 +317,14 @@ async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
         "history_last_error_at": last_error_at,
         "writes_enabled": s.writes.enabled,
         "mqtt": s.cell.mqtt().map(|link| link.to_string()),
+        "opcua": s.cell.opcua(),
     }))
 }
 
 async fn metrics(State(s): State<AppState>) -> Response {
+    if let Some(opcua) = s.cell.opcua() {
+        s.cell.metrics().set_opcua(&opcua);
+    }
     let text = s.cell.metrics().encode(s.cell.store().stats());
     (
         [(

@@ -102,6 +102,95 @@ impl StoreHandle {
         })
     }
 
+    /// A page of `point`'s stored changes between `from` and `to` in `order` (see
+    /// [`PageOrder`] for which end is included), those after `after` in that order, at
+    /// most `limit`, each with its cursor.
+    pub fn history_page(
+        &self,
+        point: &PointId,
+        from: Timestamp,
+        to: Timestamp,
+        order: PageOrder,
+        after: Option<SampleCursor>,
+        limit: usize,
+    ) -> Result<Vec<(SampleCursor, HistorySample)>, StoreError> {
+        self.readers.with(|conn| {
+            let Some(id) = point_row(conn, point)? else {
+                return Ok(Vec::new());
+            };
+            let limit = i64::try_from(limit).unwrap_or(i64::MAX);
+            let read = |r: &rusqlite::Row<'_>| {
+                let sample = read_sample(r)?;
+                let cursor = SampleCursor {
+                    t: sample.t,
+                    row: r.get(4)?,
+                };
+                Ok((cursor, sample))
+            };
+            let rows = match order {
+                PageOrder::OldestFirst => {
+                    let after = after.unwrap_or(SampleCursor {
+                        t: Timestamp(i64::MIN),
+                        row: i64::MIN,
+                    });
+                    let mut stmt = conn.prepare_cached(
+                        "SELECT t, value, text, quality, rowid FROM samples \
+                         WHERE point = ?1 AND t >= ?2 AND t < ?3 \
+                         AND (t > ?4 OR (t = ?4 AND rowid > ?5)) \
+                         ORDER BY t, rowid LIMIT ?6",
+                    )?;
+                    let lowest = from.0.max(after.t.0);
+                    stmt.query_map(params![id, lowest, to.0, after.t.0, after.row, limit], read)?
+                        .collect::<Result<Vec<_>, _>>()?
+                }
+                PageOrder::NewestFirst => {
+                    let after = after.unwrap_or(SampleCursor {
+                        t: Timestamp(i64::MAX),
+                        row: i64::MAX,
+                    });
+                    let mut stmt = conn.prepare_cached(
+                        "SELECT t, value, text, quality, rowid FROM samples \
+                         WHERE point = ?1 AND t > ?2 AND t <= ?3 \
+                         AND (t < ?4 OR (t = ?4 AND rowid < ?5)) \
+                         ORDER BY t DESC, rowid DESC LIMIT ?6",
+                    )?;
+                    let highest = to.0.min(after.t.0);
+                    stmt.query_map(
+                        params![id, from.0, highest, after.t.0, after.row, limit],
+                        read,
+                    )?
+                    .collect::<Result<Vec<_>, _>>()?
+                }
+            };
+            Ok(rows)
+        })
+    }
+
+    /// `point`'s stored change nearest `t` on one side: the last at or before it
+    /// (`later = false`), or the first at or after it.
+    pub fn history_nearest(
+        &self,
+        point: &PointId,
+        t: Timestamp,
+        later: bool,
+    ) -> Result<Option<HistorySample>, StoreError> {
+        self.readers.with(|conn| {
+            let Some(id) = point_row(conn, point)? else {
+                return Ok(None);
+            };
+            let sql = if later {
+                "SELECT t, value, text, quality FROM samples WHERE point = ?1 AND t >= ?2 \
+                 ORDER BY t, rowid LIMIT 1"
+            } else {
+                "SELECT t, value, text, quality FROM samples WHERE point = ?1 AND t <= ?2 \
+                 ORDER BY t DESC, rowid DESC LIMIT 1"
+            };
+            conn.prepare_cached(sql)?
+                .query_row(params![id, t.0], read_sample)
+                .optional()
+        })
+    }
+
     /// Stored events, newest first.
     pub fn events(&self, filter: &EventFilter) -> Result<Vec<EventRecord>, StoreError> {
         self.readers.with(|conn| {
@@ -418,4 +507,14 @@ impl ReaderPool {
             .push(conn);
         result
     }
+}
+
+/// The row id of `point` in `points`, if it was ever stored.
+fn point_row(conn: &Connection, point: &PointId) -> rusqlite::Result<Option<i64>> {
+    conn.query_row(
+        "SELECT id FROM points WHERE name = ?1",
+        [point.as_str()],
+        |r| r.get(0),
+    )
+    .optional()
 }

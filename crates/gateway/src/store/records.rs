@@ -122,6 +122,26 @@ pub struct HistorySample {
     pub quality: Quality,
 }
 
+/// Where a stored change sits in a point's history: its time, then the order it was
+/// stored in (changes at the same millisecond keep their order).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct SampleCursor {
+    /// Its time.
+    pub t: Timestamp,
+    /// Its row.
+    pub row: i64,
+}
+
+/// Which way a page of history runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PageOrder {
+    /// `from <= t < to`, oldest first.
+    OldestFirst,
+    /// `from < t <= to`, newest first (OPC UA's time running backward: the domain starts
+    /// at the later time and ends just after the earlier one).
+    NewestFirst,
+}
+
 /// A stored change of any point, in the order changes are forwarded after an outage.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StoredChange {

@@ -417,6 +417,7 @@ async function refreshLines() {
   }
 }
 
+<<<<<<< HEAD
 // ---- the view: which devices are shown ------------------------------------------------
 
 function viewFromAddress() {
@@ -533,20 +534,36 @@ function setUpToolbar() {
 }
 
 // The MQTT link as /healthz says it (hidden when the gateway publishes nothing).
+=======
+// The MQTT link and the OPC UA server as /healthz says them (each hidden when the
+// gateway does not serve it).
+>>>>>>> opcua
 async function refreshMqtt() {
   try {
     const response = await api('/healthz');
     if (!response.ok) return;
-    const link = (await response.json()).mqtt;
+    const health = await response.json();
+    const link = health.mqtt;
     const badge = document.getElementById('mqtt');
     badge.hidden = !link;
-    if (!link) return;
-    const connected = link === 'connected';
-    badge.dataset.state = connected ? 'live' : 'lost';
-    badge.textContent = connected ? 'MQTT' : 'MQTT down';
-    badge.title = `MQTT ${link}`;
+    if (link) {
+      const connected = link === 'connected';
+      badge.dataset.state = connected ? 'live' : 'lost';
+      badge.textContent = connected ? 'MQTT' : 'MQTT down';
+      badge.title = `MQTT ${link}`;
+    }
+    const opcua = health.opcua;
+    const served = document.getElementById('opcua');
+    served.hidden = !opcua;
+    if (opcua) {
+      served.dataset.state = 'live';
+      const sessions = opcua.sessions === 1 ? '1 session' : `${opcua.sessions} sessions`;
+      served.textContent = `OPC UA · ${sessions}`;
+      served.title = `OPC UA on ${opcua.endpoint}: ${sessions}, ` +
+        `${opcua.subscriptions} subscriptions, ${opcua.monitored_items} monitored items`;
+    }
   } catch (e) {
-    console.warn('mqtt', e);
+    console.warn('healthz', e);
   }
 }
 

@@ -1,9 +1,14 @@
 //! HistoryRead from the gateway's history, sans-IO: raw values, and Average, Minimum and
 //! Maximum over intervals.
 //!
-//! Raw: the stored changes in `[start, end)` with their quality as status codes (see
-//! [`space`](super::space)), newest first when the end is before the start, at most
-//! `numValuesPerNode` (no continuation points: the rest is left out). Processed: the mean,
+//! Raw ([`RawRead`]): the stored changes in `[start, end)` with their quality as status
+//! codes (see [`space`](super::space)); when the end is before the start (or only the end
+//! is given), newest first over `(end, start]`. With `returnBounds`, the bounding values
+//! come first and last: the change at the start time or the last one before it, and the
+//! change at the end time or the first one after it (in the direction of the read), each
+//! with its own time, or Bad_BoundNotFound at the start or end time. At most
+//! `numValuesPerNode` values a call (bounds included; [`PAGE_MAX`] when it is 0), with a
+//! continuation point for the rest. Processed: the mean,
 //! lowest and highest of the good changes stored in each interval, the intervals starting
 //! at the start time (as `/api/history?step=` when the start is a multiple of the step);
 //! an interval without any is Bad_NoData.
@@ -14,8 +19,11 @@ use ::opcua::types::{DataValue, DateTime, NodeId, ObjectId, StatusCode, Variant}
 
 use super::space::{gateway_time, opc_time, stored_data_value};
 use crate::point::{PointKind, Quality, Value};
-use crate::store::{History, Series};
+use crate::store::{History, HistorySample, PageOrder, SampleCursor, Series};
 use crate::time::{Timestamp, duration_millis};
+
+/// The most values one raw read call returns; more come with a continuation point.
+pub const PAGE_MAX: usize = crate::store::MAX_RAW_SAMPLES;
 
 /// The most intervals one processed read may ask for (as the HTTP API's buckets).
 pub const MAX_INTERVALS: i64 = 10_000;
@@ -35,6 +43,7 @@ impl TimeRange {
     /// The range between `start` and `end`; a null start is the beginning of time, a
     /// null end is `now`.
     pub fn of(start: &DateTime, end: &DateTime, now: Timestamp) -> Self {
+        let start_given = !start.is_null();
         let start = if start.is_null() {
             Timestamp(0)
         } else {
@@ -58,6 +67,140 @@ impl TimeRange {
                 reverse: false,
             }
         }
+        .backward_from_end_unless(start_given)
+    }
+
+    /// Only an end time given: the read runs backward from it (OPC UA Part 11, 6.5.3.2).
+    fn backward_from_end_unless(self, start_given: bool) -> Self {
+        Self {
+            reverse: self.reverse || !start_given,
+            ..self
+        }
+    }
+
+    /// The order the values are read in.
+    pub fn order(&self) -> PageOrder {
+        if self.reverse {
+            PageOrder::NewestFirst
+        } else {
+            PageOrder::OldestFirst
+        }
+    }
+
+    /// Where the read starts: the start time (the later time when reading backward).
+    pub fn start(&self) -> Timestamp {
+        if self.reverse { self.to } else { self.from }
+    }
+
+    /// Where the read ends.
+    pub fn end(&self) -> Timestamp {
+        if self.reverse { self.from } else { self.to }
+    }
+}
+
+/// A raw HistoryRead of one node, read in calls: what the client asked and how far it
+/// got. This is the content of the continuation point between calls.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawRead {
+    /// The times asked for.
+    pub range: TimeRange,
+    /// Values per call (`numValuesPerNode`; 0 asks for all, which is [`PAGE_MAX`]).
+    pub per_call: usize,
+    /// Whether the bounding values were asked for.
+    pub bounds: bool,
+    /// The last stored change handed out.
+    pub after: Option<SampleCursor>,
+    /// Whether the start bound has been handed out (or is one of the changes).
+    pub started: bool,
+}
+
+/// What one call needs from the history, fetched by the caller for [`RawRead::page`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Fetched {
+    /// When the start bound is wanted ([`RawRead::wants_start_bound`]): the stored change
+    /// nearest the start on its outer side, at the start time included.
+    pub start_bound: Option<Option<HistorySample>>,
+    /// The stored changes after [`RawRead::after`], at most [`RawRead::rows_wanted`].
+    pub rows: Vec<(SampleCursor, HistorySample)>,
+    /// When bounds are asked: the stored change nearest the end on its outer side.
+    pub end_bound: Option<Option<HistorySample>>,
+}
+
+impl RawRead {
+    /// A read from its first call.
+    pub fn new(range: TimeRange, num_values_per_node: u32, bounds: bool) -> Self {
+        let per_call = usize::try_from(num_values_per_node).unwrap_or(usize::MAX);
+        Self {
+            range,
+            per_call: if per_call == 0 {
+                PAGE_MAX
+            } else {
+                per_call.min(PAGE_MAX)
+            },
+            bounds,
+            after: None,
+            started: false,
+        }
+    }
+
+    /// Whether this call needs the start bound fetched.
+    pub fn wants_start_bound(&self) -> bool {
+        self.bounds && !self.started
+    }
+
+    /// How many stored changes to fetch: one more than fit, to know whether more follow.
+    pub fn rows_wanted(&self) -> usize {
+        self.per_call + 1
+    }
+
+    /// This call's values, and the read to continue with when there are more.
+    pub fn page(mut self, kind: &PointKind, fetched: Fetched) -> (Vec<DataValue>, Option<Self>) {
+        let mut values = Vec::new();
+        if self.wants_start_bound() {
+            self.started = true;
+            let start = self.range.start();
+            match fetched.start_bound.flatten() {
+                // At the start time: it is the first of the changes, not an extra value.
+                Some(s) if s.t == start => {}
+                Some(s) => values.push(sample_value(kind, &s)),
+                None => values.push(bound_not_found(start)),
+            }
+        }
+        let room = self.per_call.saturating_sub(values.len());
+        let more_rows = fetched.rows.len() > room;
+        for (cursor, sample) in fetched.rows.into_iter().take(room) {
+            values.push(sample_value(kind, &sample));
+            self.after = Some(cursor);
+        }
+        if more_rows {
+            return (values, Some(self));
+        }
+        if self.bounds {
+            if values.len() == self.per_call {
+                // The end bound goes in the next call.
+                return (values, Some(self));
+            }
+            values.push(match fetched.end_bound.flatten() {
+                Some(s) => sample_value(kind, &s),
+                None => bound_not_found(self.range.end()),
+            });
+        }
+        (values, None)
+    }
+}
+
+fn sample_value(kind: &PointKind, s: &HistorySample) -> DataValue {
+    stored_data_value(kind, s.value.as_ref(), Some(s.quality), Some(s.t), s.t)
+}
+
+/// A bound the history has no value for.
+fn bound_not_found(t: Timestamp) -> DataValue {
+    DataValue {
+        value: None,
+        status: Some(StatusCode::BadBoundNotFound),
+        source_timestamp: Some(opc_time(t)),
+        server_timestamp: Some(opc_time(t)),
+        ..DataValue::default()
     }
 }
 
@@ -89,22 +232,6 @@ impl Aggregate {
 pub fn check_interval(range: TimeRange, interval: Duration) -> Option<Duration> {
     let step = duration_millis(interval);
     (step > 0 && (range.to.0 - range.from.0) / step < MAX_INTERVALS).then_some(interval)
-}
-
-/// The stored changes as data values, in the order asked, at most `limit` (0: all).
-pub fn raw(kind: &PointKind, stored: &History, range: TimeRange, limit: usize) -> Vec<DataValue> {
-    let Series::Samples(samples) = &stored.series else {
-        return Vec::new();
-    };
-    let value = |s: &crate::store::HistorySample| {
-        stored_data_value(kind, s.value.as_ref(), Some(s.quality), Some(s.t), s.t)
-    };
-    let limit = if limit == 0 { usize::MAX } else { limit };
-    if range.reverse {
-        samples.iter().rev().take(limit).map(value).collect()
-    } else {
-        samples.iter().take(limit).map(value).collect()
-    }
 }
 
 /// The aggregate of the good changes in each interval of `step` from the range's start.
@@ -191,19 +318,104 @@ mod tests {
         }
     }
 
+    /// The store's part of a raw read, over samples in memory (as `history_page` and
+    /// `history_nearest` do in SQLite; the row is the index).
+    fn fetch(read: &RawRead, samples: &[HistorySample]) -> Fetched {
+        let rows: Vec<(SampleCursor, HistorySample)> = samples
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                (
+                    SampleCursor {
+                        t: s.t,
+                        row: i as i64,
+                    },
+                    s.clone(),
+                )
+            })
+            .collect();
+        let (from, to) = (read.range.from, read.range.to);
+        let nearest = |t: Timestamp, later: bool| {
+            if later {
+                samples.iter().find(|s| s.t >= t).cloned()
+            } else {
+                samples.iter().rev().find(|s| s.t <= t).cloned()
+            }
+        };
+        let page: Vec<_> = match read.range.order() {
+            PageOrder::OldestFirst => rows
+                .into_iter()
+                .filter(|(c, _)| from <= c.t && c.t < to && read.after.is_none_or(|a| *c > a))
+                .take(read.rows_wanted())
+                .collect(),
+            PageOrder::NewestFirst => rows
+                .into_iter()
+                .rev()
+                .filter(|(c, _)| from < c.t && c.t <= to && read.after.is_none_or(|a| *c < a))
+                .take(read.rows_wanted())
+                .collect(),
+        };
+        Fetched {
+            start_bound: read
+                .wants_start_bound()
+                .then(|| nearest(read.range.start(), read.range.reverse)),
+            rows: page,
+            end_bound: read
+                .bounds
+                .then(|| nearest(read.range.end(), !read.range.reverse)),
+        }
+    }
+
+    /// Every call of a raw read until no continuation is left: the values of each call.
+    fn read_all(read: RawRead, samples: &[HistorySample]) -> Vec<Vec<DataValue>> {
+        let mut calls = Vec::new();
+        let mut next = Some(read);
+        while let Some(read) = next {
+            let fetched = fetch(&read, samples);
+            let (values, more) = read.page(&PointKind::Numeric, fetched);
+            calls.push(values);
+            next = more;
+            assert!(calls.len() < 100, "the read never ends");
+        }
+        calls
+    }
+
+    fn samples(changes: &[(i64, Option<f64>, Quality)]) -> Vec<HistorySample> {
+        changes
+            .iter()
+            .map(|&(t, v, quality)| HistorySample {
+                t: Timestamp(t),
+                value: v.map(Value::Number),
+                quality,
+            })
+            .collect()
+    }
+
+    fn times(values: &[DataValue]) -> Vec<i64> {
+        values
+            .iter()
+            .map(|v| gateway_time(&v.source_timestamp.unwrap()).0)
+            .collect()
+    }
+
+    fn range(start: i64, end: i64) -> TimeRange {
+        TimeRange::of(
+            &opc_time(Timestamp(start)),
+            &opc_time(Timestamp(end)),
+            Timestamp(0),
+        )
+    }
+
     #[test]
     fn raw_history_keeps_each_change_with_its_quality_and_time() {
-        let stored = history(vec![
+        let stored = samples(&[
             (1_000, Some(20.0), Quality::Good),
             (2_000, None, Quality::Bad),
             (3_000, Some(21.0), Quality::Stale),
         ]);
-        let range = TimeRange::of(
-            &opc_time(Timestamp(0)),
-            &opc_time(Timestamp(10_000)),
-            Timestamp(0),
-        );
-        let values = raw(&PointKind::Numeric, &stored, range, 0);
+        let calls = read_all(RawRead::new(range(0, 10_000), 0, false), &stored);
+        assert_eq!(calls.len(), 1);
+        let values = &calls[0];
         let statuses: Vec<_> = values.iter().map(|v| v.status()).collect();
         assert_eq!(
             statuses,
@@ -214,27 +426,118 @@ mod tests {
             ]
         );
         assert_eq!(values[0].value, Some(Variant::Double(20.0)));
+        assert_eq!(times(values), [1_000, 2_000, 3_000]);
+    }
+
+    #[test]
+    fn num_values_per_node_pages_the_read_with_continuation_points_until_all_are_given() {
+        let stored = samples(&[
+            (1_000, Some(1.0), Quality::Good),
+            (2_000, Some(2.0), Quality::Good),
+            (2_000, Some(3.0), Quality::Good),
+            (3_000, Some(4.0), Quality::Good),
+            (4_000, Some(5.0), Quality::Good),
+        ]);
+        let calls = read_all(RawRead::new(range(0, 10_000), 2, false), &stored);
+        let sizes: Vec<_> = calls.iter().map(Vec::len).collect();
+        assert_eq!(sizes, [2, 2, 1]);
+        let values: Vec<_> = calls.concat().into_iter().map(|v| v.value).collect();
+        let expected: Vec<_> = (1..=5)
+            .map(|n| Some(Variant::Double(f64::from(n))))
+            .collect();
         assert_eq!(
-            gateway_time(&values[2].source_timestamp.unwrap()),
-            Timestamp(3_000)
+            values, expected,
+            "two changes at one millisecond are both given, once"
         );
-        assert_eq!(raw(&PointKind::Numeric, &stored, range, 1).len(), 1);
+        let exact = read_all(RawRead::new(range(0, 10_000), 5, false), &stored);
+        assert_eq!(
+            exact.len(),
+            1,
+            "no continuation when the last call had room"
+        );
+    }
+
+    #[test]
+    fn bounds_are_the_changes_around_the_range_or_bound_not_found() {
+        let stored = samples(&[
+            (1_000, Some(1.0), Quality::Good),
+            (3_000, Some(3.0), Quality::Good),
+            (5_000, Some(5.0), Quality::Good),
+            (7_000, Some(7.0), Quality::Good),
+        ]);
+        let all = |read| read_all(read, &stored).concat();
+        // The last change before the start and the first at or after the end.
+        assert_eq!(
+            times(&all(RawRead::new(range(2_000, 6_000), 0, true))),
+            [1_000, 3_000, 5_000, 7_000]
+        );
+        // A change at the start time is the start bound itself; one at the end time is
+        // the end bound (the end is outside the range).
+        assert_eq!(
+            times(&all(RawRead::new(range(3_000, 5_000), 0, true))),
+            [3_000, 5_000]
+        );
+        // Nothing before or after: Bad_BoundNotFound at the start and end times.
+        let values = all(RawRead::new(range(0, 9_000), 0, true));
+        assert_eq!(times(&values), [0, 1_000, 3_000, 5_000, 7_000, 9_000]);
+        assert_eq!(values[0].status(), StatusCode::BadBoundNotFound);
+        assert_eq!(values[0].value, None);
+        assert_eq!(values[5].status(), StatusCode::BadBoundNotFound);
+        // Backward: from the later time down to the earlier one.
+        assert_eq!(
+            times(&all(RawRead::new(range(6_000, 2_000), 0, true))),
+            [7_000, 5_000, 3_000, 1_000]
+        );
+        assert_eq!(
+            times(&all(RawRead::new(range(5_000, 3_000), 0, false))),
+            [5_000]
+        );
+    }
+
+    #[test]
+    fn bounds_count_in_num_values_per_node_and_page_like_the_changes() {
+        let stored = samples(&[
+            (1_000, Some(1.0), Quality::Good),
+            (3_000, Some(3.0), Quality::Good),
+            (5_000, Some(5.0), Quality::Good),
+            (7_000, Some(7.0), Quality::Good),
+        ]);
+        for per_call in 1..=5 {
+            let calls = read_all(RawRead::new(range(2_000, 6_000), per_call, true), &stored);
+            assert!(
+                calls.iter().all(|c| c.len() <= per_call as usize),
+                "{per_call}"
+            );
+            assert_eq!(
+                times(&calls.concat()),
+                [1_000, 3_000, 5_000, 7_000],
+                "{per_call}"
+            );
+        }
     }
 
     #[test]
     fn an_end_before_the_start_reads_newest_first() {
-        let stored = history(vec![
+        let stored = samples(&[
             (1_000, Some(20.0), Quality::Good),
             (3_000, Some(21.0), Quality::Good),
         ]);
-        let range = TimeRange::of(
-            &opc_time(Timestamp(10_000)),
-            &opc_time(Timestamp(0)),
-            Timestamp(0),
+        let read = RawRead::new(range(10_000, 0), 1, false);
+        assert!(read.range.reverse);
+        let calls = read_all(read, &stored);
+        assert_eq!(times(&calls.concat()), [3_000, 1_000]);
+        assert_eq!(calls.len(), 2);
+    }
+
+    #[test]
+    fn only_an_end_time_reads_backward_from_it() {
+        let end = TimeRange::of(
+            &DateTime::null(),
+            &opc_time(Timestamp(5_000)),
+            Timestamp(9_000),
         );
-        assert!(range.reverse);
-        let values = raw(&PointKind::Numeric, &stored, range, 0);
-        assert_eq!(values[0].value, Some(Variant::Double(21.0)));
+        assert!(end.reverse);
+        assert_eq!(end.start(), Timestamp(5_000));
     }
 
     #[test]

@@ -6,9 +6,15 @@
 //! - [`nodes`]: the node manager that builds the address space, writes and reads history.
 //! - [`history`]: HistoryRead raw and processed (Average, Minimum, Maximum), sans-IO.
 //! - [`auth`]: anonymous sessions read only; users log in on secure endpoints.
+//! - [`peers`]: the gateway accepts the clients and relays them to the server on
+//!   loopback, to know each secure channel's client address (for the audit log).
 //!
 //! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
-//! monitored items are the server's own over those values (no second polling). The same
+//! monitored items are the server's own over those values (no second polling). A point's
+//! monitored item asked to sample at its poll period or faster gets
+//! [`nodes::EVERY_CHANGE_MS`]: every change, with the time it was read. `/healthz` and
+//! `/metrics` read the server's connections, sessions, subscriptions and monitored items
+//! through [`Cell::opcua`]. The same
 //! task raises each of the gateway's events as a BaseEventType event on the device's
 //! object (the gateway object for the gateway's own), which the server also delivers to
 //! event subscriptions on the Server object. The
@@ -20,18 +26,20 @@
 pub mod auth;
 pub mod history;
 pub mod nodes;
+pub mod peers;
 pub mod space;
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use ::opcua::crypto::{CertificateStore, SecurityPolicy, X509Data};
 use ::opcua::server::{ANONYMOUS_USER_TOKEN_ID, ServerBuilder, ServerEndpoint, ServerHandle};
 use ::opcua::types::{
     ApplicationDescription, ApplicationType, BuildInfo, DataValue, DateTime, LocalizedText,
-    MessageSecurityMode, UAString, Variant,
+    MessageSecurityMode, UAString, VariableId, Variant,
 };
 use anyhow::Context;
 use tokio::sync::{broadcast, watch};
@@ -39,13 +47,16 @@ use tokio::task::JoinHandle;
 
 use self::auth::{User, Users};
 use self::nodes::CellManager;
+use self::peers::Peers;
 use self::space::ids;
-use crate::cell::{Cell, LiveMessage};
+use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaState};
 use crate::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
 use crate::time::Timestamp;
 
 /// How often the gateway object's history row count is refreshed.
 const GATEWAY_TICK: Duration = Duration::from_secs(10);
+/// How long the server may take to start listening behind the relay.
+const SERVER_START: Duration = Duration::from_secs(10);
 /// The path of every endpoint.
 const ENDPOINT_PATH: &str = "/";
 
@@ -115,6 +126,13 @@ pub async fn start(
     let addr = listener
         .local_addr()
         .context("cannot read the OPC UA server's bound address")?;
+    // The server itself listens on loopback behind the relay (see `peers`).
+    let inner = tokio::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, 0))
+        .await
+        .context("cannot listen on loopback for the OPC UA server behind the relay")?;
+    let inner_addr = inner
+        .local_addr()
+        .context("cannot read the OPC UA server's loopback address")?;
     let config = OpcuaConfig {
         port: addr.port(),
         ..config
@@ -127,14 +145,21 @@ pub async fn start(
         .await
         .context("the certificate task failed")??;
     let users = Users::new(options.users, options.anonymous, options.allow_writes);
+    let peers = Arc::new(Peers::default());
     let (server, handle) = builder(&config, &pki, &url, users.clone())
-        .with_node_manager(nodes::builder(Arc::clone(&cell), users))
+        .with_node_manager(nodes::builder(Arc::clone(&cell), users, Arc::clone(&peers)))
         .build()
         .map_err(|e| anyhow::anyhow!("the OPC UA server's configuration is refused: {e}"))?;
     let manager = handle
         .node_managers()
         .get_of_type::<CellManager>()
         .context("the OPC UA server has no node manager for the cell")?;
+    cell.set_opcua(probe(
+        url.clone(),
+        handle.clone(),
+        Arc::clone(&manager),
+        Arc::clone(&peers),
+    ));
     let ns = manager.inner().namespace();
     let live = cell.subscribe();
     let follow = tokio::spawn(follow(
@@ -145,9 +170,17 @@ pub async fn start(
         live,
         stop.clone(),
     ));
+    // Clients wait in the listener's backlog until the server's own port is put back.
+    let (open, opened) = tokio::sync::oneshot::channel::<()>();
+    let relay_stop = stop.clone();
+    let relay = tokio::spawn(async move {
+        if opened.await.is_ok() {
+            peers::relay(listener, inner_addr, peers, relay_stop).await;
+        }
+    });
     let cancel = handle.clone();
     let task = tokio::spawn(async move {
-        let run = server.run_with(listener);
+        let run = server.run_with(inner);
         tokio::pin!(run);
         tokio::select! {
             ended = &mut run => {
@@ -163,7 +196,20 @@ pub async fn start(
             }
         }
         follow.abort();
+        relay.abort();
     });
+    // `run_with` records the loopback listener's port as the server's, and endpoint
+    // descriptions (GetEndpoints, CreateSession) are built from it: put the clients' port
+    // back once it has, before the relay lets clients in.
+    let info = Arc::clone(handle.info());
+    let deadline = tokio::time::Instant::now() + SERVER_START;
+    while info.port.load(Ordering::Relaxed) != inner_addr.port()
+        && tokio::time::Instant::now() < deadline
+    {
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+    info.port.store(addr.port(), Ordering::Relaxed);
+    let _ = open.send(());
     tracing::info!(
         "OPC UA server on {url} ({})",
         config
@@ -196,6 +242,8 @@ fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerB
         .host(config.host.clone())
         .port(config.port)
         .discovery_urls(vec![url.to_owned()])
+        // For the session and subscription counts of /healthz and /metrics.
+        .diagnostics_enabled(true)
         .with_authenticator(Arc::new(users));
     let tokens: Vec<String> = if anonymous {
         vec![ANONYMOUS_USER_TOKEN_ID.to_owned()]
@@ -210,6 +258,32 @@ fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerB
         );
     }
     builder
+}
+
+/// Reads the server's state for `/healthz` and `/metrics`: sessions and subscriptions
+/// from async-opcua's diagnostics summary, monitored items from the node manager,
+/// connections from the relay.
+fn probe(
+    endpoint: String,
+    handle: ServerHandle,
+    manager: Arc<CellManager>,
+    peers: Arc<Peers>,
+) -> OpcuaProbe {
+    OpcuaProbe::new(move || {
+        let count = |id: VariableId| match handle.info().summary().get(id).and_then(|v| v.value) {
+            Some(Variant::UInt32(n)) => u64::from(n),
+            _ => 0,
+        };
+        OpcuaState {
+            endpoint: endpoint.clone(),
+            connections: peers.connections(),
+            sessions: count(VariableId::Server_ServerDiagnostics_ServerDiagnosticsSummary_CurrentSessionCount),
+            subscriptions: count(
+                VariableId::Server_ServerDiagnostics_ServerDiagnosticsSummary_CurrentSubscriptionCount,
+            ),
+            monitored_items: manager.inner().monitored_items(),
+        }
+    })
 }
 
 /// The endpoint's id in the server's configuration.

@@ -4,6 +4,7 @@
 
 use std::collections::HashMap;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use ::opcua::server::address_space::{
@@ -14,8 +15,10 @@ use ::opcua::server::node_manager::memory::{
     InMemoryNodeManager, InMemoryNodeManagerBuilder, InMemoryNodeManagerImpl,
 };
 use ::opcua::server::node_manager::{
-    HistoryNode, NodeManagerBuilder, RequestContext, ServerContext, WriteNode,
+    HistoryNode, MonitoredItemRef, NodeManagerBuilder, ParsedReadValueId, RequestContext,
+    ServerContext, WriteNode,
 };
+use ::opcua::server::{ContinuationPoint, CreateMonitoredItem};
 use ::opcua::sync::RwLock;
 use ::opcua::types::{
     AttributeId, DataTypeId, DataValue, ExtensionObject, HistoryData, NodeId, NumericRange,
@@ -24,7 +27,8 @@ use ::opcua::types::{
 };
 
 use super::auth::Users;
-use super::history::{self, Aggregate};
+use super::history::{self, Aggregate, Fetched, RawRead};
+use super::peers::Peers;
 use super::space::{self, ids};
 use crate::cell::{Cell, DeviceView};
 use crate::driver::{ErrorKind, WriteError};
@@ -39,13 +43,31 @@ pub type CellManager = InMemoryNodeManager<CellNodes>;
 pub struct CellNodes {
     cell: Arc<Cell>,
     users: Users,
+    peers: Arc<Peers>,
     ns: u16,
     /// Point variables by node id.
-    points: HashMap<NodeId, PointId>,
+    points: HashMap<NodeId, PointNode>,
+    /// Monitored items on these nodes.
+    monitored: AtomicU64,
 }
 
+/// A point's variable.
+#[derive(Debug, Clone)]
+struct PointNode {
+    id: PointId,
+    /// Its poll period, in milliseconds.
+    period_ms: f64,
+}
+
+/// The sampling interval a monitored item of a point gets when the client asks for its
+/// poll period or less: the values are set as they are read, one per poll at most, so
+/// the item passes every change with the time it was read. (async-opcua, told the poll
+/// period, would hold back a change read a little less than one period after the last
+/// and restamp it a period after that one.)
+pub const EVERY_CHANGE_MS: f64 = 1.0;
+
 /// The builder the server takes: registers the namespace and builds the nodes.
-pub fn builder(cell: Arc<Cell>, users: Users) -> impl NodeManagerBuilder {
+pub fn builder(cell: Arc<Cell>, users: Users, peers: Arc<Peers>) -> impl NodeManagerBuilder {
     InMemoryNodeManagerBuilder::new(move |context: ServerContext, space: &mut AddressSpace| {
         let ns = context
             .type_tree
@@ -57,8 +79,10 @@ pub fn builder(cell: Arc<Cell>, users: Users) -> impl NodeManagerBuilder {
         CellNodes {
             cell,
             users,
+            peers,
             ns,
             points,
+            monitored: AtomicU64::new(0),
         }
     })
 }
@@ -68,6 +92,11 @@ impl CellNodes {
     pub fn namespace(&self) -> u16 {
         self.ns
     }
+
+    /// Monitored items (values and events) on the cell's nodes.
+    pub fn monitored_items(&self) -> u64 {
+        self.monitored.load(Ordering::Relaxed)
+    }
 }
 
 /// Builds the cell's nodes; returns the point variables by node id.
@@ -76,7 +105,7 @@ fn build(
     ns: u16,
     cell: &Cell,
     now: Timestamp,
-) -> HashMap<NodeId, PointId> {
+) -> HashMap<NodeId, PointNode> {
     let mut points = HashMap::new();
     let cell_id = ids::cell(ns);
     ObjectBuilder::new(&cell_id, QualifiedName::new(ns, "Cell"), "Cell")
@@ -106,7 +135,7 @@ fn build_device(
     line_id: &NodeId,
     device: &DeviceView,
     now: Timestamp,
-    points: &mut HashMap<NodeId, PointId>,
+    points: &mut HashMap<NodeId, PointNode>,
 ) {
     let id = device.summary.id.as_str();
     let device_id = ids::device(ns, id);
@@ -171,7 +200,13 @@ fn build_device(
             &node,
             space::data_value(&point.kind, &point.view, now),
         );
-        points.insert(node.clone(), point.view.id.clone());
+        points.insert(
+            node.clone(),
+            PointNode {
+                id: point.view.id.clone(),
+                period_ms: point.view.period_ms as f64,
+            },
+        );
         if let Some(unit) = &point.view.unit {
             property(
                 space,
@@ -182,6 +217,32 @@ fn build_device(
                 DataTypeId::EUInformation,
                 ExtensionObject::from_message(space::eu_information(unit)),
             );
+        }
+        if let PointKind::Enum { states } = &point.kind {
+            let values: Vec<ExtensionObject> = space::enum_values(states)
+                .into_iter()
+                .map(ExtensionObject::from_message)
+                .collect();
+            array_property(
+                space,
+                ns,
+                &node,
+                point_id,
+                "EnumValues",
+                DataTypeId::EnumValueType,
+                Variant::from(values),
+            );
+            if let Some(strings) = space::enum_strings(states) {
+                array_property(
+                    space,
+                    ns,
+                    &node,
+                    point_id,
+                    "EnumStrings",
+                    DataTypeId::LocalizedText,
+                    Variant::from(strings),
+                );
+            }
         }
         if let (PointKind::Numeric, Some(range)) = (&point.kind, &point.writable) {
             property(
@@ -257,16 +318,52 @@ fn property(
     data_type: DataTypeId,
     value: ExtensionObject,
 ) {
+    property_of_rank(
+        space,
+        ns,
+        parent,
+        point,
+        name,
+        data_type,
+        -1,
+        Variant::from(value),
+    );
+}
+
+/// A one-dimensional array property (`EnumValues`, `EnumStrings`).
+fn array_property(
+    space: &mut AddressSpace,
+    ns: u16,
+    parent: &NodeId,
+    point: &str,
+    name: &str,
+    data_type: DataTypeId,
+    value: Variant,
+) {
+    property_of_rank(space, ns, parent, point, name, data_type, 1, value);
+}
+
+#[allow(clippy::too_many_arguments)] // the parts of a property node, each needed
+fn property_of_rank(
+    space: &mut AddressSpace,
+    ns: u16,
+    parent: &NodeId,
+    point: &str,
+    name: &str,
+    data_type: DataTypeId,
+    rank: i32,
+    value: Variant,
+) {
     let node = ids::property(ns, point, name);
     VariableBuilder::new(&node, QualifiedName::new(0, name), name)
         .data_type(data_type)
-        .value_rank(-1)
+        .value_rank(rank)
         .access_level(AccessLevel::CURRENT_READ)
         .user_access_level(AccessLevel::CURRENT_READ)
         .has_type_definition(VariableTypeId::PropertyType)
         .property_of(parent.clone())
         .insert(space);
-    set(space, &node, DataValue::new_now(Variant::from(value)));
+    set(space, &node, DataValue::new_now(value));
 }
 
 fn set(space: &mut AddressSpace, node: &NodeId, value: DataValue) {
@@ -297,7 +394,7 @@ impl InMemoryNodeManagerImpl for CellNodes {
         _space: &RwLock<AddressSpace>,
         nodes_to_write: &mut [&mut WriteNode],
     ) -> Result<(), StatusCode> {
-        let client = client_text(context);
+        let client = client_text(context, &self.peers);
         for node in nodes_to_write {
             let status = self.write_one(context, &client, node.value()).await;
             node.set_status(status);
@@ -315,26 +412,86 @@ impl InMemoryNodeManagerImpl for CellNodes {
         if details.is_read_modified {
             return Err(StatusCode::BadHistoryOperationUnsupported);
         }
-        let range =
-            history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now());
-        let limit = usize::try_from(details.num_values_per_node).unwrap_or(usize::MAX);
+        let asked = RawRead::new(
+            history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now()),
+            details.num_values_per_node,
+            details.return_bounds,
+        );
         for node in nodes.iter_mut() {
             let Some((point, kind)) = self.point_of(node.node_id()) else {
                 node.set_status(StatusCode::BadNodeIdUnknown);
                 continue;
             };
-            match self.read_history(point, range, None).await {
-                Ok(stored) => {
-                    let values = history::raw(&kind, &stored, range, limit);
+            // A continuation point carries the read as the first call asked it.
+            let read = match node.continuation_point() {
+                None => asked.clone(),
+                Some(continued) => match continued.get::<RawRead>() {
+                    Some(read) => read.clone(),
+                    None => {
+                        node.set_status(StatusCode::BadContinuationPointInvalid);
+                        continue;
+                    }
+                },
+            };
+            match self.fetch_raw(point, &read).await {
+                Ok(fetched) => {
+                    let (values, more) = read.page(&kind, fetched);
                     node.set_result(HistoryData {
                         data_values: Some(values),
                     });
+                    node.set_next_continuation_point(
+                        more.map(|read| ContinuationPoint::new(Box::new(read))),
+                    );
                     node.set_status(StatusCode::Good);
                 }
                 Err(status) => node.set_status(status),
             }
         }
         Ok(())
+    }
+
+    async fn create_value_monitored_items(
+        &self,
+        context: &RequestContext,
+        space: &RwLock<AddressSpace>,
+        items: &mut [&mut &mut CreateMonitoredItem],
+    ) {
+        let to_read: Vec<&ParsedReadValueId> = items.iter().map(|i| i.item_to_monitor()).collect();
+        let values = self
+            .read_values(context, space, &to_read, 0.0, TimestampsToReturn::Both)
+            .await;
+        for (value, item) in values.into_iter().zip(items.iter_mut()) {
+            if value.status() != StatusCode::BadAttributeIdInvalid {
+                item.set_initial_value(value);
+            }
+            item.set_status(StatusCode::Good);
+            let asked = item.sampling_interval();
+            if let Some(point) = self.points.get(&item.item_to_monitor().node_id)
+                && asked >= 0.0
+                && asked <= point.period_ms
+            {
+                item.revise_sampling_interval(EVERY_CHANGE_MS);
+            }
+        }
+        self.count_created(items);
+    }
+
+    async fn create_event_monitored_items(
+        &self,
+        _context: &RequestContext,
+        _space: &RwLock<AddressSpace>,
+        items: &mut [&mut &mut CreateMonitoredItem],
+    ) {
+        self.count_created(items);
+    }
+
+    async fn delete_monitored_items(&self, _context: &RequestContext, items: &[&MonitoredItemRef]) {
+        let gone = items.len() as u64;
+        let _ = self
+            .monitored
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| {
+                Some(n.saturating_sub(gone))
+            });
     }
 
     async fn history_read_processed(
@@ -382,9 +539,53 @@ impl InMemoryNodeManagerImpl for CellNodes {
 
 impl CellNodes {
     fn point_of(&self, node: &NodeId) -> Option<(PointId, PointKind)> {
-        let point = self.points.get(node)?;
+        let point = &self.points.get(node)?.id;
         let spec = self.cell.point(point)?;
         Some((point.clone(), spec.kind.clone()))
+    }
+
+    fn count_created(&self, items: &[&mut &mut CreateMonitoredItem]) {
+        let made = items.iter().filter(|i| i.status_code().is_good()).count();
+        self.monitored.fetch_add(made as u64, Ordering::Relaxed);
+    }
+
+    /// What one call of a raw read needs from the history.
+    async fn fetch_raw(&self, point: PointId, read: &RawRead) -> Result<Fetched, StatusCode> {
+        let cell = Arc::clone(&self.cell);
+        let read = read.clone();
+        tokio::task::spawn_blocking(move || {
+            let store = cell.store();
+            let range = read.range;
+            let start_bound = if read.wants_start_bound() {
+                Some(store.history_nearest(&point, range.start(), range.reverse)?)
+            } else {
+                None
+            };
+            let rows = store.history_page(
+                &point,
+                range.from,
+                range.to,
+                range.order(),
+                read.after,
+                read.rows_wanted(),
+            )?;
+            let end_bound = if read.bounds {
+                Some(store.history_nearest(&point, range.end(), !range.reverse)?)
+            } else {
+                None
+            };
+            Ok(Fetched {
+                start_bound,
+                rows,
+                end_bound,
+            })
+        })
+        .await
+        .map_err(|_| StatusCode::BadInternalError)?
+        .map_err(|e: crate::store::StoreError| {
+            tracing::warn!("OPC UA history read failed: {e}");
+            StatusCode::BadHistoryOperationUnsupported
+        })
     }
 
     async fn read_history(
@@ -484,16 +685,21 @@ pub fn write_status(error: &WriteError) -> StatusCode {
     }
 }
 
-/// Who writes, for the audit log: `opcua user op (session 3, urn:client:app)`.
-fn client_text(context: &RequestContext) -> String {
+/// Who writes, for the audit log:
+/// `opcua user op (session 3, urn:client:app, from 192.0.2.7:50112)`.
+fn client_text(context: &RequestContext, peers: &Peers) -> String {
     let session = context.session.read();
     let user = if context.token.is_anonymous() {
         "anonymous".to_owned()
     } else {
         format!("user {}", context.token.0)
     };
+    let from = peers
+        .address(session.secure_channel_id())
+        .map(|a| format!(", from {a}"))
+        .unwrap_or_default();
     format!(
-        "opcua {user} (session {}, {})",
+        "opcua {user} (session {}, {}{from})",
         context.session_id,
         session.application_description().application_uri.as_ref()
     )

@@ -4,7 +4,7 @@
 //! | point kind | OPC UA data type | value |
 //! |---|---|---|
 //! | numeric | Double | the number |
-//! | enumeration | Int32 | the state's number (labels are in the gateway's API) |
+//! | enumeration | Int32 | the state's number; its labels in the `EnumValues` property (and `EnumStrings` when the numbers are 0, 1, 2, …) |
 //! | text | String | the text |
 //!
 //! | point quality | StatusCode | value |
@@ -23,13 +23,13 @@
 
 use ::opcua::nodes::BaseEventType;
 use ::opcua::types::{
-    ByteString, DataTypeId, DataValue, DateTime, EUInformation, LocalizedText, NodeId,
-    ObjectTypeId, Range, StatusCode, UAString, Variant,
+    ByteString, DataTypeId, DataValue, DateTime, EUInformation, EnumValueType, LocalizedText,
+    NodeId, ObjectTypeId, Range, StatusCode, UAString, Variant,
 };
 
 use crate::cell::{DeviceStatus, DeviceSummary, PointView};
 use crate::event::Event;
-use crate::point::{PointKind, Quality, Value};
+use crate::point::{EnumState, PointKind, Quality, Value};
 use crate::time::Timestamp;
 
 /// The namespace of the cell's nodes.
@@ -189,6 +189,33 @@ pub fn written_value(kind: &PointKind, variant: &Variant) -> Option<(Value, serd
     }
 }
 
+/// An enumeration's states as the `EnumValues` property's values.
+pub fn enum_values(states: &[EnumState]) -> Vec<EnumValueType> {
+    states
+        .iter()
+        .map(|s| EnumValueType {
+            value: s.value,
+            display_name: LocalizedText::new("", &s.label),
+            description: LocalizedText::null(),
+        })
+        .collect()
+}
+
+/// An enumeration's labels as the `EnumStrings` property's values, when its numbers are
+/// 0, 1, 2, … in order (each label's index is its number); `None` otherwise.
+pub fn enum_strings(states: &[EnumState]) -> Option<Vec<LocalizedText>> {
+    let dense = states
+        .iter()
+        .enumerate()
+        .all(|(i, s)| i64::try_from(i) == Ok(s.value));
+    (dense && !states.is_empty()).then(|| {
+        states
+            .iter()
+            .map(|s| LocalizedText::new("", &s.label))
+            .collect()
+    })
+}
+
 /// A point's unit as `EUInformation`, with its UNECE code when it is a common one.
 pub fn eu_information(unit: &str) -> EUInformation {
     EUInformation {
@@ -307,9 +334,34 @@ fn unece_unit_id(unit: &str) -> Option<i32> {
 mod tests {
     use super::*;
     use crate::event::EventKind;
-    use crate::point::{DeviceId, EnumState};
+    use crate::point::DeviceId;
 
     use crate::testing::air_temperature_view as view;
+
+    fn states(table: &[(i64, &str)]) -> Vec<EnumState> {
+        table
+            .iter()
+            .map(|&(value, label)| EnumState {
+                value,
+                label: label.to_owned(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn enumeration_labels_are_enum_values_and_enum_strings_only_when_numbered_from_zero() {
+        let dense = states(&[(0, "off"), (1, "on")]);
+        let values = enum_values(&dense);
+        assert_eq!(values[1].value, 1);
+        assert_eq!(values[1].display_name.text.as_ref(), "on");
+        let strings = enum_strings(&dense).expect("0, 1: EnumStrings");
+        assert_eq!(strings[0].text.as_ref(), "off");
+        let sparse = states(&[(0, "ok"), (5, "fault")]);
+        assert_eq!(enum_values(&sparse)[1].value, 5);
+        assert_eq!(enum_strings(&sparse), None);
+        assert_eq!(enum_strings(&states(&[(1, "one")])), None);
+        assert_eq!(enum_strings(&[]), None);
+    }
 
     #[test]
     fn an_event_of_a_device_comes_from_its_object_and_one_of_the_gateway_from_the_gateway() {
