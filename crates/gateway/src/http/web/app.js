@@ -417,7 +417,6 @@ async function refreshLines() {
   }
 }
 
-<<<<<<< HEAD
 // ---- the view: which devices are shown ------------------------------------------------
 
 function viewFromAddress() {
@@ -533,11 +532,8 @@ function setUpToolbar() {
   window.addEventListener('hashchange', follow);
 }
 
-// The MQTT link as /healthz says it (hidden when the gateway publishes nothing).
-=======
 // The MQTT link and the OPC UA server as /healthz says them (each hidden when the
 // gateway does not serve it).
->>>>>>> opcua
 async function refreshMqtt() {
   try {
     const response = await api('/healthz');
