@@ -584,3 +584,43 @@ async fn three_gateways_lose_nothing_across_a_historian_kill_and_a_postgres_rest
     let out = pg.psql("plant", "SELECT count(*) FROM cellbus_samples");
     assert!(out.trim().parse::<u64>().unwrap() > 0);
 }
+
+/// A counter's value in a Prometheus text page.
+fn counter(metrics: &str, name: &str) -> f64 {
+    metrics
+        .lines()
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{name} in:\n{metrics}"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_historians_sharing_the_data_store_every_change() {
+    let broker = Mosquitto::start();
+    let pg = Postgres::start();
+    let database = pg.create_database("plant");
+    let url = broker.url();
+    // Each historian has its own host id; the gateway follows one of them.
+    let first = Historian::start(&url, &database, &["--host-id", HOST_ID, "--share", "plant"]);
+    let second = Historian::start(&url, &database, &["--host-id", "plant2", "--share", "plant"]);
+    first.wait_healthy("the first");
+    second.wait_healthy("the second");
+    let dir = tempfile::tempdir().unwrap();
+    let gateways = vec![("cellA", start_gateway(&url, "cellA", dir.path()))];
+    let deadline = Instant::now() + LIMIT;
+    while first.get_json("/healthz")["nodes_online"] != 1
+        || second.get_json("/healthz")["nodes_online"] != 1
+    {
+        assert!(Instant::now() < deadline, "both historians see the gateway's birth");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let from = now_ms();
+    tokio::time::sleep(Duration::from_secs(20)).await;
+    let to = now_ms() - 1_000;
+    assert_equal_histories(&pg, &gateways, from, to);
+    // Both took part: each got far more messages than the births.
+    for h in [&first, &second] {
+        let (_, metrics) = http_get(&h.addr, "/metrics");
+        let messages = counter(&metrics, "cellbus_historian_messages_total");
+        assert!(messages > 40.0, "{} got {messages} messages", h.addr);
+    }
+}
