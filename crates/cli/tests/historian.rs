@@ -601,7 +601,11 @@ async fn two_historians_sharing_the_data_store_every_change() {
     let url = broker.url();
     // Each historian has its own host id; the gateway follows one of them.
     let first = Historian::start(&url, &database, &["--host-id", HOST_ID, "--share", "plant"]);
-    let second = Historian::start(&url, &database, &["--host-id", "plant2", "--share", "plant"]);
+    let second = Historian::start(
+        &url,
+        &database,
+        &["--host-id", "plant2", "--share", "plant"],
+    );
     first.wait_healthy("the first");
     second.wait_healthy("the second");
     let dir = tempfile::tempdir().unwrap();
@@ -610,7 +614,10 @@ async fn two_historians_sharing_the_data_store_every_change() {
     while first.get_json("/healthz")["nodes_online"] != 1
         || second.get_json("/healthz")["nodes_online"] != 1
     {
-        assert!(Instant::now() < deadline, "both historians see the gateway's birth");
+        assert!(
+            Instant::now() < deadline,
+            "both historians see the gateway's birth"
+        );
         std::thread::sleep(Duration::from_millis(200));
     }
     let from = now_ms();

@@ -381,7 +381,7 @@ async fn healthz(State(s): State<Arc<AppState>>) -> Json<serde_json::Value> {
         "samples_committed": s.metrics.samples_committed.get(),
         "duplicate_samples": s.metrics.duplicates.get(),
         "nodes_online": s.health.nodes_online(),
-        "last_commit": (last > 0).then(|| Timestamp(last)),
+        "last_commit": (last > 0).then_some(Timestamp(last)),
     }))
 }
 

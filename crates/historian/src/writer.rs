@@ -48,7 +48,8 @@ pub enum DbState {
 /// The writer's bounds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {
-    /// Most samples waiting for their commit (about 200 bytes each in memory).
+    /// Most samples waiting for their commit (about 450 bytes each in memory: 500,000 is
+    /// about 220 MiB).
     pub max_pending: usize,
     /// How long the last commits may take at shutdown before what remains is given up.
     pub stop_grace: Duration,
@@ -57,7 +58,7 @@ pub struct Limits {
 impl Default for Limits {
     fn default() -> Self {
         Self {
-            max_pending: 1_000_000,
+            max_pending: 500_000,
             stop_grace: Duration::from_secs(10),
         }
     }
