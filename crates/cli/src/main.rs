@@ -6,6 +6,7 @@
 
 mod decode;
 mod demo;
+mod historian_cmd;
 mod jbc_cmd;
 mod jbus_cmd;
 mod mqtt_cmd;
@@ -41,6 +42,13 @@ enum Command {
     /// Run the gateway: poll the cell, keep its history, serve it over HTTP, a live web
     /// page and Prometheus metrics. Without --config, a simulated demo cell.
     Serve(serve_cmd::ServeArgs),
+    /// Run the plant historian: a Sparkplug B primary host that takes every gateway's data
+    /// off the plant's MQTT broker into PostgreSQL (views cellbus_samples, cellbus_events,
+    /// cellbus_points), and serves the gateway's history API for the whole plant.
+    ///
+    /// Exit codes: 0 stopped by Ctrl-C or SIGTERM (pending rows committed), 1 PostgreSQL
+    /// refused the login or the schema is newer, 2 bad arguments.
+    Historian(historian_cmd::HistorianArgs),
     /// Check or print a gateway configuration file.
     #[command(subcommand)]
     Config(serve_cmd::ConfigCommand),
@@ -90,6 +98,7 @@ fn main() -> ExitCode {
         match cli.command {
             Command::Serve(args) => serve_cmd::serve(args).await,
             Command::Config(command) => serve_cmd::config(command),
+            Command::Historian(args) => historian_cmd::run(args).await,
             Command::Demo(args) => demo::run(args).await,
             Command::Jbc(args) => jbc_cmd::run(args).await,
             Command::Modbus(args) => jbus_cmd::run_modbus(args).await,

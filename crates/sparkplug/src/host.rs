@@ -437,6 +437,11 @@ impl Host {
         self.stats
     }
 
+    /// How many edge nodes have a current NBIRTH (born and not dead since).
+    pub fn nodes_born(&self) -> usize {
+        self.nodes.values().filter(|n| n.birth.is_some()).count()
+    }
+
     /// The topic filters to subscribe to, again after every reconnect: births and deaths
     /// (QoS 1, never shared), data (QoS 0, shared with `$share/{name}/` when sharing).
     /// Each names its message type, so neither STATE nor commands arrive.

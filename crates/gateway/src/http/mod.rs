@@ -72,7 +72,7 @@ pub const MAX_EVENT_STREAMS: usize = 64;
 const QUERY_WAIT: Duration = Duration::from_secs(10);
 
 /// Default length of a history query without `from`.
-const DEFAULT_HISTORY: Duration = Duration::from_secs(3600);
+pub const DEFAULT_HISTORY: Duration = Duration::from_secs(3600);
 
 /// Who may write.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -209,18 +209,21 @@ pub struct ApiError {
 }
 
 impl ApiError {
-    fn new(status: StatusCode, message: impl Into<String>) -> Self {
+    /// An error answered with `status`.
+    pub fn new(status: StatusCode, message: impl Into<String>) -> Self {
         Self {
             status,
             message: message.into(),
         }
     }
 
-    fn bad_request(message: impl Into<String>) -> Self {
+    /// A 400: the request is malformed.
+    pub fn bad_request(message: impl Into<String>) -> Self {
         Self::new(StatusCode::BAD_REQUEST, message)
     }
 
-    fn not_found(message: impl Into<String>) -> Self {
+    /// A 404: what the request names does not exist.
+    pub fn not_found(message: impl Into<String>) -> Self {
         Self::new(StatusCode::NOT_FOUND, message)
     }
 }
@@ -268,7 +271,8 @@ impl From<crate::store::StoreError> for ApiError {
     }
 }
 
-pub(crate) type ApiResult<T> = Result<T, ApiError>;
+/// A handler's answer or its error.
+pub type ApiResult<T> = Result<T, ApiError>;
 
 async fn no_route(method: Method, uri: Uri) -> ApiError {
     ApiError::not_found(format!(
@@ -559,25 +563,33 @@ fn unknown_device(cell: &Cell, id: &str) -> ApiError {
     ))
 }
 
-/// Query of `/api/history`.
+/// Query of `/api/history` (also the plant historian's).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct HistoryQuery {
-    point: Option<String>,
-    from: Option<String>,
-    to: Option<String>,
-    step: Option<String>,
+pub struct HistoryQuery {
+    /// The point (`jbc1.air_temperature`; the historian's `NODE/DEVICE.POINT`).
+    pub point: Option<String>,
+    /// Start: RFC 3339, `now` or `-DURATION`.
+    pub from: Option<String>,
+    /// End, the same forms.
+    pub to: Option<String>,
+    /// Bucket width (`1m`); raw samples without it.
+    pub step: Option<String>,
 }
 
 /// The time range and step a history query asks for, checked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct HistoryRange {
-    pub(crate) from: Timestamp,
-    pub(crate) to: Timestamp,
-    pub(crate) step: Option<Duration>,
+pub struct HistoryRange {
+    /// Start (inclusive).
+    pub from: Timestamp,
+    /// End (exclusive).
+    pub to: Timestamp,
+    /// Bucket width, when downsampled.
+    pub step: Option<Duration>,
 }
 
-fn parse_time(name: &str, text: Option<&str>, now: Timestamp) -> ApiResult<Option<Timestamp>> {
+/// A query's time `name` (RFC 3339, `now` or `-DURATION`), read at `now`.
+pub fn parse_time(name: &str, text: Option<&str>, now: Timestamp) -> ApiResult<Option<Timestamp>> {
     text.map(|t| Timestamp::parse_relative(t, now))
         .transpose()
         .map_err(|e| ApiError::bad_request(format!("{name}: {e}")))
@@ -594,7 +606,7 @@ pub(crate) fn history_point(q: &HistoryQuery) -> ApiResult<PointId> {
 
 /// The range of a history query at `now`: `to` defaults to now, `from` to an hour before
 /// `to` (not before 1970), and `from` must be before `to`.
-pub(crate) fn history_range(q: &HistoryQuery, now: Timestamp) -> ApiResult<HistoryRange> {
+pub fn history_range(q: &HistoryQuery, now: Timestamp) -> ApiResult<HistoryRange> {
     let to = parse_time("to", q.to.as_deref(), now)?.unwrap_or(now);
     let from = parse_time("from", q.from.as_deref(), now)?
         .unwrap_or(to.minus(DEFAULT_HISTORY).max(Timestamp::MIN));
@@ -702,7 +714,8 @@ fn round_up_to_second(d: Duration) -> Duration {
     Duration::from_secs(d.as_secs() + u64::from(d.subsec_nanos() > 0)).max(Duration::from_secs(1))
 }
 
-pub(crate) fn check_limit(limit: Option<usize>) -> ApiResult<usize> {
+/// A listing's `limit`: 100 by default, 1 to [`MAX_LIMIT`].
+pub fn check_limit(limit: Option<usize>) -> ApiResult<usize> {
     match limit {
         None => Ok(100),
         Some(n) if (1..=MAX_LIMIT).contains(&n) => Ok(n),

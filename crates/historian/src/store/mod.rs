@@ -108,7 +108,7 @@ struct Statements {
 
 impl Store {
     /// Connects to `url` (`postgres://USER@HOST:PORT/DB`, any libpq-style option; no
-    /// TLS), brings the schema to [`SCHEMA_VERSION`] and prepares the write path.
+    /// TLS; the password from the URL, else from `PGPASSWORD`), brings the schema to [`SCHEMA_VERSION`] and prepares the write path.
     ///
     /// Must run inside a tokio runtime: the connection is driven by a spawned task.
     ///
@@ -120,6 +120,11 @@ impl Store {
         let mut config: Config = url
             .parse()
             .map_err(|source| StoreError::BadUrl { source })?;
+        if config.get_password().is_none()
+            && let Ok(password) = std::env::var("PGPASSWORD")
+        {
+            config.password(password);
+        }
         if config.get_connect_timeout().is_none() {
             config.connect_timeout(CONNECT_TIMEOUT);
         }

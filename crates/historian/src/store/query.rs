@@ -111,6 +111,28 @@ impl Store {
             .collect())
     }
 
+    /// Whether the point (node, device, name) is known.
+    ///
+    /// # Errors
+    ///
+    /// As [`Store::raw`].
+    pub async fn has_point(
+        &self,
+        node: &str,
+        device: &str,
+        point: &str,
+    ) -> Result<bool, StoreError> {
+        let row = self
+            .client
+            .query_opt(
+                "SELECT 1 FROM points WHERE node = $1 AND device = $2 AND point = $3",
+                &[&node, &device, &point],
+            )
+            .await
+            .map_err(|e| StoreError::statement("looking a point up", e))?;
+        Ok(row.is_some())
+    }
+
     /// Every point, by node, device and name.
     ///
     /// # Errors

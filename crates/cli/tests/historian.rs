@@ -1,0 +1,633 @@
+//! The plant historian end to end: a real mosquitto, a real PostgreSQL, three demo
+//! gateways (`cellbus serve --mqtt … --mqtt-node cellX --mqtt-primary-host plant`) and the
+//! real `cellbus historian`.
+//!
+//! One run covers the issue's checks in one window of a minute and more, so the 30 s gap
+//! is paid once: every device in `cellbus_points`; `cellbus_samples` equal to each
+//! gateway's own `/api/history` across a `kill -9` of the historian for 30 s and a
+//! PostgreSQL restart; a `seq` gap answered by a Rebirth; the plant API.
+//!
+//! "Equal" is checked in both directions. Every change a gateway stored in the window is a
+//! row of `cellbus_samples` with its time, quality and (when good) value. Every row of
+//! `cellbus_samples` in the window is one of those changes, or repeats the value the
+//! gateway's history held at that time (a birth's current value), or is a death marker (a
+//! node's NDEATH marks all its points bad at one instant).
+
+mod common;
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use common::{Gateway, cellbus, http_get};
+use sparkplug::{BdSeq, DataType, EdgeNode, Id, MetricName, MetricSpec, MetricValue, Sample};
+use testkit::{Mosquitto, Postgres, Subscriber};
+
+/// Generous: a loaded 2-core machine, gateways reconnecting, backlogs replayed.
+const LIMIT: Duration = Duration::from_secs(120);
+
+const NODES: [&str; 3] = ["cellA", "cellB", "cellC"];
+const HOST_ID: &str = "plant";
+
+fn now_ms() -> i64 {
+    i64::try_from(
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap()
+            .as_millis(),
+    )
+    .unwrap()
+}
+
+fn rfc3339(ms: i64) -> String {
+    humantime::format_rfc3339_millis(UNIX_EPOCH + Duration::from_millis(ms.unsigned_abs()))
+        .to_string()
+}
+
+fn rfc3339_ms(text: &str) -> i64 {
+    let t = humantime::parse_rfc3339(text).unwrap_or_else(|e| panic!("{text}: {e}"));
+    i64::try_from(t.duration_since(UNIX_EPOCH).unwrap().as_millis()).unwrap()
+}
+
+/// A running `cellbus historian`, killed (`kill -9`) when dropped.
+struct Historian {
+    child: Child,
+    /// `IP:PORT` of its API.
+    addr: String,
+}
+
+impl Historian {
+    fn start(broker: &str, database: &str, args: &[&str]) -> Historian {
+        let mut child = cellbus()
+            .args(["historian", "--mqtt", broker, "--database", database])
+            .args(["--listen", "127.0.0.1:0"])
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("cellbus runs");
+        let mut out = BufReader::new(child.stdout.take().expect("piped"));
+        let mut first = String::new();
+        out.read_line(&mut first).expect("a first line");
+        assert_eq!(
+            first.trim_end(),
+            format!("historian on {broker}"),
+            "the first line"
+        );
+        let mut second = String::new();
+        out.read_line(&mut second).expect("a second line");
+        let addr = second
+            .trim_end()
+            .strip_prefix("listening on http://")
+            .unwrap_or_else(|| panic!("second line is `listening on http://…`, got {second:?}"))
+            .to_owned();
+        Historian { child, addr }
+    }
+
+    fn get_json(&self, path: &str) -> serde_json::Value {
+        let (status, body) = http_get(&self.addr, path);
+        assert_eq!(status, 200, "{path}: {body}");
+        serde_json::from_str(&body).unwrap_or_else(|e| panic!("{path}: {e}: {body}"))
+    }
+
+    /// Polls `/healthz` until the historian is online with PostgreSQL taking commits.
+    fn wait_healthy(&self, what: &str) {
+        let deadline = Instant::now() + LIMIT;
+        loop {
+            let health = self.get_json("/healthz");
+            if health["status"] == "ok" {
+                return;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{what}: not healthy in {LIMIT:?}: {health}"
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    }
+
+    /// SIGTERM, and the exit status.
+    fn terminate(mut self) -> std::process::ExitStatus {
+        let pid = self.child.id().to_string();
+        let status = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+        assert!(status.success());
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                return status;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the historian did not stop on SIGTERM"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for Historian {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A stored sample: time (ms), quality word, and the value when good.
+#[derive(Debug, Clone, PartialEq)]
+struct Row {
+    t: i64,
+    quality: String,
+    value: Option<String>,
+}
+
+fn api_value(v: &serde_json::Value) -> Option<String> {
+    match v {
+        serde_json::Value::Number(n) => Some(format!("{}", n.as_f64().unwrap())),
+        serde_json::Value::String(s) => Some(s.clone()),
+        _ => None,
+    }
+}
+
+fn api_row(sample: &serde_json::Value) -> Row {
+    let quality = sample["quality"].as_str().unwrap().to_owned();
+    Row {
+        t: rfc3339_ms(sample["t"].as_str().unwrap()),
+        value: (quality == "good")
+            .then(|| api_value(&sample["value"]))
+            .flatten(),
+        quality,
+    }
+}
+
+/// One point's history in a gateway: the value held before the window, and the changes.
+#[derive(Debug, Default)]
+struct Series {
+    before: Option<Row>,
+    rows: Vec<Row>,
+}
+
+impl Series {
+    /// What the gateway's history held at `t`.
+    fn held_at(&self, t: i64) -> Option<&Row> {
+        self.rows
+            .iter()
+            .rev()
+            .find(|r| r.t <= t)
+            .or(self.before.as_ref())
+    }
+}
+
+/// Every point's history in a gateway over `[from, to)`, by `device.point`.
+fn gateway_history(gateway: &Gateway, from: i64, to: i64) -> BTreeMap<String, Series> {
+    let (status, body) = gateway.get("/api/devices");
+    assert_eq!(status, 200, "{body}");
+    let devices: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let mut all = BTreeMap::new();
+    for device in devices["devices"].as_array().unwrap() {
+        for point in device["points"].as_array().unwrap() {
+            let id = point["id"].as_str().unwrap();
+            let (status, body) = gateway.get(&format!(
+                "/api/history?point={id}&from={}&to={}",
+                rfc3339(from),
+                rfc3339(to)
+            ));
+            assert_eq!(status, 200, "{id}: {body}");
+            let history: serde_json::Value = serde_json::from_str(&body).unwrap();
+            let series = Series {
+                before: history.get("before").filter(|b| !b.is_null()).map(api_row),
+                rows: history["samples"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(api_row)
+                    .collect(),
+            };
+            all.insert(id.to_owned(), series);
+        }
+    }
+    all
+}
+
+fn gateway_devices(gateway: &Gateway) -> Vec<String> {
+    let (status, body) = gateway.get("/api/devices");
+    assert_eq!(status, 200, "{body}");
+    let devices: serde_json::Value = serde_json::from_str(&body).unwrap();
+    devices["devices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["id"].as_str().unwrap().to_owned())
+        .collect()
+}
+
+/// The historian's rows of `node`'s devices over `[from, to)`, by `device.point`.
+fn historian_rows(pg: &Postgres, node: &str, from: i64, to: i64) -> BTreeMap<String, Vec<Row>> {
+    let out = pg.psql(
+        "plant",
+        &format!(
+            "SELECT device || '.' || point, (extract(epoch from t) * 1000)::bigint, quality, \
+             coalesce(value::text, text) FROM cellbus_samples WHERE node = '{node}' \
+             AND device <> '' AND t >= to_timestamp({from} / 1000.0) \
+             AND t < to_timestamp({to} / 1000.0) ORDER BY 1, 2"
+        ),
+    );
+    let mut rows: BTreeMap<String, Vec<Row>> = BTreeMap::new();
+    for line in out.lines().filter(|l| !l.is_empty()) {
+        let f: Vec<&str> = line.splitn(4, '|').collect();
+        let quality = f[2].to_owned();
+        let value = (quality == "good" && !f[3].is_empty()).then(|| {
+            // Numbers as the API prints them (shortest form), text as it is.
+            f[3].parse::<f64>()
+                .map_or_else(|_| f[3].to_owned(), |n| format!("{n}"))
+        });
+        rows.entry(f[0].to_owned()).or_default().push(Row {
+            t: f[1].parse().unwrap(),
+            quality,
+            value,
+        });
+    }
+    rows
+}
+
+/// What is wrong between a gateway's history and the historian's rows, in words (empty:
+/// equal in the sense of the module's docs).
+fn differences(
+    gateway: &BTreeMap<String, Series>,
+    historian: &BTreeMap<String, Vec<Row>>,
+) -> Vec<String> {
+    let mut wrong = Vec::new();
+    // Death markers: instants at which the historian marked many points bad at once.
+    let mut bad_at: HashMap<i64, usize> = HashMap::new();
+    for rows in historian.values() {
+        for r in rows
+            .iter()
+            .filter(|r| r.quality == "bad" && r.value.is_none())
+        {
+            *bad_at.entry(r.t).or_default() += 1;
+        }
+    }
+    let deaths: BTreeSet<i64> = bad_at
+        .into_iter()
+        .filter(|(_, n)| *n * 2 >= gateway.len())
+        .map(|(t, _)| t)
+        .collect();
+    for (point, series) in gateway {
+        let stored = historian.get(point).map_or(&[][..], Vec::as_slice);
+        for change in &series.rows {
+            if !stored.contains(change) {
+                wrong.push(format!(
+                    "{point}: gateway change {change:?} not in the historian"
+                ));
+            }
+        }
+        for row in stored {
+            if series.rows.contains(row) {
+                continue;
+            }
+            if series.rows.iter().any(|c| c.t == row.t) {
+                wrong.push(format!(
+                    "{point}: historian row {row:?} differs from the gateway's"
+                ));
+                continue;
+            }
+            let held = series.held_at(row.t);
+            let repeats = held.is_some_and(|h| h.quality == row.quality && h.value == row.value);
+            let death = row.quality == "bad" && row.value.is_none() && deaths.contains(&row.t);
+            if !repeats && !death {
+                wrong.push(format!(
+                    "{point}: historian row {row:?} is neither a change of the gateway, nor the \
+                     value it held ({held:?}), nor a death"
+                ));
+            }
+        }
+    }
+    for point in historian.keys() {
+        if !gateway.contains_key(point) {
+            wrong.push(format!("{point}: a point the gateway does not have"));
+        }
+    }
+    wrong
+}
+
+/// Polls until the historian's rows of every gateway equal the gateway's history over
+/// `[from, to)`.
+fn assert_equal_histories(pg: &Postgres, gateways: &[(&str, Gateway)], from: i64, to: i64) {
+    let expected: Vec<_> = gateways
+        .iter()
+        .map(|(node, g)| (*node, gateway_history(g, from, to)))
+        .collect();
+    let changes: usize = expected
+        .iter()
+        .map(|(_, h)| h.values().map(|s| s.rows.len()).sum::<usize>())
+        .sum();
+    assert!(
+        changes > 30,
+        "the demo cells changed in the window: {changes} changes"
+    );
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let mut wrong = Vec::new();
+        for (node, history) in &expected {
+            let rows = historian_rows(pg, node, from, to);
+            wrong.extend(
+                differences(history, &rows)
+                    .into_iter()
+                    .map(|w| format!("{node}/{w}")),
+            );
+        }
+        if wrong.is_empty() {
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{} differences after {LIMIT:?} ({changes} changes in the window); the first: {:#?}",
+            wrong.len(),
+            &wrong[..wrong.len().min(10)]
+        );
+        std::thread::sleep(Duration::from_secs(1));
+    }
+}
+
+fn start_gateway(broker: &str, node: &str, data: &std::path::Path) -> Gateway {
+    Gateway::start_with(
+        data,
+        &[
+            "--mqtt",
+            broker,
+            "--mqtt-node",
+            node,
+            "--mqtt-primary-host",
+            HOST_ID,
+        ],
+    )
+}
+
+/// A fake edge node publishes its births, then data with a skipped `seq`: the historian
+/// asks it for a rebirth.
+async fn a_seq_gap_asks_for_a_rebirth(broker: &Mosquitto) {
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/+/NCMD/#").await;
+    let mut node = EdgeNode::new(
+        Id::new("cellbus").unwrap(),
+        Id::new("fake").unwrap(),
+        BdSeq::new(0),
+    );
+    node.on_connect();
+    let t = sparkplug::Timestamp::from_millis(now_ms().unsigned_abs());
+    let spec = MetricSpec::new(MetricName::new("level").unwrap(), DataType::Double);
+    let device = Id::new("tank").unwrap();
+    let sample = |v: f64| Sample::good(MetricValue::Double(v), t);
+    let births = [
+        node.node_birth(&[], t).unwrap(),
+        node.device_birth(&device, &[(spec, sample(1.0))], t)
+            .unwrap(),
+    ];
+    let live = sparkplug::Delivery::Live;
+    let skipped = node.device_data(&device, &[("level", sample(2.0))], t, live);
+    assert!(skipped.unwrap().is_some(), "a DDATA not published: the gap");
+    let after_gap = node
+        .device_data(&device, &[("level", sample(3.0))], t, live)
+        .unwrap()
+        .expect("a DDATA after the gap");
+    for message in births.into_iter().chain([after_gap]) {
+        sub.publish(&message.topic.to_string(), message.payload)
+            .await;
+    }
+    let rebirth = sub
+        .next_where("an NCMD Rebirth to the node with the gap", LIMIT, |m| {
+            m.topic == "spBv1.0/cellbus/NCMD/fake"
+        })
+        .await;
+    let metric = rebirth
+        .metric("Node Control/Rebirth")
+        .expect("a Rebirth metric");
+    assert_eq!(
+        metric.value,
+        Some(sparkplug::proto::metric::Value::BooleanValue(true))
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn three_gateways_lose_nothing_across_a_historian_kill_and_a_postgres_restart() {
+    let broker = Mosquitto::start();
+    let mut pg = Postgres::start();
+    let database = pg.create_database("plant");
+    let url = broker.url();
+    let historian = Historian::start(&url, &database, &["--host-id", HOST_ID]);
+    let dirs: Vec<_> = NODES.iter().map(|_| tempfile::tempdir().unwrap()).collect();
+    let gateways: Vec<(&str, Gateway)> = NODES
+        .iter()
+        .zip(&dirs)
+        .map(|(node, dir)| (*node, start_gateway(&url, node, dir.path())))
+        .collect();
+
+    // Every device of every gateway appears in cellbus_points.
+    let wanted: BTreeSet<String> = gateways
+        .iter()
+        .flat_map(|(node, g)| {
+            gateway_devices(g)
+                .into_iter()
+                .map(move |d| format!("{node}/{d}"))
+        })
+        .collect();
+    assert!(
+        wanted.len() >= 3 * 3,
+        "the demo cells have devices: {wanted:?}"
+    );
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let out = pg.psql(
+            "plant",
+            "SELECT DISTINCT node || '/' || device FROM cellbus_points WHERE device <> ''",
+        );
+        let got: BTreeSet<String> = out.lines().map(str::to_owned).collect();
+        if wanted.is_subset(&got) {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "devices missing from cellbus_points: {:?}",
+            wanted.difference(&got).collect::<Vec<_>>()
+        );
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    historian.wait_healthy("at start");
+    let from = now_ms();
+
+    // A seq gap from a test publisher is answered with a Rebirth.
+    a_seq_gap_asks_for_a_rebirth(&broker).await;
+
+    // The historian killed for 30 s, then restarted.
+    tokio::time::sleep(Duration::from_secs(10)).await;
+    drop(historian); // kill -9
+    tokio::time::sleep(Duration::from_secs(30)).await;
+    let historian = Historian::start(&url, &database, &["--host-id", HOST_ID]);
+    historian.wait_healthy("after the restart");
+
+    // PostgreSQL restarted (a crash and recovery) while the historian runs.
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    pg.restart();
+    historian.wait_healthy("after the PostgreSQL restart");
+    tokio::time::sleep(Duration::from_secs(10)).await;
+    let to = now_ms() - 1_000;
+    assert!(to - from >= 60_000, "a window of a minute or more");
+
+    assert_equal_histories(&pg, &gateways, from, to);
+
+    // The plant API: the gateway's /api/history shape for the same window.
+    let window = format!("from={}&to={}", rfc3339(from), rfc3339(to));
+    let (status, body) = gateways[0]
+        .1
+        .get(&format!("/api/history?point=jbc1.air_temperature&{window}"));
+    assert_eq!(status, 200, "{body}");
+    let theirs: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let ours = historian.get_json(&format!(
+        "/api/history?point=cellA/jbc1.air_temperature&{window}"
+    ));
+    let keys = |v: &serde_json::Value| {
+        v.as_object()
+            .unwrap()
+            .keys()
+            .cloned()
+            .collect::<BTreeSet<_>>()
+    };
+    assert_eq!(keys(&ours), keys(&theirs), "the same fields: {ours}");
+    assert_eq!(ours["point"], "cellA/jbc1.air_temperature");
+    assert_eq!(
+        (&ours["from"], &ours["to"]),
+        (&theirs["from"], &theirs["to"])
+    );
+    let series = |v: &serde_json::Value| Series {
+        before: v.get("before").filter(|b| !b.is_null()).map(api_row),
+        rows: v["samples"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(api_row)
+            .collect(),
+    };
+    let ours_rows = series(&ours).rows;
+    let theirs_series = series(&theirs);
+    assert!(
+        !theirs_series.rows.is_empty(),
+        "the air temperature changed: {theirs}"
+    );
+    let mut gateway_side = BTreeMap::new();
+    gateway_side.insert("jbc1.air_temperature".to_owned(), theirs_series);
+    let mut historian_side = BTreeMap::new();
+    historian_side.insert("jbc1.air_temperature".to_owned(), ours_rows);
+    let wrong = differences(&gateway_side, &historian_side);
+    assert!(wrong.is_empty(), "/api/history differs: {wrong:#?}");
+    let buckets = historian.get_json(&format!(
+        "/api/history?point=cellA/jbc1.air_temperature&{window}&step=10s"
+    ));
+    assert_eq!(buckets["step_ms"], 10_000);
+    assert!(
+        !buckets["buckets"].as_array().unwrap().is_empty(),
+        "{buckets}"
+    );
+    let (status, body) = http_get(&historian.addr, "/api/history?point=jbc1.air_temperature");
+    assert_eq!(status, 400, "{body}");
+    assert!(body.contains("NODE/DEVICE.POINT"), "{body}");
+    let (status, body) = http_get(&historian.addr, "/api/history?point=cellA/jbc1.nothing");
+    assert_eq!(status, 404, "{body}");
+
+    let points = historian.get_json("/api/points");
+    let air = points["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["id"] == "cellA/jbc1.air_temperature")
+        .unwrap_or_else(|| panic!("cellA/jbc1.air_temperature in /api/points: {points}"));
+    assert_eq!(
+        (&air["node"], &air["device"]),
+        (&"cellA".into(), &"jbc1".into())
+    );
+    assert_eq!(air["unit"], "°C");
+    assert!(air["name"].as_str().is_some_and(|n| !n.is_empty()), "{air}");
+    for node in NODES {
+        assert!(
+            points["points"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|p| p["node"] == node),
+            "{node} in /api/points"
+        );
+    }
+    let health = historian.get_json("/healthz");
+    assert_eq!(health["status"], "ok", "{health}");
+    assert_eq!(health["broker"], "connected", "{health}");
+    assert_eq!(health["database"], "ok", "{health}");
+    assert!(health["nodes_online"].as_u64().unwrap() >= 3, "{health}");
+    assert!(
+        health["samples_committed"].as_u64().unwrap() > 0,
+        "{health}"
+    );
+    let (status, metrics) = http_get(&historian.addr, "/metrics");
+    assert_eq!(status, 200);
+    for name in [
+        "cellbus_historian_messages_total",
+        "cellbus_historian_samples_committed_total",
+        "cellbus_historian_duplicate_samples_total",
+        "cellbus_historian_rebirths_asked_total",
+        "cellbus_historian_seq_gaps_total",
+        "cellbus_historian_commit_seconds_bucket",
+        "cellbus_historian_pending_samples",
+    ] {
+        assert!(metrics.contains(name), "{name} in /metrics:\n{metrics}");
+    }
+
+    // SIGTERM: a clean stop.
+    let status = historian.terminate();
+    assert!(status.success(), "exit status {status}");
+    let out = pg.psql("plant", "SELECT count(*) FROM cellbus_samples");
+    assert!(out.trim().parse::<u64>().unwrap() > 0);
+}
+
+/// A counter's value in a Prometheus text page.
+fn counter(metrics: &str, name: &str) -> f64 {
+    metrics
+        .lines()
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{name} in:\n{metrics}"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_historians_sharing_the_data_store_every_change() {
+    let broker = Mosquitto::start();
+    let pg = Postgres::start();
+    let database = pg.create_database("plant");
+    let url = broker.url();
+    // Each historian has its own host id; the gateway follows one of them.
+    let first = Historian::start(&url, &database, &["--host-id", HOST_ID, "--share", "plant"]);
+    let second = Historian::start(
+        &url,
+        &database,
+        &["--host-id", "plant2", "--share", "plant"],
+    );
+    first.wait_healthy("the first");
+    second.wait_healthy("the second");
+    let dir = tempfile::tempdir().unwrap();
+    let gateways = vec![("cellA", start_gateway(&url, "cellA", dir.path()))];
+    let deadline = Instant::now() + LIMIT;
+    while first.get_json("/healthz")["nodes_online"] != 1
+        || second.get_json("/healthz")["nodes_online"] != 1
+    {
+        assert!(
+            Instant::now() < deadline,
+            "both historians see the gateway's birth"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let from = now_ms();
+    tokio::time::sleep(Duration::from_secs(20)).await;
+    let to = now_ms() - 1_000;
+    assert_equal_histories(&pg, &gateways, from, to);
+    // Both took part: each got far more messages than the births.
+    for h in [&first, &second] {
+        let (_, metrics) = http_get(&h.addr, "/metrics");
+        let messages = counter(&metrics, "cellbus_historian_messages_total");
+        assert!(messages > 40.0, "{} got {messages} messages", h.addr);
+    }
+}

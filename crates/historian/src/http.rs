@@ -1,0 +1,432 @@
+//! The plant's HTTP API (`--listen`): the gateway's history shapes for every cell.
+//!
+//! - `GET /api/history?point=NODE/DEVICE.POINT&from=&to=&step=`: exactly the gateway's
+//!   `/api/history` answer (raw samples with `before` and `truncated`, or buckets), with the
+//!   same time forms (RFC 3339, `now`, `-1h`), defaults, limits and errors (the gateway's
+//!   own parsing is used). A node's own metrics are `NODE/.POINT`.
+//! - `GET /api/points`: every point with node, device, unit, name in words, data type and
+//!   write range.
+//! - `GET /api/events?from=&to=&limit=`: events, newest first.
+//! - `GET /healthz`: broker, database, pending samples, nodes online.
+//! - `GET /metrics`: Prometheus (OpenMetrics text).
+//!
+//! Queries use a connection of their own (never the writer's), one query at a time, opened
+//! on the first query and again after it is lost. The server loop is the gateway's
+//! ([`gateway::http::server`]: header and write timeouts, a connection limit).
+
+use std::sync::Arc;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Query, State};
+use axum::http::{Method, StatusCode, Uri, header};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use axum::{Json, Router};
+use gateway::http::{
+    ApiError, ApiResult, HistoryQuery, HistoryRange, check_limit, history_range, parse_time,
+};
+use gateway::point::{Quality as ApiQuality, Value};
+use gateway::store::{Bucket as ApiBucket, HistorySample, MAX_RAW_SAMPLES, Series};
+use gateway::time::Timestamp;
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+use crate::metrics::{Health, Metrics};
+use crate::store::{Quality, Store, StoreError, StoredSample};
+
+/// How long a query waits for the query connection before the answer is 503.
+const QUERY_WAIT: Duration = Duration::from_secs(10);
+
+/// What the handlers share.
+pub struct AppState {
+    /// The database URL (for the query connection).
+    pub url: String,
+    /// The query connection, opened on demand.
+    pub reader: tokio::sync::Mutex<Option<Store>>,
+    /// Counters.
+    pub metrics: Arc<Metrics>,
+    /// Health.
+    pub health: Arc<Health>,
+}
+
+/// The router of the plant API.
+pub fn router(state: Arc<AppState>) -> Router {
+    Router::new()
+        .route("/healthz", get(healthz))
+        .route("/metrics", get(metrics))
+        .route("/api/points", get(points))
+        .route("/api/history", get(history))
+        .route("/api/events", get(events))
+        .fallback(no_route)
+        .method_not_allowed_fallback(wrong_method)
+        .with_state(state)
+}
+
+async fn no_route(method: Method, uri: Uri) -> ApiError {
+    ApiError::not_found(format!(
+        "no route {method} {}; the historian serves /api/history, /api/points, /api/events, \
+         /healthz and /metrics",
+        uri.path()
+    ))
+}
+
+async fn wrong_method(method: Method, uri: Uri) -> ApiError {
+    ApiError::new(
+        StatusCode::METHOD_NOT_ALLOWED,
+        format!("{} does not take {method}", uri.path()),
+    )
+}
+
+fn db_error(e: StoreError) -> ApiError {
+    let status = if e.is_connection_lost() {
+        StatusCode::SERVICE_UNAVAILABLE
+    } else {
+        StatusCode::INTERNAL_SERVER_ERROR
+    };
+    ApiError::new(status, e.to_string())
+}
+
+type Reader<'a> = tokio::sync::MutexGuard<'a, Option<Store>>;
+
+/// The query connection, connected.
+async fn reader(s: &AppState) -> ApiResult<Reader<'_>> {
+    let mut guard = tokio::time::timeout(QUERY_WAIT, s.reader.lock())
+        .await
+        .map_err(|_| {
+            ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "the historian is busy with other queries; try again shortly",
+            )
+        })?;
+    if guard.as_ref().is_none_or(Store::is_closed) {
+        *guard = Some(Store::connect(&s.url).await.map_err(db_error)?);
+    }
+    Ok(guard)
+}
+
+/// Runs `result`'s error handling: a lost connection is dropped so the next query opens
+/// a new one.
+fn checked<T>(guard: &mut Reader<'_>, result: Result<T, StoreError>) -> ApiResult<T> {
+    result.map_err(|e| {
+        if e.is_connection_lost() {
+            **guard = None;
+        }
+        db_error(e)
+    })
+}
+
+fn ms(t: SystemTime) -> Timestamp {
+    Timestamp(
+        t.duration_since(UNIX_EPOCH)
+            .map_or(0, |d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX)),
+    )
+}
+
+/// A query time as a system time (the store cuts ranges to its calendar).
+fn system_time(t: Timestamp) -> SystemTime {
+    UNIX_EPOCH
+        .checked_add(Duration::from_millis(t.0.max(0).unsigned_abs()))
+        .unwrap_or(UNIX_EPOCH + Duration::from_secs(253_402_300_799))
+}
+
+fn api_quality(q: Quality) -> ApiQuality {
+    match q {
+        Quality::Good => ApiQuality::Good,
+        Quality::Stale => ApiQuality::Stale,
+        Quality::Bad => ApiQuality::Bad,
+    }
+}
+
+fn api_sample(s: StoredSample) -> HistorySample {
+    HistorySample {
+        t: ms(s.t),
+        value: s.value.map(Value::Number).or(s.text.map(Value::Text)),
+        quality: api_quality(s.quality),
+    }
+}
+
+/// A plant point id, `NODE/DEVICE.POINT` (`NODE/.POINT` for a node's own metric).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PlantPoint {
+    /// The edge node.
+    pub node: String,
+    /// The device, `""` for the node's own metrics.
+    pub device: String,
+    /// The metric's name.
+    pub point: String,
+}
+
+impl PlantPoint {
+    /// Reads `NODE/DEVICE.POINT`: the node up to the first `/`, the device up to the next
+    /// `.`, the rest the point's name.
+    ///
+    /// # Errors
+    ///
+    /// Words that quote the text and say the form.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let bad = || {
+            format!(
+                "point {text:?} is not NODE/DEVICE.POINT (e.g. cellA/jbc1.air_temperature; a \
+                 node's own metric is NODE/.POINT)"
+            )
+        };
+        let (node, rest) = text.split_once('/').ok_or_else(bad)?;
+        let (device, point) = rest.split_once('.').ok_or_else(bad)?;
+        if node.is_empty() || point.is_empty() {
+            return Err(bad());
+        }
+        Ok(Self {
+            node: node.to_owned(),
+            device: device.to_owned(),
+            point: point.to_owned(),
+        })
+    }
+
+    /// `NODE/DEVICE.POINT`.
+    pub fn id(node: &str, device: &str, point: &str) -> String {
+        format!("{node}/{device}.{point}")
+    }
+}
+
+/// The answer to a history query: the gateway's `History`, with a plant point id.
+#[derive(Debug, Serialize)]
+struct PlantHistory {
+    point: String,
+    from: Timestamp,
+    to: Timestamp,
+    step_ms: Option<i64>,
+    before: Option<HistorySample>,
+    #[serde(flatten)]
+    series: Series,
+    truncated: bool,
+}
+
+async fn history(
+    State(s): State<Arc<AppState>>,
+    query: Result<Query<HistoryQuery>, QueryRejection>,
+) -> ApiResult<Response> {
+    let Query(q) = query?;
+    let text = q.point.as_deref().ok_or_else(|| {
+        ApiError::bad_request(
+            "give the point: /api/history?point=cellA/jbc1.air_temperature&from=-1h",
+        )
+    })?;
+    let p = PlantPoint::parse(text).map_err(ApiError::bad_request)?;
+    let HistoryRange { from, to, step } = history_range(&q, Timestamp::now())?;
+    let mut guard = reader(&s).await?;
+    let Some(store) = guard.as_ref() else {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "no query connection",
+        ));
+    };
+    let known = store.has_point(&p.node, &p.device, &p.point).await;
+    if !checked(&mut guard, known)? {
+        return Err(ApiError::not_found(format!(
+            "the historian has no point {text}; GET /api/points lists them"
+        )));
+    }
+    let Some(store) = guard.as_ref() else {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "no query connection",
+        ));
+    };
+    let (from_t, to_t) = (system_time(from), system_time(to));
+    let before = store
+        .last_before(&p.node, &p.device, &p.point, from_t)
+        .await;
+    let step_ms = step.map(|d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX));
+    let (series, truncated) = match step {
+        Some(step) => {
+            let buckets = store
+                .buckets(&p.node, &p.device, &p.point, from_t, to_t, step)
+                .await;
+            let buckets = checked(&mut guard, buckets)?;
+            let buckets = buckets
+                .into_iter()
+                .map(|b| ApiBucket {
+                    t: ms(b.t),
+                    avg: b.avg,
+                    min: b.min,
+                    max: b.max,
+                    count: b.count,
+                })
+                .collect();
+            (Series::Buckets(buckets), false)
+        }
+        None => {
+            let raw = store
+                .raw(
+                    &p.node,
+                    &p.device,
+                    &p.point,
+                    from_t,
+                    to_t,
+                    MAX_RAW_SAMPLES + 1,
+                )
+                .await;
+            let mut raw = checked(&mut guard, raw)?;
+            let truncated = raw.len() > MAX_RAW_SAMPLES;
+            raw.truncate(MAX_RAW_SAMPLES);
+            (
+                Series::Samples(raw.into_iter().map(api_sample).collect()),
+                truncated,
+            )
+        }
+    };
+    let before = checked(&mut guard, before)?.map(api_sample);
+    Ok(Json(PlantHistory {
+        point: text.to_owned(),
+        from,
+        to,
+        step_ms,
+        before,
+        series,
+        truncated,
+    })
+    .into_response())
+}
+
+async fn points(State(s): State<Arc<AppState>>) -> ApiResult<Response> {
+    let mut guard = reader(&s).await?;
+    let Some(store) = guard.as_ref() else {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "no query connection",
+        ));
+    };
+    let rows = store.points().await;
+    let rows = checked(&mut guard, rows)?;
+    let points: Vec<_> = rows
+        .into_iter()
+        .map(|p| {
+            let range = match (p.write_min, p.write_max) {
+                (Some(min), Some(max)) => json!({ "min": min, "max": max }),
+                _ => serde_json::Value::Null,
+            };
+            json!({
+                "id": PlantPoint::id(&p.node, &p.device, &p.point),
+                "node": p.node,
+                "device": p.device,
+                "point": p.point,
+                "name": p.description,
+                "unit": p.unit,
+                "datatype": p.datatype,
+                "writable": p.writable,
+                "range": range,
+            })
+        })
+        .collect();
+    Ok(Json(json!({ "points": points })).into_response())
+}
+
+/// Query of `/api/events`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EventsQuery {
+    from: Option<String>,
+    to: Option<String>,
+    limit: Option<usize>,
+}
+
+async fn events(
+    State(s): State<Arc<AppState>>,
+    query: Result<Query<EventsQuery>, QueryRejection>,
+) -> ApiResult<Response> {
+    let Query(q) = query?;
+    let now = Timestamp::now();
+    let from = parse_time("from", q.from.as_deref(), now)?.unwrap_or(Timestamp::MIN);
+    let to = parse_time("to", q.to.as_deref(), now)?.unwrap_or(Timestamp(i64::MAX));
+    let limit = check_limit(q.limit)?;
+    let mut guard = reader(&s).await?;
+    let Some(store) = guard.as_ref() else {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "no query connection",
+        ));
+    };
+    let rows = store
+        .events(system_time(from), system_time(to), limit)
+        .await;
+    let rows = checked(&mut guard, rows)?;
+    let events: Vec<_> = rows
+        .into_iter()
+        .map(|e| {
+            json!({
+                "t": ms(e.t),
+                "node": e.node,
+                "device": e.device,
+                "point": e.point,
+                "line": e.line,
+                "kind": e.kind,
+                "severity": e.severity,
+                "message": e.message,
+            })
+        })
+        .collect();
+    Ok(Json(json!({ "events": events })).into_response())
+}
+
+async fn healthz(State(s): State<Arc<AppState>>) -> Json<serde_json::Value> {
+    let broker = s.health.broker();
+    let database = s.health.database();
+    let last = s.health.last_commit_ms();
+    Json(json!({
+        "status": if broker.is_none() && database.is_none() { "ok" } else { "degraded" },
+        "broker": broker.as_deref().unwrap_or("connected"),
+        "database": database.as_deref().unwrap_or("ok"),
+        "pending_samples": s.metrics.pending.get(),
+        "samples_committed": s.metrics.samples_committed.get(),
+        "duplicate_samples": s.metrics.duplicates.get(),
+        "nodes_online": s.health.nodes_online(),
+        "last_commit": (last > 0).then_some(Timestamp(last)),
+    }))
+}
+
+async fn metrics(State(s): State<Arc<AppState>>) -> Response {
+    (
+        [(
+            header::CONTENT_TYPE,
+            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+        )],
+        s.metrics.encode(),
+    )
+        .into_response()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plant_point_is_node_slash_device_dot_point() {
+        assert_eq!(
+            PlantPoint::parse("cellA/jbc1.air_temperature"),
+            Ok(PlantPoint {
+                node: "cellA".into(),
+                device: "jbc1".into(),
+                point: "air_temperature".into(),
+            })
+        );
+        let node_metric = PlantPoint::parse("cellA/.history_rows").unwrap();
+        assert_eq!(
+            (node_metric.device.as_str(), node_metric.point.as_str()),
+            ("", "history_rows")
+        );
+    }
+
+    #[test]
+    fn a_point_without_node_or_device_is_refused_with_the_form() {
+        for text in [
+            "jbc1.air_temperature",
+            "cellA/jbc1",
+            "/jbc1.x",
+            "cellA/jbc1.",
+        ] {
+            let e = PlantPoint::parse(text).unwrap_err();
+            assert!(e.contains("NODE/DEVICE.POINT") && e.contains(text), "{e}");
+        }
+    }
+}

@@ -1,0 +1,235 @@
+//! What the Sparkplug host made of a message, as rows for the store (sans-IO).
+//!
+//! [`append`] turns a [`Received`] into [`PointRow`]s, [`SampleRow`]s and [`EventRow`]s
+//! added to a [`Batch`]. Points are named by edge node, device (`""` for the node's own
+//! metrics) and metric name; the Sparkplug group is not part of the name (node ids are
+//! unique in a plant's groups, or the historian follows one group with `--group`).
+
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use sparkplug::metric::Quality as SpQuality;
+use sparkplug::{HostEvent, HostSample, PointInfo, Received, SampleValue, Timestamp, Writable};
+
+use crate::store::{Batch, EventRow, PointRow, Quality, SampleRow};
+
+/// The severity an event gets when its message has none (OPC UA's "medium").
+const DEFAULT_SEVERITY: i32 = 500;
+
+/// How many rows [`append`] added.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Added {
+    /// Point definitions.
+    pub points: usize,
+    /// Samples.
+    pub samples: usize,
+    /// Events.
+    pub events: usize,
+}
+
+/// Adds the points, samples and events of `received` to `batch`.
+pub fn append(batch: &mut Batch, received: &Received) -> Added {
+    batch.points.extend(received.points.iter().map(point_row));
+    batch
+        .samples
+        .extend(received.samples.iter().map(sample_row));
+    batch.events.extend(received.events.iter().map(event_row));
+    Added {
+        points: received.points.len(),
+        samples: received.samples.len(),
+        events: received.events.len(),
+    }
+}
+
+/// A Sparkplug time as a system time.
+pub fn system_time(t: Timestamp) -> SystemTime {
+    UNIX_EPOCH + Duration::from_millis(t.as_millis())
+}
+
+/// A system time as a Sparkplug time (times before 1970 read as 1970).
+pub fn sparkplug_time(t: SystemTime) -> Timestamp {
+    let ms = t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis());
+    Timestamp::from_millis(u64::try_from(ms).unwrap_or(u64::MAX))
+}
+
+fn device_of(device: Option<&sparkplug::Id>) -> String {
+    device.map_or_else(String::new, |d| d.as_str().to_owned())
+}
+
+fn point_row(info: &PointInfo) -> PointRow {
+    let (writable, write_min, write_max) = match &info.writable {
+        Writable::No => (false, None, None),
+        Writable::Yes => (true, None, None),
+        Writable::Within(range) => (true, Some(range.min()), Some(range.max())),
+    };
+    PointRow {
+        node: info.point.node.as_str().to_owned(),
+        device: device_of(info.point.device.as_ref()),
+        point: info.point.name.as_str().to_owned(),
+        datatype: info.datatype.to_string(),
+        unit: info.unit.clone(),
+        description: info.description.clone(),
+        writable,
+        write_min,
+        write_max,
+    }
+}
+
+fn sample_row(sample: &HostSample) -> SampleRow {
+    let (value, text) = match &sample.value {
+        SampleValue::Number(n) => (Some(*n), None),
+        SampleValue::Text(t) => (None, Some(t.clone())),
+        SampleValue::Null => (None, None),
+    };
+    SampleRow {
+        node: sample.point.node.as_str().to_owned(),
+        device: device_of(sample.point.device.as_ref()),
+        point: sample.point.name.as_str().to_owned(),
+        t: system_time(sample.t),
+        value,
+        text,
+        quality: quality(sample.quality),
+    }
+}
+
+fn quality(q: SpQuality) -> Quality {
+    match q {
+        SpQuality::Good => Quality::Good,
+        SpQuality::Stale => Quality::Stale,
+        SpQuality::Bad => Quality::Bad,
+    }
+}
+
+fn event_row(event: &HostEvent) -> EventRow {
+    EventRow {
+        node: event.node.as_str().to_owned(),
+        device: event.device.clone(),
+        point: event.point.clone(),
+        line: event.line.clone(),
+        t: system_time(event.t),
+        kind: event.kind.clone().unwrap_or_else(|| "event".to_owned()),
+        severity: event
+            .severity
+            .and_then(|s| i32::try_from(s).ok())
+            .unwrap_or(DEFAULT_SEVERITY),
+        message: event.message.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use sparkplug::{DataType, Id, MetricName, PointKey, WriteRange};
+
+    use super::*;
+
+    fn key(device: Option<&str>, name: &str) -> Arc<PointKey> {
+        Arc::new(PointKey {
+            group: Id::new("plant").unwrap(),
+            node: Id::new("cellA").unwrap(),
+            device: device.map(|d| Id::new(d).unwrap()),
+            name: MetricName::new(name).unwrap(),
+        })
+    }
+
+    #[test]
+    fn a_birth_defines_its_points_with_unit_words_and_write_range() {
+        let mut batch = Batch::default();
+        let received = Received {
+            points: vec![PointInfo {
+                point: key(Some("jbc1"), "air_temperature_setpoint"),
+                datatype: DataType::Double,
+                unit: Some("°C".into()),
+                description: Some("Air temperature set-point".into()),
+                writable: Writable::Within(WriteRange::new(150.0, 450.0).unwrap()),
+            }],
+            ..Received::default()
+        };
+        let added = append(&mut batch, &received);
+        assert_eq!(added.points, 1);
+        let p = &batch.points[0];
+        assert_eq!(
+            (p.node.as_str(), p.device.as_str(), p.point.as_str()),
+            ("cellA", "jbc1", "air_temperature_setpoint")
+        );
+        assert_eq!(p.datatype, "Double");
+        assert_eq!(p.unit.as_deref(), Some("°C"));
+        assert!(p.writable);
+        assert_eq!((p.write_min, p.write_max), (Some(150.0), Some(450.0)));
+    }
+
+    #[test]
+    fn samples_keep_their_own_time_value_and_quality_and_node_metrics_have_no_device() {
+        let mut batch = Batch::default();
+        let received = Received {
+            samples: vec![
+                HostSample {
+                    point: key(Some("jbc1"), "air_temperature"),
+                    t: Timestamp::from_millis(1_700_000_000_123),
+                    value: SampleValue::Number(351.5),
+                    quality: SpQuality::Good,
+                    historical: true,
+                },
+                HostSample {
+                    point: key(None, "history_rows"),
+                    t: Timestamp::from_millis(1_700_000_000_200),
+                    value: SampleValue::Null,
+                    quality: SpQuality::Stale,
+                    historical: false,
+                },
+                HostSample {
+                    point: key(Some("pm1"), "program"),
+                    t: Timestamp::from_millis(1_700_000_000_300),
+                    value: SampleValue::Text("NPM-7".into()),
+                    quality: SpQuality::Good,
+                    historical: false,
+                },
+            ],
+            ..Received::default()
+        };
+        assert_eq!(append(&mut batch, &received).samples, 3);
+        let s = &batch.samples;
+        assert_eq!(
+            s[0].t,
+            UNIX_EPOCH + Duration::from_millis(1_700_000_000_123)
+        );
+        assert_eq!((s[0].value, s[0].quality), (Some(351.5), Quality::Good));
+        assert_eq!(s[1].device, "");
+        assert_eq!((s[1].value, s[1].quality), (None, Quality::Stale));
+        assert_eq!((s[2].value, s[2].text.as_deref()), (None, Some("NPM-7")));
+    }
+
+    #[test]
+    fn an_event_without_kind_or_severity_gets_words_that_say_so() {
+        let mut batch = Batch::default();
+        let received = Received {
+            events: vec![HostEvent {
+                group: Id::new("plant").unwrap(),
+                node: Id::new("cellA").unwrap(),
+                device: Some("jbc1".into()),
+                point: None,
+                line: None,
+                t: Timestamp::from_millis(1_700_000_000_000),
+                kind: None,
+                severity: None,
+                message: "station restarted".into(),
+                historical: false,
+            }],
+            ..Received::default()
+        };
+        append(&mut batch, &received);
+        let e = &batch.events[0];
+        assert_eq!((e.kind.as_str(), e.severity), ("event", DEFAULT_SEVERITY));
+        assert_eq!(e.device.as_deref(), Some("jbc1"));
+    }
+
+    #[test]
+    fn times_convert_both_ways_to_the_millisecond() {
+        let t = Timestamp::from_millis(1_700_000_000_777);
+        assert_eq!(sparkplug_time(system_time(t)), t);
+        assert_eq!(
+            sparkplug_time(UNIX_EPOCH - Duration::from_secs(5)).as_millis(),
+            0
+        );
+    }
+}
