@@ -434,6 +434,8 @@ async fn three_gateways_lose_nothing_across_a_historian_kill_and_a_postgres_rest
         wanted.len() >= 3 * 3,
         "the demo cells have devices: {wanted:?}"
     );
+    // Healthy = connected to the broker and to PostgreSQL, its schema made.
+    historian.wait_healthy("at start");
     let deadline = Instant::now() + LIMIT;
     loop {
         let out = pg.psql(
@@ -451,7 +453,6 @@ async fn three_gateways_lose_nothing_across_a_historian_kill_and_a_postgres_rest
         );
         std::thread::sleep(Duration::from_millis(500));
     }
-    historian.wait_healthy("at start");
     let from = now_ms();
 
     // A seq gap from a test publisher is answered with a Rebirth.
@@ -468,7 +469,9 @@ async fn three_gateways_lose_nothing_across_a_historian_kill_and_a_postgres_rest
     tokio::time::sleep(Duration::from_secs(5)).await;
     pg.restart();
     historian.wait_healthy("after the PostgreSQL restart");
-    tokio::time::sleep(Duration::from_secs(10)).await;
+    // At least 10 s more, and a window of at least a minute however fast the steps went.
+    let rest = (from + 62_000 - now_ms()).max(10_000);
+    tokio::time::sleep(Duration::from_millis(rest as u64)).await;
     let to = now_ms() - 1_000;
     assert!(to - from >= 60_000, "a window of a minute or more");
 
