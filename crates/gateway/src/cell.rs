@@ -608,8 +608,14 @@ impl DeviceEntry {
 
     /// The index of a point by its name (the part after the device id).
     pub fn point_index(&self, name: &str) -> Option<usize> {
+        // Every point id is `<this device's id>.<name>`: skip the prefix instead of
+        // looking for the dot at each step.
+        let skip = self.id.as_str().len() + 1;
         self.by_name
-            .binary_search_by(|&i| self.points[i as usize].id.name().cmp(name))
+            .binary_search_by(|&i| {
+                let id = self.points[i as usize].id.as_str();
+                id.get(skip..).unwrap_or_default().cmp(name)
+            })
             .ok()
             .map(|found| self.by_name[found] as usize)
     }
