@@ -50,7 +50,15 @@
 //! - **Measured** over `--seconds` after `--warmup` (connections, first reads of every
 //!   group): counters from the gateway's own metrics ([`gateway::metrics::Metrics`]) and
 //!   history writer ([`gateway::store::StoreStats`]); CPU time (user + system) from
-//!   `/proc/PID/stat` over wall time; peak RSS from `VmHWM` in `/proc/PID/status`.
+//!   `/proc/PID/stat` over wall time; peak RSS from `VmHWM` in `/proc/PID/status`. The
+//!   `cost` line divides the gateway's CPU time by the polls done, the points read good and
+//!   the value changes stored: the whole cost of a poll from the scheduler to the history
+//!   commit (line I/O, drivers, live state, change stream, history writer), per protocol
+//!   when the mix has one kind (`--mix jbc=1`, `--mix modbus=1`).
+//! - **Heap profiles.** `--no-scrapes` leaves out the timed GETs after the window (a full
+//!   `/api/devices` builds megabytes), so a heap profiler's peak is the polling's:
+//!   `heaptrack target/release/deps/load-* --bench --devices 1000 --lines 50 --seconds 20
+//!   --no-scrapes` (the simulator process is started without the profiler's preload).
 //!
 //! # Adding device kinds
 //!
@@ -183,6 +191,8 @@ usage: cargo bench -p gateway --bench load -- [options]
                       JTSE model's own is 5ms)
   --live-period D     poll period of the live group (default: the driver's, 1s; at
                       least 50ms)
+  --no-scrapes        skip the timed GETs after the window (/api/devices builds
+                      megabytes: leave them out of a heap profile of the polling)
   --mqtt              also publish the cell as a Sparkplug B edge node to a local
                       mosquitto, with a subscriber counting what arrives (both in
                       processes of their own)
@@ -271,6 +281,9 @@ struct Args {
     mqtt: bool,
     opcua: bool,
     opcua_items: usize,
+    /// Whether to time the heavy GETs after the window (off for a heap profile of the
+    /// polling alone: `/api/devices` builds megabytes).
+    scrapes: bool,
 }
 
 impl Args {
@@ -287,6 +300,7 @@ impl Args {
             mqtt: false,
             opcua: false,
             opcua_items: DEFAULT_OPCUA_ITEMS,
+            scrapes: true,
         };
         let mut it = raw.iter();
         while let Some(flag) = it.next() {
@@ -296,6 +310,10 @@ impl Args {
             }
             if flag == "--opcua" {
                 args.opcua = true;
+                continue;
+            }
+            if flag == "--no-scrapes" {
+                args.scrapes = false;
                 continue;
             }
             let value = it
@@ -808,6 +826,9 @@ impl Simulators {
         let exe = std::env::current_exe().context("cannot find the bench's own executable")?;
         let mut child = Command::new(exe)
             .args(args.for_simulators())
+            // A heap profiler preloaded into the bench (heaptrack) profiles the gateway
+            // only, not the simulators too.
+            .env_remove("LD_PRELOAD")
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
@@ -1374,13 +1395,18 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         };
         // After the window: what a dashboard and a Prometheus scrape cost with this cell.
         let mut scrapes = Vec::new();
-        for path in [
-            "/metrics",
-            "/api/devices",
-            "/api/devices?fields=id,status,line",
-            "/api/devices?line=line00",
-            "/healthz",
-        ] {
+        let paths: &[&str] = if args.scrapes {
+            &[
+                "/metrics",
+                "/api/devices",
+                "/api/devices?fields=id,status,line",
+                "/api/devices?line=line00",
+                "/healthz",
+            ]
+        } else {
+            &[]
+        };
+        for &path in paths {
             let (status, size, took) = get(addr, path).await?;
             scrapes.push((path.to_owned(), status, size, took));
         }
@@ -1676,6 +1702,22 @@ impl std::fmt::Display for Report {
             g,
             g * 100.0 / self.cores as f64,
             mib(a.gateway.peak_rss_kib)
+        )?;
+        // The gateway's whole CPU time (scheduler, drivers, clients, line I/O, live state,
+        // history writer and commits, HTTP idle, this bench's sampler) over the work done.
+        let gateway_us = (a.gateway.cpu.saturating_sub(b.gateway.cpu)).as_secs_f64() * 1e6;
+        let changes = a.value_changes.saturating_sub(b.value_changes);
+        writeln!(
+            f,
+            "  cost         {:.1} µs CPU per poll, {:.2} µs per point read, {:.2} µs per value change{}",
+            gateway_us / polls_done.max(1) as f64,
+            gateway_us / points.max(1) as f64,
+            gateway_us / changes.max(1) as f64,
+            if self.args.mix.len() > 1 {
+                " (the mix's average; --mix KIND=1 for one protocol's)"
+            } else {
+                ""
+            }
         )?;
         writeln!(
             f,

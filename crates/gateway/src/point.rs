@@ -5,9 +5,16 @@
 //! may be written, and which values are an alarm. Writes are checked against the spec
 //! ([`PointSpec::check_write`]) before anything reaches a line.
 
+use std::borrow::Cow;
 use std::fmt;
 
 use serde::{Deserialize, Serialize};
+
+/// Words that a driver usually knows at compile time (a point's name in words, its unit,
+/// its poll group, an enumeration's labels): borrowed from the driver's tables, so a
+/// thousand devices of one kind share them instead of each holding a copy; owned when
+/// they come from the configuration (a Modbus register list).
+pub type Words = Cow<'static, str>;
 
 /// Longest device id or point name accepted.
 pub const MAX_ID_LEN: usize = 64;
@@ -186,7 +193,7 @@ pub struct EnumState {
     /// The number.
     pub value: i64,
     /// Its words.
-    pub label: String,
+    pub label: Words,
 }
 
 /// What kind of value a point carries.
@@ -280,13 +287,13 @@ pub struct PointSpec {
     /// `device.point`.
     pub id: PointId,
     /// Words for people: `Air temperature`.
-    pub name: String,
+    pub name: Words,
     /// Unit symbol (`°C`, `%`), if any.
-    pub unit: Option<String>,
+    pub unit: Option<Words>,
     /// Number, text or enumeration.
     pub kind: PointKind,
     /// The poll group that reads it.
-    pub group: String,
+    pub group: Words,
     /// `Some` when it may be written, with the accepted range for numbers.
     pub writable: Option<WriteRange>,
     /// When its value is an alarm, if ever.
@@ -375,7 +382,7 @@ impl PointSpec {
         states
             .iter()
             .find(|s| s.value as f64 == n)
-            .map(|s| s.label.as_str())
+            .map(|s| s.label.as_ref())
     }
 
     /// Whether `value` is an alarm for this point.
@@ -389,7 +396,7 @@ impl PointSpec {
         let Some(range) = self.writable else {
             return Err(ValueError::ReadOnly {
                 point: self.id.clone(),
-                name: self.name.clone(),
+                name: self.name.to_string(),
             });
         };
         let number = match (&self.kind, value) {
@@ -436,7 +443,7 @@ impl PointSpec {
         if !number.is_finite() || number < range.min || number > range.max {
             return Err(ValueError::OutOfRange {
                 point: self.id.clone(),
-                name: self.name.clone(),
+                name: self.name.to_string(),
                 value: number,
                 min: range.min,
                 max: range.max,
@@ -461,7 +468,7 @@ impl PointSpec {
             if (steps - steps.round()).abs() > 1e-6 {
                 return Err(ValueError::NotAStep {
                     point: self.id.clone(),
-                    name: self.name.clone(),
+                    name: self.name.to_string(),
                     value: number,
                     step,
                     unit: self

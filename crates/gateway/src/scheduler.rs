@@ -413,9 +413,8 @@ impl LineTask {
     /// Polls one group; says whether the line is lost or silent.
     async fn poll(&mut self, index: usize, clock: usize) -> Option<Lost> {
         let slot = &mut self.slots[index];
-        let group = slot.clocks[clock].group.clone();
         let started = Instant::now();
-        let result = slot.driver.poll(&group).await;
+        let result = slot.driver.poll(&slot.clocks[clock].group).await;
         let now = Instant::now();
         let took = now - started;
         slot.m.latency.observe(took.as_secs_f64());

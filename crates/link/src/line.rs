@@ -244,6 +244,10 @@ impl Line {
 
     /// Reads what is available, waiting until `deadline` at the latest.
     pub async fn recv(&mut self, buf: &mut [u8], deadline: Instant) -> Result<usize, LineError> {
+        // Bytes already there are taken without arming a timer (most reads of a fast line).
+        if let Some(n) = self.read_ready(buf).await? {
+            return Ok(n);
+        }
         let started = Instant::now();
         let read = match &mut self.stream {
             Stream::Serial(port) => tokio::time::timeout_at(deadline, port.read(buf)).await,
@@ -262,26 +266,42 @@ impl Line {
     /// Drops whatever has already arrived (a late reply to an earlier request), so the
     /// next request starts on a quiet line.
     ///
-    /// It never waits for a timer: a deadline of "now" would still cost a tick of tokio's
-    /// 1 ms timer wheel per request, which is most of an exchange on a fast line.
+    /// It never waits, nor arms a timer: a deadline of "now" would still cost a tick of
+    /// tokio's 1 ms timer wheel per request, which is most of an exchange on a fast line,
+    /// and even a far deadline is two trips through the timer wheel's lock.
     pub async fn discard_input(&mut self) -> Result<usize, LineError> {
         // The runtime polls its I/O driver before it resumes a yielded task, so bytes that
         // reached the socket or port since it last looked are seen below.
         tokio::task::yield_now().await;
         let mut dropped = 0;
         let mut buf = [0u8; 256];
-        loop {
-            // Never reached: the read is polled once, then the ready branch wins.
-            let far = Instant::now() + Duration::from_secs(60);
-            tokio::select! {
-                biased;
-                read = self.recv(&mut buf, far) => match read {
-                    Ok(n) => dropped += n,
-                    Err(LineError::Timeout { .. }) => return Ok(dropped),
-                    Err(e) => return Err(e),
-                },
-                () = std::future::ready(()) => return Ok(dropped),
-            }
+        while let Some(n) = self.read_ready(&mut buf).await? {
+            dropped += n;
+        }
+        Ok(dropped)
+    }
+
+    /// Reads what has already arrived, without waiting: `Ok(None)` when nothing has,
+    /// [`LineError::Closed`] at the end of the stream.
+    async fn read_ready(&mut self, buf: &mut [u8]) -> Result<Option<usize>, LineError> {
+        let stream = &mut self.stream;
+        let polled = std::future::poll_fn(|cx| {
+            let mut read = tokio::io::ReadBuf::new(buf);
+            let result = match stream {
+                Stream::Serial(port) => std::pin::Pin::new(port).poll_read(cx, &mut read),
+                Stream::Other(other) => std::pin::Pin::new(other).poll_read(cx, &mut read),
+            };
+            std::task::Poll::Ready(match result {
+                std::task::Poll::Pending => None,
+                std::task::Poll::Ready(done) => Some(done.map(|()| read.filled().len())),
+            })
+        })
+        .await;
+        match polled {
+            None => Ok(None),
+            Some(Ok(0)) => Err(LineError::Closed),
+            Some(Ok(n)) => Ok(Some(n)),
+            Some(Err(e)) => Err(LineError::Io(e)),
         }
     }
 

@@ -249,7 +249,7 @@ impl CrossDriver {
                         .iter()
                         .map(|(feed, value)| EnumState {
                             value: *value,
-                            label: feed.to_string(),
+                            label: feed.to_string().into(),
                         })
                         .collect(),
                 },
@@ -276,10 +276,10 @@ impl CrossDriver {
         };
         PointSpec {
             id: self.point_id(def),
-            name: def.title.clone(),
-            unit: def.unit.map(str::to_owned),
+            name: def.title.clone().into(),
+            unit: def.unit.map(Into::into),
             kind,
-            group: def.group().to_owned(),
+            group: def.group().into(),
             writable: None,
             alarm,
         }
@@ -419,7 +419,7 @@ impl Driver for CrossDriver {
         Box::pin(async move {
             Err(WriteError::Invalid(crate::point::ValueError::ReadOnly {
                 point: point.id.clone(),
-                name: point.name.clone(),
+                name: point.name.to_string(),
             }))
         })
     }
@@ -656,7 +656,7 @@ mod tests {
             .find(|p| p.id.name() == "protocol_revision")
             .unwrap();
         assert_eq!(
-            (revision.unit.as_deref(), revision.group.as_str()),
+            (revision.unit.as_deref(), revision.group.as_ref()),
             (None, RATINGS)
         );
     }

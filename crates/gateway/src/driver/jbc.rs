@@ -473,53 +473,38 @@ impl JbcDriver {
         let (kind, unit, alarm) = match def.meaning {
             Quantity => (
                 PointKind::Numeric,
-                def.code.unit().map(|u| u.symbol().to_owned()),
+                def.code.unit().map(|u| u.symbol().into()),
                 None,
             ),
             Meaning::Text => (PointKind::Text, None, None),
-            OnOff => (
-                enum_states([(0, "off".to_owned()), (1, "on".to_owned())]),
-                None,
-                None,
-            ),
+            OnOff => (enum_states([(0, "off"), (1, "on")]), None, None),
             Meaning::ToolError => (
-                enum_states(
-                    ToolError::ALL
-                        .iter()
-                        .map(|e| (e.code(), e.words().to_owned())),
-                ),
+                enum_states(ToolError::ALL.iter().map(|e| (e.code(), e.words()))),
                 None,
                 Some(AlarmRule::NotEqual(f64::from(ToolError::Ok.code()))),
             ),
             Meaning::StationError => (
-                enum_states(
-                    StationError::ALL
-                        .iter()
-                        .map(|e| (e.code(), e.words().to_owned())),
-                ),
+                enum_states(StationError::ALL.iter().map(|e| (e.code(), e.words()))),
                 None,
                 Some(AlarmRule::NotEqual(f64::from(StationError::Ok.code()))),
             ),
             Meaning::Tool => (
-                enum_states(Tool::ALL.iter().map(|t| (t.number(), t.words().to_owned()))),
+                enum_states(Tool::ALL.iter().map(|t| (t.number(), t.words()))),
                 None,
                 None,
             ),
             Meaning::WorkMode => (
-                enum_states([
-                    (0, "manual (profiles off)".to_owned()),
-                    (1, "profile (profiles on)".to_owned()),
-                ]),
+                enum_states([(0, "manual (profiles off)"), (1, "profile (profiles on)")]),
                 None,
                 None,
             ),
         };
         PointSpec {
             id: self.point_id(def),
-            name: def.title.to_owned(),
+            name: def.title.into(),
             unit,
             kind,
-            group: def.group.to_owned(),
+            group: def.group.into(),
             writable: def.range.as_ref().map(|r| WriteRange {
                 min: f64::from(*r.start()),
                 max: f64::from(*r.end()),
@@ -890,7 +875,7 @@ mod tests {
         assert_eq!(points.len(), POINTS.len());
         for p in &points {
             assert_eq!(p.id.device(), "jbc1");
-            assert!(groups.contains(&p.group), "{}", p.id);
+            assert!(groups.contains(&p.group.to_string()), "{}", p.id);
         }
         let ids: std::collections::HashSet<_> = points.iter().map(|p| &p.id).collect();
         assert_eq!(ids.len(), points.len(), "point ids are unique");

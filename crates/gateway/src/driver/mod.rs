@@ -124,15 +124,15 @@ impl PollGroup {
 }
 
 /// An enumeration's states from `(value, label)` pairs.
-pub(crate) fn enum_states<V: Into<i64>>(
-    items: impl IntoIterator<Item = (V, String)>,
+pub(crate) fn enum_states<V: Into<i64>, L: Into<crate::point::Words>>(
+    items: impl IntoIterator<Item = (V, L)>,
 ) -> crate::point::PointKind {
     crate::point::PointKind::Enum {
         states: items
             .into_iter()
             .map(|(value, label)| crate::point::EnumState {
                 value: value.into(),
-                label,
+                label: label.into(),
             })
             .collect(),
     }

@@ -189,7 +189,7 @@ impl RegisterConfig {
     /// The point kind: on/off enumeration, text or number.
     pub fn kind(&self) -> PointKind {
         if self.is_bool() {
-            enum_states([(0, "off".to_owned()), (1, "on".to_owned())])
+            enum_states([(0, "off"), (1, "on")])
         } else if self.is_numeric() {
             PointKind::Numeric
         } else {
@@ -509,7 +509,7 @@ impl ModbusDriver {
             let (min, max) = register.representable();
             WriteError::Invalid(crate::point::ValueError::OutOfRange {
                 point: point.id.clone(),
-                name: point.name.clone(),
+                name: point.name.to_string(),
                 value: number,
                 min,
                 max,
@@ -544,10 +544,10 @@ impl Driver for ModbusDriver {
             .iter()
             .map(|r| PointSpec {
                 id: self.point_id(r),
-                name: r.title.clone(),
-                unit: r.unit.clone(),
+                name: r.title.clone().into(),
+                unit: r.unit.clone().map(Into::into),
                 kind: r.kind(),
-                group: LIVE.to_owned(),
+                group: LIVE.into(),
                 writable: r.writable.map(|range| r.write_range(range)),
                 alarm: None,
             })

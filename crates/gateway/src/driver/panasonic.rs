@@ -159,17 +159,17 @@ impl PanasonicDriver {
     fn spec(
         &self,
         name: &str,
-        title: &str,
-        unit: Option<&str>,
+        title: impl Into<crate::point::Words>,
+        unit: Option<&'static str>,
         kind: PointKind,
-        group: &str,
+        group: &'static str,
     ) -> PointSpec {
         PointSpec {
             id: self.id(name),
-            name: title.to_owned(),
-            unit: unit.map(str::to_owned),
+            name: title.into(),
+            unit: unit.map(Into::into),
             kind,
-            group: group.to_owned(),
+            group: group.into(),
             writable: None,
             alarm: None,
         }
@@ -348,7 +348,7 @@ impl Driver for PanasonicDriver {
                     .iter()
                     .map(|(s, n)| EnumState {
                         value: *n,
-                        label: s.describe().to_owned(),
+                        label: s.describe().into(),
                     })
                     .collect(),
             },
@@ -367,7 +367,7 @@ impl Driver for PanasonicDriver {
                         .zip(0..)
                         .map(|(m, n)| EnumState {
                             value: n,
-                            label: m.describe().to_owned(),
+                            label: m.describe().into(),
                         })
                         .collect(),
                 },
@@ -390,7 +390,7 @@ impl Driver for PanasonicDriver {
                 .next()
                 .map(|c| c.to_uppercase().chain(chars).collect::<String>())
                 .unwrap_or_default();
-            points.push(self.spec(name, &title, unit, PointKind::Numeric, PRODUCTION));
+            points.push(self.spec(name, title, unit, PointKind::Numeric, PRODUCTION));
         }
         for (rate, name) in RATES {
             let words = rate.describe();
@@ -399,7 +399,7 @@ impl Driver for PanasonicDriver {
                 .next()
                 .map(|c| c.to_uppercase().chain(chars).collect())
                 .unwrap_or_default();
-            points.push(self.spec(name, &title, Some("%"), PointKind::Numeric, PRODUCTION));
+            points.push(self.spec(name, title, Some("%"), PointKind::Numeric, PRODUCTION));
         }
         points
     }
@@ -427,7 +427,7 @@ impl Driver for PanasonicDriver {
         Box::pin(async move {
             Err(WriteError::Invalid(ValueError::ReadOnly {
                 point: point.id.clone(),
-                name: point.name.clone(),
+                name: point.name.to_string(),
             }))
         })
     }

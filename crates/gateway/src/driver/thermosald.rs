@@ -298,7 +298,7 @@ impl ThermosaldDriver {
     fn spec(&self, def: &Def) -> PointSpec {
         let item = def.item();
         let symbol = item.unit().symbol();
-        let unit = (!symbol.is_empty()).then(|| symbol.to_owned());
+        let unit = (!symbol.is_empty()).then(|| symbol.into());
         let (kind, unit, alarm) = match def.meaning {
             Meaning::Quantity => (PointKind::Numeric, unit, None),
             Meaning::Fault => (
@@ -310,24 +310,20 @@ impl ThermosaldDriver {
                     ]
                     .into_iter()
                     .chain(Fault::ALL.iter().map(|f| f.code()))
-                    .map(|code| (code, diagnostic::describe(code).to_owned())),
+                    .map(|code| (code, diagnostic::describe(code))),
                 ),
                 None,
                 Some(AlarmRule::NotEqual(f64::from(diagnostic::NONE))),
             ),
-            Meaning::Switch => (
-                enum_states([(0, "off".into()), (1, "on".into())]),
-                None,
-                None,
-            ),
+            Meaning::Switch => (enum_states([(0, "off"), (1, "on")]), None, None),
         };
         let step = item.scale().step();
         PointSpec {
             id: self.point_id(def),
-            name: item.name().to_owned(),
+            name: item.name().into(),
             unit,
             kind,
-            group: def.group().to_owned(),
+            group: def.group().into(),
             writable: (def.writable && item.writable()).then(|| WriteRange {
                 min: item.min(),
                 max: item.max(),
@@ -638,7 +634,7 @@ fn value_error(point: &PointSpec, error: tables::ValueError) -> ValueError {
             ..
         } => ValueError::OutOfRange {
             point: point.id.clone(),
-            name: point.name.clone(),
+            name: point.name.to_string(),
             value,
             min,
             max,
@@ -651,7 +647,7 @@ fn value_error(point: &PointSpec, error: tables::ValueError) -> ValueError {
             ..
         } => ValueError::NotAStep {
             point: point.id.clone(),
-            name: point.name.clone(),
+            name: point.name.to_string(),
             value,
             step,
             unit: unit(u),
@@ -746,7 +742,7 @@ mod tests {
         let points = driver.points();
         assert_eq!(points.len(), POINTS.len());
         for p in &points {
-            assert!(groups.contains(&p.group), "{}", p.id);
+            assert!(groups.contains(&p.group.to_string()), "{}", p.id);
         }
         let ids: HashSet<_> = points.iter().map(|p| &p.id).collect();
         assert_eq!(ids.len(), points.len(), "point ids are unique");

@@ -47,9 +47,10 @@ pub fn datatype_of(kind: &PointKind) -> DataType {
 pub fn metric_spec(point: &PointDetail) -> Option<MetricSpec> {
     let view = &point.view;
     let name = MetricName::new(view.id.name()).ok()?;
-    let mut metric = MetricSpec::new(name, datatype_of(&point.kind)).description(&view.name);
+    let mut metric =
+        MetricSpec::new(name, datatype_of(&point.kind)).description(view.name.as_ref());
     if let Some(unit) = &view.unit {
-        metric = metric.unit(unit);
+        metric = metric.unit(unit.as_ref());
     }
     if let Some(range) = point.writable {
         let writable = match (&point.kind, WriteRange::new(range.min, range.max)) {

@@ -185,7 +185,7 @@ fn build_device(
         };
         let name = point.view.id.name();
         VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
-            .description(point.view.name.as_str())
+            .description(point.view.name.as_ref())
             .data_type(space::data_type(&point.kind))
             .value_rank(-1)
             .access_level(access)

@@ -343,7 +343,7 @@ mod tests {
             .iter()
             .map(|&(value, label)| EnumState {
                 value,
-                label: label.to_owned(),
+                label: label.to_owned().into(),
             })
             .collect()
     }
