@@ -124,6 +124,7 @@ fn an_independent_opcua_client_browses_reads_gets_every_stored_change_on_a_subsc
         "enumerations with EnumValues",
         "points read Good",
         "/healthz shows the OPC UA session",
+        "an absolute deadband held back",
         "as /api/history holds them",
         "BadUserAccessDenied",
     ] {

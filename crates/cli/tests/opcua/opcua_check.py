@@ -212,6 +212,26 @@ async def check_subscription(client, addr, tree, devices):
     request.RequestedParameters = params
     [created] = await sub.create_monitored_items([request])
     assert isinstance(created, int), f"the monitored item was refused: {created}"
+    # The same point behind an absolute deadband wider than any change: only its initial
+    # value arrives while the item above sees every change.
+    banded = Changes()
+    banded_sub = await client.create_subscription(100, banded)
+    wide = ua.MonitoredItemCreateRequest()
+    wide.ItemToMonitor = ua.ReadValueId(NodeId=node.nodeid, AttributeId=ua.AttributeIds.Value)
+    wide.MonitoringMode = ua.MonitoringMode.Reporting
+    wide_params = ua.MonitoringParameters()
+    wide_params.ClientHandle = 2
+    wide_params.SamplingInterval = float(period)
+    wide_params.QueueSize = 10
+    wide_params.DiscardOldest = True
+    wide_params.Filter = ua.DataChangeFilter(
+        Trigger=ua.DataChangeTrigger.StatusValue,
+        DeadbandType=ua.DeadbandType.Absolute,
+        DeadbandValue=1e12,
+    )
+    wide.RequestedParameters = wide_params
+    [created] = await banded_sub.create_monitored_items([wide])
+    assert isinstance(created, int), f"the deadband item was refused: {created}"
     # Health while subscribed: the session, the subscription and the item are counted.
     health = http(addr, "/healthz")["opcua"]
     assert health and health["sessions"] >= 1 and health["subscriptions"] >= 1, health
@@ -229,6 +249,10 @@ async def check_subscription(client, addr, tree, devices):
         _, _, data = await asyncio.wait_for(handler.seen.get(), left)
         arrivals.append((time.time(), notified(data)))
     await sub.delete()
+    await banded_sub.delete()
+    assert banded.seen.qsize() == 1, \
+        f"an absolute deadband of 1e12 let {banded.seen.qsize() - 1} changes of {p['id']} through"
+    ok(f"an absolute deadband held back the {len(arrivals) - 1} changes of {p['id']}")
     # The initial value is the node's current value; the changes after it are compared.
     first_t = arrivals[0][1][0]
     changes = [n for _, n in arrivals[1:]]
