@@ -6,6 +6,12 @@
 //! taking rows into the next batch, so receiving never waits for PostgreSQL (the channel
 //! only fills when the writer task itself gets no CPU).
 //!
+//! A batch is written over two connections at once, split by point
+//! ([`Batch::split_by_point`]: the halves never touch the same point rows), each half in a
+//! transaction of its own: PostgreSQL's commit work then runs on two backends. A half that
+//! fails is retried with its twin; a retried half that was already committed is stored
+//! once (the store's dedupe).
+//!
 //! A failed commit keeps its batch and tries it again (on a new connection when the old
 //! one is gone), waiting [`RETRY_FIRST`] doubling to [`RETRY_CAP`]; the store takes a batch
 //! twice without storing a row twice. Meanwhile the state turns [`DbState::Failing`], which
@@ -25,7 +31,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
 use crate::metrics::{Health, Metrics};
-use crate::store::{Batch, Store, StoreError};
+use crate::store::{Batch, Store, StoreError, Written};
 
 /// How long rows wait for their commit at most (when fewer than [`BATCH_SAMPLES`] come).
 pub const COMMIT_EVERY: Duration = Duration::from_millis(100);
@@ -161,7 +167,8 @@ pub struct Writer {
     state: Arc<watch::Sender<DbState>>,
     health: Arc<Health>,
     metrics: Arc<Metrics>,
-    store: Option<Store>,
+    /// The two writing connections (none until connected, or after one was lost).
+    stores: [Option<Store>; 2],
     retry: Duration,
 }
 
@@ -191,7 +198,7 @@ impl Writer {
             state,
             health,
             metrics,
-            store: None,
+            stores: [None, None],
             retry: RETRY_FIRST,
         }
     }
@@ -216,13 +223,13 @@ impl Writer {
         }
         let mut closed_at: Option<Instant> = None;
         while self.inbox.gather().await {
-            let batch = self.inbox.take_batch();
+            let batch = self.inbox.take_batch().split_by_point();
             self.set_pending(&batch);
             loop {
                 if !self.inbox.open {
                     let closed = *closed_at.get_or_insert_with(Instant::now);
                     if closed.elapsed() > self.inbox.limits.stop_grace {
-                        let lost = batch.samples.len() + self.inbox.next.samples.len();
+                        let lost = samples(&batch) + self.inbox.next.samples.len();
                         tracing::error!(
                             "historian stopping: PostgreSQL took no commit within {:?}; {lost} \
                              samples not stored (the edge nodes send them again when the \
@@ -238,57 +245,73 @@ impl Writer {
                     Err(e) if e.is_connection_lost() => self.failed(&e).await,
                     Err(e) => {
                         // Bad data, or a refusal no retry changes: log and go on.
-                        let rows = batch.len() as u64;
+                        let rows = (batch[0].len() + batch[1].len()) as u64;
                         self.metrics.dropped.inc_by(rows);
                         tracing::error!("a batch of {rows} rows was not stored: {e}");
                         break;
                     }
                 }
             }
-            self.set_pending(&Batch::default());
+            self.set_pending(&[Batch::default(), Batch::default()]);
         }
         Ok(())
     }
 
-    fn set_pending(&self, committing: &Batch) {
-        let n = committing.samples.len() + self.inbox.next.samples.len();
+    fn set_pending(&self, committing: &[Batch; 2]) {
+        let n = samples(committing) + self.inbox.next.samples.len();
         self.metrics
             .pending
             .set(i64::try_from(n).unwrap_or(i64::MAX));
     }
 
     async fn connect(&mut self) -> Result<(), StoreError> {
-        if self.store.as_ref().is_some_and(|s| !s.is_closed()) {
-            return Ok(());
+        for slot in 0..self.stores.len() {
+            if self.stores[slot].as_ref().is_some_and(|s| !s.is_closed()) {
+                continue;
+            }
+            self.stores[slot] = None;
+            let store = self.inbox.while_doing(Store::connect(&self.url)).await?;
+            if !store.migrated().is_empty() {
+                tracing::info!(
+                    "historian: database schema migrated to {:?}",
+                    store.migrated()
+                );
+            }
+            self.stores[slot] = Some(store);
         }
-        self.store = None;
-        let store = self.inbox.while_doing(Store::connect(&self.url)).await?;
-        if !store.migrated().is_empty() {
-            tracing::info!(
-                "historian: database schema migrated to {:?}",
-                store.migrated()
-            );
-        }
-        self.store = Some(store);
         self.recovered();
         Ok(())
     }
 
-    async fn commit(&mut self, batch: &Batch) -> Result<(), StoreError> {
+    async fn commit(&mut self, batch: &[Batch; 2]) -> Result<(), StoreError> {
         self.connect().await?;
-        let Some(store) = self.store.as_mut() else {
-            return Ok(()); // connect() leaves a store or fails
+        let [Some(first), Some(second)] = &mut self.stores else {
+            return Ok(()); // connect() leaves both stores or fails
         };
         let started = Instant::now();
-        let written = self.inbox.while_doing(store.write(batch)).await;
-        let written = match written {
-            Ok(written) => written,
-            Err(e) => {
-                if e.is_connection_lost() {
-                    self.store = None;
-                }
-                return Err(e);
+        let (a, b) = self
+            .inbox
+            .while_doing(async {
+                tokio::join!(write_half(first, &batch[0]), write_half(second, &batch[1]))
+            })
+            .await;
+        for (slot, result) in [&a, &b].into_iter().enumerate() {
+            if let Err(e) = result
+                && e.is_connection_lost()
+            {
+                self.stores[slot] = None;
             }
+        }
+        let written = match (a, b) {
+            (Ok(mut a), Ok(b)) => {
+                a.add(b);
+                a
+            }
+            // A lost connection, if either half has one: it decides the retry.
+            (Err(a), Err(b)) if b.is_connection_lost() && !a.is_connection_lost() => {
+                return Err(b);
+            }
+            (Err(e), _) | (_, Err(e)) => return Err(e),
         };
         self.metrics
             .commit_seconds
@@ -356,4 +379,17 @@ impl Writer {
         self.inbox.while_doing(tokio::time::sleep(wait)).await;
         self.retry = (self.retry * 2).min(RETRY_CAP);
     }
+}
+
+/// Writes one half of a batch (nothing to do for an empty half).
+async fn write_half(store: &mut Store, half: &Batch) -> Result<Written, StoreError> {
+    if half.is_empty() {
+        return Ok(Written::default());
+    }
+    store.write(half).await
+}
+
+/// Samples in both halves.
+fn samples(batch: &[Batch; 2]) -> usize {
+    batch[0].samples.len() + batch[1].samples.len()
 }

@@ -635,6 +635,45 @@ mod tests {
     const NOW_MS: u64 = 1_800_000_000_000;
 
     #[test]
+    fn a_batch_split_by_point_keeps_each_points_rows_together_and_loses_none() {
+        let mut batch = Batch::default();
+        for i in 0..200 {
+            let name = format!("p{i}");
+            batch.points.push(PointRow::bare("cell1", "jbc1", &name));
+            batch.samples.push(sample(&name, NOW_MS));
+            batch.samples.push(sample(&name, NOW_MS + 1));
+        }
+        batch.events.push(EventRow {
+            node: "cell1".into(),
+            device: None,
+            point: None,
+            line: None,
+            t: UNIX_EPOCH + Duration::from_millis(NOW_MS),
+            kind: "device_down".into(),
+            severity: 700,
+            message: "down".into(),
+        });
+        let halves = batch.clone().split_by_point();
+        assert_eq!(halves[0].len() + halves[1].len(), batch.len());
+        assert!(
+            halves.iter().all(|h| h.samples.len() > 100),
+            "both halves work"
+        );
+        assert_eq!(halves[0].events.len(), 1);
+        for half in &halves {
+            let defined: std::collections::BTreeSet<&str> =
+                half.points.iter().map(|p| p.point.as_str()).collect();
+            for s in &half.samples {
+                assert!(
+                    defined.contains(s.point.as_str()),
+                    "{} away from its definition",
+                    s.point
+                );
+            }
+        }
+    }
+
+    #[test]
     fn samples_before_2000_or_a_day_ahead_are_refused_and_counted() {
         let now = UNIX_EPOCH + Duration::from_millis(NOW_MS);
         let batch = Batch {

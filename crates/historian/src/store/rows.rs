@@ -152,6 +152,48 @@ impl Batch {
     pub fn len(&self) -> usize {
         self.points.len() + self.samples.len() + self.events.len()
     }
+
+    /// Splits the batch in two by point: every sample and definition of one point goes to
+    /// the same half, so two connections can write the halves at once without waiting for
+    /// each other's point rows. Events go to the first half.
+    pub fn split_by_point(self) -> [Batch; 2] {
+        fn half(node: &str, device: &str, point: &str) -> usize {
+            let mut hasher = std::hash::DefaultHasher::new();
+            std::hash::Hash::hash(&(node, device, point), &mut hasher);
+            usize::from(std::hash::Hasher::finish(&hasher) & 1 == 1)
+        }
+        let mut halves = [Batch::default(), Batch::default()];
+        for row in self.points {
+            halves[half(&row.node, &row.device, &row.point)]
+                .points
+                .push(row);
+        }
+        for row in self.samples {
+            halves[half(&row.node, &row.device, &row.point)]
+                .samples
+                .push(row);
+        }
+        halves[0].events = self.events;
+        halves
+    }
+}
+
+impl Written {
+    /// Adds what another write committed and left out (the first refusal stays).
+    pub fn add(&mut self, other: Written) {
+        self.points += other.points;
+        self.bare_points += other.bare_points;
+        self.samples += other.samples;
+        self.duplicate_samples += other.duplicate_samples;
+        self.refused_samples += other.refused_samples;
+        self.events += other.events;
+        self.duplicate_events += other.duplicate_events;
+        self.refused_events += other.refused_events;
+        self.refused_points += other.refused_points;
+        if self.first_refusal.is_none() {
+            self.first_refusal = other.first_refusal;
+        }
+    }
 }
 
 /// What a write committed, and what it left out.
