@@ -35,6 +35,7 @@ use rumqttc::{
 };
 use sparkplug::{Host, Problem, Publish, Qos};
 use tokio::sync::{mpsc, watch};
+use wire::backoff::Backoff;
 
 use crate::ingest;
 use crate::metrics::{Health, Metrics};
@@ -122,7 +123,7 @@ impl Link {
             health,
         } = self;
         let client_id = format!("cellbus-historian-{}", lock(&host).host_id());
-        let mut retry = RETRY_FIRST;
+        let mut retry = Backoff::new(RETRY_FIRST, RETRY_CAP).timer();
         loop {
             // Online only while PostgreSQL takes commits.
             loop {
@@ -188,16 +189,15 @@ impl Link {
                 End::Lost(why) => {
                     if connected {
                         tracing::warn!("historian: MQTT connection ended: {why}; retrying");
-                        retry = RETRY_FIRST;
+                        retry.reset();
                     } else {
                         tracing::debug!("historian: cannot connect to the broker: {why}");
                     }
                     health.set_broker(Some(why));
                     tokio::select! {
-                        () = tokio::time::sleep(retry) => {}
+                        () = tokio::time::sleep(retry.next_wait()) => {}
                         _ = stop.changed() => {}
                     }
-                    retry = (retry * 2).min(RETRY_CAP);
                 }
                 End::Offline | End::Stop => {
                     // Offline at once, so the edge nodes store and forward.
@@ -213,7 +213,7 @@ impl Link {
                         return;
                     }
                     tracing::warn!("historian: offline (STATE) until PostgreSQL takes commits");
-                    retry = RETRY_FIRST;
+                    retry.reset();
                 }
             }
         }

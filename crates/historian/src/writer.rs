@@ -29,6 +29,7 @@ use std::time::{Duration, SystemTime};
 
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
+use wire::backoff::{Backoff, BackoffTimer};
 
 use crate::metrics::{Health, Metrics};
 use crate::store::{Batch, Store, StoreError, Written};
@@ -169,7 +170,7 @@ pub struct Writer {
     metrics: Arc<Metrics>,
     /// The two writing connections (none until connected, or after one was lost).
     stores: [Option<Store>; 2],
-    retry: Duration,
+    retry: BackoffTimer,
 }
 
 impl Writer {
@@ -199,7 +200,7 @@ impl Writer {
             health,
             metrics,
             stores: [None, None],
-            retry: RETRY_FIRST,
+            retry: Backoff::new(RETRY_FIRST, RETRY_CAP).timer(),
         }
     }
 
@@ -334,7 +335,7 @@ impl Writer {
 
     /// A commit or connection worked: reset the wait, say so once.
     fn recovered(&mut self) {
-        self.retry = RETRY_FIRST;
+        self.retry.reset();
         if self.inbox.overflow > 0 {
             if self.inbox.next.samples.len() > self.inbox.limits.max_pending / 2 {
                 return; // still too full to take the edge nodes' data again
@@ -365,7 +366,7 @@ impl Writer {
         self.metrics.database_ok.set(0);
         let why = e.to_string();
         self.health.set_database(Some(why.clone()));
-        let wait = self.retry;
+        let wait = self.retry.next_wait();
         self.state.send_if_modified(|s| {
             let changed = *s == DbState::Ok;
             if changed {
@@ -377,7 +378,6 @@ impl Writer {
             changed
         });
         self.inbox.while_doing(tokio::time::sleep(wait)).await;
-        self.retry = (self.retry * 2).min(RETRY_CAP);
     }
 }
 

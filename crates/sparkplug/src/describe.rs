@@ -204,25 +204,15 @@ impl Describer {
             }
         };
         let message_type = parsed.message_type();
-        let (group, kind, edge_node, device) = match parsed {
-            Topic::State { host } => {
+        let (group, kind, edge_node, device) = match parsed.into_edge() {
+            Ok(parts) => parts,
+            Err(host) => {
                 return Description::State {
                     topic: topic.to_owned(),
                     host: host.to_string(),
                     payload: RawPayload::new(payload),
                 };
             }
-            Topic::Node {
-                group,
-                kind,
-                edge_node,
-            } => (group, kind, edge_node, None),
-            Topic::Device {
-                group,
-                kind,
-                edge_node,
-                device,
-            } => (group, kind, edge_node, Some(device)),
         };
         let decoded = match Payload::decode(payload) {
             Ok(decoded) => decoded,

@@ -508,19 +508,8 @@ impl Host {
                 return out.problem(topic, Problem::Topic(e));
             }
         };
-        let (group, kind, node, device) = match parsed {
-            Topic::State { .. } => return,
-            Topic::Node {
-                group,
-                kind,
-                edge_node,
-            } => (group, kind, edge_node, None),
-            Topic::Device {
-                group,
-                kind,
-                edge_node,
-                device,
-            } => (group, kind, edge_node, Some(device)),
+        let Ok((group, kind, node, device)) = parsed.into_edge() else {
+            return; // a host's STATE
         };
         if kind == MessageKind::Command || self.group.as_ref().is_some_and(|g| *g != group) {
             return;

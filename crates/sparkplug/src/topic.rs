@@ -131,6 +131,25 @@ pub enum Topic {
 }
 
 impl Topic {
+    /// An edge node's or device's message as (group, kind, edge node, device: `None` for
+    /// the node's own); a host's STATE as `Err` with the host's id.
+    pub fn into_edge(self) -> Result<(Id, MessageKind, Id, Option<Id>), Id> {
+        match self {
+            Topic::Node {
+                group,
+                kind,
+                edge_node,
+            } => Ok((group, kind, edge_node, None)),
+            Topic::Device {
+                group,
+                kind,
+                edge_node,
+                device,
+            } => Ok((group, kind, edge_node, Some(device))),
+            Topic::State { host } => Err(host),
+        }
+    }
+
     /// The message type as the topic spells it (`NBIRTH`, `DCMD`, `STATE`).
     pub fn message_type(&self) -> String {
         match self {
