@@ -215,6 +215,12 @@ impl PointsTemplate {
     }
 }
 
+/// About the bytes of a device's fields besides its groups and points.
+const DEVICE_LIVE_BYTES: usize = 400;
+
+/// About the bytes of a point's live part (value, label, quality, time, alarm).
+const POINT_LIVE_BYTES: usize = 110;
+
 /// A device and its template.
 #[derive(Debug)]
 struct Listed {
@@ -228,13 +234,15 @@ pub(crate) struct Listing {
     devices: Vec<Listed>,
     /// Templates held, after sharing.
     templates: usize,
+    /// About the bytes a full listing takes (the first one's buffer is that big at once).
+    size_estimate: usize,
 }
 
 impl Listing {
     /// Serialises every device's description once; equal ones are shared.
     pub(crate) fn new(cell: &Cell) -> Listing {
         let mut shared: HashMap<Vec<u8>, Arc<PointsTemplate>> = HashMap::new();
-        let devices = cell
+        let devices: Vec<Listed> = cell
             .device_entries()
             .map(|entry| {
                 let template = PointsTemplate::of(entry);
@@ -249,10 +257,29 @@ impl Listing {
                 }
             })
             .collect();
+        let size_estimate = devices
+            .iter()
+            .map(|d| {
+                let id = d.entry.id.as_str().len();
+                DEVICE_LIVE_BYTES
+                    + d.points.groups.len()
+                    + d.points
+                        .points
+                        .iter()
+                        .map(|p| id + p.head.len() + p.tail.len() + POINT_LIVE_BYTES)
+                        .sum::<usize>()
+            })
+            .sum();
         Listing {
             devices,
             templates: shared.len(),
+            size_estimate,
         }
+    }
+
+    /// About the bytes a full listing takes.
+    pub(crate) fn size_estimate(&self) -> usize {
+        self.size_estimate
     }
 
     /// How many devices.
@@ -484,7 +511,9 @@ pub(crate) fn field(out: &mut Vec<u8>, key: &str, value: &(impl Serialize + ?Siz
     out.push(if last { b'}' } else { b',' });
 }
 
-/// Bytes to reserve for a listing: the last one's size and a little more.
-pub(crate) fn capacity(last: usize) -> usize {
-    last + last / 8 + 256
+/// Bytes to reserve for a full listing: the last one's size or, before the first, the
+/// estimate, and a little more.
+pub(crate) fn capacity(last: usize, estimate: usize) -> usize {
+    let expected = if last > 0 { last } else { estimate };
+    expected + expected / 8 + 256
 }

@@ -407,7 +407,7 @@ async fn devices(
             .take(limit);
         let sized = std::sync::atomic::Ordering::Relaxed;
         let mut out = Vec::with_capacity(if full {
-            listing::capacity(s.listing_size.load(sized))
+            listing::capacity(s.listing_size.load(sized), listing.size_estimate())
         } else {
             4096
         });

@@ -1239,4 +1239,20 @@ async fn devices_with_the_same_description_share_one_template() {
     let rig = rig(3);
     let stations = listing::Listing::new(&rig.cell);
     assert_eq!((stations.len(), stations.templates()), (3, 1));
+    // Polled stations' listing is about as big as estimated (the first buffer's size).
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let mut out = Vec::new();
+    listing::devices_array(
+        &mut out,
+        stations.entries(),
+        listing::Fields::ALL,
+        Timestamp::now(),
+    );
+    let ratio = stations.size_estimate() as f64 / out.len() as f64;
+    assert!(
+        (0.9..1.2).contains(&ratio),
+        "estimated {} bytes, took {}",
+        stations.size_estimate(),
+        out.len()
+    );
 }
