@@ -392,7 +392,9 @@ async fn devices(
     };
     let (offset, limit) = (q.offset.unwrap_or(0), q.limit.unwrap_or(usize::MAX));
     let writes_enabled = s.writes.enabled;
-    let full = fields == listing::Fields::ALL && selection.ids.is_none();
+    let full = fields == listing::Fields::ALL
+        && selection.ids.is_none()
+        && (offset, limit) == (0, usize::MAX);
     let blocking = s.listing.len() > BLOCKING_LISTING;
     let write = move || {
         let listing = &s.listing;

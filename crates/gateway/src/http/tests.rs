@@ -1256,3 +1256,31 @@ async fn devices_with_the_same_description_share_one_template() {
         out.len()
     );
 }
+
+#[tokio::test(start_paused = true)]
+async fn device_listings_are_served_as_json() {
+    let rig = rig(2);
+    let app = app(&rig, false);
+    for uri in [
+        "/api/devices",
+        "/api/devices?fields=status",
+        "/api/devices/jbc2",
+    ] {
+        let response = app
+            .clone()
+            .oneshot(Request::get(uri).body(Body::empty()).unwrap())
+            .await
+            .unwrap();
+        assert_eq!(response.status(), StatusCode::OK, "{uri}");
+        assert_eq!(
+            response.headers()["content-type"],
+            "application/json",
+            "{uri}"
+        );
+        let bytes = axum::body::to_bytes(response.into_body(), 1 << 20)
+            .await
+            .unwrap();
+        let body: Json = serde_json::from_slice(&bytes).unwrap();
+        assert!(body.is_object(), "{uri}: {body}");
+    }
+}
