@@ -55,6 +55,10 @@
 //!   the value changes stored: the whole cost of a poll from the scheduler to the history
 //!   commit (line I/O, drivers, live state, change stream, history writer), per protocol
 //!   when the mix has one kind (`--mix jbc=1`, `--mix modbus=1`).
+//! - **Heavy GETs.** After the window, while the cell is still polled, `/metrics`, the full
+//!   `/api/devices`, two filtered listings and `/healthz` are each fetched five times over
+//!   fresh connections, time to the last byte: the report gives the first, the median and
+//!   the fastest.
 //! - **Heap profiles.** `--no-scrapes` leaves out the timed GETs after the window (a full
 //!   `/api/devices` builds megabytes), so a heap profiler's peak is the polling's:
 //!   `heaptrack target/release/deps/load-* --bench --devices 1000 --lines 50 --seconds 20
@@ -169,6 +173,10 @@ const MODBUS_CHANGES_PER_SECOND: f64 = 15.0;
 const MODBUS_CSV: &str = "modbus-registers.csv";
 /// Monitored items of the OPC UA counter when `--opcua-items` is not given.
 const DEFAULT_OPCUA_ITEMS: usize = 10_000;
+
+/// Times each GET after the window is made, one after another on fresh connections: the
+/// report gives the first (a cold buffer), the median and the fastest.
+const SCRAPE_REPEATS: usize = 5;
 /// The flag that makes the process the simulators' one.
 const SIMULATORS_FLAG: &str = "--simulators";
 /// What the simulator process prints once every line listens.
@@ -1267,7 +1275,7 @@ struct Report {
     before: Counters,
     after: Counters,
     groups: Vec<(String, GroupSeen)>,
-    scrapes: Vec<(String, String, usize, Duration)>,
+    scrapes: Vec<(String, String, usize, Vec<Duration>)>,
     stop_took: Duration,
     rows_at_stop: u64,
     integrity: String,
@@ -1407,8 +1415,13 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
             &[]
         };
         for &path in paths {
+            let mut times = Vec::with_capacity(SCRAPE_REPEATS);
             let (status, size, took) = get(addr, path).await?;
-            scrapes.push((path.to_owned(), status, size, took));
+            times.push(took);
+            for _ in 1..SCRAPE_REPEATS {
+                times.push(get(addr, path).await?.2);
+            }
+            scrapes.push((path.to_owned(), status, size, times));
         }
         drop(cell);
         let stopping = Instant::now();
@@ -1792,12 +1805,18 @@ impl std::fmt::Display for Report {
                 mib(oa.client.peak_rss_kib),
             )?;
         }
-        for (path, status, size, took) in &self.scrapes {
+        for (path, status, size, times) in &self.scrapes {
+            let ms = |d: Duration| d.as_secs_f64() * 1000.0;
+            let mut sorted = times.clone();
+            sorted.sort_unstable();
             writeln!(
                 f,
-                "  GET {path:<12} {status}, {:.0} kB in {:.1} ms",
+                "  GET {path:<12} {status}, {:.0} kB in {:.1} ms; median {:.1} ms, min {:.1} ms of {}",
                 *size as f64 / 1000.0,
-                took.as_secs_f64() * 1000.0
+                ms(times[0]),
+                ms(sorted[sorted.len() / 2]),
+                ms(sorted[0]),
+                sorted.len(),
             )?;
         }
         writeln!(

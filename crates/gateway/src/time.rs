@@ -93,6 +93,47 @@ impl Timestamp {
     pub fn is_printable(self) -> bool {
         (Self::MIN..=Self::MAX).contains(&self)
     }
+
+    /// RFC 3339 in UTC with milliseconds (`2026-11-03T08:15:02.125Z`), if printable: what
+    /// [`Display`](fmt::Display) prints, without a formatter (device listings print tens
+    /// of thousands of times).
+    pub fn rfc3339_millis(self) -> Option<[u8; 24]> {
+        if !self.is_printable() {
+            return None;
+        }
+        let (days, ms_of_day) = (self.0.div_euclid(86_400_000), self.0.rem_euclid(86_400_000));
+        let (year, month, day) = civil_from_days(days);
+        let mut text = *b"0000-00-00T00:00:00.000Z";
+        let mut digits = |at: usize, width: usize, mut n: i64| {
+            for i in (at..at + width).rev() {
+                text[i] = b'0' + (n % 10) as u8;
+                n /= 10;
+            }
+        };
+        digits(0, 4, year);
+        digits(5, 2, month);
+        digits(8, 2, day);
+        digits(11, 2, ms_of_day / 3_600_000);
+        digits(14, 2, ms_of_day / 60_000 % 60);
+        digits(17, 2, ms_of_day / 1000 % 60);
+        digits(20, 3, ms_of_day % 1000);
+        Some(text)
+    }
+}
+
+/// The proleptic Gregorian date (year, month, day) `days` after 1970-01-01 (Howard
+/// Hinnant's `civil_from_days`).
+fn civil_from_days(days: i64) -> (i64, i64, i64) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    (year, month, day)
 }
 
 impl fmt::Display for Timestamp {
@@ -100,8 +141,8 @@ impl fmt::Display for Timestamp {
     /// query can name but arithmetic can reach, prints as its milliseconds from the epoch
     /// (`-3600000 ms from 1970-01-01T00:00:00Z`) instead of panicking in the formatter.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.is_printable() {
-            write!(f, "{}", humantime::format_rfc3339_millis(self.to_system()))
+        if let Some(text) = self.rfc3339_millis() {
+            f.write_str(std::str::from_utf8(&text).map_err(|_| fmt::Error)?)
         } else {
             write!(f, "{} ms from 1970-01-01T00:00:00Z", self.0)
         }
@@ -196,6 +237,33 @@ mod tests {
             Timestamp(1_700_000_000_125).to_string(),
             "2023-11-14T22:13:20.125Z"
         );
+    }
+
+    #[test]
+    fn the_fast_rfc3339_printer_agrees_with_humantime_from_1970_to_9999() {
+        let humantime = |t: Timestamp| {
+            humantime::format_rfc3339_millis(t.to_system())
+                .to_string()
+                .into_bytes()
+        };
+        // Ends of the range, leap days (2000 is a leap year, 2100 is not) and year ends.
+        let mut times = vec![
+            Timestamp::MIN,
+            Timestamp::MAX,
+            Timestamp(951_782_400_000),
+            Timestamp(951_868_799_999),
+            Timestamp(4_107_542_400_000),
+            Timestamp(4_102_444_799_999),
+            Timestamp(68_169_600_000),
+        ];
+        let mut rng = fastrand::Rng::with_seed(15);
+        times.extend((0..200_000).map(|_| Timestamp(rng.i64(0..=Timestamp::MAX.0))));
+        for t in times {
+            let fast = t.rfc3339_millis().expect("printable");
+            assert_eq!(fast.to_vec(), humantime(t), "{}", t.0);
+        }
+        assert_eq!(Timestamp(-1).rfc3339_millis(), None);
+        assert_eq!(Timestamp(Timestamp::MAX.0 + 1).rfc3339_millis(), None);
     }
 
     #[test]

@@ -1056,3 +1056,231 @@ async fn with_a_read_token_every_api_route_needs_it_and_the_page_and_health_do_n
     assert_eq!(get(&app, "/healthz").await.0, StatusCode::OK);
     assert_eq!(get(&app, "/").await.0, StatusCode::OK);
 }
+
+/// The example configuration's cell (every kind of device), its lines never opened, each
+/// point given a value, quality, time and error that exercise the JSON: text needing
+/// escapes, numbers JSON cannot hold, enumeration values with and without a label, stale
+/// and bad qualities, times outside what RFC 3339 prints.
+fn example_cell_with_every_kind_of_state(
+    dir: &std::path::Path,
+) -> (crate::store::Store, Arc<Cell>) {
+    use crate::cell::{DeviceState, PointState};
+    use crate::driver::{DeviceError, ErrorKind};
+    use crate::point::{PointKind, Quality, Value};
+    let store = crate::store::Store::open(dir, crate::store::StoreOptions::default()).unwrap();
+    let config = crate::config::parse_config(
+        crate::EXAMPLE_CONFIG,
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml"),
+    )
+    .unwrap();
+    let never: crate::scheduler::Opener =
+        Arc::new(|| Box::pin(async { Err("not opened in this test".to_owned()) }));
+    let (cell, _tasks) = Cell::with_openers(
+        &config,
+        store.handle(),
+        Arc::new(crate::metrics::Metrics::new()),
+        |_| Arc::clone(&never),
+    )
+    .unwrap();
+    let numbers = [
+        350.0,
+        -0.0,
+        0.1,
+        1e300,
+        f64::NAN,
+        f64::INFINITY,
+        9.0,
+        1.5e-7,
+    ];
+    let texts = [
+        "JT",
+        "quote \" and \\ back",
+        "tab\tnew\nline",
+        "°C ünïcode ✓",
+        "\u{1}",
+    ];
+    let times = [
+        Some(NOW),
+        Some(NOW.minus(Duration::from_secs(3600))),
+        Some(Timestamp(-5)),
+        None,
+    ];
+    let mut n = 0usize;
+    for device in cell.device_entries() {
+        let mut state = device.write_state();
+        let points = device
+            .points
+            .iter()
+            .map(|spec| {
+                n += 1;
+                let value = match (&spec.kind, n % 5) {
+                    (_, 0) => None,
+                    (PointKind::Text, _) => Some(Value::Text(texts[n % texts.len()].to_owned())),
+                    (PointKind::Enum { states }, _) if n % 2 == 0 && !states.is_empty() => {
+                        Some(Value::Number(states[n % states.len()].value as f64))
+                    }
+                    _ => Some(Value::Number(numbers[n % numbers.len()])),
+                };
+                PointState {
+                    value,
+                    t: times[n % times.len()],
+                    quality: [
+                        None,
+                        Some(Quality::Good),
+                        Some(Quality::Bad),
+                        Some(Quality::Stale),
+                    ][n % 4],
+                    error: (n % 3 == 0).then(|| texts[n % texts.len()].to_owned()),
+                    alarm: n % 7 == 0,
+                    recorded: None,
+                }
+            })
+            .collect();
+        n += 1;
+        *state = DeviceState {
+            status: [
+                DeviceStatus::Up,
+                DeviceStatus::Down,
+                DeviceStatus::Connecting,
+            ][n % 3],
+            since: NOW.minus(Duration::from_secs(n as u64)),
+            error: (n % 2 == 0).then(|| DeviceError::new(ErrorKind::Timeout, "no \"answer\"\n")),
+            last_ok: times[n % times.len()],
+            failures: n as u32,
+            next_try_at: (n % 2 == 0).then(|| NOW.plus(Duration::from_millis(1500))),
+            points,
+        };
+    }
+    (store, cell)
+}
+
+/// A fixed now for the listing tests.
+const NOW: Timestamp = Timestamp(1_793_692_800_000);
+
+#[test]
+fn a_device_listing_is_byte_for_byte_what_the_device_views_serialise_to() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_store, cell) = example_cell_with_every_kind_of_state(dir.path());
+    let listing = listing::Listing::new(&cell);
+    assert_eq!(listing.len(), cell.device_entries().count());
+    for now in [
+        NOW,
+        NOW.plus(Duration::from_secs(10)),
+        NOW.plus(Duration::from_secs(86_400)),
+    ] {
+        let mut fast = Vec::new();
+        listing::devices_array(&mut fast, listing.entries(), listing::Fields::ALL, now);
+        listing::field(&mut fast, "total", &listing.len(), false);
+        listing::field(&mut fast, "writes_enabled", &true, true);
+        #[derive(serde::Serialize)]
+        struct Body {
+            devices: Vec<crate::cell::DeviceView>,
+            total: usize,
+            writes_enabled: bool,
+        }
+        let views = Body {
+            devices: cell.device_entries().map(|d| d.view(now)).collect(),
+            total: listing.len(),
+            writes_enabled: true,
+        };
+        let derived = serde_json::to_vec(&views).unwrap();
+        assert_eq!(
+            String::from_utf8(fast).unwrap(),
+            String::from_utf8(derived).unwrap()
+        );
+    }
+}
+
+#[test]
+fn a_listing_cut_to_some_fields_has_just_those_of_the_full_view_and_the_id() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_store, cell) = example_cell_with_every_kind_of_state(dir.path());
+    let listing = listing::Listing::new(&cell);
+    let names = listing::Field::NAMES;
+    let mut selections: Vec<Vec<&str>> = names.iter().map(|n| vec![*n]).collect();
+    selections.push(vec!["status", "line"]);
+    selections.push(vec!["points", "name", "next_try_in_ms"]);
+    selections.push(names.to_vec());
+    for selection in selections {
+        let fields = listing::Fields::parse(&selection.join(" , ")).unwrap();
+        for device in listing.entries() {
+            let mut fast = Vec::new();
+            device.write(&mut fast, fields, NOW);
+            let mut expected =
+                serde_json::to_value(cell.device_entry(device.id()).unwrap().view(NOW)).unwrap();
+            expected
+                .as_object_mut()
+                .unwrap()
+                .retain(|k, _| k == "id" || selection.contains(&k.as_str()));
+            // The same members; in the full view's order (the listing before this one,
+            // through a `serde_json::Value`, sorted them by name).
+            let fast: Json = serde_json::from_slice(&fast).unwrap();
+            assert_eq!(fast, expected, "fields {selection:?}");
+        }
+    }
+    assert_eq!(
+        listing::Fields::parse("status,colour"),
+        Err("colour".to_owned())
+    );
+    assert_eq!(listing::Fields::parse(""), Err(String::new()));
+}
+
+#[tokio::test(start_paused = true)]
+async fn devices_with_the_same_description_share_one_template() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_store, cell) = example_cell_with_every_kind_of_state(dir.path());
+    let listing = listing::Listing::new(&cell);
+    let kinds: std::collections::HashSet<_> = cell
+        .device_entries()
+        .map(|d| format!("{:?}", d.protocol))
+        .collect();
+    assert!(listing.templates() >= kinds.len());
+    assert!(listing.templates() <= listing.len());
+    let rig = rig(3);
+    let stations = listing::Listing::new(&rig.cell);
+    assert_eq!((stations.len(), stations.templates()), (3, 1));
+    // Polled stations' listing is about as big as estimated (the first buffer's size).
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let mut out = Vec::new();
+    listing::devices_array(
+        &mut out,
+        stations.entries(),
+        listing::Fields::ALL,
+        Timestamp::now(),
+    );
+    let ratio = stations.size_estimate() as f64 / out.len() as f64;
+    assert!(
+        (0.9..1.2).contains(&ratio),
+        "estimated {} bytes, took {}",
+        stations.size_estimate(),
+        out.len()
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn device_listings_are_served_as_json() {
+    let rig = rig(2);
+    let app = app(&rig, false);
+    for uri in [
+        "/api/devices",
+        "/api/devices?fields=status",
+        "/api/devices/jbc2",
+    ] {
+        let response = app
+            .clone()
+            .oneshot(Request::get(uri).body(Body::empty()).unwrap())
+            .await
+            .unwrap();
+        assert_eq!(response.status(), StatusCode::OK, "{uri}");
+        assert_eq!(
+            response.headers()["content-type"],
+            "application/json",
+            "{uri}"
+        );
+        let bytes = axum::body::to_bytes(response.into_body(), 1 << 20)
+            .await
+            .unwrap();
+        let body: Json = serde_json::from_slice(&bytes).unwrap();
+        assert!(body.is_object(), "{uri}: {body}");
+    }
+}
