@@ -89,7 +89,13 @@ impl PointId {
     /// The id of point `name` of `device`; `name` follows the device id rules.
     pub fn new(device: &DeviceId, name: &str) -> Result<Self, IdError> {
         check_name("point name", name)?;
-        Ok(Self(format!("{device}.{name}")))
+        // Drivers build one per reading: plain copies, not the formatting machinery.
+        let device = device.as_str();
+        let mut id = String::with_capacity(device.len() + 1 + name.len());
+        id.push_str(device);
+        id.push('.');
+        id.push_str(name);
+        Ok(Self(id))
     }
 
     /// Parses `device.point`.

@@ -700,10 +700,19 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
     let mut events = Vec::new();
     {
         let mut state = entry.write_state();
+        // Drivers give their readings in the order of their points: the point after the
+        // last one found is tried first, the search by name only when it is not that one.
+        let mut next = 0;
         for reading in readings {
-            let Some(i) = entry.point_index(reading.point.name()) else {
+            let guess = entry
+                .points
+                .get(next)
+                .filter(|spec| spec.id == reading.point)
+                .map(|_| next);
+            let Some(i) = guess.or_else(|| entry.point_index(reading.point.name())) else {
                 continue;
             };
+            next = i + 1;
             let (Some(spec), Some(point)) = (entry.points.get(i), state.points.get_mut(i)) else {
                 continue;
             };

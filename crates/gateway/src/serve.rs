@@ -21,6 +21,7 @@ use crate::event::{Event, EventKind};
 use crate::http::{self, WritePolicy};
 use crate::metrics::Metrics;
 use crate::northbound;
+use crate::scheduler::LineTask;
 use crate::store::{HistoryState, Store, StoreOptions};
 use crate::time::Timestamp;
 
@@ -137,7 +138,7 @@ pub struct Gateway {
     store: Store,
     writes: WritePolicy,
     stop: watch::Sender<bool>,
-    pollers: Vec<JoinHandle<()>>,
+    pollers: Pollers,
     mqtt: Option<JoinHandle<()>>,
     opcua: Option<northbound::opcua::Started>,
     _demo: Option<DemoCell>,
@@ -201,10 +202,7 @@ impl Gateway {
         ));
         report_history_off(&cell, options.data_dir.clone());
         let (stop, stopped) = watch::channel(false);
-        let pollers = tasks
-            .into_iter()
-            .map(|task| tokio::spawn(task.run(stopped.clone())))
-            .collect();
+        let pollers = Pollers::start(tasks, stopped.clone())?;
         let mqtt = mqtt
             .map(|config| {
                 northbound::mqtt::start(
@@ -283,10 +281,11 @@ impl Gateway {
             }
         };
         let _ = stop.send(true);
-        for poller in pollers {
-            if tokio::time::timeout(STOP_GRACE, poller).await.is_err() {
-                tracing::warn!("a line task did not stop in {STOP_GRACE:?}");
-            }
+        if tokio::time::timeout(STOP_GRACE, pollers.stopped)
+            .await
+            .is_err()
+        {
+            tracing::warn!("the line tasks did not stop in {STOP_GRACE:?}");
         }
         if let Some(mqtt) = mqtt
             && tokio::time::timeout(STOP_GRACE, mqtt).await.is_err()
@@ -317,6 +316,51 @@ impl Gateway {
             flushed.context("the history could not be committed at shutdown")?;
         }
         Ok(())
+    }
+}
+
+/// The line tasks, on a thread of their own with a single-threaded runtime.
+///
+/// A poll is a chain of short exchanges, each waiting a few milliseconds for its reply.
+/// On the multi-threaded runtime each reply woke one worker, which often woke the other
+/// to share the work (a futex wake and two thread switches for a few microseconds of
+/// work); on one thread, the I/O driver hands every reply that arrived to its task
+/// without any. In the load bench (1,000 JBC stations) this alone took the CPU per point
+/// read from 11.0 to 9.0 µs (runs back to back). It also keeps polling away from the HTTP, MQTT and OPC UA work on the
+/// main runtime: a large API answer no longer delays a poll. One thread polls every line
+/// (a thousand stations take about a tenth of a core).
+#[derive(Debug)]
+struct Pollers {
+    /// Resolves when every line task has ended (or the thread is gone).
+    stopped: tokio::sync::oneshot::Receiver<()>,
+}
+
+impl Pollers {
+    /// Starts `tasks` on the pollers' thread; they end when `stop` turns true.
+    fn start(tasks: Vec<LineTask>, stop: watch::Receiver<bool>) -> anyhow::Result<Self> {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .context("cannot start the pollers' runtime")?;
+        let (ended, stopped) = tokio::sync::oneshot::channel();
+        std::thread::Builder::new()
+            .name("cellbus-poll".into())
+            .spawn(move || {
+                runtime.block_on(async move {
+                    let running: Vec<_> = tasks
+                        .into_iter()
+                        .map(|task| tokio::spawn(task.run(stop.clone())))
+                        .collect();
+                    for task in running {
+                        if let Err(e) = task.await {
+                            tracing::error!("a line task failed: {e}");
+                        }
+                    }
+                });
+                let _ = ended.send(());
+            })
+            .context("cannot start the pollers' thread")?;
+        Ok(Self { stopped })
     }
 }
 

@@ -184,7 +184,6 @@ impl Client {
         let matcher = Reply {
             request: *request,
             route: self.config.route,
-            wire_text: wire_text(&frame),
         };
         let policy = Policy::new(self.config.retries, self.config.timeout);
         let mut exchange = Exchange::new(matcher, FrameCodec, bytes, policy);
@@ -193,11 +192,12 @@ impl Client {
     }
 }
 
-/// What answers one request: an acknowledgement of its code on the route back.
+/// What answers one request: an acknowledgement of its code on the route back. The
+/// request's text for messages is built only when the station refuses it, not for every
+/// request (formatting it was a visible share of a poll's CPU).
 struct Reply {
     request: Request,
     route: Option<Route>,
-    wire_text: String,
 }
 
 impl Matcher for Reply {
@@ -215,7 +215,7 @@ impl Matcher for Reply {
                     Verdict::Retry(Trouble::Mismatch(Transmission(reason)))
                 }
                 Match::Refused(reason) => Verdict::Refused(Refusal {
-                    request: self.wire_text.clone(),
+                    request: wire_text(&self.request.to_frame(self.route)),
                     reason,
                     number: reason.code(),
                 }),

@@ -29,7 +29,6 @@
 //!   README states the residual risk.
 
 use std::collections::HashMap;
-use std::collections::hash_map::Entry;
 use std::ops::RangeInclusive;
 use std::time::Duration;
 
@@ -516,12 +515,16 @@ impl JbcDriver {
     }
 
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
-        let mut answers: HashMap<Code, Answer> = HashMap::new();
-        let mut readings = Vec::new();
+        // A poll reads about ten codes: a list searched in place beats hashing each code.
+        let mut answers: Vec<(Code, Answer)> = Vec::with_capacity(POINTS.len());
+        let mut readings = Vec::with_capacity(POINTS.len());
         for def in POINTS.iter().filter(|d| d.group == group) {
-            let answer = match answers.entry(def.code) {
-                Entry::Occupied(known) => known.into_mut(),
-                Entry::Vacant(slot) => slot.insert(self.read_code(def.code, group).await?),
+            if !answers.iter().any(|(code, _)| *code == def.code) {
+                let answer = self.read_code(def.code, group).await?;
+                answers.push((def.code, answer));
+            }
+            let Some((_, answer)) = answers.iter().find(|(code, _)| *code == def.code) else {
+                continue;
             };
             let value = match answer {
                 Answer::Good(reading) => {

@@ -66,6 +66,7 @@ use std::time::Duration;
 use crate::time::Timestamp;
 
 mod fault;
+mod inbox;
 mod open;
 mod query;
 mod records;
@@ -194,9 +195,12 @@ pub enum StoreError {
 }
 
 enum Command {
-    Sample(Sample),
+    /// Samples wait in the [`inbox::Inbox`]: take them.
+    Wake,
     Event(Event),
-    Audit(AuditEntry),
+    /// An audit row, committed at once with the samples queued before it (the inbox's
+    /// mark when it was sent), never with later ones.
+    Audit(AuditEntry, u64),
     Flush(tokio::sync::oneshot::Sender<Result<u64, String>>),
     Prune(Timestamp, tokio::sync::oneshot::Sender<Result<u64, String>>),
     /// Caps the file at its current size (`max_page_count`), as a full disk would.
@@ -217,6 +221,7 @@ pub struct Store {
 #[derive(Debug, Clone)]
 pub struct StoreHandle {
     tx: mpsc::Sender<Command>,
+    inbox: Arc<inbox::Inbox>,
     readers: Arc<ReaderPool>,
     stats: Arc<StoreStats>,
     shared: Arc<Shared>,
@@ -355,17 +360,20 @@ impl Store {
         let shared = Arc::new(Shared::default());
         let (tx, rx) = mpsc::channel();
         let (opened_tx, opened) = mpsc::channel();
+        let inbox = Arc::new(inbox::Inbox::new(options.batch_rows.min(writer::DRAIN_MAX)));
         let spawned = {
             let (dir, stats, shared) = (dir.to_owned(), Arc::clone(&stats), Arc::clone(&shared));
+            let inbox = Arc::clone(&inbox);
             thread::Builder::new()
                 .name("cellbus-history".into())
-                .spawn(move || run_writer(&dir, options, stats, shared, rx, opened_tx))
+                .spawn(move || run_writer(&dir, options, stats, shared, inbox, rx, opened_tx))
         };
         let writer = match spawned {
             Ok(writer) => Some(writer),
             Err(e) => {
                 let reason = format!("cannot start the history writer thread: {e}");
                 tracing::error!("{reason}");
+                inbox.close();
                 shared.set_open(Err(reason.clone()));
                 // `opened` then reports the sender gone: `open` says so.
                 None
@@ -374,6 +382,7 @@ impl Store {
         let store = Self {
             handle: StoreHandle {
                 tx,
+                inbox,
                 readers: Arc::new(ReaderPool {
                     path,
                     idle: Mutex::new(Vec::new()),
@@ -414,9 +423,19 @@ impl Drop for Store {
 }
 
 impl StoreHandle {
-    /// Queues a value change.
+    /// Queues a value change. It waits in the inbox, without waking the writer thread
+    /// unless the writer has no batch open (see `inbox`).
     pub fn sample(&self, sample: Sample) {
-        self.send(Command::Sample(sample));
+        match self.inbox.put(sample) {
+            inbox::Put::Queued => {}
+            // A writer that is gone closed the inbox and counted what it left.
+            inbox::Put::Wake => {
+                let _ = self.tx.send(Command::Wake);
+            }
+            inbox::Put::Closed => {
+                self.stats.rows_dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
     }
 
     /// Queues an event.
@@ -426,7 +445,7 @@ impl StoreHandle {
 
     /// Queues a write attempt; the writer commits it at once (unless commits are failing).
     pub fn audit(&self, entry: AuditEntry) {
-        self.send(Command::Audit(entry));
+        self.send(Command::Audit(entry, self.inbox.mark()));
     }
 
     fn send(&self, command: Command) {

@@ -13,6 +13,7 @@ use crate::point::{DeviceId, PointId, Value};
 use crate::time::Timestamp;
 
 use super::fault::CommitFaults;
+use super::inbox::Inbox;
 use super::open::open_writer;
 use super::rollup::{OpenMinutes, Staged, bucket_value};
 use super::*;
@@ -21,8 +22,9 @@ use super::*;
 /// stop (with much to delete) is not slowed by it.
 const FIRST_PRUNE_AFTER: Duration = Duration::from_secs(60);
 
-/// Commands taken from the channel before the writer looks at its batch and its prune.
-const DRAIN_MAX: usize = 10_000;
+/// Commands taken from the channel before the writer looks at its batch and its prune;
+/// also the most samples the inbox holds before it wakes the writer.
+pub(super) const DRAIN_MAX: usize = 10_000;
 
 /// Pages returned to the file system per `incremental_vacuum` step (4 MB of 4 KiB pages).
 const VACUUM_PAGES: u32 = 1024;
@@ -44,9 +46,15 @@ pub(super) fn run_writer(
     options: StoreOptions,
     stats: Arc<StoreStats>,
     shared: Arc<Shared>,
+    inbox: Arc<Inbox>,
     rx: mpsc::Receiver<Command>,
     opened: mpsc::Sender<Result<(), StoreError>>,
 ) {
+    // However the writer ends (even by a panic), later samples are refused and counted.
+    let _closing = CloseInbox {
+        inbox: Arc::clone(&inbox),
+        stats: Arc::clone(&stats),
+    };
     let opened_with_rollups = open_writer(dir).and_then(|open| {
         open.conn
             .set_prepared_statement_cache_capacity(STATEMENT_CACHE);
@@ -71,6 +79,8 @@ pub(super) fn run_writer(
                 last_prune: None,
                 faults: CommitFaults::default(),
                 prunes: VecDeque::new(),
+                inbox,
+                incoming: Vec::new(),
             };
             if let Some((aside, fault)) = open.moved_aside {
                 writer.push(Row::Event(Event::of_gateway(
@@ -92,10 +102,27 @@ pub(super) fn run_writer(
                 "history is off: {reason}; values are served live but not stored; \
                  fix the data directory and restart"
             );
+            let left = inbox.close();
+            stats.rows_dropped.fetch_add(left as u64, Ordering::Relaxed);
             shared.set_open(Err(reason.clone()));
             let _ = opened.send(Err(e));
             discard(&rx, &stats, &reason);
         }
+    }
+}
+
+/// Closes the inbox when the writer thread ends; what was left in it is counted dropped.
+struct CloseInbox {
+    inbox: Arc<Inbox>,
+    stats: Arc<StoreStats>,
+}
+
+impl Drop for CloseInbox {
+    fn drop(&mut self) {
+        let left = self.inbox.close();
+        self.stats
+            .rows_dropped
+            .fetch_add(left as u64, Ordering::Relaxed);
     }
 }
 
@@ -104,7 +131,9 @@ fn discard(rx: &mpsc::Receiver<Command>, stats: &StoreStats, reason: &str) {
     let off = || Err(format!("history is off: {reason}"));
     for command in rx {
         match command {
-            Command::Sample(_) | Command::Event(_) | Command::Audit(_) => {
+            // The inbox was closed: its samples are counted as they come.
+            Command::Wake => {}
+            Command::Event(_) | Command::Audit(..) => {
                 stats.rows_dropped.fetch_add(1, Ordering::Relaxed);
             }
             Command::Flush(reply) | Command::Prune(_, reply) => {
@@ -132,6 +161,10 @@ struct Writer {
     last_prune: Option<Instant>,
     faults: CommitFaults,
     prunes: VecDeque<PruneJob>,
+    /// Samples the pollers queued (see `inbox`).
+    inbox: Arc<Inbox>,
+    /// The inbox's samples being pushed; empty between two takes.
+    incoming: Vec<Sample>,
 }
 
 impl Writer {
@@ -142,6 +175,10 @@ impl Writer {
                 .unwrap_or(now),
         );
         loop {
+            // What came while the writer worked; with nothing, it sleeps, and is woken by
+            // the next sample only if no batch is open (an open batch is committed at its
+            // time and takes what came meanwhile).
+            self.take_inbox(true);
             let wait = if self.prunes.is_empty() {
                 self.wake_in(Instant::now())
             } else {
@@ -173,6 +210,7 @@ impl Writer {
                     };
                 }
             }
+            self.take_inbox(false);
             let now = Instant::now();
             self.commit_if_due(now);
             if self.prunes.is_empty() {
@@ -198,11 +236,46 @@ impl Writer {
             .saturating_duration_since(now)
     }
 
+    /// Pushes the samples waiting in the inbox. With `arm` (the writer is about to sleep),
+    /// takes until the inbox is found empty and then arms it: the next sample wakes the
+    /// writer when no batch is open.
+    fn take_inbox(&mut self, arm: bool) {
+        loop {
+            let idle = self.oldest.is_none();
+            self.inbox.take(&mut self.incoming, arm.then_some(idle));
+            if self.incoming.is_empty() {
+                return;
+            }
+            let mut incoming = std::mem::take(&mut self.incoming);
+            for sample in incoming.drain(..) {
+                self.push(Row::Sample(sample));
+            }
+            self.incoming = incoming;
+            if !arm {
+                return;
+            }
+        }
+    }
+
     fn handle(&mut self, command: Command) -> ControlFlow<()> {
+        // Samples queued before these commands come before them (some queued after may
+        // too, which does no harm to a commit).
+        if matches!(
+            command,
+            Command::Flush(_) | Command::Prune(..) | Command::Shutdown
+        ) {
+            self.take_inbox(false);
+        }
         match command {
-            Command::Sample(sample) => self.push(Row::Sample(sample)),
+            Command::Wake => {}
             Command::Event(event) => self.push(Row::Event(event)),
-            Command::Audit(entry) => {
+            Command::Audit(entry, mark) => {
+                let mut incoming = std::mem::take(&mut self.incoming);
+                self.inbox.take_until(&mut incoming, mark);
+                for sample in incoming.drain(..) {
+                    self.push(Row::Sample(sample));
+                }
+                self.incoming = incoming;
                 self.push(Row::Audit(entry));
                 if self.faults.may_commit(Instant::now()) {
                     let _ = self.commit();
