@@ -31,6 +31,7 @@
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::ops::RangeInclusive;
+use std::sync::{Arc, LazyLock};
 use std::time::Duration;
 
 use jbc::client::{Client, ClientConfig, ClientError, ExchangeError};
@@ -44,7 +45,8 @@ use super::{
     enum_states,
 };
 use crate::point::{
-    AlarmRule, DeviceId, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
+    AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
+    WriteRange,
 };
 
 /// A JTSE's line when the URL says nothing: 19200 baud, 8E1 (the manual's example).
@@ -469,52 +471,62 @@ impl JbcDriver {
         PointId::new(&self.device, def.name).expect("point names in POINTS follow the id rules")
     }
 
-    fn spec(&self, def: &Def) -> PointSpec {
-        let (kind, unit, alarm) = match def.meaning {
-            Quantity => (
-                PointKind::Numeric,
-                def.code.unit().map(|u| u.symbol().into()),
-                None,
-            ),
-            Meaning::Text => (PointKind::Text, None, None),
-            OnOff => (enum_states([(0, "off"), (1, "on")]), None, None),
-            Meaning::ToolError => (
-                enum_states(ToolError::ALL.iter().map(|e| (e.code(), e.words()))),
-                None,
-                Some(AlarmRule::NotEqual(f64::from(ToolError::Ok.code()))),
-            ),
-            Meaning::StationError => (
-                enum_states(StationError::ALL.iter().map(|e| (e.code(), e.words()))),
-                None,
-                Some(AlarmRule::NotEqual(f64::from(StationError::Ok.code()))),
-            ),
-            Meaning::Tool => (
-                enum_states(Tool::ALL.iter().map(|t| (t.number(), t.words()))),
-                None,
-                None,
-            ),
-            Meaning::WorkMode => (
-                enum_states([(0, "manual (profiles off)"), (1, "profile (profiles on)")]),
-                None,
-                None,
-            ),
-        };
-        PointSpec {
-            id: self.point_id(def),
-            name: def.title.into(),
-            unit,
-            kind,
-            group: def.group.into(),
-            writable: def.range.as_ref().map(|r| WriteRange {
-                min: f64::from(*r.start()),
-                max: f64::from(*r.end()),
-                integer: true,
-                step: None,
-            }),
-            alarm,
-        }
+    fn spec(&self, def: &Def, description: &Arc<PointDescription>) -> PointSpec {
+        PointSpec::new(self.point_id(def), Arc::clone(description))
     }
+}
 
+/// The description of every point in [`POINTS`], built once for every station.
+static DESCRIPTIONS: LazyLock<Vec<Arc<PointDescription>>> =
+    LazyLock::new(|| POINTS.iter().map(|d| Arc::new(describe(d))).collect());
+
+/// What `def`'s point is, the same on every station.
+fn describe(def: &Def) -> PointDescription {
+    let (kind, unit, alarm) = match def.meaning {
+        Quantity => (
+            PointKind::Numeric,
+            def.code.unit().map(|u| u.symbol().into()),
+            None,
+        ),
+        Meaning::Text => (PointKind::Text, None, None),
+        OnOff => (enum_states([(0, "off"), (1, "on")]), None, None),
+        Meaning::ToolError => (
+            enum_states(ToolError::ALL.iter().map(|e| (e.code(), e.words()))),
+            None,
+            Some(AlarmRule::NotEqual(f64::from(ToolError::Ok.code()))),
+        ),
+        Meaning::StationError => (
+            enum_states(StationError::ALL.iter().map(|e| (e.code(), e.words()))),
+            None,
+            Some(AlarmRule::NotEqual(f64::from(StationError::Ok.code()))),
+        ),
+        Meaning::Tool => (
+            enum_states(Tool::ALL.iter().map(|t| (t.number(), t.words()))),
+            None,
+            None,
+        ),
+        Meaning::WorkMode => (
+            enum_states([(0, "manual (profiles off)"), (1, "profile (profiles on)")]),
+            None,
+            None,
+        ),
+    };
+    PointDescription {
+        name: def.title.into(),
+        unit,
+        kind,
+        group: def.group.into(),
+        writable: def.range.as_ref().map(|r| WriteRange {
+            min: f64::from(*r.start()),
+            max: f64::from(*r.end()),
+            integer: true,
+            step: None,
+        }),
+        alarm,
+    }
+}
+
+impl JbcDriver {
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
         let mut answers: HashMap<Code, Answer> = HashMap::new();
         let mut readings = Vec::new();
@@ -638,7 +650,11 @@ impl JbcDriver {
 
 impl Driver for JbcDriver {
     fn points(&self) -> Vec<PointSpec> {
-        POINTS.iter().map(|d| self.spec(d)).collect()
+        POINTS
+            .iter()
+            .zip(DESCRIPTIONS.iter())
+            .map(|(def, description)| self.spec(def, description))
+            .collect()
     }
 
     fn groups(&self) -> Vec<PollGroup> {

@@ -66,7 +66,9 @@ use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
     enum_states,
 };
-use crate::point::{Deadband, DeviceId, PointId, PointKind, PointSpec, Value, WriteRange};
+use crate::point::{
+    Deadband, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, WriteRange,
+};
 
 /// A Modbus line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
@@ -542,14 +544,18 @@ impl Driver for ModbusDriver {
     fn points(&self) -> Vec<PointSpec> {
         self.registers
             .iter()
-            .map(|r| PointSpec {
-                id: self.point_id(r),
-                name: r.title.clone().into(),
-                unit: r.unit.clone().map(Into::into),
-                kind: r.kind(),
-                group: LIVE.into(),
-                writable: r.writable.map(|range| r.write_range(range)),
-                alarm: None,
+            .map(|r| {
+                PointSpec::new(
+                    self.point_id(r),
+                    PointDescription {
+                        name: r.title.clone().into(),
+                        unit: r.unit.clone().map(Into::into),
+                        kind: r.kind(),
+                        group: LIVE.into(),
+                        writable: r.writable.map(|range| r.write_range(range)),
+                        alarm: None,
+                    },
+                )
             })
             .collect()
     }

@@ -71,6 +71,7 @@ pub(super) fn run_writer(
                 last_prune: None,
                 faults: CommitFaults::default(),
                 prunes: VecDeque::new(),
+                cache: WriterCache::new(),
             };
             if let Some((aside, fault)) = open.moved_aside {
                 writer.push(Row::Event(Event::of_gateway(
@@ -132,6 +133,8 @@ struct Writer {
     last_prune: Option<Instant>,
     faults: CommitFaults,
     prunes: VecDeque<PruneJob>,
+    /// The page cache's size, following the batches'.
+    cache: WriterCache,
 }
 
 impl Writer {
@@ -323,6 +326,17 @@ impl Writer {
     fn commit(&mut self) -> Result<(), String> {
         if self.pending.is_empty() {
             return Ok(());
+        }
+        let cache_before = self.cache.kib();
+        if let Some(kib) = self.cache.for_batch(self.pending.len()) {
+            // A cache that could not be resized only costs speed or memory: go on.
+            if let Err(e) = self.conn.pragma_update(None, "cache_size", -kib) {
+                tracing::warn!(
+                    "history {}: the page cache stays at {} KiB, resizing it to {kib} KiB failed: {e}",
+                    self.path.display(),
+                    cache_before
+                );
+            }
         }
         let mut rows = std::mem::take(&mut self.pending);
         let result = write_rows(
