@@ -26,10 +26,22 @@ pub const MAX_ID_LEN: usize = 64;
 #[serde(transparent)]
 pub struct DeviceId(String);
 
-/// A point's id: `<device>.<point>`, e.g. `jbc1.air_temperature`.
+/// A point's id: `<device>.<point>`, e.g. `jbc1.air_temperature`. Its text is shared:
+/// a clone (a reading, a sample, the history writer's map) costs no copy. It hashes and
+/// compares as its text, so a map keyed by ids is looked up with a `&str`.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 #[serde(transparent)]
-pub struct PointId(String);
+pub struct PointId(#[serde(serialize_with = "serialize_shared_str")] Arc<str>);
+
+fn serialize_shared_str<S: serde::Serializer>(text: &Arc<str>, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(text)
+}
+
+impl std::borrow::Borrow<str> for PointId {
+    fn borrow(&self) -> &str {
+        &self.0
+    }
+}
 
 /// An id that does not follow the rules.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -90,7 +102,7 @@ impl PointId {
     /// The id of point `name` of `device`; `name` follows the device id rules.
     pub fn new(device: &DeviceId, name: &str) -> Result<Self, IdError> {
         check_name("point name", name)?;
-        Ok(Self(format!("{device}.{name}")))
+        Ok(Self(format!("{device}.{name}").into()))
     }
 
     /// Parses `device.point`.

@@ -720,7 +720,7 @@ mod tests {
             retries: Some(1),
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         }
     }
@@ -881,6 +881,23 @@ mod tests {
             Ok(Value::Number(300.0))
         );
         assert_eq!(rig.requests.load(Ordering::SeqCst) - before, codes + 1);
+    }
+
+    #[test]
+    fn every_station_shares_one_description_per_point_and_has_its_own_ids() {
+        let one = JbcDriver::new(&config(Some(1))).unwrap().points();
+        let two = JbcDriver::new(&DriverConfig {
+            id: DeviceId::new("jbc2").unwrap(),
+            ..config(Some(2))
+        })
+        .unwrap()
+        .points();
+        assert_eq!(one.len(), POINTS.len());
+        for (a, b) in one.iter().zip(&two) {
+            assert!(Arc::ptr_eq(&a.description, &b.description), "{}", a.id);
+            assert_eq!(a.id.name(), b.id.name());
+            assert_eq!((a.id.device(), b.id.device()), ("jbc1", "jbc2"));
+        }
     }
 
     #[test]

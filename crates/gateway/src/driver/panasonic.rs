@@ -471,7 +471,7 @@ mod tests {
                 line: None,
                 framing: link::TcpFraming::Raw,
             }),
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         })
         .unwrap();
@@ -538,7 +538,7 @@ mod tests {
             retries: None,
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         })
         .unwrap();
@@ -617,7 +617,7 @@ mod tests {
                 line: None,
                 framing: link::TcpFraming::Raw,
             }),
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         })
         .unwrap();

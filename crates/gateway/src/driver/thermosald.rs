@@ -683,7 +683,7 @@ mod tests {
             retries: Some(1),
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         }
     }

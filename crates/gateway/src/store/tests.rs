@@ -1173,7 +1173,11 @@ fn the_writer_cache_stays_small_for_a_trickle_of_rows() {
     let mut cache = WriterCache::new();
     assert_eq!(cache.kib(), WRITER_CACHE_MIN_KIB);
     for _ in 0..100 {
-        assert_eq!(cache.for_batch(700), None, "a trickle leaves the cache alone");
+        assert_eq!(
+            cache.for_batch(700),
+            None,
+            "a trickle leaves the cache alone"
+        );
     }
     assert_eq!(cache.kib(), WRITER_CACHE_MIN_KIB);
 }

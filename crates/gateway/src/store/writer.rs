@@ -124,7 +124,7 @@ struct Writer {
     rollups: OpenMinutes,
     path: PathBuf,
     /// Point ids known to be committed (a cache; `point_id` asks the table otherwise).
-    points: HashMap<String, i64>,
+    points: HashMap<PointId, i64>,
     options: StoreOptions,
     stats: Arc<StoreStats>,
     shared: Arc<Shared>,
@@ -627,7 +627,7 @@ impl PruneJob {
 /// samples, events and audit rows. The rollups' state changes only if the commit works.
 fn write_rows(
     conn: &mut Connection,
-    points: &mut HashMap<String, i64>,
+    points: &mut HashMap<PointId, i64>,
     rollups: &mut OpenMinutes,
     rows: &[Row],
 ) -> rusqlite::Result<[u64; 3]> {
@@ -638,7 +638,7 @@ fn write_rows(
     for row in rows {
         match row {
             Row::Sample(s) => {
-                let id = point_id(&tx, points, s.point.as_str())?;
+                let id = point_id(&tx, points, &s.point)?;
                 staged.sample(
                     rollups,
                     id,
@@ -709,12 +709,13 @@ fn insert_samples(tx: &Transaction<'_>, samples: &[(i64, &Sample)]) -> rusqlite:
     Ok(())
 }
 
-/// The id of point `name`: cached, else from the table, else a new row.
+/// The id of `point`: cached (sharing the id's text), else from the table, else a new row.
 fn point_id(
     tx: &Transaction<'_>,
-    points: &mut HashMap<String, i64>,
-    name: &str,
+    points: &mut HashMap<PointId, i64>,
+    point: &PointId,
 ) -> rusqlite::Result<i64> {
+    let name = point.as_str();
     if let Some(id) = points.get(name) {
         return Ok(*id);
     }
@@ -730,6 +731,6 @@ fn point_id(
             tx.last_insert_rowid()
         }
     };
-    points.insert(name.to_owned(), id);
+    points.insert(point.clone(), id);
     Ok(id)
 }
