@@ -813,6 +813,7 @@ pub fn judge_staleness(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::point::PointDescription;
 
     #[test]
     fn every_point_is_found_by_its_name_and_no_other_name_is() {
@@ -820,14 +821,18 @@ mod tests {
         let names = ["zeta", "alpha", "mid_point", "alpha2", "b", "alpha-1"];
         let points: Vec<PointSpec> = names
             .iter()
-            .map(|n| PointSpec {
-                id: PointId::new(&device, n).unwrap(),
-                name: (*n).into(),
-                unit: None,
-                kind: PointKind::Numeric,
-                group: "live".into(),
-                writable: None,
-                alarm: None,
+            .map(|n| {
+                PointSpec::new(
+                    PointId::new(&device, n).unwrap(),
+                    PointDescription {
+                        name: (*n).into(),
+                        unit: None,
+                        kind: PointKind::Numeric,
+                        group: "live".into(),
+                        writable: None,
+                        alarm: None,
+                    },
+                )
             })
             .collect();
         let (writes, _queued) = mpsc::channel(1);

@@ -32,7 +32,7 @@
 //! sense is refused whole, with the file, line and column and what is wrong
 //! ([`ConfigError`]). [`EXAMPLE_CONFIG`] is a commented example for a real cell.
 
-use std::collections::{BTreeMap, HashSet};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -45,7 +45,7 @@ use toml::Spanned;
 use jbus::data::{DataType, Format, Order, Scaling};
 use jbus::rtu::{ReadBitCount, ReadRegisterCount};
 
-use crate::driver::modbus::{ModbusOptions, RegisterConfig, RegisterTable};
+use crate::driver::modbus::{ModbusOptions, RegisterConfig, RegisterList, RegisterTable};
 use crate::driver::{self, DriverConfig, Protocol};
 use crate::point::{Deadband, DeviceId};
 
@@ -386,6 +386,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
     let mut lines = Vec::new();
     let mut line_names = HashSet::new();
     let mut device_ids = HashSet::new();
+    let mut csv_lists = CsvRegisterLists::default();
     for line in raw.line {
         let name = line.name.get_ref();
         DeviceId::new(name).map_err(|e| {
@@ -447,7 +448,7 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 .address
                 .as_ref()
                 .map_or(id_span.clone(), Spanned::span);
-            let device = check_device(device, this, &endpoint, path, &at)?;
+            let device = check_device(device, this, &endpoint, path, &mut csv_lists, &at)?;
             if let Some(address) = device.driver.address
                 && !addresses.insert(address)
             {
@@ -752,6 +753,7 @@ fn check_device(
     protocol: Protocol,
     endpoint: &Endpoint,
     path: &Path,
+    csv_lists: &mut CsvRegisterLists,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<DeviceConfig, ConfigError> {
     let id = DeviceId::new(raw.id.get_ref()).map_err(|e| {
@@ -830,7 +832,7 @@ fn check_device(
     };
     let deadband = check_deadband(&raw.deadband, &raw.deadband_percent, at)?;
     let modbus = check_modbus_options(&raw, protocol, at)?;
-    let registers = check_registers(&raw, protocol, path, deadband, at)?;
+    let registers = check_registers(&raw, protocol, path, deadband, csv_lists, at)?;
     let driver_config = DriverConfig {
         id: id.clone(),
         protocol,
@@ -1014,15 +1016,23 @@ fn check_modbus_options(
     Ok(options)
 }
 
+/// The register lists read from `registers_csv` files so far, by file and the device's
+/// deadband (which the registers take): a thousand meters naming one file share one list
+/// (each parsing its own copy was two thirds of the heap with 100 registers a meter).
+#[derive(Default)]
+struct CsvRegisterLists(HashMap<(PathBuf, String), RegisterList>);
+
 /// The registers of a generic Modbus device: its `[[line.device.register]]` tables, or
-/// the rows of its `registers_csv` file (relative to the config file's directory).
+/// the rows of its `registers_csv` file (relative to the config file's directory), read
+/// once for every device that names it with the same deadband.
 fn check_registers(
     raw: &RawDevice,
     protocol: Protocol,
     path: &Path,
     deadband: Option<Deadband>,
+    csv_lists: &mut CsvRegisterLists,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
-) -> Result<Vec<RegisterConfig>, ConfigError> {
+) -> Result<RegisterList, ConfigError> {
     if protocol != Protocol::Modbus {
         return match raw.register.first() {
             Some(first) => Err(at(
@@ -1032,7 +1042,7 @@ fn check_registers(
                     protocol.as_str()
                 ),
             )),
-            None => Ok(Vec::new()),
+            None => Ok(RegisterList::default()),
         };
     }
     match (&raw.registers_csv, raw.register.first()) {
@@ -1046,6 +1056,10 @@ fn check_registers(
                 .parent()
                 .unwrap_or_else(|| Path::new(""))
                 .join(csv.get_ref().trim());
+            let key = (file.clone(), format!("{deadband:?}"));
+            if let Some(list) = csv_lists.0.get(&key) {
+                return Ok(list.clone());
+            }
             let text = read_bounded(&file, MAX_REGISTERS_CSV)
                 .and_then(|bytes| {
                     String::from_utf8(bytes).map_err(|_| "is not UTF-8 text".to_owned())
@@ -1057,11 +1071,15 @@ fn check_registers(
                     )
                 })?;
             let table = register_csv::CsvRegisters::parse(&text, &file)?;
-            check_register_list(&table.rows, deadband, &|span, message| {
-                table.error(span, message)
-            })
+            let list = RegisterList::from(check_register_list(
+                &table.rows,
+                deadband,
+                &|span, message| table.error(span, message),
+            )?);
+            csv_lists.0.insert(key, list.clone());
+            Ok(list)
         }
-        (None, Some(_)) => check_register_list(&raw.register, deadband, at),
+        (None, Some(_)) => check_register_list(&raw.register, deadband, at).map(Into::into),
         (None, None) => Err(at(
             raw.id.span(),
             "a modbus device needs its registers: add [[line.device.register]] tables with name and address, or registers_csv"
@@ -2601,6 +2619,56 @@ type = "string:4"
     }
 
     #[test]
+    fn meters_naming_one_registers_csv_share_its_registers_and_their_point_descriptions() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("meter.csv"),
+            "address,name,type,table\n0,voltage,uint16,input\n1,current,uint16,input\n",
+        )
+        .unwrap();
+        let device = |id: &str, unit: u8, extra: &str| {
+            format!(
+                "[[line.device]]\nid = \"{id}\"\nprotocol = \"modbus\"\naddress = {unit}\n\
+                 registers_csv = \"meter.csv\"\n{extra}\n"
+            )
+        };
+        let toml = format!(
+            "[[line]]\nname = \"utilities\"\nendpoint = \"modbus-tcp://192.0.2.61\"\n\n{}{}{}",
+            device("meter1", 1, ""),
+            device("meter2", 2, ""),
+            device("meter3", 3, "deadband = 0.5"),
+        );
+        let path = dir.path().join("cell.toml");
+        std::fs::write(&path, toml).unwrap();
+        let config = check_config(&path).unwrap();
+        let points: Vec<Vec<crate::point::PointSpec>> = config.lines[0]
+            .devices
+            .iter()
+            .map(|d| driver::build(&d.driver).unwrap().points())
+            .collect();
+        let shared = |a: usize, b: usize| {
+            points[a]
+                .iter()
+                .zip(&points[b])
+                .all(|(a, b)| std::sync::Arc::ptr_eq(&a.description, &b.description))
+        };
+        assert_eq!(points[0][1].id.as_str(), "meter1.current");
+        assert_eq!(points[1][1].id.as_str(), "meter2.current");
+        assert!(shared(0, 1), "one file, one deadband: one list");
+        assert!(!shared(0, 2), "another deadband is another list");
+        let deadbands: Vec<_> = config.lines[0]
+            .devices
+            .iter()
+            .map(|d| d.driver.registers[0].deadband)
+            .collect();
+        assert_eq!(
+            deadbands,
+            [None, None, Some(Deadband::Absolute(0.5))],
+            "each device keeps its own deadband"
+        );
+    }
+
+    #[test]
     fn a_csv_register_list_is_read_relative_to_the_config_file_with_columns_in_any_order() {
         let dir = tempfile::tempdir().unwrap();
         let config = csv_cell(
@@ -2713,7 +2781,7 @@ type = "string:4"
              [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\n\n{toml}"
         ))
         .unwrap();
-        assert_eq!(config.lines[0].devices[0].driver.registers, registers);
+        assert_eq!(*config.lines[0].devices[0].driver.registers, *registers);
     }
 
     #[test]

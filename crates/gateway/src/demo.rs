@@ -144,7 +144,7 @@ fn device(id: DeviceId, protocol: Protocol, address: i64, name: &str) -> DeviceC
             retries: None,
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         },
         name: name.to_owned(),

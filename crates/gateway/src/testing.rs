@@ -78,7 +78,7 @@ pub fn device(id: &str, address: i64) -> DeviceConfig {
             retries: None,
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         },
         name: format!("Station {id}"),

@@ -38,7 +38,9 @@ use super::{
     WriteError,
 };
 use crate::event::EventKind;
-use crate::point::{AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value};
+use crate::point::{
+    AlarmRule, DeviceId, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
+};
 
 /// A CROSS line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
@@ -274,15 +276,17 @@ impl CrossDriver {
             Show::Alarms(_) => (PointKind::Text, Some(AlarmRule::NotText(NO_ALARM))),
             Show::Measure(..) | Show::Rating(..) => (PointKind::Numeric, None),
         };
-        PointSpec {
-            id: self.point_id(def),
-            name: def.title.clone().into(),
-            unit: def.unit.map(Into::into),
-            kind,
-            group: def.group().into(),
-            writable: None,
-            alarm,
-        }
+        PointSpec::new(
+            self.point_id(def),
+            PointDescription {
+                name: def.title.clone().into(),
+                unit: def.unit.map(Into::into),
+                kind,
+                group: def.group().into(),
+                writable: None,
+                alarm,
+            },
+        )
     }
 
     /// Reads one area; `Ok(Err)` when the unit refused it (an exception), which marks only
@@ -491,7 +495,7 @@ mod tests {
             retries: Some(1),
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         }
     }

@@ -30,6 +30,7 @@
 
 use std::collections::HashMap;
 use std::ops::RangeInclusive;
+use std::sync::{Arc, LazyLock};
 use std::time::Duration;
 
 use jbc::client::{Client, ClientConfig, ClientError, ExchangeError};
@@ -43,7 +44,8 @@ use super::{
     enum_states,
 };
 use crate::point::{
-    AlarmRule, DeviceId, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
+    AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
+    WriteRange,
 };
 
 /// A JTSE's line when the URL says nothing: 19200 baud, 8E1 (the manual's example).
@@ -429,6 +431,9 @@ pub struct JbcDriver {
     device: DeviceId,
     config: ClientConfig,
     client: Option<Client>,
+    /// The id of each of [`POINTS`], in order: a reading clones one (a reference count),
+    /// and the specs hold the same ones.
+    ids: Box<[PointId]>,
     /// The last confirmed value of each code that is confirmed (see the module doc); the
     /// limit codes among them check set points before the wire.
     confirmed: HashMap<Code, jbc::code::Value>,
@@ -452,8 +457,16 @@ impl JbcDriver {
                 })
             }
         };
+        let ids = POINTS
+            .iter()
+            .map(|def| {
+                PointId::new(&config.id, def.name)
+                    .expect("point names in POINTS follow the id rules")
+            })
+            .collect();
         Ok(Self {
             device: config.id.clone(),
+            ids,
             config: ClientConfig {
                 route,
                 timeout: config.timeout.unwrap_or(defaults.timeout),
@@ -464,61 +477,64 @@ impl JbcDriver {
         })
     }
 
-    fn point_id(&self, def: &Def) -> PointId {
-        PointId::new(&self.device, def.name).expect("point names in POINTS follow the id rules")
-    }
+}
 
-    fn spec(&self, def: &Def) -> PointSpec {
-        let (kind, unit, alarm) = match def.meaning {
-            Quantity => (
-                PointKind::Numeric,
-                def.code.unit().map(|u| u.symbol().into()),
-                None,
-            ),
-            Meaning::Text => (PointKind::Text, None, None),
-            OnOff => (enum_states([(0, "off"), (1, "on")]), None, None),
-            Meaning::ToolError => (
-                enum_states(ToolError::ALL.iter().map(|e| (e.code(), e.words()))),
-                None,
-                Some(AlarmRule::NotEqual(f64::from(ToolError::Ok.code()))),
-            ),
-            Meaning::StationError => (
-                enum_states(StationError::ALL.iter().map(|e| (e.code(), e.words()))),
-                None,
-                Some(AlarmRule::NotEqual(f64::from(StationError::Ok.code()))),
-            ),
-            Meaning::Tool => (
-                enum_states(Tool::ALL.iter().map(|t| (t.number(), t.words()))),
-                None,
-                None,
-            ),
-            Meaning::WorkMode => (
-                enum_states([(0, "manual (profiles off)"), (1, "profile (profiles on)")]),
-                None,
-                None,
-            ),
-        };
-        PointSpec {
-            id: self.point_id(def),
-            name: def.title.into(),
-            unit,
-            kind,
-            group: def.group.into(),
-            writable: def.range.as_ref().map(|r| WriteRange {
-                min: f64::from(*r.start()),
-                max: f64::from(*r.end()),
-                integer: true,
-                step: None,
-            }),
-            alarm,
-        }
-    }
+/// The description of every point in [`POINTS`], built once for every station.
+static DESCRIPTIONS: LazyLock<Vec<Arc<PointDescription>>> =
+    LazyLock::new(|| POINTS.iter().map(|d| Arc::new(describe(d))).collect());
 
+/// What `def`'s point is, the same on every station.
+fn describe(def: &Def) -> PointDescription {
+    let (kind, unit, alarm) = match def.meaning {
+        Quantity => (
+            PointKind::Numeric,
+            def.code.unit().map(|u| u.symbol().into()),
+            None,
+        ),
+        Meaning::Text => (PointKind::Text, None, None),
+        OnOff => (enum_states([(0, "off"), (1, "on")]), None, None),
+        Meaning::ToolError => (
+            enum_states(ToolError::ALL.iter().map(|e| (e.code(), e.words()))),
+            None,
+            Some(AlarmRule::NotEqual(f64::from(ToolError::Ok.code()))),
+        ),
+        Meaning::StationError => (
+            enum_states(StationError::ALL.iter().map(|e| (e.code(), e.words()))),
+            None,
+            Some(AlarmRule::NotEqual(f64::from(StationError::Ok.code()))),
+        ),
+        Meaning::Tool => (
+            enum_states(Tool::ALL.iter().map(|t| (t.number(), t.words()))),
+            None,
+            None,
+        ),
+        Meaning::WorkMode => (
+            enum_states([(0, "manual (profiles off)"), (1, "profile (profiles on)")]),
+            None,
+            None,
+        ),
+    };
+    PointDescription {
+        name: def.title.into(),
+        unit,
+        kind,
+        group: def.group.into(),
+        writable: def.range.as_ref().map(|r| WriteRange {
+            min: f64::from(*r.start()),
+            max: f64::from(*r.end()),
+            integer: true,
+            step: None,
+        }),
+        alarm,
+    }
+}
+
+impl JbcDriver {
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
         // A poll reads about ten codes: a list searched in place beats hashing each code.
         let mut answers: Vec<(Code, Answer)> = Vec::with_capacity(POINTS.len());
         let mut readings = Vec::with_capacity(POINTS.len());
-        for def in POINTS.iter().filter(|d| d.group == group) {
+        for (index, def) in POINTS.iter().enumerate().filter(|(_, d)| d.group == group) {
             if !answers.iter().any(|(code, _)| *code == def.code) {
                 let answer = self.read_code(def.code, group).await?;
                 answers.push((def.code, answer));
@@ -535,8 +551,7 @@ impl JbcDriver {
                 Answer::Bad(e) => Err(e.clone()),
             };
             readings.push(Reading {
-                point: PointId::new(&self.device, def.name)
-                    .expect("point names in POINTS follow the id rules"),
+                point: self.ids[index].clone(),
                 value,
             });
         }
@@ -641,7 +656,11 @@ impl JbcDriver {
 
 impl Driver for JbcDriver {
     fn points(&self) -> Vec<PointSpec> {
-        POINTS.iter().map(|d| self.spec(d)).collect()
+        self.ids
+            .iter()
+            .zip(DESCRIPTIONS.iter())
+            .map(|(id, description)| PointSpec::new(id.clone(), Arc::clone(description)))
+            .collect()
     }
 
     fn groups(&self) -> Vec<PollGroup> {
@@ -707,7 +726,7 @@ mod tests {
             retries: Some(1),
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         }
     }
@@ -868,6 +887,23 @@ mod tests {
             Ok(Value::Number(300.0))
         );
         assert_eq!(rig.requests.load(Ordering::SeqCst) - before, codes + 1);
+    }
+
+    #[test]
+    fn every_station_shares_one_description_per_point_and_has_its_own_ids() {
+        let one = JbcDriver::new(&config(Some(1))).unwrap().points();
+        let two = JbcDriver::new(&DriverConfig {
+            id: DeviceId::new("jbc2").unwrap(),
+            ..config(Some(2))
+        })
+        .unwrap()
+        .points();
+        assert_eq!(one.len(), POINTS.len());
+        for (a, b) in one.iter().zip(&two) {
+            assert!(Arc::ptr_eq(&a.description, &b.description), "{}", a.id);
+            assert_eq!(a.id.name(), b.id.name());
+            assert_eq!((a.id.device(), b.id.device()), ("jbc1", "jbc2"));
+        }
     }
 
     #[test]

@@ -389,7 +389,7 @@ pub struct DriverConfig {
     /// (their client frames Modbus TCP).
     pub endpoint: Option<link::Endpoint>,
     /// Generic Modbus: the registers the config names (empty for other protocols).
-    pub registers: Vec<modbus::RegisterConfig>,
+    pub registers: modbus::RegisterList,
     /// Generic Modbus: how reads are planned and paced (defaults for other protocols).
     pub modbus: modbus::ModbusOptions,
 }

@@ -52,6 +52,7 @@
 //! line is free for other devices meanwhile) and `delay_after_connect` before its first
 //! request after the scheduler (re)attached the line, which it does after every (re)open.
 
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use jbus::client::{Client, ClientConfig, ClientError, Framing};
@@ -66,7 +67,9 @@ use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
     enum_states,
 };
-use crate::point::{Deadband, DeviceId, PointId, PointKind, PointSpec, Value, WriteRange};
+use crate::point::{
+    Deadband, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, WriteRange,
+};
 
 /// A Modbus line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
@@ -317,13 +320,76 @@ pub fn plan_items(registers: &[RegisterConfig]) -> Vec<Item> {
         .collect()
 }
 
+/// A Modbus device's registers, shared by every device configured with the same list (one
+/// `registers_csv` file is parsed once for all its devices), with their points'
+/// descriptions, built on first use, once for all of them. Reads as a slice of registers.
+#[derive(Debug, Clone, Default)]
+pub struct RegisterList(Arc<SharedRegisters>);
+
+#[derive(Debug, Default)]
+struct SharedRegisters {
+    registers: Vec<RegisterConfig>,
+    descriptions: OnceLock<Vec<Arc<PointDescription>>>,
+}
+
+impl RegisterList {
+    /// The description of each register's point, in the registers' order.
+    fn descriptions(&self) -> &[Arc<PointDescription>] {
+        self.0.descriptions.get_or_init(|| {
+            self.0
+                .registers
+                .iter()
+                .map(|r| {
+                    Arc::new(PointDescription {
+                        name: r.title.clone().into(),
+                        unit: r.unit.clone().map(Into::into),
+                        kind: r.kind(),
+                        group: LIVE.into(),
+                        writable: r.writable.map(|range| r.write_range(range)),
+                        alarm: None,
+                    })
+                })
+                .collect()
+        })
+    }
+}
+
+impl From<Vec<RegisterConfig>> for RegisterList {
+    fn from(registers: Vec<RegisterConfig>) -> Self {
+        Self(Arc::new(SharedRegisters {
+            registers,
+            descriptions: OnceLock::new(),
+        }))
+    }
+}
+
+impl FromIterator<RegisterConfig> for RegisterList {
+    fn from_iter<I: IntoIterator<Item = RegisterConfig>>(registers: I) -> Self {
+        Self::from(registers.into_iter().collect::<Vec<_>>())
+    }
+}
+
+impl std::ops::Deref for RegisterList {
+    type Target = [RegisterConfig];
+
+    fn deref(&self) -> &[RegisterConfig] {
+        &self.0.registers
+    }
+}
+
+impl PartialEq for RegisterList {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0) || self.0.registers == other.0.registers
+    }
+}
+
 /// A Modbus device with configured registers.
 pub struct ModbusDriver {
     device: DeviceId,
     unit: UnitId,
     config: ClientConfig,
     client: Option<Client>,
-    registers: Vec<RegisterConfig>,
+    registers: RegisterList,
     /// The reads, item `i` being register `i`; splits are kept across polls.
     plan: Plan,
     options: ModbusOptions,
@@ -351,7 +417,7 @@ impl ModbusDriver {
             .and_then(|a| u8::try_from(a).ok())
             .and_then(|a| UnitId::jbus(a).ok())
             .ok_or_else(|| "Modbus unit number out of range".to_owned())?;
-        for r in &config.registers {
+        for r in config.registers.iter() {
             PointId::new(&config.id, &r.name).map_err(|e| e.to_string())?;
         }
         let plan =
@@ -542,15 +608,8 @@ impl Driver for ModbusDriver {
     fn points(&self) -> Vec<PointSpec> {
         self.registers
             .iter()
-            .map(|r| PointSpec {
-                id: self.point_id(r),
-                name: r.title.clone().into(),
-                unit: r.unit.clone().map(Into::into),
-                kind: r.kind(),
-                group: LIVE.into(),
-                writable: r.writable.map(|range| r.write_range(range)),
-                alarm: None,
-            })
+            .zip(self.registers.descriptions())
+            .map(|(r, description)| PointSpec::new(self.point_id(r), Arc::clone(description)))
             .collect()
     }
 
@@ -681,7 +740,7 @@ mod tests {
             retries: Some(1),
             event_port: None,
             endpoint: None,
-            registers,
+            registers: registers.into(),
             modbus: options,
         })
         .unwrap();

@@ -28,6 +28,7 @@
 //! Nothing is writable: C5 start and reset are commands, not values, and the gateway writes
 //! values only.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use link::{Endpoint, SharedLine};
@@ -45,7 +46,8 @@ use super::{
 };
 use crate::event::EventKind;
 use crate::point::{
-    AlarmRule, DeviceId, EnumState, PointId, PointKind, PointSpec, Value, ValueError,
+    AlarmRule, DeviceId, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
+    ValueError,
 };
 use crate::time::Timestamp;
 
@@ -164,15 +166,17 @@ impl PanasonicDriver {
         kind: PointKind,
         group: &'static str,
     ) -> PointSpec {
-        PointSpec {
-            id: self.id(name),
-            name: title.into(),
-            unit: unit.map(Into::into),
-            kind,
-            group: group.into(),
-            writable: None,
-            alarm: None,
-        }
+        PointSpec::new(
+            self.id(name),
+            PointDescription {
+                name: title.into(),
+                unit: unit.map(Into::into),
+                kind,
+                group: group.into(),
+                writable: None,
+                alarm: None,
+            },
+        )
     }
 
     /// The client, connecting on first use.
@@ -354,7 +358,7 @@ impl Driver for PanasonicDriver {
             },
             LIVE,
         );
-        state.alarm = Some(AlarmRule::Above(1.5));
+        Arc::make_mut(&mut state.description).alarm = Some(AlarmRule::Above(1.5));
         let mut points = vec![
             state,
             self.spec(
@@ -467,7 +471,7 @@ mod tests {
                 line: None,
                 framing: link::TcpFraming::Raw,
             }),
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         })
         .unwrap();
@@ -534,7 +538,7 @@ mod tests {
             retries: None,
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         })
         .unwrap();
@@ -613,7 +617,7 @@ mod tests {
                 line: None,
                 framing: link::TcpFraming::Raw,
             }),
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         })
         .unwrap();

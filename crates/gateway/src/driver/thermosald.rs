@@ -68,7 +68,8 @@ use super::{
     enum_states,
 };
 use crate::point::{
-    AlarmRule, DeviceId, PointId, PointKind, PointSpec, Value, ValueError, WriteRange,
+    AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
+    WriteRange,
 };
 
 /// A Thermosald line when the URL says nothing: 9600 baud, 8N1 (the spec's).
@@ -318,20 +319,22 @@ impl ThermosaldDriver {
             Meaning::Switch => (enum_states([(0, "off"), (1, "on")]), None, None),
         };
         let step = item.scale().step();
-        PointSpec {
-            id: self.point_id(def),
-            name: item.name().into(),
-            unit,
-            kind,
-            group: def.group().into(),
-            writable: (def.writable && item.writable()).then(|| WriteRange {
-                min: item.min(),
-                max: item.max(),
-                integer: step.fract() == 0.0,
-                step: (step != 1.0).then_some(step),
-            }),
-            alarm,
-        }
+        PointSpec::new(
+            self.point_id(def),
+            PointDescription {
+                name: item.name().into(),
+                unit,
+                kind,
+                group: def.group().into(),
+                writable: (def.writable && item.writable()).then(|| WriteRange {
+                    min: item.min(),
+                    max: item.max(),
+                    integer: step.fract() == 0.0,
+                    step: (step != 1.0).then_some(step),
+                }),
+                alarm,
+            },
+        )
     }
 
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
@@ -680,7 +683,7 @@ mod tests {
             retries: Some(1),
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         }
     }

@@ -44,7 +44,7 @@ fn device(id: &str, protocol: Protocol, address: i64) -> DeviceConfig {
             retries: None,
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         },
         name: format!("Device {id}"),

@@ -26,6 +26,7 @@
 use std::collections::BTreeMap;
 
 use rusqlite::{Connection, OptionalExtension, Transaction, params};
+use smallvec::SmallVec;
 
 use crate::point::{Quality, Value};
 
@@ -39,9 +40,13 @@ const CLOSE_AFTER_MS: i64 = MINUTE_MS;
 /// The exact sum of finite numbers, as non-overlapping partial sums in increasing
 /// magnitude (Shewchuk's algorithm, as in Python's `math.fsum`); [`ExactSum::total`] is the
 /// correctly rounded sum. Infinities (and their NaN) are summed apart and win.
+///
+/// The partials are held inline up to two (a minute's sum rarely needs more): an open
+/// minute of every point is held in memory, and a heap block each was a tenth of the
+/// gateway's heap with 100,000 points.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ExactSum {
-    partials: Vec<f64>,
+    partials: SmallVec<[f64; 2]>,
     /// The plain sum of non-finite inputs (and of an overflow); 0 when there were none.
     special: f64,
 }

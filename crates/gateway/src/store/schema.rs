@@ -104,12 +104,72 @@ pub(super) fn configure(conn: &Connection) -> rusqlite::Result<()> {
     Ok(())
 }
 
-/// The writer's page cache, in KiB (SQLite's default is 2 MiB): the hot leaf of every
-/// point in `samples_by_point_time` for a few thousand points fits, so a batch does not
-/// read back the pages the last one wrote. In the `store_ingest` bench (1,000 points)
-/// 4 MiB cost 1.7× the CPU per row of 16 MiB, 64 MiB gained nothing. The pages are
-/// allocated as they are used: this is up to 16 MiB of the gateway's resident memory.
-pub(super) const WRITER_CACHE_KIB: i64 = 16 * 1024;
+/// The writer's largest page cache, in KiB, while it commits large batches (a backlog,
+/// the `store_ingest` bench): the hot leaf of every point in `samples_by_point_time` for
+/// a few thousand points fits, so a batch does not read back the pages the last one wrote.
+/// In the `store_ingest` bench (1,000 points, 20,000-row batches) 4 MiB cost 1.7× the CPU
+/// per row of 16 MiB, 64 MiB gained nothing.
+pub(super) const WRITER_CACHE_MAX_KIB: i64 = 16 * 1024;
+
+/// The writer's page cache for the trickle of a running cell (a few hundred rows a batch),
+/// in KiB: SQLite's default. Pages missed are read back from the OS's file cache, not
+/// the disk; 16 MiB here was 12 MiB of the gateway's resident memory at 1,000 stations.
+pub(super) const WRITER_CACHE_MIN_KIB: i64 = 2 * 1024;
+
+/// Cache per row of the batch being committed, in KiB: a 20,000-row batch gets the
+/// largest cache, a 2,000-row one the smallest.
+const WRITER_CACHE_KIB_PER_ROW: i64 = 1;
+
+/// Batches in a row that want a smaller cache before the writer lowers it: the last,
+/// short batch of a backlog does not give back the cache the next one needs.
+const WRITER_CACHE_LOWER_AFTER: u32 = 10;
+
+/// The writer's page-cache size, following the size of its batches (sans IO: it says
+/// what `PRAGMA cache_size` should become; the writer applies it). It grows at once for
+/// a large batch and shrinks after [`WRITER_CACHE_LOWER_AFTER`] smaller ones; SQLite
+/// frees the pages above a lowered size.
+#[derive(Debug)]
+pub(super) struct WriterCache {
+    kib: i64,
+    smaller: u32,
+}
+
+impl WriterCache {
+    /// The cache a new connection starts with ([`configure_writer`] sets it).
+    pub(super) fn new() -> Self {
+        Self {
+            kib: WRITER_CACHE_MIN_KIB,
+            smaller: 0,
+        }
+    }
+
+    /// The size in force, in KiB.
+    pub(super) fn kib(&self) -> i64 {
+        self.kib
+    }
+
+    /// Notes a batch of `rows` about to be committed; `Some(kib)` when the cache size must
+    /// change to it before the batch.
+    pub(super) fn for_batch(&mut self, rows: usize) -> Option<i64> {
+        let rows = i64::try_from(rows).unwrap_or(i64::MAX);
+        let wanted = rows
+            .saturating_mul(WRITER_CACHE_KIB_PER_ROW)
+            .clamp(WRITER_CACHE_MIN_KIB, WRITER_CACHE_MAX_KIB);
+        if wanted >= self.kib {
+            self.smaller = 0;
+            let grow = wanted > self.kib;
+            self.kib = wanted;
+            return grow.then_some(wanted);
+        }
+        self.smaller += 1;
+        if self.smaller < WRITER_CACHE_LOWER_AFTER {
+            return None;
+        }
+        self.smaller = 0;
+        self.kib = wanted;
+        Some(wanted)
+    }
+}
 
 /// Pages the WAL may hold before the writer copies them back into the database file.
 /// SQLite's 1000 (4 MB) checkpointed (with its own fsync) every few batches under load,
@@ -117,10 +177,11 @@ pub(super) const WRITER_CACHE_KIB: i64 = 16 * 1024;
 /// ten times as many commits (1.3–1.6× the rows/s in the `store_ingest` bench).
 pub(super) const WAL_CHECKPOINT_PAGES: i64 = 10_000;
 
-/// The writer's connection: [`configure`], plus its cache and checkpoint size.
+/// The writer's connection: [`configure`], plus its checkpoint size and its smallest
+/// cache ([`WriterCache`] resizes it per batch).
 pub(super) fn configure_writer(conn: &Connection) -> rusqlite::Result<()> {
     configure(conn)?;
-    conn.pragma_update(None, "cache_size", -WRITER_CACHE_KIB)?;
+    conn.pragma_update(None, "cache_size", -WRITER_CACHE_MIN_KIB)?;
     conn.pragma_update(None, "wal_autocheckpoint", WAL_CHECKPOINT_PAGES)?;
     Ok(())
 }

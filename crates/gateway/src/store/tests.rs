@@ -1167,3 +1167,45 @@ async fn a_file_of_the_previous_schema_opens_answers_and_rolls_up_what_comes_aft
     assert!(rollup_rows(dir.path()) >= 8);
     assert_rollups_agree(&h, dir.path(), "a.temp", 15 * 60_000);
 }
+
+#[test]
+fn the_writer_cache_stays_small_for_a_trickle_of_rows() {
+    let mut cache = WriterCache::new();
+    assert_eq!(cache.kib(), WRITER_CACHE_MIN_KIB);
+    for _ in 0..100 {
+        assert_eq!(
+            cache.for_batch(700),
+            None,
+            "a trickle leaves the cache alone"
+        );
+    }
+    assert_eq!(cache.kib(), WRITER_CACHE_MIN_KIB);
+}
+
+#[test]
+fn the_writer_cache_grows_at_once_for_a_large_batch_up_to_its_largest() {
+    let mut cache = WriterCache::new();
+    assert_eq!(cache.for_batch(8_000), Some(8_000));
+    assert_eq!(cache.for_batch(20_000), Some(WRITER_CACHE_MAX_KIB));
+    assert_eq!(cache.for_batch(1_000_000), None, "already at its largest");
+    assert_eq!(cache.kib(), WRITER_CACHE_MAX_KIB);
+}
+
+#[test]
+fn the_writer_cache_shrinks_only_after_ten_smaller_batches_in_a_row() {
+    let mut cache = WriterCache::new();
+    cache.for_batch(20_000);
+    for _ in 0..9 {
+        assert_eq!(cache.for_batch(500), None);
+    }
+    assert_eq!(
+        cache.for_batch(20_000),
+        None,
+        "a large batch again: kept, and the count starts over"
+    );
+    for _ in 0..9 {
+        assert_eq!(cache.for_batch(500), None);
+    }
+    assert_eq!(cache.for_batch(500), Some(WRITER_CACHE_MIN_KIB));
+    assert_eq!(cache.kib(), WRITER_CACHE_MIN_KIB);
+}

@@ -81,6 +81,7 @@ pub(super) fn run_writer(
                 prunes: VecDeque::new(),
                 inbox,
                 incoming: Vec::new(),
+                cache: WriterCache::new(),
             };
             if let Some((aside, fault)) = open.moved_aside {
                 writer.push(Row::Event(Event::of_gateway(
@@ -152,7 +153,7 @@ struct Writer {
     rollups: OpenMinutes,
     path: PathBuf,
     /// Point ids known to be committed (a cache; `point_id` asks the table otherwise).
-    points: HashMap<String, i64>,
+    points: HashMap<PointId, i64>,
     options: StoreOptions,
     stats: Arc<StoreStats>,
     shared: Arc<Shared>,
@@ -165,6 +166,8 @@ struct Writer {
     inbox: Arc<Inbox>,
     /// The inbox's samples being pushed; empty between two takes.
     incoming: Vec<Sample>,
+    /// The page cache's size, following the batches'.
+    cache: WriterCache,
 }
 
 impl Writer {
@@ -396,6 +399,17 @@ impl Writer {
     fn commit(&mut self) -> Result<(), String> {
         if self.pending.is_empty() {
             return Ok(());
+        }
+        let cache_before = self.cache.kib();
+        if let Some(kib) = self.cache.for_batch(self.pending.len()) {
+            // A cache that could not be resized only costs speed or memory: go on.
+            if let Err(e) = self.conn.pragma_update(None, "cache_size", -kib) {
+                tracing::warn!(
+                    "history {}: the page cache stays at {} KiB, resizing it to {kib} KiB failed: {e}",
+                    self.path.display(),
+                    cache_before
+                );
+            }
         }
         let mut rows = std::mem::take(&mut self.pending);
         let result = write_rows(
@@ -686,7 +700,7 @@ impl PruneJob {
 /// samples, events and audit rows. The rollups' state changes only if the commit works.
 fn write_rows(
     conn: &mut Connection,
-    points: &mut HashMap<String, i64>,
+    points: &mut HashMap<PointId, i64>,
     rollups: &mut OpenMinutes,
     rows: &[Row],
 ) -> rusqlite::Result<[u64; 3]> {
@@ -697,7 +711,7 @@ fn write_rows(
     for row in rows {
         match row {
             Row::Sample(s) => {
-                let id = point_id(&tx, points, s.point.as_str())?;
+                let id = point_id(&tx, points, &s.point)?;
                 staged.sample(
                     rollups,
                     id,
@@ -768,12 +782,13 @@ fn insert_samples(tx: &Transaction<'_>, samples: &[(i64, &Sample)]) -> rusqlite:
     Ok(())
 }
 
-/// The id of point `name`: cached, else from the table, else a new row.
+/// The id of `point`: cached (sharing the id's text), else from the table, else a new row.
 fn point_id(
     tx: &Transaction<'_>,
-    points: &mut HashMap<String, i64>,
-    name: &str,
+    points: &mut HashMap<PointId, i64>,
+    point: &PointId,
 ) -> rusqlite::Result<i64> {
+    let name = point.as_str();
     if let Some(id) = points.get(name) {
         return Ok(*id);
     }
@@ -789,6 +804,6 @@ fn point_id(
             tx.last_insert_rowid()
         }
     };
-    points.insert(name.to_owned(), id);
+    points.insert(point.clone(), id);
     Ok(id)
 }

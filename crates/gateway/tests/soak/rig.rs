@@ -538,7 +538,7 @@ fn device(id: &str, protocol: Protocol, address: i64, options: &SoakOptions) -> 
             retries: None,
             event_port: None,
             endpoint: None,
-            registers: Vec::new(),
+            registers: Default::default(),
             modbus: Default::default(),
         },
         name: id.to_owned(),
