@@ -102,7 +102,7 @@ impl Timestamp {
             return None;
         }
         let (days, ms_of_day) = (self.0.div_euclid(86_400_000), self.0.rem_euclid(86_400_000));
-        let (year, month, day) = civil_from_days(days);
+        let (year, month, day) = wire::calendar::civil_date(days);
         let mut text = *b"0000-00-00T00:00:00.000Z";
         let mut digits = |at: usize, width: usize, mut n: i64| {
             for i in (at..at + width).rev() {
@@ -111,29 +111,14 @@ impl Timestamp {
             }
         };
         digits(0, 4, year);
-        digits(5, 2, month);
-        digits(8, 2, day);
+        digits(5, 2, i64::from(month));
+        digits(8, 2, i64::from(day));
         digits(11, 2, ms_of_day / 3_600_000);
         digits(14, 2, ms_of_day / 60_000 % 60);
         digits(17, 2, ms_of_day / 1000 % 60);
         digits(20, 3, ms_of_day % 1000);
         Some(text)
     }
-}
-
-/// The proleptic Gregorian date (year, month, day) `days` after 1970-01-01 (Howard
-/// Hinnant's `civil_from_days`).
-fn civil_from_days(days: i64) -> (i64, i64, i64) {
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    (year, month, day)
 }
 
 impl fmt::Display for Timestamp {

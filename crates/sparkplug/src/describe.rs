@@ -424,9 +424,10 @@ pub fn quality_word(quality: Quality) -> &'static str {
 
 /// A Sparkplug timestamp as ISO 8601 UTC with milliseconds: `2025-06-01T12:00:00.250Z`.
 pub fn iso_time(ms: u64) -> String {
-    let days = ms / 86_400_000;
+    // At most 2^64 ms / 86,400,000 ≈ 2.1e11 days: always an i64.
+    let days = i64::try_from(ms / 86_400_000).unwrap_or(i64::MAX / 2);
     let in_day = ms % 86_400_000;
-    let (year, month, day) = civil_from_days(days);
+    let (year, month, day) = wire::calendar::civil_date(days);
     format!(
         "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{:03}Z",
         in_day / 3_600_000,
@@ -434,20 +435,6 @@ pub fn iso_time(ms: u64) -> String {
         in_day / 1000 % 60,
         in_day % 1000
     )
-}
-
-/// Year, month, day of `days` after 1970-01-01 (Howard Hinnant's `civil_from_days`).
-fn civil_from_days(days: u64) -> (u64, u64, u64) {
-    let z = days + 719_468;
-    let era = z / 146_097;
-    let doe = z % 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + u64::from(month <= 2);
-    (year, month, day)
 }
 
 fn hex(bytes: &[u8]) -> String {

@@ -7,6 +7,7 @@
 //!   `% … LF`).
 //! - [`ascii`]: fixed-width ASCII numbers as the serial protocols carry them.
 //! - [`backoff`]: waits that double after each failure, up to a cap.
+//! - [`calendar`]: the calendar date of a day count.
 //! - [`exchange`]: one request/response exchange with retries as a sans-IO state machine,
 //!   judged by a protocol's [`exchange::Matcher`]; `link` drives it on a line.
 //! - [`failure`]: the kinds of failure every client error reports ([`FailureKind`]).
@@ -19,6 +20,7 @@
 
 pub mod ascii;
 pub mod backoff;
+pub mod calendar;
 pub mod checksum;
 pub mod codec;
 pub mod device;

@@ -476,7 +476,6 @@ impl JbcDriver {
             confirmed: HashMap::new(),
         })
     }
-
 }
 
 /// The description of every point in [`POINTS`], built once for every station.

@@ -2,6 +2,8 @@
 
 use std::time::{SystemTime, UNIX_EPOCH};
 
+use wire::calendar::civil_date;
+
 const SECONDS_PER_DAY: i64 = 86_400;
 
 /// Milliseconds since the epoch (negative before it; saturating far away).
@@ -39,26 +41,6 @@ pub fn create_partition_sql(day: i64) -> String {
     )
 }
 
-/// Year, month (1–12) and day (1–31) of a day counted from 1970-01-01, in the proleptic
-/// Gregorian calendar (Howard Hinnant's `civil_from_days`).
-pub fn civil_date(day: i64) -> (i64, u32, u32) {
-    let z = day + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097); // [0, 146096]
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365; // [0, 399]
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100); // [0, 365]
-    let mp = (5 * doy + 2) / 153; // [0, 11], March first
-    let d = doy - (153 * mp + 2) / 5 + 1; // [1, 31]
-    let m = if mp < 10 { mp + 3 } else { mp - 9 }; // [1, 12]
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    // Both are in range by construction.
-    (
-        y,
-        u32::try_from(m).unwrap_or(1),
-        u32::try_from(d).unwrap_or(1),
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -78,15 +60,6 @@ mod tests {
         assert_eq!(day_of(at(86_399_999)), 0);
         assert_eq!(day_of(at(86_400_000)), 1);
         assert_eq!(day_of(at(-1)), -1);
-    }
-
-    #[test]
-    fn civil_dates_match_the_calendar_across_leap_days_and_the_epoch() {
-        assert_eq!(civil_date(0), (1970, 1, 1));
-        assert_eq!(civil_date(-1), (1969, 12, 31));
-        assert_eq!(civil_date(19_782), (2024, 2, 29));
-        assert_eq!(civil_date(10_957), (2000, 1, 1));
-        assert_eq!(civil_date(47_846), (2100, 12, 31));
     }
 
     #[test]
