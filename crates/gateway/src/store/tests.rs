@@ -356,7 +356,7 @@ async fn a_full_disk_is_retried_with_a_doubling_wait_instead_of_a_busy_loop() {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
     let h = store.handle();
-    h.fill_disk(true);
+    h.fill_disk(true).await;
     fill(&h, "a.temp", 0, 5_000);
     let err = h.flush().await.unwrap_err().to_string();
     assert!(err.contains("full"), "{err}");
@@ -446,7 +446,7 @@ async fn rows_kept_while_the_disk_is_full_are_committed_when_it_has_room_and_an_
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
     let h = store.handle();
     assert_eq!(h.health(Timestamp::now()).history, HistoryState::Ok);
-    h.fill_disk(true);
+    h.fill_disk(true).await;
     fill(&h, "a.temp", 0, 3_000);
     h.audit(audit(1, "while full"));
     assert!(h.flush().await.is_err());
@@ -460,7 +460,7 @@ async fn rows_kept_while_the_disk_is_full_are_committed_when_it_has_room_and_an_
     );
     assert!(health.pending_rows >= 3_001, "{health:?}");
 
-    h.fill_disk(false);
+    h.fill_disk(false).await;
     flush_until_committed(&h).await;
     let got = h
         .history(&point("a.temp"), Timestamp(0), Timestamp(99_999), None)
@@ -491,7 +491,7 @@ async fn back_pressure_drops_the_oldest_samples_and_never_an_audit_row_or_an_eve
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
     let h = store.handle();
-    h.fill_disk(true);
+    h.fill_disk(true).await;
     h.audit(audit(0, "first"));
     let over = 1_000;
     let total = i64::try_from(MAX_PENDING_ROWS).unwrap() + over;
@@ -510,7 +510,7 @@ async fn back_pressure_drops_the_oldest_samples_and_never_an_audit_row_or_an_eve
     }
     h.audit(audit(total, "last"));
     assert!(h.flush().await.is_err());
-    h.fill_disk(false);
+    h.fill_disk(false).await;
     flush_until_committed(&h).await;
     assert_eq!(h.audit_log(None, 10).unwrap().len(), 2);
     assert_eq!(events_of(&h, EventKind::DeviceDown).len(), 11);
@@ -818,7 +818,7 @@ async fn a_full_disk_leaves_live_values_served_and_healthz_reporting_the_fault()
     tokio::time::sleep(Duration::from_secs(2)).await;
     let h = rig.cell.store().clone();
     h.flush().await.unwrap();
-    h.fill_disk(true);
+    h.fill_disk(true).await;
     fill(&h, "pad.rows", Timestamp::now().0, 5_000);
     assert!(h.flush().await.is_err(), "the disk is full");
 
@@ -845,7 +845,7 @@ async fn a_full_disk_leaves_live_values_served_and_healthz_reporting_the_fault()
     let (status, _) = get("/api/history?point=jbc1.air_temperature").await;
     assert_eq!(status, StatusCode::OK);
 
-    h.fill_disk(false);
+    h.fill_disk(false).await;
     flush_until_committed(&h).await;
     assert_eq!(events_of(&h, EventKind::HistoryRecovered).len(), 1);
     let (_, health) = get("/healthz").await;

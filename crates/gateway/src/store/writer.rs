@@ -26,6 +26,10 @@ const FIRST_PRUNE_AFTER: Duration = Duration::from_secs(60);
 /// also the most samples the inbox holds before it wakes the writer.
 pub(super) const DRAIN_MAX: usize = 10_000;
 
+/// Rounds of taking the inbox before the writer looks at its channel again, when samples
+/// keep arriving (see `Writer::take_inbox`).
+const TAKE_ROUNDS: usize = 4;
+
 /// Pages returned to the file system per `incremental_vacuum` step (4 MB of 4 KiB pages).
 const VACUUM_PAGES: u32 = 1024;
 
@@ -181,8 +185,8 @@ impl Writer {
             // What came while the writer worked; with nothing, it sleeps, and is woken by
             // the next sample only if no batch is open (an open batch is committed at its
             // time and takes what came meanwhile).
-            self.take_inbox(true);
-            let wait = if self.prunes.is_empty() {
+            let armed = self.take_inbox(true);
+            let wait = if self.prunes.is_empty() && armed {
                 self.wake_in(Instant::now())
             } else {
                 Duration::ZERO
@@ -241,13 +245,15 @@ impl Writer {
 
     /// Pushes the samples waiting in the inbox. With `arm` (the writer is about to sleep),
     /// takes until the inbox is found empty and then arms it: the next sample wakes the
-    /// writer when no batch is open.
-    fn take_inbox(&mut self, arm: bool) {
-        loop {
+    /// writer when no batch is open. Returns whether it armed: samples arriving faster
+    /// than it takes them stop it after a few rounds, so commands (an audit row, a flush)
+    /// are never starved; the writer then looks at its channel without sleeping.
+    fn take_inbox(&mut self, arm: bool) -> bool {
+        for _ in 0..TAKE_ROUNDS {
             let idle = self.oldest.is_none();
             self.inbox.take(&mut self.incoming, arm.then_some(idle));
             if self.incoming.is_empty() {
-                return;
+                return arm;
             }
             let mut incoming = std::mem::take(&mut self.incoming);
             for sample in incoming.drain(..) {
@@ -255,9 +261,10 @@ impl Writer {
             }
             self.incoming = incoming;
             if !arm {
-                return;
+                return false;
             }
         }
+        false
     }
 
     fn handle(&mut self, command: Command) -> ControlFlow<()> {
