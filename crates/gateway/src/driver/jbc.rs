@@ -28,7 +28,6 @@
 //! - The live measurements change between two reads and are only range-checked: the
 //!   README states the residual risk.
 
-use std::collections::HashMap;
 use std::ops::RangeInclusive;
 use std::sync::{Arc, LazyLock};
 use std::time::Duration;
@@ -436,7 +435,46 @@ pub struct JbcDriver {
     ids: Box<[PointId]>,
     /// The last confirmed value of each code that is confirmed (see the module doc); the
     /// limit codes among them check set points before the wire.
-    confirmed: HashMap<Code, jbc::code::Value>,
+    confirmed: Confirmed,
+}
+
+/// The last confirmed value of each code: a few codes, so a short list searched in
+/// order, made as long as the codes that can be confirmed (a `HashMap` each, or a list
+/// grown by doubling, was a kilobyte per station).
+#[derive(Debug)]
+struct Confirmed(Vec<(Code, jbc::code::Value)>);
+
+/// How many codes can be confirmed: those of a point confirmed by a second read or
+/// written.
+static CONFIRMABLE_CODES: LazyLock<usize> = LazyLock::new(|| {
+    let mut codes: Vec<Code> = Vec::new();
+    for d in POINTS.iter().filter(|d| d.confirmed() || d.range.is_some()) {
+        if !codes.contains(&d.code) {
+            codes.push(d.code);
+        }
+    }
+    codes.len()
+});
+
+impl Default for Confirmed {
+    fn default() -> Self {
+        Self(Vec::with_capacity(*CONFIRMABLE_CODES))
+    }
+}
+
+impl Confirmed {
+    /// The confirmed value of `code`, if there is one.
+    fn get(&self, code: Code) -> Option<&jbc::code::Value> {
+        self.0.iter().find(|(c, _)| *c == code).map(|(_, v)| v)
+    }
+
+    /// Notes `value` as the confirmed value of `code`.
+    fn insert(&mut self, code: Code, value: jbc::code::Value) {
+        match self.0.iter_mut().find(|(c, _)| *c == code) {
+            Some((_, v)) => *v = value,
+            None => self.0.push((code, value)),
+        }
+    }
 }
 
 impl JbcDriver {
@@ -473,7 +511,7 @@ impl JbcDriver {
                 retries: config.retries.unwrap_or(defaults.retries),
             },
             client: None,
-            confirmed: HashMap::new(),
+            confirmed: Confirmed::default(),
         })
     }
 }
@@ -559,7 +597,7 @@ impl JbcDriver {
 
     /// The confirmed number of `code`, if there is one.
     fn confirmed_number(&self, code: Code) -> Option<i32> {
-        match self.confirmed.get(&code)? {
+        match self.confirmed.get(code)? {
             jbc::code::Value::Number(n) => Some(*n),
             jbc::code::Value::Text(_) => None,
         }
@@ -585,7 +623,7 @@ impl JbcDriver {
             return Ok(Answer::Bad(error));
         }
         let value = first.value();
-        if !defs().any(Def::confirmed) || self.confirmed.get(&code) == Some(&value) {
+        if !defs().any(Def::confirmed) || self.confirmed.get(code) == Some(&value) {
             return Ok(Answer::Good(first));
         }
         let second = client.read(code).await;
@@ -600,7 +638,7 @@ impl JbcDriver {
             Err(e) => return Err(DeviceError::of(&e)),
         };
         tracing::warn!(device = %self.device, %code, "two reads disagree, not recorded: {why}");
-        if self.confirmed.contains_key(&code) {
+        if self.confirmed.get(code).is_some() {
             Ok(Answer::Unconfirmed)
         } else {
             Ok(Answer::Bad(DeviceError::new(
@@ -1011,6 +1049,23 @@ mod tests {
             .await
             .unwrap_err();
         assert!(matches!(err, WriteError::Invalid(_)), "{err}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_station_polled_in_every_group_confirms_its_codes_in_the_list_made_for_them() {
+        let (mut driver, _model) = rig(StationConfig::default(), Some(1));
+        let made = driver.confirmed.0.capacity();
+        for group in driver.groups() {
+            driver.poll(&group.name).await.unwrap();
+        }
+        let spec = driver
+            .points()
+            .into_iter()
+            .find(|p| p.id.name() == "air_temperature_setpoint")
+            .unwrap();
+        driver.write(&spec, &Value::Number(300.0)).await.unwrap();
+        assert_eq!(driver.confirmed.0.len(), *CONFIRMABLE_CODES);
+        assert_eq!(driver.confirmed.0.capacity(), made, "never grown");
     }
 
     #[tokio::test(start_paused = true)]

@@ -52,7 +52,7 @@
 //! line is free for other devices meanwhile) and `delay_after_connect` before its first
 //! request after the scheduler (re)attached the line, which it does after every (re)open.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use std::time::Duration;
 
 use jbus::client::{Client, ClientConfig, ClientError, Framing};
@@ -322,7 +322,8 @@ pub fn plan_items(registers: &[RegisterConfig]) -> Vec<Item> {
 
 /// A Modbus device's registers, shared by every device configured with the same list (one
 /// `registers_csv` file is parsed once for all its devices), with their points'
-/// descriptions, built on first use, once for all of them. Reads as a slice of registers.
+/// descriptions, built on first use, once for all of them, and their read plan (shared
+/// until a device asks for a split). Reads as a slice of registers.
 #[derive(Debug, Clone, Default)]
 pub struct RegisterList(Arc<SharedRegisters>);
 
@@ -330,9 +331,28 @@ pub struct RegisterList(Arc<SharedRegisters>);
 struct SharedRegisters {
     registers: Vec<RegisterConfig>,
     descriptions: OnceLock<Vec<Arc<PointDescription>>>,
+    /// The first plan made of the registers, with its options.
+    plan: Mutex<Option<(PlanOptions, Arc<Plan>)>>,
 }
 
 impl RegisterList {
+    /// The reads of the registers under `options`: the plan made for the first device of
+    /// the list when its options were the same (a device that splits a read gets its own
+    /// copy), else a new one.
+    fn plan(&self, options: PlanOptions) -> Result<Arc<Plan>, jbus::plan::PlanError> {
+        let mut shared = self.0.plan.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some((made_for, plan)) = &*shared
+            && *made_for == options
+        {
+            return Ok(Arc::clone(plan));
+        }
+        let plan = Arc::new(Plan::new(&plan_items(&self.0.registers), options)?);
+        if shared.is_none() {
+            *shared = Some((options, Arc::clone(&plan)));
+        }
+        Ok(plan)
+    }
+
     /// The description of each register's point, in the registers' order.
     fn descriptions(&self) -> &[Arc<PointDescription>] {
         self.0.descriptions.get_or_init(|| {
@@ -359,6 +379,7 @@ impl From<Vec<RegisterConfig>> for RegisterList {
         Self(Arc::new(SharedRegisters {
             registers,
             descriptions: OnceLock::new(),
+            plan: Mutex::new(None),
         }))
     }
 }
@@ -390,8 +411,9 @@ pub struct ModbusDriver {
     config: ClientConfig,
     client: Option<Client>,
     registers: RegisterList,
-    /// The reads, item `i` being register `i`; splits are kept across polls.
-    plan: Plan,
+    /// The reads, item `i` being register `i`; splits are kept across polls. Shared with
+    /// the devices of the same register list until a split.
+    plan: Arc<Plan>,
     options: ModbusOptions,
     /// When the last request ended, for `delay_between_requests`.
     last_request: Option<Instant>,
@@ -420,13 +442,12 @@ impl ModbusDriver {
         for r in config.registers.iter() {
             PointId::new(&config.id, &r.name).map_err(|e| e.to_string())?;
         }
-        let plan =
-            Plan::new(&plan_items(&config.registers), config.modbus.plan).map_err(
-                |e| match config.registers.get(plan_error_index(&e)) {
-                    Some(r) => format!("register {}: {e}", r.name),
-                    None => e.to_string(),
-                },
-            )?;
+        let plan = config.registers.plan(config.modbus.plan).map_err(|e| {
+            match config.registers.get(plan_error_index(&e)) {
+                Some(r) => format!("register {}: {e}", r.name),
+                None => e.to_string(),
+            }
+        })?;
         let defaults = ClientConfig::default();
         Ok(Self {
             device: config.id.clone(),
@@ -515,7 +536,7 @@ impl ModbusDriver {
                     if jbus::client::exception_code(&e)
                         == Some(ExceptionCode::ILLEGAL_DATA_ADDRESS) =>
                 {
-                    match self.plan.split(index) {
+                    match Arc::make_mut(&mut self.plan).split(index) {
                         Some(split @ Split::Into { .. }) => {
                             tracing::warn!(device = %self.device, "{split}");
                         }
@@ -726,7 +747,7 @@ mod tests {
 
     fn rig_with(
         map: &str,
-        registers: Vec<RegisterConfig>,
+        registers: impl Into<RegisterList>,
         options: ModbusOptions,
     ) -> (ModbusDriver, SharedModel<Slave>) {
         let slave = SharedModel::new(Slave::new(SlaveMap::parse(map).unwrap()));
@@ -833,6 +854,34 @@ mod tests {
         driver.poll(LIVE).await.unwrap();
         assert_eq!(driver.requests_per_poll(), Some(3), "the split is kept");
         drop(slave);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn devices_of_one_register_list_share_its_plan_until_one_splits_a_read() {
+        let list = RegisterList::from(registers());
+        let (mut first, _first) = rig_with(MAP, list.clone(), ModbusOptions::default());
+        let (second, _second) = rig_with(MAP, list.clone(), ModbusOptions::default());
+        assert!(Arc::ptr_eq(&first.plan, &second.plan));
+        // Holding 1-6 do not exist: the first device splits its merged read.
+        first.poll(LIVE).await.unwrap();
+        assert_eq!(spans(&first).len(), 3);
+        assert_eq!(
+            spans(&second),
+            vec![
+                (Table::HoldingRegisters, 0, 8),
+                (Table::InputRegisters, 100, 2),
+            ],
+            "the other device keeps the plan as made"
+        );
+        let alone = ModbusOptions {
+            plan: PlanOptions {
+                one_request_per_item: true,
+                ..PlanOptions::default()
+            },
+            ..ModbusOptions::default()
+        };
+        let (third, _third) = rig_with(MAP, list, alone);
+        assert_eq!(third.plan().reads().len(), 4, "other options, another plan");
     }
 
     #[tokio::test(start_paused = true)]
