@@ -199,7 +199,7 @@ impl Def {
     /// Whether a changed value is confirmed by a second read: all but the live
     /// measurements, which change between two reads.
     fn confirmed(&self) -> bool {
-        !(self.group == LIVE && self.meaning == Quantity && self.range.is_none())
+        !(self.meaning == Quantity && self.range.is_none() && self.group == LIVE)
     }
 }
 
@@ -520,6 +520,54 @@ impl JbcDriver {
 static DESCRIPTIONS: LazyLock<Vec<Arc<PointDescription>>> =
     LazyLock::new(|| POINTS.iter().map(|d| Arc::new(describe(d))).collect());
 
+/// How each group is read, worked out once for every station: its points and the codes
+/// they need, so a poll compares no group names and scans no list for a code's points.
+static PLANS: LazyLock<Vec<GroupPlan>> = LazyLock::new(|| {
+    let mut plans: Vec<GroupPlan> = Vec::new();
+    for (index, def) in POINTS.iter().enumerate() {
+        let at = match plans.iter().position(|p| p.group == def.group) {
+            Some(at) => at,
+            None => {
+                plans.push(GroupPlan {
+                    group: def.group,
+                    points: Vec::new(),
+                    reads: Vec::new(),
+                });
+                plans.len() - 1
+            }
+        };
+        let plan = &mut plans[at];
+        let read = match plan.reads.iter().position(|r| r.code == def.code) {
+            Some(read) => read,
+            None => {
+                plan.reads.push(CodeRead {
+                    code: def.code,
+                    defs: Vec::new(),
+                });
+                plan.reads.len() - 1
+            }
+        };
+        plan.reads[read].defs.push(def);
+        plan.points.push((index, read));
+    }
+    plans
+});
+
+/// How one group is read.
+struct GroupPlan {
+    group: &'static str,
+    /// Its points in [`POINTS`] order: the index of each there and of its code's read in
+    /// `reads`, which are in the order their first point needs them.
+    points: Vec<(usize, usize)>,
+    reads: Vec<CodeRead>,
+}
+
+/// One code read in a group, and the group's points it gives.
+struct CodeRead {
+    code: Code,
+    defs: Vec<&'static Def>,
+}
+
 /// What `def`'s point is, the same on every station.
 fn describe(def: &Def) -> PointDescription {
     let (kind, unit, alarm) = match def.meaning {
@@ -568,22 +616,23 @@ fn describe(def: &Def) -> PointDescription {
 
 impl JbcDriver {
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
-        // A poll reads about ten codes: a list searched in place beats hashing each code.
-        let mut answers: Vec<(Code, Answer)> = Vec::with_capacity(POINTS.len());
-        let mut readings = Vec::with_capacity(POINTS.len());
-        for (index, def) in POINTS.iter().enumerate().filter(|(_, d)| d.group == group) {
-            if !answers.iter().any(|(code, _)| *code == def.code) {
-                let answer = self.read_code(def.code, group).await?;
-                answers.push((def.code, answer));
+        let Some(plan) = PLANS.iter().find(|p| p.group == group) else {
+            return Ok(Vec::new());
+        };
+        let mut answers: Vec<Option<Answer>> = Vec::with_capacity(plan.reads.len());
+        answers.resize_with(plan.reads.len(), || None);
+        let mut readings = Vec::with_capacity(plan.points.len());
+        for &(index, read) in &plan.points {
+            if answers[read].is_none() {
+                let code = &plan.reads[read];
+                answers[read] = Some(self.read_code(code.code, &code.defs).await?);
             }
-            let Some((_, answer)) = answers.iter().find(|(code, _)| *code == def.code) else {
+            let Some(answer) = &answers[read] else {
                 continue;
             };
             let value = match answer {
-                Answer::Good(reading) => {
-                    let value = value_of(reading, def.part);
-                    def.check_plausible(&value).map(|()| value)
-                }
+                // `read_code` found the value plausible for every point of the code.
+                Answer::Good(reading) => Ok(value_of(reading, POINTS[index].part)),
                 Answer::Unconfirmed => continue,
                 Answer::Bad(e) => Err(e.clone()),
             };
@@ -603,21 +652,17 @@ impl JbcDriver {
         }
     }
 
-    /// Reads `code` for the points of `group`, checks its value is plausible for each of
-    /// them, and confirms a changed value by a second read (see the module doc). `Err`
-    /// only when the station cannot be reached at all.
-    async fn read_code(&mut self, code: Code, group: &str) -> Result<Answer, DeviceError> {
+    /// Reads `code` for the points `of` a group it gives, checks its value is plausible
+    /// for each of them, and confirms a changed value by a second read (see the module
+    /// doc). `Err` only when the station cannot be reached at all.
+    async fn read_code(&mut self, code: Code, of: &[&Def]) -> Result<Answer, DeviceError> {
         let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
         let first = match client.read(code).await {
             Ok(reading) => reading,
             Err(e) if point_level(&e) => return Ok(Answer::Bad(DeviceError::of(&e))),
             Err(e) => return Err(DeviceError::of(&e)),
         };
-        let defs = || {
-            POINTS
-                .iter()
-                .filter(move |d| d.code == code && d.group == group)
-        };
+        let defs = || of.iter().copied();
         if let Some(error) = defs().find_map(|d| d.check_plausible(&value_of(&first, d.part)).err())
         {
             return Ok(Answer::Bad(error));
@@ -955,6 +1000,29 @@ mod tests {
         }
         let ids: std::collections::HashSet<_> = points.iter().map(|p| &p.id).collect();
         assert_eq!(ids.len(), points.len(), "point ids are unique");
+    }
+
+    #[test]
+    fn the_group_plans_read_every_point_once_with_its_own_code_in_points_order() {
+        let mut seen = Vec::new();
+        for plan in PLANS.iter() {
+            let mut last = None;
+            for &(index, read) in &plan.points {
+                let def = &POINTS[index];
+                assert_eq!(def.group, plan.group, "{}", def.name);
+                assert_eq!(plan.reads[read].code, def.code, "{}", def.name);
+                assert!(
+                    plan.reads[read].defs.iter().any(|d| d.name == def.name),
+                    "{}",
+                    def.name
+                );
+                assert!(last < Some(index), "{} out of order", def.name);
+                last = Some(index);
+                seen.push(index);
+            }
+        }
+        seen.sort_unstable();
+        assert_eq!(seen, (0..POINTS.len()).collect::<Vec<_>>());
     }
 
     #[test]
