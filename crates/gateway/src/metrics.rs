@@ -367,14 +367,8 @@ impl Metrics {
                 .rows_dropped
                 .load(std::sync::atomic::Ordering::Relaxed),
         );
-        self.history_pending_rows.set(
-            i64::try_from(
-                store
-                    .pending_rows
-                    .load(std::sync::atomic::Ordering::Relaxed),
-            )
-            .unwrap_or(i64::MAX),
-        );
+        self.history_pending_rows
+            .set(i64::try_from(store.rows_waiting()).unwrap_or(i64::MAX));
         let mut text = String::new();
         prometheus_client::encoding::text::encode(&mut text, &self.registry)
             .expect("writing to a String cannot fail");

@@ -10,9 +10,10 @@
 //! a bounded number of them here). Commands that must see every sample queued before them
 //! (flush, audit, prune, shutdown) make the writer take the inbox first.
 
-use std::sync::{Mutex, MutexGuard, PoisonError};
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
-use super::Sample;
+use super::{Sample, StoreStats};
 
 /// What [`Inbox::put`] did with a sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -29,6 +30,8 @@ pub(super) enum Put {
 #[derive(Debug)]
 pub(super) struct Inbox {
     state: Mutex<State>,
+    /// Where the number of queued samples is shown (`queued_rows`).
+    stats: Arc<StoreStats>,
 }
 
 #[derive(Debug)]
@@ -45,8 +48,9 @@ struct State {
 
 impl Inbox {
     /// An empty inbox whose writer is woken by the first sample, and by the `wake_at`-th.
-    pub(super) fn new(wake_at: usize) -> Self {
+    pub(super) fn new(wake_at: usize, stats: Arc<StoreStats>) -> Self {
         Self {
+            stats,
             state: Mutex::new(State {
                 samples: Vec::new(),
                 taken: 0,
@@ -61,6 +65,13 @@ impl Inbox {
         self.state.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
+    /// Shows how many samples `state` holds (under its lock, so the gauge follows it).
+    fn show(&self, state: &State) {
+        self.stats
+            .queued_rows
+            .store(state.samples.len() as u64, Ordering::Relaxed);
+    }
+
     /// Queues `sample`; says whether the writer must be woken.
     pub(super) fn put(&self, sample: Sample) -> Put {
         let mut state = self.lock();
@@ -68,6 +79,7 @@ impl Inbox {
             return Put::Closed;
         }
         state.samples.push(sample);
+        self.show(&state);
         if state.wake || state.samples.len() == state.wake_at {
             state.wake = false;
             Put::Wake
@@ -92,6 +104,7 @@ impl Inbox {
             .min(state.samples.len());
         into.extend(state.samples.drain(..before));
         state.taken += before as u64;
+        self.show(&state);
     }
 
     /// The writer takes every queued sample into `into` (which it keeps empty between
@@ -102,6 +115,7 @@ impl Inbox {
         let mut state = self.lock();
         std::mem::swap(&mut state.samples, into);
         state.taken += into.len() as u64;
+        self.show(&state);
         if into.is_empty()
             && let Some(idle) = arm
         {
@@ -116,6 +130,7 @@ impl Inbox {
         state.closed = true;
         let left = state.samples.len();
         state.samples = Vec::new();
+        self.show(&state);
         left
     }
 }
@@ -137,7 +152,7 @@ mod tests {
 
     #[test]
     fn only_the_first_sample_for_an_idle_writer_wakes_it() {
-        let inbox = Inbox::new(100);
+        let inbox = Inbox::new(100, Arc::default());
         assert_eq!(inbox.put(sample(1)), Put::Wake);
         assert_eq!(inbox.put(sample(2)), Put::Queued);
         let mut taken = Vec::new();
@@ -162,7 +177,7 @@ mod tests {
 
     #[test]
     fn a_full_inbox_wakes_a_writer_with_an_open_batch() {
-        let inbox = Inbox::new(3);
+        let inbox = Inbox::new(3, Arc::default());
         let mut taken = Vec::new();
         inbox.take(&mut taken, Some(false));
         assert_eq!(inbox.put(sample(1)), Put::Queued);
@@ -173,7 +188,7 @@ mod tests {
 
     #[test]
     fn a_mark_takes_exactly_the_samples_queued_before_it() {
-        let inbox = Inbox::new(100);
+        let inbox = Inbox::new(100, Arc::default());
         inbox.put(sample(1));
         let mut taken = Vec::new();
         inbox.take(&mut taken, None);
@@ -193,8 +208,33 @@ mod tests {
     }
 
     #[test]
+    fn queued_samples_count_as_waiting_until_the_writer_takes_them() {
+        let stats = Arc::new(StoreStats::default());
+        stats.pending_rows.store(5, Ordering::Relaxed);
+        let inbox = Inbox::new(100, Arc::clone(&stats));
+        inbox.put(sample(1));
+        inbox.put(sample(2));
+        let mark = inbox.mark();
+        inbox.put(sample(3));
+        assert_eq!(stats.rows_waiting(), 8);
+        let mut taken = Vec::new();
+        inbox.take_until(&mut taken, mark);
+        assert_eq!(stats.queued_rows.load(Ordering::Relaxed), 1);
+        taken.clear();
+        inbox.take(&mut taken, None);
+        assert_eq!(
+            stats.rows_waiting(),
+            5,
+            "taken samples are the writer's to count"
+        );
+        inbox.put(sample(4));
+        assert_eq!(inbox.close(), 1);
+        assert_eq!(stats.queued_rows.load(Ordering::Relaxed), 0);
+    }
+
+    #[test]
     fn a_closed_inbox_refuses_samples_and_counts_those_left() {
-        let inbox = Inbox::new(10);
+        let inbox = Inbox::new(10, Arc::default());
         inbox.put(sample(1));
         inbox.put(sample(2));
         assert_eq!(inbox.close(), 2);

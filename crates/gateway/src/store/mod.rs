@@ -360,7 +360,10 @@ impl Store {
         let shared = Arc::new(Shared::default());
         let (tx, rx) = mpsc::channel();
         let (opened_tx, opened) = mpsc::channel();
-        let inbox = Arc::new(inbox::Inbox::new(options.batch_rows.min(writer::DRAIN_MAX)));
+        let inbox = Arc::new(inbox::Inbox::new(
+            options.batch_rows.min(writer::DRAIN_MAX),
+            Arc::clone(&stats),
+        ));
         let spawned = {
             let (dir, stats, shared) = (dir.to_owned(), Arc::clone(&stats), Arc::clone(&shared));
             let inbox = Arc::clone(&inbox);
@@ -490,7 +493,7 @@ impl StoreHandle {
     /// How the history is doing at `now`: degraded while a commit failed in the last
     /// [`FAULT_WINDOW`] or more than [`PENDING_ROWS_DEGRADED`] rows wait, or when it is off.
     pub fn health(&self, now: Timestamp) -> StoreHealth {
-        let pending_rows = self.stats.pending_rows.load(Ordering::Relaxed);
+        let pending_rows = self.stats.rows_waiting();
         let rows_dropped = self.stats.rows_dropped.load(Ordering::Relaxed);
         let state = self.shared.lock();
         let recent = state

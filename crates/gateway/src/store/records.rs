@@ -247,13 +247,21 @@ pub struct StoreStats {
     /// Rows never stored: dropped (oldest samples first, never audit rows) while the disk
     /// refused writes for too long, or discarded while the history is off.
     pub rows_dropped: AtomicU64,
-    /// Rows waiting for their commit (a gauge).
+    /// Rows the writer holds, waiting for their commit (a gauge).
     pub pending_rows: AtomicU64,
+    /// Samples queued for the writer that it has not taken yet (a gauge; see
+    /// [`rows_waiting`](Self::rows_waiting)).
+    pub queued_rows: AtomicU64,
     /// Rows deleted by retention.
     pub rows_pruned: AtomicU64,
 }
 
 impl StoreStats {
+    /// Every row not committed yet: those the writer holds and those queued for it.
+    pub fn rows_waiting(&self) -> u64 {
+        self.pending_rows.load(Ordering::Relaxed) + self.queued_rows.load(Ordering::Relaxed)
+    }
+
     /// Every row committed so far.
     pub fn rows_written(&self) -> u64 {
         self.samples_written.load(Ordering::Relaxed)
