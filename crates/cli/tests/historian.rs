@@ -20,7 +20,7 @@ use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use common::{Gateway, cellbus, http_get};
+use common::{Gateway, api_value, cellbus, http_get, rfc3339, rfc3339_ms};
 use sparkplug::{BdSeq, DataType, EdgeNode, Id, MetricName, MetricSpec, MetricValue, Sample};
 use testkit::{Mosquitto, Postgres, Subscriber};
 
@@ -38,16 +38,6 @@ fn now_ms() -> i64 {
             .as_millis(),
     )
     .unwrap()
-}
-
-fn rfc3339(ms: i64) -> String {
-    humantime::format_rfc3339_millis(UNIX_EPOCH + Duration::from_millis(ms.unsigned_abs()))
-        .to_string()
-}
-
-fn rfc3339_ms(text: &str) -> i64 {
-    let t = humantime::parse_rfc3339(text).unwrap_or_else(|e| panic!("{text}: {e}"));
-    i64::try_from(t.duration_since(UNIX_EPOCH).unwrap().as_millis()).unwrap()
 }
 
 /// A running `cellbus historian`, killed (`kill -9`) when dropped.
@@ -141,14 +131,6 @@ struct Row {
     value: Option<String>,
 }
 
-fn api_value(v: &serde_json::Value) -> Option<String> {
-    match v {
-        serde_json::Value::Number(n) => Some(format!("{}", n.as_f64().unwrap())),
-        serde_json::Value::String(s) => Some(s.clone()),
-        _ => None,
-    }
-}
-
 fn api_row(sample: &serde_json::Value) -> Row {
     let quality = sample["quality"].as_str().unwrap().to_owned();
     Row {
@@ -180,20 +162,10 @@ impl Series {
 
 /// Every point's history in a gateway over `[from, to)`, by `device.point`.
 fn gateway_history(gateway: &Gateway, from: i64, to: i64) -> BTreeMap<String, Series> {
-    let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200, "{body}");
-    let devices: serde_json::Value = serde_json::from_str(&body).unwrap();
-    let mut all = BTreeMap::new();
-    for device in devices["devices"].as_array().unwrap() {
-        for point in device["points"].as_array().unwrap() {
-            let id = point["id"].as_str().unwrap();
-            let (status, body) = gateway.get(&format!(
-                "/api/history?point={id}&from={}&to={}",
-                rfc3339(from),
-                rfc3339(to)
-            ));
-            assert_eq!(status, 200, "{id}: {body}");
-            let history: serde_json::Value = serde_json::from_str(&body).unwrap();
+    gateway
+        .histories(from, to)
+        .into_iter()
+        .map(|(id, history)| {
             let series = Series {
                 before: history.get("before").filter(|b| !b.is_null()).map(api_row),
                 rows: history["samples"]
@@ -203,10 +175,9 @@ fn gateway_history(gateway: &Gateway, from: i64, to: i64) -> BTreeMap<String, Se
                     .map(api_row)
                     .collect(),
             };
-            all.insert(id.to_owned(), series);
-        }
-    }
-    all
+            (id, series)
+        })
+        .collect()
 }
 
 fn gateway_devices(gateway: &Gateway) -> Vec<String> {

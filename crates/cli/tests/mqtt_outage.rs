@@ -10,7 +10,7 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use common::Gateway;
+use common::{Gateway, api_value, rfc3339_ms};
 use sparkplug::proto::metric::Value as SpValue;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 
@@ -35,11 +35,6 @@ fn now_ms() -> i64 {
     .unwrap()
 }
 
-fn rfc3339_ms(text: &str) -> i64 {
-    let t = humantime::parse_rfc3339(text).unwrap_or_else(|e| panic!("{text}: {e}"));
-    i64::try_from(t.duration_since(UNIX_EPOCH).unwrap().as_millis()).unwrap()
-}
-
 /// A stored or received change: point, read time (ms), and the value when there is one.
 type Change = (String, i64, Option<String>);
 
@@ -52,42 +47,17 @@ fn sparkplug_value(v: &SpValue) -> String {
     }
 }
 
-fn api_value(v: &serde_json::Value) -> Option<String> {
-    match v {
-        serde_json::Value::Number(n) => Some(format!("{}", n.as_f64().unwrap())),
-        serde_json::Value::String(s) => Some(s.clone()),
-        _ => None,
-    }
-}
-
 /// What the gateway's history holds for every point in `[from, to]`.
 fn stored_changes(gateway: &Gateway, from: i64, to: i64) -> BTreeSet<Change> {
-    let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200, "{body}");
-    let devices: serde_json::Value = serde_json::from_str(&body).unwrap();
     let mut changes = BTreeSet::new();
-    let time = |ms: i64| {
-        humantime::format_rfc3339_millis(UNIX_EPOCH + Duration::from_millis(ms.unsigned_abs()))
-            .to_string()
-    };
-    for device in devices["devices"].as_array().unwrap() {
-        for point in device["points"].as_array().unwrap() {
-            let id = point["id"].as_str().unwrap();
-            let (status, body) = gateway.get(&format!(
-                "/api/history?point={id}&from={}&to={}",
-                time(from),
-                time(to)
+    for (id, history) in gateway.histories(from, to) {
+        for sample in history["samples"].as_array().unwrap() {
+            let good = sample["quality"] == "good";
+            changes.insert((
+                id.clone(),
+                rfc3339_ms(sample["t"].as_str().unwrap()),
+                good.then(|| api_value(&sample["value"])).flatten(),
             ));
-            assert_eq!(status, 200, "{id}: {body}");
-            let history: serde_json::Value = serde_json::from_str(&body).unwrap();
-            for sample in history["samples"].as_array().unwrap() {
-                let good = sample["quality"] == "good";
-                changes.insert((
-                    id.to_owned(),
-                    rfc3339_ms(sample["t"].as_str().unwrap()),
-                    good.then(|| api_value(&sample["value"])).flatten(),
-                ));
-            }
         }
     }
     changes

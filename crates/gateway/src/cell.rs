@@ -151,6 +151,21 @@ pub struct DeviceState {
     pub points: Vec<PointState>,
 }
 
+impl DeviceState {
+    /// A device not yet polled since `since`, with `points` points not yet read.
+    fn connecting(since: Timestamp, points: usize) -> Self {
+        Self {
+            status: DeviceStatus::Connecting,
+            since,
+            error: None,
+            last_ok: None,
+            failures: 0,
+            next_try_at: None,
+            points: vec![PointState::default(); points],
+        }
+    }
+}
+
 /// The changing part of a point.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PointState {
@@ -439,15 +454,7 @@ impl Cell {
                     protocol: device.driver.protocol,
                     line: line.name.clone(),
                     address: device.driver.address,
-                    state: RwLock::new(DeviceState {
-                        status: DeviceStatus::Connecting,
-                        since: now,
-                        error: None,
-                        last_ok: None,
-                        failures: 0,
-                        next_try_at: None,
-                        points: vec![PointState::default(); points.len()],
-                    }),
+                    state: RwLock::new(DeviceState::connecting(now, points.len())),
                     points,
                     deadbands,
                     groups,
@@ -845,15 +852,7 @@ mod tests {
             deadbands: vec![None; points.len()],
             groups: Vec::new(),
             by_name: sorted_by_name(&points),
-            state: RwLock::new(DeviceState {
-                status: DeviceStatus::Connecting,
-                since: Timestamp(0),
-                error: None,
-                last_ok: None,
-                failures: 0,
-                next_try_at: None,
-                points: vec![PointState::default(); points.len()],
-            }),
+            state: RwLock::new(DeviceState::connecting(Timestamp(0), points.len())),
             points,
             writes,
         };

@@ -5,7 +5,7 @@
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::process::{Child, ChildStdin, ChildStdout, Command, Output, Stdio};
-use std::time::Duration;
+use std::time::{Duration, UNIX_EPOCH};
 
 /// The built `cellbus` binary.
 pub fn cellbus() -> Command {
@@ -167,6 +167,49 @@ impl Gateway {
     /// A plain HTTP/1.1 GET; returns the status code and the body.
     pub fn get(&self, path: &str) -> (u16, String) {
         http_get(&self.addr, path)
+    }
+
+    /// Every point's `/api/history` answer over `[from, to]` (ms since the epoch), by id,
+    /// in the order of `/api/devices`.
+    pub fn histories(&self, from: i64, to: i64) -> Vec<(String, serde_json::Value)> {
+        let (status, body) = self.get("/api/devices");
+        assert_eq!(status, 200, "{body}");
+        let devices: serde_json::Value = serde_json::from_str(&body).unwrap();
+        let mut all = Vec::new();
+        for device in devices["devices"].as_array().unwrap() {
+            for point in device["points"].as_array().unwrap() {
+                let id = point["id"].as_str().unwrap();
+                let (status, body) = self.get(&format!(
+                    "/api/history?point={id}&from={}&to={}",
+                    rfc3339(from),
+                    rfc3339(to)
+                ));
+                assert_eq!(status, 200, "{id}: {body}");
+                all.push((id.to_owned(), serde_json::from_str(&body).unwrap()));
+            }
+        }
+        all
+    }
+}
+
+/// `ms` since the epoch as RFC 3339 with milliseconds.
+pub fn rfc3339(ms: i64) -> String {
+    humantime::format_rfc3339_millis(UNIX_EPOCH + Duration::from_millis(ms.unsigned_abs()))
+        .to_string()
+}
+
+/// An RFC 3339 time as ms since the epoch.
+pub fn rfc3339_ms(text: &str) -> i64 {
+    let t = humantime::parse_rfc3339(text).unwrap_or_else(|e| panic!("{text}: {e}"));
+    i64::try_from(t.duration_since(UNIX_EPOCH).unwrap().as_millis()).unwrap()
+}
+
+/// A value of the HTTP API as text (numbers as `f64`), `None` for null.
+pub fn api_value(v: &serde_json::Value) -> Option<String> {
+    match v {
+        serde_json::Value::Number(n) => Some(format!("{}", n.as_f64().unwrap())),
+        serde_json::Value::String(s) => Some(s.clone()),
+        _ => None,
     }
 }
 
