@@ -298,15 +298,15 @@ async fn node(port: u16, n: usize, period: Duration) {
         .map(|d| Id::new(format!("dev{d:02}")).unwrap())
         .collect();
     let t = sparkplug::Timestamp::from_millis(now_ms());
-    let birth = edge.node_birth(&[], t).unwrap();
-    let _ = client
-        .publish(
+    let publish = |birth: sparkplug::Publish| {
+        client.publish(
             birth.topic.to_string(),
             QoS::AtMostOnce,
             false,
             birth.payload,
         )
-        .await;
+    };
+    let _ = publish(edge.node_birth(&[], t).unwrap()).await;
     for device in &devices {
         let metrics: Vec<_> = names
             .iter()
@@ -317,15 +317,7 @@ async fn node(port: u16, n: usize, period: Duration) {
                 )
             })
             .collect();
-        let birth = edge.device_birth(device, &metrics, t).unwrap();
-        let _ = client
-            .publish(
-                birth.topic.to_string(),
-                QoS::AtMostOnce,
-                false,
-                birth.payload,
-            )
-            .await;
+        let _ = publish(edge.device_birth(device, &metrics, t).unwrap()).await;
     }
     let mut tick = tokio::time::interval(period);
     let mut round = 0_u64;
