@@ -1,13 +1,11 @@
-//! Links the `cellbus` binary with packed relative relocations (DT_RELR) on Linux with glibc:
-//! a position-independent executable's table of relocations to apply at start shrinks from
-//! 1.7 MB (read in full at every start, so resident) to 19 kB: the demo gateway starts in
-//! about 2 MiB less memory. GNU ld 2.38+ and lld use it only when the C library supports it
-//! (glibc 2.36+); older linkers ignore the option with a warning.
+//! Links the `cellbus` binary for memory: packed relative relocations and the functions it
+//! runs laid out first (see `link.rs`).
+
+include!("link.rs");
 
 fn main() {
-    let os = std::env::var("CARGO_CFG_TARGET_OS").unwrap_or_default();
-    let env = std::env::var("CARGO_CFG_TARGET_ENV").unwrap_or_default();
-    if os == "linux" && env == "gnu" {
-        println!("cargo:rustc-link-arg-bins=-Wl,-z,pack-relative-relocs");
-    }
+    println!("cargo:rerun-if-changed=link.rs");
+    let manifest =
+        std::path::PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
+    link_options("bins", &manifest.join("code-order.txt"));
 }

@@ -1,10 +1,11 @@
-//! Links the benches like the `cellbus` binary (see `crates/cli/build.rs`): packed relative
-//! relocations on Linux with glibc, so the load bench's memory figures are the binary's.
+//! Links the benches like the `cellbus` binary (see `crates/cli/link.rs`), so the load
+//! bench's memory figures are the binary's.
+
+include!("../cli/link.rs");
 
 fn main() {
-    let os = std::env::var("CARGO_CFG_TARGET_OS").unwrap_or_default();
-    let env = std::env::var("CARGO_CFG_TARGET_ENV").unwrap_or_default();
-    if os == "linux" && env == "gnu" {
-        println!("cargo:rustc-link-arg-benches=-Wl,-z,pack-relative-relocs");
-    }
+    println!("cargo:rerun-if-changed=../cli/link.rs");
+    let manifest =
+        std::path::PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
+    link_options("benches", &manifest.join("../cli/code-order.txt"));
 }
