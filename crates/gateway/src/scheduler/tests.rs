@@ -619,3 +619,55 @@ async fn a_percent_deadband_is_a_share_of_the_last_recorded_value() {
         vec![Some(Value::Number(200.0)), Some(Value::Number(202.0))]
     );
 }
+
+#[test]
+fn a_held_back_number_is_compared_with_the_one_recorded_and_text_with_the_last_value() {
+    let band = Some(Deadband::Absolute(1.0));
+    let text = |s: &str| Value::Text(s.to_owned());
+    // Nothing recorded yet: anything is a change.
+    assert!(moved_enough(None, None, &Value::Number(5.0), band));
+    // 20.4 was read after 20.0 was recorded: 20.8 is still within the band of 20.0, 21.0
+    // is not, whatever the last value read.
+    let last = Value::Number(20.4);
+    assert!(!moved_enough(
+        Some(20.0),
+        Some(&last),
+        &Value::Number(20.8),
+        band
+    ));
+    assert!(moved_enough(
+        Some(20.0),
+        Some(&last),
+        &Value::Number(21.0),
+        band
+    ));
+    // Without a band any other number is a change, the same one is not.
+    assert!(moved_enough(
+        Some(20.0),
+        Some(&Value::Number(20.0)),
+        &Value::Number(20.1),
+        None
+    ));
+    assert!(!moved_enough(
+        Some(20.0),
+        Some(&Value::Number(20.0)),
+        &Value::Number(20.0),
+        None
+    ));
+    // Text is never held back: the last value is the one recorded.
+    assert!(!moved_enough(None, Some(&text("P12")), &text("P12"), band));
+    assert!(moved_enough(None, Some(&text("P12")), &text("P13"), band));
+    // A number after text, and text after a number, are changes.
+    assert!(moved_enough(
+        None,
+        Some(&text("P12")),
+        &Value::Number(12.0),
+        band
+    ));
+    assert!(moved_enough(
+        Some(12.0),
+        Some(&Value::Number(12.0)),
+        &text("P12"),
+        band
+    ));
+}
