@@ -488,11 +488,16 @@ async fn an_overloaded_line_slows_every_group_by_the_same_factor() {
 /// A cell of one JBC station whose numeric points have `deadband`; its line is never
 /// opened, so only the readings a test applies reach it.
 fn cell_with_deadband(deadband: Deadband) -> (Arc<Cell>, crate::store::Store, tempfile::TempDir) {
+    cell_with(Some(deadband))
+}
+
+/// A cell of one JBC station, `jbc1`, with `deadband` on its numeric points.
+fn cell_with(deadband: Option<Deadband>) -> (Arc<Cell>, crate::store::Store, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     let store =
         crate::store::Store::open(dir.path(), crate::store::StoreOptions::default()).unwrap();
     let mut device = crate::testing::device("jbc1", 1);
-    device.deadband = Some(deadband);
+    device.deadband = deadband;
     let config = crate::config::CellConfig {
         source: None,
         mqtt: None,
@@ -670,4 +675,18 @@ fn a_held_back_number_is_compared_with_the_one_recorded_and_text_with_the_last_v
         &text("P12"),
         band
     ));
+}
+
+#[tokio::test]
+async fn a_device_without_deadbands_keeps_no_list_of_them() {
+    let (cell, _store, _dir) = cell_with(None);
+    let entry = cell.device_entry("jbc1").unwrap();
+    assert!(entry.deadbands.is_empty());
+    assert!((0..entry.points.len()).all(|i| entry.deadband(i).is_none()));
+    let band = Deadband::Absolute(2.0);
+    let (cell, _store, _dir) = cell_with(Some(band));
+    let entry = cell.device_entry("jbc1").unwrap();
+    assert_eq!(entry.deadbands.len(), entry.points.len());
+    let air = entry.point_index("air_temperature").unwrap();
+    assert_eq!(entry.deadband(air), Some(band));
 }
