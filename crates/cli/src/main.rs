@@ -84,6 +84,10 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging();
+    if matches!(cli.command, Command::Serve(_) | Command::Demo(_)) {
+        // The gateway's malloc, set before the runtime starts its threads.
+        gateway::tune_malloc();
+    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

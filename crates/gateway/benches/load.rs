@@ -257,6 +257,10 @@ fn main() -> ExitCode {
         };
         println!("load: smoke run (cargo bench -p gateway --bench load for the benchmark)");
     }
+    if !simulators {
+        // This process is the gateway: its malloc set up as `cellbus serve` sets it.
+        gateway::tune_malloc();
+    }
     let result = if simulators {
         run_simulators(&args)
     } else {

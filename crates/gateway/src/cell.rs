@@ -109,7 +109,9 @@ pub struct DeviceEntry {
     pub address: Option<i64>,
     /// Its points.
     pub points: Vec<PointSpec>,
-    /// Each point's deadband (numeric points only), in the order of `points`.
+    /// Each point's deadband (numeric points only), in the order of `points`; empty when
+    /// no point has one (a JBC station: 400 bytes each less). Read through
+    /// [`DeviceEntry::deadband`].
     pub deadbands: Vec<Option<Deadband>>,
     /// Its poll groups, with the periods in force.
     pub groups: Vec<PollGroup>,
@@ -176,13 +178,15 @@ pub struct PointState {
     /// Good, stale (not refreshed in time: set by the line task's sweep, and judged again
     /// when shown) or bad.
     pub quality: Option<Quality>,
-    /// Why the last read failed.
-    pub error: Option<String>,
+    /// Why the last read failed (shared by the points of a device that went down).
+    pub error: Option<Arc<str>>,
     /// Whether the value is in alarm.
     pub alarm: bool,
-    /// The last value stored and published: a value within the point's deadband of it
-    /// updates only `value`.
-    pub recorded: Option<Value>,
+    /// The last value stored and published, when it was a number: a number within the
+    /// point's deadband of it updates only `value`. Text (and no value) is never held
+    /// back, so then the last value stored is `value` itself. (A number, not a `Value`:
+    /// 80 bytes a point instead of 96, 1.6 MB less at 100,000 points.)
+    pub recorded: Option<f64>,
 }
 
 /// One line and its health.
@@ -446,7 +450,12 @@ impl Cell {
                         }
                         .filter(|_| p.kind == PointKind::Numeric)
                     })
-                    .collect();
+                    .collect::<Vec<_>>();
+                let deadbands = if deadbands.iter().all(Option::is_none) {
+                    Vec::new()
+                } else {
+                    deadbands
+                };
                 let by_name = sorted_by_name(&points);
                 let entry = Arc::new(DeviceEntry {
                     id: device.driver.id.clone(),
@@ -666,6 +675,11 @@ impl DeviceEntry {
         self.state.write().unwrap_or_else(PoisonError::into_inner)
     }
 
+    /// The deadband of the point at `index`, if it has one.
+    pub fn deadband(&self, index: usize) -> Option<Deadband> {
+        self.deadbands.get(index).copied().flatten()
+    }
+
     /// The index of a point by its name (the part after the device id).
     pub fn point_index(&self, name: &str) -> Option<usize> {
         // Every point id is `<this device's id>.<name>`: skip the prefix instead of
@@ -711,7 +725,7 @@ impl DeviceEntry {
                 .quality
                 .map(|q| judge_staleness(q, state.t, period, now)),
             t: state.t,
-            error: state.error.clone(),
+            error: state.error.as_deref().map(str::to_owned),
             alarm: state.alarm,
             period_ms: duration_millis(period),
         }

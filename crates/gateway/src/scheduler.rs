@@ -718,9 +718,9 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
             };
             let changed = match reading.value {
                 Ok(value) => {
-                    let deadband = entry.deadbands.get(i).copied().flatten();
+                    let deadband = entry.deadband(i);
                     let changed = point.quality != Some(Quality::Good)
-                        || moved_enough(point.recorded.as_ref(), &value, deadband);
+                        || moved_enough(point.recorded, point.value.as_ref(), &value, deadband);
                     let alarm = spec.is_alarm(&value);
                     if alarm != point.alarm {
                         let text = spec
@@ -758,13 +758,13 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
                     let changed = point.quality != Some(Quality::Bad)
                         || point.error.as_deref() != Some(error.message.as_str());
                     point.quality = Some(Quality::Bad);
-                    point.error = Some(error.message);
+                    point.error = Some(error.message.into());
                     point.t = Some(now);
                     changed
                 }
             };
             if changed {
-                point.recorded = point.value.clone();
+                point.recorded = point.value.as_ref().and_then(Value::as_number);
                 samples.push(Sample {
                     point: spec.id.clone(),
                     t: now,
@@ -792,7 +792,23 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
 
 /// Whether a good value is to be recorded against the last recorded one: any change, or
 /// under a deadband a move at least as big as the band (numbers only).
-fn moved_enough(recorded: Option<&Value>, value: &Value, deadband: Option<Deadband>) -> bool {
+///
+/// `recorded` is the number last recorded, if it was one; otherwise what was last recorded
+/// is `last`, the point's value before `value` (text is never held back).
+fn moved_enough(
+    recorded: Option<f64>,
+    last: Option<&Value>,
+    value: &Value,
+    deadband: Option<Deadband>,
+) -> bool {
+    let number;
+    let recorded = match recorded {
+        Some(x) => {
+            number = Value::Number(x);
+            Some(&number)
+        }
+        None => last,
+    };
     match (recorded, deadband) {
         (None, _) => true,
         (Some(recorded), None) => recorded != value,
@@ -869,12 +885,13 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
             state.status = DeviceStatus::Down;
             state.since = now;
         }
+        let message: Arc<str> = error.message.as_str().into();
         for (i, point) in state.points.iter_mut().enumerate() {
             if point.quality == Some(Quality::Bad) {
                 continue;
             }
             point.quality = Some(Quality::Bad);
-            point.error = Some(error.message.clone());
+            point.error = Some(Arc::clone(&message));
             point.t = Some(now);
             samples.push(Sample {
                 point: entry.points[i].id.clone(),

@@ -432,7 +432,7 @@ impl ListedDevice<'_> {
                 out.extend_from_slice(b",\"t\":");
                 optional_timestamp(out, point.t);
                 out.extend_from_slice(b",\"error\":");
-                match &point.error {
+                match point.error.as_deref() {
                     Some(error) => json(out, error),
                     None => out.extend_from_slice(b"null"),
                 }

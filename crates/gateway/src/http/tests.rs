@@ -1130,7 +1130,7 @@ fn example_cell_with_every_kind_of_state(
                         Some(Quality::Bad),
                         Some(Quality::Stale),
                     ][n % 4],
-                    error: (n % 3 == 0).then(|| texts[n % texts.len()].to_owned()),
+                    error: (n % 3 == 0).then(|| texts[n % texts.len()].into()),
                     alarm: n % 7 == 0,
                     recorded: None,
                 }

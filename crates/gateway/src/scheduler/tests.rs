@@ -488,11 +488,16 @@ async fn an_overloaded_line_slows_every_group_by_the_same_factor() {
 /// A cell of one JBC station whose numeric points have `deadband`; its line is never
 /// opened, so only the readings a test applies reach it.
 fn cell_with_deadband(deadband: Deadband) -> (Arc<Cell>, crate::store::Store, tempfile::TempDir) {
+    cell_with(Some(deadband))
+}
+
+/// A cell of one JBC station, `jbc1`, with `deadband` on its numeric points.
+fn cell_with(deadband: Option<Deadband>) -> (Arc<Cell>, crate::store::Store, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     let store =
         crate::store::Store::open(dir.path(), crate::store::StoreOptions::default()).unwrap();
     let mut device = crate::testing::device("jbc1", 1);
-    device.deadband = Some(deadband);
+    device.deadband = deadband;
     let config = crate::config::CellConfig {
         source: None,
         mqtt: None,
@@ -618,4 +623,70 @@ async fn a_percent_deadband_is_a_share_of_the_last_recorded_value() {
         stored,
         vec![Some(Value::Number(200.0)), Some(Value::Number(202.0))]
     );
+}
+
+#[test]
+fn a_held_back_number_is_compared_with_the_one_recorded_and_text_with_the_last_value() {
+    let band = Some(Deadband::Absolute(1.0));
+    let text = |s: &str| Value::Text(s.to_owned());
+    // Nothing recorded yet: anything is a change.
+    assert!(moved_enough(None, None, &Value::Number(5.0), band));
+    // 20.4 was read after 20.0 was recorded: 20.8 is still within the band of 20.0, 21.0
+    // is not, whatever the last value read.
+    let last = Value::Number(20.4);
+    assert!(!moved_enough(
+        Some(20.0),
+        Some(&last),
+        &Value::Number(20.8),
+        band
+    ));
+    assert!(moved_enough(
+        Some(20.0),
+        Some(&last),
+        &Value::Number(21.0),
+        band
+    ));
+    // Without a band any other number is a change, the same one is not.
+    assert!(moved_enough(
+        Some(20.0),
+        Some(&Value::Number(20.0)),
+        &Value::Number(20.1),
+        None
+    ));
+    assert!(!moved_enough(
+        Some(20.0),
+        Some(&Value::Number(20.0)),
+        &Value::Number(20.0),
+        None
+    ));
+    // Text is never held back: the last value is the one recorded.
+    assert!(!moved_enough(None, Some(&text("P12")), &text("P12"), band));
+    assert!(moved_enough(None, Some(&text("P12")), &text("P13"), band));
+    // A number after text, and text after a number, are changes.
+    assert!(moved_enough(
+        None,
+        Some(&text("P12")),
+        &Value::Number(12.0),
+        band
+    ));
+    assert!(moved_enough(
+        Some(12.0),
+        Some(&Value::Number(12.0)),
+        &text("P12"),
+        band
+    ));
+}
+
+#[tokio::test]
+async fn a_device_without_deadbands_keeps_no_list_of_them() {
+    let (cell, _store, _dir) = cell_with(None);
+    let entry = cell.device_entry("jbc1").unwrap();
+    assert!(entry.deadbands.is_empty());
+    assert!((0..entry.points.len()).all(|i| entry.deadband(i).is_none()));
+    let band = Deadband::Absolute(2.0);
+    let (cell, _store, _dir) = cell_with(Some(band));
+    let entry = cell.device_entry("jbc1").unwrap();
+    assert_eq!(entry.deadbands.len(), entry.points.len());
+    let air = entry.point_index("air_temperature").unwrap();
+    assert_eq!(entry.deadband(air), Some(band));
 }

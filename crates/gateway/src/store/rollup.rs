@@ -26,7 +26,6 @@
 use std::collections::BTreeMap;
 
 use rusqlite::{Connection, OptionalExtension, Transaction, params};
-use smallvec::SmallVec;
 
 use crate::point::{Quality, Value};
 
@@ -41,67 +40,82 @@ const CLOSE_AFTER_MS: i64 = MINUTE_MS;
 /// magnitude (Shewchuk's algorithm, as in Python's `math.fsum`); [`ExactSum::total`] is the
 /// correctly rounded sum. Infinities (and their NaN) are summed apart and win.
 ///
-/// The partials are held inline up to two (a minute's sum rarely needs more): an open
-/// minute of every point is held in memory, and a heap block each was a tenth of the
-/// gateway's heap with 100,000 points.
+/// The largest partial is held inline and only the smaller ones spill to the heap: a
+/// minute's sum of integer or float32 readings needs one partial, and an open minute of
+/// every point is held in memory (16 bytes here, against 32 with two partials inline).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ExactSum {
-    partials: SmallVec<[f64; 2]>,
-    /// The plain sum of non-finite inputs (and of an overflow); 0 when there were none.
-    special: f64,
+    /// The largest partial (0 with none); once a non-finite number was added, or the
+    /// partial sums left the range of f64, that non-finite total, which wins.
+    top: f64,
+    /// The smaller partials, in increasing magnitude; `None` while `top` alone is exact.
+    rest: Option<Box<Partials>>,
 }
+
+/// The partials below an [`ExactSum`]'s largest, in increasing magnitude; never empty.
+#[derive(Debug, Clone, PartialEq)]
+struct Partials(Vec<f64>);
 
 impl ExactSum {
     /// Adds `x` exactly.
     pub fn add(&mut self, x: f64) {
-        if !x.is_finite() {
-            self.special += x;
+        if !self.top.is_finite() {
+            // A non-finite total stays what it is, or becomes NaN with an opposite infinity.
+            self.top += x;
             return;
         }
+        if !x.is_finite() {
+            self.top = x;
+            self.rest = None;
+            return;
+        }
+        let Some(rest) = self.rest.as_mut() else {
+            // One partial (or none: 0 adds nothing): the common case, without the heap.
+            let (hi, lo) = two_sum(x, self.top);
+            self.top = hi;
+            if lo != 0.0 && hi.is_finite() {
+                self.rest = Some(Box::new(Partials(vec![lo])));
+            }
+            return;
+        };
+        let p = &mut rest.0;
+        p.push(self.top);
         let mut x = x;
         let mut kept = 0;
-        for j in 0..self.partials.len() {
-            let mut y = self.partials[j];
-            if x.abs() < y.abs() {
-                std::mem::swap(&mut x, &mut y);
-            }
-            let hi = x + y;
-            let lo = y - (hi - x);
+        for j in 0..p.len() {
+            let (hi, lo) = two_sum(x, p[j]);
             if lo != 0.0 {
-                self.partials[kept] = lo;
+                p[kept] = lo;
                 kept += 1;
             }
             x = hi;
         }
-        self.partials.truncate(kept);
-        if x.is_finite() {
-            self.partials.push(x);
-        } else {
-            // The partial sums left the range of f64: the total is that infinity.
-            self.special += x;
-            self.partials.clear();
+        p.truncate(kept);
+        // A non-finite `x`: the partial sums left the range of f64, the total is that
+        // infinity.
+        self.top = x;
+        if p.is_empty() || !x.is_finite() {
+            self.rest = None;
         }
     }
 
     /// Adds every number `other` holds.
     pub fn merge(&mut self, other: &ExactSum) {
-        for &p in &other.partials {
-            self.add(p);
+        if let Some(rest) = &other.rest {
+            rest.0.iter().for_each(|p| self.add(*p));
         }
-        self.special += other.special;
+        self.add(other.top);
     }
 
     /// The sum, correctly rounded to the nearest f64 (ties to even).
     pub fn total(&self) -> f64 {
-        if self.special != 0.0 || self.special.is_nan() {
-            return self.special;
-        }
-        let p = &self.partials;
-        let Some(&top) = p.last() else {
-            return 0.0;
+        let Some(rest) = &self.rest else {
+            return self.top;
         };
-        let mut n = p.len() - 1;
-        let (mut hi, mut lo) = (top, 0.0);
+        // The partials are `rest` and then `top`; `p[n]` is the one below the sum so far.
+        let p = &rest.0;
+        let mut n = p.len();
+        let (mut hi, mut lo) = (self.top, 0.0);
         while n > 0 {
             n -= 1;
             let (x, y) = (hi, p[n]);
@@ -124,10 +138,11 @@ impl ExactSum {
 
     /// The stored form: the partials as little-endian f64s, or the non-finite total alone.
     pub fn to_bytes(&self) -> Vec<u8> {
-        if self.special != 0.0 || self.special.is_nan() {
-            return self.special.to_le_bytes().to_vec();
-        }
-        self.partials.iter().flat_map(|p| p.to_le_bytes()).collect()
+        let rest = self.rest.as_ref().map_or(&[][..], |r| &r.0[..]);
+        rest.iter()
+            .chain(std::iter::once(&self.top))
+            .flat_map(|p| p.to_le_bytes())
+            .collect()
     }
 
     /// Reads [`ExactSum::to_bytes`]' form; `None` if the length is not a multiple of 8.
@@ -146,6 +161,13 @@ impl ExactSum {
     }
 }
 
+/// `x + y` rounded, and the error of that rounding (exact for finite numbers).
+fn two_sum(x: f64, y: f64) -> (f64, f64) {
+    let (x, y) = if x.abs() < y.abs() { (y, x) } else { (x, y) };
+    let hi = x + y;
+    (hi, y - (hi - x))
+}
+
 /// Count, exact sum, minimum and maximum of some good numeric samples: one minute's
 /// rollup, or one bucket of a query.
 #[derive(Debug, Clone, PartialEq)]
@@ -161,6 +183,17 @@ pub struct Aggregate {
 }
 
 impl Aggregate {
+    /// No samples: what any aggregate merged into it gives back.
+    const EMPTY: Aggregate = Aggregate {
+        count: 0,
+        sum: ExactSum {
+            top: 0.0,
+            rest: None,
+        },
+        min: f64::INFINITY,
+        max: f64::NEG_INFINITY,
+    };
+
     /// The aggregate of the single value `x`.
     pub fn of(x: f64) -> Self {
         // SQLite stores -0.0 as 0: the rollup sees what the table keeps.
@@ -264,8 +297,8 @@ impl Marks {
 #[derive(Debug)]
 pub(super) struct OpenMinutes {
     marks: Marks,
-    /// (point id, minute) → aggregate, for minutes at or after `marks.until`.
-    open: BTreeMap<(i64, i64), Aggregate>,
+    /// The aggregates of the minutes at or after `marks.until`.
+    open: OpenTable,
     /// The newest sample time committed.
     newest: i64,
 }
@@ -274,7 +307,9 @@ pub(super) struct OpenMinutes {
 /// has committed.
 #[derive(Debug, Default)]
 pub(super) struct Staged {
-    open: BTreeMap<(i64, i64), Aggregate>,
+    /// (point id, minute, value) of the batch's samples in open minutes, in order: added to
+    /// the open minutes after the commit (most of them stay open).
+    open: Vec<(i64, i64, f64)>,
     late: BTreeMap<(i64, i64), Aggregate>,
     newest: Option<i64>,
     marks: Option<Marks>,
@@ -290,16 +325,15 @@ impl Staged {
         if !state.marks.covers(t) {
             return;
         }
-        let key = (id, minute_of(t));
-        let into = if t >= state.marks.until {
-            &mut self.open
-        } else {
-            &mut self.late
-        };
-        match into.get_mut(&key) {
+        let minute = minute_of(t);
+        if t >= state.marks.until {
+            self.open.push((id, minute, x));
+            return;
+        }
+        match self.late.get_mut(&(id, minute)) {
             Some(agg) => agg.add(x),
             None => {
-                into.insert(key, Aggregate::of(x));
+                self.late.insert((id, minute), Aggregate::of(x));
             }
         }
     }
@@ -310,9 +344,11 @@ impl OpenMinutes {
     /// after `until` (after a restart, a `kill -9` included).
     pub(super) fn load(conn: &Connection) -> rusqlite::Result<Self> {
         let marks = Marks::read(conn)?;
+        let highest: Option<i64> =
+            conn.query_row("SELECT max(id) FROM points", [], |r| r.get(0))?;
         let mut state = OpenMinutes {
             marks,
-            open: BTreeMap::new(),
+            open: OpenTable::new(highest.unwrap_or(0)),
             newest: i64::MIN,
         };
         let from = marks.until.max(marks.since).max(0);
@@ -323,11 +359,7 @@ impl OpenMinutes {
         let mut rows = stmt.query([from])?;
         while let Some(r) = rows.next()? {
             let (id, t, x): (i64, i64, f64) = (r.get(0)?, r.get(1)?, r.get(2)?);
-            state
-                .open
-                .entry((id, minute_of(t)))
-                .and_modify(|a| a.add(x))
-                .or_insert_with(|| Aggregate::of(x));
+            state.open.add(id, minute_of(t), x);
         }
         state.newest = conn
             .query_row("SELECT max(t) FROM samples", [], |r| {
@@ -344,7 +376,8 @@ impl OpenMinutes {
 
     /// Writes what `staged` holds in the batch's transaction: late samples merged into
     /// their rows; minutes that close (a minute behind the newest sample, or the clock
-    /// `now_ms` if earlier) written once; the new marks.
+    /// `now_ms` if earlier) written once; the new marks. The open minutes are only read:
+    /// they change in [`OpenMinutes::committed`].
     pub(super) fn write(
         &self,
         tx: &Transaction<'_>,
@@ -362,20 +395,25 @@ impl OpenMinutes {
         if close_before <= self.marks.until {
             return Ok(());
         }
-        let closing = |map: &BTreeMap<(i64, i64), Aggregate>| {
-            map.iter()
-                .filter(|((_, minute), _)| *minute < close_before)
-                .map(|(k, a)| (*k, a.clone()))
-                .collect::<Vec<_>>()
-        };
-        let mut closed: BTreeMap<(i64, i64), Aggregate> = closing(&self.open).into_iter().collect();
-        for (key, agg) in closing(&staged.open) {
-            closed
-                .entry(key)
-                .and_modify(|a| a.merge(&agg))
-                .or_insert(agg);
+        // The batch's own samples of closing minutes (rare: a minute late at least).
+        let mut batch: BTreeMap<(i64, i64), Aggregate> = BTreeMap::new();
+        for &(id, minute, x) in staged.open.iter().filter(|s| s.1 < close_before) {
+            batch
+                .entry((id, minute))
+                .and_modify(|a| a.add(x))
+                .or_insert_with(|| Aggregate::of(x));
         }
-        for (&(id, minute), agg) in &closed {
+        for (id, minute, held) in self.open.before(close_before) {
+            match batch.remove(&(id, minute)) {
+                Some(more) => {
+                    let mut agg = held.clone();
+                    agg.merge(&more);
+                    merge_row(tx, id, minute, &agg)?;
+                }
+                None => merge_row(tx, id, minute, held)?,
+            }
+        }
+        for (&(id, minute), agg) in &batch {
             merge_row(tx, id, minute, agg)?;
         }
         let marks = Marks {
@@ -387,19 +425,19 @@ impl OpenMinutes {
         Ok(())
     }
 
-    /// The batch committed: its open minutes join the held ones, closed ones leave.
+    /// The batch committed: closed minutes leave, its samples of open ones join.
     pub(super) fn committed(&mut self, staged: Staged) {
         if let Some(n) = staged.newest {
             self.newest = self.newest.max(n);
         }
-        for (key, agg) in staged.open {
-            self.open
-                .entry(key)
-                .and_modify(|a| a.merge(&agg))
-                .or_insert(agg);
-        }
         if let Some(marks) = staged.marks {
             self.set_marks(marks);
+        }
+        for (id, minute, x) in staged.open {
+            // Minutes before `until` closed in this batch, these samples with them.
+            if minute >= self.marks.until {
+                self.open.add(id, minute, x);
+            }
         }
     }
 
@@ -422,7 +460,117 @@ impl OpenMinutes {
 
     fn set_marks(&mut self, marks: Marks) {
         self.marks = marks;
-        self.open.retain(|(_, minute), _| *minute >= marks.until);
+        self.open.close_before(marks.until);
+    }
+}
+
+/// The open minutes' aggregates: a column per minute (about two are open: the one
+/// closing a minute behind and the current one), each a vector indexed by point id, which
+/// the `points` table hands out densely from 1, with [`Aggregate::EMPTY`] where a point
+/// has no sample that minute; ids outside that range in a map. 40 bytes a point and open
+/// minute, against about 100 for an entry in a map of (point, minute).
+#[derive(Debug)]
+struct OpenTable {
+    /// Minute → its column, for the open minutes.
+    columns: BTreeMap<i64, Vec<Aggregate>>,
+    /// A closed column, emptied, for the next minute (its memory reused, not reallocated).
+    spare: Vec<Aggregate>,
+    /// Ids up to this one are kept in the columns: the highest in the `points` table at
+    /// start, raised by the ids of new points, which follow it.
+    dense_until: i64,
+    /// (point id, minute) → aggregate for the other ids.
+    more: BTreeMap<(i64, i64), Aggregate>,
+}
+
+/// How far past `OpenTable::dense_until` a new point's id may be and still be kept in the
+/// columns (new points take the next ids; a stray higher id goes to the map instead of
+/// sizing every column).
+const DENSE_STEP: i64 = 1024;
+
+/// How many entries a column grows by at least: new points arrive in bursts, and doubling
+/// would leave up to half of a large column unused.
+const GROW_ENTRIES: usize = 1024;
+
+impl OpenTable {
+    fn new(dense_until: i64) -> Self {
+        OpenTable {
+            columns: BTreeMap::new(),
+            spare: Vec::new(),
+            dense_until: dense_until.max(0),
+            more: BTreeMap::new(),
+        }
+    }
+
+    /// Adds `x` to point `id`'s minute starting at `minute`.
+    fn add(&mut self, id: i64, minute: i64, x: f64) {
+        let Some(i) = self.dense_index(id) else {
+            self.more
+                .entry((id, minute))
+                .and_modify(|a| a.add(x))
+                .or_insert_with(|| Aggregate::of(x));
+            return;
+        };
+        if !self.columns.contains_key(&minute) {
+            // The points of the newest open minute come back in this one: size it for them.
+            let newest = self.columns.values().next_back().map_or(0, Vec::len);
+            let mut column = std::mem::take(&mut self.spare);
+            column.reserve_exact(newest.max(i + 1));
+            self.columns.insert(minute, column);
+        }
+        let column = self
+            .columns
+            .get_mut(&minute)
+            .expect("the minute's column was just made");
+        if i >= column.len() {
+            if i >= column.capacity() {
+                column.reserve_exact((i + 1 - column.len()).max(GROW_ENTRIES));
+            }
+            column.resize(i + 1, Aggregate::EMPTY);
+        }
+        column[i].add(x);
+    }
+
+    /// The column index of point `id`; `None` for an id kept in the map.
+    fn dense_index(&mut self, id: i64) -> Option<usize> {
+        let i = usize::try_from(id).ok()?;
+        if id > self.dense_until.saturating_add(DENSE_STEP) {
+            return None;
+        }
+        self.dense_until = self.dense_until.max(id);
+        Some(i)
+    }
+
+    /// The open minutes before `minute`: (point id, minute, aggregate).
+    fn before(&self, minute: i64) -> impl Iterator<Item = (i64, i64, &Aggregate)> {
+        let columns = self.columns.range(..minute).flat_map(|(&minute, column)| {
+            column
+                .iter()
+                .enumerate()
+                .filter(|(_, agg)| agg.count > 0)
+                .map(move |(i, agg)| {
+                    let id = i64::try_from(i).expect("a column's index came from an i64 id");
+                    (id, minute, agg)
+                })
+        });
+        let more = self
+            .more
+            .iter()
+            .filter(move |((_, m), _)| *m < minute)
+            .map(|(&(id, m), agg)| (id, m, agg));
+        columns.chain(more)
+    }
+
+    /// Forgets the minutes before `minute` (written, or no longer rolled up).
+    fn close_before(&mut self, minute: i64) {
+        let open = self.columns.split_off(&minute);
+        let closed = std::mem::replace(&mut self.columns, open);
+        if let Some(mut column) = closed.into_values().max_by_key(Vec::capacity) {
+            column.clear();
+            if column.capacity() > self.spare.capacity() {
+                self.spare = column;
+            }
+        }
+        self.more.retain(|(_, m), _| *m >= minute);
     }
 }
 
@@ -524,6 +672,170 @@ mod tests {
         huge.add(f64::MAX);
         huge.add(f64::MAX);
         assert_eq!(huge.total(), f64::INFINITY);
+    }
+
+    /// The sum as it was kept before the largest partial moved inline: every partial in
+    /// one list, the infinities beside it.
+    #[derive(Default)]
+    struct ListSum {
+        partials: Vec<f64>,
+        special: f64,
+    }
+
+    impl ListSum {
+        fn add(&mut self, x: f64) {
+            if !x.is_finite() {
+                self.special += x;
+                return;
+            }
+            let mut x = x;
+            let mut kept = 0;
+            for j in 0..self.partials.len() {
+                let (hi, lo) = two_sum(x, self.partials[j]);
+                if lo != 0.0 {
+                    self.partials[kept] = lo;
+                    kept += 1;
+                }
+                x = hi;
+            }
+            self.partials.truncate(kept);
+            if x.is_finite() {
+                self.partials.push(x);
+            } else {
+                self.special += x;
+                self.partials.clear();
+            }
+        }
+
+        fn total(&self) -> f64 {
+            if self.special != 0.0 || self.special.is_nan() {
+                return self.special;
+            }
+            let mut sum = ExactSum::default();
+            if let Some((&top, rest)) = self.partials.split_last() {
+                sum.top = top;
+                if !rest.is_empty() {
+                    sum.rest = Some(Box::new(Partials(rest.to_vec())));
+                }
+            }
+            sum.total()
+        }
+    }
+
+    #[test]
+    fn an_exact_sum_holds_the_same_partials_as_a_list_of_them() {
+        let mut rng = fastrand::Rng::with_seed(15);
+        let pick = |rng: &mut fastrand::Rng| match rng.u8(0..8) {
+            0 => f64::from(rng.i32(-1000..1000)),
+            1 => f64::from(rng.i32(-1000..1000)) / 10.0,
+            2 => f64::from(rng.f32() * 400.0 - 100.0),
+            3 => (rng.f64() - 0.5) * 1e16,
+            4 => (rng.f64() - 0.5) * 1e-12,
+            5 => (rng.f64() - 0.5) * 1e300,
+            6 => [0.1, 0.2, 0.3, -0.6, 1e16, -1e16][rng.usize(0..6)],
+            _ => rng.f64(),
+        };
+        for round in 0..2000 {
+            let n = rng.usize(1..60);
+            let values: Vec<f64> = (0..n).map(|_| pick(&mut rng)).collect();
+            let (mut list, mut inline) = (ListSum::default(), ExactSum::default());
+            for &x in &values {
+                list.add(x);
+                inline.add(x);
+                let rest = inline.rest.as_ref().map_or(&[][..], |r| &r.0[..]);
+                let held: Vec<f64> = rest.iter().copied().chain([inline.top]).collect();
+                assert_eq!(held, list.partials, "round {round}: {values:?}");
+            }
+            assert_eq!(
+                inline.total().to_bits(),
+                list.total().to_bits(),
+                "{values:?}"
+            );
+            // Split where a batch or a minute would split them, then merged.
+            let cut = rng.usize(0..=n);
+            let (mut a, mut b) = (ExactSum::default(), ExactSum::default());
+            values[..cut].iter().for_each(|x| a.add(*x));
+            values[cut..].iter().for_each(|x| b.add(*x));
+            a.merge(&b);
+            assert_eq!(
+                a.total().to_bits(),
+                list.total().to_bits(),
+                "{values:?} cut {cut}"
+            );
+            let back = ExactSum::from_bytes(&inline.to_bytes()).expect("whole f64s");
+            assert_eq!(back.total().to_bits(), list.total().to_bits(), "{values:?}");
+        }
+    }
+
+    #[test]
+    fn a_sum_of_whole_or_float32_readings_needs_no_heap() {
+        let mut sum = ExactSum::default();
+        for i in 0..10_000 {
+            sum.add(f64::from(i % 500) - 120.0);
+            sum.add(f64::from(i as f32 * 0.25 + 0.1_f32));
+        }
+        assert!(sum.rest.is_none(), "{sum:?}");
+        assert_eq!(std::mem::size_of::<ExactSum>(), 16);
+        assert_eq!(std::mem::size_of::<Aggregate>(), 40);
+        let mut tenths = ExactSum::default();
+        [0.1, 0.2].iter().for_each(|x| tenths.add(*x));
+        assert!(tenths.rest.is_some(), "0.1 + 0.2 is not exact in binary");
+        tenths.add(-0.2);
+        assert_eq!(tenths.total(), 0.1);
+        tenths.add(-0.1);
+        assert!(tenths.rest.is_none(), "back to one partial: {tenths:?}");
+        assert_eq!(tenths.total(), 0.0);
+    }
+
+    /// Every open minute the table holds before `minute`, in a map.
+    fn held(table: &OpenTable, minute: i64) -> BTreeMap<(i64, i64), (u64, f64, f64, f64)> {
+        table
+            .before(minute)
+            .map(|(id, m, a)| ((id, m), (a.count, a.sum.total(), a.min, a.max)))
+            .collect()
+    }
+
+    #[test]
+    fn the_open_table_keeps_every_id_and_minute_whatever_their_range() {
+        // Two points known at start; ids beyond them come as new points or stray.
+        let mut table = OpenTable::new(2);
+        let stray = 3 + DENSE_STEP + 1;
+        let samples = [
+            (1, 0, 5.0),
+            (2, 0, -1.5),
+            (1, MINUTE_MS, 7.0),
+            (1, 0, 6.0),
+            (3, MINUTE_MS, 1.0),
+            (-4, 0, 2.0),
+            (stray, MINUTE_MS, 3.0),
+            (i64::MAX, 2 * MINUTE_MS, 4.0),
+            (2, 5 * MINUTE_MS, 9.0),
+        ];
+        for (id, minute, x) in samples {
+            table.add(id, minute, x);
+        }
+        assert!(table.more.contains_key(&(-4, 0)));
+        assert!(table.more.contains_key(&(stray, MINUTE_MS)));
+        assert!(table.more.contains_key(&(i64::MAX, 2 * MINUTE_MS)));
+        assert_eq!(table.columns.len(), 3, "minutes 0, 1 and 5 in columns");
+        let all = held(&table, i64::MAX);
+        assert_eq!(all.len(), 8, "{all:?}");
+        assert_eq!(all[&(1, 0)], (2, 11.0, 5.0, 6.0));
+        assert_eq!(all[&(2, 0)], (1, -1.5, -1.5, -1.5));
+        assert_eq!(all[&(3, MINUTE_MS)], (1, 1.0, 1.0, 1.0));
+        assert_eq!(all[&(-4, 0)], (1, 2.0, 2.0, 2.0));
+
+        table.close_before(MINUTE_MS);
+        let left = held(&table, i64::MAX);
+        assert!(left.keys().all(|&(_, m)| m >= MINUTE_MS), "{left:?}");
+        assert_eq!(left.len(), 5, "{left:?}");
+        // The closed minute's column is kept for the next minute, which fills it again.
+        let spare = table.spare.capacity();
+        assert!(spare > 0);
+        table.add(1, 6 * MINUTE_MS, 1.0);
+        assert_eq!(table.columns[&(6 * MINUTE_MS)].capacity(), spare);
+        table.close_before(i64::MAX);
+        assert!(held(&table, i64::MAX).is_empty());
     }
 
     #[test]
