@@ -5,8 +5,7 @@
 //! own, up to eight per core; each keeps its own free memory, so a process whose threads
 //! take turns building and freeing (a poller, a history writer, the runtime's workers)
 //! holds several partly empty heaps. [`set_arena_max`] limits them;
-//! [`set_mmap_threshold`] keeps large blocks out of the heap; [`trim`] hands free pages
-//! back to the kernel.
+//! [`set_mmap_threshold`] keeps large blocks out of the heap.
 //!
 //! Elsewhere than glibc on Linux (musl, macOS) the calls do nothing and say so.
 //!
@@ -59,24 +58,6 @@ pub fn set_mmap_threshold(bytes: u32) -> bool {
     }
 }
 
-/// Hands the free memory of every arena back to the kernel, as far as whole pages allow
-/// (glibc's `malloc_trim(0)`); `true` if some was, `false` if none was or this is not
-/// glibc.
-pub fn trim() -> bool {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        // SAFETY: malloc_trim takes an integer, reads no memory of ours and locks each
-        // arena while it works; it frees nothing that is in use.
-        #[allow(unsafe_code)]
-        let released = unsafe { libc::malloc_trim(0) };
-        released == 1
-    }
-    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-    {
-        false
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -101,29 +82,9 @@ mod tests {
     }
 
     #[test]
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    fn a_trim_returns_the_pages_of_freed_blocks_between_live_ones() {
-        // Every other 16 KiB block freed: free memory malloc keeps (no neighbour to merge
-        // with, below the mmap threshold), whole pages of which the trim can return.
-        let mut blocks: Vec<Option<Vec<u8>>> =
-            (0..256).map(|i| Some(vec![i as u8; 16 << 10])).collect();
-        blocks.iter_mut().step_by(2).for_each(|b| *b = None);
-        assert!(trim(), "no page of 128 freed 16 KiB blocks was returned");
-        let live: usize = blocks.iter().flatten().map(Vec::len).sum();
-        assert_eq!(live, 128 * (16 << 10), "the live blocks are untouched");
-        assert!(
-            blocks
-                .iter()
-                .flatten()
-                .all(|b| b.iter().all(|x| *x % 2 == 1))
-        );
-    }
-
-    #[test]
     #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
     fn elsewhere_the_calls_say_they_did_nothing() {
         assert!(!set_arena_max(1));
         assert!(!set_mmap_threshold(128 << 10));
-        assert!(!trim());
     }
 }
