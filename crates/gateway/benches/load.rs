@@ -1145,7 +1145,44 @@ struct GroupSeen {
     devices: usize,
     reads: u64,
     points: u64,
-    intervals_ms: Vec<i64>,
+    intervals_ms: Intervals,
+}
+
+/// Poll intervals in whole milliseconds, counted per value: the sampler runs inside the
+/// measured gateway process, and a list of every interval grew to megabytes in long runs
+/// (a few hundred distinct values here).
+#[derive(Debug, Default)]
+struct Intervals(std::collections::BTreeMap<i64, u64>);
+
+impl Intervals {
+    fn add(&mut self, ms: i64) {
+        *self.0.entry(ms).or_default() += 1;
+    }
+
+    fn len(&self) -> u64 {
+        self.0.values().sum()
+    }
+
+    fn max(&self) -> Option<i64> {
+        self.0.keys().next_back().copied()
+    }
+
+    /// The `p`th percentile, ranked as in a sorted list of every interval.
+    fn percentile(&self, p: f64) -> Option<i64> {
+        let n = self.len();
+        if n == 0 {
+            return None;
+        }
+        let rank = (((p / 100.0) * (n - 1) as f64).round() as u64).min(n - 1);
+        let mut below = 0;
+        for (&ms, &count) in &self.0 {
+            below += count;
+            if rank < below {
+                return Some(ms);
+            }
+        }
+        self.max()
+    }
 }
 
 /// Follows the time stamp of one point per device and group: each new good time stamp is
@@ -1224,7 +1261,7 @@ impl Sampler {
                         seen.reads += 1;
                         seen.points += w.points;
                         if let (Some(now), Some(before)) = (t, w.last) {
-                            seen.intervals_ms.push(now - before);
+                            seen.intervals_ms.add(now - before);
                         }
                     }
                     w.last = if good { t } else { None };
@@ -1552,14 +1589,6 @@ fn loadavg() -> String {
 
 // ---- the report --------------------------------------------------------------------------
 
-fn percentile(sorted: &[i64], p: f64) -> Option<i64> {
-    if sorted.is_empty() {
-        return None;
-    }
-    let rank = ((p / 100.0) * (sorted.len() - 1) as f64).round() as usize;
-    sorted.get(rank.min(sorted.len() - 1)).copied()
-}
-
 fn mib(kib: u64) -> f64 {
     kib as f64 / 1024.0
 }
@@ -1676,8 +1705,7 @@ impl std::fmt::Display for Report {
             )?;
         }
         for (name, g) in &self.groups {
-            let mut sorted = g.intervals_ms.clone();
-            sorted.sort_unstable();
+            let intervals = &g.intervals_ms;
             let period = g.period.as_millis() as i64;
             let show = |p: Option<i64>| p.map_or("-".to_owned(), |v| format!("{v}"));
             writeln!(
@@ -1686,10 +1714,10 @@ impl std::fmt::Display for Report {
                 period,
                 g.reads as f64 / secs,
                 g.devices as f64 / g.period.as_secs_f64(),
-                show(percentile(&sorted, 50.0)),
-                show(percentile(&sorted, 99.0)),
-                show(sorted.last().copied()),
-                sorted.len()
+                show(intervals.percentile(50.0)),
+                show(intervals.percentile(99.0)),
+                show(intervals.max()),
+                intervals.len()
             )?;
         }
         let busy: Vec<f64> = a
