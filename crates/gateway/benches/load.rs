@@ -1151,7 +1151,7 @@ struct GroupSeen {
 /// Poll intervals in whole milliseconds, counted per value: the sampler runs inside the
 /// measured gateway process, and a list of every interval grew to megabytes in long runs
 /// (a few hundred distinct values here).
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 struct Intervals(std::collections::BTreeMap<i64, u64>);
 
 impl Intervals {
