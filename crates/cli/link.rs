@@ -12,10 +12,12 @@
 //   first, in that order: the few thousand functions a gateway runs sit side by side
 //   instead of spread over 20 MB of code, and the kernel maps only their pages (DESIGN.md,
 //   "Code layout"; scripts/code-order writes the list). Names the binary does not define
-//   are skipped, so a stale list costs memory, never a failed build.
+//   are skipped, so a stale list costs memory, never a failed build; a release build warns
+//   when the list was made for another compiler or Cargo.lock.
 
-/// Prints the link options for the targets of `kind` (`bins` or `benches`).
-fn link_options(kind: &str, code_order: &std::path::Path) {
+/// Prints the link options for the targets of `kind` (`bins` or `benches`); `lock` is the
+/// workspace's Cargo.lock.
+fn link_options(kind: &str, code_order: &std::path::Path, lock: &std::path::Path) {
     let var = |name: &str| std::env::var(name).unwrap_or_default();
     println!("cargo:rerun-if-changed={}", code_order.display());
     println!("cargo:rerun-if-env-changed=RUSTC_LINKER");
@@ -23,18 +25,62 @@ fn link_options(kind: &str, code_order: &std::path::Path) {
         return;
     }
     println!("cargo:rustc-link-arg-{kind}=-Wl,-z,pack-relative-relocs");
-    if var("PROFILE") == "release" && code_order.is_file() && links_with_lld(&var) {
+    let rustc = rustc_version();
+    if var("PROFILE") == "release" && code_order.is_file() && links_with_lld(&var, &rustc) {
         println!(
             "cargo:rustc-link-arg-{kind}=-Wl,--symbol-ordering-file={}",
             code_order.display()
         );
         println!("cargo:rustc-link-arg-{kind}=-Wl,--no-warn-symbol-ordering");
+        println!("cargo:rerun-if-changed={}", lock.display());
+        if let Some(why) = stale(code_order, lock, &rustc) {
+            println!(
+                "cargo:warning=crates/cli/code-order.txt {why}: most of the functions it \
+                 lists have other names now, so the binary's code is not laid out by use \
+                 and it takes more memory (run scripts/code-order)"
+            );
+        }
     }
+}
+
+/// What a code-order list records of the build it was made from (written by
+/// scripts/code-order): the compiler's version and a digest of Cargo.lock, since the
+/// symbol names it lists carry hashes that change with either.
+const MADE_FOR: &str = "# made for: ";
+
+/// Why the list in `code_order` no longer matches this build, if it does not.
+fn stale(code_order: &std::path::Path, lock: &std::path::Path, rustc: &str) -> Option<String> {
+    let list = std::fs::read_to_string(code_order).unwrap_or_default();
+    let Some(made_for) = list.lines().find_map(|line| line.strip_prefix(MADE_FOR)) else {
+        return Some("does not say which compiler and Cargo.lock it was made for".to_owned());
+    };
+    let lock = std::fs::read(lock).unwrap_or_default();
+    let now = made_for_line(rustc, &lock);
+    (made_for != now).then(|| format!("was made for {made_for}, this build is {now}"))
+}
+
+/// `rustc 1.95.0 (59807616e 2026-04-14), Cargo.lock fnv1a64 0123456789abcdef`.
+fn made_for_line(rustc: &str, lock: &[u8]) -> String {
+    // FNV-1a, 64 bits: scripts/code-order computes the same.
+    let digest = lock.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    format!("{rustc}, Cargo.lock fnv1a64 {digest:016x}")
+}
+
+/// `rustc --version`, e.g. "rustc 1.95.0 (59807616e 2026-04-14)"; empty if it cannot run.
+fn rustc_version() -> String {
+    let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
+    std::process::Command::new(rustc)
+        .arg("--version")
+        .output()
+        .map(|output| String::from_utf8_lossy(&output.stdout).trim().to_owned())
+        .unwrap_or_default()
 }
 
 /// Whether rustc links with its own lld: its default on x86_64 Linux since Rust 1.90, when
 /// neither a linker nor linker flags are configured.
-fn links_with_lld(var: &dyn Fn(&str) -> String) -> bool {
+fn links_with_lld(var: &dyn Fn(&str) -> String, rustc: &str) -> bool {
     let flags = var("CARGO_ENCODED_RUSTFLAGS");
     if var("TARGET") != "x86_64-unknown-linux-gnu"
         || !var("RUSTC_LINKER").is_empty()
@@ -43,13 +89,8 @@ fn links_with_lld(var: &dyn Fn(&str) -> String) -> bool {
     {
         return false;
     }
-    let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
-    let Ok(output) = std::process::Command::new(rustc).arg("--version").output() else {
-        return false;
-    };
     // "rustc 1.95.0 (59807616e 2026-04-14)"
-    let version = String::from_utf8_lossy(&output.stdout);
-    let number: Vec<u32> = (version.split_whitespace().nth(1).unwrap_or_default().split('.'))
+    let number: Vec<u32> = (rustc.split_whitespace().nth(1).unwrap_or_default().split('.'))
         .map_while(|part| part.parse().ok())
         .collect();
     matches!(number[..], [1, minor, ..] if minor >= 90) || matches!(number[..], [major, ..] if major > 1)
