@@ -457,9 +457,10 @@ impl OpenMinutes {
 /// closing a minute behind and the current one), each indexed by point id, which the
 /// `points` table hands out densely from 1; ids outside that range in a map. A column
 /// holds a 4-byte slot per point and a 40-byte aggregate per point with samples that
-/// minute: at 1,000 JBC stations about a fifth of the 26,000 points change in a minute, so
-/// a minute takes about 0.3 MB, against 1 MB with an aggregate per point and about 100
-/// bytes an entry in a map of (point, minute).
+/// minute: at 1,000 JBC stations (26,000 points) about 9,500 points change in a minute, so
+/// a minute takes about 0.5 MB, against 1 MB with an aggregate per point and about 100
+/// bytes an entry in a map of (point, minute). The first minute after a start holds
+/// every point, each read for the first time.
 #[derive(Debug)]
 struct OpenTable {
     /// Minute → its column, for the open minutes.
@@ -488,8 +489,8 @@ struct Column {
 /// sizing every column).
 const DENSE_STEP: i64 = 1024;
 
-/// How many slots a column grows by at least: new points arrive in bursts, and doubling
-/// would leave up to half of a large column unused.
+/// How many slots (or aggregates) a column grows by at least: new points arrive in bursts,
+/// and doubling would leave up to half of a large column unused.
 const GROW_ENTRIES: usize = 1024;
 
 impl OpenTable {
@@ -560,6 +561,11 @@ impl OpenTable {
         if let Some(mut column) = closed.into_values().max_by_key(|c| c.slots.capacity()) {
             column.slots.clear();
             column.aggregates.clear();
+            // The first minute after a start holds every point (each is read for the first
+            // time); later minutes only the points that change. Keep room for as many as
+            // the newest open minute holds, not for that first one.
+            let wanted = self.columns.values().map(|c| c.aggregates.len()).max();
+            column.aggregates.shrink_to(wanted.unwrap_or(0));
             if column.slots.capacity() > self.spare.slots.capacity() {
                 self.spare = column;
             }
@@ -584,6 +590,11 @@ impl Column {
         }
         match self.slots[i] {
             0 => {
+                if self.aggregates.len() == self.aggregates.capacity() {
+                    // By a quarter, not double: a minute's points come in their thousands.
+                    let more = (self.aggregates.len() / 4).max(GROW_ENTRIES);
+                    self.aggregates.reserve_exact(more);
+                }
                 self.aggregates.push(Aggregate::of(x));
                 // At most as many aggregates as slots, and slots are below MAX_SLOTS.
                 self.slots[i] = u32::try_from(self.aggregates.len())
@@ -888,6 +899,31 @@ mod tests {
             "in id order"
         );
         assert_eq!(held[&(201, 0)], (2, 202.5, 1.5, 201.0));
+    }
+
+    #[test]
+    fn a_closed_first_minute_full_of_points_leaves_room_only_for_the_next_ones() {
+        let mut table = OpenTable::new(20_000);
+        // After a start every point is read for the first time...
+        for id in 1..=20_000 {
+            table.add(id, 0, 1.0);
+        }
+        // ...then only some of them change.
+        for id in (1..=20_000).step_by(10) {
+            table.add(id, MINUTE_MS, 2.0);
+        }
+        let first = table.columns[&0].aggregates.capacity();
+        assert!(
+            first >= 20_000 && first < 25_000,
+            "grown by quarters: {first}"
+        );
+        table.close_before(MINUTE_MS);
+        assert!(
+            table.spare.aggregates.capacity() <= 2_000 + GROW_ENTRIES,
+            "the spare keeps room for the open minute's 2,000, not 20,000: {}",
+            table.spare.aggregates.capacity()
+        );
+        assert_eq!(held(&table, i64::MAX).len(), 2_000);
     }
 
     #[test]
