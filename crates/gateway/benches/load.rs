@@ -1751,12 +1751,16 @@ impl std::fmt::Display for Report {
         // The gateway's whole CPU time (scheduler, drivers, clients, line I/O, live state,
         // history writer and commits, HTTP idle, this bench's sampler) over the work done.
         let gateway_us = (a.gateway.cpu.saturating_sub(b.gateway.cpu)).as_secs_f64() * 1e6;
+        let user_us = (a.gateway.user.saturating_sub(b.gateway.user)).as_secs_f64() * 1e6;
         let changes = a.value_changes.saturating_sub(b.value_changes);
+        let point = |us: f64| us / points.max(1) as f64;
         writeln!(
             f,
-            "  cost         {:.1} µs CPU per poll, {:.2} µs per point read, {:.2} µs per value change{}",
+            "  cost         {:.1} µs CPU per poll, {:.2} µs per point read (user {:.2}, kernel {:.2}), {:.2} µs per value change{}",
             gateway_us / polls_done.max(1) as f64,
-            gateway_us / points.max(1) as f64,
+            point(gateway_us),
+            point(user_us),
+            point(gateway_us - user_us),
             gateway_us / changes.max(1) as f64,
             if self.args.mix.len() > 1 {
                 " (the mix's average; --mix KIND=1 for one protocol's)"

@@ -386,6 +386,7 @@ fn run(args: &Args) -> anyhow::Result<Report> {
     store.close();
     let diff = |a: ProcessUse, b: ProcessUse| ProcessUse {
         cpu: a.cpu.saturating_sub(b.cpu),
+        user: a.user.saturating_sub(b.user),
         peak_rss_kib: a.peak_rss_kib,
     };
     Ok(Report {

@@ -153,6 +153,7 @@ fn bench(load: Load) -> anyhow::Result<()> {
         ages.sort_unstable();
         let pct = |p: f64| ages.get(((ages.len() as f64 - 1.0) * p) as usize).copied().unwrap_or(0);
         let cpu = (use1.cpu - use0.cpu).as_secs_f64() / elapsed;
+        let user = (use1.user - use0.user).as_secs_f64() / elapsed;
         let metrics = http_get(&api, "/metrics")?;
         let value = |name: &str| {
             metrics
@@ -163,9 +164,10 @@ fn bench(load: Load) -> anyhow::Result<()> {
         println!("committed:   {rate:.0} changes/s over {elapsed:.1} s ({:.0} % of offered)", 100.0 * rate / offered);
         println!("latency:     p50 {} ms, p99 {} ms (age of the newest committed row, {} polls)", pct(0.5), pct(0.99), ages.len());
         println!(
-            "historian:   {:.2} cores ({:.2} µs CPU per change), peak RSS {:.1} MiB",
+            "historian:   {:.2} cores ({:.2} µs CPU per change, {:.2} of it user), peak RSS {:.1} MiB",
             cpu,
             cpu * 1e6 / rate.max(1.0),
+            user * 1e6 / rate.max(1.0),
             use1.peak_rss_kib as f64 / 1024.0
         );
         println!(

@@ -10,6 +10,10 @@ use anyhow::Context;
 pub struct ProcessUse {
     /// User and system CPU time.
     pub cpu: Duration,
+    /// The user part of `cpu` (the rest is the kernel's work for the process: system calls,
+    /// and what the kernel accounts to it while it runs, such as loopback TCP delivering
+    /// what it sends to the receiving socket).
+    pub user: Duration,
     /// Peak resident set size (`VmHWM`).
     pub peak_rss_kib: u64,
 }
@@ -32,7 +36,8 @@ impl ProcessUse {
                 .and_then(|f| f.parse().ok())
                 .with_context(|| format!("/proc/{pid}/stat field {n}"))
         };
-        let total = ticks(14)? + ticks(15)?;
+        let user = ticks(14)?;
+        let total = user + ticks(15)?;
         let status = std::fs::read_to_string(format!("/proc/{pid}/status"))
             .with_context(|| format!("cannot read /proc/{pid}/status"))?;
         let peak_rss_kib = status
@@ -42,6 +47,7 @@ impl ProcessUse {
             .context("no VmHWM in /proc/PID/status")?;
         Ok(Self {
             cpu: Duration::from_secs_f64(total as f64 / ticks_per_second as f64),
+            user: Duration::from_secs_f64(user as f64 / ticks_per_second as f64),
             peak_rss_kib,
         })
     }

@@ -914,7 +914,7 @@ mod tests {
         }
         let first = table.columns[&0].aggregates.capacity();
         assert!(
-            first >= 20_000 && first < 25_000,
+            (20_000..25_000).contains(&first),
             "grown by quarters: {first}"
         );
         table.close_before(MINUTE_MS);
