@@ -35,9 +35,10 @@ fn link_options(kind: &str, code_order: &std::path::Path, lock: &std::path::Path
         println!("cargo:rerun-if-changed={}", lock.display());
         if let Some(why) = stale(code_order, lock, &rustc) {
             println!(
-                "cargo:warning=crates/cli/code-order.txt {why}: most of the functions it \
-                 lists have other names now, so the binary's code is not laid out by use \
-                 and it takes more memory (run scripts/code-order)"
+                "cargo:warning=crates/cli/code-order.txt {why}: the functions it lists may \
+                 have other names in this build, so the binary works the same but its code \
+                 may not be laid out by use and take more memory (scripts/code-order \
+                 writes a new list)"
             );
         }
     }
