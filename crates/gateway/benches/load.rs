@@ -54,7 +54,9 @@
 //!   `cost` line divides the gateway's CPU time by the polls done, the points read good and
 //!   the value changes stored: the whole cost of a poll from the scheduler to the history
 //!   commit (line I/O, drivers, live state, change stream, history writer), per protocol
-//!   when the mix has one kind (`--mix jbc=1`, `--mix modbus=1`).
+//!   when the mix has one kind (`--mix jbc=1`, `--mix modbus=1`), and splits a point's
+//!   cost into user and kernel time (the kernel's includes what loopback TCP does for the
+//!   simulators' sockets inside the gateway's sends).
 //! - **Heavy GETs.** After the window, while the cell is still polled, `/metrics`, the full
 //!   `/api/devices`, two filtered listings and `/healthz` are each fetched five times over
 //!   fresh connections, time to the last byte: the report gives the first, the median and
