@@ -25,22 +25,26 @@ fn link_options(kind: &str, code_order: &std::path::Path, lock: &std::path::Path
         return;
     }
     println!("cargo:rustc-link-arg-{kind}=-Wl,-z,pack-relative-relocs");
+    if var("PROFILE") != "release" || !code_order.is_file() {
+        return;
+    }
+    // Only here: `rustc --version` is a process of its own, which other builds skip.
     let rustc = rustc_version();
-    if var("PROFILE") == "release" && code_order.is_file() && links_with_lld(&var, &rustc) {
+    if !links_with_lld(&var, &rustc) {
+        return;
+    }
+    println!(
+        "cargo:rustc-link-arg-{kind}=-Wl,--symbol-ordering-file={}",
+        code_order.display()
+    );
+    println!("cargo:rustc-link-arg-{kind}=-Wl,--no-warn-symbol-ordering");
+    println!("cargo:rerun-if-changed={}", lock.display());
+    if let Some(why) = stale(code_order, lock, &rustc) {
         println!(
-            "cargo:rustc-link-arg-{kind}=-Wl,--symbol-ordering-file={}",
-            code_order.display()
+            "cargo:warning=crates/cli/code-order.txt {why}: the functions it lists may have \
+             other names in this build, so the binary works the same but its code may not \
+             be laid out by use and take more memory (scripts/code-order writes a new list)"
         );
-        println!("cargo:rustc-link-arg-{kind}=-Wl,--no-warn-symbol-ordering");
-        println!("cargo:rerun-if-changed={}", lock.display());
-        if let Some(why) = stale(code_order, lock, &rustc) {
-            println!(
-                "cargo:warning=crates/cli/code-order.txt {why}: the functions it lists may \
-                 have other names in this build, so the binary works the same but its code \
-                 may not be laid out by use and take more memory (scripts/code-order \
-                 writes a new list)"
-            );
-        }
     }
 }
 
