@@ -168,8 +168,8 @@ impl DeviceState {
     }
 }
 
-/// The changing part of a point.
-#[derive(Debug, Clone, Default, PartialEq)]
+/// The changing part of a point: 64 bytes (one is kept per point: 1.7 MB at 26,000).
+#[derive(Debug, Clone)]
 pub struct PointState {
     /// Last value read.
     pub value: Option<Value>,
@@ -178,15 +178,57 @@ pub struct PointState {
     /// Good, stale (not refreshed in time: set by the line task's sweep, and judged again
     /// when shown) or bad.
     pub quality: Option<Quality>,
-    /// Why the last read failed (shared by the points of a device that went down).
-    pub error: Option<Arc<str>>,
+    /// Why the last read failed (shared by the points of a device that went down; an
+    /// `Arc<String>`, not an `Arc<str>`, for a pointer of 8 bytes instead of 16).
+    pub error: Option<Arc<String>>,
     /// Whether the value is in alarm.
     pub alarm: bool,
-    /// The last value stored and published, when it was a number: a number within the
-    /// point's deadband of it updates only `value`. Text (and no value) is never held
-    /// back, so then the last value stored is `value` itself. (A number, not a `Value`:
-    /// 80 bytes a point instead of 96, 1.6 MB less at 100,000 points.)
-    pub recorded: Option<f64>,
+    /// The last value stored and published when it was a number, NaN otherwise (see
+    /// [`PointState::recorded`]). A number, not a `Value`, and NaN for none rather than an
+    /// `Option`: 64 bytes a point instead of 96.
+    recorded: f64,
+}
+
+impl Default for PointState {
+    fn default() -> Self {
+        Self {
+            value: None,
+            t: None,
+            quality: None,
+            error: None,
+            alarm: false,
+            recorded: f64::NAN,
+        }
+    }
+}
+
+impl PartialEq for PointState {
+    fn eq(&self, other: &Self) -> bool {
+        self.value == other.value
+            && self.t == other.t
+            && self.quality == other.quality
+            && self.error == other.error
+            && self.alarm == other.alarm
+            && self.recorded() == other.recorded()
+    }
+}
+
+impl PointState {
+    /// The last value stored and published, when it was a number (and not NaN): a number
+    /// within the point's deadband of it updates only `value`. Text, NaN and no value are
+    /// never held back, so then the last value stored is `value` itself.
+    pub fn recorded(&self) -> Option<f64> {
+        (!self.recorded.is_nan()).then_some(self.recorded)
+    }
+
+    /// Notes that its value was just stored and published.
+    pub(crate) fn set_recorded(&mut self) {
+        self.recorded = self
+            .value
+            .as_ref()
+            .and_then(Value::as_number)
+            .unwrap_or(f64::NAN);
+    }
 }
 
 /// One line and its health.
@@ -725,7 +767,7 @@ impl DeviceEntry {
                 .quality
                 .map(|q| judge_staleness(q, state.t, period, now)),
             t: state.t,
-            error: state.error.as_deref().map(str::to_owned),
+            error: state.error.as_deref().cloned(),
             alarm: state.alarm,
             period_ms: duration_millis(period),
         }
@@ -835,6 +877,28 @@ pub fn judge_staleness(
 mod tests {
     use super::*;
     use crate::point::PointDescription;
+
+    #[test]
+    #[cfg(target_pointer_width = "64")]
+    fn a_point_state_takes_64_bytes_one_is_kept_per_point() {
+        assert_eq!(std::mem::size_of::<PointState>(), 64);
+    }
+
+    #[test]
+    fn a_point_state_records_numbers_only_and_a_nan_as_nothing_held_back() {
+        let mut point = PointState::default();
+        assert_eq!(point.recorded(), None);
+        let mut record = |value: Option<Value>| {
+            point.value = value;
+            point.set_recorded();
+            point.recorded()
+        };
+        assert_eq!(record(Some(Value::Number(20.5))), Some(20.5));
+        assert_eq!(record(Some(Value::Text("JTSE".into()))), None);
+        assert_eq!(record(Some(Value::Number(f64::NAN))), None, "a NaN is never held back");
+        assert_eq!(record(None), None);
+        assert_eq!(point, PointState::default(), "no number recorded is equal to none");
+    }
 
     #[test]
     fn every_point_is_found_by_its_name_and_no_other_name_is() {

@@ -720,7 +720,7 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
                 Ok(value) => {
                     let deadband = entry.deadband(i);
                     let changed = point.quality != Some(Quality::Good)
-                        || moved_enough(point.recorded, point.value.as_ref(), &value, deadband);
+                        || moved_enough(point.recorded(), point.value.as_ref(), &value, deadband);
                     let alarm = spec.is_alarm(&value);
                     if alarm != point.alarm {
                         let text = spec
@@ -756,15 +756,15 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
                 }
                 Err(error) => {
                     let changed = point.quality != Some(Quality::Bad)
-                        || point.error.as_deref() != Some(error.message.as_str());
+                        || point.error.as_deref().map(String::as_str) != Some(error.message.as_str());
                     point.quality = Some(Quality::Bad);
-                    point.error = Some(error.message.into());
+                    point.error = Some(Arc::new(error.message));
                     point.t = Some(now);
                     changed
                 }
             };
             if changed {
-                point.recorded = point.value.as_ref().and_then(Value::as_number);
+                point.set_recorded();
                 samples.push(Sample {
                     point: spec.id.clone(),
                     t: now,
@@ -885,7 +885,7 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
             state.status = DeviceStatus::Down;
             state.since = now;
         }
-        let message: Arc<str> = error.message.as_str().into();
+        let message = Arc::new(error.message.clone());
         for (i, point) in state.points.iter_mut().enumerate() {
             if point.quality == Some(Quality::Bad) {
                 continue;

@@ -1,6 +1,7 @@
 //! The API through `tower::ServiceExt::oneshot` on the router (paused clock, in-memory
 //! line), and over a real loopback socket for the event stream and client addresses.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use axum::body::Body;
@@ -1121,19 +1122,18 @@ fn example_cell_with_every_kind_of_state(
                     }
                     _ => Some(Value::Number(numbers[n % numbers.len()])),
                 };
-                PointState {
-                    value,
-                    t: times[n % times.len()],
-                    quality: [
-                        None,
-                        Some(Quality::Good),
-                        Some(Quality::Bad),
-                        Some(Quality::Stale),
-                    ][n % 4],
-                    error: (n % 3 == 0).then(|| texts[n % texts.len()].into()),
-                    alarm: n % 7 == 0,
-                    recorded: None,
-                }
+                let mut point = PointState::default();
+                point.value = value;
+                point.t = times[n % times.len()];
+                point.quality = [
+                    None,
+                    Some(Quality::Good),
+                    Some(Quality::Bad),
+                    Some(Quality::Stale),
+                ][n % 4];
+                point.error = (n % 3 == 0).then(|| Arc::new(texts[n % texts.len()].to_owned()));
+                point.alarm = n % 7 == 0;
+                point
             })
             .collect();
         n += 1;
