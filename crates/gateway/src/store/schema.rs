@@ -116,9 +116,17 @@ pub(super) const WRITER_CACHE_MAX_KIB: i64 = 16 * 1024;
 /// the disk; 16 MiB here was 12 MiB of the gateway's resident memory at 1,000 stations.
 pub(super) const WRITER_CACHE_MIN_KIB: i64 = 2 * 1024;
 
-/// Cache per row of the batch being committed, in KiB: a 20,000-row batch gets the
-/// largest cache, a 2,000-row one the smallest.
+/// Cache per row of the batch being committed, in KiB: a 16,000-row batch gets the
+/// largest cache.
 const WRITER_CACHE_KIB_PER_ROW: i64 = 1;
+
+/// The smallest batch for which the cache grows: half the default batch (20,000 rows),
+/// which a writer gathers only behind a backlog or from more than 50,000 rows a second.
+/// Below it the cache stays at its floor: a gateway's start (every point read, stored
+/// and added to `points` for the first time, in batches of 2,000–5,000 rows at 1,000
+/// stations) grew it to 5 MiB, and the 0.7 MiB it filled beyond the floor stayed in the
+/// process's memory after the cache shrank back.
+pub(super) const WRITER_CACHE_GROW_FROM_ROWS: usize = 10_000;
 
 /// Batches in a row that want a smaller cache before the writer lowers it: the last,
 /// short batch of a backlog does not give back the cache the next one needs.
@@ -126,8 +134,8 @@ const WRITER_CACHE_LOWER_AFTER: u32 = 10;
 
 /// The writer's page-cache size, following the size of its batches (sans IO: it says
 /// what `PRAGMA cache_size` should become; the writer applies it). It grows at once for
-/// a large batch and shrinks after [`WRITER_CACHE_LOWER_AFTER`] smaller ones; SQLite
-/// frees the pages above a lowered size.
+/// a large batch (from [`WRITER_CACHE_GROW_FROM_ROWS`] rows) and shrinks after
+/// [`WRITER_CACHE_LOWER_AFTER`] smaller ones; SQLite frees the pages above a lowered size.
 #[derive(Debug)]
 pub(super) struct WriterCache {
     kib: i64,
@@ -151,10 +159,14 @@ impl WriterCache {
     /// Notes a batch of `rows` about to be committed; `Some(kib)` when the cache size must
     /// change to it before the batch.
     pub(super) fn for_batch(&mut self, rows: usize) -> Option<i64> {
-        let rows = i64::try_from(rows).unwrap_or(i64::MAX);
-        let wanted = rows
-            .saturating_mul(WRITER_CACHE_KIB_PER_ROW)
-            .clamp(WRITER_CACHE_MIN_KIB, WRITER_CACHE_MAX_KIB);
+        let wanted = if rows < WRITER_CACHE_GROW_FROM_ROWS {
+            WRITER_CACHE_MIN_KIB
+        } else {
+            i64::try_from(rows)
+                .unwrap_or(i64::MAX)
+                .saturating_mul(WRITER_CACHE_KIB_PER_ROW)
+                .clamp(WRITER_CACHE_MIN_KIB, WRITER_CACHE_MAX_KIB)
+        };
         if wanted >= self.kib {
             self.smaller = 0;
             let grow = wanted > self.kib;

@@ -1183,9 +1183,18 @@ fn the_writer_cache_stays_small_for_a_trickle_of_rows() {
 }
 
 #[test]
+fn the_writer_cache_stays_small_for_the_batches_of_a_gateways_start() {
+    let mut cache = WriterCache::new();
+    for rows in [2_000, 5_000, WRITER_CACHE_GROW_FROM_ROWS - 1, 3_000] {
+        assert_eq!(cache.for_batch(rows), None, "{rows} rows");
+    }
+    assert_eq!(cache.kib(), WRITER_CACHE_MIN_KIB);
+}
+
+#[test]
 fn the_writer_cache_grows_at_once_for_a_large_batch_up_to_its_largest() {
     let mut cache = WriterCache::new();
-    assert_eq!(cache.for_batch(8_000), Some(8_000));
+    assert_eq!(cache.for_batch(12_000), Some(12_000));
     assert_eq!(cache.for_batch(20_000), Some(WRITER_CACHE_MAX_KIB));
     assert_eq!(cache.for_batch(1_000_000), None, "already at its largest");
     assert_eq!(cache.kib(), WRITER_CACHE_MAX_KIB);
