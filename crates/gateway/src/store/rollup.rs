@@ -23,6 +23,7 @@
 //!   yet in the table. A sample that arrives for a closed minute (a late reading) is merged
 //!   into its row in the same transaction.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 
 use rusqlite::{Connection, OptionalExtension, Transaction, params};
@@ -395,11 +396,11 @@ impl OpenMinutes {
         for (id, minute, held) in self.open.before(close_before) {
             match batch.remove(&(id, minute)) {
                 Some(more) => {
-                    let mut agg = held.clone();
+                    let mut agg = held.into_owned();
                     agg.merge(&more);
                     merge_row(tx, id, minute, &agg)?;
                 }
-                None => merge_row(tx, id, minute, held)?,
+                None => merge_row(tx, id, minute, &held)?,
             }
         }
         for (&(id, minute), agg) in &batch {
@@ -456,11 +457,12 @@ impl OpenMinutes {
 /// The open minutes' aggregates: a column per minute (about two are open: the one
 /// closing a minute behind and the current one), each indexed by point id, which the
 /// `points` table hands out densely from 1; ids outside that range in a map. A column
-/// holds a 4-byte slot per point and a 40-byte aggregate per point with samples that
-/// minute: at 1,000 JBC stations (26,000 points) about 9,500 points change in a minute, so
-/// a minute takes about 0.5 MB, against 1 MB with an aggregate per point and about 100
-/// bytes an entry in a map of (point, minute). The first minute after a start holds
-/// every point, each read for the first time.
+/// holds a 4-byte slot per point, an 8-byte number per point with one sample that minute
+/// and a 40-byte aggregate per point with more: at 1,000 JBC stations (26,000 points)
+/// about 9,500 points change in a minute, so a minute takes about 0.5 MB, against 1 MB
+/// with an aggregate per point and about 100 bytes an entry in a map of (point, minute).
+/// The first minute after a start holds every point, each read for the first time, most
+/// of them once (settings, identity): 0.5 MB instead of 1.1.
 #[derive(Debug)]
 struct OpenTable {
     /// Minute → its column, for the open minutes.
@@ -477,12 +479,20 @@ struct OpenTable {
 /// One open minute of the points kept in columns.
 #[derive(Debug, Default)]
 struct Column {
-    /// Point id → 1 + the index of its aggregate in `aggregates`; 0 when the point has no
-    /// sample that minute.
+    /// Point id → where its samples of the minute are: 0 for none; 1 + an index into
+    /// `singles` with [`SINGLE`] set for one sample; 1 + an index into `aggregates` for
+    /// more.
     slots: Vec<u32>,
-    /// The aggregates of the points with samples, in the order of their first sample.
+    /// The sample of each point with one sample, in the order they came; a point's entry
+    /// stays unused when its second sample moves it to `aggregates`.
+    singles: Vec<f64>,
+    /// The aggregates of the points with two samples or more, in the order of their
+    /// second sample.
     aggregates: Vec<Aggregate>,
 }
+
+/// The bit of a slot that says it points into `Column::singles`.
+const SINGLE: u32 = 1 << 31;
 
 /// How far past `OpenTable::dense_until` a new point's id may be and still be kept in the
 /// columns (new points take the next ids; a stray higher id goes to the map instead of
@@ -514,13 +524,13 @@ impl OpenTable {
         };
         if !self.columns.contains_key(&minute) {
             // The points of the newest open minute come back in this one: size it for them.
-            let (slots, aggregates) = self
-                .columns
-                .values()
-                .next_back()
-                .map_or((0, 0), |c| (c.slots.len(), c.aggregates.len()));
+            let (slots, singles, aggregates) =
+                self.columns.values().next_back().map_or((0, 0, 0), |c| {
+                    (c.slots.len(), c.singles.len(), c.aggregates.len())
+                });
             let mut column = std::mem::take(&mut self.spare);
             column.slots.reserve_exact(slots.max(i + 1));
+            column.singles.reserve_exact(singles);
             column.aggregates.reserve_exact(aggregates);
             self.columns.insert(minute, column);
         }
@@ -541,7 +551,7 @@ impl OpenTable {
     }
 
     /// The open minutes before `minute`: (point id, minute, aggregate).
-    fn before(&self, minute: i64) -> impl Iterator<Item = (i64, i64, &Aggregate)> {
+    fn before(&self, minute: i64) -> impl Iterator<Item = (i64, i64, Cow<'_, Aggregate>)> {
         let columns = self
             .columns
             .range(..minute)
@@ -550,7 +560,7 @@ impl OpenTable {
             .more
             .iter()
             .filter(move |((_, m), _)| *m < minute)
-            .map(|(&(id, m), agg)| (id, m, agg));
+            .map(|(&(id, m), agg)| (id, m, Cow::Borrowed(agg)));
         columns.chain(more)
     }
 
@@ -560,12 +570,18 @@ impl OpenTable {
         let closed = std::mem::replace(&mut self.columns, open);
         if let Some(mut column) = closed.into_values().max_by_key(|c| c.slots.capacity()) {
             column.slots.clear();
+            column.singles.clear();
             column.aggregates.clear();
             // The first minute after a start holds every point (each is read for the first
             // time); later minutes only the points that change. Keep room for as many as
             // the newest open minute holds, not for that first one.
-            let wanted = self.columns.values().map(|c| c.aggregates.len()).max();
-            column.aggregates.shrink_to(wanted.unwrap_or(0));
+            let newest = self.columns.values().next_back();
+            column
+                .singles
+                .shrink_to(newest.map_or(0, |c| c.singles.len()));
+            column
+                .aggregates
+                .shrink_to(newest.map_or(0, |c| c.aggregates.len()));
             if column.slots.capacity() > self.spare.slots.capacity() {
                 self.spare = column;
             }
@@ -574,9 +590,9 @@ impl OpenTable {
     }
 }
 
-/// The most slots a column has: a slot holds 1 + an index into the column's aggregates,
-/// which are at most as many as its slots.
-const MAX_SLOTS: usize = u32::MAX as usize;
+/// The most slots a column has: a slot holds 1 + an index into the column's singles or
+/// aggregates (at most as many as its slots) below the [`SINGLE`] bit.
+const MAX_SLOTS: usize = (SINGLE - 1) as usize;
 
 impl Column {
     /// Adds `x` to the point in slot `i` (below [`MAX_SLOTS`]).
@@ -590,31 +606,54 @@ impl Column {
         }
         match self.slots[i] {
             0 => {
-                if self.aggregates.len() == self.aggregates.capacity() {
-                    // By a quarter, not double: a minute's points come in their thousands.
-                    let more = (self.aggregates.len() / 4).max(GROW_ENTRIES);
-                    self.aggregates.reserve_exact(more);
-                }
-                self.aggregates.push(Aggregate::of(x));
-                // At most as many aggregates as slots, and slots are below MAX_SLOTS.
-                self.slots[i] = u32::try_from(self.aggregates.len())
-                    .expect("a column has fewer than u32::MAX slots");
+                grow_by_a_quarter(&mut self.singles);
+                self.singles.push(x);
+                self.slots[i] = SINGLE | entry_number(self.singles.len());
+            }
+            at if at & SINGLE != 0 => {
+                let mut aggregate = Aggregate::of(self.singles[(at & !SINGLE) as usize - 1]);
+                aggregate.add(x);
+                grow_by_a_quarter(&mut self.aggregates);
+                self.aggregates.push(aggregate);
+                self.slots[i] = entry_number(self.aggregates.len());
             }
             at => self.aggregates[at as usize - 1].add(x),
         }
     }
 
     /// (point id, aggregate) of the points with samples, in the order of their ids.
-    fn held(&self) -> impl Iterator<Item = (i64, &Aggregate)> {
+    fn held(&self) -> impl Iterator<Item = (i64, Cow<'_, Aggregate>)> {
         self.slots
             .iter()
             .enumerate()
             .filter(|(_, at)| **at != 0)
             .map(|(i, &at)| {
                 let id = i64::try_from(i).expect("a column's index came from an i64 id");
-                (id, &self.aggregates[at as usize - 1])
+                let held = if at & SINGLE != 0 {
+                    Cow::Owned(Aggregate::of(self.singles[(at & !SINGLE) as usize - 1]))
+                } else {
+                    Cow::Borrowed(&self.aggregates[at as usize - 1])
+                };
+                (id, held)
             })
     }
+}
+
+/// Makes room for one more entry in `list`, by a quarter of its length and not double: a
+/// minute's points come in their thousands.
+fn grow_by_a_quarter<T>(list: &mut Vec<T>) {
+    if list.len() == list.capacity() {
+        list.reserve_exact((list.len() / 4).max(GROW_ENTRIES));
+    }
+}
+
+/// The slot number of the last of `len` entries: 1 + its index, below [`SINGLE`] (a column
+/// has at most as many singles, or aggregates, as slots, and fewer than [`MAX_SLOTS`]).
+fn entry_number(len: usize) -> u32 {
+    u32::try_from(len)
+        .ok()
+        .filter(|&n| n < SINGLE)
+        .expect("a column has fewer entries than MAX_SLOTS")
 }
 
 /// Adds `agg` to the row of (`id`, `minute`), creating it if need be.
@@ -912,18 +951,48 @@ mod tests {
         for id in (1..=20_000).step_by(10) {
             table.add(id, MINUTE_MS, 2.0);
         }
-        let first = table.columns[&0].aggregates.capacity();
+        let first = &table.columns[&0];
+        assert_eq!(first.aggregates.capacity(), 0, "one sample each: no aggregate");
+        let singles = first.singles.capacity();
         assert!(
-            (20_000..25_000).contains(&first),
-            "grown by quarters: {first}"
+            (20_000..25_000).contains(&singles),
+            "grown by quarters: {singles}"
         );
         table.close_before(MINUTE_MS);
         assert!(
-            table.spare.aggregates.capacity() <= 2_000 + GROW_ENTRIES,
+            table.spare.singles.capacity() <= 2_000 + GROW_ENTRIES,
             "the spare keeps room for the open minute's 2,000, not 20,000: {}",
-            table.spare.aggregates.capacity()
+            table.spare.singles.capacity()
         );
         assert_eq!(held(&table, i64::MAX).len(), 2_000);
+    }
+
+    #[test]
+    fn a_point_sampled_once_in_a_minute_holds_one_number_and_a_second_sample_an_aggregate() {
+        let mut table = OpenTable::new(4);
+        table.add(1, 0, -0.0);
+        table.add(2, 0, 3.5);
+        table.add(3, 0, f64::INFINITY);
+        table.add(2, 0, 0.1);
+        table.add(2, 0, 0.2);
+        let column = &table.columns[&0];
+        assert_eq!(column.singles.len(), 3, "every point's first sample");
+        assert_eq!(column.aggregates.len(), 1, "only point 2 has more");
+        let held = held(&table, i64::MAX);
+        let mut expected = Aggregate::of(3.5);
+        expected.add(0.1);
+        expected.add(0.2);
+        assert_eq!(
+            held[&(2, 0)],
+            (3, expected.sum.total(), 0.1, 3.5),
+            "the same aggregate as from three adds"
+        );
+        assert_eq!(held[&(1, 0)], (1, 0.0, 0.0, 0.0), "-0 kept as SQLite keeps it");
+        assert!(held[&(1, 0)].1.is_sign_positive());
+        assert_eq!(
+            held[&(3, 0)],
+            (1, f64::INFINITY, f64::INFINITY, f64::INFINITY)
+        );
     }
 
     #[test]
