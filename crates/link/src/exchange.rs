@@ -40,9 +40,15 @@ pub async fn step<M: Matcher, Q>(
         });
     }
     match exchange.poll_outcome() {
-        None => Ok(None),
         Some(Ok(answer)) => Ok(Some(answer)),
-        Some(Err(ended)) => Err(ExchangeError::ended(ended, line.name(), exchange.matcher())),
+        None => {
+            line.expect_late_input();
+            Ok(None)
+        }
+        Some(Err(ended)) => {
+            line.expect_late_input();
+            Err(ExchangeError::ended(ended, line.name(), exchange.matcher()))
+        }
     }
 }
 

@@ -101,6 +101,10 @@ pub struct Line {
     rs485: Rs485,
     /// The line must stay quiet until then (a device's turnaround, an inter-frame gap).
     quiet_until: Option<Instant>,
+    /// Whether input may still come that no request waits for (a reply after its
+    /// timeout, the rest of a damaged one): the next [`Line::discard_input`] then lets the
+    /// runtime look at the line first.
+    unsettled: bool,
 }
 
 impl std::fmt::Debug for Line {
@@ -128,6 +132,7 @@ impl Line {
                     settings: Some(*settings),
                     rs485: *rs485,
                     quiet_until: None,
+                    unsettled: false,
                 };
                 line.set_direction(false).map_err(|e| OpenError::Serial {
                     path: path.clone(),
@@ -194,6 +199,7 @@ impl Line {
             settings,
             rs485: Rs485::default(),
             quiet_until: None,
+            unsettled: false,
         }
     }
 
@@ -254,13 +260,23 @@ impl Line {
             Stream::Other(stream) => tokio::time::timeout_at(deadline, stream.read(buf)).await,
         };
         match read {
-            Err(_) => Err(LineError::Timeout {
-                after: deadline.saturating_duration_since(started),
-            }),
+            Err(_) => {
+                self.unsettled = true;
+                Err(LineError::Timeout {
+                    after: deadline.saturating_duration_since(started),
+                })
+            }
             Ok(Ok(0)) => Err(LineError::Closed),
             Ok(Ok(n)) => Ok(n),
             Ok(Err(e)) => Err(LineError::Io(e)),
         }
+    }
+
+    /// Notes that input no request waits for may still come (an exchange ended without
+    /// its answer: retried after a damaged reply, or given up): the next
+    /// [`Line::discard_input`] looks harder. A receive that times out notes it itself.
+    pub fn expect_late_input(&mut self) {
+        self.unsettled = true;
     }
 
     /// Drops whatever has already arrived (a late reply to an earlier request), so the
@@ -270,9 +286,14 @@ impl Line {
     /// tokio's 1 ms timer wheel per request, which is most of an exchange on a fast line,
     /// and even a far deadline is two trips through the timer wheel's lock.
     pub async fn discard_input(&mut self) -> Result<usize, LineError> {
-        // The runtime polls its I/O driver before it resumes a yielded task, so bytes that
-        // reached the socket or port since it last looked are seen below.
-        tokio::task::yield_now().await;
+        if std::mem::take(&mut self.unsettled) {
+            // The runtime polls its I/O driver before it resumes a yielded task, so bytes
+            // that reached the socket or port since it last looked are seen below. After
+            // an answered exchange nothing is owed: what the runtime has seen is enough,
+            // and the turn (a second wake of the line's task per request, 5 % of a
+            // point's CPU at 1,000 stations) is saved.
+            tokio::task::yield_now().await;
+        }
         let mut dropped = 0;
         let mut buf = [0u8; 256];
         while let Some(n) = self.read_ready(&mut buf).await? {
@@ -421,6 +442,41 @@ impl SharedLine {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A line over a real loopback connection, and the device's end of it.
+    async fn tcp_line() -> (Line, tokio::net::TcpStream) {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let (ours, theirs) = tokio::join!(tokio::net::TcpStream::connect(addr), listener.accept());
+        let line = Line::from_stream(ours.unwrap(), "tcp test", None);
+        (line, theirs.unwrap().0)
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_reply_that_comes_after_its_timeout_is_dropped_before_the_next_request() {
+        let (mut line, mut device) = tcp_line().await;
+        let mut buf = [0u8; 16];
+        let deadline = Instant::now() + Duration::from_millis(100);
+        let timeout = line.recv(&mut buf, deadline).await.unwrap_err();
+        assert!(matches!(timeout, LineError::Timeout { .. }), "{timeout:?}");
+        // The device answers at last, just before our next request.
+        device.write_all(b"late\n").await.unwrap();
+        assert_eq!(line.discard_input().await.unwrap(), 5);
+        device.write_all(b"answer\n").await.unwrap();
+        let n = line
+            .recv(&mut buf, Instant::now() + Duration::from_secs(1))
+            .await
+            .unwrap();
+        assert_eq!(&buf[..n], b"answer\n");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn after_an_exchange_ended_without_its_answer_late_input_is_dropped_too() {
+        let (mut line, mut device) = tcp_line().await;
+        line.expect_late_input();
+        device.write_all(b"rest of a damaged reply").await.unwrap();
+        assert_eq!(line.discard_input().await.unwrap(), 23);
+    }
 
     #[tokio::test]
     async fn opening_a_missing_serial_port_names_the_path_and_gives_a_hint() {
