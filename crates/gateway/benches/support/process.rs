@@ -53,6 +53,19 @@ impl ProcessUse {
     }
 }
 
+impl ProcessUse {
+    /// This use without the CPU time of `part` (one of its threads); the peak RSS is the
+    /// process's.
+    #[allow(dead_code)] // only the load bench runs a thread of its own in the process
+    pub fn without(self, part: &ProcessUse) -> Self {
+        Self {
+            cpu: self.cpu.saturating_sub(part.cpu),
+            user: self.user.saturating_sub(part.user),
+            peak_rss_kib: self.peak_rss_kib,
+        }
+    }
+}
+
 /// Clock ticks per second of `/proc/PID/stat` (USER_HZ; 100 on Linux unless `getconf`
 /// says otherwise).
 pub fn ticks_per_second() -> u64 {
