@@ -262,15 +262,19 @@ pub struct LineState {
 }
 
 /// A change pushed to event-stream clients.
+///
+/// Each kind is boxed: the change stream keeps [`LIVE_CAPACITY`] slots of this size from
+/// the start, 16 bytes each instead of 168 (0.6 MB less), and a message's box lives only
+/// until every subscriber has read it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum LiveMessage {
     /// A point's value or quality changed.
-    Value(PointView),
+    Value(Box<PointView>),
     /// A device went up or down.
-    Device(DeviceSummary),
+    Device(Box<DeviceSummary>),
     /// An event was recorded.
-    Event(Event),
+    Event(Box<Event>),
 }
 
 impl LiveMessage {
@@ -652,7 +656,7 @@ impl Cell {
         self.metrics.events.inc();
         tracing::info!(kind = event.kind.as_str(), "{}", event.message);
         self.store.event(event.clone());
-        self.publish(LiveMessage::Event(event));
+        self.publish(LiveMessage::Event(Box::new(event)));
     }
 
     /// Tells the event-stream clients.

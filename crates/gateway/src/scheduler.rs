@@ -783,7 +783,7 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
         cell.store().sample(sample);
     }
     for view in messages {
-        cell.publish(LiveMessage::Value(view));
+        cell.publish(LiveMessage::Value(Box::new(view)));
     }
     for event in events {
         cell.emit(event);
@@ -857,7 +857,7 @@ fn mark_up(cell: &Cell, entry: &DeviceEntry) {
     if previous == DeviceStatus::Up {
         return;
     }
-    cell.publish(LiveMessage::Device(entry.summary()));
+    cell.publish(LiveMessage::Device(Box::new(entry.summary())));
     if previous == DeviceStatus::Down {
         cell.emit(Event {
             t: now,
@@ -908,9 +908,9 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
         cell.store().sample(sample);
     }
     for view in views {
-        cell.publish(LiveMessage::Value(view));
+        cell.publish(LiveMessage::Value(Box::new(view)));
     }
-    cell.publish(LiveMessage::Device(entry.summary()));
+    cell.publish(LiveMessage::Device(Box::new(entry.summary())));
     if went_down {
         cell.emit(Event {
             t: now,
@@ -964,7 +964,7 @@ fn mark_stale(cell: &Cell, entry: &DeviceEntry) {
         cell.store().sample(sample);
     }
     for view in views {
-        cell.publish(LiveMessage::Value(view));
+        cell.publish(LiveMessage::Value(Box::new(view)));
     }
 }
 

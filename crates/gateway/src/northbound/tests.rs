@@ -358,7 +358,7 @@ async fn next_event(
     tokio::time::timeout(LIMIT, async {
         loop {
             match live.recv().await {
-                Ok(crate::cell::LiveMessage::Event(e)) if e.kind == kind => return e,
+                Ok(crate::cell::LiveMessage::Event(e)) if e.kind == kind => return *e,
                 Ok(_) | Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
                 Err(e) => panic!("the change stream ended: {e}"),
             }

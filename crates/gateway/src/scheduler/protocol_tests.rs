@@ -387,7 +387,7 @@ async fn wait_for_event(
         if let crate::cell::LiveMessage::Event(event) = message
             && matches(&event)
         {
-            return event;
+            return *event;
         }
     }
 }

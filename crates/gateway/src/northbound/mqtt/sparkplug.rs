@@ -418,7 +418,7 @@ impl Node {
                 LiveMessage::Device(summary) => {
                     // Keep the order: what came before a status change goes out first.
                     self.device_data(conn, std::mem::take(&mut values)).await?;
-                    self.on_status(conn, summary).await?;
+                    self.on_status(conn, *summary).await?;
                 }
             }
             next = match live.try_recv() {
