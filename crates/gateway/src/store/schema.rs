@@ -112,9 +112,12 @@ pub(super) fn configure(conn: &Connection) -> rusqlite::Result<()> {
 pub(super) const WRITER_CACHE_MAX_KIB: i64 = 16 * 1024;
 
 /// The writer's page cache for the trickle of a running cell (a few hundred rows a batch),
-/// in KiB: SQLite's default. Pages missed are read back from the OS's file cache, not
+/// in KiB: half SQLite's default. Pages missed are read back from the OS's file cache, not
 /// the disk; 16 MiB here was 12 MiB of the gateway's resident memory at 1,000 stations.
-pub(super) const WRITER_CACHE_MIN_KIB: i64 = 2 * 1024;
+/// A batch of a running cell adds to the leaves of `samples_by_point_time` of hundreds of
+/// points, one leaf each, which no cache of this size holds once the file has grown; the
+/// cache keeps the inner pages, which 1 MiB holds as well as 2.
+pub(super) const WRITER_CACHE_MIN_KIB: i64 = 1024;
 
 /// Cache per row of the batch being committed, in KiB: a 16,000-row batch gets the
 /// largest cache.
