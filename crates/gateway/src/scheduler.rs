@@ -756,7 +756,8 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
                 }
                 Err(error) => {
                     let changed = point.quality != Some(Quality::Bad)
-                        || point.error.as_deref().map(String::as_str) != Some(error.message.as_str());
+                        || point.error.as_deref().map(String::as_str)
+                            != Some(error.message.as_str());
                     point.quality = Some(Quality::Bad);
                     point.error = Some(Arc::new(error.message));
                     point.t = Some(now);

@@ -461,8 +461,8 @@ impl OpenMinutes {
 /// and a 40-byte aggregate per point with more: at 1,000 JBC stations (26,000 points)
 /// about 9,500 points change in a minute, so a minute takes about 0.5 MB, against 1 MB
 /// with an aggregate per point and about 100 bytes an entry in a map of (point, minute).
-/// The first minute after a start holds every point, each read for the first time, most
-/// of them once (settings, identity): 0.5 MB instead of 1.1.
+/// The first minute after a start holds every point, each read for the first time and
+/// most of them once (those whose value does not change): 0.5 MB instead of 1.1.
 #[derive(Debug)]
 struct OpenTable {
     /// Minute → its column, for the open minutes.
@@ -952,7 +952,11 @@ mod tests {
             table.add(id, MINUTE_MS, 2.0);
         }
         let first = &table.columns[&0];
-        assert_eq!(first.aggregates.capacity(), 0, "one sample each: no aggregate");
+        assert_eq!(
+            first.aggregates.capacity(),
+            0,
+            "one sample each: no aggregate"
+        );
         let singles = first.singles.capacity();
         assert!(
             (20_000..25_000).contains(&singles),
@@ -987,7 +991,11 @@ mod tests {
             (3, expected.sum.total(), 0.1, 3.5),
             "the same aggregate as from three adds"
         );
-        assert_eq!(held[&(1, 0)], (1, 0.0, 0.0, 0.0), "-0 kept as SQLite keeps it");
+        assert_eq!(
+            held[&(1, 0)],
+            (1, 0.0, 0.0, 0.0),
+            "-0 kept as SQLite keeps it"
+        );
         assert!(held[&(1, 0)].1.is_sign_positive());
         assert_eq!(
             held[&(3, 0)],
