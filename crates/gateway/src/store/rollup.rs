@@ -575,13 +575,13 @@ impl OpenTable {
             // The first minute after a start holds every point (each is read for the first
             // time); later minutes only the points that change. Keep room for as many as
             // the newest open minute holds, not for that first one.
-            let newest = self.columns.values().next_back();
+            let most = |len: fn(&Column) -> usize| self.columns.values().map(len).max();
             column
                 .singles
-                .shrink_to(newest.map_or(0, |c| c.singles.len()));
+                .shrink_to(most(|c| c.singles.len()).unwrap_or(0));
             column
                 .aggregates
-                .shrink_to(newest.map_or(0, |c| c.aggregates.len()));
+                .shrink_to(most(|c| c.aggregates.len()).unwrap_or(0));
             if column.slots.capacity() > self.spare.slots.capacity() {
                 self.spare = column;
             }
