@@ -1783,8 +1783,7 @@ impl std::fmt::Display for Report {
             max * 100.0,
             busy_total * 1000.0 / polls_done.max(1) as f64
         )?;
-        let cpu =
-            |x: &ProcessUse, y: &ProcessUse| (x.cpu.saturating_sub(y.cpu)).as_secs_f64() / secs;
+        let cpu = |x: &ProcessUse, y: &ProcessUse| x.without(y).cpu.as_secs_f64() / secs;
         let g = cpu(&a.gateway, &b.gateway);
         let s = cpu(&a.simulators, &b.simulators);
         writeln!(
@@ -1797,8 +1796,9 @@ impl std::fmt::Display for Report {
         // The gateway's whole CPU time (scheduler, drivers, clients, line I/O, live state,
         // history writer and commits, HTTP idle; not this bench's sampler) over the work
         // done.
-        let gateway_us = (a.gateway.cpu.saturating_sub(b.gateway.cpu)).as_secs_f64() * 1e6;
-        let user_us = (a.gateway.user.saturating_sub(b.gateway.user)).as_secs_f64() * 1e6;
+        let window = a.gateway.without(&b.gateway);
+        let gateway_us = window.cpu.as_secs_f64() * 1e6;
+        let user_us = window.user.as_secs_f64() * 1e6;
         let changes = a.value_changes.saturating_sub(b.value_changes);
         let point = |us: f64| us / points.max(1) as f64;
         writeln!(

@@ -384,11 +384,6 @@ fn run(args: &Args) -> anyhow::Result<Report> {
     drop(cell);
     runtime.shutdown_timeout(Duration::from_secs(5));
     store.close();
-    let diff = |a: ProcessUse, b: ProcessUse| ProcessUse {
-        cpu: a.cpu.saturating_sub(b.cpu),
-        user: a.user.saturating_sub(b.user),
-        peak_rss_kib: a.peak_rss_kib,
-    };
     Ok(Report {
         args: *args,
         cores,
@@ -403,9 +398,9 @@ fn run(args: &Args) -> anyhow::Result<Report> {
             historical: received.historical - received_before.historical,
             ..received
         },
-        gateway: diff(gateway_after, gateway_before),
-        broker: diff(broker_after, broker_before),
-        counter: diff(counter_after, counter_before),
+        gateway: gateway_after.without(&gateway_before),
+        broker: broker_after.without(&broker_before),
+        counter: counter_after.without(&counter_before),
         peak_reset,
         load,
         published: published_total,

@@ -152,8 +152,9 @@ fn bench(load: Load) -> anyhow::Result<()> {
         let rate = (c1 - c0) / elapsed;
         ages.sort_unstable();
         let pct = |p: f64| ages.get(((ages.len() as f64 - 1.0) * p) as usize).copied().unwrap_or(0);
-        let cpu = (use1.cpu - use0.cpu).as_secs_f64() / elapsed;
-        let user = (use1.user - use0.user).as_secs_f64() / elapsed;
+        let window = use1.without(&use0);
+        let cpu = window.cpu.as_secs_f64() / elapsed;
+        let user = window.user.as_secs_f64() / elapsed;
         let metrics = http_get(&api, "/metrics")?;
         let value = |name: &str| {
             metrics

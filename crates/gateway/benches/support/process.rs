@@ -54,9 +54,8 @@ impl ProcessUse {
 }
 
 impl ProcessUse {
-    /// This use without the CPU time of `part` (one of its threads); the peak RSS is the
-    /// process's.
-    #[allow(dead_code)] // only the load bench runs a thread of its own in the process
+    /// This use without the CPU time of `part` (one of its threads, or the same process
+    /// earlier: the CPU time between two readings); the peak RSS is this one's.
     pub fn without(self, part: &ProcessUse) -> Self {
         Self {
             cpu: self.cpu.saturating_sub(part.cpu),

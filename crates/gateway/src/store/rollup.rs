@@ -494,6 +494,25 @@ struct Column {
 /// The bit of a slot that says it points into `Column::singles`.
 const SINGLE: u32 = 1 << 31;
 
+/// What a column's slot says of its point's samples that minute.
+enum Slot {
+    None,
+    /// One sample, at this index of `Column::singles`.
+    Single(usize),
+    /// More, aggregated at this index of `Column::aggregates`.
+    Many(usize),
+}
+
+impl Slot {
+    fn of(at: u32) -> Self {
+        match at {
+            0 => Slot::None,
+            at if at & SINGLE != 0 => Slot::Single((at & !SINGLE) as usize - 1),
+            at => Slot::Many(at as usize - 1),
+        }
+    }
+}
+
 /// How far past `OpenTable::dense_until` a new point's id may be and still be kept in the
 /// columns (new points take the next ids; a stray higher id goes to the map instead of
 /// sizing every column).
@@ -574,7 +593,7 @@ impl OpenTable {
             column.aggregates.clear();
             // The first minute after a start holds every point (each is read for the first
             // time); later minutes only the points that change. Keep room for as many as
-            // the newest open minute holds, not for that first one.
+            // an open minute holds, not for that first one.
             let most = |len: fn(&Column) -> usize| self.columns.values().map(len).max();
             column
                 .singles
@@ -604,38 +623,34 @@ impl Column {
             }
             self.slots.resize(i + 1, 0);
         }
-        match self.slots[i] {
-            0 => {
+        match Slot::of(self.slots[i]) {
+            Slot::None => {
                 grow_by_a_quarter(&mut self.singles);
                 self.singles.push(x);
                 self.slots[i] = SINGLE | entry_number(self.singles.len());
             }
-            at if at & SINGLE != 0 => {
-                let mut aggregate = Aggregate::of(self.singles[(at & !SINGLE) as usize - 1]);
+            Slot::Single(j) => {
+                let mut aggregate = Aggregate::of(self.singles[j]);
                 aggregate.add(x);
                 grow_by_a_quarter(&mut self.aggregates);
                 self.aggregates.push(aggregate);
                 self.slots[i] = entry_number(self.aggregates.len());
             }
-            at => self.aggregates[at as usize - 1].add(x),
+            Slot::Many(j) => self.aggregates[j].add(x),
         }
     }
 
     /// (point id, aggregate) of the points with samples, in the order of their ids.
     fn held(&self) -> impl Iterator<Item = (i64, Cow<'_, Aggregate>)> {
-        self.slots
-            .iter()
-            .enumerate()
-            .filter(|(_, at)| **at != 0)
-            .map(|(i, &at)| {
-                let id = i64::try_from(i).expect("a column's index came from an i64 id");
-                let held = if at & SINGLE != 0 {
-                    Cow::Owned(Aggregate::of(self.singles[(at & !SINGLE) as usize - 1]))
-                } else {
-                    Cow::Borrowed(&self.aggregates[at as usize - 1])
-                };
-                (id, held)
-            })
+        self.slots.iter().enumerate().filter_map(|(i, &at)| {
+            let held = match Slot::of(at) {
+                Slot::None => return None,
+                Slot::Single(j) => Cow::Owned(Aggregate::of(self.singles[j])),
+                Slot::Many(j) => Cow::Borrowed(&self.aggregates[j]),
+            };
+            let id = i64::try_from(i).expect("a column's index came from an i64 id");
+            Some((id, held))
+        })
     }
 }
 

@@ -96,14 +96,7 @@ impl Port1 {
             let n = line.recv(buf, deadline).await.map_err(trouble)?;
             deframer.push(buf.get(..n).unwrap_or_default());
             while let Some(input) = deframer.next_frame() {
-                let message = match input {
-                    Ok(message) => message,
-                    Err(error) => {
-                        // The rest of the damaged message may still come.
-                        line.expect_late_input();
-                        return Err(Failure::Trouble(Trouble::Damaged(error)));
-                    }
-                };
+                let message = input.map_err(|error| Failure::Trouble(Trouble::Damaged(error)))?;
                 if message.command().starts_with(event::code::CLASS) {
                     tracing::warn!(%message, "an R message on Port 1 (R messages belong on Port 2): skipped");
                     continue;
