@@ -1783,8 +1783,10 @@ impl std::fmt::Display for Report {
             max * 100.0,
             busy_total * 1000.0 / polls_done.max(1) as f64
         )?;
+        // Cores a process used over the window.
         let cpu = |x: &ProcessUse, y: &ProcessUse| x.without(y).cpu.as_secs_f64() / secs;
-        let g = cpu(&a.gateway, &b.gateway);
+        let window = a.gateway.without(&b.gateway);
+        let g = window.cpu.as_secs_f64() / secs;
         let s = cpu(&a.simulators, &b.simulators);
         writeln!(
             f,
@@ -1796,7 +1798,6 @@ impl std::fmt::Display for Report {
         // The gateway's whole CPU time (scheduler, drivers, clients, line I/O, live state,
         // history writer and commits, HTTP idle; not this bench's sampler) over the work
         // done.
-        let window = a.gateway.without(&b.gateway);
         let gateway_us = window.cpu.as_secs_f64() * 1e6;
         let user_us = window.user.as_secs_f64() * 1e6;
         let changes = a.value_changes.saturating_sub(b.value_changes);
