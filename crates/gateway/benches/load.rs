@@ -29,6 +29,12 @@
 //!   polls the stations of a line in turn over one connection, as it would a real bus.
 //!   Real JBC stations are RS-232, one per port: until the Thermosald and CROSS drivers
 //!   land, JTSE stations stand in for multi-drop devices here.
+//! - **Serial ports** (`--serial`). The JBC lines are pseudo-terminals instead: the
+//!   simulator process creates one per line ([`link::serve::Pty`]) and serves the line's
+//!   bus on its master end; the gateway opens the other end as `serial://`, through
+//!   tokio-serial, as it would a port of a multi-port serial card: the serial path (the
+//!   port's settings, the kernel's tty layer) under load. The `cost` line's kernel time is
+//!   then the gateway's reads and writes on ttys instead of on sockets.
 //! - **Modbus lines** (`--mix modbus=1`) are Modbus TCP gateways: one `modbus-tcp://`
 //!   listener per line, a [`jbus::tcp::MbapServer`] in front of a bus of generic Modbus
 //!   servers ([`jbus::slave::Slave`], units 1, 2, …), so the gateway polls every unit of
@@ -71,9 +77,10 @@
 //!
 //! The device mix is `--mix jbc=1` (weights per line). A kind is one [`Kind`] variant with
 //! its arms in [`Kind::parse`], [`Kind::protocol`], [`Kind::max_per_line`],
-//! [`Kind::line_serial`], [`Kind::scheme`] and [`simulate_line`] (its simulator models
-//! behind the bus, and their operator); [`config_text`] for keys of its own. Thermosald regulators and CROSS switches join this way when their
-//! gateway drivers merge.
+//! [`Kind::line_serial`], [`Kind::is_serial`], [`Kind::scheme`] and [`simulate_line`] (its
+//! simulator models behind the bus, and their operator); [`config_text`] for keys of its
+//! own. Thermosald regulators and CROSS switches join this way when their gateway drivers
+//! merge.
 //!
 //! # MQTT
 //!
@@ -106,9 +113,9 @@
 //! cost of serving is the difference between runs with `--opcua` and without.
 //!
 //! Under `cargo test --benches` (no `--bench` flag) it runs a one-second smoke test with
-//! four devices (two JTSEs on one line, two Modbus units behind one Modbus TCP gateway),
-//! publishing to MQTT and serving OPC UA to a client monitoring 100 points, and fails
-//! unless both kinds answered, each Modbus poll took two reads, and the OPC UA client got
+//! four devices (two JTSEs on one serial port, as `--serial` makes it; two Modbus units
+//! behind one Modbus TCP gateway), publishing to MQTT and serving OPC UA to a client
+//! monitoring 100 points, and fails unless both kinds answered, each Modbus poll took two reads, and the OPC UA client got
 //! its items and, by source time, every change the history holds for them in the window.
 
 use std::collections::HashMap;
@@ -198,6 +205,9 @@ usage: cargo bench -p gateway --bench load -- [options]
                       modbus: 100 float32 points behind a Modbus TCP gateway)
   --baud B|none       pace each serial line like one of B baud (default none:
                       loopback speed; Modbus TCP lines are never paced)
+  --serial            JBC lines are serial ports (pseudo-terminals the simulator
+                      process creates, which the gateway opens as serial://)
+                      instead of tcp:// to a serial server
   --reply-delay D     station processing time before each reply (default 1ms; the
                       JTSE model's own is 5ms)
   --live-period D     poll period of the live group (default: the driver's, 1s; at
@@ -246,13 +256,15 @@ fn main() -> ExitCode {
     };
     let smoke = !benching && !simulators && rest.is_empty();
     if smoke {
-        // A line of each kind, so CI goes through every simulator and driver path.
+        // A line of each kind, so CI goes through every simulator and driver path: the
+        // JBC line a serial port, the Modbus line a TCP connection.
         args = Args {
             devices: 4,
             lines: 2,
             seconds: Duration::from_secs(1),
             warmup: Duration::from_secs(1),
             mix: vec![(Kind::Jbc, 1), (Kind::Modbus, 1)],
+            serial: true,
             mqtt: true,
             opcua: true,
             opcua_items: 100,
@@ -291,6 +303,8 @@ struct Args {
     warmup: Duration,
     mix: Vec<(Kind, u32)>,
     baud: Option<u32>,
+    /// JBC lines over pseudo-terminals (`serial://`) instead of TCP.
+    serial: bool,
     reply_delay: Duration,
     live_period: Option<Duration>,
     mqtt: bool,
@@ -310,6 +324,7 @@ impl Args {
             warmup: DEFAULT_WARMUP,
             mix: vec![(Kind::Jbc, 1)],
             baud: None,
+            serial: false,
             reply_delay: DEFAULT_REPLY_DELAY,
             live_period: None,
             mqtt: false,
@@ -329,6 +344,10 @@ impl Args {
             }
             if flag == "--no-scrapes" {
                 args.scrapes = false;
+                continue;
+            }
+            if flag == "--serial" {
+                args.serial = true;
                 continue;
             }
             let value = it
@@ -400,7 +419,7 @@ impl Args {
             .map(|(k, w)| format!("{}={w}", k.protocol()))
             .collect::<Vec<_>>()
             .join(",");
-        vec![
+        let mut args: Vec<String> = vec![
             SIMULATORS_FLAG.into(),
             "--devices".into(),
             self.devices.to_string(),
@@ -412,7 +431,11 @@ impl Args {
             self.baud.map_or("none".into(), |b| b.to_string()),
             "--reply-delay".into(),
             format!("{}us", self.reply_delay.as_micros()),
-        ]
+        ];
+        if self.serial {
+            args.push("--serial".into());
+        }
+        args
     }
 }
 
@@ -513,7 +536,16 @@ impl Kind {
         }
     }
 
-    /// The scheme of the line's endpoint in the config.
+    /// Whether the kind's lines are serial lines, which `--serial` turns into serial ports
+    /// (a Modbus TCP gateway's are not).
+    fn is_serial(self) -> bool {
+        match self {
+            Kind::Jbc => true,
+            Kind::Modbus => false,
+        }
+    }
+
+    /// The scheme of the line's TCP endpoint in the config.
     fn scheme(self) -> &'static str {
         match self {
             Kind::Jbc => "tcp",
@@ -785,23 +817,39 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("cannot start the simulators' runtime")?;
+    // Where the pseudo-terminals of `--serial` are linked; removed when the process ends.
+    let links = tempfile::tempdir().context("cannot create a temporary directory")?;
     runtime.block_on(async {
         let mut operators = Vec::new();
         let mut out = String::new();
         for (i, plan) in plans.iter().enumerate() {
             let (bus, operator) = simulate_line(*plan, i, args.reply_delay)?;
-            let listener = tokio::net::TcpListener::bind(("127.0.0.1", 0))
-                .await
-                .context("cannot listen on 127.0.0.1")?;
-            let port = listener.local_addr()?.port();
             let pace = args.baud.and_then(|b| plan.kind.line_serial(b));
-            tokio::spawn(async move {
-                if let Err(e) = link::serve::serve_tcp(listener, move || bus(), pace).await {
-                    eprintln!("load: simulated line {i} stopped: {e}");
-                }
-            });
+            let endpoint = if args.serial && plan.kind.is_serial() {
+                let link = links.path().join(format!("line{i:02}"));
+                let pty = link::serve::Pty::create(&link)
+                    .with_context(|| format!("cannot create the PTY of line {i}"))?;
+                let device = bus();
+                tokio::spawn(async move {
+                    if let Err(e) = pty.serve(device, pace).await {
+                        eprintln!("load: simulated line {i} stopped: {e}");
+                    }
+                });
+                format!("serial://{}", link.display())
+            } else {
+                let listener = tokio::net::TcpListener::bind(("127.0.0.1", 0))
+                    .await
+                    .context("cannot listen on 127.0.0.1")?;
+                let port = listener.local_addr()?.port();
+                tokio::spawn(async move {
+                    if let Err(e) = link::serve::serve_tcp(listener, move || bus(), pace).await {
+                        eprintln!("load: simulated line {i} stopped: {e}");
+                    }
+                });
+                format!("{}://127.0.0.1:{port}", plan.kind.scheme())
+            };
             operators.push(operator);
-            writeln!(out, "line {i} {port}").expect("writing to a String cannot fail");
+            writeln!(out, "line {i} {endpoint}").expect("writing to a String cannot fail");
         }
         tokio::spawn(async move {
             let mut tick = tokio::time::interval(OPERATOR_TICK);
@@ -833,7 +881,8 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
 /// The simulator process, killed when dropped.
 struct Simulators {
     child: Child,
-    ports: Vec<u16>,
+    /// Each line's endpoint, as the config names it (without its serial settings).
+    endpoints: Vec<String>,
 }
 
 impl Simulators {
@@ -852,19 +901,19 @@ impl Simulators {
         let stdout = child.stdout.take().context("the child has no stdout")?;
         let mut simulators = Simulators {
             child,
-            ports: Vec::new(),
+            endpoints: Vec::new(),
         };
         for line in BufReader::new(stdout).lines() {
             let line = line.context("reading the simulator process's output")?;
             if line == READY {
                 return Ok(simulators);
             }
-            let port = line
+            let endpoint = line
                 .strip_prefix("line ")
                 .and_then(|rest| rest.split_once(' '))
-                .and_then(|(_, port)| port.parse::<u16>().ok())
+                .map(|(_, endpoint)| endpoint.to_owned())
                 .with_context(|| format!("unexpected line from the simulators: {line:?}"))?;
-            simulators.ports.push(port);
+            simulators.endpoints.push(endpoint);
         }
         bail!("the simulator process ended before it was ready")
     }
@@ -885,9 +934,9 @@ impl Drop for Simulators {
 
 /// The cell configuration for the simulated lines, as a file for `cellbus serve --config`
 /// (Modbus devices name [`MODBUS_CSV`], written by [`modbus_csv`] next to it).
-fn config_text(args: &Args, plans: &[LinePlan], ports: &[u16]) -> String {
+fn config_text(args: &Args, plans: &[LinePlan], endpoints: &[String]) -> String {
     let mut text = String::from("# Generated by the gateway load benchmark.\n");
-    for (i, (plan, port)) in plans.iter().zip(ports).enumerate() {
+    for (i, (plan, endpoint)) in plans.iter().zip(endpoints).enumerate() {
         let timing = args
             .baud
             .and_then(|b| plan.kind.line_serial(b))
@@ -896,8 +945,7 @@ fn config_text(args: &Args, plans: &[LinePlan], ports: &[u16]) -> String {
             });
         let _ = write!(
             text,
-            "\n[[line]]\nname = \"line{i:02}\"\nendpoint = \"{}://127.0.0.1:{port}{timing}\"\n",
-            plan.kind.scheme()
+            "\n[[line]]\nname = \"line{i:02}\"\nendpoint = \"{endpoint}{timing}\"\n"
         );
         for d in 0..plan.devices {
             let address = plan.kind.address(d);
@@ -1389,16 +1437,16 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let load_before = loadavg();
     let simulators = Simulators::start(args)?;
-    if simulators.ports.len() != plans.len() {
+    if simulators.endpoints.len() != plans.len() {
         bail!(
             "the simulators opened {} lines, not {}",
-            simulators.ports.len(),
+            simulators.endpoints.len(),
             plans.len()
         );
     }
     let dir = tempfile::tempdir().context("cannot create a temporary directory")?;
     let config = dir.path().join("cell.toml");
-    std::fs::write(&config, config_text(args, &plans, &simulators.ports))
+    std::fs::write(&config, config_text(args, &plans, &simulators.endpoints))
         .context("cannot write the generated cell.toml")?;
     std::fs::write(dir.path().join(MODBUS_CSV), modbus_csv())
         .context("cannot write the generated register list")?;
@@ -1669,7 +1717,12 @@ impl std::fmt::Display for Report {
                 .baud
                 .map_or("not paced (loopback speed)".to_owned(), |b| format!(
                     "paced at {b} baud"
-                )),
+                ))
+                + if self.args.serial {
+                    ", JBC lines on serial ports (PTYs)"
+                } else {
+                    ""
+                },
             humantime::format_duration(self.args.reply_delay),
             self.args
                 .live_period
