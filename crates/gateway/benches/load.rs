@@ -13,10 +13,11 @@
 //! # How it runs
 //!
 //! - **Two processes.** The bench re-executes itself with `--simulators`: that child process
-//!   runs every simulated device, one TCP listener on 127.0.0.1 per line. The parent runs
-//!   the gateway exactly as `cellbus serve --config` does: a generated `cell.toml` (checked
-//!   by [`gateway::check_config`]), [`Gateway::start`] on a multi-threaded tokio runtime
-//!   like the CLI's, the real scheduler, drivers, protocol clients and `tcp://` lines, the
+//!   runs every simulated device, one TCP listener on 127.0.0.1 per line (a PTY per JBC
+//!   line with `--serial`). The parent runs the gateway exactly as `cellbus serve --config`
+//!   does: a generated `cell.toml` (checked by [`gateway::check_config`]),
+//!   [`Gateway::start`] on a multi-threaded tokio runtime like the CLI's, the real
+//!   scheduler, drivers, protocol clients and lines (`tcp://`, or `serial://`), the
 //!   SQLite history in a temporary directory, the HTTP server listening on a free port. So
 //!   the CPU share and peak RSS printed for the gateway are the gateway's own: this bench's
 //!   sampler, which reads the point timestamps ten times a second, runs on a thread whose
@@ -115,8 +116,9 @@
 //! Under `cargo test --benches` (no `--bench` flag) it runs a one-second smoke test with
 //! four devices (two JTSEs on one serial port, as `--serial` makes it; two Modbus units
 //! behind one Modbus TCP gateway), publishing to MQTT and serving OPC UA to a client
-//! monitoring 100 points, and fails unless both kinds answered, each Modbus poll took two reads, and the OPC UA client got
-//! its items and, by source time, every change the history holds for them in the window.
+//! monitoring 100 points, and fails unless both kinds answered, each Modbus poll took two
+//! reads, and the OPC UA client got its items and, by source time, every change the history
+//! holds for them in the window.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
