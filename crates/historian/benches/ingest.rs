@@ -5,7 +5,8 @@
 //!
 //! `cargo bench -p historian --bench ingest` runs the default matrix;
 //! `-- --samples N` changes the samples per configuration (default 1,000,000),
-//! `-- --quick` runs one small configuration (a check that the bench works).
+//! `-- --quick` runs one small configuration (a check that the bench works), as does
+//! `cargo test` (which does not pass `--bench`).
 //!
 //! Issue #17's goal is ≥ 200,000 metric changes/s committed on the 2-core machine.
 
@@ -27,7 +28,8 @@ struct Config {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let quick = args.iter().any(|a| a == "--quick");
+    // `cargo bench` passes --bench; `cargo test` (scripts/test) does not: then a smoke run.
+    let quick = args.iter().any(|a| a == "--quick") || !args.iter().any(|a| a == "--bench");
     let total = args
         .iter()
         .position(|a| a == "--samples")

@@ -6,7 +6,8 @@
 //!
 //! `cargo bench -p historian --bench plant` runs 20 nodes × 10 devices × 100 points, every
 //! point changing every 100 ms (200,000 changes/s offered) for 20 s after a 5 s warm-up;
-//! `-- --nodes N --period-ms P --secs S` change it; `-- --quick` runs 2 nodes for 5 s.
+//! `-- --nodes N --period-ms P --secs S` change it; `-- --quick` runs 2 nodes for 5 s, as
+//! does `cargo test` (which does not pass `--bench`).
 //!
 //! Latency: every point's value carries the time it was "read" (the metric timestamp,
 //! set when the DDATA is built). The parent polls the newest committed sample of one probe
@@ -64,7 +65,8 @@ fn main() -> ExitCode {
         let period = Duration::from_millis(args[i + 3].parse().expect("a period"));
         return run_nodes(port, nodes, period);
     }
-    let quick = args.iter().any(|a| a == "--quick");
+    // `cargo bench` passes --bench; `cargo test` (scripts/test) does not: then a smoke run.
+    let quick = args.iter().any(|a| a == "--quick") || !args.iter().any(|a| a == "--bench");
     let load = Load {
         nodes: arg(&args, "--nodes").unwrap_or(if quick { 2 } else { 20 }),
         period: Duration::from_millis(arg(&args, "--period-ms").unwrap_or(100)),

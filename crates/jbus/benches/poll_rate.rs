@@ -16,7 +16,8 @@
 //!
 //! Rates are steady-state: cycles counted between the end of the first and the end of the
 //! last cycle. `cargo bench -p jbus --bench poll_rate` (about 25 s; `POLL_SECONDS=N` per
-//! side, default 10).
+//! side, default 8). Under `cargo test` (no `--bench` flag) each side runs for 1 s: a smoke
+//! run.
 
 use std::process::Command;
 use std::time::Duration;
@@ -41,7 +42,11 @@ fn main() {
     let seconds = std::env::var("POLL_SECONDS")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(8u64);
+        .unwrap_or(if std::env::args().any(|a| a == "--bench") {
+            8u64
+        } else {
+            1
+        });
     let unit = UnitId::jbus(UNIT).expect("2 is a unit number");
     let plan = read_requests();
 

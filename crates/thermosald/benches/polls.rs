@@ -10,7 +10,7 @@
 //! (each poll's 40 ms release included, none cut off at the ends).
 //!
 //! `cargo bench -p thermosald --bench polls` (about 30 s; `POLLS_SECONDS=N` per case,
-//! default 5).
+//! default 5). Under `cargo test` (no `--bench` flag) each case runs for 1 s: a smoke run.
 
 use std::time::Duration;
 
@@ -60,7 +60,11 @@ fn main() {
     let seconds = std::env::var("POLLS_SECONDS")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(5u64);
+        .unwrap_or(if std::env::args().any(|a| a == "--bench") {
+            5u64
+        } else {
+            1
+        });
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
