@@ -13,8 +13,8 @@
 //! # How it runs
 //!
 //! - **Two processes.** The bench re-executes itself with `--simulators`: that child process
-//!   runs every simulated device, one TCP listener on 127.0.0.1 per line (a PTY per JBC
-//!   line with `--serial`). The parent runs the gateway exactly as `cellbus serve --config`
+//!   runs every simulated device, one TCP listener on 127.0.0.1 per line (a PTY per
+//!   serial line with `--serial`). The parent runs the gateway exactly as `cellbus serve --config`
 //!   does: a generated `cell.toml` (checked by [`gateway::check_config`]),
 //!   [`Gateway::start`] on a multi-threaded tokio runtime like the CLI's, the real
 //!   scheduler, drivers, protocol clients and lines (`tcp://`, or `serial://`), the
@@ -28,10 +28,14 @@
 //!   a real RS-485 line where every device hears everything); only the addressed station
 //!   answers (the station model is silent to frames for other addresses). The gateway
 //!   polls the stations of a line in turn over one connection, as it would a real bus.
-//!   Real JBC stations are RS-232, one per port: until the Thermosald and CROSS drivers
-//!   land, JTSE stations stand in for multi-drop devices here.
-//! - **Serial ports** (`--serial`). The JBC lines are pseudo-terminals instead: the
-//!   simulator process creates one per line ([`link::serve::Pty`]) and serves the line's
+//!   Real JBC stations are RS-232, one per port: here they stand in for a multi-drop
+//!   device with a JTSE's points. Thermosald regulators (`--mix thermosald=1`, addresses
+//!   0–7, at most 8 a line) and CROSS switches (`--mix cross=1`, JBUS units 1, 2, …) are
+//!   multi-drop RS-485 devices: their lines are buses of their twins
+//!   ([`thermosald::device::RegulatorBus`], [`jbus::cross::device::CrossTwin`]).
+//! - **Serial ports** (`--serial`). The serial kinds' lines (JBC, Thermosald, CROSS) are
+//!   pseudo-terminals instead: the simulator process creates one per line
+//!   ([`link::serve::Pty`]) and serves the line's
 //!   bus on its master end; the gateway opens the other end as `serial://`, through
 //!   tokio-serial, as it would a port of a multi-port serial card: the serial path (the
 //!   port's settings, the kernel's tty layer) under load. The `cost` line's kernel time is
@@ -50,11 +54,19 @@
 //!   20 stations fit on one line at the driver's periods (live 1 s, settings 10 s, info
 //!   60 s: about ten reads per station per second). `--baud 19200 --reply-delay 5ms` gives
 //!   a JTSE's real wire timing; a line then carries only about four stations at those
-//!   periods, and the report shows the periods the scheduler could keep.
+//!   periods, and the report shows the periods the scheduler could keep. A Thermosald
+//!   regulator answers 200 ms after each question and the line is quiet 40 ms after it
+//!   (the protocol's timing, kept by the client and the twin whatever `--reply-delay`
+//!   says): about four exchanges a second a line, one per regulator and table read, so
+//!   eight regulators fill a line at the driver's 2 s live period. A CROSS switch answers
+//!   after `--reply-delay` (its model's own is 5 ms); its driver reads it in four requests
+//!   a second (live) and more once a minute (ratings).
 //! - **A working cell.** An operator script in the simulator process works every station
 //!   (set points, tool on and off, the suction pedal, an occasional air-flow fault), each
 //!   on its own phase, so temperatures move and the history grows as in production; the
-//!   Modbus devices' values drift (above).
+//!   Modbus devices' values drift (above); the regulators seal at their own rhythms (3 to
+//!   4 s); each CROSS loses source 1 for 40 s of every 2 minutes (an outage, then an
+//!   undervoltage) and transfers to source 2 and back.
 //! - **Measured** over `--seconds` after `--warmup` (connections, first reads of every
 //!   group): counters from the gateway's own metrics ([`gateway::metrics::Metrics`]) and
 //!   history writer ([`gateway::store::StoreStats`]); CPU time (user + system) from
@@ -62,7 +74,7 @@
 //!   `cost` line divides the gateway's CPU time by the polls done, the points read good and
 //!   the value changes stored: the whole cost of a poll from the scheduler to the history
 //!   commit (line I/O, drivers, live state, change stream, history writer), per protocol
-//!   when the mix has one kind (`--mix jbc=1`, `--mix modbus=1`), and splits a point's
+//!   when the mix has one kind (`--mix jbc=1`, `--mix cross=1`, …), and splits a point's
 //!   cost into user and kernel time (the kernel's includes what loopback TCP does for the
 //!   simulators' sockets inside the gateway's sends).
 //! - **Heavy GETs.** After the window, while the cell is still polled, `/metrics`, the full
@@ -80,8 +92,8 @@
 //! its arms in [`Kind::parse`], [`Kind::protocol`], [`Kind::max_per_line`],
 //! [`Kind::line_serial`], [`Kind::is_serial`], [`Kind::scheme`] and [`simulate_line`] (its
 //! simulator models behind the bus, and their operator); [`config_text`] for keys of its
-//! own. Thermosald regulators and CROSS switches join this way when their gateway drivers
-//! merge.
+//! own. A Panasonic machine is not a device on a line (two TCP ports of its own, one
+//! machine each) and is not in the mix.
 //!
 //! # MQTT
 //!
@@ -114,11 +126,12 @@
 //! cost of serving is the difference between runs with `--opcua` and without.
 //!
 //! Under `cargo test --benches` (no `--bench` flag) it runs a one-second smoke test with
-//! four devices (two JTSEs on one serial port, as `--serial` makes it; two Modbus units
-//! behind one Modbus TCP gateway), publishing to MQTT and serving OPC UA to a client
-//! monitoring 100 points, and fails unless both kinds answered, each Modbus poll took two
-//! reads, and the OPC UA client got its items and, by source time, every change the history
-//! holds for them in the window.
+//! eight devices on four lines (two JTSEs, two Thermosald regulators and two CROSS units,
+//! each pair on one serial port, as `--serial` makes it; two Modbus units behind one Modbus
+//! TCP gateway), publishing to MQTT and serving OPC UA to a client monitoring 100 points,
+//! and fails unless every kind answered, each Modbus poll took two reads, and the OPC UA
+//! client got its items and, by source time, every change the history holds for them in
+//! the window.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -140,11 +153,15 @@ use jbc::code::{Code, Port, ToolError};
 use jbc::device::{Station, StationConfig};
 use jbc::frame::{Address, Route};
 use jbc::message::{Reply, Request};
+use jbus::cross::Source;
+use jbus::cross::device::{CrossTwin, SourceFault};
 use jbus::data::{DataType, Order, TypedValue};
 use jbus::rtu::UnitId;
 use jbus::slave::{Slave, SlaveMap, Table};
 use jbus::tcp::MbapServer;
 use link::SerialSettings;
+use thermosald::device::{Regulator, RegulatorBus, RegulatorConfig};
+use thermosald::exchange::LineTiming;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use wire::device::{Bus, Device, SharedModel};
 
@@ -204,12 +221,14 @@ usage: cargo bench -p gateway --bench load -- [options]
   --seconds S         measured time, e.g. 60 or 60s (default 10 s)
   --warmup S          time before measuring (default 5 s)
   --mix KIND=W,...    device kinds, by weight per line (default jbc=1; known: jbc,
-                      modbus: 100 float32 points behind a Modbus TCP gateway)
+                      modbus: 100 float32 points behind a Modbus TCP gateway,
+                      thermosald: at most 8 a line, cross)
   --baud B|none       pace each serial line like one of B baud (default none:
                       loopback speed; Modbus TCP lines are never paced)
-  --serial            JBC lines are serial ports (pseudo-terminals the simulator
-                      process creates, which the gateway opens as serial://)
-                      instead of tcp:// to a serial server
+  --serial            serial lines (JBC, Thermosald, CROSS) are serial ports
+                      (pseudo-terminals the simulator process creates, which the
+                      gateway opens as serial://) instead of tcp:// to a serial
+                      server
   --reply-delay D     station processing time before each reply (default 1ms; the
                       JTSE model's own is 5ms)
   --live-period D     poll period of the live group (default: the driver's, 1s; at
@@ -228,6 +247,8 @@ usage: cargo bench -p gateway --bench load -- [options]
   nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
 1,000 Modbus devices x 100 float32 points at 1 s:
   cargo bench -p gateway --bench load -- --mix modbus=1 --devices 1000 --lines 50 --seconds 30
+400 Thermosald regulators, 8 on each of 50 RS-485 lines:
+  cargo bench -p gateway --bench load -- --mix thermosald=1 --devices 400 --lines 50 --seconds 30
 ";
 
 fn main() -> ExitCode {
@@ -259,13 +280,18 @@ fn main() -> ExitCode {
     let smoke = !benching && !simulators && rest.is_empty();
     if smoke {
         // A line of each kind, so CI goes through every simulator and driver path: the
-        // JBC line a serial port, the Modbus line a TCP connection.
+        // serial kinds' lines serial ports, the Modbus line a TCP connection.
         args = Args {
-            devices: 4,
-            lines: 2,
+            devices: 8,
+            lines: 4,
             seconds: Duration::from_secs(1),
             warmup: Duration::from_secs(1),
-            mix: vec![(Kind::Jbc, 1), (Kind::Modbus, 1)],
+            mix: vec![
+                (Kind::Jbc, 1),
+                (Kind::Modbus, 1),
+                (Kind::Thermosald, 1),
+                (Kind::Cross, 1),
+            ],
             serial: true,
             mqtt: true,
             opcua: true,
@@ -305,7 +331,7 @@ struct Args {
     warmup: Duration,
     mix: Vec<(Kind, u32)>,
     baud: Option<u32>,
-    /// JBC lines over pseudo-terminals (`serial://`) instead of TCP.
+    /// Serial lines (JBC, Thermosald, CROSS) over pseudo-terminals (`serial://`) instead of TCP.
     serial: bool,
     reply_delay: Duration,
     live_period: Option<Duration>,
@@ -482,7 +508,7 @@ fn mix(value: &str) -> Result<Vec<(Kind, u32)>, String> {
 
 // ---- device kinds and the plan of lines --------------------------------------------------
 
-/// A kind of simulated device. Add Thermosald and CROSS here when their drivers land.
+/// A kind of simulated device.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 enum Kind {
     /// JBC JTSE hot-air station.
@@ -491,15 +517,22 @@ enum Kind {
     /// input registers, behind a Modbus TCP gateway: the line is one `modbus-tcp://`
     /// endpoint answering every unit on it.
     Modbus,
+    /// Thermosald ISC impulse-sealer regulator (addresses 0–7 on an RS-485 line), sealing
+    /// at its own rhythm.
+    Thermosald,
+    /// Chloride CROSS static transfer switch (JBUS units 1, 2, … on an RS-485 line).
+    Cross,
 }
 
 impl Kind {
-    const KNOWN: &'static str = "jbc, modbus";
+    const KNOWN: &'static str = "jbc, modbus, thermosald, cross";
 
     fn parse(name: &str) -> Option<Kind> {
         match name {
             "jbc" => Some(Kind::Jbc),
             "modbus" => Some(Kind::Modbus),
+            "thermosald" => Some(Kind::Thermosald),
+            "cross" => Some(Kind::Cross),
             _ => None,
         }
     }
@@ -509,6 +542,8 @@ impl Kind {
         match self {
             Kind::Jbc => "jbc",
             Kind::Modbus => "modbus",
+            Kind::Thermosald => "thermosald",
+            Kind::Cross => "cross",
         }
     }
 
@@ -517,15 +552,18 @@ impl Kind {
         match self {
             // 01-99; 00 is the robot's (the gateway's) own address.
             Kind::Jbc => usize::from(Address::MAX),
-            // Units 1-247.
-            Kind::Modbus => usize::from(jbus::rtu::UnitId::MAX),
+            // Units 1-247 (the CROSS's JBUS would take 248-255 too).
+            Kind::Modbus | Kind::Cross => usize::from(jbus::rtu::UnitId::MAX),
+            // Addresses 0-7.
+            Kind::Thermosald => usize::from(thermosald::Address::MAX) + 1,
         }
     }
 
     /// The device address of the `index`-th device on a line.
     fn address(self, index: usize) -> i64 {
         match self {
-            Kind::Jbc | Kind::Modbus => index as i64 + 1,
+            Kind::Jbc | Kind::Modbus | Kind::Cross => index as i64 + 1,
+            Kind::Thermosald => index as i64,
         }
     }
 
@@ -534,6 +572,7 @@ impl Kind {
     fn line_serial(self, baud: u32) -> Option<SerialSettings> {
         match self {
             Kind::Jbc => Some(SerialSettings::new_8e1(baud)),
+            Kind::Thermosald | Kind::Cross => Some(SerialSettings::new_8n1(baud)),
             Kind::Modbus => None,
         }
     }
@@ -542,7 +581,7 @@ impl Kind {
     /// (a Modbus TCP gateway's are not).
     fn is_serial(self) -> bool {
         match self {
-            Kind::Jbc => true,
+            Kind::Jbc | Kind::Thermosald | Kind::Cross => true,
             Kind::Modbus => false,
         }
     }
@@ -550,7 +589,7 @@ impl Kind {
     /// The scheme of the line's TCP endpoint in the config.
     fn scheme(self) -> &'static str {
         match self {
-            Kind::Jbc => "tcp",
+            Kind::Jbc | Kind::Thermosald | Kind::Cross => "tcp",
             Kind::Modbus => "modbus-tcp",
         }
     }
@@ -598,11 +637,12 @@ fn plan(args: &Args) -> Result<Vec<LinePlan>, String> {
 type Operator = Box<dyn FnMut(std::time::Instant) + Send>;
 
 /// The bus of one line's simulated devices (a new bus per connection, sharing the models)
-/// and their operator.
+/// and their operator; `pace` is the line's character timing when the serve loop paces it.
 fn simulate_line(
     plan: LinePlan,
     line: usize,
     reply_delay: Duration,
+    pace: Option<SerialSettings>,
 ) -> anyhow::Result<(Arc<dyn Fn() -> Bus + Send + Sync>, Operator)> {
     match plan.kind {
         Kind::Jbc => {
@@ -675,6 +715,96 @@ fn simulate_line(
                 }
             });
             Ok((bus, operator))
+        }
+        Kind::Thermosald => {
+            // The regulators answer 200 ms after a question whatever `--reply-delay` says:
+            // the protocol fixes it. Each seals at its own rhythm (3 to 4 s), so its
+            // temperatures move as in production; the machine is the operator.
+            let now = std::time::Instant::now();
+            let mut regulators = Vec::with_capacity(plan.devices);
+            for i in 0..plan.devices {
+                let address = u8::try_from(plan.kind.address(i))
+                    .ok()
+                    .and_then(|a| thermosald::Address::new(a).ok())
+                    .context("a Thermosald address out of range (plan checks it)")?;
+                let config = RegulatorConfig {
+                    seal_period: Some(Duration::from_millis(
+                        3_000 + ((line * 7 + i) % 8) as u64 * 125,
+                    )),
+                    ..RegulatorConfig::default()
+                };
+                regulators.push(Regulator::new(address, config, now));
+            }
+            let mut regulators = RegulatorBus::from_regulators(regulators);
+            if let Some(serial) = pace {
+                let timing = LineTiming::new(serial.baud, serial.bits_per_char())
+                    .context("the Thermosald line's timing")?;
+                regulators = regulators.paced(timing);
+            }
+            let model = SharedModel::new(regulators);
+            let bus = Arc::new(move || Bus(vec![Box::new(model.line()) as Box<dyn Device>]));
+            Ok((bus, Box::new(|_: std::time::Instant| {})))
+        }
+        Kind::Cross => {
+            let mut switches = Vec::with_capacity(plan.devices);
+            for i in 0..plan.devices {
+                let unit = u8::try_from(plan.kind.address(i))
+                    .ok()
+                    .and_then(|u| UnitId::jbus(u).ok())
+                    .context("a JBUS unit out of range (plan checks it)")?;
+                let model = SharedModel::new(
+                    CrossTwin::new(unit, (line * 1000 + i) as u64).with_reply_delay(reply_delay),
+                );
+                // Phases spread the switches' mains trouble over the round.
+                let phase = Duration::from_millis(((line * 97 + i * 7919) % 120_000) as u64);
+                switches.push((model, phase, CrossOperator::default()));
+            }
+            let models: Vec<SharedModel<CrossTwin>> =
+                switches.iter().map(|(m, ..)| m.clone()).collect();
+            let bus = Arc::new(move || {
+                Bus(models
+                    .iter()
+                    .map(|m| Box::new(m.line()) as Box<dyn Device>)
+                    .collect())
+            });
+            let started = std::time::Instant::now();
+            let operator = Box::new(move |now: std::time::Instant| {
+                let elapsed = now.saturating_duration_since(started);
+                for (model, phase, op) in &mut switches {
+                    op.act(model, elapsed + *phase);
+                }
+            });
+            Ok((bus, operator))
+        }
+    }
+}
+
+/// The mains a CROSS rides through, 120 s a round: source 1 fails for the last 40 s of
+/// each (an outage in one round, an undervoltage in the next), so the load transfers to
+/// source 2 and back.
+#[derive(Debug, Default)]
+struct CrossOperator {
+    failed: bool,
+}
+
+impl CrossOperator {
+    fn act(&mut self, model: &SharedModel<CrossTwin>, at: Duration) {
+        let round = at.as_secs() / ROUTINE.as_secs();
+        let fail = at.as_secs() % ROUTINE.as_secs() >= 80;
+        if fail == self.failed {
+            return;
+        }
+        self.failed = fail;
+        let mut twin = model.lock();
+        if fail {
+            let fault = if round % 2 == 0 {
+                SourceFault::Outage
+            } else {
+                SourceFault::Undervoltage
+            };
+            twin.fail_source_with(Source::S1, fault);
+        } else {
+            twin.restore_source(Source::S1);
         }
     }
 }
@@ -825,8 +955,8 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
         let mut operators = Vec::new();
         let mut out = String::new();
         for (i, plan) in plans.iter().enumerate() {
-            let (bus, operator) = simulate_line(*plan, i, args.reply_delay)?;
             let pace = args.baud.and_then(|b| plan.kind.line_serial(b));
+            let (bus, operator) = simulate_line(*plan, i, args.reply_delay, pace)?;
             let endpoint = if args.serial && plan.kind.is_serial() {
                 let link = links.path().join(format!("line{i:02}"));
                 let pty = link::serve::Pty::create(&link)
@@ -1721,7 +1851,7 @@ impl std::fmt::Display for Report {
                     "paced at {b} baud"
                 ))
                 + if self.args.serial {
-                    ", JBC lines on serial ports (PTYs)"
+                    ", serial lines on serial ports (PTYs)"
                 } else {
                     ""
                 },
