@@ -23,6 +23,7 @@
 //! The CROSS is read-only over JBUS (it answers function 3 only): no point is writable.
 //! The mimic diagram area is not shown; the state words say the same in words.
 
+use std::sync::LazyLock;
 use std::time::Duration;
 
 use jbus::client::{Client, ClientConfig, ClientError, Framing};
@@ -38,9 +39,7 @@ use super::{
     WriteError,
 };
 use crate::event::EventKind;
-use crate::point::{
-    AlarmRule, DeviceId, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
-};
+use crate::point::{AlarmRule, EnumState, PointDescription, PointId, PointKind, PointSpec, Value};
 
 /// A CROSS line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
@@ -136,6 +135,10 @@ fn quantity_defs<A>(
         .collect()
 }
 
+/// Every point, in the order a person reads them (see [`defs`]): one list for every CROSS
+/// driver.
+static DEFS: LazyLock<Vec<Def>> = LazyLock::new(defs);
+
 /// Every point, in the order a person reads them: the load, states and alarms, then the
 /// measures and ratings of `jbus::cross::points`.
 fn defs() -> Vec<Def> {
@@ -202,12 +205,14 @@ fn feed_number(feed: Feed) -> i64 {
 
 /// A CROSS on a line.
 pub struct CrossDriver {
-    device: DeviceId,
     unit: UnitId,
     config: ClientConfig,
     client: Option<Client>,
-    /// Every point.
-    defs: Vec<Def>,
+    /// Every point ([`DEFS`]).
+    defs: &'static [Def],
+    /// Each point's id, in the order of `defs` (made once: readings share them with the
+    /// cell's point specs).
+    ids: Vec<PointId>,
     /// The discrete parts at the last poll, to see transfers.
     last: Option<Discrete>,
     events: Vec<DeviceEvent>,
@@ -224,7 +229,6 @@ impl CrossDriver {
             .ok_or_else(|| "JBUS unit number out of range".to_owned())?;
         let defaults = ClientConfig::default();
         Ok(Self {
-            device: config.id.clone(),
             unit,
             config: ClientConfig {
                 timeout: config.timeout.unwrap_or(defaults.timeout),
@@ -233,17 +237,20 @@ impl CrossDriver {
                 ..defaults
             },
             client: None,
-            defs: defs(),
+            defs: &DEFS,
+            ids: DEFS
+                .iter()
+                .map(|def| {
+                    PointId::new(&config.id, &def.name)
+                        .expect("point names in defs() follow the id rules")
+                })
+                .collect(),
             last: None,
             events: Vec::new(),
         })
     }
 
-    fn point_id(&self, def: &Def) -> PointId {
-        PointId::new(&self.device, &def.name).expect("point names in defs() follow the id rules")
-    }
-
-    fn spec(&self, def: &Def) -> PointSpec {
+    fn spec(def: &Def, id: PointId) -> PointSpec {
         let (kind, alarm) = match def.show {
             Show::Feed => (
                 PointKind::Enum {
@@ -277,7 +284,7 @@ impl CrossDriver {
             Show::Measure(..) | Show::Rating(..) => (PointKind::Numeric, None),
         };
         PointSpec::new(
-            self.point_id(def),
+            id,
             PointDescription {
                 name: def.title.clone().into(),
                 unit: def.unit.map(Into::into),
@@ -322,7 +329,10 @@ impl CrossDriver {
             if let Ok(internal) = &internal {
                 self.note_changes(internal);
             }
-            for def in self.defs.iter().filter(|d| d.group() == LIVE) {
+            for (def, id) in self.defs.iter().zip(&self.ids) {
+                if def.group() != LIVE {
+                    continue;
+                }
                 let value = match def.show {
                     Show::Measure(quantity, phase) => measures
                         .as_ref()
@@ -334,7 +344,7 @@ impl CrossDriver {
                         .map_err(Clone::clone),
                 };
                 readings.push(Reading {
-                    point: self.point_id(def),
+                    point: id.clone(),
                     value,
                 });
             }
@@ -344,14 +354,17 @@ impl CrossDriver {
                 .await?
                 .and_then(|w| words::<{ Ratings::LEN }>(&w, Area::Ratings))
                 .map(|w| Ratings::from_words(&w));
-            for def in self.defs.iter().filter(|d| d.group() == RATINGS) {
+            for (def, id) in self.defs.iter().zip(&self.ids) {
+                if def.group() != RATINGS {
+                    continue;
+                }
                 let value = match (def.show, &ratings) {
                     (Show::Rating(quantity, phase), Ok(r)) => Ok(number((quantity.read)(r), phase)),
                     (_, Err(e)) => Err(e.clone()),
                     _ => continue,
                 };
                 readings.push(Reading {
-                    point: self.point_id(def),
+                    point: id.clone(),
                     value,
                 });
             }
@@ -397,7 +410,11 @@ impl CrossDriver {
 
 impl Driver for CrossDriver {
     fn points(&self) -> Vec<PointSpec> {
-        self.defs.iter().map(|d| self.spec(d)).collect()
+        self.defs
+            .iter()
+            .zip(&self.ids)
+            .map(|(def, id)| Self::spec(def, id.clone()))
+            .collect()
     }
 
     fn groups(&self) -> Vec<PollGroup> {
@@ -483,6 +500,7 @@ mod tests {
     use std::collections::HashSet;
 
     use super::*;
+    use crate::point::DeviceId;
     use jbus::cross::device::CrossTwin;
     use wire::device::SharedModel;
 
