@@ -245,13 +245,13 @@ impl RegisterConfig {
     }
 
     /// The point's value for its registers (or bit).
-    fn value(&self, answer: &Answer) -> Result<Value, DeviceError> {
-        match answer {
-            Answer::Bits(bits) => bits
+    fn value(&self, part: Part<'_>) -> Result<Value, DeviceError> {
+        match part {
+            Part::Bits(bits) => bits
                 .first()
                 .map(|&on| Value::Number(f64::from(u8::from(on))))
                 .ok_or_else(|| missing(self)),
-            Answer::Words(words) => {
+            Part::Words(words) => {
                 let typed = self
                     .format
                     .decode(words)
@@ -421,6 +421,9 @@ pub struct ModbusDriver {
     fresh_line: bool,
     /// Requests the last poll sent.
     requests: Option<u64>,
+    /// Each register's point id, in the registers' order (made once: readings share them
+    /// with the cell's point specs).
+    ids: Vec<PointId>,
 }
 
 /// A read's answer.
@@ -428,6 +431,13 @@ pub struct ModbusDriver {
 enum Answer {
     Words(Vec<u16>),
     Bits(Vec<bool>),
+}
+
+/// One register's (or bit's) part of an answer.
+#[derive(Debug, Clone, Copy)]
+enum Part<'a> {
+    Words(&'a [u16]),
+    Bits(&'a [bool]),
 }
 
 impl ModbusDriver {
@@ -439,9 +449,11 @@ impl ModbusDriver {
             .and_then(|a| u8::try_from(a).ok())
             .and_then(|a| UnitId::jbus(a).ok())
             .ok_or_else(|| "Modbus unit number out of range".to_owned())?;
-        for r in config.registers.iter() {
-            PointId::new(&config.id, &r.name).map_err(|e| e.to_string())?;
-        }
+        let ids = config
+            .registers
+            .iter()
+            .map(|r| PointId::new(&config.id, &r.name).map_err(|e| e.to_string()))
+            .collect::<Result<Vec<_>, _>>()?;
         let plan = config.registers.plan(config.modbus.plan).map_err(|e| {
             match config.registers.get(plan_error_index(&e)) {
                 Some(r) => format!("register {}: {e}", r.name),
@@ -465,16 +477,13 @@ impl ModbusDriver {
             last_request: None,
             fresh_line: false,
             requests: None,
+            ids,
         })
     }
 
     /// The reads each poll sends (fewer registers per read after splits).
     pub fn plan(&self) -> &Plan {
         &self.plan
-    }
-
-    fn point_id(&self, register: &RegisterConfig) -> PointId {
-        PointId::new(&self.device, &register.name).expect("register names are checked in new")
     }
 
     /// Waits what the pacing asks before a request.
@@ -561,18 +570,18 @@ impl ModbusDriver {
                         Some(Ok(Answer::Words(words))) => at
                             .slice(words)
                             .ok_or_else(|| missing(r))
-                            .and_then(|words| r.value(&Answer::Words(words.to_vec()))),
+                            .and_then(|words| r.value(Part::Words(words))),
                         Some(Ok(Answer::Bits(bits))) => at
                             .slice(bits)
                             .ok_or_else(|| missing(r))
-                            .and_then(|bits| r.value(&Answer::Bits(bits.to_vec()))),
+                            .and_then(|bits| r.value(Part::Bits(bits))),
                         Some(Err(e)) => Err(e.clone()),
                         None => Err(missing(r)),
                     },
                     None => Err(missing(r)),
                 };
                 Reading {
-                    point: self.point_id(r),
+                    point: self.ids[i].clone(),
                     value,
                 }
             })
@@ -628,9 +637,10 @@ impl ModbusDriver {
 impl Driver for ModbusDriver {
     fn points(&self) -> Vec<PointSpec> {
         self.registers
+            .descriptions()
             .iter()
-            .zip(self.registers.descriptions())
-            .map(|(r, description)| PointSpec::new(self.point_id(r), Arc::clone(description)))
+            .zip(&self.ids)
+            .map(|(description, id)| PointSpec::new(id.clone(), Arc::clone(description)))
             .collect()
     }
 

@@ -268,6 +268,9 @@ pub struct ThermosaldDriver {
     /// The last confirmed raw value of each confirmed item (see the module doc), by table
     /// and index; the maximum working temperature among them is the write limit.
     confirmed: BTreeMap<(Table, u8), RawValue>,
+    /// Each point's id, in the order of [`POINTS`] (made once: readings share them with
+    /// the cell's point specs).
+    ids: Vec<PointId>,
 }
 
 impl ThermosaldDriver {
@@ -289,14 +292,17 @@ impl ThermosaldDriver {
             config: client,
             client: None,
             confirmed: BTreeMap::new(),
+            ids: POINTS
+                .iter()
+                .map(|def| {
+                    PointId::new(&config.id, def.name)
+                        .expect("point names in POINTS follow the id rules")
+                })
+                .collect(),
         })
     }
 
-    fn point_id(&self, def: &Def) -> PointId {
-        PointId::new(&self.device, def.name).expect("point names in POINTS follow the id rules")
-    }
-
-    fn spec(&self, def: &Def) -> PointSpec {
+    fn spec(def: &Def, id: PointId) -> PointSpec {
         let item = def.item();
         let symbol = item.unit().symbol();
         let unit = (!symbol.is_empty()).then(|| symbol.into());
@@ -320,7 +326,7 @@ impl ThermosaldDriver {
         };
         let step = item.scale().step();
         PointSpec::new(
-            self.point_id(def),
+            id,
             PointDescription {
                 name: item.name().into(),
                 unit,
@@ -349,12 +355,17 @@ impl ThermosaldDriver {
             .read_table(table)
             .await
             .map_err(|e| DeviceError::of(&e))?;
-        let defs: Vec<&'static Def> = POINTS.iter().filter(|d| d.table == table).collect();
+        // The table's points, with their places in `POINTS`.
+        let defs: Vec<(usize, &'static Def)> = POINTS
+            .iter()
+            .enumerate()
+            .filter(|(_, d)| d.table == table)
+            .collect();
         // What the first read settles (`None`: nothing to record this poll), and the
         // readings that need a second read.
         let mut outcomes: Vec<Option<Result<Value, DeviceError>>> = Vec::new();
         let mut changed: Vec<(usize, tables::Reading)> = Vec::new();
-        for (i, def) in defs.iter().enumerate() {
+        for (i, &(_, def)) in defs.iter().enumerate() {
             let outcome = match checked(def, &first) {
                 Ok(reading)
                     if def.confirmed()
@@ -374,7 +385,7 @@ impl ThermosaldDriver {
                 _ => client.read_table(table).await,
             };
             for (i, reading) in changed {
-                let def = defs[i];
+                let (_, def) = defs[i];
                 let confirmation = match &second {
                     Ok(values) => self.confirm(reading, values),
                     Err(e) => Err(unconfirmed_after_failure(reading, e)),
@@ -390,9 +401,9 @@ impl ThermosaldDriver {
         Ok(defs
             .iter()
             .zip(outcomes)
-            .filter_map(|(def, outcome)| {
+            .filter_map(|(&(at, _), outcome)| {
                 outcome.map(|value| Reading {
-                    point: self.point_id(def),
+                    point: self.ids[at].clone(),
                     value,
                 })
             })
@@ -526,7 +537,11 @@ impl ThermosaldDriver {
 
 impl Driver for ThermosaldDriver {
     fn points(&self) -> Vec<PointSpec> {
-        POINTS.iter().map(|d| self.spec(d)).collect()
+        POINTS
+            .iter()
+            .zip(&self.ids)
+            .map(|(def, id)| Self::spec(def, id.clone()))
+            .collect()
     }
 
     fn groups(&self) -> Vec<PollGroup> {
