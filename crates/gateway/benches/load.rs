@@ -657,18 +657,11 @@ fn simulate_line(
                     reply_delay,
                     ..StationConfig::default()
                 }));
-                // Phases spread the stations' routines over the round.
-                let phase = Duration::from_millis(((line * 97 + i * 7919) % 120_000) as u64);
-                stations.push((model, address, phase, JbcOperator::default()));
+                stations.push((model, address, phase(line, i), JbcOperator::default()));
             }
             let models: Vec<SharedModel<Station>> =
                 stations.iter().map(|(m, ..)| m.clone()).collect();
-            let bus = Arc::new(move || {
-                Bus(models
-                    .iter()
-                    .map(|m| Box::new(m.line()) as Box<dyn Device>)
-                    .collect())
-            });
+            let bus = Arc::new(move || bus_of(&models));
             let started = std::time::Instant::now();
             let operator = Box::new(move |now: std::time::Instant| {
                 let elapsed = now.saturating_duration_since(started);
@@ -700,11 +693,9 @@ fn simulate_line(
             // its line, the addressed unit's answer back behind the request's header. (A
             // one-device bus, to keep one type for every kind's connections.)
             let bus = Arc::new(move || {
-                let units = Bus(models
-                    .iter()
-                    .map(|m| Box::new(m.line()) as Box<dyn Device>)
-                    .collect());
-                Bus(vec![Box::new(MbapServer::new(units)) as Box<dyn Device>])
+                Bus(vec![
+                    Box::new(MbapServer::new(bus_of(&models))) as Box<dyn Device>
+                ])
             });
             let mut last = std::time::Instant::now();
             let operator = Box::new(move |now: std::time::Instant| {
@@ -755,18 +746,11 @@ fn simulate_line(
                 let model = SharedModel::new(
                     CrossTwin::new(unit, (line * 1000 + i) as u64).with_reply_delay(reply_delay),
                 );
-                // Phases spread the switches' mains trouble over the round.
-                let phase = Duration::from_millis(((line * 97 + i * 7919) % 120_000) as u64);
-                switches.push((model, phase, CrossOperator::default()));
+                switches.push((model, phase(line, i), CrossOperator::default()));
             }
             let models: Vec<SharedModel<CrossTwin>> =
                 switches.iter().map(|(m, ..)| m.clone()).collect();
-            let bus = Arc::new(move || {
-                Bus(models
-                    .iter()
-                    .map(|m| Box::new(m.line()) as Box<dyn Device>)
-                    .collect())
-            });
+            let bus = Arc::new(move || bus_of(&models));
             let started = std::time::Instant::now();
             let operator = Box::new(move |now: std::time::Instant| {
                 let elapsed = now.saturating_duration_since(started);
@@ -777,6 +761,24 @@ fn simulate_line(
             Ok((bus, operator))
         }
     }
+}
+
+/// A bus of the models' lines (each connection gets a new one, sharing the models).
+fn bus_of<M>(models: &[SharedModel<M>]) -> Bus
+where
+    M: wire::device::Model + Send + 'static,
+    wire::device::ModelLine<M>: Device + Send + 'static,
+{
+    Bus(models
+        .iter()
+        .map(|m| Box::new(m.line()) as Box<dyn Device>)
+        .collect())
+}
+
+/// Where the `i`-th device of `line` starts in its operator's [`ROUTINE`]: the phases
+/// spread the devices' routines over the round.
+fn phase(line: usize, i: usize) -> Duration {
+    Duration::from_millis(((line * 97 + i * 7919) % ROUTINE.as_millis() as usize) as u64)
 }
 
 /// The mains a CROSS rides through, 120 s a round: source 1 fails for the last 40 s of
