@@ -92,8 +92,12 @@
 //! its arms in [`Kind::parse`], [`Kind::protocol`], [`Kind::max_per_line`],
 //! [`Kind::line_serial`], [`Kind::is_serial`], [`Kind::scheme`] and [`simulate_line`] (its
 //! simulator models behind the bus, and their operator); [`config_text`] for keys of its
-//! own. A Panasonic machine is not a device on a line (two TCP ports of its own, one
-//! machine each) and is not in the mix.
+//! own. A Panasonic machine (`--mix panasonic=1`) is not a device on a bus: its twin
+//! ([`panasonic::server::TwinServer`]) listens on two ports of its own (commands, R
+//! messages), one machine a line, served by `simulate_machine`; the simulator process
+//! prints the event port after the line's endpoint, and the config names it
+//! (`event_port`). Its operator starts a run, lets a feeder run out and clears the error
+//! stop, 85 s a round.
 //!
 //! # MQTT
 //!
@@ -126,12 +130,12 @@
 //! cost of serving is the difference between runs with `--opcua` and without.
 //!
 //! Under `cargo test --benches` (no `--bench` flag) it runs a one-second smoke test with
-//! eight devices on four lines (two JTSEs, two Thermosald regulators and two CROSS units,
-//! each pair on one serial port, as `--serial` makes it; two Modbus units behind one Modbus
-//! TCP gateway), publishing to MQTT and serving OPC UA to a client monitoring 100 points,
-//! and fails unless every kind answered, each Modbus poll took two reads, and the OPC UA
-//! client got its items and, by source time, every change the history holds for them in
-//! the window.
+//! one device of each kind on a line of its own (a JTSE, a Thermosald regulator and a
+//! CROSS, each on a serial port, as `--serial` makes it; a Modbus unit behind a Modbus TCP
+//! gateway; a Panasonic machine), publishing to MQTT and serving OPC UA to a client
+//! monitoring 100 points, and fails unless every kind answered, each Modbus poll took two
+//! reads, and the OPC UA client got its items and, by source time, every change the
+//! history holds for them in the window.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -160,6 +164,10 @@ use jbus::rtu::UnitId;
 use jbus::slave::{Slave, SlaveMap, Table};
 use jbus::tcp::MbapServer;
 use link::SerialSettings;
+use panasonic::operator::Command as PanelCommand;
+use panasonic::server::{Control, RunningTwin, TwinServer};
+use panasonic::status::StopMode;
+use panasonic::{Machine, MachineConfig};
 use thermosald::device::{Regulator, RegulatorBus, RegulatorConfig};
 use thermosald::exchange::LineTiming;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -222,7 +230,8 @@ usage: cargo bench -p gateway --bench load -- [options]
   --warmup S          time before measuring (default 5 s)
   --mix KIND=W,...    device kinds, by weight per line (default jbc=1; known: jbc,
                       modbus: 100 float32 points behind a Modbus TCP gateway,
-                      thermosald: at most 8 a line, cross)
+                      thermosald: at most 8 a line, cross, panasonic: one a
+                      line)
   --baud B|none       pace each serial line like one of B baud (default none:
                       loopback speed; Modbus TCP lines are never paced)
   --serial            serial lines (JBC, Thermosald, CROSS) are serial ports
@@ -282,8 +291,8 @@ fn main() -> ExitCode {
         // A line of each kind, so CI goes through every simulator and driver path: the
         // serial kinds' lines serial ports, the Modbus line a TCP connection.
         args = Args {
-            devices: 8,
-            lines: 4,
+            devices: 5,
+            lines: 5,
             seconds: Duration::from_secs(1),
             warmup: Duration::from_secs(1),
             mix: vec![
@@ -291,6 +300,7 @@ fn main() -> ExitCode {
                 (Kind::Modbus, 1),
                 (Kind::Thermosald, 1),
                 (Kind::Cross, 1),
+                (Kind::Panasonic, 1),
             ],
             serial: true,
             mqtt: true,
@@ -522,10 +532,13 @@ enum Kind {
     Thermosald,
     /// Chloride CROSS static transfer switch (JBUS units 1, 2, … on an RS-485 line).
     Cross,
+    /// Panasonic placement machine: its own two TCP ports (commands, R messages), one
+    /// machine a line.
+    Panasonic,
 }
 
 impl Kind {
-    const KNOWN: &'static str = "jbc, modbus, thermosald, cross";
+    const KNOWN: &'static str = "jbc, modbus, thermosald, cross, panasonic";
 
     fn parse(name: &str) -> Option<Kind> {
         match name {
@@ -533,6 +546,7 @@ impl Kind {
             "modbus" => Some(Kind::Modbus),
             "thermosald" => Some(Kind::Thermosald),
             "cross" => Some(Kind::Cross),
+            "panasonic" => Some(Kind::Panasonic),
             _ => None,
         }
     }
@@ -544,6 +558,7 @@ impl Kind {
             Kind::Modbus => "modbus",
             Kind::Thermosald => "thermosald",
             Kind::Cross => "cross",
+            Kind::Panasonic => "panasonic",
         }
     }
 
@@ -556,6 +571,8 @@ impl Kind {
             Kind::Modbus | Kind::Cross => usize::from(jbus::rtu::UnitId::MAX),
             // Addresses 0-7.
             Kind::Thermosald => usize::from(thermosald::Address::MAX) + 1,
+            // A machine is its own TCP server.
+            Kind::Panasonic => 1,
         }
     }
 
@@ -563,7 +580,7 @@ impl Kind {
     fn address(self, index: usize) -> i64 {
         match self {
             Kind::Jbc | Kind::Modbus | Kind::Cross => index as i64 + 1,
-            Kind::Thermosald => index as i64,
+            Kind::Thermosald | Kind::Panasonic => index as i64,
         }
     }
 
@@ -573,7 +590,7 @@ impl Kind {
         match self {
             Kind::Jbc => Some(SerialSettings::new_8e1(baud)),
             Kind::Thermosald | Kind::Cross => Some(SerialSettings::new_8n1(baud)),
-            Kind::Modbus => None,
+            Kind::Modbus | Kind::Panasonic => None,
         }
     }
 
@@ -582,14 +599,14 @@ impl Kind {
     fn is_serial(self) -> bool {
         match self {
             Kind::Jbc | Kind::Thermosald | Kind::Cross => true,
-            Kind::Modbus => false,
+            Kind::Modbus | Kind::Panasonic => false,
         }
     }
 
     /// The scheme of the line's TCP endpoint in the config.
     fn scheme(self) -> &'static str {
         match self {
-            Kind::Jbc | Kind::Thermosald | Kind::Cross => "tcp",
+            Kind::Jbc | Kind::Thermosald | Kind::Cross | Kind::Panasonic => "tcp",
             Kind::Modbus => "modbus-tcp",
         }
     }
@@ -759,6 +776,78 @@ fn simulate_line(
                 }
             });
             Ok((bus, operator))
+        }
+        Kind::Panasonic => bail!("a Panasonic machine is not on a bus: simulate_machine serves it"),
+    }
+}
+
+/// A Panasonic machine's twin served on two ports of 127.0.0.1 (Port 1 commands, Port 2 R
+/// messages): the running twin (kept while the simulators run), the line's endpoint with
+/// the event port after it (`tcp://127.0.0.1:PORT EVENT_PORT`), and its operator.
+async fn simulate_machine(line: usize) -> anyhow::Result<(RunningTwin, String, Operator)> {
+    let machine = Machine::new(MachineConfig::default()).map_err(anyhow::Error::msg)?;
+    let any = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
+    let twin = TwinServer::bind(any, any, machine)
+        .await
+        .context("cannot listen for a Panasonic machine")?
+        .spawn()
+        .context("cannot start a Panasonic machine")?;
+    let endpoint = format!(
+        "tcp://127.0.0.1:{} {}",
+        twin.command_addr().port(),
+        twin.event_addr().port()
+    );
+    let mut operator = PlacementOperator {
+        control: twin.control().clone(),
+        done: None,
+    };
+    let started = std::time::Instant::now();
+    let phase = phase(line, 0);
+    let operator = Box::new(move |now: std::time::Instant| {
+        operator.act(now.saturating_duration_since(started) + phase);
+    });
+    Ok((twin, endpoint, operator))
+}
+
+/// The feeder the placement operator lets run out.
+const EMPTY_FEEDER: u16 = 7;
+
+/// A placement machine's operator, 85 s a round: starts a continuous run at 10 s, lets a
+/// feeder run out at 60 s (an error stop), refills it and clears the error at 75 s.
+struct PlacementOperator {
+    control: Control,
+    /// The (round, step) last done.
+    done: Option<(u64, usize)>,
+}
+
+impl PlacementOperator {
+    const ROUND: u64 = 85;
+    /// Seconds into the round of each step.
+    const STEPS: [u64; 3] = [10, 60, 75];
+
+    fn act(&mut self, at: Duration) {
+        let round = at.as_secs() / Self::ROUND;
+        let into = at.as_secs() % Self::ROUND;
+        let Some(step) = Self::STEPS.iter().rposition(|&s| s <= into) else {
+            return;
+        };
+        if self.done == Some((round, step)) {
+            return;
+        }
+        self.done = Some((round, step));
+        let commands: &[PanelCommand] = match step {
+            0 => &[PanelCommand::Start(Some(StopMode::Continuous))],
+            1 => &[PanelCommand::PauseFeeder(EMPTY_FEEDER)],
+            _ => &[
+                PanelCommand::ResumeFeeder(EMPTY_FEEDER),
+                PanelCommand::RefillFeeder(EMPTY_FEEDER),
+                PanelCommand::Clear,
+            ],
+        };
+        for &command in commands {
+            // A refusal (a start while the machine is stopped by an error the bench
+            // started in) changes nothing; the next round tries again.
+            let _ = self.control.apply(command);
         }
     }
 }
@@ -955,8 +1044,16 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
     let links = tempfile::tempdir().context("cannot create a temporary directory")?;
     runtime.block_on(async {
         let mut operators = Vec::new();
+        let mut machines = Vec::new();
         let mut out = String::new();
         for (i, plan) in plans.iter().enumerate() {
+            if plan.kind == Kind::Panasonic {
+                let (twin, endpoint, operator) = simulate_machine(i).await?;
+                machines.push(twin);
+                operators.push(operator);
+                writeln!(out, "line {i} {endpoint}").expect("writing to a String cannot fail");
+                continue;
+            }
             let pace = args.baud.and_then(|b| plan.kind.line_serial(b));
             let (bus, operator) = simulate_line(*plan, i, args.reply_delay, pace)?;
             let endpoint = if args.serial && plan.kind.is_serial() {
@@ -1006,6 +1103,7 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
         })
         .await
         .context("the standard input watcher failed")?;
+        drop(machines);
         anyhow::Ok(())
     })?;
     runtime.shutdown_background();
@@ -1077,6 +1175,10 @@ fn config_text(args: &Args, plans: &[LinePlan], endpoints: &[String]) -> String 
             .map_or(String::new(), |serial| {
                 format!("?baud={}&framing={}", serial.baud, serial.framing())
             });
+        // A Panasonic line's endpoint is followed by its machine's event port.
+        let (endpoint, event_port) = endpoint
+            .split_once(' ')
+            .map_or((endpoint.as_str(), None), |(e, port)| (e, Some(port)));
         let _ = write!(
             text,
             "\n[[line]]\nname = \"line{i:02}\"\nendpoint = \"{endpoint}{timing}\"\n"
@@ -1085,9 +1187,17 @@ fn config_text(args: &Args, plans: &[LinePlan], endpoints: &[String]) -> String 
             let address = plan.kind.address(d);
             let _ = write!(
                 text,
-                "\n[[line.device]]\nid = \"l{i:02}-{kind}{address:02}\"\nprotocol = \"{kind}\"\naddress = {address}\n",
+                "\n[[line.device]]\nid = \"l{i:02}-{kind}{address:02}\"\nprotocol = \"{kind}\"\n",
                 kind = plan.kind.protocol()
             );
+            match event_port {
+                Some(port) => {
+                    let _ = writeln!(text, "event_port = {port}");
+                }
+                None => {
+                    let _ = writeln!(text, "address = {address}");
+                }
+            }
             if plan.kind == Kind::Modbus {
                 let _ = writeln!(text, "registers_csv = \"{MODBUS_CSV}\"");
             }
