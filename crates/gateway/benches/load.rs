@@ -14,8 +14,8 @@
 //!
 //! - **Two processes.** The bench re-executes itself with `--simulators`: that child process
 //!   runs every simulated device, one TCP listener on 127.0.0.1 per line (a PTY per
-//!   serial line with `--serial`). The parent runs the gateway exactly as `cellbus serve --config`
-//!   does: a generated `cell.toml` (checked by [`gateway::check_config`]),
+//!   serial line with `--serial`). The parent runs the gateway exactly as `cellbus serve
+//!   --config` does: a generated `cell.toml` (checked by [`gateway::check_config`]),
 //!   [`Gateway::start`] on a multi-threaded tokio runtime like the CLI's, the real
 //!   scheduler, drivers, protocol clients and lines (`tcp://`, or `serial://`), the
 //!   SQLite history in a temporary directory, the HTTP server listening on a free port. So
@@ -35,10 +35,10 @@
 //!   ([`thermosald::device::RegulatorBus`], [`jbus::cross::device::CrossTwin`]).
 //! - **Serial ports** (`--serial`). The serial kinds' lines (JBC, Thermosald, CROSS) are
 //!   pseudo-terminals instead: the simulator process creates one per line
-//!   ([`link::serve::Pty`]) and serves the line's
-//!   bus on its master end; the gateway opens the other end as `serial://`, through
-//!   tokio-serial, as it would a port of a multi-port serial card: the serial path (the
-//!   port's settings, the kernel's tty layer) under load. The `cost` line's kernel time is
+//!   ([`link::serve::Pty`]) and serves the line's bus on its master end; the gateway
+//!   opens the other end as `serial://`, through tokio-serial, as it would a port of a
+//!   multi-port serial card: the serial path (the port's settings, the kernel's tty layer)
+//!   under load. The `cost` line's kernel time is
 //!   then the gateway's reads and writes on ttys instead of on sockets.
 //! - **Modbus lines** (`--mix modbus=1`) are Modbus TCP gateways: one `modbus-tcp://`
 //!   listener per line, a [`jbus::tcp::MbapServer`] in front of a bus of generic Modbus
@@ -57,8 +57,9 @@
 //!   periods, and the report shows the periods the scheduler could keep. A Thermosald
 //!   regulator answers 200 ms after each question and the line is quiet 40 ms after it
 //!   (the protocol's timing, kept by the client and the twin whatever `--reply-delay`
-//!   says): about four exchanges a second a line, one per regulator and table read, so
-//!   eight regulators fill a line at the driver's 2 s live period. A CROSS switch answers
+//!   says): about four exchanges a second a line, one per regulator and table read. Six
+//!   regulators a line keep the driver's 2 s live period; eight do about 80 % of the live
+//!   polls due. A CROSS switch answers
 //!   after `--reply-delay` (its model's own is 5 ms); its driver reads it in four requests
 //!   a second (live) and more once a minute (ratings).
 //! - **A working cell.** An operator script in the simulator process works every station
