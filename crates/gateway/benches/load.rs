@@ -91,7 +91,7 @@
 //!
 //! The device mix is `--mix jbc=1` (weights per line). A kind is one [`Kind`] variant with
 //! its arms in [`Kind::parse`], [`Kind::protocol`], [`Kind::max_per_line`],
-//! [`Kind::line_serial`], [`Kind::is_serial`], [`Kind::scheme`] and [`simulate_line`] (its
+//! [`Kind::framing`], [`Kind::scheme`] and [`simulate_line`] (its
 //! simulator models behind the bus, and their operator); [`config_text`] for keys of its
 //! own. A Panasonic machine (`--mix panasonic=1`) is not a device on a bus: its twin
 //! ([`panasonic::server::TwinServer`]) listens on two ports of its own (commands, R
@@ -585,23 +585,25 @@ impl Kind {
         }
     }
 
-    /// The line's character framing at `baud`, when the line is paced; `None` for a line
-    /// that is not serial (Modbus TCP), which `--baud` leaves at loopback speed.
-    fn line_serial(self, baud: u32) -> Option<SerialSettings> {
+    /// The character framing of the kind's serial lines, at a given baud rate; `None` for
+    /// a kind on a network (Modbus TCP, a placement machine).
+    fn framing(self) -> Option<fn(u32) -> SerialSettings> {
         match self {
-            Kind::Jbc => Some(SerialSettings::new_8e1(baud)),
-            Kind::Thermosald | Kind::Cross => Some(SerialSettings::new_8n1(baud)),
+            Kind::Jbc => Some(SerialSettings::new_8e1),
+            Kind::Thermosald | Kind::Cross => Some(SerialSettings::new_8n1),
             Kind::Modbus | Kind::Panasonic => None,
         }
     }
 
-    /// Whether the kind's lines are serial lines, which `--serial` turns into serial ports
-    /// (a Modbus TCP gateway's are not).
+    /// The line's character framing at `baud`, when the line is paced; `None` for a line
+    /// that is not serial, which `--baud` leaves at loopback speed.
+    fn line_serial(self, baud: u32) -> Option<SerialSettings> {
+        self.framing().map(|framing| framing(baud))
+    }
+
+    /// Whether the kind's lines are serial lines, which `--serial` turns into serial ports.
     fn is_serial(self) -> bool {
-        match self {
-            Kind::Jbc | Kind::Thermosald | Kind::Cross => true,
-            Kind::Modbus | Kind::Panasonic => false,
-        }
+        self.framing().is_some()
     }
 
     /// The scheme of the line's TCP endpoint in the config.
@@ -654,14 +656,25 @@ fn plan(args: &Args) -> Result<Vec<LinePlan>, String> {
 /// What an operator does to the devices of a line, every [`OPERATOR_TICK`].
 type Operator = Box<dyn FnMut(std::time::Instant) + Send>;
 
-/// The bus of one line's simulated devices (a new bus per connection, sharing the models)
-/// and their operator; `pace` is the line's character timing when the serve loop paces it.
-fn simulate_line(
+/// Makes a bus of a line's simulated devices for each connection, sharing the models.
+type BusFactory = Arc<dyn Fn() -> Bus + Send + Sync>;
+
+/// One line's simulated devices, and their operator.
+enum SimulatedLine {
+    /// Devices on a bus, which the simulator process serves on a listener or a PTY.
+    Bus(BusFactory, Operator),
+    /// A machine serving its own ports (kept while the simulators run), and where.
+    Machine(RunningTwin, LineEndpoint, Operator),
+}
+
+/// The simulated devices of one line and their operator; `pace` is the line's character
+/// timing when the serve loop paces it.
+async fn simulate_line(
     plan: LinePlan,
     line: usize,
     reply_delay: Duration,
     pace: Option<SerialSettings>,
-) -> anyhow::Result<(Arc<dyn Fn() -> Bus + Send + Sync>, Operator)> {
+) -> anyhow::Result<SimulatedLine> {
     match plan.kind {
         Kind::Jbc => {
             let mut stations = Vec::with_capacity(plan.devices);
@@ -687,7 +700,7 @@ fn simulate_line(
                     op.act(model, *address, elapsed + *phase, now);
                 }
             });
-            Ok((bus, operator))
+            Ok(SimulatedLine::Bus(bus, operator))
         }
         Kind::Modbus => {
             let mut devices = Vec::with_capacity(plan.devices);
@@ -723,7 +736,7 @@ fn simulate_line(
                     op.act(&mut model.lock(), elapsed);
                 }
             });
-            Ok((bus, operator))
+            Ok(SimulatedLine::Bus(bus, operator))
         }
         Kind::Thermosald => {
             // The regulators answer 200 ms after a question whatever `--reply-delay` says:
@@ -752,7 +765,10 @@ fn simulate_line(
             }
             let model = SharedModel::new(regulators);
             let bus = Arc::new(move || Bus(vec![Box::new(model.line()) as Box<dyn Device>]));
-            Ok((bus, Box::new(|_: std::time::Instant| {})))
+            Ok(SimulatedLine::Bus(
+                bus,
+                Box::new(|_: std::time::Instant| {}),
+            ))
         }
         Kind::Cross => {
             let mut switches = Vec::with_capacity(plan.devices);
@@ -776,16 +792,15 @@ fn simulate_line(
                     op.act(model, elapsed + *phase);
                 }
             });
-            Ok((bus, operator))
+            Ok(SimulatedLine::Bus(bus, operator))
         }
-        Kind::Panasonic => bail!("a Panasonic machine is not on a bus: simulate_machine serves it"),
+        Kind::Panasonic => simulate_machine(line).await,
     }
 }
 
 /// A Panasonic machine's twin served on two ports of 127.0.0.1 (Port 1 commands, Port 2 R
-/// messages): the running twin (kept while the simulators run), the line's endpoint with
-/// the event port after it (`tcp://127.0.0.1:PORT EVENT_PORT`), and its operator.
-async fn simulate_machine(line: usize) -> anyhow::Result<(RunningTwin, String, Operator)> {
+/// messages), and its operator.
+async fn simulate_machine(line: usize) -> anyhow::Result<SimulatedLine> {
     let machine = Machine::new(MachineConfig::default()).map_err(anyhow::Error::msg)?;
     let any = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
     let twin = TwinServer::bind(any, any, machine)
@@ -793,11 +808,10 @@ async fn simulate_machine(line: usize) -> anyhow::Result<(RunningTwin, String, O
         .context("cannot listen for a Panasonic machine")?
         .spawn()
         .context("cannot start a Panasonic machine")?;
-    let endpoint = format!(
-        "tcp://127.0.0.1:{} {}",
-        twin.command_addr().port(),
-        twin.event_addr().port()
-    );
+    let endpoint = LineEndpoint {
+        url: format!("tcp://127.0.0.1:{}", twin.command_addr().port()),
+        event_port: Some(twin.event_addr().port()),
+    };
     let mut operator = PlacementOperator {
         control: twin.control().clone(),
         done: None,
@@ -807,7 +821,7 @@ async fn simulate_machine(line: usize) -> anyhow::Result<(RunningTwin, String, O
     let operator = Box::new(move |now: std::time::Instant| {
         operator.act(now.saturating_duration_since(started) + phase);
     });
-    Ok((twin, endpoint, operator))
+    Ok(SimulatedLine::Machine(twin, endpoint, operator))
 }
 
 /// The feeder the placement operator lets run out.
@@ -1033,8 +1047,9 @@ impl JbcOperator {
     }
 }
 
-/// The child process: serves every line, prints `line I PORT` for each and then `ready`,
-/// and runs until its standard input closes (the bench ends or dies).
+/// The child process: serves every line, prints `line I ENDPOINT` for each (see
+/// [`LineEndpoint`]) and then `ready`, and runs until its standard input closes (the bench
+/// ends or dies).
 fn run_simulators(args: &Args) -> anyhow::Result<()> {
     let plans = plan(args).map_err(anyhow::Error::msg)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -1042,23 +1057,29 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
         .build()
         .context("cannot start the simulators' runtime")?;
     // Where the pseudo-terminals of `--serial` are linked; removed when the process ends.
-    let links = tempfile::tempdir().context("cannot create a temporary directory")?;
+    let links = args
+        .serial
+        .then(tempfile::tempdir)
+        .transpose()
+        .context("cannot create a temporary directory")?;
     runtime.block_on(async {
         let mut operators = Vec::new();
         let mut machines = Vec::new();
         let mut out = String::new();
         for (i, plan) in plans.iter().enumerate() {
-            if plan.kind == Kind::Panasonic {
-                let (twin, endpoint, operator) = simulate_machine(i).await?;
-                machines.push(twin);
-                operators.push(operator);
-                writeln!(out, "line {i} {endpoint}").expect("writing to a String cannot fail");
-                continue;
-            }
             let pace = args.baud.and_then(|b| plan.kind.line_serial(b));
-            let (bus, operator) = simulate_line(*plan, i, args.reply_delay, pace)?;
-            let endpoint = if args.serial && plan.kind.is_serial() {
-                let link = links.path().join(format!("line{i:02}"));
+            let (bus, operator) = match simulate_line(*plan, i, args.reply_delay, pace).await? {
+                SimulatedLine::Bus(bus, operator) => (bus, operator),
+                SimulatedLine::Machine(twin, endpoint, operator) => {
+                    machines.push(twin);
+                    operators.push(operator);
+                    writeln!(out, "line {i} {endpoint}").expect("writing to a String cannot fail");
+                    continue;
+                }
+            };
+            let pty_dir = links.as_ref().filter(|_| plan.kind.is_serial());
+            let url = if let Some(dir) = pty_dir {
+                let link = dir.path().join(format!("line{i:02}"));
                 let pty = link::serve::Pty::create(&link)
                     .with_context(|| format!("cannot create the PTY of line {i}"))?;
                 let device = bus();
@@ -1081,6 +1102,10 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
                 format!("{}://127.0.0.1:{port}", plan.kind.scheme())
             };
             operators.push(operator);
+            let endpoint = LineEndpoint {
+                url,
+                event_port: None,
+            };
             writeln!(out, "line {i} {endpoint}").expect("writing to a String cannot fail");
         }
         tokio::spawn(async move {
@@ -1111,11 +1136,40 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Where the gateway reaches a simulated line, as the simulator process prints it: the
+/// line's URL (without its serial settings), and a placement machine's event port after
+/// it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct LineEndpoint {
+    url: String,
+    event_port: Option<u16>,
+}
+
+impl LineEndpoint {
+    /// Reads what [`LineEndpoint`]'s `Display` printed.
+    fn parse(text: &str) -> Option<Self> {
+        let mut words = text.split(' ');
+        let url = words.next()?.to_owned();
+        let event_port = words.next().map(str::parse).transpose().ok()?;
+        words.next().is_none().then_some(Self { url, event_port })
+    }
+}
+
+impl std::fmt::Display for LineEndpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.url)?;
+        match self.event_port {
+            Some(port) => write!(f, " {port}"),
+            None => Ok(()),
+        }
+    }
+}
+
 /// The simulator process, killed when dropped.
 struct Simulators {
     child: Child,
-    /// Each line's endpoint, as the config names it (without its serial settings).
-    endpoints: Vec<String>,
+    /// Each line's endpoint.
+    endpoints: Vec<LineEndpoint>,
 }
 
 impl Simulators {
@@ -1144,7 +1198,7 @@ impl Simulators {
             let endpoint = line
                 .strip_prefix("line ")
                 .and_then(|rest| rest.split_once(' '))
-                .map(|(_, endpoint)| endpoint.to_owned())
+                .and_then(|(_, endpoint)| LineEndpoint::parse(endpoint))
                 .with_context(|| format!("unexpected line from the simulators: {line:?}"))?;
             simulators.endpoints.push(endpoint);
         }
@@ -1167,7 +1221,7 @@ impl Drop for Simulators {
 
 /// The cell configuration for the simulated lines, as a file for `cellbus serve --config`
 /// (Modbus devices name [`MODBUS_CSV`], written by [`modbus_csv`] next to it).
-fn config_text(args: &Args, plans: &[LinePlan], endpoints: &[String]) -> String {
+fn config_text(args: &Args, plans: &[LinePlan], endpoints: &[LineEndpoint]) -> String {
     let mut text = String::from("# Generated by the gateway load benchmark.\n");
     for (i, (plan, endpoint)) in plans.iter().zip(endpoints).enumerate() {
         let timing = args
@@ -1176,13 +1230,10 @@ fn config_text(args: &Args, plans: &[LinePlan], endpoints: &[String]) -> String 
             .map_or(String::new(), |serial| {
                 format!("?baud={}&framing={}", serial.baud, serial.framing())
             });
-        // A Panasonic line's endpoint is followed by its machine's event port.
-        let (endpoint, event_port) = endpoint
-            .split_once(' ')
-            .map_or((endpoint.as_str(), None), |(e, port)| (e, Some(port)));
         let _ = write!(
             text,
-            "\n[[line]]\nname = \"line{i:02}\"\nendpoint = \"{endpoint}{timing}\"\n"
+            "\n[[line]]\nname = \"line{i:02}\"\nendpoint = \"{}{timing}\"\n",
+            endpoint.url
         );
         for d in 0..plan.devices {
             let address = plan.kind.address(d);
@@ -1191,7 +1242,7 @@ fn config_text(args: &Args, plans: &[LinePlan], endpoints: &[String]) -> String 
                 "\n[[line.device]]\nid = \"l{i:02}-{kind}{address:02}\"\nprotocol = \"{kind}\"\n",
                 kind = plan.kind.protocol()
             );
-            match event_port {
+            match endpoint.event_port {
                 Some(port) => {
                     let _ = writeln!(text, "event_port = {port}");
                 }

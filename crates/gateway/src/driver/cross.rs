@@ -208,9 +208,7 @@ pub struct CrossDriver {
     unit: UnitId,
     config: ClientConfig,
     client: Option<Client>,
-    /// Every point ([`DEFS`]).
-    defs: &'static [Def],
-    /// Each point's id, in the order of `defs` (made once: readings share them with the
+    /// Each point's id, in the order of [`DEFS`] (made once: readings share them with the
     /// cell's point specs).
     ids: Vec<PointId>,
     /// The discrete parts at the last poll, to see transfers.
@@ -237,7 +235,6 @@ impl CrossDriver {
                 ..defaults
             },
             client: None,
-            defs: &DEFS,
             ids: DEFS
                 .iter()
                 .map(|def| {
@@ -329,7 +326,7 @@ impl CrossDriver {
             if let Ok(internal) = &internal {
                 self.note_changes(internal);
             }
-            for (def, id) in self.defs.iter().zip(&self.ids) {
+            for (def, id) in DEFS.iter().zip(&self.ids) {
                 if def.group() != LIVE {
                     continue;
                 }
@@ -354,7 +351,7 @@ impl CrossDriver {
                 .await?
                 .and_then(|w| words::<{ Ratings::LEN }>(&w, Area::Ratings))
                 .map(|w| Ratings::from_words(&w));
-            for (def, id) in self.defs.iter().zip(&self.ids) {
+            for (def, id) in DEFS.iter().zip(&self.ids) {
                 if def.group() != RATINGS {
                     continue;
                 }
@@ -410,8 +407,7 @@ impl CrossDriver {
 
 impl Driver for CrossDriver {
     fn points(&self) -> Vec<PointSpec> {
-        self.defs
-            .iter()
+        DEFS.iter()
             .zip(&self.ids)
             .map(|(def, id)| Self::spec(def, id.clone()))
             .collect()
@@ -577,7 +573,7 @@ mod tests {
         let live = driver.poll(LIVE).await.unwrap();
         assert_eq!(
             live.len(),
-            defs().iter().filter(|d| d.group() == LIVE).count()
+            DEFS.iter().filter(|d| d.group() == LIVE).count()
         );
         assert_eq!(value(&live, "load_feed"), Ok(Value::Number(1.0)));
         assert_eq!(value(&live, "s1_alarms"), Ok(Value::Text("none".into())));
