@@ -102,7 +102,8 @@ impl PointId {
     /// The id of point `name` of `device`; `name` follows the device id rules.
     pub fn new(device: &DeviceId, name: &str) -> Result<Self, IdError> {
         check_name("point name", name)?;
-        // Drivers build one per reading: plain copies, not the formatting machinery.
+        // Plain copies, not the formatting machinery: a device's ids are made at its start
+        // (every device of a cell at once).
         let device = device.as_str();
         let mut id = String::with_capacity(device.len() + 1 + name.len());
         id.push_str(device);

@@ -36,7 +36,7 @@ use link::{SerialSettings, SharedLine};
 
 use super::{
     BoxFuture, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
-    WriteError,
+    WriteError, point_ids,
 };
 use crate::event::EventKind;
 use crate::point::{AlarmRule, EnumState, PointDescription, PointId, PointKind, PointSpec, Value};
@@ -210,7 +210,7 @@ pub struct CrossDriver {
     client: Option<Client>,
     /// Each point's id, in the order of [`DEFS`] (made once: readings share them with the
     /// cell's point specs).
-    ids: Vec<PointId>,
+    ids: Box<[PointId]>,
     /// The discrete parts at the last poll, to see transfers.
     last: Option<Discrete>,
     events: Vec<DeviceEvent>,
@@ -235,13 +235,7 @@ impl CrossDriver {
                 ..defaults
             },
             client: None,
-            ids: DEFS
-                .iter()
-                .map(|def| {
-                    PointId::new(&config.id, &def.name)
-                        .expect("point names in defs() follow the id rules")
-                })
-                .collect(),
+            ids: point_ids(&config.id, DEFS.iter().map(|def| def.name.as_str())),
             last: None,
             events: Vec::new(),
         })

@@ -40,7 +40,7 @@ use link::{SerialSettings, SharedLine};
 
 use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
-    enum_states,
+    enum_states, point_ids,
 };
 use crate::point::{
     AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
@@ -495,13 +495,7 @@ impl JbcDriver {
                 })
             }
         };
-        let ids = POINTS
-            .iter()
-            .map(|def| {
-                PointId::new(&config.id, def.name)
-                    .expect("point names in POINTS follow the id rules")
-            })
-            .collect();
+        let ids = point_ids(&config.id, POINTS.iter().map(|def| def.name));
         Ok(Self {
             device: config.id.clone(),
             ids,

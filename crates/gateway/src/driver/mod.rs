@@ -123,6 +123,20 @@ impl PollGroup {
     }
 }
 
+/// The ids of `device`'s points named in a driver's own table, whose names follow the id
+/// rules (a driver's tests build one, so a bad name fails them). Made once per device: its readings clone them,
+/// so a reading, the point's spec and its history row share one text, and the scheduler
+/// finds a reading's point by pointer.
+pub(crate) fn point_ids<'a>(
+    device: &DeviceId,
+    names: impl IntoIterator<Item = &'a str>,
+) -> Box<[PointId]> {
+    names
+        .into_iter()
+        .map(|name| PointId::new(device, name).expect("a driver's point names follow the id rules"))
+        .collect()
+}
+
 /// An enumeration's states from `(value, label)` pairs.
 pub(crate) fn enum_states<V: Into<i64>, L: Into<crate::point::Words>>(
     items: impl IntoIterator<Item = (V, L)>,

@@ -65,7 +65,7 @@ use thermosald::{Address, RawValue, Read, Target};
 
 use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
-    enum_states,
+    enum_states, point_ids,
 };
 use crate::point::{
     AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
@@ -270,7 +270,7 @@ pub struct ThermosaldDriver {
     confirmed: BTreeMap<(Table, u8), RawValue>,
     /// Each point's id, in the order of [`POINTS`] (made once: readings share them with
     /// the cell's point specs).
-    ids: Vec<PointId>,
+    ids: Box<[PointId]>,
 }
 
 impl ThermosaldDriver {
@@ -292,13 +292,7 @@ impl ThermosaldDriver {
             config: client,
             client: None,
             confirmed: BTreeMap::new(),
-            ids: POINTS
-                .iter()
-                .map(|def| {
-                    PointId::new(&config.id, def.name)
-                        .expect("point names in POINTS follow the id rules")
-                })
-                .collect(),
+            ids: point_ids(&config.id, POINTS.iter().map(|def| def.name)),
         })
     }
 
