@@ -622,6 +622,18 @@ struct LinePlan {
     devices: usize,
 }
 
+impl LinePlan {
+    /// The `i`-th device's address as its protocol's type, made by `make` ([`plan`] keeps
+    /// the devices within the addresses the protocol has).
+    fn address<T, E>(&self, i: usize, make: impl FnOnce(u8) -> Result<T, E>) -> anyhow::Result<T> {
+        let address = self.kind.address(i);
+        u8::try_from(address)
+            .ok()
+            .and_then(|a| make(a).ok())
+            .with_context(|| format!("{} address {address} out of range", self.kind.protocol()))
+    }
+}
+
 /// Spreads the devices over the lines (as evenly as whole numbers allow) and the kinds
 /// over the lines by weight.
 fn plan(args: &Args) -> Result<Vec<LinePlan>, String> {
@@ -679,10 +691,7 @@ async fn simulate_line(
         Kind::Jbc => {
             let mut stations = Vec::with_capacity(plan.devices);
             for i in 0..plan.devices {
-                let address = u8::try_from(plan.kind.address(i))
-                    .ok()
-                    .and_then(|a| Address::new(a).ok())
-                    .context("a JBC address out of range (plan checks it)")?;
+                let address = plan.address(i, Address::new)?;
                 let model = SharedModel::new(Station::new(StationConfig {
                     address: Some(address),
                     reply_delay,
@@ -705,10 +714,7 @@ async fn simulate_line(
         Kind::Modbus => {
             let mut devices = Vec::with_capacity(plan.devices);
             for i in 0..plan.devices {
-                let unit = u8::try_from(plan.kind.address(i))
-                    .ok()
-                    .and_then(|u| UnitId::new(u).ok())
-                    .context("a Modbus unit out of range (plan checks it)")?;
+                let unit = plan.address(i, UnitId::new)?;
                 let map = SlaveMap::parse(&format!(
                     "unit {}\ninput 0..={}\n",
                     unit.get(),
@@ -745,10 +751,7 @@ async fn simulate_line(
             let now = std::time::Instant::now();
             let mut regulators = Vec::with_capacity(plan.devices);
             for i in 0..plan.devices {
-                let address = u8::try_from(plan.kind.address(i))
-                    .ok()
-                    .and_then(|a| thermosald::Address::new(a).ok())
-                    .context("a Thermosald address out of range (plan checks it)")?;
+                let address = plan.address(i, thermosald::Address::new)?;
                 let config = RegulatorConfig {
                     seal_period: Some(Duration::from_millis(
                         3_000 + ((line * 7 + i) % 8) as u64 * 125,
@@ -773,10 +776,7 @@ async fn simulate_line(
         Kind::Cross => {
             let mut switches = Vec::with_capacity(plan.devices);
             for i in 0..plan.devices {
-                let unit = u8::try_from(plan.kind.address(i))
-                    .ok()
-                    .and_then(|u| UnitId::jbus(u).ok())
-                    .context("a JBUS unit out of range (plan checks it)")?;
+                let unit = plan.address(i, UnitId::jbus)?;
                 let model = SharedModel::new(
                     CrossTwin::new(unit, (line * 1000 + i) as u64).with_reply_delay(reply_delay),
                 );
