@@ -140,9 +140,9 @@
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::path::PathBuf;
-use std::process::{Child, Command, ExitCode, Stdio};
+use std::process::{Command, ExitCode};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -182,7 +182,7 @@ mod opcua_counter;
 mod process;
 
 use mqtt_counter::Counter;
-use process::{ProcessUse, ticks_per_second};
+use process::{Helper, ProcessUse, ticks_per_second};
 
 /// Devices simulated when `--devices` is not given.
 const DEFAULT_DEVICES: usize = 100;
@@ -1165,9 +1165,9 @@ impl std::fmt::Display for LineEndpoint {
     }
 }
 
-/// The simulator process, killed when dropped.
+/// The simulator process, ended when dropped (see [`Helper`]).
 struct Simulators {
-    child: Child,
+    helper: Helper,
     /// Each line's endpoint.
     endpoints: Vec<LineEndpoint>,
 }
@@ -1175,23 +1175,21 @@ struct Simulators {
 impl Simulators {
     fn start(args: &Args) -> anyhow::Result<Self> {
         let exe = std::env::current_exe().context("cannot find the bench's own executable")?;
-        let mut child = Command::new(exe)
+        let mut command = Command::new(exe);
+        command
             .args(args.for_simulators())
             // A heap profiler preloaded into the bench (heaptrack) profiles the gateway
             // only, not the simulators too.
-            .env_remove("LD_PRELOAD")
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .context("cannot start the simulator process")?;
-        let stdout = child.stdout.take().context("the child has no stdout")?;
+            .env_remove("LD_PRELOAD");
         let mut simulators = Simulators {
-            child,
+            helper: Helper::start(command, "simulator")?,
             endpoints: Vec::new(),
         };
-        for line in BufReader::new(stdout).lines() {
-            let line = line.context("reading the simulator process's output")?;
+        loop {
+            let line = simulators
+                .helper
+                .read_line()
+                .context("the simulator process ended before it was ready")?;
             if line == READY {
                 return Ok(simulators);
             }
@@ -1202,18 +1200,10 @@ impl Simulators {
                 .with_context(|| format!("unexpected line from the simulators: {line:?}"))?;
             simulators.endpoints.push(endpoint);
         }
-        bail!("the simulator process ended before it was ready")
     }
 
     fn pid(&self) -> u32 {
-        self.child.id()
-    }
-}
-
-impl Drop for Simulators {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        self.helper.pid()
     }
 }
 

@@ -9,13 +9,15 @@
 //! subscriptions, then answers each line on its standard input with one line of counts,
 //! and ends when its standard input closes. [`Counter`] is the parent's side.
 
-use std::io::{BufRead, BufReader, Write};
-use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::io::{BufRead, Write};
+use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, bail};
+
+use super::process::Helper;
 use prost::Message as _;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use sparkplug::proto::Payload;
@@ -231,11 +233,9 @@ async fn subscribe(port: u16, shared: Arc<Shared>, ready: std::sync::mpsc::Sende
     }
 }
 
-/// The parent's side: the counter process, killed when dropped.
+/// The parent's side: the counter process, ended when dropped.
 pub struct Counter {
-    child: Child,
-    stdin: ChildStdin,
-    stdout: BufReader<ChildStdout>,
+    helper: Helper,
 }
 
 impl Counter {
@@ -243,47 +243,25 @@ impl Counter {
     /// subscribed.
     pub fn start(port: u16) -> anyhow::Result<Self> {
         let exe = std::env::current_exe().context("cannot find the bench's own executable")?;
-        let mut child = Command::new(exe)
-            .args([FLAG.to_owned(), port.to_string()])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .context("cannot start the MQTT counter process")?;
-        let stdin = child.stdin.take().context("the counter has no stdin")?;
-        let stdout = BufReader::new(child.stdout.take().context("the counter has no stdout")?);
-        let mut counter = Self {
-            child,
-            stdin,
-            stdout,
-        };
-        let mut line = String::new();
-        counter.stdout.read_line(&mut line)?;
-        if line.trim() != READY {
+        let mut command = Command::new(exe);
+        command.args([FLAG.to_owned(), port.to_string()]);
+        let mut helper = Helper::start(command, "MQTT counter")?;
+        let line = helper.read_line()?;
+        if line != READY {
             bail!("the MQTT counter did not start (it said {line:?})");
         }
-        Ok(counter)
+        Ok(Self { helper })
     }
 
     /// What it counted so far.
     pub fn counts(&mut self) -> anyhow::Result<Counts> {
-        writeln!(self.stdin, "?")?;
-        self.stdin.flush()?;
-        let mut line = String::new();
-        self.stdout.read_line(&mut line)?;
+        let line = self.helper.ask("?")?;
         Counts::parse(&line).with_context(|| format!("unexpected counts {line:?}"))
     }
 
     /// Its process id.
     pub fn pid(&self) -> u32 {
-        self.child.id()
-    }
-}
-
-impl Drop for Counter {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        self.helper.pid()
     }
 }
 

@@ -17,13 +17,15 @@
 //! gets one line of counts. It ends when its standard input closes. [`Counter`] is the
 //! parent's side.
 
-use std::io::{BufRead, BufReader, Write};
-use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::io::{BufRead, Write};
+use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
+
+use super::process::Helper;
 use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
 use opcua::crypto::SecurityPolicy;
 use opcua::types::{
@@ -293,11 +295,9 @@ async fn subscribe(
     Ok(created)
 }
 
-/// The parent's side: the counter process, killed when dropped.
+/// The parent's side: the counter process, ended when dropped.
 pub struct Counter {
-    child: Child,
-    stdin: ChildStdin,
-    stdout: BufReader<ChildStdout>,
+    helper: Helper,
     /// Monitored items the server created.
     pub created: usize,
 }
@@ -307,39 +307,20 @@ impl Counter {
     /// waits until its items are created.
     pub fn start(url: &str, items: &std::path::Path) -> anyhow::Result<Self> {
         let exe = std::env::current_exe().context("cannot find the bench's own executable")?;
-        let mut child = Command::new(exe)
-            .arg(FLAG)
-            .arg(url)
-            .arg(items)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .context("cannot start the OPC UA counter process")?;
-        let stdin = child.stdin.take().context("the counter has no stdin")?;
-        let stdout = BufReader::new(child.stdout.take().context("the counter has no stdout")?);
-        let mut counter = Self {
-            child,
-            stdin,
-            stdout,
-            created: 0,
-        };
-        let mut line = String::new();
-        counter.stdout.read_line(&mut line)?;
-        counter.created = line
-            .trim()
+        let mut command = Command::new(exe);
+        command.arg(FLAG).arg(url).arg(items);
+        let mut helper = Helper::start(command, "OPC UA counter")?;
+        let line = helper.read_line()?;
+        let created = line
             .strip_prefix(READY)
             .and_then(|n| n.trim().parse().ok())
             .with_context(|| format!("the OPC UA counter did not start (it said {line:?})"))?;
-        Ok(counter)
+        Ok(Self { helper, created })
     }
 
     /// What it counted so far; `reset` empties the delay histogram first.
     pub fn counts(&mut self, reset: bool) -> anyhow::Result<Counts> {
-        writeln!(self.stdin, "{}", if reset { "reset" } else { "?" })?;
-        self.stdin.flush()?;
-        let mut line = String::new();
-        self.stdout.read_line(&mut line)?;
+        let line = self.helper.ask(if reset { "reset" } else { "?" })?;
         Counts::parse(&line).with_context(|| format!("unexpected counts {line:?}"))
     }
 
@@ -361,25 +342,14 @@ impl Counter {
     }
 
     fn between(&mut self, from: i64, to: i64) -> anyhow::Result<u64> {
-        writeln!(self.stdin, "between {from} {to}")?;
-        self.stdin.flush()?;
-        let mut line = String::new();
-        self.stdout.read_line(&mut line)?;
-        line.trim()
-            .parse()
+        let line = self.helper.ask(&format!("between {from} {to}"))?;
+        line.parse()
             .with_context(|| format!("unexpected count {line:?}"))
     }
 
     /// Its process id.
     pub fn pid(&self) -> u32 {
-        self.child.id()
-    }
-}
-
-impl Drop for Counter {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        self.helper.pid()
     }
 }
 
