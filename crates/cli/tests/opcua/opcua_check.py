@@ -349,7 +349,9 @@ async def secure_client(url, data_dir, password, cert_dir):
 
 async def write(url, addr, data_dir, password):
     devices = http(addr, "/api/devices")["devices"]
-    cert_dir = tempfile.mkdtemp()
+    # Removed when this function's frame goes, or at the latest when the process exits.
+    certs = tempfile.TemporaryDirectory(prefix="opcua-check-")
+    cert_dir = certs.name
     client = await secure_client(url, data_dir, password, cert_dir)
     try:
         await client.connect()

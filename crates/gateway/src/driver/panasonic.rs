@@ -46,8 +46,7 @@ use super::{
 };
 use crate::event::EventKind;
 use crate::point::{
-    AlarmRule, DeviceId, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
-    ValueError,
+    AlarmRule, EnumState, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
 };
 use crate::time::Timestamp;
 
@@ -101,9 +100,26 @@ const RATES: [(RateKind, &str); 2] = [
     (RateKind::Mount, "placement_rate"),
 ];
 
+/// Where each point's id is in [`PanasonicDriver::ids`]: the run state, the control mode
+/// and the program, then [`COUNTERS`], then [`RATES`].
+const STATE: usize = 0;
+const MODE: usize = 1;
+const SELECTED_PROGRAM: usize = 2;
+const FIRST_COUNTER: usize = 3;
+const FIRST_RATE: usize = FIRST_COUNTER + COUNTERS.len();
+
+/// The points' names, in the order of [`PanasonicDriver::ids`].
+fn point_names() -> impl Iterator<Item = &'static str> {
+    ["state", "mode", "program"]
+        .into_iter()
+        .chain(COUNTERS.iter().map(|(_, name)| *name))
+        .chain(RATES.iter().map(|(_, name)| *name))
+}
+
 /// A placement machine.
 pub struct PanasonicDriver {
-    device: DeviceId,
+    /// Each point's id, made once (see [`STATE`] for the order).
+    ids: Box<[PointId]>,
     config: ClientConfig,
     client: Option<Client>,
     notices: Option<mpsc::UnboundedReceiver<(Timestamp, Notice)>>,
@@ -144,7 +160,7 @@ impl PanasonicDriver {
             client.retries = retries;
         }
         Ok(Self {
-            device: config.id.clone(),
+            ids: super::point_ids(&config.id, point_names()),
             config: client,
             client: None,
             notices: None,
@@ -154,20 +170,21 @@ impl PanasonicDriver {
         })
     }
 
-    fn id(&self, name: &str) -> PointId {
-        PointId::new(&self.device, name).expect("point names of this driver follow the id rules")
+    /// The id of the point at `index` (see [`STATE`]).
+    fn id(&self, index: usize) -> PointId {
+        self.ids[index].clone()
     }
 
     fn spec(
         &self,
-        name: &str,
+        index: usize,
         title: impl Into<crate::point::Words>,
         unit: Option<&'static str>,
         kind: PointKind,
         group: &'static str,
     ) -> PointSpec {
         PointSpec::new(
-            self.id(name),
+            self.id(index),
             PointDescription {
                 name: title.into(),
                 unit: unit.map(Into::into),
@@ -211,11 +228,11 @@ impl PanasonicDriver {
                 self.note_state(status.state);
                 vec![
                     Reading {
-                        point: self.id("state"),
+                        point: self.id(STATE),
                         value: Ok(Value::Number(state_number(status.state) as f64)),
                     },
                     Reading {
-                        point: self.id("mode"),
+                        point: self.id(MODE),
                         value: Ok(Value::Number(match status.mode {
                             ControlMode::Online => 0.0,
                             ControlMode::Remote => 1.0,
@@ -230,7 +247,7 @@ impl PanasonicDriver {
                     Err(e) => return Err(DeviceError::of(&e)),
                 };
                 vec![Reading {
-                    point: self.id("program"),
+                    point: self.id(SELECTED_PROGRAM),
                     value,
                 }]
             }
@@ -251,7 +268,7 @@ impl PanasonicDriver {
                     )
                 };
                 let mut readings = Vec::new();
-                for (counter, name) in COUNTERS {
+                for (i, (counter, _)) in COUNTERS.into_iter().enumerate() {
                     let value = match &data {
                         Ok(d) => d
                             .count(counter)
@@ -260,11 +277,11 @@ impl PanasonicDriver {
                         Err(e) => Err(e.clone()),
                     };
                     readings.push(Reading {
-                        point: self.id(name),
+                        point: self.id(FIRST_COUNTER + i),
                         value,
                     });
                 }
-                for (rate, name) in RATES {
+                for (i, (rate, _)) in RATES.into_iter().enumerate() {
                     let value = match &data {
                         Ok(d) => d
                             .rate(rate)
@@ -273,7 +290,7 @@ impl PanasonicDriver {
                         Err(e) => Err(e.clone()),
                     };
                     readings.push(Reading {
-                        point: self.id(name),
+                        point: self.id(FIRST_RATE + i),
                         value,
                     });
                 }
@@ -344,7 +361,7 @@ impl PanasonicDriver {
 impl Driver for PanasonicDriver {
     fn points(&self) -> Vec<PointSpec> {
         let mut state = self.spec(
-            "state",
+            STATE,
             "Run state",
             None,
             PointKind::Enum {
@@ -362,7 +379,7 @@ impl Driver for PanasonicDriver {
         let mut points = vec![
             state,
             self.spec(
-                "mode",
+                MODE,
                 "Control mode",
                 None,
                 PointKind::Enum {
@@ -378,14 +395,14 @@ impl Driver for PanasonicDriver {
                 LIVE,
             ),
             self.spec(
-                "program",
+                SELECTED_PROGRAM,
                 "Selected program",
                 None,
                 PointKind::Text,
                 PROGRAM,
             ),
         ];
-        for (counter, name) in COUNTERS {
+        for (i, (counter, _)) in COUNTERS.into_iter().enumerate() {
             let unit = (counter == Counter::PartsExhaustTime).then_some("s");
             let words = counter.describe();
             let title = words.replace(" (s)", "");
@@ -394,16 +411,18 @@ impl Driver for PanasonicDriver {
                 .next()
                 .map(|c| c.to_uppercase().chain(chars).collect::<String>())
                 .unwrap_or_default();
-            points.push(self.spec(name, title, unit, PointKind::Numeric, PRODUCTION));
+            let index = FIRST_COUNTER + i;
+            points.push(self.spec(index, title, unit, PointKind::Numeric, PRODUCTION));
         }
-        for (rate, name) in RATES {
+        for (i, (rate, _)) in RATES.into_iter().enumerate() {
             let words = rate.describe();
             let mut chars = words.chars();
             let title: String = chars
                 .next()
                 .map(|c| c.to_uppercase().chain(chars).collect())
                 .unwrap_or_default();
-            points.push(self.spec(name, title, Some("%"), PointKind::Numeric, PRODUCTION));
+            let index = FIRST_RATE + i;
+            points.push(self.spec(index, title, Some("%"), PointKind::Numeric, PRODUCTION));
         }
         points
     }
@@ -447,6 +466,7 @@ mod tests {
     use std::collections::HashSet;
 
     use super::*;
+    use crate::point::DeviceId;
     use panasonic::server::TwinServer;
     use panasonic::status::StopMode;
     use panasonic::{Machine, MachineConfig};

@@ -51,8 +51,10 @@ def compile_schema(out_dir):
     if done.returncode != 0:
         fail(f"protoc could not compile {PROTO}: {done.stderr.strip()}")
     sys.path.insert(0, out_dir)
-    import sparkplug_b_pb2  # noqa: E402  (generated just now)
-
+    try:
+        import sparkplug_b_pb2  # noqa: E402  (generated just now)
+    finally:
+        sys.path.remove(out_dir)
     return sparkplug_b_pb2
 
 
@@ -107,8 +109,9 @@ def main():
     parser.add_argument("--limit", type=float, default=60.0, help="seconds to wait for everything")
     args = parser.parse_args()
 
-    out_dir = tempfile.mkdtemp(prefix="sparkplug-py-")
-    pb = compile_schema(out_dir)
+    # The generated module is imported at once; its directory goes when the import is done.
+    with tempfile.TemporaryDirectory(prefix="sparkplug-py-") as out_dir:
+        pb = compile_schema(out_dir)
 
     inbox = queue.Queue()
     client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=f"sparkplug-check-{os.getpid()}")
