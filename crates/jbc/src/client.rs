@@ -345,6 +345,37 @@ mod tests {
     }
 
     #[tokio::test(start_paused = true)]
+    async fn a_reply_that_is_only_line_noise_is_told_as_noise_not_silence() {
+        let garbage = || Trick::Replace(b"xx~xxxxx".to_vec());
+        let mut b = bench(
+            vec![garbage(), garbage(), garbage()],
+            ClientConfig::default(),
+        );
+        let err = b
+            .client
+            .read(code("ST1"))
+            .await
+            .expect_err("only noise came");
+        assert!(
+            matches!(
+                err,
+                ClientError::Exchange(ExchangeError::NoAnswer {
+                    attempts: 3,
+                    last: Trouble::Noise { bytes: 8 },
+                    ..
+                })
+            ),
+            "{err:?}"
+        );
+        assert!(
+            err.to_string()
+                .ends_with("(last: no reply, only 8 bytes of line noise)"),
+            "{err}"
+        );
+        assert_eq!(err.kind(), FailureKind::Timeout);
+    }
+
+    #[tokio::test(start_paused = true)]
     async fn a_silent_station_gives_up_after_every_attempt_with_the_facts() {
         let route = Some(Route {
             source: Address::new(0).expect("valid"),

@@ -250,4 +250,19 @@ mod tests {
         assert!(err.to_string().starts_with("line gone failed"), "{err}");
         assert_eq!(err.kind(), FailureKind::Disconnected);
     }
+
+    #[test]
+    fn a_line_that_never_stops_talking_still_ends_every_attempt_at_its_timeout() {
+        let ended = testkit::ends_within(Duration::from_secs(60), || async {
+            let mut line = Line::from_stream(testkit::Chatter::new(*b"chat\n"), "chatty", None);
+            let mut ex = exchange(1, Duration::from_millis(20));
+            let err: Error = run(&mut line, &mut ex).await.unwrap_err();
+            (err.kind(), err.to_string(), ex.attempts())
+        });
+        let (kind, text, attempts) =
+            ended.expect("the exchange ends although the line never falls silent");
+        assert_eq!(kind, FailureKind::Timeout);
+        assert_eq!(attempts, 2);
+        assert!(text.contains("after 2 attempts of 20 ms each"), "{text}");
+    }
 }

@@ -22,6 +22,10 @@ pub const TCP_KEEPALIVE_IDLE: Duration = Duration::from_secs(30);
 /// Time between keep-alive probes.
 pub const TCP_KEEPALIVE_INTERVAL: Duration = Duration::from_secs(10);
 
+/// The most [`Line::discard_input`] drops before a request: twice the largest message of
+/// the protocols here (a Panasonic message may carry 4 MiB), and hours of a serial line.
+pub const DISCARD_MOST: usize = 8 * 1024 * 1024;
+
 /// Any byte stream a line can run over (a serial port, a TCP socket, an in-memory duplex).
 pub trait Io: AsyncRead + AsyncWrite + Send + Unpin {}
 impl<T: AsyncRead + AsyncWrite + Send + Unpin> Io for T {}
@@ -280,7 +284,9 @@ impl Line {
     }
 
     /// Drops whatever has already arrived (a late reply to an earlier request), so the
-    /// next request starts on a quiet line.
+    /// next request starts on a quiet line: at most [`DISCARD_MOST`] bytes, so a line
+    /// that never stops talking does not hold the request back (what it says next is
+    /// judged, and skipped, by the exchange).
     ///
     /// It never waits, nor arms a timer: a deadline of "now" would still cost a tick of
     /// tokio's 1 ms timer wheel per request, which is most of an exchange on a fast line,
@@ -296,7 +302,10 @@ impl Line {
         }
         let mut dropped = 0;
         let mut buf = [0u8; 256];
-        while let Some(n) = self.read_ready(&mut buf).await? {
+        while dropped < DISCARD_MOST {
+            let Some(n) = self.read_ready(&mut buf).await? else {
+                break;
+            };
             dropped += n;
         }
         Ok(dropped)

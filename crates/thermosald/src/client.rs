@@ -324,11 +324,13 @@ pub struct Probe {
 
 impl Probe {
     /// Whether something answered at the address (a damaged or odd answer counts: a
-    /// regulator is there).
+    /// regulator is there; line noise alone does not).
     pub fn answered(&self) -> bool {
         match &self.outcome {
             Ok(_) | Err(ClientError::Refused { .. }) => true,
-            Err(ClientError::NoAnswer { last, .. }) => *last != Trouble::Silence,
+            Err(ClientError::NoAnswer { last, .. }) => {
+                !matches!(last, Trouble::Silence | Trouble::Noise { .. })
+            }
             Err(_) => false,
         }
     }

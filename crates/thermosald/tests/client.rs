@@ -6,7 +6,7 @@ use std::time::{Duration, Instant as StdInstant};
 use link::{Line, SerialSettings, SharedLine};
 use testkit::{At, Tap, Trick, Tricky};
 use thermosald::client::{
-    Client, ClientConfig, ClientError, DEFAULT_TIMEOUT, Trouble, probe_timeout, scan,
+    Client, ClientConfig, ClientError, DEFAULT_TIMEOUT, Probe, Trouble, probe_timeout, scan,
 };
 use thermosald::device::RegulatorBus;
 use thermosald::diagnostic::{self, Fault};
@@ -533,6 +533,24 @@ async fn dollar_carries_only_address_assignment() {
     let err = client.clear_faults().await.expect_err("refused");
     assert!(matches!(err, ClientError::Request(_)), "{err}");
     assert_eq!(b.questions(), 0);
+}
+
+#[test]
+fn a_probe_that_heard_only_line_noise_found_nobody_but_a_damaged_answer_counts() {
+    let probe = |last: Trouble| Probe {
+        address: Address::new(3).unwrap(),
+        outcome: Err(ClientError::NoAnswer {
+            endpoint: "test".into(),
+            device: "regulator 3".into(),
+            request: None,
+            attempts: 1,
+            timeout: ms(400),
+            last,
+        }),
+    };
+    assert!(!probe(Trouble::Silence).answered());
+    assert!(!probe(Trouble::Noise { bytes: 12 }).answered());
+    assert!(probe(Trouble::Incomplete { bytes: 12 }).answered());
 }
 
 #[tokio::test(start_paused = true)]

@@ -41,6 +41,12 @@ use crate::failure::{Failure, FailureKind};
 pub enum Trouble<D, M> {
     /// Nothing came.
     Silence,
+    /// Only bytes the codec drops as noise came (no frame, nothing that looks damaged):
+    /// still no reply, told with what the line carried instead.
+    Noise {
+        /// How many bytes were dropped.
+        bytes: usize,
+    },
     /// A damaged frame came.
     Damaged(D),
     /// The line fell quiet after bytes that make no frame.
@@ -57,6 +63,7 @@ impl<D: fmt::Display, M: fmt::Display> fmt::Display for Trouble<D, M> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Trouble::Silence => f.write_str("no reply"),
+            Trouble::Noise { bytes } => write!(f, "no reply, only {bytes} bytes of line noise"),
             Trouble::Damaged(damage) => write!(f, "damaged reply: {damage}"),
             Trouble::Incomplete { bytes } => {
                 write!(
@@ -83,7 +90,7 @@ where
 {
     fn kind(&self) -> FailureKind {
         match self {
-            Trouble::Silence => FailureKind::Timeout,
+            Trouble::Silence | Trouble::Noise { .. } => FailureKind::Timeout,
             Trouble::Damaged(_) | Trouble::Incomplete { .. } => FailureKind::Damaged,
             Trouble::Mismatch(mismatch) => mismatch.kind(),
         }
@@ -462,6 +469,8 @@ struct Waiting<T> {
     /// The trouble so far, and whether it ends the attempt once the line is quiet.
     trouble: Option<(T, bool)>,
     skipped: Option<Instant>,
+    /// Bytes dropped as noise ([`Verdict::Noise`]) in this attempt.
+    noise: usize,
 }
 
 impl<M: Matcher> Exchange<M> {
@@ -528,22 +537,35 @@ impl<M: Matcher> Exchange<M> {
                 last_input: now,
                 trouble: None,
                 skipped: None,
+                noise: 0,
             });
         }
     }
 
-    /// Bytes that arrived at `now`.
+    /// Bytes that arrived at `now`. Input at or past the attempt's deadline ends the
+    /// attempt once its frames are judged (as [`handle_timeout`](Self::handle_timeout)
+    /// would): a line that never stops talking cannot hold an attempt open, whether or
+    /// not the caller's reads ever wait.
     pub fn handle_input(&mut self, bytes: &[u8], now: Instant) {
         let State::Waiting(waiting) = &mut self.state else {
             return;
         };
         waiting.last_input = now;
+        let deadline = waiting.deadline;
         self.deframer.push(bytes);
-        while let Some(input) = self.deframer.next_frame() {
+        loop {
+            let before = self.deframer.buffered().len();
+            let Some(input) = self.deframer.next_frame() else {
+                break;
+            };
+            let consumed = before - self.deframer.buffered().len();
             let verdict = self.matcher.judge(input);
-            if self.apply(verdict, now) {
+            if self.apply(verdict, now, consumed) {
                 return;
             }
+        }
+        if now >= deadline {
+            self.handle_timeout(now);
         }
     }
 
@@ -568,7 +590,7 @@ impl<M: Matcher> Exchange<M> {
                     .to_vec();
                 self.deframer.clear();
                 self.deframer.push(&rest);
-                if self.apply(verdict, now) {
+                if self.apply(verdict, now, consumed) {
                     return;
                 }
             }
@@ -636,8 +658,8 @@ impl<M: Matcher> Exchange<M> {
             && (now >= waiting.last_input + gap || now >= waiting.deadline)
     }
 
-    /// Applies a verdict heard at `now`; whether the attempt ended.
-    fn apply(&mut self, verdict: VerdictOf<M>, now: Instant) -> bool {
+    /// Applies a verdict on `bytes` bytes heard at `now`; whether the attempt ended.
+    fn apply(&mut self, verdict: VerdictOf<M>, now: Instant, bytes: usize) -> bool {
         let State::Waiting(waiting) = &mut self.state else {
             return true;
         };
@@ -665,7 +687,10 @@ impl<M: Matcher> Exchange<M> {
                 waiting.skipped = Some(now);
                 return false;
             }
-            Verdict::Noise => return false,
+            Verdict::Noise => {
+                waiting.noise += bytes;
+                return false;
+            }
         }
         true
     }
@@ -673,11 +698,15 @@ impl<M: Matcher> Exchange<M> {
     /// Ends the attempt with `trouble` (else the trouble noted, else silence): retries
     /// while attempts remain.
     fn end_attempt(&mut self, trouble: Option<TroubleOf<M>>, ending: Ending, now: Instant) {
-        let noted = match &mut self.state {
-            State::Waiting(waiting) => waiting.trouble.take().map(|(t, _)| t),
-            _ => None,
+        let (noted, noise) = match &mut self.state {
+            State::Waiting(waiting) => (waiting.trouble.take().map(|(t, _)| t), waiting.noise),
+            _ => (None, 0),
         };
-        let last = trouble.or(noted).unwrap_or(Trouble::Silence);
+        let nothing = match noise {
+            0 => Trouble::Silence,
+            bytes => Trouble::Noise { bytes },
+        };
+        let last = trouble.or(noted).unwrap_or(nothing);
         if self.attempt < self.policy.attempts {
             self.note_quiet(ending, now);
             self.state = State::Ready;
@@ -749,8 +778,8 @@ mod tests {
         }
     }
 
-    /// `ok…` answers, `no…` refuses, `other…` is another device's frame, damage retries
-    /// when the line falls quiet.
+    /// `ok…` answers, `no…` refuses, `noise…` is dropped as noise, anything else is
+    /// another device's frame, damage retries when the line falls quiet.
     struct Asking;
 
     impl Matcher for Asking {
@@ -762,6 +791,7 @@ mod tests {
         fn judge(&mut self, input: Result<Vec<u8>, Damage>) -> VerdictOf<Self> {
             match input {
                 Ok(frame) if frame.starts_with(b"ok") => Verdict::Answer(frame),
+                Ok(frame) if frame.starts_with(b"noise") => Verdict::Noise,
                 Ok(frame) if frame.starts_with(b"no") => Verdict::Refused(frame),
                 Ok(_) => Verdict::Skip,
                 Err(e) => Verdict::RetryWhenQuiet(Trouble::Damaged(e)),
@@ -852,5 +882,54 @@ mod tests {
         ex.handle_input(b"ok\n", quiet + Duration::from_millis(1));
         assert_eq!(ex.poll_outcome(), Some(Ok(b"ok".to_vec())));
         assert_eq!(ex.attempts(), 2);
+    }
+
+    #[test]
+    fn input_that_keeps_coming_ends_the_attempt_at_its_deadline() {
+        let mut ex = exchange(1);
+        let t0 = Instant::now();
+        send(&mut ex, t0);
+        ex.handle_input(b"other device\n", t0 + TIMEOUT / 2);
+        assert!(
+            ex.is_waiting(),
+            "before the deadline the answer may still come"
+        );
+        // A caller whose reads never wait (a line that never stops talking) never calls
+        // handle_timeout: the input itself ends the attempt.
+        ex.handle_input(b"other device\n", t0 + TIMEOUT);
+        assert!(!ex.is_waiting());
+        let t1 = t0 + TIMEOUT;
+        send(&mut ex, t1);
+        ex.handle_input(b"other device\n", t1 + TIMEOUT + Duration::from_millis(3));
+        assert_eq!(
+            ex.poll_outcome(),
+            Some(Err(Ended::GaveUp {
+                attempts: 2,
+                timeout: TIMEOUT,
+                last: Trouble::Silence
+            }))
+        );
+    }
+
+    #[test]
+    fn an_answer_in_the_input_that_crosses_the_deadline_still_counts() {
+        let mut ex = exchange(0);
+        let t0 = Instant::now();
+        send(&mut ex, t0);
+        ex.handle_input(b"ok late\n", t0 + TIMEOUT + Duration::from_millis(1));
+        assert_eq!(ex.poll_outcome(), Some(Ok(b"ok late".to_vec())));
+    }
+
+    #[test]
+    fn a_timeout_after_line_noise_says_how_many_bytes_of_noise_came() {
+        let mut ex = exchange(0);
+        let t0 = Instant::now();
+        send(&mut ex, t0);
+        ex.handle_input(b"noise noise\nnoise\n", t0 + Duration::from_millis(1));
+        ex.handle_timeout(t0 + TIMEOUT);
+        let Some(Err(Ended::GaveUp { last, .. })) = ex.poll_outcome() else {
+            panic!("the attempt should have timed out");
+        };
+        assert_eq!(last, Trouble::Noise { bytes: 18 });
     }
 }

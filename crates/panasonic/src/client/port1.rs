@@ -125,6 +125,11 @@ impl Port1 {
                     }
                 }
             }
+            // Input at or past the deadline (R messages, a peer that never stops talking)
+            // does not keep the attempt open: a read that never waits never times out.
+            if Instant::now() >= deadline {
+                return Err(Failure::Trouble(Trouble::Silence));
+            }
         }
     }
 }

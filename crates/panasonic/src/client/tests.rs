@@ -661,3 +661,37 @@ async fn a_dropped_port_2_loses_no_r_message_beyond_the_buffer_rule() {
         }
     )));
 }
+
+#[test]
+fn a_port_1_that_never_stops_talking_still_ends_the_attempt_at_its_timeout() {
+    let ended = testkit::ends_within(Duration::from_secs(60), || async {
+        let event = Event::Heartbeat {
+            id: KeepAliveId::sequence(1),
+        };
+        let line = link::Line::from_stream(
+            testkit::Chatter::after_request(event.to_message().to_bytes()),
+            "chatty",
+            None,
+        );
+        let mut port1 = port1::Port1 {
+            line: Some(line),
+            ..port1::Port1::default()
+        };
+        let command = Command::Status;
+        let request = command.to_message().expect("fits").to_bytes();
+        let attempt = port1
+            .attempt(&command, &request, Duration::from_millis(20))
+            .await;
+        match attempt {
+            Ok(_) => "answered".to_owned(),
+            Err(port1::Failure::Trouble(trouble)) => format!("trouble: {trouble:?}"),
+            Err(port1::Failure::Refused(_)) => "refused".to_owned(),
+            Err(port1::Failure::Protocol(e)) => format!("protocol: {e}"),
+        }
+    });
+    let ended = ended.expect("the attempt ends although Port 1 never falls silent");
+    assert_eq!(
+        ended, "trouble: Silence",
+        "R messages on Port 1 are skipped: no answer came"
+    );
+}
