@@ -687,6 +687,17 @@ async fn run_query<T: Send + 'static>(
     s: &AppState,
     run: impl FnOnce(crate::store::StoreHandle) -> Result<T, crate::store::StoreError> + Send + 'static,
 ) -> ApiResult<T> {
+    run_query_on(&s.queries, s.cell.store().clone(), run).await
+}
+
+/// Runs `run` on a blocking thread once one of `turns` is free. The turn is held by the
+/// blocking thread, not by the caller: a client that hangs up drops the caller, but its
+/// query runs on, and still counts, until it ends.
+async fn run_query_on<T: Send + 'static>(
+    turns: &Arc<tokio::sync::Semaphore>,
+    store: crate::store::StoreHandle,
+    run: impl FnOnce(crate::store::StoreHandle) -> Result<T, crate::store::StoreError> + Send + 'static,
+) -> ApiResult<T> {
     let busy = || {
         ApiError::new(
             StatusCode::SERVICE_UNAVAILABLE,
@@ -695,15 +706,17 @@ async fn run_query<T: Send + 'static>(
             ),
         )
     };
-    let _turn = tokio::time::timeout(QUERY_WAIT, Arc::clone(&s.queries).acquire_owned())
+    let turn = tokio::time::timeout(QUERY_WAIT, Arc::clone(turns).acquire_owned())
         .await
         .map_err(|_| busy())?
         .map_err(|_| busy())?;
-    let store = s.cell.store().clone();
-    tokio::task::spawn_blocking(move || run(store))
-        .await
-        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?
-        .map_err(ApiError::from)
+    tokio::task::spawn_blocking(move || {
+        let _turn = turn;
+        run(store)
+    })
+    .await
+    .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?
+    .map_err(ApiError::from)
 }
 
 /// `d` rounded up to whole seconds (at least one), for a step to suggest.

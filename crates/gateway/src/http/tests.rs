@@ -582,6 +582,83 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
     assert_eq!(events["events"].as_array().unwrap().len(), 2);
 }
 
+#[tokio::test]
+async fn a_query_whose_client_hung_up_keeps_its_turn_until_it_ends() {
+    let rig = rig(1);
+    let turns = Arc::new(tokio::sync::Semaphore::new(1));
+    let (started, running) = tokio::sync::oneshot::channel::<()>();
+    let (release, wait) = std::sync::mpsc::channel::<()>();
+    let client = tokio::spawn({
+        let turns = Arc::clone(&turns);
+        let store = rig.cell.store().clone();
+        async move {
+            super::run_query_on(&turns, store, move |_| {
+                let _ = started.send(());
+                let _ = wait.recv();
+                Ok(())
+            })
+            .await
+        }
+    });
+    running.await.expect("the query starts");
+    // The client hangs up: hyper drops the handler's future.
+    client.abort();
+    assert!(client.await.unwrap_err().is_cancelled());
+    assert_eq!(
+        turns.available_permits(),
+        0,
+        "the query still runs, so it still holds its turn"
+    );
+    release.send(()).unwrap();
+    let turn = tokio::time::timeout(Duration::from_secs(60), turns.acquire())
+        .await
+        .expect("the turn comes back when the query ends");
+    drop(turn);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_write_whose_body_never_comes_holds_no_connection() {
+    let rig = rig(1);
+    // Headers that announce a body, and no body.
+    let head = |token: &str| {
+        format!(
+            "POST /api/devices/jbc1/write HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\
+             Authorization: Bearer {token}\r\nContent-Type: application/json\r\n\
+             Content-Length: 4000\r\n\r\n"
+        )
+    };
+    // A minute of (paused) time is far more than any answer here needs.
+    let answer = |addr, request: String| async move {
+        tokio::time::timeout(Duration::from_secs(60), raw_http(addr, &request))
+            .await
+            .expect("an answer, not a connection held open")
+    };
+    // Writes off, or a wrong token: refused before the body is read.
+    let off = serve_on_loopback(app(&rig, false)).await;
+    let response = answer(off, head(TOKEN)).await;
+    assert!(response.starts_with("HTTP/1.1 403"), "{response}");
+    let on = serve_on_loopback(app(&rig, true)).await;
+    let response = answer(on, head("wrong")).await;
+    assert!(response.starts_with("HTTP/1.1 401"), "{response}");
+    // Authorised: the body has BODY_TIMEOUT to arrive, and the attempt is audited.
+    let started = tokio::time::Instant::now();
+    let response = answer(on, head(TOKEN)).await;
+    assert!(response.starts_with("HTTP/1.1 408"), "{response}");
+    assert!(
+        response.contains("did not arrive within 10 s"),
+        "{response}"
+    );
+    let waited = started.elapsed();
+    let limit = super::write::BODY_TIMEOUT;
+    // Then the refusal's audit row is committed before the answer.
+    assert!(
+        waited >= limit && waited < limit + Duration::from_secs(5),
+        "{waited:?}"
+    );
+    let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
+    assert_eq!(rows.len(), 1, "{rows:?}");
+}
+
 /// Sends one request over a real socket and returns the raw response.
 async fn raw_http(addr: SocketAddr, request: &str) -> String {
     let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();

@@ -24,8 +24,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use axum::Json;
-use axum::extract::rejection::JsonRejection;
-use axum::extract::{Path, State};
+use axum::extract::{FromRequest, Path, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
@@ -40,6 +39,9 @@ use crate::write::{Attempt, LOG_EVERY, MAX_NAME, MAX_VALUE, Unauthorised, cut};
 
 /// Largest write request body accepted.
 pub const BODY_LIMIT: usize = 4096;
+/// How long an authorised write's body may take to arrive (a client that sends the
+/// headers and then nothing must not hold a connection for ever).
+pub const BODY_TIMEOUT: Duration = Duration::from_secs(10);
 /// Wrong tokens one client address may send within [`FAILURE_WINDOW`].
 pub const MAX_TOKEN_FAILURES: u32 = 5;
 /// The window over which wrong tokens are counted.
@@ -124,13 +126,30 @@ impl Guard {
     }
 }
 
-/// The handler.
+/// Reads the write's JSON body: at most [`BODY_LIMIT`] bytes (the route's
+/// `DefaultBodyLimit`), within [`BODY_TIMEOUT`].
+async fn read_body(request: Request) -> Result<Json<WriteBody>, ApiError> {
+    match tokio::time::timeout(BODY_TIMEOUT, Json::<WriteBody>::from_request(request, &())).await {
+        Ok(Ok(body)) => Ok(body),
+        Ok(Err(rejection)) => Err(rejection.into()),
+        Err(_) => Err(ApiError::new(
+            StatusCode::REQUEST_TIMEOUT,
+            format!(
+                "the request body did not arrive within {} s",
+                BODY_TIMEOUT.as_secs()
+            ),
+        )),
+    }
+}
+
+/// The handler. The body is read only once the caller is authorised (step 1 of the module
+/// docs), and within [`BODY_TIMEOUT`].
 pub(super) async fn write(
     State(s): State<AppState>,
     ClientAddr(client): ClientAddr,
     Path(id): Path<String>,
     headers: HeaderMap,
-    body: Result<Json<WriteBody>, JsonRejection>,
+    request: Request,
 ) -> ApiResult<Response> {
     let now = Instant::now();
     let addr = client.parse::<std::net::SocketAddr>().ok().map(|a| a.ip());
@@ -167,6 +186,7 @@ pub(super) async fn write(
     }
 
     // Authorised from here on: every attempt is audited.
+    let body = read_body(request).await;
     let (point_text, new) = match &body {
         Ok(Json(b)) => (b.point.clone(), b.value.clone()),
         Err(_) => (String::new(), serde_json::Value::Null),
@@ -177,7 +197,7 @@ pub(super) async fn write(
     };
     let Json(body) = match body {
         Ok(body) => body,
-        Err(rejection) => return Err(refuse(&attempt, rejection.into()).await),
+        Err(error) => return Err(refuse(&attempt, error).await),
     };
     // Accept the point's own name or its full id.
     let name = body

@@ -466,7 +466,12 @@ fn add(acc: &mut BTreeMap<i64, Aggregate>, bucket: i64, agg: &Aggregate) {
     }
 }
 
-/// Read connections, reused.
+/// Read connections kept open between queries; more may run at once (the HTTP API's
+/// queries, the MQTT backlog, OPC UA reads), and a connection beyond these is closed after
+/// its query, so a burst leaves no open files or page caches behind.
+pub(super) const MAX_IDLE_READERS: usize = 8;
+
+/// Read connections, reused (at most [`MAX_IDLE_READERS`] kept).
 #[derive(Debug)]
 pub(super) struct ReaderPool {
     pub(super) path: PathBuf,
@@ -501,10 +506,10 @@ impl ReaderPool {
             }
         };
         let result = f(&conn).map_err(sqlite);
-        self.idle
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .push(conn);
+        let mut idle = self.idle.lock().unwrap_or_else(PoisonError::into_inner);
+        if idle.len() < MAX_IDLE_READERS {
+            idle.push(conn);
+        }
         result
     }
 }

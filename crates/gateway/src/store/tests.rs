@@ -1218,3 +1218,31 @@ fn the_writer_cache_shrinks_only_after_ten_smaller_batches_in_a_row() {
     assert_eq!(cache.for_batch(500), Some(WRITER_CACHE_MIN_KIB));
     assert_eq!(cache.kib(), WRITER_CACHE_MIN_KIB);
 }
+
+#[tokio::test]
+async fn a_burst_of_queries_at_once_leaves_only_a_few_read_connections_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    h.sample(sample("a.temp", 1000, 1.0));
+    h.flush().await.unwrap();
+    let burst = 3 * super::query::MAX_IDLE_READERS;
+    let together = Arc::new(std::sync::Barrier::new(burst));
+    let threads: Vec<_> = (0..burst)
+        .map(|_| {
+            let (h, together) = (h.clone(), Arc::clone(&together));
+            std::thread::spawn(move || {
+                h.readers.with(|conn| {
+                    // Every query holds its own connection while all of them run.
+                    together.wait();
+                    conn.query_row("SELECT count(*) FROM samples", [], |r| r.get::<_, i64>(0))
+                })
+            })
+        })
+        .collect();
+    for thread in threads {
+        assert_eq!(thread.join().unwrap().unwrap(), 1);
+    }
+    let idle = h.readers.idle.lock().unwrap().len();
+    assert_eq!(idle, super::query::MAX_IDLE_READERS);
+}
