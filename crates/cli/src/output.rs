@@ -37,9 +37,13 @@ pub fn failure<E: Failure + Send + Sync + 'static>(error: E) -> anyhow::Error {
     }
 }
 
-/// 2 for usage errors, 1 for everything else (the device refused, timed out, the line failed).
+/// 2 for usage errors (ours, and the options `cellbus serve` refuses), 1 for everything
+/// else (the device refused, timed out, the line failed).
 pub fn exit_code_for(err: &anyhow::Error) -> ExitCode {
-    if err.chain().any(|cause| cause.is::<UsageError>()) {
+    if err
+        .chain()
+        .any(|cause| cause.is::<UsageError>() || cause.is::<gateway::OptionError>())
+    {
         ExitCode::from(2)
     } else {
         ExitCode::from(1)

@@ -22,13 +22,14 @@ pub struct ServeArgs {
     /// Where the history database is kept.
     #[arg(long, value_name = "DIR", default_value = gateway::DEFAULT_DATA_DIR)]
     pub data: PathBuf,
-    /// How long history (samples and events) is kept: `30d`, `12h`, `90min`. Deleted hourly,
-    /// in chunks; the freed space goes back to the file system.
-    #[arg(long, value_name = "AGE", default_value = "30d", value_parser = humantime::parse_duration)]
+    /// How long history (samples and events) is kept: `30d`, `12h`, `6months`; at least
+    /// `1h` (`m` is minutes). Deleted hourly, in chunks; the freed space goes back to the
+    /// file system.
+    #[arg(long, value_name = "AGE", default_value = "30d", value_parser = parse_retain)]
     pub retain: Duration,
-    /// How long the audit log of write attempts is kept: `365d`, `2y`. Never less than
-    /// --retain (the longer wins).
-    #[arg(long, value_name = "AGE", default_value = "365d", value_parser = humantime::parse_duration)]
+    /// How long the audit log of write attempts is kept: `365d`, `2y`; at least `1d`. Never
+    /// less than --retain (the longer wins).
+    #[arg(long, value_name = "AGE", default_value = "365d", value_parser = parse_retain_audit)]
     pub retain_audit: Duration,
     /// Accept `POST /api/devices/{id}/write`, with `Authorization: Bearer <token>` (the
     /// token from --token, CELLBUS_TOKEN or the configuration).
@@ -70,6 +71,34 @@ pub struct ServeArgs {
     /// off).
     #[arg(long, value_name = "IP:PORT")]
     pub opcua: Option<SocketAddr>,
+}
+
+/// The shortest `--retain`: anything shorter is most likely a slip (`30m` is 30 minutes, not
+/// months) that would delete the history a minute after the start.
+const MIN_RETAIN: Duration = Duration::from_secs(3600);
+/// The shortest `--retain-audit`.
+const MIN_RETAIN_AUDIT: Duration = Duration::from_secs(24 * 3600);
+
+fn parse_retain(text: &str) -> Result<Duration, String> {
+    parse_age(text, MIN_RETAIN, "history")
+}
+
+fn parse_retain_audit(text: &str) -> Result<Duration, String> {
+    parse_age(text, MIN_RETAIN_AUDIT, "audit log")
+}
+
+/// An age of at least `least`, in humantime's words.
+fn parse_age(text: &str, least: Duration, what: &str) -> Result<Duration, String> {
+    let age = humantime::parse_duration(text)
+        .map_err(|e| format!("{e}; give an age such as 30d, 12h or 6months"))?;
+    if age < least {
+        return Err(format!(
+            "{text} would keep less than {} of {what}; ages are in s, min or m (minutes), h, \
+             d, w, months (or M) and y",
+            humantime::format_duration(least)
+        ));
+    }
+    Ok(age)
 }
 
 fn parse_mqtt_mode(text: &str) -> Result<gateway::config::MqttMode, String> {

@@ -107,6 +107,91 @@ fn serve_with_a_bad_configuration_exits_2_naming_file_and_line() {
 }
 
 #[test]
+fn serve_refuses_a_retention_that_would_delete_the_history_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().to_str().unwrap();
+    for (flag, age, least) in [
+        ("--retain", "30m", "1h"),
+        ("--retain", "0s", "1h"),
+        ("--retain-audit", "12m", "1day"),
+    ] {
+        let out = run(&[
+            "serve",
+            "--listen",
+            "127.0.0.1:0",
+            "--data",
+            data,
+            flag,
+            age,
+        ]);
+        assert_eq!(out.status.code(), Some(2), "{flag} {age}: {}", stderr(&out));
+        assert!(
+            stderr(&out).contains(&format!("{age} would keep less than {least}")),
+            "{}",
+            stderr(&out)
+        );
+    }
+    assert!(
+        std::fs::read_dir(dir.path()).unwrap().next().is_none(),
+        "nothing was started or stored"
+    );
+}
+
+#[test]
+fn serve_refuses_a_token_no_client_could_send_and_writes_without_one_as_usage_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().to_str().unwrap();
+    let out = common::cellbus()
+        .args(["serve", "--listen", "127.0.0.1:0", "--data", data])
+        .env("CELLBUS_TOKEN", "pässwörd")
+        .env_remove("CELLBUS_READ_TOKEN")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("the write token cannot be used: it holds 'ä' (character 2)"),
+        "{}",
+        stderr(&out)
+    );
+    let out = common::cellbus()
+        .args([
+            "serve",
+            "--listen",
+            "127.0.0.1:0",
+            "--data",
+            data,
+            "--allow-writes",
+        ])
+        .env_remove("CELLBUS_TOKEN")
+        .env_remove("CELLBUS_READ_TOKEN")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("--allow-writes needs a token"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn config_check_refuses_a_token_with_characters_a_header_cannot_carry() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cell.toml");
+    let mut text = String::from("token = \"secret here\"\n");
+    text.push_str(&String::from_utf8(run(&["config", "example"]).stdout).unwrap());
+    std::fs::write(&path, text).unwrap();
+    let out = run(&["config", "check", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("cell.toml:1:")
+            && stderr(&out).contains("token cannot be used: it holds a space (character 7)"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
 fn the_example_configuration_passes_its_own_check() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("cell.toml");

@@ -511,6 +511,11 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
                 format!("{key} is empty; remove it or set a secret"),
             ));
         }
+        if let Some(token) = token
+            && let Some(fault) = crate::write::token_fault(token.get_ref().trim())
+        {
+            return Err(at(token.span(), format!("{key} cannot be used: {fault}")));
+        }
     }
     let mqtt = raw.mqtt.map(|m| check_mqtt(m, path, &at)).transpose()?;
     let opcua = raw.opcua.map(|o| check_opcua(o, &at)).transpose()?;

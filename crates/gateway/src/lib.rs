@@ -53,5 +53,5 @@ mod testing;
 pub use config::{CellConfig, ConfigError, EXAMPLE_CONFIG, check_config};
 pub use serve::{
     DEFAULT_DATA_DIR, DEFAULT_LISTEN, DEFAULT_RETAIN, Gateway, MALLOC_ARENAS,
-    MALLOC_MMAP_THRESHOLD, ServeOptions, TOKEN_ENV, serve, tune_malloc,
+    MALLOC_MMAP_THRESHOLD, OptionError, ServeOptions, TOKEN_ENV, serve, tune_malloc,
 };

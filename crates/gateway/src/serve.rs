@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 
@@ -40,6 +40,12 @@ pub const DEFAULT_RETAIN_AUDIT: Duration = Duration::from_secs(365 * 24 * 3600);
 
 /// The demo cell's Sparkplug edge node id (its group is `cellbus`).
 pub const DEMO_EDGE_NODE: &str = "demo";
+
+/// A mistake in the options `cellbus serve` was given (the CLI exits 2 for it), as opposed
+/// to a failure to start (a port in use, a data directory that cannot be made).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct OptionError(pub String);
 
 /// Environment variable holding the write token.
 pub const TOKEN_ENV: &str = "CELLBUS_TOKEN";
@@ -402,16 +408,18 @@ fn mqtt_config(
                 || options.mqtt_node.is_some()
                 || options.mqtt_primary_host.is_some()
             {
-                anyhow::bail!(
+                return Err(OptionError(
                     "--mqtt-mode, --mqtt-node and --mqtt-primary-host need a broker: give \
                      --mqtt URL or an [mqtt] table in the configuration"
-                );
+                        .to_owned(),
+                )
+                .into());
             }
             return Ok(None);
         }
         (None, Some(table)) => table.clone(),
         (Some(url), Some(table)) => {
-            let broker = parse_broker(url).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?;
+            let broker = parse_broker(url).map_err(|m| OptionError(format!("--mqtt: {m}")))?;
             MqttConfig {
                 host: broker.host,
                 port: broker.port,
@@ -426,7 +434,7 @@ fn mqtt_config(
                 None if demo => DEMO_EDGE_NODE.to_owned(),
                 None => default_edge_node_id(),
             };
-            MqttConfig::for_broker(url, &node).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?
+            MqttConfig::for_broker(url, &node).map_err(|m| OptionError(format!("--mqtt: {m}")))?
         }
     };
     if let Some(mode) = options.mqtt_mode {
@@ -434,7 +442,7 @@ fn mqtt_config(
     }
     if let Some(node) = &options.mqtt_node {
         sparkplug::Id::new(node.as_str())
-            .map_err(|e| anyhow::anyhow!("--mqtt-node {node:?}: {e}"))?;
+            .map_err(|e| OptionError(format!("--mqtt-node {node:?}: {e}")))?;
         if mqtt.prefix == format!("cellbus/{}", mqtt.edge_node_id) {
             mqtt.prefix = format!("cellbus/{node}");
         }
@@ -445,7 +453,7 @@ fn mqtt_config(
     }
     if let Some(host) = &options.mqtt_primary_host {
         sparkplug::Id::new(host.as_str())
-            .map_err(|e| anyhow::anyhow!("--mqtt-primary-host {host:?}: {e}"))?;
+            .map_err(|e| OptionError(format!("--mqtt-primary-host {host:?}: {e}")))?;
         mqtt.primary_host = Some(host.clone());
     }
     Ok(Some(mqtt))
@@ -574,23 +582,19 @@ async fn bind(addr: SocketAddr) -> anyhow::Result<tokio::net::TcpListener> {
 
 /// Who may write: `--allow-writes` and a token from the options, the environment or the
 /// config, in that order.
-fn write_policy(options: &ServeOptions, config: &CellConfig) -> anyhow::Result<WritePolicy> {
+fn write_policy(options: &ServeOptions, config: &CellConfig) -> Result<WritePolicy, OptionError> {
     let token = options
         .token
         .clone()
         .or_else(|| std::env::var(TOKEN_ENV).ok())
         .or_else(|| config.token.clone())
         .map(|t| t.trim().to_owned());
-    if let Some(t) = &token
-        && t.is_empty()
-    {
-        bail!("the write token is empty; set a non-empty {TOKEN_ENV} or token in the config");
-    }
+    check_token(token.as_deref(), "write token", TOKEN_ENV, "token")?;
     if options.allow_writes && token.is_none() {
-        bail!(
+        return Err(OptionError(format!(
             "--allow-writes needs a token for clients to send as Authorization: Bearer <token>; \
              set {TOKEN_ENV} or token = \"...\" in the config"
-        );
+        )));
     }
     let read_token = options
         .read_token
@@ -598,16 +602,33 @@ fn write_policy(options: &ServeOptions, config: &CellConfig) -> anyhow::Result<W
         .or_else(|| std::env::var(READ_TOKEN_ENV).ok())
         .or_else(|| config.read_token.clone())
         .map(|t| t.trim().to_owned());
-    if read_token.as_deref() == Some("") {
-        bail!(
-            "the read token is empty; set a non-empty {READ_TOKEN_ENV} or read_token in the config"
-        );
-    }
+    check_token(
+        read_token.as_deref(),
+        "read token",
+        READ_TOKEN_ENV,
+        "read_token",
+    )?;
     Ok(WritePolicy {
         enabled: options.allow_writes,
         token,
         read_token,
     })
+}
+
+/// Refuses an empty token, or one no client could send.
+fn check_token(token: Option<&str>, what: &str, env: &str, key: &str) -> Result<(), OptionError> {
+    let Some(token) = token else {
+        return Ok(());
+    };
+    if token.is_empty() {
+        return Err(OptionError(format!(
+            "the {what} is empty; set a non-empty {env} or {key} in the config"
+        )));
+    }
+    match crate::write::token_fault(token) {
+        Some(fault) => Err(OptionError(format!("the {what} cannot be used: {fault}"))),
+        None => Ok(()),
+    }
 }
 
 #[cfg(test)]

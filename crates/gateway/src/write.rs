@@ -23,6 +23,26 @@ use crate::point::{PointId, Value};
 use crate::store::{AuditEntry, AuditResult};
 use crate::time::Timestamp;
 
+/// What is wrong with `token` as a bearer token, if anything: clients send it in an HTTP
+/// header, which carries visible ASCII only (a token with `ä` or a space could be set but
+/// never sent).
+pub fn token_fault(token: &str) -> Option<String> {
+    let (at, bad) = token
+        .chars()
+        .enumerate()
+        .find(|(_, c)| !c.is_ascii_graphic())?;
+    let shown = if bad == ' ' {
+        "a space".to_owned()
+    } else {
+        format!("{bad:?}")
+    };
+    Some(format!(
+        "it holds {shown} (character {}); a token is sent in an HTTP header, so use visible \
+         ASCII only: letters, digits and punctuation, no spaces",
+        at + 1
+    ))
+}
+
 /// Longest stored text of a client, device or point as the request named them.
 pub const MAX_NAME: usize = 128;
 /// Longest stored value as given (its JSON text).
