@@ -293,13 +293,14 @@ pub struct DeviceConfig {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("cannot read config {path}: {source}")]
+    /// The file could not be read (missing, not a file, larger than [`MAX_CONFIG`], not
+    /// UTF-8).
+    #[error("config {path} {why}")]
     Read {
         /// The file.
         path: PathBuf,
-        /// What the OS said.
-        source: std::io::Error,
+        /// Why, in words that follow the path (`cannot be read: …`, `is not a file`).
+        why: String,
     },
     /// The file is not valid, at a place in it.
     #[error("{}", self.describe())]
@@ -360,13 +361,27 @@ impl ConfigError {
     }
 }
 
+/// Largest configuration file, or CSV register list given to `cellbus config import-csv`.
+pub const MAX_CONFIG: u64 = 16 << 20;
+
 /// Reads and checks the configuration at `path`.
 pub fn check_config(path: &Path) -> Result<CellConfig, ConfigError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+    parse_config(&read_text(path)?, path)
+}
+
+/// The text of the file at `path`: at most [`MAX_CONFIG`] bytes of UTF-8.
+fn read_text(path: &Path) -> Result<String, ConfigError> {
+    let unreadable = |why: String| ConfigError::Read {
         path: path.to_owned(),
-        source,
-    })?;
-    parse_config(&text, path)
+        why,
+    };
+    let bytes = read_bounded(path, MAX_CONFIG).map_err(unreadable)?;
+    String::from_utf8(bytes).map_err(|e| {
+        unreadable(format!(
+            "is not UTF-8 text (byte {} is not)",
+            e.utf8_error().valid_up_to() + 1
+        ))
+    })
 }
 
 /// Checks configuration text; `path` names it in errors.
@@ -1096,10 +1111,7 @@ fn check_registers(
 /// The registers of a CSV register list (`cellbus config import-csv`), checked as a
 /// device's would be.
 pub fn registers_from_csv(file: &Path) -> Result<Vec<RegisterConfig>, ConfigError> {
-    let text = std::fs::read_to_string(file).map_err(|source| ConfigError::Read {
-        path: file.to_owned(),
-        source,
-    })?;
+    let text = read_text(file)?;
     let table = register_csv::CsvRegisters::parse(&text, file)?;
     check_register_list(&table.rows, None, &|span, message| {
         table.error(span, message)
@@ -1979,6 +1991,40 @@ protocol = "jbc"
                 .lines
                 .iter()
                 .any(|l| matches!(l.endpoint, Endpoint::Tcp { .. }))
+        );
+    }
+
+    #[test]
+    fn a_config_that_is_not_a_file_too_large_or_not_text_is_refused_without_reading_it_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let why = |path: &Path| match check_config(path) {
+            Err(e @ ConfigError::Read { .. }) => e.to_string(),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(
+            why(Path::new("/dev/zero")),
+            "config /dev/zero is not a file"
+        );
+        let big = dir.path().join("big.toml");
+        let file = std::fs::File::create(&big).unwrap();
+        file.set_len(MAX_CONFIG + 1).unwrap();
+        assert!(
+            why(&big).ends_with("big.toml is larger than 16 MiB"),
+            "{}",
+            why(&big)
+        );
+        let latin1 = dir.path().join("latin1.toml");
+        std::fs::write(&latin1, b"# caf\xe9\n").unwrap();
+        assert!(
+            why(&latin1).ends_with("latin1.toml is not UTF-8 text (byte 6 is not)"),
+            "{}",
+            why(&latin1)
+        );
+        let missing = dir.path().join("missing.toml");
+        assert!(
+            why(&missing).contains("missing.toml cannot be read: "),
+            "{}",
+            why(&missing)
         );
     }
 

@@ -183,15 +183,17 @@ pub fn duration_millis(d: Duration) -> i64 {
     i64::try_from(d.as_millis()).unwrap_or(i64::MAX)
 }
 
-/// Parses RFC 3339 with `Z` or a numeric offset (`+01:00`, `-05:30`).
+/// Parses RFC 3339 with `Z` or a numeric offset (`+01:00`, `-05:30`; hours 00 to 23,
+/// minutes 00 to 59); `t` and `z` may be lower case, as RFC 3339 allows.
 fn parse_rfc3339(text: &str) -> Result<Timestamp, TimeError> {
     let err = |reason: &str| TimeError::Malformed {
         text: text.to_owned(),
         reason: reason.to_owned(),
     };
+    let upper = text.to_ascii_uppercase();
     // Split a trailing ±HH:MM offset from the local time; humantime reads UTC only.
-    let (local, offset_minutes) = match text.len().checked_sub(6).and_then(|at| {
-        let (head, tail) = (text.get(..at)?, text.get(at..)?);
+    let split = upper.len().checked_sub(6).and_then(|at| {
+        let (head, tail) = (upper.get(..at)?, upper.get(at..)?);
         let bytes = tail.as_bytes();
         let sign = match bytes.first()? {
             b'+' => 1,
@@ -201,10 +203,16 @@ fn parse_rfc3339(text: &str) -> Result<Timestamp, TimeError> {
         (bytes.get(3) == Some(&b':') && head.contains('T')).then_some(())?;
         let hours: i64 = tail.get(1..3)?.parse().ok()?;
         let minutes: i64 = tail.get(4..6)?.parse().ok()?;
-        Some((head.to_owned() + "Z", sign * (hours * 60 + minutes)))
-    }) {
-        Some(split) => split,
-        None => (text.to_owned(), 0),
+        Some((head.to_owned() + "Z", tail, sign, hours, minutes))
+    });
+    let (local, offset_minutes) = match split {
+        Some((_, tail, _, hours, minutes)) if hours > 23 || minutes > 59 => {
+            return Err(err(&format!(
+                "the offset {tail} is not one: hours go from 00 to 23, minutes from 00 to 59"
+            )));
+        }
+        Some((local, _, sign, hours, minutes)) => (local, sign * (hours * 60 + minutes)),
+        None => (upper.clone(), 0),
     };
     let time = humantime::parse_rfc3339_weak(&local).map_err(|e| err(&e.to_string()))?;
     let utc = Timestamp::from_system(time);
@@ -249,6 +257,26 @@ mod tests {
         }
         assert_eq!(Timestamp(-1).rfc3339_millis(), None);
         assert_eq!(Timestamp(Timestamp::MAX.0 + 1).rfc3339_millis(), None);
+    }
+
+    #[test]
+    fn an_offset_out_of_range_is_refused_and_lower_case_t_and_z_are_read() {
+        let now = Timestamp(0);
+        for text in ["2023-11-14T23:13:20+99:99", "2023-11-14T23:13:20+01:60"] {
+            let e = Timestamp::parse_relative(text, now).unwrap_err();
+            assert!(
+                e.to_string().contains("is not one: hours go from 00 to 23"),
+                "{e}"
+            );
+        }
+        assert_eq!(
+            Timestamp::parse_relative("2023-11-14t22:13:20z", now).unwrap(),
+            Timestamp(1_700_000_000_000)
+        );
+        assert_eq!(
+            Timestamp::parse_relative("2023-11-14t23:13:20+01:00", now).unwrap(),
+            Timestamp(1_700_000_000_000)
+        );
     }
 
     #[test]

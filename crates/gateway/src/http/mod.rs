@@ -506,7 +506,7 @@ impl Selection {
     }
 }
 
-async fn device(State(s): State<AppState>, Path(id): Path<String>) -> ApiResult<Response> {
+async fn device(State(s): State<AppState>, DeviceIdPath(id): DeviceIdPath) -> ApiResult<Response> {
     let device = s
         .listing
         .get(&id)
@@ -934,6 +934,24 @@ impl<S: Send + Sync> FromRequestParts<S> for ClientAddr {
                 .get::<ConnectInfo<SocketAddr>>()
                 .map_or_else(|| "unknown".to_owned(), |c| c.0.to_string()),
         ))
+    }
+}
+
+/// The `{id}` of a device's route; a path that is not one (`%ff`, not UTF-8) is a JSON
+/// `400` like every other refusal, not axum's plain text.
+struct DeviceIdPath(String);
+
+impl<S: Send + Sync> FromRequestParts<S> for DeviceIdPath {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        match Path::<String>::from_request_parts(parts, state).await {
+            Ok(Path(id)) => Ok(DeviceIdPath(id)),
+            Err(rejection) => Err(ApiError::bad_request(format!(
+                "the device id in the path is not one: {}",
+                rejection.body_text()
+            ))),
+        }
     }
 }
 

@@ -583,6 +583,25 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
 }
 
 #[tokio::test]
+async fn a_device_path_that_is_not_utf8_is_refused_in_json_like_everything_else() {
+    let rig = rig(1);
+    let app = app(&rig, true);
+    for uri in ["/api/devices/%ff", "/api/devices/%ff/write"] {
+        let request = if uri.ends_with("write") {
+            Request::post(uri)
+        } else {
+            Request::get(uri)
+        };
+        let (status, body) = call(&app, request.body(Body::empty()).unwrap()).await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{uri}: {body}");
+        assert!(
+            error_of(&body).starts_with("the device id in the path is not one: "),
+            "{uri}: {body}"
+        );
+    }
+}
+
+#[tokio::test]
 async fn a_query_whose_client_hung_up_keeps_its_turn_until_it_ends() {
     let rig = rig(1);
     let turns = Arc::new(tokio::sync::Semaphore::new(1));

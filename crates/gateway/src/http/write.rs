@@ -24,14 +24,14 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use axum::Json;
-use axum::extract::{FromRequest, Path, Request, State};
+use axum::extract::{FromRequest, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use serde_json::json;
 use tokio::time::Instant;
 
-use super::{ApiError, ApiResult, AppState, ClientAddr, unknown_device};
+use super::{ApiError, ApiResult, AppState, ClientAddr, DeviceIdPath, unknown_device};
 use crate::cell::Cell;
 use crate::driver::{ErrorKind, WriteError};
 use crate::point::{PointId, Value};
@@ -147,7 +147,7 @@ async fn read_body(request: Request) -> Result<Json<WriteBody>, ApiError> {
 pub(super) async fn write(
     State(s): State<AppState>,
     ClientAddr(client): ClientAddr,
-    Path(id): Path<String>,
+    DeviceIdPath(id): DeviceIdPath,
     headers: HeaderMap,
     request: Request,
 ) -> ApiResult<Response> {
