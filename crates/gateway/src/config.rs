@@ -1091,6 +1091,16 @@ fn check_registers(
                     )
                 })?;
             let table = register_csv::CsvRegisters::parse(&text, &file)?;
+            if table.rows.is_empty() {
+                return Err(at(
+                    csv.span(),
+                    format!(
+                        "registers_csv {} names no registers (a header, comments or nothing): \
+                         a modbus device needs at least one",
+                        file.display()
+                    ),
+                ));
+            }
             let list = RegisterList::from(check_register_list(
                 &table.rows,
                 deadband,
@@ -1528,7 +1538,10 @@ struct RawRange {
 }
 
 #[derive(Debug, Deserialize)]
-#[serde(untagged)]
+#[serde(
+    untagged,
+    expecting = "the address must be a whole number (see the protocol's range) or \"none\""
+)]
 enum RawAddress {
     Number(i64),
     Text(String),
@@ -2741,6 +2754,30 @@ type = "string:4"
         assert_eq!(registers[1].table, RegisterTable::Holding, "empty: default");
         assert_eq!(registers[1].writable, Some((0.0, 200.0)));
         assert_eq!(registers[1].unit.as_deref(), Some("kW"));
+    }
+
+    #[test]
+    fn a_registers_csv_with_a_header_and_no_rows_is_refused_like_a_device_without_registers() {
+        let dir = tempfile::tempdir().unwrap();
+        for csv in ["name,address\n", "# a meter\nname,address\n# no rows yet\n"] {
+            let err = csv_cell(dir.path(), csv).unwrap_err().to_string();
+            assert!(
+                err.contains("meter.csv names no registers") && err.contains("cell.toml:"),
+                "{csv:?}: {err}"
+            );
+        }
+    }
+
+    #[test]
+    fn an_address_of_the_wrong_type_is_told_in_words_not_rust_types() {
+        for address in ["1.5", "true"] {
+            refused(
+                &format!("{ONE}address = {address}\n"),
+                9,
+                11,
+                "the address must be a whole number (see the protocol's range) or \"none\"",
+            );
+        }
     }
 
     #[test]

@@ -750,9 +750,18 @@ pub(crate) fn events_filter(q: EventsQuery, now: Timestamp) -> ApiResult<EventFi
             })
         })
         .transpose()?;
+    let from = parse_time("from", q.from.as_deref(), now)?;
+    let to = parse_time("to", q.to.as_deref(), now)?;
+    if let (Some(from), Some(to)) = (from, to)
+        && from > to
+    {
+        return Err(ApiError::bad_request(format!(
+            "from ({from}) must not be after to ({to})"
+        )));
+    }
     Ok(EventFilter {
-        from: parse_time("from", q.from.as_deref(), now)?,
-        to: parse_time("to", q.to.as_deref(), now)?,
+        from,
+        to,
         device: q.device,
         kind,
         limit: check_limit(q.limit)?,

@@ -583,6 +583,20 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
 }
 
 #[tokio::test]
+async fn a_reversed_range_of_events_is_refused_as_a_reversed_history_range_is() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    for uri in [
+        "/api/events?from=now&to=-1h",
+        "/api/history?point=jbc1.tool_on&from=now&to=-1h",
+    ] {
+        let (status, body) = call(&app, Request::get(uri).body(Body::empty()).unwrap()).await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{uri}: {body}");
+        assert!(error_of(&body).starts_with("from ("), "{uri}: {body}");
+    }
+}
+
+#[tokio::test]
 async fn a_device_path_that_is_not_utf8_is_refused_in_json_like_everything_else() {
     let rig = rig(1);
     let app = app(&rig, true);
@@ -1048,6 +1062,12 @@ async fn a_client_that_guesses_tokens_is_told_to_wait_and_nothing_is_stored() {
             body.len()
         )
     };
+    // Requests that send no token at all are refused, but are not guesses.
+    let bare = request("x").replace("authorization: Bearer x\r\n", "");
+    for _ in 0..2 * MAX_TOKEN_FAILURES {
+        let answer = raw_http(addr, &bare).await;
+        assert!(answer.starts_with("HTTP/1.1 401"), "{answer}");
+    }
     for _ in 0..MAX_TOKEN_FAILURES {
         let answer = raw_http(addr, &request("guess")).await;
         assert!(answer.starts_with("HTTP/1.1 401"), "{answer}");
