@@ -400,6 +400,8 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
     }
     let mut lines = Vec::new();
     let mut line_names = HashSet::new();
+    // The port each line holds, with the line's name: one port carries one line.
+    let mut ports: HashMap<String, String> = HashMap::new();
     let mut device_ids = HashSet::new();
     let mut csv_lists = CsvRegisterLists::default();
     for line in raw.line {
@@ -425,6 +427,23 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
         let protocol = protocol_of(&first.protocol).map_err(|m| at(first.protocol.span(), m))?;
         let endpoint = Endpoint::parse(line.endpoint.get_ref(), protocol.default_serial())
             .map_err(|e| at(line.endpoint.span(), e.to_string()))?;
+        if let Endpoint::Tcp { port: 0, .. } = endpoint {
+            return Err(at(
+                line.endpoint.span(),
+                "port 0 is not a port a device listens on; give the serial server's or the device's port".into(),
+            ));
+        }
+        if let Some(port) = held_port(&endpoint)
+            && let Some(first) = ports.insert(port.clone(), name.clone())
+        {
+            return Err(at(
+                line.endpoint.span(),
+                format!(
+                    "line {name:?} is on {port}, as line {first:?} is: two lines on one port \
+                     would interleave their requests; put the devices of both on one line"
+                ),
+            ));
+        }
         if endpoint.is_mbap() && !matches!(protocol, Protocol::Modbus | Protocol::Cross) {
             return Err(at(
                 line.endpoint.span(),
@@ -756,6 +775,22 @@ pub fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>, String> {
         return Err(format!("is larger than {} MiB", max >> 20));
     }
     Ok(bytes)
+}
+
+/// The port a line holds for itself, in words: a serial port, or a TCP connection to a
+/// serial server or a machine (which serve one client at a time). A Modbus TCP server
+/// takes several connections, so lines to it hold nothing.
+fn held_port(endpoint: &Endpoint) -> Option<String> {
+    match endpoint {
+        Endpoint::Serial { path, .. } => Some(format!("serial port {path}")),
+        Endpoint::Tcp {
+            host,
+            port,
+            framing: link::TcpFraming::Raw,
+            ..
+        } => Some(format!("tcp://{}:{port}", host.to_ascii_lowercase())),
+        Endpoint::Tcp { .. } => None,
+    }
 }
 
 fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
@@ -2150,7 +2185,11 @@ protocol = "jbc"
         );
         refused(&ONE.replace("\"rework\"", "\"re work\""), 3, 8, "line name");
         refused(
-            &format!("{ONE}\n{}", ONE.replace("\"rework\"", "\"two\"")),
+            &format!(
+                "{ONE}\n{}",
+                ONE.replace("\"rework\"", "\"two\"")
+                    .replace("ttyUSB0", "ttyUSB1")
+            ),
             16,
             6,
             "\"jbc1\" is used twice",
@@ -2766,6 +2805,39 @@ type = "string:4"
                 "{csv:?}: {err}"
             );
         }
+    }
+
+    #[test]
+    fn two_lines_on_one_serial_port_or_serial_server_are_refused_but_a_modbus_tcp_server_takes_several()
+     {
+        let two = |first: &str, second: &str, protocol: &str| {
+            format!(
+                "[[line]]\nname = \"a\"\nendpoint = \"{first}\"\n[[line.device]]\nid = \"d1\"\n\
+                 protocol = \"{protocol}\"\naddress = 1\n\
+                 [[line]]\nname = \"b\"\nendpoint = \"{second}\"\n[[line.device]]\nid = \"d2\"\n\
+                 protocol = \"{protocol}\"\naddress = 2\n"
+            )
+        };
+        refused(
+            &two("serial:///dev/ttyUSB0", "/dev/ttyUSB0", "cross"),
+            10,
+            12,
+            "line \"b\" is on serial port /dev/ttyUSB0, as line \"a\" is",
+        );
+        refused(
+            &two("tcp://Moxa:4001", "tcp://moxa:4001?baud=9600", "cross"),
+            10,
+            12,
+            "line \"b\" is on tcp://moxa:4001, as line \"a\" is",
+        );
+        refused(
+            &two("tcp://moxa:0", "tcp://moxa:4002", "cross"),
+            3,
+            12,
+            "port 0 is not a port a device listens on",
+        );
+        parse(&two("modbus-tcp://plc", "modbus-tcp://plc", "cross"))
+            .expect("a Modbus TCP server serves several connections");
     }
 
     #[test]
