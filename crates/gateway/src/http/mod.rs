@@ -148,13 +148,18 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
 
 /// With a read token set, every `/api/` route and `/metrics` need it (or the write token)
 /// as `Authorization: Bearer …`, or as `?token=` for an event stream (a browser's
-/// EventSource cannot send headers). The page and `/healthz` stay open.
+/// EventSource cannot send headers). The page and `/healthz` stay open. A `?token=` is
+/// taken off the query before the handlers see it, also where none is needed (a client set
+/// up for a read token still reads a gateway without one).
 async fn require_read_token(
     State(s): State<AppState>,
     mut request: axum::extract::Request,
     next: axum::middleware::Next,
 ) -> Response {
     let Some(read) = s.writes.read_token.as_deref() else {
+        if let Some(uri) = without_token(request.uri()) {
+            *request.uri_mut() = uri;
+        }
         return next.run(request).await;
     };
     let path = request.uri().path();

@@ -583,6 +583,20 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
 }
 
 #[tokio::test]
+async fn a_token_in_the_query_is_ignored_where_the_gateway_needs_none() {
+    let rig = rig(1);
+    let app = app(&rig, false);
+    let (status, body) = call(
+        &app,
+        Request::get("/api/events?token=look-only&limit=5")
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+}
+
+#[tokio::test]
 async fn a_reversed_range_of_events_is_refused_as_a_reversed_history_range_is() {
     let rig = rig(1);
     let app = app(&rig, false);
