@@ -174,6 +174,8 @@ use thermosald::exchange::LineTiming;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use wire::device::{Bus, Device, SharedModel};
 
+#[path = "support/helper.rs"]
+mod helper;
 #[path = "support/mqtt_counter.rs"]
 mod mqtt_counter;
 #[path = "support/opcua_counter.rs"]
@@ -181,8 +183,9 @@ mod opcua_counter;
 #[path = "support/process.rs"]
 mod process;
 
+use helper::Helper;
 use mqtt_counter::Counter;
-use process::{Helper, ProcessUse, ticks_per_second};
+use process::{ProcessUse, ticks_per_second};
 
 /// Devices simulated when `--devices` is not given.
 const DEFAULT_DEVICES: usize = 100;

@@ -56,6 +56,8 @@ use gateway::point::{PointId, PointKind, Quality, Value};
 use gateway::store::{Sample, Store, StoreOptions};
 use gateway::time::Timestamp;
 
+#[path = "support/helper.rs"]
+mod helper;
 #[path = "support/mqtt_counter.rs"]
 mod mqtt_counter;
 #[path = "support/process.rs"]
