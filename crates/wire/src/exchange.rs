@@ -814,6 +814,15 @@ mod tests {
         )
     }
 
+    /// The outcome of an exchange that gave up after `attempts` of [`TIMEOUT`].
+    fn gave_up(attempts: u8, last: Trouble<Damage, String>) -> Option<Outcome<Asking>> {
+        Some(Err(Ended::GaveUp {
+            attempts,
+            timeout: TIMEOUT,
+            last,
+        }))
+    }
+
     /// Sends the next attempt at `now`; its bytes.
     fn send(ex: &mut Exchange<Asking>, now: Instant) -> Vec<u8> {
         let bytes = ex.poll_transmit().expect("an attempt is due");
@@ -843,14 +852,7 @@ mod tests {
         let t1 = t0 + TIMEOUT;
         send(&mut ex, t1);
         ex.handle_timeout(t1 + TIMEOUT);
-        assert_eq!(
-            ex.poll_outcome(),
-            Some(Err(Ended::GaveUp {
-                attempts: 2,
-                timeout: TIMEOUT,
-                last: Trouble::Silence
-            }))
-        );
+        assert_eq!(ex.poll_outcome(), gave_up(2, Trouble::Silence));
         assert!(ex.poll_transmit().is_none(), "no third attempt");
     }
 
@@ -901,14 +903,7 @@ mod tests {
         let t1 = t0 + TIMEOUT;
         send(&mut ex, t1);
         ex.handle_input(b"other device\n", t1 + TIMEOUT + Duration::from_millis(3));
-        assert_eq!(
-            ex.poll_outcome(),
-            Some(Err(Ended::GaveUp {
-                attempts: 2,
-                timeout: TIMEOUT,
-                last: Trouble::Silence
-            }))
-        );
+        assert_eq!(ex.poll_outcome(), gave_up(2, Trouble::Silence));
     }
 
     #[test]
