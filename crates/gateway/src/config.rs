@@ -215,6 +215,9 @@ impl MqttConfig {
     }
 }
 
+/// The longest MQTT client id: an MQTT string is at most 65,535 bytes.
+const MAX_CLIENT_ID: usize = 65_535;
+
 /// Reads `mqtt://host[:port]` (port 1883 by default) or `mqtts://host[:port]` (TLS, port
 /// 8883 by default).
 pub fn parse_broker(text: &str) -> Result<Broker, String> {
@@ -242,11 +245,13 @@ pub fn parse_broker(text: &str) -> Result<Broker, String> {
         .trim_start_matches('[')
         .trim_end_matches(']')
         .to_owned();
-    Ok(Broker {
-        host,
-        port: url.port().unwrap_or(default_port),
-        tls,
-    })
+    let port = url.port().unwrap_or(default_port);
+    if port == 0 {
+        return Err(format!(
+            "broker {text:?}: port 0 is not a port a broker listens on; write mqtt://host:1883"
+        ));
+    }
+    Ok(Broker { host, port, tls })
 }
 
 /// This machine's host name as a Sparkplug id, else `cellbus`.
@@ -580,6 +585,15 @@ fn check_mqtt(
             return Err(at(
                 c.span(),
                 "client_id is empty; remove it for the default".into(),
+            ));
+        }
+        Some(c) if c.get_ref().len() > MAX_CLIENT_ID => {
+            return Err(at(
+                c.span(),
+                format!(
+                    "client_id is {} bytes; MQTT carries at most {MAX_CLIENT_ID}",
+                    c.get_ref().len()
+                ),
             ));
         }
         Some(c) => c.into_inner(),
@@ -2968,6 +2982,21 @@ type = "string:4"
             12,
             14,
             "keep_alive",
+        );
+        refused(
+            &at("broker = \"mqtt://b:0\"\n"),
+            11,
+            10,
+            "port 0 is not a port a broker listens on",
+        );
+        refused(
+            &at(&format!(
+                "broker = \"mqtt://b\"\nclient_id = \"{}\"\n",
+                "c".repeat(70_000)
+            )),
+            12,
+            13,
+            "client_id is 70000 bytes; MQTT carries at most 65535",
         );
     }
 
