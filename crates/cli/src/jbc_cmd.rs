@@ -29,10 +29,10 @@ pub struct JbcArgs {
     #[arg(long, default_value = "00")]
     pub robot_address: Address,
     /// Send frames without address fields (the station's "address off" setting).
-    #[arg(long)]
+    #[arg(long, conflicts_with_all = ["address", "robot_address"])]
     pub no_address: bool,
     /// Time to wait for each reply.
-    #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
+    #[arg(long, default_value = "500ms", value_parser = crate::output::parse_timeout)]
     pub timeout: Duration,
     /// Retries after a timeout or a damaged frame (never after a refusal).
     #[arg(long, default_value_t = DEFAULT_RETRIES)]

@@ -45,7 +45,7 @@ pub struct LineArgs {
     pub endpoint: Option<String>,
     /// Time to wait for each answer, on top of the frames' time on the wire [default: 500ms;
     /// scan: 200ms].
-    #[arg(long, value_parser = humantime::parse_duration, global = true)]
+    #[arg(long, value_parser = crate::output::parse_timeout, global = true)]
     pub timeout: Option<Duration>,
     /// Retries after no answer, a damaged answer or one that does not match (never after an
     /// exception: that is the device's answer).
@@ -919,8 +919,7 @@ pub async fn sim_modbus(args: SimModbusArgs) -> anyhow::Result<ExitCode> {
     let map = match &args.map {
         Some(path) => {
             let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read the map {}", path.display()))
-                .map_err(usage)?;
+                .map_err(|e| usage(format!("cannot read the map {}: {e}", path.display())))?;
             SlaveMap::parse(&text).map_err(|e| usage(format!("map {}: {e}", path.display())))?
         }
         None => SlaveMap::all_writable(UnitId::jbus(DEFAULT_SLAVE_UNIT).map_err(usage)?),

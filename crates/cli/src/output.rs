@@ -2,6 +2,7 @@
 
 use std::io::Write;
 use std::process::ExitCode;
+use std::time::Duration;
 
 use wire::{Failure, FailureKind};
 
@@ -14,6 +15,19 @@ pub struct UsageError(pub String);
 /// Makes a usage error (exit code 2) from anything printable.
 pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
     UsageError(message.to_string()).into()
+}
+
+/// The shortest and longest `--timeout` of the clients.
+const TIMEOUTS: (Duration, Duration) = (Duration::from_millis(1), Duration::from_secs(3600));
+
+/// A client's `--timeout`: from 1 ms to 1 h. `0s` would report every device as silent
+/// (a scan would find nobody), and an hour is more than any device here needs.
+pub fn parse_timeout(text: &str) -> Result<Duration, String> {
+    let timeout = humantime::parse_duration(text).map_err(|e| format!("{e}; e.g. 500ms"))?;
+    if !(TIMEOUTS.0..=TIMEOUTS.1).contains(&timeout) {
+        return Err(format!("{text} is not a timeout from 1ms to 1h"));
+    }
+    Ok(timeout)
 }
 
 /// Refuses a `modbus-tcp://` endpoint for a device that does not speak Modbus (`what`:

@@ -35,7 +35,7 @@ pub struct PanasonicArgs {
     #[arg(long, value_name = "P")]
     pub events_port: Option<u16>,
     /// Time to wait for each answer of the machine.
-    #[arg(long, default_value = "5s", value_parser = humantime::parse_duration)]
+    #[arg(long, default_value = "5s", value_parser = crate::output::parse_timeout)]
     pub timeout: Duration,
     /// Retries, on a new connection, of a command that changes nothing (status, names,
     /// lists, uploads) after a lost answer; a download, delete, start or reset is never

@@ -38,7 +38,7 @@ pub struct ThermosaldArgs {
     pub address: String,
     /// Time to wait for each answer [default: 500ms at 9600 baud, longer on slower lines;
     /// scan: 422ms]. A regulator answers 200 ms after the question.
-    #[arg(long, value_parser = humantime::parse_duration, global = true)]
+    #[arg(long, value_parser = crate::output::parse_timeout, global = true)]
     pub timeout: Option<Duration>,
     /// Retries after no answer, a damaged answer or one of the wrong shape. An echo that
     /// differs from what was sent is retried once, then reported.

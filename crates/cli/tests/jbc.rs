@@ -221,3 +221,23 @@ fn frame(body: &[u8]) -> Vec<u8> {
     bytes.push(bytes.iter().fold(0, |a, b| a ^ b));
     bytes
 }
+
+#[test]
+fn no_address_with_an_address_is_refused_instead_of_dropping_the_address() {
+    let out = run(&[
+        "jbc",
+        "--endpoint",
+        "tcp://127.0.0.1:9",
+        "--no-address",
+        "--address",
+        "05",
+        "read",
+        "ST1",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("'--no-address' cannot be used with '--address"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -1385,3 +1385,59 @@ fn our_client_reads_and_writes_float32_cdab_and_int32_values_of_a_pymodbus_tcp_s
         json!([-7, 123_456_789, -2_147_483_648_i64])
     );
 }
+
+#[test]
+fn every_client_refuses_a_timeout_of_zero_or_beyond_an_hour_as_a_usage_error() {
+    // Refused while the arguments are read: nothing is connected to (port 9 is unused).
+    let clients: [&[&str]; 5] = [
+        &["jbc", "--endpoint", "tcp://127.0.0.1:9", "read", "ST1"],
+        &[
+            "modbus",
+            "--endpoint",
+            "tcp://127.0.0.1:9",
+            "--unit",
+            "1",
+            "read-holding",
+            "0",
+            "1",
+        ],
+        &["cross", "--endpoint", "tcp://127.0.0.1:9", "status"],
+        &[
+            "thermosald",
+            "--endpoint",
+            "tcp://127.0.0.1:9",
+            "--address",
+            "1",
+            "read",
+            "runtime",
+        ],
+        &["panasonic", "--host", "127.0.0.1:9", "status"],
+    ];
+    for client in clients {
+        for timeout in ["0s", "18446744073709551615s", "2h"] {
+            let mut args = client.to_vec();
+            args.splice(1..1, ["--timeout", timeout]);
+            let out = run(&args);
+            assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+            assert!(
+                stderr(&out).contains(&format!("{timeout} is not a timeout from 1ms to 1h"))
+                    || stderr(&out).contains("number is too large"),
+                "{args:?}: {}",
+                stderr(&out)
+            );
+        }
+    }
+}
+
+#[test]
+fn a_simulator_map_that_cannot_be_read_says_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.map");
+    let out = run(&["sim", "modbus", "--map", missing.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("missing.map: No such file or directory"),
+        "{}",
+        stderr(&out)
+    );
+}

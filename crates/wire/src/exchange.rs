@@ -380,6 +380,15 @@ impl Policy {
     }
 }
 
+/// The longest wait the engine counts: a longer timeout or quiet gap (a user's
+/// `--timeout` of 585 years) waits this long instead of overflowing the clock.
+pub const LONGEST_WAIT: Duration = Duration::from_secs(24 * 3600);
+
+/// `wait` after `at`, at most [`LONGEST_WAIT`].
+pub fn after(at: Instant, wait: Duration) -> Instant {
+    at + wait.min(LONGEST_WAIT)
+}
+
 /// How an exchange ended without its answer.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Ended<R, T> {
@@ -533,7 +542,7 @@ impl<M: Matcher> Exchange<M> {
         if matches!(self.state, State::Sending) {
             self.state = State::Waiting(Waiting {
                 sent: now,
-                deadline: now + self.policy.timeout,
+                deadline: after(now, self.policy.timeout),
                 last_input: now,
                 trouble: None,
                 skipped: None,
@@ -622,7 +631,7 @@ impl<M: Matcher> Exchange<M> {
         };
         match self.policy.quiet_gap {
             Some(gap) if self.listening_for_quiet(waiting) => {
-                Some(waiting.deadline.min(waiting.last_input + gap))
+                Some(waiting.deadline.min(after(waiting.last_input, gap)))
             }
             _ => Some(waiting.deadline),
         }
@@ -655,7 +664,7 @@ impl<M: Matcher> Exchange<M> {
             return false;
         };
         self.listening_for_quiet(waiting)
-            && (now >= waiting.last_input + gap || now >= waiting.deadline)
+            && (now >= after(waiting.last_input, gap) || now >= waiting.deadline)
     }
 
     /// Applies a verdict on `bytes` bytes heard at `now`; whether the attempt ended.
@@ -926,5 +935,22 @@ mod tests {
             panic!("the attempt should have timed out");
         };
         assert_eq!(last, Trouble::Noise { bytes: 18 });
+    }
+
+    #[test]
+    fn a_timeout_beyond_the_clock_waits_the_longest_wait_instead_of_overflowing() {
+        let mut ex = Exchange::new(
+            Asking,
+            Lines,
+            b"ask\n".to_vec(),
+            Policy::new(0, Duration::MAX).with_quiet_gap(Duration::MAX),
+        );
+        let t0 = Instant::now();
+        send(&mut ex, t0);
+        assert_eq!(ex.poll_timeout(), Some(t0 + LONGEST_WAIT));
+        ex.handle_input(b"!garbled", t0);
+        assert_eq!(ex.poll_timeout(), Some(t0 + LONGEST_WAIT));
+        ex.handle_timeout(t0 + LONGEST_WAIT);
+        assert!(!ex.is_waiting());
     }
 }

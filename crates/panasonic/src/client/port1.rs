@@ -91,7 +91,7 @@ impl Port1 {
         }
         deframer.clear();
         line.send(request).await.map_err(trouble)?;
-        let mut deadline = Instant::now() + timeout;
+        let mut deadline = Instant::now() + timeout.min(wire::exchange::LONGEST_WAIT);
         loop {
             let n = line.recv(buf, deadline).await.map_err(trouble)?;
             deframer.push(buf.get(..n).unwrap_or_default());
@@ -104,7 +104,7 @@ impl Port1 {
                 match conversation.handle(message) {
                     Next::Send(ack) => {
                         line.send(&ack.to_bytes()).await.map_err(trouble)?;
-                        deadline = Instant::now() + timeout;
+                        deadline = Instant::now() + timeout.min(wire::exchange::LONGEST_WAIT);
                     }
                     Next::Done { send, outcome } => {
                         if let Some(last) = send {
