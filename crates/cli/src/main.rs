@@ -120,7 +120,7 @@ fn main() -> ExitCode {
         Ok(code) => code,
         Err(err) if output::is_broken_pipe(&err) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("cellbus: {err:#}");
+            eprintln!("cellbus: {}", output::describe(&err));
             output::exit_code_for(&err)
         }
     }

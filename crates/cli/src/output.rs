@@ -64,6 +64,24 @@ pub fn exit_code_for(err: &anyhow::Error) -> ExitCode {
     }
 }
 
+/// `err` and its causes in words, each cause once: many errors already say their cause
+/// (`cannot connect to tcp://…: Connection refused`), and anyhow's `{:#}` would repeat it
+/// after them.
+pub fn describe(err: &anyhow::Error) -> String {
+    let mut words = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if words.contains(&text) {
+            continue;
+        }
+        if !words.is_empty() {
+            words.push_str(": ");
+        }
+        words.push_str(&text);
+    }
+    words
+}
+
 /// A closed stdout (`cellbus … | head`) is not an error.
 pub fn is_broken_pipe(err: &anyhow::Error) -> bool {
     err.chain().any(|cause| {
@@ -140,6 +158,26 @@ pub fn hex(bytes: &[u8]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_error_that_already_says_its_cause_is_not_followed_by_it_again() {
+        let line = link::LineError::Closed;
+        let said = format!("line tcp://x failed: {line}");
+        #[derive(Debug, thiserror::Error)]
+        #[error("{said}")]
+        struct Failed {
+            said: String,
+            #[source]
+            line: link::LineError,
+        }
+        let err = anyhow::Error::new(Failed { said, line }).context("reading ST1");
+        assert_eq!(
+            describe(&err),
+            "reading ST1: line tcp://x failed: the line was closed by the other end"
+        );
+        let plain = anyhow::anyhow!("no such file").context("cannot read the map m");
+        assert_eq!(describe(&plain), "cannot read the map m: no such file");
+    }
 
     #[test]
     fn hex_input_accepts_spaced_packed_and_prefixed_bytes() {
