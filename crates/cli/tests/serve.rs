@@ -149,7 +149,8 @@ fn serve_refuses_a_token_no_client_could_send_and_writes_without_one_as_usage_er
         .unwrap();
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(
-        stderr(&out).contains("the write token cannot be used: it holds 'ä' (character 2)"),
+        stderr(&out).contains("the write token cannot be used: character 2 is not visible ASCII")
+            && !stderr(&out).contains('ä'),
         "{}",
         stderr(&out)
     );
@@ -185,7 +186,7 @@ fn config_check_refuses_a_token_with_characters_a_header_cannot_carry() {
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(
         stderr(&out).contains("cell.toml:1:")
-            && stderr(&out).contains("token cannot be used: it holds a space (character 7)"),
+            && stderr(&out).contains("token cannot be used: character 7 is not visible ASCII"),
         "{}",
         stderr(&out)
     );

@@ -1128,8 +1128,8 @@ fn check_registers(
                 return Err(at(
                     csv.span(),
                     format!(
-                        "registers_csv {} names no registers (a header, comments or nothing): \
-                         a modbus device needs at least one",
+                        "registers_csv {} names no registers, only its header: a modbus \
+                         device needs at least one",
                         file.display()
                     ),
                 ));

@@ -25,20 +25,13 @@ use crate::time::Timestamp;
 
 /// What is wrong with `token` as a bearer token, if anything: clients send it in an HTTP
 /// header, which carries visible ASCII only (a token with `ä` or a space could be set but
-/// never sent).
+/// never sent). The words name the character's position, never the character: a token is
+/// a secret.
 pub fn token_fault(token: &str) -> Option<String> {
-    let (at, bad) = token
-        .chars()
-        .enumerate()
-        .find(|(_, c)| !c.is_ascii_graphic())?;
-    let shown = if bad == ' ' {
-        "a space".to_owned()
-    } else {
-        format!("{bad:?}")
-    };
+    let at = token.chars().position(|c| !c.is_ascii_graphic())?;
     Some(format!(
-        "it holds {shown} (character {}); a token is sent in an HTTP header, so use visible \
-         ASCII only: letters, digits and punctuation, no spaces",
+        "character {} is not visible ASCII; a token is sent in an HTTP header, so use \
+         letters, digits and punctuation only, no spaces",
         at + 1
     ))
 }
