@@ -380,13 +380,7 @@ fn read_text(path: &Path) -> Result<String, ConfigError> {
         path: path.to_owned(),
         why,
     };
-    let bytes = read_bounded(path, MAX_CONFIG).map_err(unreadable)?;
-    String::from_utf8(bytes).map_err(|e| {
-        unreadable(format!(
-            "is not UTF-8 text (byte {} is not)",
-            e.utf8_error().valid_up_to() + 1
-        ))
-    })
+    read_bounded_text(path, MAX_CONFIG).map_err(unreadable)
 }
 
 /// Checks configuration text; `path` names it in errors.
@@ -791,6 +785,16 @@ pub fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>, String> {
     Ok(bytes)
 }
 
+/// The text of the file at `path`, as [`read_bounded`] reads it, refused unless UTF-8.
+fn read_bounded_text(path: &Path, max: u64) -> Result<String, String> {
+    String::from_utf8(read_bounded(path, max)?).map_err(|e| {
+        format!(
+            "is not UTF-8 text (byte {} is not)",
+            e.utf8_error().valid_up_to() + 1
+        )
+    })
+}
+
 fn protocol_of(text: &Spanned<String>) -> Result<Protocol, String> {
     Protocol::parse(text.get_ref()).ok_or_else(|| {
         format!(
@@ -1113,11 +1117,7 @@ fn check_registers(
             if let Some(list) = csv_lists.0.get(&key) {
                 return Ok(list.clone());
             }
-            let text = read_bounded(&file, MAX_REGISTERS_CSV)
-                .and_then(|bytes| {
-                    String::from_utf8(bytes).map_err(|_| "is not UTF-8 text".to_owned())
-                })
-                .map_err(|why| {
+            let text = read_bounded_text(&file, MAX_REGISTERS_CSV).map_err(|why| {
                     at(
                         csv.span(),
                         format!("registers_csv {}: {why}", file.display()),
