@@ -101,15 +101,51 @@ where
     F: Future<Output = T>,
     T: Send + 'static,
 {
+    on_own_thread(limit, false, make)
+}
+
+/// Like [`ends_within`], on a runtime with I/O whose clock is paused: long timeouts pass at
+/// once, and the bound stays in real time. For tests that wait on a thread outside the
+/// runtime (the history writer): while the runtime waits for it, paused time jumps from
+/// timer to timer, so a bound in paused time would trip however fast that thread is.
+pub fn ends_within_paused<F, T>(
+    limit: Duration,
+    make: impl FnOnce() -> F + Send + 'static,
+) -> Option<T>
+where
+    F: Future<Output = T>,
+    T: Send + 'static,
+{
+    on_own_thread(limit, true, make)
+}
+
+fn on_own_thread<F, T>(
+    limit: Duration,
+    paused: bool,
+    make: impl FnOnce() -> F + Send + 'static,
+) -> Option<T>
+where
+    F: Future<Output = T>,
+    T: Send + 'static,
+{
     let (done, ended) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
+    let thread = std::thread::spawn(move || {
         let runtime = tokio::runtime::Builder::new_current_thread()
-            .enable_time()
+            .enable_all()
+            .start_paused(paused)
             .build()
             .expect("a runtime for the test");
         let _ = done.send(runtime.block_on(make()));
     });
-    ended.recv_timeout(limit).ok()
+    match ended.recv_timeout(limit) {
+        Ok(output) => Some(output),
+        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => None,
+        // The future panicked (a failed assertion): the test fails with its message.
+        Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => match thread.join() {
+            Err(panic) => std::panic::resume_unwind(panic),
+            Ok(()) => None,
+        },
+    }
 }
 
 #[cfg(test)]

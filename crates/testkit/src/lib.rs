@@ -1,8 +1,9 @@
 //! Test and bench tools shared by the cellbus crates.
 //!
 //! - [`chatter`]: [`Chatter`], a line that never stops talking (its reads never wait),
-//!   and [`ends_within`], which runs a client on it on a thread of its own, so a hang
-//!   fails the test instead of holding it.
+//!   and [`ends_within`] (and [`ends_within_paused`]), which run a test's future on a
+//!   thread of its own with a bound in real time, so a hang fails the test instead of
+//!   holding it.
 //! - `mosquitto` (feature `mqtt`): `Mosquitto`, a real MQTT broker on a free loopback
 //!   port (and a TLS listener on a second one with `TlsFiles`), killed on drop.
 //! - `sparkplug_sub` (feature `mqtt`): `Subscriber`, a Sparkplug B subscriber that decodes
@@ -32,7 +33,7 @@ pub mod proxy;
 pub mod sparkplug_sub;
 pub mod tricks;
 
-pub use chatter::{Chatter, ends_within};
+pub use chatter::{Chatter, ends_within, ends_within_paused};
 #[cfg(feature = "mqtt")]
 pub use mosquitto::{Mosquitto, TlsFiles};
 pub use noise::{Noise, NoiseConfig, NoiseCounts};

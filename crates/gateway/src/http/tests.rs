@@ -663,47 +663,47 @@ async fn a_query_whose_client_hung_up_keeps_its_turn_until_it_ends() {
     drop(turn);
 }
 
-#[tokio::test(start_paused = true)]
-async fn a_write_whose_body_never_comes_holds_no_connection() {
-    let rig = rig(1);
-    // Headers that announce a body, and no body.
-    let head = |token: &str| {
-        format!(
-            "POST /api/devices/jbc1/write HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\
-             Authorization: Bearer {token}\r\nContent-Type: application/json\r\n\
-             Content-Length: 4000\r\n\r\n"
-        )
-    };
-    // A minute of (paused) time is far more than any answer here needs.
-    let answer = |addr, request: String| async move {
-        tokio::time::timeout(Duration::from_secs(60), raw_http(addr, &request))
-            .await
-            .expect("an answer, not a connection held open")
-    };
-    // Writes off, or a wrong token: refused before the body is read.
-    let off = serve_on_loopback(app(&rig, false)).await;
-    let response = answer(off, head(TOKEN)).await;
-    assert!(response.starts_with("HTTP/1.1 403"), "{response}");
-    let on = serve_on_loopback(app(&rig, true)).await;
-    let response = answer(on, head("wrong")).await;
-    assert!(response.starts_with("HTTP/1.1 401"), "{response}");
-    // Authorised: the body has BODY_TIMEOUT to arrive, and the attempt is audited.
-    let started = tokio::time::Instant::now();
-    let response = answer(on, head(TOKEN)).await;
-    assert!(response.starts_with("HTTP/1.1 408"), "{response}");
+/// Paused time lets the 10 s body timeout pass at once; the bound on each answer is in real
+/// time. (The refusal's audit row is committed by the history writer, a thread of its own;
+/// while the runtime waits for it, paused time runs on from poll to poll, so a bound in
+/// paused time would trip on a slow machine.)
+#[test]
+fn a_write_whose_body_never_comes_holds_no_connection() {
+    let ended = testkit::ends_within_paused(Duration::from_secs(120), || async {
+        let rig = rig(1);
+        // Headers that announce a body, and no body.
+        let head = |token: &str| {
+            format!(
+                "POST /api/devices/jbc1/write HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\
+                 Authorization: Bearer {token}\r\nContent-Type: application/json\r\n\
+                 Content-Length: 4000\r\n\r\n"
+            )
+        };
+        // Writes off, or a wrong token: refused before the body is read.
+        let off = serve_on_loopback(app(&rig, false)).await;
+        let response = raw_http(off, &head(TOKEN)).await;
+        assert!(response.starts_with("HTTP/1.1 403"), "{response}");
+        let on = serve_on_loopback(app(&rig, true)).await;
+        let response = raw_http(on, &head("wrong")).await;
+        assert!(response.starts_with("HTTP/1.1 401"), "{response}");
+        // Authorised: the body has BODY_TIMEOUT to arrive, and the attempt is audited.
+        let started = tokio::time::Instant::now();
+        let response = raw_http(on, &head(TOKEN)).await;
+        assert!(response.starts_with("HTTP/1.1 408"), "{response}");
+        assert!(
+            response.contains("did not arrive within 10 s"),
+            "{response}"
+        );
+        let waited = started.elapsed();
+        assert!(waited >= super::write::BODY_TIMEOUT, "{waited:?}");
+        // The refusal's audit row is committed before the answer.
+        let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
+        assert_eq!(rows.len(), 1, "{rows:?}");
+    });
     assert!(
-        response.contains("did not arrive within 10 s"),
-        "{response}"
+        ended.is_some(),
+        "every answer within 2 minutes, not a connection held open"
     );
-    let waited = started.elapsed();
-    let limit = super::write::BODY_TIMEOUT;
-    // Then the refusal's audit row is committed before the answer.
-    assert!(
-        waited >= limit && waited < limit + Duration::from_secs(5),
-        "{waited:?}"
-    );
-    let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();
-    assert_eq!(rows.len(), 1, "{rows:?}");
 }
 
 /// Sends one request over a real socket and returns the raw response.
