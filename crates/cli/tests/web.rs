@@ -39,7 +39,9 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
     let (web, chromium) = browser();
     let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
     let data = tempfile::tempdir().unwrap();
-    let mut config = String::from("# 1,000 stations for the page's test.\n");
+    // The script writes one setpoint, so that a value on the page changes.
+    const TOKEN: &str = "big-cell-token";
+    let mut config = format!("# 1,000 stations for the page's test.\ntoken = \"{TOKEN}\"\n");
     for line in 1..=LINES {
         let _ = write!(
             config,
@@ -57,7 +59,10 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
     }
     let path = data.path().join("cell.toml");
     std::fs::write(&path, config).unwrap();
-    let gateway = Gateway::start_with(data.path(), &["--config", path.to_str().unwrap()]);
+    let gateway = Gateway::start_with(
+        data.path(),
+        &["--config", path.to_str().unwrap(), "--allow-writes"],
+    );
 
     // The API's filtered and slim listings of a cell this size stay small and quick.
     let (status, slim) = gateway.get("/api/devices?fields=line,status");
@@ -79,6 +84,7 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
         .arg(format!("http://{}", gateway.addr))
         .arg(&screenshot)
         .env("CHROMIUM", &chromium)
+        .env("TOKEN", TOKEN)
         .output()
         .expect("node runs (install Node.js: it comes with npm)");
     let stdout = String::from_utf8_lossy(&out.stdout);

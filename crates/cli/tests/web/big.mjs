@@ -10,7 +10,7 @@
 // Measures (printed, not asserted): time to the first line's cards, bytes and messages per
 // second of the stream while a line is shown against the whole cell's stream, the other
 // requests' bytes per refresh.
-// Usage: node big.mjs http://127.0.0.1:PORT screenshot.png
+// Usage: TOKEN=WRITE_TOKEN node big.mjs http://127.0.0.1:PORT screenshot.png
 // Prints one JSON line with what it saw and measured; exits non-zero with a reason otherwise.
 import { chromium } from 'playwright-core';
 
@@ -151,18 +151,24 @@ try {
   check(dom.lineCards === 1, `the health of the shown line only: ${dom.lineCards} line cards`);
   check(dom.options === lines.length + 1, `every line (and all) in the selector: ${dom.options}`);
 
-  // A live value of the line's answering station changes on the page.
-  const firstValues = await page.evaluate(() =>
-    [...document.querySelectorAll('[id^="point-"]')].map((e) => [e.id, e.querySelector('.value').textContent]));
+  // A live value of the line's answering station changes on the page. An idle station's
+  // readings stay put, so the change is made: a new air temperature setpoint, written
+  // through the API (the gateway reads a write back at once).
+  const station = first.devices[0];
+  const setpoint = (await (await fetch(`${base}/api/devices/${station}`)).json()).points
+    .find((p) => p.id.endsWith('.air_temperature_setpoint'));
+  check(setpoint, `${station} has an air temperature setpoint`);
+  const value = setpoint.value === 400 ? 410 : 400;
+  const write = await fetch(`${base}/api/devices/${station}/write`, {
+    method: 'POST',
+    headers: { authorization: `Bearer ${process.env.TOKEN}`, 'content-type': 'application/json' },
+    body: JSON.stringify({ point: setpoint.id, value }),
+  });
+  check(write.ok, `the setpoint write is taken: ${write.status} ${await write.text()}`);
   await page.waitForFunction(
-    (before) => {
-      const then = new Map(before);
-      return [...document.querySelectorAll('[id^="point-"]')].some((e) => {
-        const text = e.querySelector('.value').textContent;
-        return then.has(e.id) && text !== '—' && text !== then.get(e.id);
-      });
-    },
-    firstValues,
+    ([id, value]) => document.getElementById(`point-${id}`)?.querySelector('.value')
+      .textContent.startsWith(`${value}`),
+    [setpoint.id, value],
     { timeout: 30000, polling: 100 },
   );
 
