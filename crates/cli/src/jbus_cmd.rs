@@ -227,6 +227,12 @@ enum Send {
 pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
     let endpoint = args.line.endpoint()?;
     if let ModbusAction::Scan { units } = &args.action {
+        if let Some(unit) = args.unit {
+            return Err(usage(format!(
+                "scan tries the units of --units (1-247 unless given), not --unit; \
+                 to try unit {unit} alone: scan --units {unit}"
+            )));
+        }
         return scan(&endpoint, &args.line, units.clone()).await;
     }
     let Some(unit) = args.unit else {
@@ -490,7 +496,9 @@ fn print_answer(
 }
 
 /// Registers read as values of `format`: one line each (its first register's address and
-/// the value), or `{"unit","address","type","values"}`.
+/// the value), or `{"unit","address","type","values"}`; registers that hold no value of
+/// the type are an error, and with `--json` also `{"unit","address","type","registers",
+/// "error"}` on stdout.
 fn print_typed(
     unit: u8,
     address: u16,
@@ -499,16 +507,29 @@ fn print_typed(
     json: bool,
 ) -> anyhow::Result<()> {
     let width = usize::from(format.registers());
-    let values = registers
+    let decoded = registers
         .chunks(width)
         .map(|chunk| format.decode(chunk))
-        .collect::<Result<Vec<_>, _>>()
-        .with_context(|| {
-            format!(
+        .collect::<Result<Vec<_>, _>>();
+    let values = match decoded {
+        Ok(values) => values,
+        Err(error) => {
+            // Scripts still get the registers that came, with what is wrong with them.
+            if json {
+                output::line(json!({
+                    "unit": unit,
+                    "address": address,
+                    "type": format.data_type.to_string(),
+                    "registers": registers,
+                    "error": error.to_string(),
+                }))?;
+            }
+            return Err(anyhow::Error::new(error).context(format!(
                 "unit {unit}, registers from {address} (0x{address:04X}) as {}",
                 format.data_type
-            )
-        })?;
+            )));
+        }
+    };
     if json {
         let values: Vec<Value> = values.iter().map(typed_json).collect();
         output::line(json!({

@@ -217,8 +217,8 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
                     std::fs::write(&path, &data)
                         .with_context(|| format!("cannot write {}", path.display()))?;
                     output::line(format!(
-                        "{} bytes written to {}",
-                        data.len(),
+                        "{} written to {}",
+                        wire::words::Bytes(data.len()),
                         path.display()
                     ))?;
                 }

@@ -395,6 +395,24 @@ fn typed_writes_encode_each_value_in_its_registers() {
     ok(&["write-registers", "0x40", "--order", "BADC", "0x1234"]);
     let out = ok(&["--json", "read-holding", "0x40", "1"]);
     assert_eq!(json_of(&out)["values"], json!([0x3412]));
+
+    // Registers that hold no value of the type: an error, and with --json the registers
+    // and the error on stdout, so a script still sees what came.
+    ok(&["write-registers", "0x50", "0xC3A4"]);
+    let out = modbus(
+        &sim,
+        "1",
+        &["--json", "read-holding", "0x50", "1", "--type", "string:1"],
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("not ASCII"), "{}", stderr(&out));
+    let seen = json_of(&out);
+    assert_eq!(seen["registers"], json!([0xC3A4]));
+    assert_eq!(seen["type"], "string:1");
+    assert!(
+        seen["error"].as_str().unwrap().contains("byte 0xC3"),
+        "{seen}"
+    );
 }
 
 #[test]
@@ -463,6 +481,11 @@ fn bad_types_orders_and_typed_values_exit_2_naming_the_text_and_the_choices() {
         &["read-holding", "0", "1", "--type", "string:200"],
         &["1 to 125 registers"],
     );
+    usage(
+        &["write-registers", "0", "--type", "float32", "1e-50"],
+        &["1e-50 is too small for float32: it would be written as 0"],
+    );
+    usage(&["scan"], &["not --unit", "scan --units 1"]);
 }
 
 #[test]

@@ -490,7 +490,7 @@ pub struct FrameHead {
 #[non_exhaustive]
 pub enum DecodeError {
     /// Bytes before the next `STX`: noise on the line.
-    #[error("{len} bytes of line noise before the next frame start (STX)")]
+    #[error("{} of line noise before the next frame start (STX)", wire::words::Bytes(*len))]
     Garbage {
         /// Bytes dropped.
         len: usize,

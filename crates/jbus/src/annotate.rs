@@ -179,9 +179,9 @@ pub fn describe_response(adu: &ResponseAdu) -> String {
         Response::ReadCoils(bits) | Response::ReadDiscreteInputs(bits) => {
             let bytes = bits.as_bytes();
             format!(
-                "{from}, function {function}: {} bytes of bits {} (bits from the first address \
+                "{from}, function {function}: {} of bits {} (bits from the first address \
                  on: {}; the request says how many count)",
-                bytes.len(),
+                wire::words::Bytes(bytes.len()),
                 hex(bytes),
                 bit_text(&unpack_bits(bytes, bytes.len() * 8))
             )

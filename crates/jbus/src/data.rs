@@ -201,7 +201,14 @@ impl DataType {
                 if float.abs() > f64::from(f32::MAX) {
                     return Err(self.out_of_range(value, f32::MIN, f32::MAX));
                 }
-                (float as f32).to_be_bytes().to_vec()
+                let narrow = float as f32;
+                if narrow == 0.0 && float != 0.0 {
+                    return Err(EncodeError::TooSmall {
+                        value: float,
+                        data_type: self,
+                    });
+                }
+                narrow.to_be_bytes().to_vec()
             }
             Self::Float64 => self.float(value)?.to_be_bytes().to_vec(),
             Self::String(length) => encode_text(self, length, value)?,
@@ -731,6 +738,17 @@ pub enum EncodeError {
         /// The largest the type holds.
         max: String,
     },
+    /// A number so close to zero that the type would hold 0 instead.
+    #[error(
+        "{value:e} is too small for {data_type}: it would be written as 0 (the smallest \
+         number it holds above 0 is about 1.4e-45)"
+    )]
+    TooSmall {
+        /// The number.
+        value: f64,
+        /// The type.
+        data_type: DataType,
+    },
     /// A fraction for an integer type.
     #[error("{value} is not a whole number, which {data_type} needs")]
     NotWhole {
@@ -1209,6 +1227,16 @@ mod tests {
             ty("float32").encode(Abcd, &TypedValue::Float(1e39)),
             Err(EncodeError::OutOfRange { .. })
         ));
+        assert_eq!(
+            ty("float32")
+                .encode(Abcd, &TypedValue::Float(1e-50))
+                .unwrap_err()
+                .to_string(),
+            "1e-50 is too small for float32: it would be written as 0 (the smallest number it \
+             holds above 0 is about 1.4e-45)"
+        );
+        assert_eq!(encode("float32", Abcd, TypedValue::Float(-0.0)), [0x8000, 0]);
+        assert_eq!(encode("float32", Abcd, TypedValue::Float(1e-45)), [0, 1]);
         assert!(matches!(
             ty("uint16").encode(Abcd, &TypedValue::Text("x".into())),
             Err(EncodeError::WrongKind { .. })

@@ -34,6 +34,7 @@
 
 use std::fmt;
 
+use wire::words::Bytes;
 use wire::{Codec, Resync};
 
 /// Width of the command field.
@@ -214,7 +215,7 @@ impl fmt::Display for Message {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.command)?;
         if !self.data.is_empty() {
-            write!(f, " [{} bytes]", self.data.len())?;
+            write!(f, " [{}]", Bytes(self.data.len()))?;
         }
         Ok(())
     }
@@ -248,7 +249,9 @@ pub enum DecodeError {
     },
     /// A data size above the limit.
     #[error(
-        "{command} announces {size} bytes of data, more than the {max}-byte limit: not a message here; skipping {drop} bytes"
+        "{command} announces {} of data, more than the {max}-byte limit: not a message here; skipping {}",
+        Bytes(*size as usize),
+        Bytes(*drop)
     )]
     DataTooLong {
         /// The command text (trimmed).
@@ -263,7 +266,9 @@ pub enum DecodeError {
     /// The three bytes after the data are not a terminator: the size is wrong, or the
     /// message was cut.
     #[error(
-        "{command} with {size} bytes of data ends in {found:02x?} instead of the 00 00 00 terminator; skipping {drop} bytes"
+        "{command} with {} of data ends in {found:02x?} instead of the 00 00 00 terminator; skipping {}",
+        Bytes(*size as usize),
+        Bytes(*drop)
     )]
     Terminator {
         /// The command text (trimmed).

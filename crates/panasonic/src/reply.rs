@@ -189,7 +189,7 @@ impl Reply {
             Reply::Invalid(A4Reason::ProtocolError) => "refused: protocol error".to_owned(),
             Reply::Invalid(A4Reason::Other(n)) => format!("refused: error E{n:02}"),
             Reply::Invalid(A4Reason::Unspecified) => "refused".to_owned(),
-            Reply::Data(data) => format!("data block of {} bytes", data.len()),
+            Reply::Data(data) => format!("data block of {}", wire::words::Bytes(data.len())),
             Reply::Value(data) => format!("value {:?}", String::from_utf8_lossy(data)),
         }
     }

@@ -31,6 +31,7 @@ use std::time::{Duration, Instant};
 
 use crate::codec::{Codec, Deframer};
 use crate::failure::{Failure, FailureKind};
+use crate::words::Bytes;
 
 /// Line trouble on one attempt: what makes an exchange retry.
 ///
@@ -63,12 +64,15 @@ impl<D: fmt::Display, M: fmt::Display> fmt::Display for Trouble<D, M> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Trouble::Silence => f.write_str("no reply"),
-            Trouble::Noise { bytes } => write!(f, "no reply, only {bytes} bytes of line noise"),
+            Trouble::Noise { bytes } => {
+                write!(f, "no reply, only {} of line noise", Bytes(*bytes))
+            }
             Trouble::Damaged(damage) => write!(f, "damaged reply: {damage}"),
             Trouble::Incomplete { bytes } => {
                 write!(
                     f,
-                    "the line fell quiet after {bytes} bytes that make no frame"
+                    "the line fell quiet after {} that make no frame",
+                    Bytes(*bytes)
                 )
             }
             Trouble::Mismatch(mismatch) => write!(f, "{mismatch}"),
@@ -935,6 +939,9 @@ mod tests {
             panic!("the attempt should have timed out");
         };
         assert_eq!(last, Trouble::Noise { bytes: 18 });
+        let words = |bytes| Trouble::<String, String>::Noise { bytes }.to_string();
+        assert_eq!(words(18), "no reply, only 18 bytes of line noise");
+        assert_eq!(words(1), "no reply, only 1 byte of line noise");
     }
 
     #[test]

@@ -15,6 +15,7 @@
 //!   and seeded [`device::FaultInjector`] for realistic line trouble.
 //! - [`operator`]: the operator commands a simulated device takes while it serves (a
 //!   command table, one parser, `help`), each device's set defined next to its twin.
+//! - [`words`]: counts as messages say them ([`words::Bytes`]: "1 byte", "8 bytes").
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -28,6 +29,7 @@ pub mod exchange;
 pub mod failure;
 pub mod operator;
 pub mod scan;
+pub mod words;
 
 pub use codec::{Codec, Deframer, Resync};
 pub use device::{Device, LineTiming, Transmit};

@@ -27,7 +27,7 @@ use wire::operator::{CommandSet, ParseError, Syntax, Words, help_line};
 
 use super::{Phase, Regulator, RegulatorBus};
 use crate::diagnostic::{self, Fault};
-use crate::frame::Address;
+use crate::frame::{Address, RawValue};
 
 /// One operator command for a line of regulators.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -189,9 +189,12 @@ fn status(line: &mut RegulatorBus, now: Instant) -> String {
                 .address()
                 .map_or_else(|| "no address".to_owned(), |a| a.to_string());
             let status = regulator.status(now);
-            let temperature = status
-                .measured_temperature
-                .map_or_else(|| "no temperature".to_owned(), |t| format!("{t:.0} °C"));
+            // What the regulator reports (run-time item 1): 0–999 °C, so a shorted band's
+            // far lower reckoning shows as 0, never as -616 or -0.
+            let temperature = status.measured_temperature.map_or_else(
+                || "no temperature".to_owned(),
+                |t| format!("{} °C", RawValue::saturating(t).get()),
+            );
             format!(
                 "regulator {who}: {}, {temperature}, fault {} ({})",
                 phase_words(status.phase),
@@ -302,6 +305,28 @@ mod tests {
             parsed("help fault"),
             Ok(Command::Help(Some(&Command::TABLE[0])))
         );
+    }
+
+    #[test]
+    fn status_shows_the_temperature_the_regulator_reports_even_with_a_shorted_band() {
+        let now = Instant::now();
+        let mut line = RegulatorBus::new(&[address(1)], now).expect("one regulator");
+        let shown = apply(&mut line, Command::Status, now).expect("a status");
+        assert!(shown.starts_with("regulator 1: "), "{shown}");
+        assert!(shown.contains(" °C, fault "), "{shown}");
+        let short = Command::Fault {
+            address: address(1),
+            kind: Fault::ShortCircuit,
+        };
+        apply(&mut line, short, now).expect("provoked");
+        let later = now + std::time::Duration::from_secs(1);
+        let reckoned = line.regulators_mut()[0]
+            .status(later)
+            .measured_temperature
+            .expect("a shorted band is measured");
+        assert!(reckoned < -100.0, "{reckoned}");
+        let shown = apply(&mut line, Command::Status, later).expect("a status");
+        assert!(shown.contains(", 0 °C, fault "), "{shown}");
     }
 
     #[test]
