@@ -173,6 +173,21 @@ fn serve_refuses_a_token_no_client_could_send_and_writes_without_one_as_usage_er
         "{}",
         stderr(&out)
     );
+    // A read token that is the write token would let every reader write.
+    let out = common::cellbus()
+        .args(["serve", "--listen", "127.0.0.1:0", "--data", data])
+        .args(["--read-token", "s3cret"])
+        .env("CELLBUS_TOKEN", "s3cret")
+        .env_remove("CELLBUS_READ_TOKEN")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("the read token is the write token")
+            && !stderr(&out).contains("s3cret"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]

@@ -550,6 +550,14 @@ pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> 
             return Err(at(token.span(), format!("{key} cannot be used: {fault}")));
         }
     }
+    if let (Some(token), Some(read_token)) = (&raw.token, &raw.read_token)
+        && token.get_ref().trim() == read_token.get_ref().trim()
+    {
+        return Err(at(
+            read_token.span(),
+            format!("read_token cannot be used: {}", crate::serve::SAME_TOKENS),
+        ));
+    }
     let mqtt = raw.mqtt.map(|m| check_mqtt(m, path, &at)).transpose()?;
     let opcua = raw.opcua.map(|o| check_opcua(o, &at)).transpose()?;
     Ok(CellConfig {
@@ -3149,6 +3157,16 @@ type = "string:4"
     fn a_missing_file_is_named() {
         let err = check_config(Path::new("/nonexistent/cell.toml")).unwrap_err();
         assert!(err.to_string().contains("/nonexistent/cell.toml"), "{err}");
+    }
+
+    #[test]
+    fn a_read_token_equal_to_the_write_token_is_refused_without_showing_either() {
+        let text = format!("token = \"s3cret\"\nread_token = \" s3cret\"\n{ONE}");
+        refused(&text, 2, 14, "read_token cannot be used: the read token is the write token");
+        let shown = parse(&text).unwrap_err().to_string();
+        assert!(!shown.contains("s3cret"), "{shown}");
+        let text = format!("token = \"s3cret\"\nread_token = \"look\"\n{ONE}");
+        assert_eq!(parse(&text).unwrap().read_token.as_deref(), Some("look"));
     }
 
     #[test]

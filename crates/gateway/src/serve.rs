@@ -608,12 +608,19 @@ fn write_policy(options: &ServeOptions, config: &CellConfig) -> Result<WritePoli
         READ_TOKEN_ENV,
         "read_token",
     )?;
+    if token.is_some() && read_token == token {
+        return Err(OptionError(SAME_TOKENS.to_owned()));
+    }
     Ok(WritePolicy {
         enabled: options.allow_writes,
         token,
         read_token,
     })
 }
+
+/// Why a read token equal to the write token is refused.
+pub(crate) const SAME_TOKENS: &str = "the read token is the write token, so everyone who may \
+     read could also write; give readers a token of their own, or no read token";
 
 /// Refuses an empty token, or one no client could send.
 fn check_token(token: Option<&str>, what: &str, env: &str, key: &str) -> Result<(), OptionError> {
