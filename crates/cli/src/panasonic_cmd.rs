@@ -345,6 +345,12 @@ fn split_host(text: &str) -> anyhow::Result<(String, u16)> {
             ))
         })
     };
+    if let Some((scheme, _)) = text.split_once("://") {
+        return Err(usage(format!(
+            "--host {text:?}: give the machine's host or HOST:PORT, without {scheme}:// \
+             (e.g. 192.168.0.20 or 192.168.0.20:49152)"
+        )));
+    }
     let (host, port) = if let Some(rest) = text.strip_prefix('[') {
         let (host, after) = rest
             .split_once(']')

@@ -331,6 +331,14 @@ fn bad_arguments_exit_2_without_touching_the_machine() {
     let out = run(&["panasonic", "--host", "127.0.0.1:99999", "status"]);
     assert_eq!(code(&out), 2);
     assert!(stderr(&out).contains("not a TCP port"), "{}", stderr(&out));
+    // The other commands' --endpoint URLs are not hosts.
+    let out = run(&["panasonic", "--host", "tcp://127.0.0.1:1", "status"]);
+    assert_eq!(code(&out), 2);
+    assert!(
+        stderr(&out).contains("without tcp:// (e.g. 192.168.0.20"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]
