@@ -100,8 +100,8 @@ pub enum ThermosaldAction {
         /// Time between rounds.
         #[arg(long, default_value = "1s", value_parser = humantime::parse_duration)]
         interval: Duration,
-        /// Stop after this many rounds (default: until interrupted).
-        #[arg(long)]
+        /// Stop after this many rounds, at least 1 (default: until interrupted).
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
         count: Option<u64>,
     },
 }

@@ -526,7 +526,7 @@ fn watch_goes_on_past_a_dead_regulator_and_exits_1() {
 #[test]
 fn bad_arguments_exit_2_before_the_line_is_opened() {
     let line = Untouched::new();
-    let cases: [(&[&str], &str); 10] = [
+    let cases: [(&[&str], &str); 11] = [
         (
             &["--address", "8", "read", "runtime"],
             "regulator address 8 is not one of 0 to 7",
@@ -555,6 +555,7 @@ fn bad_arguments_exit_2_before_the_line_is_opened() {
             &["watch", "--interval", "0s"],
             "--interval must be longer than 0",
         ),
+        (&["watch", "--count", "0"], "0 is not in 1.."),
     ];
     for (args, message) in cases {
         let err = line.refused(args);
