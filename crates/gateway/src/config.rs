@@ -383,12 +383,29 @@ fn read_text(path: &Path) -> Result<String, ConfigError> {
     read_bounded_text(path, MAX_CONFIG).map_err(unreadable)
 }
 
+/// toml's message, in words where it speaks of Rust's types: a whole number beyond 64 bits
+/// is "invalid type: integer `…` as i128, expected any value".
+fn plain_toml_message(message: &str) -> String {
+    let message = message.trim_end();
+    message
+        .strip_prefix("invalid type: integer `")
+        .and_then(|rest| rest.split_once("` as i128"))
+        .map_or_else(
+            || message.to_owned(),
+            |(number, _)| {
+                format!(
+                    "{number} is too large: no number in the configuration is beyond {}",
+                    i64::MAX
+                )
+            },
+        )
+}
+
 /// Checks configuration text; `path` names it in errors.
 pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> {
     let at = |span: Range<usize>, message: String| locate(text, path, span, message);
     let raw: RawConfig = toml::from_str(text).map_err(|e| {
-        let message = e.message().trim_end().to_owned();
-        at(e.span().unwrap_or(0..0), message)
+        at(e.span().unwrap_or(0..0), plain_toml_message(e.message()))
     })?;
     if raw.line.is_empty() {
         return Err(at(
@@ -3151,6 +3168,22 @@ type = "string:4"
             .unwrap_err()
             .to_string();
         assert!(err.contains("9 | address = 100\n  |           ^"), "{err}");
+    }
+
+    #[test]
+    fn a_number_beyond_64_bits_is_called_too_large_not_an_i128() {
+        let text = ONE.replace(
+            "protocol = \"jbc\"",
+            "protocol = \"jbc\"\naddress = 99999999999999999999999",
+        );
+        refused(
+            &text,
+            9,
+            11,
+            "99999999999999999999999 is too large: no number in the configuration is beyond \
+             9223372036854775807",
+        );
+        assert_eq!(plain_toml_message("expected a table\n"), "expected a table");
     }
 
     #[test]
