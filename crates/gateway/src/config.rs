@@ -404,9 +404,8 @@ fn plain_toml_message(message: &str) -> String {
 /// Checks configuration text; `path` names it in errors.
 pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> {
     let at = |span: Range<usize>, message: String| locate(text, path, span, message);
-    let raw: RawConfig = toml::from_str(text).map_err(|e| {
-        at(e.span().unwrap_or(0..0), plain_toml_message(e.message()))
-    })?;
+    let raw: RawConfig = toml::from_str(text)
+        .map_err(|e| at(e.span().unwrap_or(0..0), plain_toml_message(e.message())))?;
     if raw.line.is_empty() {
         return Err(at(
             0..0,
@@ -3195,7 +3194,12 @@ type = "string:4"
     #[test]
     fn a_read_token_equal_to_the_write_token_is_refused_without_showing_either() {
         let text = format!("token = \"s3cret\"\nread_token = \" s3cret\"\n{ONE}");
-        refused(&text, 2, 14, "read_token cannot be used: the read token is the write token");
+        refused(
+            &text,
+            2,
+            14,
+            "read_token cannot be used: the read token is the write token",
+        );
         let shown = parse(&text).unwrap_err().to_string();
         assert!(!shown.contains("s3cret"), "{shown}");
         let text = format!("token = \"s3cret\"\nread_token = \"look\"\n{ONE}");

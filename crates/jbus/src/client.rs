@@ -1263,10 +1263,15 @@ mod tests {
                 err,
                 ClientError::NoAnswer {
                     attempts: 3,
-                    last: Trouble::Silence,
+                    last: Trouble::Others { frames: 1 },
                     ..
                 }
             ),
+            "{err}"
+        );
+        assert!(
+            err.to_string()
+                .ends_with("(last: no reply, only a frame that answers something else)"),
             "{err}"
         );
         assert_eq!(

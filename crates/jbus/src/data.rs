@@ -1235,7 +1235,10 @@ mod tests {
             "1e-50 is too small for float32: it would be written as 0 (the smallest number it \
              holds above 0 is about 1.4e-45)"
         );
-        assert_eq!(encode("float32", Abcd, TypedValue::Float(-0.0)), [0x8000, 0]);
+        assert_eq!(
+            encode("float32", Abcd, TypedValue::Float(-0.0)),
+            [0x8000, 0]
+        );
         assert_eq!(encode("float32", Abcd, TypedValue::Float(1e-45)), [0, 1]);
         assert!(matches!(
             ty("uint16").encode(Abcd, &TypedValue::Text("x".into())),

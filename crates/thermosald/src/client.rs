@@ -328,9 +328,10 @@ impl Probe {
     pub fn answered(&self) -> bool {
         match &self.outcome {
             Ok(_) | Err(ClientError::Refused { .. }) => true,
-            Err(ClientError::NoAnswer { last, .. }) => {
-                !matches!(last, Trouble::Silence | Trouble::Noise { .. })
-            }
+            Err(ClientError::NoAnswer { last, .. }) => !matches!(
+                last,
+                Trouble::Silence | Trouble::Noise { .. } | Trouble::Others { .. }
+            ),
             Err(_) => false,
         }
     }

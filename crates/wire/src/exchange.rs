@@ -48,6 +48,12 @@ pub enum Trouble<D, M> {
         /// How many bytes were dropped.
         bytes: usize,
     },
+    /// Only well-formed frames that answer something else came (another address's, a late
+    /// answer to an earlier request): still no reply, told with what came instead.
+    Others {
+        /// How many such frames came.
+        frames: usize,
+    },
     /// A damaged frame came.
     Damaged(D),
     /// The line fell quiet after bytes that make no frame.
@@ -66,6 +72,15 @@ impl<D: fmt::Display, M: fmt::Display> fmt::Display for Trouble<D, M> {
             Trouble::Silence => f.write_str("no reply"),
             Trouble::Noise { bytes } => {
                 write!(f, "no reply, only {} of line noise", Bytes(*bytes))
+            }
+            Trouble::Others { frames: 1 } => {
+                f.write_str("no reply, only a frame that answers something else")
+            }
+            Trouble::Others { frames } => {
+                write!(
+                    f,
+                    "no reply, only {frames} frames that answer something else"
+                )
             }
             Trouble::Damaged(damage) => write!(f, "damaged reply: {damage}"),
             Trouble::Incomplete { bytes } => {
@@ -94,7 +109,9 @@ where
 {
     fn kind(&self) -> FailureKind {
         match self {
-            Trouble::Silence | Trouble::Noise { .. } => FailureKind::Timeout,
+            Trouble::Silence | Trouble::Noise { .. } | Trouble::Others { .. } => {
+                FailureKind::Timeout
+            }
             Trouble::Damaged(_) | Trouble::Incomplete { .. } => FailureKind::Damaged,
             Trouble::Mismatch(mismatch) => mismatch.kind(),
         }
@@ -482,6 +499,8 @@ struct Waiting<T> {
     /// The trouble so far, and whether it ends the attempt once the line is quiet.
     trouble: Option<(T, bool)>,
     skipped: Option<Instant>,
+    /// Frames skipped ([`Verdict::Skip`]) in this attempt.
+    others: usize,
     /// Bytes dropped as noise ([`Verdict::Noise`]) in this attempt.
     noise: usize,
 }
@@ -550,6 +569,7 @@ impl<M: Matcher> Exchange<M> {
                 last_input: now,
                 trouble: None,
                 skipped: None,
+                others: 0,
                 noise: 0,
             });
         }
@@ -698,6 +718,7 @@ impl<M: Matcher> Exchange<M> {
             }
             Verdict::Skip => {
                 waiting.skipped = Some(now);
+                waiting.others += 1;
                 return false;
             }
             Verdict::Noise => {
@@ -711,13 +732,19 @@ impl<M: Matcher> Exchange<M> {
     /// Ends the attempt with `trouble` (else the trouble noted, else silence): retries
     /// while attempts remain.
     fn end_attempt(&mut self, trouble: Option<TroubleOf<M>>, ending: Ending, now: Instant) {
-        let (noted, noise) = match &mut self.state {
-            State::Waiting(waiting) => (waiting.trouble.take().map(|(t, _)| t), waiting.noise),
-            _ => (None, 0),
+        let (noted, others, noise) = match &mut self.state {
+            State::Waiting(waiting) => (
+                waiting.trouble.take().map(|(t, _)| t),
+                waiting.others,
+                waiting.noise,
+            ),
+            _ => (None, 0, 0),
         };
-        let nothing = match noise {
-            0 => Trouble::Silence,
-            bytes => Trouble::Noise { bytes },
+        // No answer: say what came instead, frames for something else before noise.
+        let nothing = match (others, noise) {
+            (0, 0) => Trouble::Silence,
+            (0, bytes) => Trouble::Noise { bytes },
+            (frames, _) => Trouble::Others { frames },
         };
         let last = trouble.or(noted).unwrap_or(nothing);
         if self.attempt < self.policy.attempts {
@@ -916,7 +943,7 @@ mod tests {
         let t1 = t0 + TIMEOUT;
         send(&mut ex, t1);
         ex.handle_input(b"other device\n", t1 + TIMEOUT + Duration::from_millis(3));
-        assert_eq!(ex.poll_outcome(), gave_up(2, Trouble::Silence));
+        assert_eq!(ex.poll_outcome(), gave_up(2, Trouble::Others { frames: 1 }));
     }
 
     #[test]
@@ -942,6 +969,28 @@ mod tests {
         let words = |bytes| Trouble::<String, String>::Noise { bytes }.to_string();
         assert_eq!(words(18), "no reply, only 18 bytes of line noise");
         assert_eq!(words(1), "no reply, only 1 byte of line noise");
+    }
+
+    #[test]
+    fn a_timeout_after_frames_for_something_else_says_how_many_came() {
+        let mut ex = exchange(0);
+        let t0 = Instant::now();
+        send(&mut ex, t0);
+        ex.handle_input(b"other\nnoise\nother\n", t0 + Duration::from_millis(1));
+        ex.handle_timeout(t0 + TIMEOUT);
+        let Some(Err(Ended::GaveUp { last, .. })) = ex.poll_outcome() else {
+            panic!("the attempt should have timed out");
+        };
+        assert_eq!(last, Trouble::Others { frames: 2 });
+        let words = |frames| Trouble::<String, String>::Others { frames }.to_string();
+        assert_eq!(
+            words(2),
+            "no reply, only 2 frames that answer something else"
+        );
+        assert_eq!(
+            words(1),
+            "no reply, only a frame that answers something else"
+        );
     }
 
     #[test]
