@@ -553,15 +553,29 @@ async fn lines(
     Ok(Json(json!({ "lines": lines })))
 }
 
+/// How many device ids a "no device" answer lists before it points to the listing.
+const KNOWN_LISTED: usize = 20;
+
+/// A 404 for `id` (cut to [`MAX_NAME`](crate::write::MAX_NAME) bytes) with the first
+/// [`KNOWN_LISTED`] devices: a cell of thousands answers a typo in a line, not in 50 kB.
 fn unknown_device(cell: &Cell, id: &str) -> ApiError {
-    let known: Vec<String> = cell.device_entries().map(|d| d.id.to_string()).collect();
+    let total = cell.device_entries().count();
+    let first: Vec<String> = cell
+        .device_entries()
+        .take(KNOWN_LISTED)
+        .map(|d| d.id.to_string())
+        .collect();
+    let known = match total {
+        0 => "none".to_owned(),
+        n if n <= KNOWN_LISTED => first.join(", "),
+        n => format!(
+            "{}, … ({n} in all; GET /api/devices?fields=line lists them)",
+            first.join(", ")
+        ),
+    };
     ApiError::not_found(format!(
-        "no device {id:?}; devices: {}",
-        if known.is_empty() {
-            "none".to_owned()
-        } else {
-            known.join(", ")
-        }
+        "no device {:?}; devices: {known}",
+        crate::write::cut(id, crate::write::MAX_NAME)
     ))
 }
 

@@ -238,12 +238,36 @@ async fn devices_can_be_filtered_by_line_and_id_cut_to_fields_and_paged() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn an_unknown_device_in_a_large_cell_lists_the_first_twenty_and_the_count() {
+    let rig = rig(25);
+    let app = app(&rig, false);
+    let (status, body) = get(&app, "/api/devices/nope").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    // In the order of the listing (by id, as text).
+    let mut ids: Vec<String> = (1..=25).map(|n| format!("jbc{n}")).collect();
+    ids.sort();
+    let first = &ids[..20];
+    assert_eq!(
+        error_of(&body),
+        format!(
+            "no device \"nope\"; devices: {}, … (25 in all; GET /api/devices?fields=line lists \
+             them)",
+            first.join(", ")
+        )
+    );
+}
+
+#[tokio::test(start_paused = true)]
 async fn unknown_ids_and_routes_are_404_with_json_that_says_what_exists() {
     let rig = rig(1);
     let app = app(&rig, false);
     let (status, body) = get(&app, "/api/devices/nope").await;
     assert_eq!(status, StatusCode::NOT_FOUND);
     assert_eq!(error_of(&body), "no device \"nope\"; devices: jbc1");
+    // A long id is cut in the answer.
+    let (status, body) = get(&app, &format!("/api/devices/{}", "x".repeat(5000))).await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    assert!(error_of(&body).len() < 200, "{body}");
     let (status, body) = get(&app, "/api/nothing").await;
     assert_eq!(status, StatusCode::NOT_FOUND);
     assert!(error_of(&body).contains("/api/openapi.json"));
