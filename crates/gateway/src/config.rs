@@ -401,6 +401,10 @@ fn plain_toml_message(message: &str) -> String {
         )
 }
 
+/// Device ids the gateway's own objects use: the OPC UA node ids of the `Cell` folder and
+/// the `Gateway` object, and the source of the gateway's own events.
+pub const RESERVED_DEVICE_IDS: [&str; 2] = ["cell", "gateway"];
+
 /// Checks configuration text; `path` names it in errors.
 pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> {
     let at = |span: Range<usize>, message: String| locate(text, path, span, message);
@@ -843,6 +847,16 @@ fn check_device(
             format!("device id {:?} is not valid: {}", raw.id.get_ref(), e.rule),
         )
     })?;
+    if RESERVED_DEVICE_IDS.contains(&id.as_str()) {
+        return Err(at(
+            raw.id.span(),
+            format!(
+                "device id {:?} is taken by the gateway's own objects (the OPC UA server's \
+                 Cell folder and Gateway object, the gateway's events); choose another",
+                id.as_str()
+            ),
+        ));
+    }
     let address = match &raw.address {
         None => protocol.default_address(),
         Some(spanned) => match spanned.get_ref() {
@@ -3183,6 +3197,14 @@ type = "string:4"
              9223372036854775807",
         );
         assert_eq!(plain_toml_message("expected a table\n"), "expected a table");
+    }
+
+    #[test]
+    fn device_ids_the_gateways_own_objects_use_are_refused() {
+        for id in RESERVED_DEVICE_IDS {
+            let text = ONE.replace("id = \"jbc1\"", &format!("id = \"{id}\""));
+            refused(&text, 7, 6, "is taken by the gateway's own objects");
+        }
     }
 
     #[test]

@@ -376,6 +376,39 @@ async def write(url, addr, data_dir, password):
         except ua.UaStatusCodeError as e:
             assert e.code == ua.StatusCodes.BadOutOfRange, e
         ok(f"{too_high} for {p['id']} was refused: BadOutOfRange")
+        # A Bad status or a timestamp in the written value: refused, never dropped on the way.
+        within = float(p["writable"]["min"])
+        for extra in [
+            {"StatusCode": ua.StatusCode(ua.StatusCodes.BadInternalError)},
+            {"SourceTimestamp": datetime.now(timezone.utc)},
+        ]:
+            try:
+                await node.write_value(ua.DataValue(ua.Variant(within, ua.VariantType.Double), **extra))
+                raise AssertionError(f"a write with {extra} was accepted")
+            except ua.UaStatusCodeError as e:
+                assert e.code == ua.StatusCodes.BadWriteNotSupported, e
+        ok(f"a value with a Bad status or a timestamp for {p['id']} was refused: BadWriteNotSupported")
+        # Text for a number: refused, and the audit names the point and the text as given.
+        try:
+            await node.write_value(ua.DataValue(ua.Variant("on", ua.VariantType.String)))
+            raise AssertionError("text for a number was accepted")
+        except ua.UaStatusCodeError as e:
+            assert e.code == ua.StatusCodes.BadTypeMismatch, e
+        row = http(addr, f"/api/audit?device={d['id']}")["audit"][0]
+        assert (row["point"], row["new_value"], row["result"]) == (p["id"], "on", "refused"), row
+        ok(f"text for {p['id']} was refused (BadTypeMismatch) and audited as {row['new_value']!r}")
+        # A Float as typed: 1.23 is 1.2300000190734863 as a double, yet meant as 1.23.
+        stepped = [
+            (dd, pp) for dd in devices for pp in dd["points"]
+            if dd["status"] == "up" and pp["writable"] and pp["writable"].get("step") == 0.01
+            and pp["writable"]["min"] + 0.23 <= pp["writable"]["max"]
+        ]
+        if stepped:
+            dd, pp = stepped[0]
+            target = tree[dd["id"]][1][pp["id"].split(".", 1)[1]]
+            typed = round(pp["writable"]["min"] + 0.23, 2)
+            await target.write_value(ua.DataValue(ua.Variant(typed, ua.VariantType.Float)))
+            ok(f"the Float {typed} was written to {pp['id']} (step 0.01)")
         device_node = await node.get_parent()
         on_device = await subscribe_events(client, device_node)
         on_server = await subscribe_events(client, client.nodes.server)
@@ -431,6 +464,38 @@ async def write(url, addr, data_dir, password):
         for t, avg in theirs.items():
             assert abs(averages[t] - avg) < 1e-9, (t, averages[t], avg)
         ok(f"HistoryRead Average gives the {len(theirs)} buckets of /api/history")
+        # Several nodes in one processed read, each with its own aggregate.
+        aggregate = {
+            name: ua.NodeId(getattr(ua.ObjectIds, f"AggregateFunction_{name}"))
+            for name in ("Average", "Minimum", "Maximum")
+        }
+
+        async def read_processed(nodes, names):
+            details = ua.ReadProcessedDetails()
+            details.StartTime, details.EndTime, details.ProcessingInterval = start, end, step
+            details.AggregateType = [aggregate[n] for n in names]
+            params = ua.HistoryReadParameters()
+            params.HistoryReadDetails = details
+            params.TimestampsToReturn = ua.TimestampsToReturn.Both
+            params.ReleaseContinuationPoints = False  # asyncua's default is True: no data
+            params.NodesToRead = [ua.HistoryReadValueId(NodeId=n.nodeid, IndexRange="") for n in nodes]
+            return await client.uaclient.history_read(params)
+
+        def good(result):
+            return {source_ms(v): v.Value.Value for v in result.HistoryData.DataValues if v.StatusCode.is_good()}
+
+        low, high = await read_processed([node, node], ["Minimum", "Maximum"])
+        assert low.StatusCode.is_good() and high.StatusCode.is_good(), (low.StatusCode, high.StatusCode)
+        assert good(low) == {ms(b["t"]): b["min"] for b in h["buckets"]}, (good(low), h["buckets"])
+        assert good(high) == {ms(b["t"]): b["max"] for b in h["buckets"]}, (good(high), h["buckets"])
+        ok("one processed read gives each node its own aggregate (Minimum, Maximum)")
+        # A node the server answers itself (no history) ahead of them: the aggregates'
+        # places cannot be known, so the cell's nodes are refused, never given another's.
+        status_node = tree[d["id"]][1]["Status"]
+        first, low, high = await read_processed([status_node, node, node], ["Average", "Minimum", "Maximum"])
+        for result in (low, high):
+            assert result.StatusCode.value == ua.StatusCodes.BadAggregateInvalidInputs, result.StatusCode
+        ok(f"with a node not historized first and aggregates that differ: {first.StatusCode.name}, then refused")
 
 
 async def read_pages(node, start, end, per_call, bounds):

@@ -228,8 +228,13 @@ impl Aggregate {
 }
 
 /// The interval as a step, if it is at least a millisecond and makes at most
-/// [`MAX_INTERVALS`] intervals in `range`.
+/// [`MAX_INTERVALS`] intervals in `range`; an interval of 0 is the whole range, one
+/// interval (OPC UA Part 13, 5.1.3: "If the ProcessingInterval is 0 … one interval").
 pub fn check_interval(range: TimeRange, interval: Duration) -> Option<Duration> {
+    if interval.is_zero() {
+        let whole = u64::try_from(range.to.0 - range.from.0).unwrap_or(0).max(1);
+        return Some(Duration::from_millis(whole));
+    }
     let step = duration_millis(interval);
     (step > 0 && (range.to.0 - range.from.0) / step < MAX_INTERVALS).then_some(interval)
 }
@@ -566,14 +571,26 @@ mod tests {
     }
 
     #[test]
-    fn too_many_or_empty_intervals_are_refused() {
+    fn too_many_or_empty_intervals_are_refused_and_an_interval_of_0_is_the_whole_range() {
         let range = TimeRange {
             from: Timestamp(0),
             to: Timestamp(100_000_000),
             reverse: false,
         };
         assert_eq!(check_interval(range, Duration::from_millis(1)), None);
-        assert_eq!(check_interval(range, Duration::ZERO), None);
+        assert_eq!(check_interval(range, Duration::from_micros(500)), None);
         assert!(check_interval(range, Duration::from_secs(60)).is_some());
+        assert_eq!(
+            check_interval(range, Duration::ZERO),
+            Some(Duration::from_millis(100_000_000))
+        );
+        let stored = history(vec![
+            (10, Some(10.0), Quality::Good),
+            (50_000_000, Some(30.0), Quality::Good),
+        ]);
+        let whole = check_interval(range, Duration::ZERO).unwrap();
+        let average = processed(&stored, range, whole, Aggregate::Average);
+        assert_eq!(average.len(), 1);
+        assert_eq!(average[0].value, Some(Variant::Double(20.0)));
     }
 }

@@ -242,6 +242,9 @@ fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerB
         .host(config.host.clone())
         .port(config.port)
         .discovery_urls(vec![url.to_owned()])
+        // async-opcua's default of 20 let 20 anonymous readers lock out everyone else,
+        // the operator included (sessions are counted before anyone says who they are).
+        .max_sessions(MAX_SESSIONS)
         // For the session and subscription counts of /healthz and /metrics.
         .diagnostics_enabled(true)
         .with_authenticator(Arc::new(users));
@@ -306,9 +309,43 @@ fn opc_security(security: &OpcuaSecurity) -> (SecurityPolicy, MessageSecurityMod
     (policy, mode)
 }
 
+/// Sessions at once (of every client, anonymous or not).
+pub const MAX_SESSIONS: usize = 100;
+
+/// Makes the private key's folder and files readable by this user only (on every start:
+/// a key made by an earlier version, under a umask of 022, was readable by all).
+#[cfg(unix)]
+fn keep_private(private: &Path) -> anyhow::Result<()> {
+    use std::os::unix::fs::PermissionsExt;
+    let set = |path: &Path, mode: u32| {
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode))
+            .map_err(|e| anyhow::anyhow!("cannot make {} private: {e}", path.display()))
+    };
+    set(private, 0o700)?;
+    for entry in std::fs::read_dir(private)
+        .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", private.display()))?
+        .flatten()
+    {
+        if entry.file_type().is_ok_and(|t| t.is_file()) {
+            set(&entry.path(), 0o600)?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(not(unix))]
+fn keep_private(_private: &Path) -> anyhow::Result<()> {
+    Ok(())
+}
+
 /// Makes the self-signed application certificate and its key on first start, and the
-/// trusted and rejected folders.
+/// trusted and rejected folders; the key is readable by this user only.
 fn ensure_certificate(pki: &Path, config: &OpcuaConfig) -> anyhow::Result<()> {
+    ensure_keypair(pki, config)?;
+    keep_private(&pki.join("private"))
+}
+
+fn ensure_keypair(pki: &Path, config: &OpcuaConfig) -> anyhow::Result<()> {
     let store = CertificateStore::new(pki);
     store.ensure_pki_path().map_err(|e| {
         anyhow::anyhow!(
@@ -463,5 +500,31 @@ fn set_values(
     );
     if let Err(status) = result {
         tracing::warn!("an OPC UA value was not set: {status}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn the_private_key_is_readable_by_this_user_only_even_when_an_older_start_left_it_open() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let pki = dir.path().join("pki");
+        let config = OpcuaConfig::at("127.0.0.1", 4840);
+        ensure_certificate(&pki, &config).unwrap();
+        let private = pki.join("private");
+        let mode = |path: &Path| std::fs::metadata(path).unwrap().permissions().mode() & 0o777;
+        let key = private.join("private.pem");
+        assert_eq!(mode(&private), 0o700);
+        assert_eq!(mode(&key), 0o600);
+        // As an earlier version left it: the next start closes it again.
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o644)).unwrap();
+        std::fs::set_permissions(&private, std::fs::Permissions::from_mode(0o755)).unwrap();
+        ensure_certificate(&pki, &config).unwrap();
+        assert_eq!(mode(&private), 0o700);
+        assert_eq!(mode(&key), 0o600);
     }
 }

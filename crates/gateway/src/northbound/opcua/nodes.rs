@@ -503,11 +503,27 @@ impl InMemoryNodeManagerImpl for CellNodes {
     ) -> Result<(), StatusCode> {
         let range =
             history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now());
-        let interval = Duration::from_secs_f64((details.processing_interval / 1000.0).max(0.0));
+        let milliseconds = details.processing_interval;
+        let interval = (milliseconds.is_finite() && milliseconds >= 0.0)
+            .then(|| Duration::try_from_secs_f64(milliseconds / 1000.0).ok())
+            .flatten();
         let aggregates = details.aggregate_type.clone().unwrap_or_default();
-        for (i, node) in nodes.iter_mut().enumerate() {
-            let Some(aggregate) = aggregates.get(i).and_then(Aggregate::of) else {
+        let chosen = match aggregates_of(&aggregates, nodes.len()) {
+            Ok(chosen) => chosen,
+            Err(status) => {
+                for node in nodes.iter_mut() {
+                    node.set_status(status);
+                }
+                return Ok(());
+            }
+        };
+        for (node, aggregate) in nodes.iter_mut().zip(chosen) {
+            let Some(aggregate) = aggregate.and_then(Aggregate::of) else {
                 node.set_status(StatusCode::BadAggregateNotSupported);
+                continue;
+            };
+            let Some(interval) = interval else {
+                node.set_status(StatusCode::BadAggregateInvalidInputs);
                 continue;
             };
             let Some((point, kind)) = self.point_of(node.node_id()) else {
@@ -534,6 +550,25 @@ impl InMemoryNodeManagerImpl for CellNodes {
             }
         }
         Ok(())
+    }
+}
+
+/// The aggregate of each of the `count` nodes of a processed read handed to this manager.
+/// async-opcua hands a node manager only the nodes it owns that passed its own checks,
+/// without their places in the request, so the `i`-th aggregate belongs to the `i`-th
+/// node only when every node came (as many as aggregates). Otherwise the aggregates are
+/// known only when they are all the same; when they differ, the nodes are refused
+/// (`Bad_AggregateInvalidInputs`) rather than given another node's aggregate.
+fn aggregates_of(aggregates: &[NodeId], count: usize) -> Result<Vec<Option<&NodeId>>, StatusCode> {
+    if aggregates.len() < count {
+        return Err(StatusCode::BadAggregateListMismatch);
+    }
+    if aggregates.len() == count {
+        return Ok(aggregates.iter().map(Some).collect());
+    }
+    match aggregates.split_first() {
+        Some((first, rest)) if rest.iter().all(|a| a == first) => Ok(vec![Some(first); count]),
+        _ => Err(StatusCode::BadAggregateInvalidInputs),
     }
 }
 
@@ -639,20 +674,37 @@ impl CellNodes {
             return StatusCode::BadIndexRangeInvalid;
         }
         let given = write.value.value.clone().unwrap_or(Variant::Empty);
-        let Some((value, json)) = space::written_value(&kind, &given) else {
+        let refuse = |words: String| {
             let attempt = Attempt::new(
                 Arc::clone(&self.cell),
                 client,
                 point.device(),
-                point.name(),
-                serde_json::Value::String(format!("{given:?}")),
+                point.to_string(),
+                space::variant_json(&given),
             );
-            let words = format!(
-                "{point} takes {:?}, not {:?}",
+            async move { attempt.refuse(&words, None).await }
+        };
+        // The gateway writes values only: a status other than Good, or a time, that the
+        // client sets would be dropped on the way (a Bad value must never reach a device as
+        // a good one). OPC UA Part 4, 5.10.4: Bad_WriteNotSupported.
+        let value = &write.value;
+        if value.status.is_some_and(|s| !s.is_good())
+            || value.source_timestamp.is_some()
+            || value.server_timestamp.is_some()
+        {
+            refuse(format!(
+                "{point}: a write carries a value only, not a status (other than Good) or timestamps"
+            ))
+            .await;
+            return StatusCode::BadWriteNotSupported;
+        }
+        let Some((value, json)) = space::written_value(&kind, &given) else {
+            refuse(format!(
+                "{point} takes {:?}, not {}",
                 space::data_type(&kind),
-                given.scalar_type_id()
-            );
-            attempt.refuse(&words, None).await;
+                space::variant_kind(&given)
+            ))
+            .await;
             return StatusCode::BadTypeMismatch;
         };
         let attempt = Attempt::new(

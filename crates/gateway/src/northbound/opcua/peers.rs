@@ -27,6 +27,12 @@ const CHANNEL_HEADER_LEN: usize = 12;
 const SNIFF_LIMIT: u64 = 1 << 20;
 /// The relay's buffer per direction.
 const RELAY_BUFFER: usize = 64 * 1024;
+/// Client connections relayed at once; more are closed as they come (each costs three
+/// sockets and two buffers until the server's hello timeout ends it: a flood of idle
+/// connections must not exhaust the process's memory or file descriptors).
+pub const MAX_CONNECTIONS: usize = 256;
+/// How often a refused connection is logged at most.
+const REFUSED_LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// The clients' addresses by secure channel id, and the open connections.
 #[derive(Debug, Default)]
@@ -178,6 +184,9 @@ pub async fn relay(
     peers: std::sync::Arc<Peers>,
     mut stop: watch::Receiver<bool>,
 ) {
+    let slots = std::sync::Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
+    let mut refused = 0_u64;
+    let mut last_log: Option<tokio::time::Instant> = None;
     loop {
         let accepted = tokio::select! {
             accepted = listener.accept() => accepted,
@@ -185,8 +194,23 @@ pub async fn relay(
         };
         match accepted {
             Ok((client, address)) => {
+                let Ok(slot) = std::sync::Arc::clone(&slots).try_acquire_owned() else {
+                    drop(client);
+                    refused += 1;
+                    let now = tokio::time::Instant::now();
+                    if last_log.is_none_or(|t| now >= t + REFUSED_LOG_EVERY) {
+                        tracing::warn!(
+                            "OPC UA: {MAX_CONNECTIONS} client connections are open; closed \
+                             {refused} more since the last report (the latest from {address})"
+                        );
+                        refused = 0;
+                        last_log = Some(now);
+                    }
+                    continue;
+                };
                 let peers = std::sync::Arc::clone(&peers);
                 tokio::spawn(async move {
+                    let _slot = slot;
                     peers.connections.fetch_add(1, Ordering::Relaxed);
                     let channel = relay_one(client, address, server, &peers).await;
                     peers.connections.fetch_sub(1, Ordering::Relaxed);
@@ -268,6 +292,73 @@ mod tests {
         bytes.extend(message(b"OPN", &open));
         bytes.extend(message(b"MSG", &[1, 0, 0, 0, 9, 9]));
         bytes
+    }
+
+    #[tokio::test]
+    async fn connections_beyond_the_cap_are_closed_and_a_slot_freed_is_taken_again() {
+        let server = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let server_addr = server.local_addr().unwrap();
+        // The server side accepts and holds every connection, as a server waiting for a
+        // Hello does.
+        let held = tokio::spawn(async move {
+            let mut held = Vec::new();
+            while let Ok((socket, _)) = server.accept().await {
+                held.push(socket);
+            }
+        });
+        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let peers = std::sync::Arc::new(Peers::default());
+        let (stop, stopped) = watch::channel(false);
+        tokio::spawn(relay(
+            listener,
+            server_addr,
+            std::sync::Arc::clone(&peers),
+            stopped,
+        ));
+        let mut open = Vec::new();
+        for _ in 0..MAX_CONNECTIONS {
+            open.push(TcpStream::connect(addr).await.unwrap());
+        }
+        let relayed = tokio::time::timeout(std::time::Duration::from_secs(60), async {
+            while peers.connections() < MAX_CONNECTIONS as u64 {
+                tokio::task::yield_now().await;
+            }
+        });
+        relayed
+            .await
+            .expect("every connection up to the cap is relayed");
+        // One more is closed at once: its read ends.
+        let closed_at_once = |mut extra: TcpStream| async move {
+            let mut byte = [0u8; 1];
+            tokio::time::timeout(std::time::Duration::from_secs(60), extra.read(&mut byte))
+                .await
+                .expect("closed, not held")
+                .map_or(true, |n| n == 0)
+        };
+        let extra = TcpStream::connect(addr).await.unwrap();
+        assert!(closed_at_once(extra).await);
+        // A client leaves; the next one is relayed.
+        drop(open.pop());
+        let freed = tokio::time::timeout(std::time::Duration::from_secs(60), async {
+            while peers.connections() == MAX_CONNECTIONS as u64 {
+                tokio::task::yield_now().await;
+            }
+        });
+        freed.await.expect("the slot is freed");
+        let mut next = TcpStream::connect(addr).await.unwrap();
+        next.write_all(b"HEL").await.unwrap();
+        let waited = tokio::time::timeout(
+            std::time::Duration::from_millis(200),
+            next.read(&mut [0u8; 1]),
+        )
+        .await;
+        assert!(
+            waited.is_err(),
+            "relayed and waiting for the server, not closed"
+        );
+        stop.send(true).unwrap();
+        held.abort();
     }
 
     #[test]

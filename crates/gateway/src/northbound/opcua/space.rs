@@ -175,7 +175,10 @@ pub fn written_value(kind: &PointKind, variant: &Variant) -> Option<(Value, serd
         (PointKind::Text, _) => None,
         (PointKind::Numeric | PointKind::Enum { .. }, v) => match v {
             Variant::Double(n) => number(*n),
-            Variant::Float(n) => number(f64::from(*n)),
+            // As the client typed it: 1.23 as a Float is 1.2300000190734863 as a Double,
+            // which a point of step 0.01 would refuse. The shortest text of the Float
+            // reads back as the number meant.
+            Variant::Float(n) => number(n.to_string().parse().unwrap_or(f64::from(*n))),
             Variant::Int32(n) => number(f64::from(*n)),
             Variant::Int16(n) => number(f64::from(*n)),
             Variant::UInt16(n) => number(f64::from(*n)),
@@ -186,6 +189,31 @@ pub fn written_value(kind: &PointKind, variant: &Variant) -> Option<(Value, serd
             Variant::UInt64(n) => number(*n as f64),
             _ => None,
         },
+    }
+}
+
+/// A written value as the audit log shows it: text, a number, true/false, `null` for no
+/// value, else its OPC UA text.
+pub fn variant_json(variant: &Variant) -> serde_json::Value {
+    match variant {
+        Variant::Empty => serde_json::Value::Null,
+        Variant::Boolean(b) => serde_json::json!(b),
+        Variant::String(s) => serde_json::json!(s.as_ref()),
+        other => match written_value(&PointKind::Numeric, other) {
+            Some((_, number)) => number,
+            None => serde_json::json!(other.to_string()),
+        },
+    }
+}
+
+/// What a written value is, in a refusal: `String`, `an array`, `no value`.
+pub fn variant_kind(variant: &Variant) -> String {
+    match variant {
+        Variant::Empty => "no value".to_owned(),
+        Variant::Array(_) => "an array".to_owned(),
+        other => other
+            .scalar_type_id()
+            .map_or_else(|| "another type".to_owned(), |t| format!("{t:?}")),
     }
 }
 
