@@ -220,8 +220,10 @@ const MAX_CLIENT_ID: usize = 65_535;
 
 /// Reads `mqtt://host[:port]` (port 1883 by default) or `mqtts://host[:port]` (TLS, port
 /// 8883 by default).
-pub fn parse_broker(text: &str) -> Result<Broker, String> {
-    let url = url::Url::parse(text.trim())
+pub fn parse_broker(given: &str) -> Result<Broker, String> {
+    // Errors show the URL without its user name and password.
+    let text = &hide_userinfo(given);
+    let url = url::Url::parse(given.trim())
         .map_err(|e| format!("broker {text:?} is not a URL ({e}); write mqtt://host:1883"))?;
     let (tls, default_port) = match url.scheme() {
         "mqtt" => (false, 1883),
@@ -252,6 +254,19 @@ pub fn parse_broker(text: &str) -> Result<Broker, String> {
         ));
     }
     Ok(Broker { host, port, tls })
+}
+
+/// `text` with what comes before an `@` in a URL's authority (a user name and a password)
+/// shown as `(hidden)`.
+fn hide_userinfo(text: &str) -> String {
+    let Some((scheme, rest)) = text.split_once("://") else {
+        return text.to_owned();
+    };
+    let end = rest.find(['/', '?', '#']).unwrap_or(rest.len());
+    match rest[..end].rfind('@') {
+        Some(at) => format!("{scheme}://(hidden){}", &rest[at..]),
+        None => text.to_owned(),
+    }
 }
 
 /// This machine's host name as a Sparkplug id, else `cellbus`.
@@ -1497,6 +1512,9 @@ fn hide_secret(line: &str) -> String {
         .any(|word| name.contains(word))
     {
         format!("{key}= \"(hidden)\"")
+    } else if let Some((key, value)) = line.split_once('=') {
+        // A URL's user name and password (`broker = "mqtt://user:pw@host"`).
+        format!("{key}={}", hide_userinfo(value))
     } else {
         line.to_owned()
     }
@@ -3205,6 +3223,20 @@ type = "string:4"
             let text = ONE.replace("id = \"jbc1\"", &format!("id = \"{id}\""));
             refused(&text, 7, 6, "is taken by the gateway's own objects");
         }
+    }
+
+    #[test]
+    fn a_broker_url_with_a_user_and_password_is_refused_without_showing_them() {
+        let err = parse_broker("mqtt://user:pw@127.0.0.1:1883").unwrap_err();
+        assert!(!err.contains("pw") && !err.contains("user:"), "{err}");
+        assert!(err.contains("mqtt://(hidden)@127.0.0.1:1883"), "{err}");
+        let text = format!("[mqtt]\nbroker = \"mqtt://user:pw@127.0.0.1:1883\"\n{ONE}");
+        let shown = parse(&text).unwrap_err().to_string();
+        assert!(!shown.contains("pw"), "{shown}");
+        assert_eq!(
+            hide_userinfo("mqtt://host:1883/a@b"),
+            "mqtt://host:1883/a@b"
+        );
     }
 
     #[test]

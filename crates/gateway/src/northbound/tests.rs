@@ -350,6 +350,104 @@ async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
     node.stop().await;
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_never() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(1);
+    let read = || {
+        let device = rig.cell.device("jbc1").unwrap();
+        device
+            .points
+            .iter()
+            .any(|p| p.writable.is_some() && p.view.value.is_some())
+    };
+    tokio::time::timeout(LIMIT, async {
+        while !read() {
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    })
+    .await
+    .expect("jbc1 read");
+    let (name, old, _) = writable_number(&rig);
+    let topic = "spBv1.0/rig/DCMD/cell/jbc1";
+    let command = |value: f64| {
+        testkit::command_payload(
+            &name,
+            sparkplug::DataType::Double,
+            SpValue::DoubleValue(value),
+        )
+    };
+    // A command kept by the broker from before the node's session: delivered as retained
+    // when the node subscribes, and refused.
+    let stale = old + 7.0;
+    sub.publish_retained(topic, command(stale)).await;
+    let config = MqttConfig {
+        commands: true,
+        ..config(&broker)
+    };
+    let node = Node::start(&rig, config, true);
+    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
+        .await;
+    // Five commands, one right after the other: carried out in that order.
+    let values: Vec<f64> = (1..=5).map(|k| old + f64::from(k)).collect();
+    for &value in &values {
+        sub.publish(topic, command(value)).await;
+    }
+    let last = *values.last().unwrap();
+    tokio::time::timeout(LIMIT, async {
+        loop {
+            let accepted = rig.cell.store().audit_log(None, 50).unwrap();
+            if accepted.iter().filter(|a| a.result == "accepted").count() == values.len() {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    })
+    .await
+    .expect("five writes accepted");
+    let audit = rig.cell.store().audit_log(None, 50).unwrap();
+    let accepted: Vec<&serde_json::Value> = audit
+        .iter()
+        .rev()
+        .filter(|a| a.result == "accepted")
+        .map(|a| &a.new_value)
+        .collect();
+    let expected: Vec<serde_json::Value> = values.iter().map(|v| serde_json::json!(v)).collect();
+    assert_eq!(accepted, expected.iter().collect::<Vec<_>>(), "{audit:#?}");
+    // The device holds the last value (the cell shows it from the next read on).
+    let shown = || {
+        let device = rig.cell.device("jbc1").unwrap();
+        device
+            .points
+            .iter()
+            .find(|p| p.view.id.name() == name)
+            .and_then(|p| p.view.value.clone())
+    };
+    tokio::time::timeout(LIMIT, async {
+        while shown() != Some(Value::Number(last)) {
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    })
+    .await
+    .unwrap_or_else(|_| panic!("jbc1.{name} shows {last}, not {:?}", shown()));
+    // The retained command: one refused row, never carried out.
+    let refused: Vec<_> = audit.iter().filter(|a| a.result == "refused").collect();
+    assert_eq!(refused.len(), 1, "{audit:#?}");
+    assert!(
+        refused[0].detail.contains("retained"),
+        "{}",
+        refused[0].detail
+    );
+    assert!(
+        !audit
+            .iter()
+            .any(|a| a.result == "accepted" && a.new_value == serde_json::json!(stale)),
+        "{audit:#?}"
+    );
+    node.stop().await;
+}
+
 /// The next event of `kind` on the cell's change stream.
 async fn next_event(
     live: &mut tokio::sync::broadcast::Receiver<crate::cell::LiveMessage>,

@@ -43,6 +43,11 @@ use crate::time::Timestamp;
 pub const RETRY_FIRST: Duration = Duration::from_millis(500);
 /// Longest wait between connection attempts.
 pub const RETRY_CAP: Duration = Duration::from_secs(30);
+/// A connection that lasted this long resets the wait to [`RETRY_FIRST`]; a shorter one
+/// doubles it like a failed attempt. A broker that ends every session at once (another
+/// client with the same client id takes it over, a retained message over the size limit)
+/// would otherwise be reconnected to, and sent births and stored history, twice a second.
+pub const STABLE_SESSION: Duration = Duration::from_secs(30);
 
 /// Requests queued for the MQTT client.
 const QUEUE: usize = 1024;
@@ -142,6 +147,9 @@ pub enum Step {
         topic: String,
         /// Its payload.
         payload: Vec<u8>,
+        /// Whether the broker delivered it as a retained message (published before this
+        /// session's subscription).
+        retain: bool,
     },
     /// From the change stream.
     Live(Result<LiveMessage, broadcast::error::RecvError>),
@@ -203,11 +211,11 @@ impl Link {
                 connected: false,
                 connections: &mut connections,
             };
+            let started = tokio::time::Instant::now();
             let end = mode.serve(&mut conn, &mut live).await;
             let connected = conn.connected;
-            if connected {
-                retry = RETRY_FIRST;
-            }
+            let lasted = started.elapsed();
+            retry = first_wait(retry, connected, lasted);
             match end {
                 End::Stop => {
                     if connected {
@@ -233,7 +241,21 @@ impl Link {
                     pump.abort();
                     delivery.lost();
                     mode.lost();
+                    let why = if connected && lasted < STABLE_SESSION {
+                        format!(
+                            "{why} ({:.1} s after connecting: is another client using the \
+                             client id {:?}, or a message over {} MiB waiting for it? next \
+                             attempt in {:.1} s)",
+                            lasted.as_secs_f64(),
+                            self.config.client_id,
+                            MAX_PACKET >> 20,
+                            retry.as_secs_f64()
+                        )
+                    } else {
+                        why
+                    };
                     if connected || was_connected {
+                        tracing::warn!("MQTT: {why}");
                         self.went_down(connected, why.clone());
                     }
                     self.cell.set_mqtt(MqttLink::Disconnected(why));
@@ -375,6 +397,7 @@ impl Connection<'_> {
                     return Ok(Step::Message {
                         topic: p.topic,
                         payload: p.payload.to_vec(),
+                        retain: p.retain,
                     });
                 }
                 Some(Pumped::Event(MqttEvent::Incoming(Packet::PingResp))) => {
@@ -504,5 +527,39 @@ async fn pump(mut eventloop: EventLoop, events: mpsc::UnboundedSender<Pumped>) {
         if events.send(report).is_err() {
             return;
         }
+    }
+}
+
+/// The wait before the next connection attempt, given the wait so far and how the last
+/// connection went: back to [`RETRY_FIRST`] after a session that lasted
+/// [`STABLE_SESSION`], else the wait so far (it doubles after the wait, up to
+/// [`RETRY_CAP`]), so sessions the broker ends at once are not retried twice a second.
+fn first_wait(retry: Duration, connected: bool, lasted: Duration) -> Duration {
+    if connected && lasted >= STABLE_SESSION {
+        RETRY_FIRST
+    } else {
+        retry
+    }
+}
+
+#[cfg(test)]
+mod retry_tests {
+    use super::*;
+
+    #[test]
+    fn only_a_session_that_lasted_resets_the_wait_so_short_ones_back_off_like_failures() {
+        let waited = Duration::from_secs(8);
+        assert_eq!(first_wait(waited, true, STABLE_SESSION), RETRY_FIRST);
+        assert_eq!(first_wait(waited, true, Duration::from_millis(400)), waited);
+        assert_eq!(first_wait(waited, false, Duration::from_secs(3600)), waited);
+        // Sessions taken over at once, one after the other: 0.5, 1, 2, 4 … 30 s apart.
+        let mut retry = RETRY_FIRST;
+        let mut waits = Vec::new();
+        for _ in 0..8 {
+            retry = first_wait(retry, true, Duration::from_millis(100));
+            waits.push(retry.as_secs_f64());
+            retry = (retry * 2).min(RETRY_CAP);
+        }
+        assert_eq!(waits, [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 30.0, 30.0]);
     }
 }

@@ -33,7 +33,7 @@ use sparkplug::{
     BdSeq, Command, DataType, Delivery, EdgeNode, HostState, Id, MessageKind, MetricName,
     MetricSpec, MetricValue, NodeEvent, Publish, Qos, Sample, Topic,
 };
-use tokio::sync::broadcast;
+use tokio::sync::{broadcast, mpsc};
 
 use super::forward::Backlog;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
@@ -82,6 +82,38 @@ pub struct Node {
     keep_alive: Duration,
     /// Whether the stored `bdSeq` was read (before the first connection).
     bd_seq_read: bool,
+    /// The task that carries out DCMD writes in order, once the first came.
+    writer: Option<mpsc::Sender<Write>>,
+    /// When the last rebirth asked for was published.
+    last_rebirth: Option<tokio::time::Instant>,
+}
+
+/// DCMD writes waiting for the write task; more are refused (and audited).
+const WRITES_WAITING: usize = 256;
+
+/// Rebirth requests closer together than this get one birth cycle: each sends every
+/// metric of the node and its devices again.
+const REBIRTH_AT_MOST_EVERY: Duration = Duration::from_secs(2);
+
+/// One DCMD write, waiting for its turn.
+struct Write {
+    attempt: Attempt,
+    /// `None`: the metric's name is no point id.
+    point: Option<PointId>,
+    value: Value,
+}
+
+impl Write {
+    async fn carry_out(self) {
+        let Some(point) = self.point else {
+            self.attempt.refuse("no such point", None).await;
+            return;
+        };
+        match self.attempt.carry_out(point.clone(), self.value).await {
+            Ok(done) => tracing::info!("MQTT: {}", done.detail),
+            Err(e) => tracing::warn!("MQTT: DCMD write of {point} failed: {e}"),
+        }
+    }
 }
 
 impl Node {
@@ -111,6 +143,8 @@ impl Node {
             refused: Unauthorised::default(),
             keep_alive: config.keep_alive,
             bd_seq_read: false,
+            writer: None,
+            last_rebirth: None,
         })
     }
 }
@@ -158,9 +192,11 @@ impl Mode for Node {
             };
             let done = match step {
                 Step::Connected => self.on_connect(conn, live).await,
-                Step::Message { topic, payload } => {
-                    self.on_message(conn, live, &topic, &payload).await
-                }
+                Step::Message {
+                    topic,
+                    payload,
+                    retain,
+                } => self.on_message(conn, live, &topic, &payload, retain).await,
                 Step::Live(Ok(message)) => self.on_change(conn, live, message).await,
                 Step::Live(Err(broadcast::error::RecvError::Lagged(missed))) => {
                     tracing::warn!("MQTT: {missed} changes missed; publishing births again");
@@ -526,23 +562,49 @@ impl Node {
         live: &mut broadcast::Receiver<LiveMessage>,
         topic: &str,
         payload: &[u8],
+        retained: bool,
     ) -> Done {
         if let Some(host) = &self.primary_host
             && topic == (Topic::State { host: host.clone() }).to_string()
         {
             return self.on_host_state(conn, live, payload).await;
         }
+        // Sparkplug B 3.0 (6.4.18, 6.4.19): NCMD and DCMD are published with retain false.
+        // A retained one would be carried out again at every reconnection, after whatever
+        // an operator set since.
+        if retained {
+            self.audit_refused_command(
+                topic,
+                "a command the broker kept as retained (Sparkplug commands are never \
+                 retained): not carried out again",
+            )
+            .await;
+            return Ok(());
+        }
         let commands = match self.node.handle_command(topic, payload) {
             Ok(commands) => commands,
             Err(e) => {
-                tracing::warn!("MQTT: command on {topic} refused: {e}");
                 self.audit_refused_command(topic, &e.to_string()).await;
                 return Ok(());
             }
         };
+        if commands.is_empty() {
+            self.audit_refused_command(topic, "a command without metrics")
+                .await;
+            return Ok(());
+        }
         for command in commands {
             match command {
                 Command::Rebirth => {
+                    let now = tokio::time::Instant::now();
+                    if self
+                        .last_rebirth
+                        .is_some_and(|t| now < t + REBIRTH_AT_MOST_EVERY)
+                    {
+                        tracing::debug!("MQTT: rebirth on {topic} ignored: births just sent");
+                        continue;
+                    }
+                    self.last_rebirth = Some(now);
                     tracing::info!("MQTT: rebirth asked on {topic}");
                     let from = conn.catch_up_from();
                     self.birth_cycle(conn, live, from).await?;
@@ -593,7 +655,8 @@ impl Node {
         }
     }
 
-    /// Carries out a DCMD write in a task of its own (the audit records how it ended), or
+    /// Queues a DCMD write for the node's write task, which carries the writes out one
+    /// after the other in the order they came (the audit records how each ended), or
     /// refuses it when writes are off.
     fn on_write(
         &mut self,
@@ -637,20 +700,35 @@ impl Node {
         let point = DeviceId::new(device.as_str())
             .ok()
             .and_then(|d| PointId::new(&d, metric.as_str()).ok());
-        tokio::spawn(async move {
-            let Some(point) = point else {
-                attempt.refuse("no such point", None).await;
-                return;
-            };
-            match attempt.carry_out(point.clone(), value).await {
-                Ok(done) => tracing::info!("MQTT: {}", done.detail),
-                Err(e) => tracing::warn!("MQTT: DCMD write of {point} failed: {e}"),
-            }
+        let queue = self.writer.get_or_insert_with(|| {
+            let (queue, mut writes) = mpsc::channel::<Write>(WRITES_WAITING);
+            tokio::spawn(async move {
+                while let Some(write) = writes.recv().await {
+                    write.carry_out().await;
+                }
+            });
+            queue
         });
+        let write = Write {
+            attempt,
+            point,
+            value,
+        };
+        if let Err(refused) = queue.try_send(write) {
+            let write = match refused {
+                mpsc::error::TrySendError::Full(w) | mpsc::error::TrySendError::Closed(w) => w,
+            };
+            tokio::spawn(async move {
+                let why = format!("{WRITES_WAITING} commands are waiting already");
+                write.attempt.refuse(&why, None).await;
+            });
+        }
     }
 
-    /// A DCMD the node refused (a value of the wrong type or out of range, an unknown
-    /// metric): one audit row when writes are on, else counted like any refused write.
+    /// A command the node refused (a value of the wrong type or out of range, an unknown
+    /// metric, a retained or empty command): one audit row when writes are on, else
+    /// counted like any refused write; an NCMD's refusal is logged, at most once every
+    /// [`LOG_EVERY`].
     async fn audit_refused_command(&mut self, topic: &str, why: &str) {
         let Ok(Topic::Device {
             kind: MessageKind::Command,
@@ -658,8 +736,17 @@ impl Node {
             ..
         }) = topic.parse::<Topic>()
         else {
+            let now = tokio::time::Instant::now();
+            if let Some(count) = self.refused.refused(&self.cell, now) {
+                tracing::warn!(
+                    "refused {count} MQTT command(s) in the last {} s; the latest on {topic}: \
+                     {why}",
+                    LOG_EVERY.as_secs()
+                );
+            }
             return;
         };
+        tracing::debug!("MQTT: command on {topic} refused: {why}");
         if !self.writes {
             self.refuse(topic, &device, "(refused command)");
             return;
