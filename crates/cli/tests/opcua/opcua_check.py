@@ -542,6 +542,20 @@ async def check_paged_history(client, tree, addr, devices):
     assert [source_ms(v) for v in values] == theirs, (values, theirs)
     assert max(sizes) <= 2 and len(sizes) >= 2, sizes
     ok(f"HistoryRead raw with numValuesPerNode 2 gives the {len(values)} changes in {len(sizes)} calls")
+    # A continuation point is for its node only.
+    details = ua.ReadRawModifiedDetails()
+    details.IsReadModified = False
+    details.StartTime, details.EndTime = start, end
+    details.NumValuesPerNode, details.ReturnBounds = 2, False
+    first_page = await node.history_read(details)
+    assert first_page.ContinuationPoint, first_page
+    other = next(
+        child for name, child in tree[d["id"]][1].items()
+        if name not in ("Status", "Error") and child.nodeid != node.nodeid
+    )
+    elsewhere = await other.history_read(details, first_page.ContinuationPoint)
+    assert elsewhere.StatusCode.value == ua.StatusCodes.BadContinuationPointInvalid, elsewhere.StatusCode
+    ok("a continuation point sent with another node is refused: BadContinuationPointInvalid")
     # Bounds: from just after the first change to the last one, the first change is the
     # start bound and the last (at the end time) the end bound.
     first = datetime.fromtimestamp((theirs[0] + 1) / 1000, timezone.utc)

@@ -422,25 +422,26 @@ impl InMemoryNodeManagerImpl for CellNodes {
                 node.set_status(StatusCode::BadNodeIdUnknown);
                 continue;
             };
-            // A continuation point carries the read as the first call asked it.
+            // A continuation point carries the read as the first call asked it, and the
+            // point it was for: another node's is refused.
             let read = match node.continuation_point() {
                 None => asked.clone(),
-                Some(continued) => match continued.get::<RawRead>() {
-                    Some(read) => read.clone(),
-                    None => {
+                Some(continued) => match continued.get::<(PointId, RawRead)>() {
+                    Some((of, read)) if *of == point => read.clone(),
+                    _ => {
                         node.set_status(StatusCode::BadContinuationPointInvalid);
                         continue;
                     }
                 },
             };
-            match self.fetch_raw(point, &read).await {
+            match self.fetch_raw(point.clone(), &read).await {
                 Ok(fetched) => {
                     let (values, more) = read.page(&kind, fetched);
                     node.set_result(HistoryData {
                         data_values: Some(values),
                     });
                     node.set_next_continuation_point(
-                        more.map(|read| ContinuationPoint::new(Box::new(read))),
+                        more.map(|read| ContinuationPoint::new(Box::new((point.clone(), read)))),
                     );
                     node.set_status(StatusCode::Good);
                 }
