@@ -556,6 +556,20 @@ async def check_paged_history(client, tree, addr, devices):
     elsewhere = await other.history_read(details, first_page.ContinuationPoint)
     assert elsewhere.StatusCode.value == ua.StatusCodes.BadContinuationPointInvalid, elsewhere.StatusCode
     ok("a continuation point sent with another node is refused: BadContinuationPointInvalid")
+    # TimestampsToReturn: Server gives the server's times only; Neither is refused.
+    for which in (ua.TimestampsToReturn.Server, ua.TimestampsToReturn.Neither):
+        params = ua.HistoryReadParameters()
+        params.HistoryReadDetails = details
+        params.TimestampsToReturn = which
+        params.ReleaseContinuationPoints = False  # asyncua's default is True: no data
+        params.NodesToRead = [ua.HistoryReadValueId(NodeId=node.nodeid, IndexRange="")]
+        [result] = await client.uaclient.history_read(params)
+        if which == ua.TimestampsToReturn.Neither:
+            assert result.StatusCode.value == ua.StatusCodes.BadTimestampsToReturnInvalid, result.StatusCode
+        else:
+            page = result.HistoryData.DataValues
+            assert page and all(v.SourceTimestamp is None and v.ServerTimestamp for v in page), page
+    ok("HistoryRead honours TimestampsToReturn (Server: server times only; Neither: refused)")
     # Bounds: from just after the first change to the last one, the first change is the
     # start bound and the last (at the end time) the end bound.
     first = datetime.fromtimestamp((theirs[0] + 1) / 1000, timezone.utc)

@@ -15,7 +15,7 @@
 
 use std::time::Duration;
 
-use ::opcua::types::{DataValue, DateTime, NodeId, ObjectId, StatusCode, Variant};
+use ::opcua::types::{DataValue, DateTime, NodeId, ObjectId, StatusCode, TimestampsToReturn, Variant};
 
 use super::space::{gateway_time, opc_time, stored_data_value};
 use crate::point::{PointKind, Quality, Value};
@@ -237,6 +237,25 @@ pub fn check_interval(range: TimeRange, interval: Duration) -> Option<Duration> 
     }
     let step = duration_millis(interval);
     (step > 0 && (range.to.0 - range.from.0) / step < MAX_INTERVALS).then_some(interval)
+}
+
+/// `values` with the timestamps the client asked for (OPC UA Part 11, 6.4: `Source`, the
+/// device's time only; `Server`, the server's only; `Both`). `Neither` is refused before.
+pub fn with_timestamps(mut values: Vec<DataValue>, which: TimestampsToReturn) -> Vec<DataValue> {
+    for value in &mut values {
+        match which {
+            TimestampsToReturn::Source => {
+                value.server_timestamp = None;
+                value.server_picoseconds = None;
+            }
+            TimestampsToReturn::Server => {
+                value.source_timestamp = None;
+                value.source_picoseconds = None;
+            }
+            _ => {}
+        }
+    }
+    values
 }
 
 /// The aggregate of the good changes in each interval of `step` from the range's start.
@@ -532,6 +551,28 @@ mod tests {
         let calls = read_all(read, &stored);
         assert_eq!(times(&calls.concat()), [3_000, 1_000]);
         assert_eq!(calls.len(), 2);
+    }
+
+    #[test]
+    fn history_values_keep_only_the_timestamps_asked_for() {
+        let value = || DataValue {
+            value: Some(Variant::Double(1.0)),
+            source_timestamp: Some(opc_time(Timestamp(1_000))),
+            server_timestamp: Some(opc_time(Timestamp(2_000))),
+            ..DataValue::default()
+        };
+        let [source] = with_timestamps(vec![value()], TimestampsToReturn::Source)
+            .try_into()
+            .unwrap();
+        assert!(source.source_timestamp.is_some() && source.server_timestamp.is_none());
+        let [server] = with_timestamps(vec![value()], TimestampsToReturn::Server)
+            .try_into()
+            .unwrap();
+        assert!(server.source_timestamp.is_none() && server.server_timestamp.is_some());
+        let [both] = with_timestamps(vec![value()], TimestampsToReturn::Both)
+            .try_into()
+            .unwrap();
+        assert_eq!(both, value());
     }
 
     #[test]

@@ -407,10 +407,13 @@ impl InMemoryNodeManagerImpl for CellNodes {
         _context: &RequestContext,
         details: &ReadRawModifiedDetails,
         nodes: &mut [&mut &mut HistoryNode],
-        _timestamps: TimestampsToReturn,
+        timestamps: TimestampsToReturn,
     ) -> Result<(), StatusCode> {
         if details.is_read_modified {
             return Err(StatusCode::BadHistoryOperationUnsupported);
+        }
+        if timestamps == TimestampsToReturn::Neither {
+            return Err(StatusCode::BadTimestampsToReturnInvalid);
         }
         let asked = RawRead::new(
             history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now()),
@@ -438,7 +441,7 @@ impl InMemoryNodeManagerImpl for CellNodes {
                 Ok(fetched) => {
                     let (values, more) = read.page(&kind, fetched);
                     node.set_result(HistoryData {
-                        data_values: Some(values),
+                        data_values: Some(history::with_timestamps(values, timestamps)),
                     });
                     node.set_next_continuation_point(
                         more.map(|read| ContinuationPoint::new(Box::new((point.clone(), read)))),
@@ -500,8 +503,11 @@ impl InMemoryNodeManagerImpl for CellNodes {
         _context: &RequestContext,
         details: &ReadProcessedDetails,
         nodes: &mut [&mut &mut HistoryNode],
-        _timestamps: TimestampsToReturn,
+        timestamps: TimestampsToReturn,
     ) -> Result<(), StatusCode> {
+        if timestamps == TimestampsToReturn::Neither {
+            return Err(StatusCode::BadTimestampsToReturnInvalid);
+        }
         let range =
             history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now());
         let milliseconds = details.processing_interval;
@@ -543,7 +549,7 @@ impl InMemoryNodeManagerImpl for CellNodes {
                 Ok(stored) => {
                     let values = history::processed(&stored, range, step, aggregate);
                     node.set_result(HistoryData {
-                        data_values: Some(values),
+                        data_values: Some(history::with_timestamps(values, timestamps)),
                     });
                     node.set_status(StatusCode::Good);
                 }
