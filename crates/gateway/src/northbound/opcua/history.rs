@@ -15,7 +15,9 @@
 
 use std::time::Duration;
 
-use ::opcua::types::{DataValue, DateTime, NodeId, ObjectId, StatusCode, TimestampsToReturn, Variant};
+use ::opcua::types::{
+    DataValue, DateTime, NodeId, ObjectId, StatusCode, TimestampsToReturn, Variant,
+};
 
 use super::space::{gateway_time, opc_time, stored_data_value};
 use crate::point::{PointKind, Quality, Value};

@@ -178,6 +178,7 @@ pub async fn start(
             peers::relay(listener, inner_addr, peers, relay_stop).await;
         }
     });
+    let rejected = tokio::spawn(trim_rejected_every(pki.join("rejected"), stop.clone()));
     let cancel = handle.clone();
     let task = tokio::spawn(async move {
         let run = server.run_with(inner);
@@ -197,6 +198,7 @@ pub async fn start(
         }
         follow.abort();
         relay.abort();
+        rejected.abort();
     });
     // `run_with` records the loopback listener's port as the server's, and endpoint
     // descriptions (GetEndpoints, CreateSession) are built from it: put the clients' port
@@ -307,6 +309,56 @@ fn opc_security(security: &OpcuaSecurity) -> (SecurityPolicy, MessageSecurityMod
         OpcuaMode::SignAndEncrypt => MessageSecurityMode::SignAndEncrypt,
     };
     (policy, mode)
+}
+
+/// Certificates kept in `pki/rejected`: async-opcua files every unknown client
+/// certificate there, and anyone who reaches the port can send a new one each time.
+pub const REJECTED_KEPT: usize = 64;
+/// How often `pki/rejected` is cut back to [`REJECTED_KEPT`] files.
+const REJECTED_TRIM_EVERY: Duration = Duration::from_secs(60);
+
+/// Cuts `pki/rejected` back every [`REJECTED_TRIM_EVERY`] until `stop`.
+async fn trim_rejected_every(dir: std::path::PathBuf, mut stop: watch::Receiver<bool>) {
+    loop {
+        tokio::select! {
+            () = tokio::time::sleep(REJECTED_TRIM_EVERY) => {}
+            () = stopped(&mut stop) => return,
+        }
+        let dir = dir.clone();
+        match tokio::task::spawn_blocking(move || trim_rejected(&dir, REJECTED_KEPT)).await {
+            Ok(Ok(0)) | Err(_) => {}
+            Ok(Ok(n)) => tracing::warn!(
+                "OPC UA: deleted {n} rejected client certificate(s), the oldest, keeping the \
+                 newest {REJECTED_KEPT}"
+            ),
+            Ok(Err(e)) => tracing::warn!("OPC UA: cannot cut back pki/rejected: {e}"),
+        }
+    }
+}
+
+/// Deletes all but the `keep` newest files of `dir` (by modification time); returns how
+/// many went.
+fn trim_rejected(dir: &Path, keep: usize) -> std::io::Result<usize> {
+    let mut files: Vec<(std::time::SystemTime, std::path::PathBuf)> = std::fs::read_dir(dir)?
+        .flatten()
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+        .map(|e| {
+            let modified = e
+                .metadata()
+                .and_then(|m| m.modified())
+                .unwrap_or(std::time::SystemTime::UNIX_EPOCH);
+            (modified, e.path())
+        })
+        .collect();
+    if files.len() <= keep {
+        return Ok(0);
+    }
+    files.sort();
+    let old = files.len() - keep;
+    for (_, path) in &files[..old] {
+        std::fs::remove_file(path)?;
+    }
+    Ok(old)
 }
 
 /// Sessions at once (of every client, anonymous or not).
@@ -506,6 +558,26 @@ fn set_values(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rejected_certificates_are_cut_back_to_the_newest() {
+        let dir = tempfile::tempdir().unwrap();
+        let start = std::time::SystemTime::now() - Duration::from_secs(1000);
+        for n in 0..10_u64 {
+            let path = dir.path().join(format!("cert{n}.der"));
+            std::fs::write(&path, b"x").unwrap();
+            let file = std::fs::File::options().write(true).open(&path).unwrap();
+            file.set_modified(start + Duration::from_secs(n)).unwrap();
+        }
+        assert_eq!(trim_rejected(dir.path(), 4).unwrap(), 6);
+        let mut left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["cert6.der", "cert7.der", "cert8.der", "cert9.der"]);
+        assert_eq!(trim_rejected(dir.path(), 4).unwrap(), 0);
+    }
 
     #[cfg(unix)]
     #[test]
