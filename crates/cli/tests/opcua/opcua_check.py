@@ -397,6 +397,12 @@ async def write(url, addr, data_dir, password):
         row = http(addr, f"/api/audit?device={d['id']}")["audit"][0]
         assert (row["point"], row["new_value"], row["result"]) == (p["id"], "on", "refused"), row
         ok(f"text for {p['id']} was refused (BadTypeMismatch) and audited as {row['new_value']!r}")
+        try:
+            await client.get_node(f"ns={ns};s=nosuch.point").write_value(ua.DataValue(ua.Variant(1.0)))
+            raise AssertionError("a write to a node that does not exist was accepted")
+        except ua.UaStatusCodeError as e:
+            assert e.code == ua.StatusCodes.BadNodeIdUnknown, e
+        ok("a write to a node that does not exist: BadNodeIdUnknown")
         # A Float as typed: 1.23 is 1.2300000190734863 as a double, yet meant as 1.23.
         stepped = [
             (dd, pp) for dd in devices for pp in dd["points"]

@@ -243,9 +243,9 @@ impl Link {
                     mode.lost();
                     let why = if connected && lasted < STABLE_SESSION {
                         format!(
-                            "{why} ({:.1} s after connecting: is another client using the \
-                             client id {:?}, or a message over {} MiB waiting for it? next \
-                             attempt in {:.1} s)",
+                            "{why} (the session lasted {:.1} s; if that repeats, another \
+                             client may be using the client id {:?}, or a message over {} MiB \
+                             may be waiting for it; next attempt in {:.1} s)",
                             lasted.as_secs_f64(),
                             self.config.client_id,
                             MAX_PACKET >> 20,

@@ -391,12 +391,17 @@ impl InMemoryNodeManagerImpl for CellNodes {
     async fn write(
         &self,
         context: &RequestContext,
-        _space: &RwLock<AddressSpace>,
+        space: &RwLock<AddressSpace>,
         nodes_to_write: &mut [&mut WriteNode],
     ) -> Result<(), StatusCode> {
         let client = client_text(context, &self.peers);
         for node in nodes_to_write {
-            let status = self.write_one(context, &client, node.value()).await;
+            let exists = space.read().node_exists(&node.value().node_id);
+            let status = if exists {
+                self.write_one(context, &client, node.value()).await
+            } else {
+                StatusCode::BadNodeIdUnknown
+            };
             node.set_status(status);
         }
         Ok(())
