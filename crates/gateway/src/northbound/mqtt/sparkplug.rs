@@ -86,6 +86,9 @@ pub struct Node {
     writer: Option<mpsc::Sender<Write>>,
     /// When the last rebirth asked for was published.
     last_rebirth: Option<tokio::time::Instant>,
+    /// Refused NCMDs since the last log line, and when that was.
+    node_refused: u64,
+    node_refused_logged: Option<tokio::time::Instant>,
 }
 
 /// DCMD writes waiting for the write task; more are refused (and audited).
@@ -145,6 +148,8 @@ impl Node {
             bd_seq_read: false,
             writer: None,
             last_rebirth: None,
+            node_refused: 0,
+            node_refused_logged: None,
         })
     }
 }
@@ -736,13 +741,20 @@ impl Node {
             ..
         }) = topic.parse::<Topic>()
         else {
+            // Not a write: logged with a throttle of its own, not counted as one.
             let now = tokio::time::Instant::now();
-            if let Some(count) = self.refused.refused(&self.cell, now) {
+            self.node_refused += 1;
+            if self
+                .node_refused_logged
+                .is_none_or(|t| now >= t + LOG_EVERY)
+            {
                 tracing::warn!(
-                    "refused {count} MQTT command(s) in the last {} s; the latest on {topic}: \
-                     {why}",
-                    LOG_EVERY.as_secs()
+                    "refused {} MQTT node command(s) since the last report; the latest on \
+                     {topic}: {why}",
+                    self.node_refused
                 );
+                self.node_refused = 0;
+                self.node_refused_logged = Some(now);
             }
             return;
         };
