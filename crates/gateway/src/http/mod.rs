@@ -463,7 +463,8 @@ impl Selection {
         {
             let lines: Vec<String> = cell.lines().into_iter().map(|l| l.name).collect();
             return Err(ApiError::not_found(format!(
-                "no line {line:?}; lines: {}",
+                "no line {:?}; lines: {}",
+                crate::write::cut(line, crate::write::MAX_NAME),
                 lines.join(", ")
             )));
         }
@@ -544,7 +545,8 @@ async fn lines(
         if let Some(unknown) = wanted.iter().find(|w| !lines.iter().any(|l| l.name == **w)) {
             let names: Vec<&str> = lines.iter().map(|l| l.name.as_str()).collect();
             return Err(ApiError::not_found(format!(
-                "no line {unknown:?}; lines: {}",
+                "no line {:?}; lines: {}",
+                crate::write::cut(unknown, crate::write::MAX_NAME),
                 names.join(", ")
             )));
         }
@@ -663,7 +665,8 @@ pub(crate) fn parse_step(text: &str) -> ApiResult<Duration> {
         Ok(d) if d >= Duration::from_millis(1) => Ok(d),
         Ok(_) => Err(ApiError::bad_request("step must be at least 1ms")),
         Err(e) => Err(ApiError::bad_request(format!(
-            "step {text:?} is not a duration ({e}); write e.g. 10s, 1m or 1h"
+            "step {:?} is not a duration ({e}); write e.g. 10s, 1m or 1h",
+            crate::write::cut(text, crate::write::MAX_NAME)
         ))),
     }
 }

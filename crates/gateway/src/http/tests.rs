@@ -264,10 +264,21 @@ async fn unknown_ids_and_routes_are_404_with_json_that_says_what_exists() {
     let (status, body) = get(&app, "/api/devices/nope").await;
     assert_eq!(status, StatusCode::NOT_FOUND);
     assert_eq!(error_of(&body), "no device \"nope\"; devices: jbc1");
-    // A long id is cut in the answer.
-    let (status, body) = get(&app, &format!("/api/devices/{}", "x".repeat(5000))).await;
-    assert_eq!(status, StatusCode::NOT_FOUND);
-    assert!(error_of(&body).len() < 200, "{body}");
+    // A long id, line or step is cut in the answer.
+    let long = "x".repeat(5000);
+    for (path, status) in [
+        (format!("/api/devices/{long}"), StatusCode::NOT_FOUND),
+        (format!("/api/devices?line={long}"), StatusCode::NOT_FOUND),
+        (format!("/api/lines?line={long}"), StatusCode::NOT_FOUND),
+        (
+            format!("/api/history?point=jbc1.air_temperature&step={long}"),
+            StatusCode::BAD_REQUEST,
+        ),
+    ] {
+        let (got, body) = get(&app, &path).await;
+        assert_eq!(got, status, "{path}: {body}");
+        assert!(error_of(&body).len() < 300, "{path}: {body}");
+    }
     let (status, body) = get(&app, "/api/nothing").await;
     assert_eq!(status, StatusCode::NOT_FOUND);
     assert!(error_of(&body).contains("/api/openapi.json"));
