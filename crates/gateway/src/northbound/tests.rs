@@ -355,6 +355,7 @@ async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_n
     let broker = Mosquitto::start();
     let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
     let rig = rig(1);
+    let mut live = rig.cell.subscribe();
     let read = || {
         let device = rig.cell.device("jbc1").unwrap();
         device
@@ -364,7 +365,7 @@ async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_n
     };
     tokio::time::timeout(LIMIT, async {
         while !read() {
-            tokio::time::sleep(Duration::from_millis(50)).await;
+            let _ = live.recv().await;
         }
     })
     .await
@@ -394,18 +395,17 @@ async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_n
     for &value in &values {
         sub.publish(topic, command(value)).await;
     }
+    // Each write's event comes once its audit rows are committed.
+    let mut done = Vec::new();
+    for _ in &values {
+        done.push(next_event(&mut live, crate::event::EventKind::Write).await);
+    }
     let last = *values.last().unwrap();
-    tokio::time::timeout(LIMIT, async {
-        loop {
-            let accepted = rig.cell.store().audit_log(None, 50).unwrap();
-            if accepted.iter().filter(|a| a.result == "accepted").count() == values.len() {
-                return;
-            }
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
-    })
-    .await
-    .expect("five writes accepted");
+    assert!(
+        done[4].message.contains(&format!(" set to {last}")),
+        "{}",
+        done[4].message
+    );
     let audit = rig.cell.store().audit_log(None, 50).unwrap();
     let accepted: Vec<&serde_json::Value> = audit
         .iter()
@@ -415,22 +415,6 @@ async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_n
         .collect();
     let expected: Vec<serde_json::Value> = values.iter().map(|v| serde_json::json!(v)).collect();
     assert_eq!(accepted, expected.iter().collect::<Vec<_>>(), "{audit:#?}");
-    // The device holds the last value (the cell shows it from the next read on).
-    let shown = || {
-        let device = rig.cell.device("jbc1").unwrap();
-        device
-            .points
-            .iter()
-            .find(|p| p.view.id.name() == name)
-            .and_then(|p| p.view.value.clone())
-    };
-    tokio::time::timeout(LIMIT, async {
-        while shown() != Some(Value::Number(last)) {
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
-    })
-    .await
-    .unwrap_or_else(|_| panic!("jbc1.{name} shows {last}, not {:?}", shown()));
     // The retained command: one refused row, never carried out.
     let refused: Vec<_> = audit.iter().filter(|a| a.result == "refused").collect();
     assert_eq!(refused.len(), 1, "{audit:#?}");
