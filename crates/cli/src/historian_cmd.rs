@@ -61,7 +61,8 @@ pub struct HistorianArgs {
     password_env: Option<String>,
     /// Most samples waiting for their commit; past it new rows are dropped and the
     /// historian goes offline until PostgreSQL catches up (the gateways send them again).
-    #[arg(long, value_name = "N", default_value_t = 500_000)]
+    #[arg(long, value_name = "N", default_value_t = 500_000,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     max_pending: usize,
 }
 

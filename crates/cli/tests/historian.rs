@@ -605,3 +605,40 @@ async fn two_historians_sharing_the_data_store_every_change() {
         assert!(messages > 40.0, "{} got {messages} messages", h.addr);
     }
 }
+
+#[test]
+fn a_database_that_is_not_postgresql_or_no_pending_room_exits_2_before_anything_starts() {
+    for (args, words) in [
+        (
+            ["--database", "mysql://u:secret@127.0.0.1/db"],
+            "mysql:// is not PostgreSQL",
+        ),
+        (
+            ["--database", "postgres://u:secret@127.0.0.1:notaport/db"],
+            "not a PostgreSQL connection string",
+        ),
+    ] {
+        let out = cellbus()
+            .args(["historian", "--mqtt", "mqtt://127.0.0.1:1"])
+            .args(args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(words) && !stderr.contains("secret"),
+            "{stderr}"
+        );
+    }
+    let out = cellbus()
+        .args(["historian", "--mqtt", "mqtt://127.0.0.1:1"])
+        .args([
+            "--database",
+            "postgres://u@127.0.0.1/db",
+            "--max-pending",
+            "0",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}

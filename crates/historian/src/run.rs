@@ -87,6 +87,7 @@ impl Historian {
             None => Sharing::Alone,
         };
         let parsed = parse_broker(&options.mqtt).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?;
+        check_database(&options.database)?;
         let transport = if parsed.tls {
             let config =
                 gateway::northbound::mqtt::tls::client_config(&options.tls).context("MQTT TLS")?;
@@ -228,5 +229,45 @@ impl Historian {
             let _ = server.await;
         }
         Ok(())
+    }
+}
+
+/// Refuses a `--database` that is no PostgreSQL connection string, before anything starts
+/// (a bad argument, exit 2, not a refused login). The message never repeats the text: it
+/// may hold a password.
+fn check_database(text: &str) -> anyhow::Result<()> {
+    if let Some((scheme, _)) = text.split_once("://")
+        && !matches!(scheme, "postgres" | "postgresql")
+    {
+        bail!("--database: {scheme}:// is not PostgreSQL; write postgres://USER@HOST:PORT/DB");
+    }
+    text.parse::<tokio_postgres::Config>().map_err(|e| {
+        anyhow::anyhow!("--database is not a PostgreSQL connection string ({e}); write postgres://USER@HOST:PORT/DB")
+    })?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod database_tests {
+    use super::check_database;
+
+    #[test]
+    fn a_database_that_is_not_postgresql_is_refused_without_repeating_it() {
+        assert!(check_database("postgres://cellbus@127.0.0.1:5432/plant").is_ok());
+        assert!(check_database("host=127.0.0.1 user=cellbus").is_ok());
+        let mysql = check_database("mysql://u:secret@h/db")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            mysql.contains("mysql:// is not PostgreSQL") && !mysql.contains("secret"),
+            "{mysql}"
+        );
+        let port = check_database("postgres://u:secret@h:notaport/db")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            port.contains("not a PostgreSQL connection string") && !port.contains("secret"),
+            "{port}"
+        );
     }
 }
