@@ -171,6 +171,13 @@ impl PlantPoint {
                  node's own metric is NODE/.POINT)"
             )
         };
+        // PostgreSQL text holds no NUL: such an id names no point (and is a 400, not
+        // the database's refusal as a 500).
+        if text.contains('\0') {
+            return Err(format!(
+                "point {text:?} has a NUL character, which no point id has"
+            ));
+        }
         let (node, rest) = text.split_once('/').ok_or_else(bad)?;
         let (device, point) = rest.split_once('.').ok_or_else(bad)?;
         if node.is_empty() || point.is_empty() {
@@ -428,5 +435,7 @@ mod tests {
             let e = PlantPoint::parse(text).unwrap_err();
             assert!(e.contains("NODE/DEVICE.POINT") && e.contains(text), "{e}");
         }
+        let e = PlantPoint::parse("\0/x.y").unwrap_err();
+        assert!(e.contains("NUL"), "{e}");
     }
 }
