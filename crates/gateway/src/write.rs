@@ -52,8 +52,7 @@ pub const LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
 /// every [`LOG_EVERY`], with how many there were.
 #[derive(Debug, Default)]
 pub struct Unauthorised {
-    last_log: Option<tokio::time::Instant>,
-    unlogged: u64,
+    log: LogThrottle,
 }
 
 impl Unauthorised {
@@ -65,6 +64,21 @@ impl Unauthorised {
                 result: "unauthorised".to_owned(),
             })
             .inc();
+        self.log.count(now)
+    }
+}
+
+/// Something anyone can cause by the thousand (a refused write, command or connection),
+/// logged at most once every [`LOG_EVERY`] with how many there were since the last line.
+#[derive(Debug, Default)]
+pub struct LogThrottle {
+    last_log: Option<tokio::time::Instant>,
+    unlogged: u64,
+}
+
+impl LogThrottle {
+    /// Counts one at `now`; returns how many to report when a log line is due.
+    pub fn count(&mut self, now: tokio::time::Instant) -> Option<u64> {
         self.unlogged += 1;
         if self.last_log.is_some_and(|t| now < t + LOG_EVERY) {
             return None;

@@ -233,17 +233,9 @@ impl Historian {
 }
 
 /// Refuses a `--database` that is no PostgreSQL connection string, before anything starts
-/// (a bad argument, exit 2, not a refused login). The message never repeats the text: it
-/// may hold a password.
+/// (a bad argument, exit 2, not a refused login), with the store's own reading of it.
 fn check_database(text: &str) -> anyhow::Result<()> {
-    if let Some((scheme, _)) = text.split_once("://")
-        && !matches!(scheme, "postgres" | "postgresql")
-    {
-        bail!("--database: {scheme}:// is not PostgreSQL; write postgres://USER@HOST:PORT/DB");
-    }
-    text.parse::<tokio_postgres::Config>().map_err(|e| {
-        anyhow::anyhow!("--database is not a PostgreSQL connection string ({e}); write postgres://USER@HOST:PORT/DB")
-    })?;
+    crate::store::parse_url(text).map_err(|e| anyhow::anyhow!("--database: {e}"))?;
     Ok(())
 }
 

@@ -328,10 +328,7 @@ impl Probe {
     pub fn answered(&self) -> bool {
         match &self.outcome {
             Ok(_) | Err(ClientError::Refused { .. }) => true,
-            Err(ClientError::NoAnswer { last, .. }) => !matches!(
-                last,
-                Trouble::Silence | Trouble::Noise { .. } | Trouble::Others { .. }
-            ),
+            Err(ClientError::NoAnswer { last, .. }) => !last.heard_nothing(),
             Err(_) => false,
         }
     }

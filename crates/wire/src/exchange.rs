@@ -66,6 +66,18 @@ pub enum Trouble<D, M> {
     Mismatch(M),
 }
 
+impl<D, M> Trouble<D, M> {
+    /// Whether nothing that could be this request's answer came: silence, line noise, or
+    /// only frames that answer something else (no device is heard at the address).
+    pub fn heard_nothing(&self) -> bool {
+        // Every variant named: a new one must be judged here.
+        match self {
+            Trouble::Silence | Trouble::Noise { .. } | Trouble::Others { .. } => true,
+            Trouble::Damaged(_) | Trouble::Incomplete { .. } | Trouble::Mismatch(_) => false,
+        }
+    }
+}
+
 impl<D: fmt::Display, M: fmt::Display> fmt::Display for Trouble<D, M> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

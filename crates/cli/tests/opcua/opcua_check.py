@@ -409,12 +409,12 @@ async def write(url, addr, data_dir, password):
             if dd["status"] == "up" and pp["writable"] and pp["writable"].get("step") == 0.01
             and pp["writable"]["min"] + 0.23 <= pp["writable"]["max"]
         ]
-        if stepped:
-            dd, pp = stepped[0]
-            target = tree[dd["id"]][1][pp["id"].split(".", 1)[1]]
-            typed = round(pp["writable"]["min"] + 0.23, 2)
-            await target.write_value(ua.DataValue(ua.Variant(typed, ua.VariantType.Float)))
-            ok(f"the Float {typed} was written to {pp['id']} (step 0.01)")
+        assert stepped, "the demo cell has a writable point of step 0.01 (a sealer's heating factor)"
+        dd, pp = stepped[0]
+        target = tree[dd["id"]][1][pp["id"].split(".", 1)[1]]
+        typed = round(pp["writable"]["min"] + 0.23, 2)
+        await target.write_value(ua.DataValue(ua.Variant(typed, ua.VariantType.Float)))
+        ok(f"the Float {typed} was written to {pp['id']} (step 0.01)")
         device_node = await node.get_parent()
         on_device = await subscribe_events(client, device_node)
         on_server = await subscribe_events(client, client.nodes.server)

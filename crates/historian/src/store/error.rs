@@ -12,10 +12,20 @@ use tokio_postgres::error::{DbError, SqlState};
 #[non_exhaustive]
 pub enum StoreError {
     /// The database URL cannot be read (it is not echoed: it may hold a password).
-    #[error("the PostgreSQL URL cannot be read: {source}; write postgres://USER@HOST:PORT/DB")]
+    #[error(
+        "the database URL is not a PostgreSQL connection string ({source}); write \
+         postgres://USER@HOST:PORT/DB"
+    )]
     BadUrl {
         /// The parser's complaint.
         source: tokio_postgres::Error,
+    },
+    /// A URL of another scheme (`mysql://…`), which libpq's parser would call only an
+    /// unexpected end.
+    #[error("{scheme}:// is not PostgreSQL; write postgres://USER@HOST:PORT/DB")]
+    NotPostgres {
+        /// The scheme given.
+        scheme: String,
     },
     /// No connection could be made.
     #[error("cannot connect to PostgreSQL at {target}: {reason}")]

@@ -106,6 +106,23 @@ struct Statements {
     insert_events: Statement,
 }
 
+/// Reads a PostgreSQL connection string (a `postgres://` or `postgresql://` URL, or
+/// libpq's `key=value` form); never echoes it, since it may hold a password.
+///
+/// # Errors
+///
+/// [`StoreError::NotPostgres`] for another URL scheme, else [`StoreError::BadUrl`].
+pub fn parse_url(url: &str) -> Result<Config, StoreError> {
+    if let Some((scheme, _)) = url.split_once("://")
+        && !matches!(scheme, "postgres" | "postgresql")
+    {
+        return Err(StoreError::NotPostgres {
+            scheme: scheme.to_owned(),
+        });
+    }
+    url.parse().map_err(|source| StoreError::BadUrl { source })
+}
+
 impl Store {
     /// Connects to `url` (`postgres://USER@HOST:PORT/DB`, any libpq-style option; no
     /// TLS; the password from the URL, else from `PGPASSWORD`), brings the schema to [`SCHEMA_VERSION`] and prepares the write path.
@@ -117,9 +134,7 @@ impl Store {
     /// [`StoreError::BadUrl`], [`StoreError::Connect`] (transient when the server is not
     /// up yet), [`StoreError::SchemaTooNew`], or the failing step of the migration.
     pub async fn connect(url: &str) -> Result<Store, StoreError> {
-        let mut config: Config = url
-            .parse()
-            .map_err(|source| StoreError::BadUrl { source })?;
+        let mut config = parse_url(url)?;
         if config.get_password().is_none()
             && let Ok(password) = std::env::var("PGPASSWORD")
         {

@@ -42,7 +42,7 @@ use crate::event::Event;
 use crate::northbound::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
 use crate::point::{DeviceId, PointId, Value};
 use crate::time::{Timestamp, duration_millis};
-use crate::write::{Attempt, LOG_EVERY, Unauthorised};
+use crate::write::{Attempt, LOG_EVERY, LogThrottle, Unauthorised};
 
 /// The key of the stored `bdSeq` in the history database's `settings` table.
 pub const BD_SEQ_KEY: &str = "mqtt.bd_seq";
@@ -86,9 +86,8 @@ pub struct Node {
     writer: Option<mpsc::Sender<Write>>,
     /// When the last rebirth asked for was published.
     last_rebirth: Option<tokio::time::Instant>,
-    /// Refused NCMDs since the last log line, and when that was.
-    node_refused: u64,
-    node_refused_logged: Option<tokio::time::Instant>,
+    /// Refused NCMDs since the last log line.
+    node_refused: LogThrottle,
 }
 
 /// DCMD writes waiting for the write task; more are refused (and audited).
@@ -148,8 +147,7 @@ impl Node {
             bd_seq_read: false,
             writer: None,
             last_rebirth: None,
-            node_refused: 0,
-            node_refused_logged: None,
+            node_refused: LogThrottle::default(),
         })
     }
 }
@@ -742,19 +740,11 @@ impl Node {
         }) = topic.parse::<Topic>()
         else {
             // Not a write: logged with a throttle of its own, not counted as one.
-            let now = tokio::time::Instant::now();
-            self.node_refused += 1;
-            if self
-                .node_refused_logged
-                .is_none_or(|t| now >= t + LOG_EVERY)
-            {
+            if let Some(count) = self.node_refused.count(tokio::time::Instant::now()) {
                 tracing::warn!(
-                    "refused {} MQTT node command(s) since the last report; the latest on \
-                     {topic}: {why}",
-                    self.node_refused
+                    "refused {count} MQTT node command(s) since the last report; the latest on \
+                     {topic}: {why}"
                 );
-                self.node_refused = 0;
-                self.node_refused_logged = Some(now);
             }
             return;
         };

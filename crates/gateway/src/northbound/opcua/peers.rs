@@ -31,8 +31,6 @@ const RELAY_BUFFER: usize = 64 * 1024;
 /// sockets and two buffers until the server's hello timeout ends it: a flood of idle
 /// connections must not exhaust the process's memory or file descriptors).
 pub const MAX_CONNECTIONS: usize = 256;
-/// How often a refused connection is logged at most.
-const REFUSED_LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// The clients' addresses by secure channel id, and the open connections.
 #[derive(Debug, Default)]
@@ -185,8 +183,7 @@ pub async fn relay(
     mut stop: watch::Receiver<bool>,
 ) {
     let slots = std::sync::Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
-    let mut refused = 0_u64;
-    let mut last_log: Option<tokio::time::Instant> = None;
+    let mut refused = crate::write::LogThrottle::default();
     loop {
         let accepted = tokio::select! {
             accepted = listener.accept() => accepted,
@@ -196,15 +193,11 @@ pub async fn relay(
             Ok((client, address)) => {
                 let Ok(slot) = std::sync::Arc::clone(&slots).try_acquire_owned() else {
                     drop(client);
-                    refused += 1;
-                    let now = tokio::time::Instant::now();
-                    if last_log.is_none_or(|t| now >= t + REFUSED_LOG_EVERY) {
+                    if let Some(count) = refused.count(tokio::time::Instant::now()) {
                         tracing::warn!(
                             "OPC UA: {MAX_CONNECTIONS} client connections are open; closed \
-                             {refused} more since the last report (the latest from {address})"
+                             {count} more since the last report (the latest from {address})"
                         );
-                        refused = 0;
-                        last_log = Some(now);
                     }
                     continue;
                 };
