@@ -64,6 +64,13 @@ pub struct HistorianArgs {
     #[arg(long, value_name = "N", default_value_t = 500_000,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     max_pending: usize,
+    /// Samples and events older than this (by the historian's clock) are refused and
+    /// counted as dropped: a gateway clock gone wrong, or a rogue birth naming a day per
+    /// metric, would otherwise create a day partition for each day it names. Raise it to
+    /// take a longer backlog.
+    #[arg(long, value_name = "DURATION", default_value = "31days",
+          value_parser = humantime::parse_duration)]
+    max_age: std::time::Duration,
 }
 
 pub async fn run(args: HistorianArgs) -> anyhow::Result<ExitCode> {
@@ -85,6 +92,7 @@ pub async fn run(args: HistorianArgs) -> anyhow::Result<ExitCode> {
         listen: args.listen,
         limits: historian::writer::Limits {
             max_pending: args.max_pending,
+            max_age: args.max_age,
             ..historian::writer::Limits::default()
         },
     };

@@ -606,6 +606,39 @@ async fn two_historians_sharing_the_data_store_every_change() {
     }
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_retained_message_larger_than_any_usual_limit_is_read_not_a_reason_to_stay_offline() {
+    let broker = Mosquitto::start();
+    let pg = Postgres::start();
+    let database = pg.create_database("plant");
+    // 17 MiB of garbage, retained where the historian subscribes: it comes at every
+    // connection, and a client with a smaller packet limit drops each one on it.
+    let publisher = Subscriber::start(broker.port(), "cellbus/test/nothing").await;
+    publisher
+        .publish_retained("spBv1.0/plant/NDATA/big", vec![0xff; 17 << 20])
+        .await;
+    let historian = Historian::start(&broker.url(), &database, &["--host-id", HOST_ID]);
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let (_, metrics) = http_get(&historian.addr, "/metrics");
+        if counter(&metrics, "cellbus_historian_messages_total") >= 1.0 {
+            assert!(
+                counter(&metrics, "cellbus_historian_message_problems_total") >= 1.0,
+                "the garbage is a problem counted:\n{metrics}"
+            );
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the 17 MiB message was not received in {LIMIT:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    historian.wait_healthy("after the large message");
+    let health = historian.get_json("/healthz");
+    assert_eq!(health["broker"], "connected", "{health}");
+}
+
 #[test]
 fn a_database_that_is_not_postgresql_or_no_pending_room_exits_2_before_anything_starts() {
     for (args, words) in [

@@ -190,6 +190,7 @@ async fn run(url: &str, config: Config, total: usize) -> Outcome {
 
 fn point(p: usize) -> PointRow {
     PointRow {
+        group: "plant".into(),
         node: format!("cell{:02}", p / 1000),
         device: format!("jbc{}", (p % 1000) / 10),
         point: format!("p{}", p % 10),
@@ -204,6 +205,7 @@ fn point(p: usize) -> PointRow {
 
 fn sample(p: usize, t: SystemTime, i: usize) -> SampleRow {
     SampleRow {
+        group: "plant".into(),
         node: format!("cell{:02}", p / 1000),
         device: format!("jbc{}", (p % 1000) / 10),
         point: format!("p{}", p % 10),

@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::metrics::{Health, Metrics};
-use crate::store::{Quality, Store, StoreError, StoredSample};
+use crate::store::{PointRow, Quality, Store, StoreError, StoredSample};
 
 /// How long a query waits for the query connection before the answer is 503.
 const QUERY_WAIT: Duration = Duration::from_secs(10);
@@ -146,53 +146,103 @@ fn api_sample(s: StoredSample) -> HistorySample {
     }
 }
 
-/// A plant point id, `NODE/DEVICE.POINT` (`NODE/.POINT` for a node's own metric).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct PlantPoint {
-    /// The edge node.
-    pub node: String,
-    /// The device, `""` for the node's own metrics.
-    pub device: String,
-    /// The metric's name.
-    pub point: String,
+/// Checks the form of a plant point id: `NODE/DEVICE.POINT` (`NODE/.POINT` for a node's
+/// own metric), or `GROUP/NODE/DEVICE.POINT` when the node id is in several Sparkplug
+/// groups. Which point it names is the store's answer ([`Store::find_points`]).
+///
+/// # Errors
+///
+/// Words that quote the text and say the form.
+pub fn check_point_id(text: &str) -> Result<(), String> {
+    // PostgreSQL text holds no NUL: such an id names no point (and is a 400, not the
+    // database's refusal as a 500).
+    if text.contains('\0') {
+        return Err(format!(
+            "point {:?} has a NUL character, which no point id has",
+            cut(text)
+        ));
+    }
+    let well_formed = text.split_once('/').is_some_and(|(first, rest)| {
+        !first.is_empty() && rest.contains('.') && !rest.ends_with('.')
+    });
+    if well_formed {
+        Ok(())
+    } else {
+        Err(format!(
+            "point {:?} is not NODE/DEVICE.POINT (e.g. cellA/jbc1.air_temperature; a node's \
+             own metric is NODE/.POINT; GROUP/NODE/DEVICE.POINT when the node id is in \
+             several groups)",
+            cut(text)
+        ))
+    }
 }
 
-impl PlantPoint {
-    /// Reads `NODE/DEVICE.POINT`: the node up to the first `/`, the device up to the next
-    /// `.`, the rest the point's name.
-    ///
-    /// # Errors
-    ///
-    /// Words that quote the text and say the form.
-    pub fn parse(text: &str) -> Result<Self, String> {
-        let bad = || {
-            format!(
-                "point {text:?} is not NODE/DEVICE.POINT (e.g. cellA/jbc1.air_temperature; a \
-                 node's own metric is NODE/.POINT)"
-            )
-        };
-        // PostgreSQL text holds no NUL: such an id names no point (and is a 400, not
-        // the database's refusal as a 500).
-        if text.contains('\0') {
-            return Err(format!(
-                "point {text:?} has a NUL character, which no point id has"
-            ));
-        }
-        let (node, rest) = text.split_once('/').ok_or_else(bad)?;
-        let (device, point) = rest.split_once('.').ok_or_else(bad)?;
-        if node.is_empty() || point.is_empty() {
-            return Err(bad());
-        }
-        Ok(Self {
-            node: node.to_owned(),
-            device: device.to_owned(),
-            point: point.to_owned(),
-        })
-    }
-
-    /// `NODE/DEVICE.POINT`.
-    pub fn id(node: &str, device: &str, point: &str) -> String {
+/// A point's plant id: `NODE/DEVICE.POINT`, or with `GROUP/` first when `grouped`.
+pub fn point_id(p: &PointRow, grouped: bool) -> String {
+    let (node, device, point) = (&p.node, &p.device, &p.point);
+    if grouped {
+        format!("{}/{node}/{device}.{point}", p.group)
+    } else {
         format!("{node}/{device}.{point}")
+    }
+}
+
+/// A point id as an error message quotes it: at most [`MAX_QUOTED`] bytes.
+fn cut(text: &str) -> &str {
+    if text.len() <= MAX_QUOTED {
+        return text;
+    }
+    let mut end = MAX_QUOTED;
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    &text[..end]
+}
+
+/// The most of a client's text an error repeats.
+const MAX_QUOTED: usize = 256;
+
+/// The one point `text` names, or a 404 (none) or 400 (several, listed).
+async fn find_point(guard: &mut Reader<'_>, text: &str) -> ApiResult<crate::store::FoundPoint> {
+    let Some(store) = guard.as_ref() else {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "no query connection",
+        ));
+    };
+    let found = store.find_points(text).await;
+    let mut found = checked(guard, found)?;
+    match found.len() {
+        0 => Err(ApiError::not_found(format!(
+            "the historian has no point {}; GET /api/points lists them",
+            cut(text)
+        ))),
+        1 => Ok(found.remove(0)),
+        _ => {
+            let names: Vec<String> = found
+                .iter()
+                .map(|p| {
+                    format!(
+                        "group {:?} node {:?} device {:?} point {:?}",
+                        p.group, p.node, p.device, p.point
+                    )
+                })
+                .collect();
+            let groups: std::collections::BTreeSet<&str> =
+                found.iter().map(|p| p.group.as_str()).collect();
+            let hint = if groups.len() > 1 {
+                "; name the group first: GROUP/NODE/DEVICE.POINT"
+            } else {
+                "; a device id with a `.` makes such ids ambiguous, and the plant API cannot \
+                 tell these apart (query cellbus_samples by its columns)"
+            };
+            Err(ApiError::bad_request(format!(
+                "point {} names {} points: {}{hint}",
+                cut(text),
+                found.len(),
+                names.join(", ")
+            )))
+        }
     }
 }
 
@@ -219,21 +269,10 @@ async fn history(
             "give the point: /api/history?point=cellA/jbc1.air_temperature&from=-1h",
         )
     })?;
-    let p = PlantPoint::parse(text).map_err(ApiError::bad_request)?;
+    check_point_id(text).map_err(ApiError::bad_request)?;
     let HistoryRange { from, to, step } = history_range(&q, Timestamp::now())?;
     let mut guard = reader(&s).await?;
-    let Some(store) = guard.as_ref() else {
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "no query connection",
-        ));
-    };
-    let known = store.has_point(&p.node, &p.device, &p.point).await;
-    if !checked(&mut guard, known)? {
-        return Err(ApiError::not_found(format!(
-            "the historian has no point {text}; GET /api/points lists them"
-        )));
-    }
+    let p = find_point(&mut guard, text).await?;
     let Some(store) = guard.as_ref() else {
         return Err(ApiError::new(
             StatusCode::SERVICE_UNAVAILABLE,
@@ -241,15 +280,11 @@ async fn history(
         ));
     };
     let (from_t, to_t) = (system_time(from), system_time(to));
-    let before = store
-        .last_before(&p.node, &p.device, &p.point, from_t)
-        .await;
+    let before = store.last_before(p.id, from_t).await;
     let step_ms = step.map(|d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX));
     let (series, truncated) = match step {
         Some(step) => {
-            let buckets = store
-                .buckets(&p.node, &p.device, &p.point, from_t, to_t, step)
-                .await;
+            let buckets = store.buckets(p.id, from_t, to_t, step).await;
             let buckets = checked(&mut guard, buckets)?;
             let buckets = buckets
                 .into_iter()
@@ -264,16 +299,7 @@ async fn history(
             (Series::Buckets(buckets), false)
         }
         None => {
-            let raw = store
-                .raw(
-                    &p.node,
-                    &p.device,
-                    &p.point,
-                    from_t,
-                    to_t,
-                    MAX_RAW_SAMPLES + 1,
-                )
-                .await;
+            let raw = store.raw(p.id, from_t, to_t, MAX_RAW_SAMPLES + 1).await;
             let mut raw = checked(&mut guard, raw)?;
             let truncated = raw.len() > MAX_RAW_SAMPLES;
             raw.truncate(MAX_RAW_SAMPLES);
@@ -296,7 +322,37 @@ async fn history(
     .into_response())
 }
 
-async fn points(State(s): State<Arc<AppState>>) -> ApiResult<Response> {
+/// Query of `/api/points`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PointsQuery {
+    node: Option<String>,
+    offset: Option<usize>,
+    limit: Option<usize>,
+}
+
+/// Points in one `/api/points` answer by default and at most (about 150 bytes each).
+pub const MAX_POINTS: usize = 10_000;
+
+async fn points(
+    State(s): State<Arc<AppState>>,
+    query: Result<Query<PointsQuery>, QueryRejection>,
+) -> ApiResult<Response> {
+    let Query(q) = query?;
+    let limit = match q.limit {
+        None => MAX_POINTS,
+        Some(n) if (1..=MAX_POINTS).contains(&n) => n,
+        Some(n) => {
+            return Err(ApiError::bad_request(format!(
+                "limit {n} is out of range: 1 to {MAX_POINTS} (page with offset)"
+            )));
+        }
+    };
+    if q.node.as_deref().is_some_and(|n| n.contains('\0')) {
+        return Err(ApiError::bad_request(
+            "node has a NUL character, which no node id has",
+        ));
+    }
     let mut guard = reader(&s).await?;
     let Some(store) = guard.as_ref() else {
         return Err(ApiError::new(
@@ -304,8 +360,18 @@ async fn points(State(s): State<Arc<AppState>>) -> ApiResult<Response> {
             "no query connection",
         ));
     };
-    let rows = store.points().await;
-    let rows = checked(&mut guard, rows)?;
+    let page = store
+        .points(q.node.as_deref(), q.offset.unwrap_or(0), limit)
+        .await;
+    let (rows, total) = checked(&mut guard, page)?;
+    let Some(store) = guard.as_ref() else {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "no query connection",
+        ));
+    };
+    let shared = store.nodes_in_several_groups().await;
+    let shared = checked(&mut guard, shared)?;
     let points: Vec<_> = rows
         .into_iter()
         .map(|p| {
@@ -314,7 +380,8 @@ async fn points(State(s): State<Arc<AppState>>) -> ApiResult<Response> {
                 _ => serde_json::Value::Null,
             };
             json!({
-                "id": PlantPoint::id(&p.node, &p.device, &p.point),
+                "id": point_id(&p, shared.contains(&p.node)),
+                "group": p.group,
                 "node": p.node,
                 "device": p.device,
                 "point": p.point,
@@ -326,7 +393,7 @@ async fn points(State(s): State<Arc<AppState>>) -> ApiResult<Response> {
             })
         })
         .collect();
-    Ok(Json(json!({ "points": points })).into_response())
+    Ok(Json(json!({ "points": points, "total": total })).into_response())
 }
 
 /// Query of `/api/events`.
@@ -337,6 +404,10 @@ struct EventsQuery {
     to: Option<String>,
     limit: Option<usize>,
 }
+
+/// Where an `/api/events` answer stops (`"truncated": true`): events' messages come from
+/// the gateways, and 10,000 long ones would make an answer of any size.
+const MAX_EVENTS_BYTES: usize = 4 << 20;
 
 async fn events(
     State(s): State<Arc<AppState>>,
@@ -358,22 +429,29 @@ async fn events(
         .events(system_time(from), system_time(to), limit)
         .await;
     let rows = checked(&mut guard, rows)?;
-    let events: Vec<_> = rows
-        .into_iter()
-        .map(|e| {
-            json!({
-                "t": ms(e.t),
-                "node": e.node,
-                "device": e.device,
-                "point": e.point,
-                "line": e.line,
-                "kind": e.kind,
-                "severity": e.severity,
-                "message": e.message,
-            })
-        })
-        .collect();
-    Ok(Json(json!({ "events": events })).into_response())
+    let mut events = Vec::with_capacity(rows.len());
+    let mut bytes = 0;
+    let mut truncated = false;
+    for e in rows {
+        let event = json!({
+            "t": ms(e.t),
+            "group": e.group,
+            "node": e.node,
+            "device": e.device,
+            "point": e.point,
+            "line": e.line,
+            "kind": e.kind,
+            "severity": e.severity,
+            "message": e.message,
+        });
+        bytes += event.to_string().len();
+        if bytes > MAX_EVENTS_BYTES && !events.is_empty() {
+            truncated = true;
+            break;
+        }
+        events.push(event);
+    }
+    Ok(Json(json!({ "events": events, "truncated": truncated })).into_response())
 }
 
 async fn healthz(State(s): State<Arc<AppState>>) -> Json<serde_json::Value> {
@@ -408,20 +486,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_plant_point_is_node_slash_device_dot_point() {
-        assert_eq!(
-            PlantPoint::parse("cellA/jbc1.air_temperature"),
-            Ok(PlantPoint {
-                node: "cellA".into(),
-                device: "jbc1".into(),
-                point: "air_temperature".into(),
-            })
-        );
-        let node_metric = PlantPoint::parse("cellA/.history_rows").unwrap();
-        assert_eq!(
-            (node_metric.device.as_str(), node_metric.point.as_str()),
-            ("", "history_rows")
-        );
+    fn a_plant_point_is_node_slash_device_dot_point_or_with_its_group_first() {
+        for text in [
+            "cellA/jbc1.air_temperature",
+            "cellA/.history_rows",
+            "cellA/.Node Control/Rebirth",
+            "plant/cellA/jbc1.air_temperature",
+        ] {
+            assert_eq!(check_point_id(text), Ok(()), "{text}");
+        }
+        let mut p = PointRow::bare("plant", "cellA", "jbc1", "air_temperature");
+        assert_eq!(point_id(&p, false), "cellA/jbc1.air_temperature");
+        assert_eq!(point_id(&p, true), "plant/cellA/jbc1.air_temperature");
+        p.device = String::new();
+        assert_eq!(point_id(&p, false), "cellA/.air_temperature");
     }
 
     #[test]
@@ -432,10 +510,13 @@ mod tests {
             "/jbc1.x",
             "cellA/jbc1.",
         ] {
-            let e = PlantPoint::parse(text).unwrap_err();
+            let e = check_point_id(text).unwrap_err();
             assert!(e.contains("NODE/DEVICE.POINT") && e.contains(text), "{e}");
         }
-        let e = PlantPoint::parse("\0/x.y").unwrap_err();
+        let e = check_point_id("\0/x.y").unwrap_err();
         assert!(e.contains("NUL"), "{e}");
+        let long = format!("{}/x", "é".repeat(1_000));
+        let e = check_point_id(&long).unwrap_err();
+        assert!(e.len() < 600, "a long id is cut: {} bytes", e.len());
     }
 }

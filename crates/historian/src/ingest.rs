@@ -1,9 +1,8 @@
 //! What the Sparkplug host made of a message, as rows for the store (sans-IO).
 //!
 //! [`append`] turns a [`Received`] into [`PointRow`]s, [`SampleRow`]s and [`EventRow`]s
-//! added to a [`Batch`]. Points are named by edge node, device (`""` for the node's own
-//! metrics) and metric name; the Sparkplug group is not part of the name (node ids are
-//! unique in a plant's groups, or the historian follows one group with `--group`).
+//! added to a [`Batch`]. Points are named by Sparkplug group, edge node, device (`""` for
+//! the node's own metrics) and metric name: the same node id in two groups is two nodes.
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -14,6 +13,8 @@ use crate::store::{Batch, EventRow, PointRow, Quality, SampleRow};
 
 /// The severity an event gets when its message has none (OPC UA's "medium").
 const DEFAULT_SEVERITY: i32 = 500;
+/// The highest severity (OPC UA's scale ends at 1000).
+const MAX_SEVERITY: u32 = 1000;
 
 /// How many rows [`append`] added.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -62,6 +63,7 @@ fn point_row(info: &PointInfo) -> PointRow {
         Writable::Within(range) => (true, Some(range.min()), Some(range.max())),
     };
     PointRow {
+        group: info.point.group.as_str().to_owned(),
         node: info.point.node.as_str().to_owned(),
         device: device_of(info.point.device.as_ref()),
         point: info.point.name.as_str().to_owned(),
@@ -74,20 +76,29 @@ fn point_row(info: &PointInfo) -> PointRow {
     }
 }
 
+/// A sample as a row. A number that is not finite (NaN, ±Inf: a failed conversion, a
+/// division by zero in the source) is no reading: it is stored without a value and `bad`,
+/// as JSON, Grafana and the gateway's API have no good NaN.
 fn sample_row(sample: &HostSample) -> SampleRow {
+    let mut quality = quality(sample.quality);
     let (value, text) = match &sample.value {
-        SampleValue::Number(n) => (Some(*n), None),
+        SampleValue::Number(n) if n.is_finite() => (Some(*n), None),
+        SampleValue::Number(_) => {
+            quality = Quality::Bad;
+            (None, None)
+        }
         SampleValue::Text(t) => (None, Some(t.clone())),
         SampleValue::Null => (None, None),
     };
     SampleRow {
+        group: sample.point.group.as_str().to_owned(),
         node: sample.point.node.as_str().to_owned(),
         device: device_of(sample.point.device.as_ref()),
         point: sample.point.name.as_str().to_owned(),
         t: system_time(sample.t),
         value,
         text,
-        quality: quality(sample.quality),
+        quality,
     }
 }
 
@@ -101,16 +112,17 @@ fn quality(q: SpQuality) -> Quality {
 
 fn event_row(event: &HostEvent) -> EventRow {
     EventRow {
+        group: event.group.as_str().to_owned(),
         node: event.node.as_str().to_owned(),
         device: event.device.clone(),
         point: event.point.clone(),
         line: event.line.clone(),
         t: system_time(event.t),
         kind: event.kind.clone().unwrap_or_else(|| "event".to_owned()),
-        severity: event
-            .severity
-            .and_then(|s| i32::try_from(s).ok())
-            .unwrap_or(DEFAULT_SEVERITY),
+        // OPC UA's scale is 1–1000: a larger number is as serious as it gets.
+        severity: event.severity.map_or(DEFAULT_SEVERITY, |s| {
+            i32::try_from(s.clamp(1, MAX_SEVERITY)).unwrap_or(DEFAULT_SEVERITY)
+        }),
         message: event.message.clone(),
     }
 }
@@ -149,8 +161,13 @@ mod tests {
         assert_eq!(added.points, 1);
         let p = &batch.points[0];
         assert_eq!(
-            (p.node.as_str(), p.device.as_str(), p.point.as_str()),
-            ("cellA", "jbc1", "air_temperature_setpoint")
+            (
+                p.group.as_str(),
+                p.node.as_str(),
+                p.device.as_str(),
+                p.point.as_str()
+            ),
+            ("plant", "cellA", "jbc1", "air_temperature_setpoint")
         );
         assert_eq!(p.datatype, "Double");
         assert_eq!(p.unit.as_deref(), Some("°C"));
@@ -221,6 +238,58 @@ mod tests {
         let e = &batch.events[0];
         assert_eq!((e.kind.as_str(), e.severity), ("event", DEFAULT_SEVERITY));
         assert_eq!(e.device.as_deref(), Some("jbc1"));
+        assert_eq!(e.group, "plant");
+    }
+
+    #[test]
+    fn a_severity_beyond_the_scale_is_the_highest_not_the_default() {
+        let event = |severity| HostEvent {
+            group: Id::new("plant").unwrap(),
+            node: Id::new("cellA").unwrap(),
+            device: None,
+            point: None,
+            line: None,
+            t: Timestamp::from_millis(1_700_000_000_000),
+            kind: Some("alarm".into()),
+            severity: Some(severity),
+            message: "over".into(),
+            historical: false,
+        };
+        let mut batch = Batch::default();
+        let received = Received {
+            events: vec![event(4_000_000_000), event(0), event(700)],
+            ..Received::default()
+        };
+        append(&mut batch, &received);
+        let severities: Vec<i32> = batch.events.iter().map(|e| e.severity).collect();
+        assert_eq!(severities, [1000, 1, 700]);
+    }
+
+    #[test]
+    fn a_number_that_is_not_finite_is_stored_bad_without_a_value() {
+        let mut batch = Batch::default();
+        let sample = |value: f64| HostSample {
+            point: key(Some("meter1"), "power"),
+            t: Timestamp::from_millis(1_700_000_000_000),
+            value: SampleValue::Number(value),
+            quality: SpQuality::Good,
+            historical: false,
+        };
+        let received = Received {
+            samples: vec![sample(f64::NAN), sample(f64::INFINITY), sample(2.5)],
+            ..Received::default()
+        };
+        append(&mut batch, &received);
+        let rows: Vec<(Option<f64>, Quality)> =
+            batch.samples.iter().map(|s| (s.value, s.quality)).collect();
+        assert_eq!(
+            rows,
+            [
+                (None, Quality::Bad),
+                (None, Quality::Bad),
+                (Some(2.5), Quality::Good)
+            ]
+        );
     }
 
     #[test]

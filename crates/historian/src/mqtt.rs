@@ -48,8 +48,8 @@ pub const KEEP_ALIVE: Duration = Duration::from_secs(10);
 pub const RETRY_FIRST: Duration = Duration::from_millis(500);
 /// Longest wait between connection attempts.
 pub const RETRY_CAP: Duration = Duration::from_secs(30);
-/// Largest MQTT packet accepted: births of large cells are large.
-const MAX_PACKET: usize = 16 << 20;
+/// Largest MQTT packet sent (STATE and Rebirth requests are small).
+const MAX_OUTGOING: usize = 1 << 20;
 /// Requests queued for the client (STATE, subscriptions, Rebirth requests).
 const QUEUE: usize = 1024;
 /// How long a disconnect waits for STATE offline and DISCONNECT to leave.
@@ -145,7 +145,7 @@ impl Link {
             options
                 .set_keep_alive(KEEP_ALIVE)
                 .set_clean_session(false)
-                .set_max_packet_size(MAX_PACKET, MAX_PACKET)
+                .set_max_packet_size(gateway::northbound::mqtt::MAX_INCOMING, MAX_OUTGOING)
                 .set_transport(broker.transport.clone())
                 .set_last_will(LastWill::new(
                     will.topic.to_string(),

@@ -12,6 +12,13 @@
 //! fails is retried with its twin; a retried half that was already committed is stored
 //! once (the store's dedupe).
 //!
+//! A commit that takes longer than [`Limits::slow_commit`] counts as failing while it
+//! lasts (a lock held on `samples`, a disk that stalls): the historian goes offline, so the
+//! edge nodes store from then on, and the rows it holds uncommitted stay within what they
+//! send again when it is back (they rewind by twice their keep-alive, 20 s at the least).
+//! Without that, a commit that never ends would keep the historian online, taking rows it
+//! cannot store, until a restart lost them.
+//!
 //! A failed commit keeps its batch and tries it again (on a new connection when the old
 //! one is gone), waiting [`RETRY_FIRST`] doubling to [`RETRY_CAP`]; the store takes a batch
 //! twice without storing a row twice. Meanwhile the state turns [`DbState::Failing`], which
@@ -43,6 +50,9 @@ pub const RETRY_FIRST: Duration = Duration::from_millis(200);
 /// Longest wait between two tries.
 pub const RETRY_CAP: Duration = Duration::from_secs(5);
 
+/// How old a row may be by default: 31 days.
+pub const DEFAULT_MAX_AGE: Duration = Duration::from_secs(31 * 86_400);
+
 /// Whether PostgreSQL takes the historian's commits.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum DbState {
@@ -60,6 +70,13 @@ pub struct Limits {
     pub max_pending: usize,
     /// How long the last commits may take at shutdown before what remains is given up.
     pub stop_grace: Duration,
+    /// A commit still running after this long turns the state failing (offline) until
+    /// it ends. Less than the edge nodes' rewind (twice their keep-alive, at least 20 s).
+    pub slow_commit: Duration,
+    /// Samples and events older than this are refused (counted in the dropped rows): a
+    /// clock gone wrong, or a rogue birth, would otherwise create a day partition for
+    /// every day it names.
+    pub max_age: Duration,
 }
 
 impl Default for Limits {
@@ -67,6 +84,8 @@ impl Default for Limits {
         Self {
             max_pending: 500_000,
             stop_grace: Duration::from_secs(10),
+            slow_commit: Duration::from_secs(10),
+            max_age: DEFAULT_MAX_AGE,
         }
     }
 }
@@ -271,7 +290,8 @@ impl Writer {
                 continue;
             }
             self.stores[slot] = None;
-            let store = self.inbox.while_doing(Store::connect(&self.url)).await?;
+            let mut store = self.inbox.while_doing(Store::connect(&self.url)).await?;
+            store.set_max_age(Some(self.inbox.limits.max_age));
             if !store.migrated().is_empty() {
                 tracing::info!(
                     "historian: database schema migrated to {:?}",
@@ -290,12 +310,33 @@ impl Writer {
             return Ok(()); // connect() leaves both stores or fails
         };
         let started = Instant::now();
-        let (a, b) = self
-            .inbox
-            .while_doing(async {
-                tokio::join!(write_half(first, &batch[0]), write_half(second, &batch[1]))
-            })
-            .await;
+        let (a, b) = {
+            let halves =
+                async { tokio::join!(write_half(first, &batch[0]), write_half(second, &batch[1])) };
+            tokio::pin!(halves);
+            let slow_commit = self.inbox.limits.slow_commit;
+            match self
+                .inbox
+                .while_doing(tokio::time::timeout(slow_commit, &mut halves))
+                .await
+            {
+                Ok(written) => written,
+                Err(_) => {
+                    let why = format!(
+                        "a commit has taken more than {slow_commit:?} (a lock on the tables, \
+                         a stalled disk?)"
+                    );
+                    mark_failing(
+                        &self.state,
+                        &self.health,
+                        &self.metrics,
+                        &why,
+                        "waiting for it",
+                    );
+                    self.inbox.while_doing(&mut halves).await
+                }
+            }
+        };
         for (slot, result) in [&a, &b].into_iter().enumerate() {
             if let Err(e) = result
                 && e.is_connection_lost()
@@ -363,22 +404,37 @@ impl Writer {
     /// A commit or connection failed: say so, then wait (taking rows meanwhile).
     async fn failed(&mut self, e: &StoreError) {
         self.metrics.commit_errors.inc();
-        self.metrics.database_ok.set(0);
-        let why = e.to_string();
-        self.health.set_database(Some(why.clone()));
         let wait = self.retry.next_wait();
-        self.state.send_if_modified(|s| {
-            let changed = *s == DbState::Ok;
-            if changed {
-                tracing::warn!(
-                    "historian: {why}; retrying every {wait:?} or so, offline meanwhile"
-                );
-            }
-            *s = DbState::Failing(why.clone());
-            changed
-        });
+        mark_failing(
+            &self.state,
+            &self.health,
+            &self.metrics,
+            &e.to_string(),
+            &format!("retrying every {wait:?} or so"),
+        );
         self.inbox.while_doing(tokio::time::sleep(wait)).await;
     }
+}
+
+/// The state turns failing (the historian goes offline) for `why`; logged once, with
+/// what the writer does meanwhile.
+fn mark_failing(
+    state: &watch::Sender<DbState>,
+    health: &Health,
+    metrics: &Metrics,
+    why: &str,
+    meanwhile: &str,
+) {
+    metrics.database_ok.set(0);
+    health.set_database(Some(why.to_owned()));
+    state.send_if_modified(|s| {
+        let changed = *s == DbState::Ok;
+        if changed {
+            tracing::warn!("historian: {why}; {meanwhile}, offline meanwhile");
+        }
+        *s = DbState::Failing(why.to_owned());
+        changed
+    });
 }
 
 /// Writes one half of a batch (nothing to do for an empty half).

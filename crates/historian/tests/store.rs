@@ -18,8 +18,21 @@ fn at(ms: u64) -> SystemTime {
     UNIX_EPOCH + Duration::from_millis(ms)
 }
 
+/// Every point of the store.
+async fn all_points(store: &Store) -> Vec<PointRow> {
+    store.points(None, 0, 100_000).await.expect("points").0
+}
+
+/// The row id of the one point `plant_id` names.
+async fn id(store: &Store, plant_id: &str) -> i32 {
+    let found = store.find_points(plant_id).await.expect("find");
+    assert_eq!(found.len(), 1, "{plant_id}: {found:?}");
+    found[0].id
+}
+
 fn sample(device: &str, point: &str, ms: u64, value: f64) -> SampleRow {
     SampleRow {
+        group: "plant".into(),
         node: "cell1".into(),
         device: device.into(),
         point: point.into(),
@@ -32,6 +45,7 @@ fn sample(device: &str, point: &str, ms: u64, value: f64) -> SampleRow {
 
 fn temperature_point() -> PointRow {
     PointRow {
+        group: "plant".into(),
         node: "cell1".into(),
         device: "jbc1".into(),
         point: "air_temperature".into(),
@@ -46,6 +60,7 @@ fn temperature_point() -> PointRow {
 
 fn event(ms: u64, message: &str) -> EventRow {
     EventRow {
+        group: "plant".into(),
         node: "cell1".into(),
         device: Some("jbc1".into()),
         point: None,
@@ -105,14 +120,14 @@ async fn column(client: &Client, sql: &str) -> Vec<String> {
 async fn the_schema_is_created_on_first_connect_and_not_migrated_again() {
     let (_pg, url) = database();
     let first = Store::connect(&url).await.expect("first connect");
-    assert_eq!(first.migrated(), [SCHEMA_VERSION]);
+    assert_eq!(first.migrated(), [1, SCHEMA_VERSION]);
     assert_eq!(first.layout(), SamplesLayout::DayPartitions);
     let second = Store::connect(&url).await.expect("second connect");
     assert_eq!(second.migrated(), [] as [i32; 0]);
     let sql = client(&url).await;
     assert_eq!(
-        column(&sql, "SELECT version::text FROM cellbus_schema").await,
-        ["1"]
+        column(&sql, "SELECT version::text FROM cellbus_schema ORDER BY 1").await,
+        ["1", "2"]
     );
 }
 
@@ -144,6 +159,7 @@ async fn the_views_have_exactly_the_stable_column_names_and_types() {
             "value double precision",
             "text text",
             "quality text",
+            "group_id text",
         ]
     );
     assert_eq!(
@@ -157,6 +173,7 @@ async fn the_views_have_exactly_the_stable_column_names_and_types() {
             "kind text",
             "severity integer",
             "message text",
+            "group_id text",
         ]
     );
     assert_eq!(
@@ -171,6 +188,7 @@ async fn the_views_have_exactly_the_stable_column_names_and_types() {
             "writable boolean",
             "write_min double precision",
             "write_max double precision",
+            "group_id text",
         ]
     );
 }
@@ -272,10 +290,8 @@ async fn samples_too_old_or_far_in_the_future_are_refused_and_counted() {
     assert_eq!(refusal.reason, RefusalReason::TooFarAhead);
     assert_eq!(refusal.row, "sample cell1/jbc1.future");
     assert_eq!(store.count_samples().await.expect("count"), 1);
-    let names: Vec<String> = store
-        .points()
+    let names: Vec<String> = all_points(&store)
         .await
-        .expect("points")
         .into_iter()
         .map(|p| p.point)
         .collect();
@@ -305,7 +321,12 @@ async fn raw_and_buckets_answer_what_was_written() {
 
     let (from, to) = (at(start + 5_000), at(start + 65_000));
     let raw = store
-        .raw("cell1", "jbc1", "air_temperature", from, to, 1000)
+        .raw(
+            id(&store, "cell1/jbc1.air_temperature").await,
+            from,
+            to,
+            1000,
+        )
         .await
         .expect("raw");
     let expected: Vec<StoredSample> = batch.samples[5..65]
@@ -319,17 +340,17 @@ async fn raw_and_buckets_answer_what_was_written() {
         .collect();
     assert_eq!(raw, expected);
     let limited = store
-        .raw("cell1", "jbc1", "air_temperature", from, to, 3)
+        .raw(id(&store, "cell1/jbc1.air_temperature").await, from, to, 3)
         .await
         .expect("raw with a limit");
     assert_eq!(limited, expected[..3]);
     let before = store
-        .last_before("cell1", "jbc1", "air_temperature", from)
+        .last_before(id(&store, "cell1/jbc1.air_temperature").await, from)
         .await
         .expect("before");
     assert_eq!(before.map(|s| s.t), Some(at(start + 4_000)));
     let text = store
-        .raw("cell1", "jbc1", "state", at(start), to, 10)
+        .raw(id(&store, "cell1/jbc1.state").await, at(start), to, 10)
         .await
         .expect("text");
     assert_eq!(text[0].text.as_deref(), Some("Sealing"));
@@ -337,9 +358,7 @@ async fn raw_and_buckets_answer_what_was_written() {
     // 30 s buckets over the first two minutes: good numeric samples only.
     let buckets = store
         .buckets(
-            "cell1",
-            "jbc1",
-            "air_temperature",
+            id(&store, "cell1/jbc1.air_temperature").await,
             at(start),
             at(start + 120_000),
             Duration::from_secs(30),
@@ -390,8 +409,11 @@ async fn a_birth_after_samples_fills_the_bare_point_in() {
     };
     let written = store.write(&early).await.expect("samples first");
     assert_eq!((written.bare_points, written.samples), (1, 1));
-    let bare = store.points().await.expect("points");
-    assert_eq!(bare, [PointRow::bare("cell1", "jbc1", "air_temperature")]);
+    let bare = all_points(&store).await;
+    assert_eq!(
+        bare,
+        [PointRow::bare("plant", "cell1", "jbc1", "air_temperature")]
+    );
 
     let mut birth = temperature_point();
     birth.writable = true;
@@ -405,15 +427,13 @@ async fn a_birth_after_samples_fills_the_bare_point_in() {
         .await
         .expect("birth");
     assert_eq!(written.points, 1);
-    assert_eq!(store.points().await.expect("points"), [birth]);
+    assert_eq!(all_points(&store).await, [birth]);
     // The same id: the early sample belongs to the described point.
     let reconnected = Store::connect(&url).await.expect("reconnect");
     assert_eq!(reconnected.count_samples().await.expect("count"), 1);
     let raw = reconnected
         .raw(
-            "cell1",
-            "jbc1",
-            "air_temperature",
+            id(&reconnected, "cell1/jbc1.air_temperature").await,
             at(0),
             at(MIDNIGHT_MS + 1),
             10,
@@ -468,7 +488,7 @@ async fn two_stores_migrating_at_once_both_succeed() {
     let sql = client(&url).await;
     assert_eq!(
         column(&sql, "SELECT count(*)::text FROM cellbus_schema").await,
-        ["1"]
+        [SCHEMA_VERSION.to_string()]
     );
 }
 
@@ -497,20 +517,23 @@ async fn queries_with_times_beyond_the_calendar_answer_instead_of_panicking() {
     store.write(&batch(MIDNIGHT_MS, 3)).await.expect("write");
     let far = at(u64::MAX / 4);
     let raw = store
-        .raw("cell1", "jbc1", "air_temperature", UNIX_EPOCH, far, 10)
+        .raw(
+            id(&store, "cell1/jbc1.air_temperature").await,
+            UNIX_EPOCH,
+            far,
+            10,
+        )
         .await
         .expect("raw up to the far future");
     assert_eq!(raw.len(), 3);
     let before = store
-        .last_before("cell1", "jbc1", "air_temperature", far)
+        .last_before(id(&store, "cell1/jbc1.air_temperature").await, far)
         .await
         .expect("before the far future");
     assert_eq!(before.map(|s| s.t), Some(at(MIDNIGHT_MS + 2_000)));
     let buckets = store
         .buckets(
-            "cell1",
-            "jbc1",
-            "air_temperature",
+            id(&store, "cell1/jbc1.air_temperature").await,
             UNIX_EPOCH,
             far,
             Duration::MAX,
@@ -528,7 +551,7 @@ async fn two_stores_declaring_the_same_points_in_opposite_orders_both_commit() {
     let mut a = Store::connect(&url).await.expect("connect a");
     let mut b = Store::connect(&url).await.expect("connect b");
     let points: Vec<PointRow> = (0..2_000)
-        .map(|i| PointRow::bare("cell1", "dev", &format!("p{i:04}")))
+        .map(|i| PointRow::bare("plant", "cell1", "dev", &format!("p{i:04}")))
         .collect();
     let forward = Batch {
         points: points.clone(),
@@ -543,5 +566,108 @@ async fn two_stores_declaring_the_same_points_in_opposite_orders_both_commit() {
         assert_eq!(wa.expect("a commits").points, 2_000, "round {round}");
         assert_eq!(wb.expect("b commits").points, 2_000, "round {round}");
     }
-    assert_eq!(a.points().await.expect("points").len(), 2_000);
+    assert_eq!(all_points(&a).await.len(), 2_000);
+}
+
+#[tokio::test]
+async fn the_same_node_id_in_two_groups_is_two_nodes_whose_points_never_merge() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let mut batch = Batch::default();
+    for (group, value) in [("north", 1.0), ("south", 2.0)] {
+        let mut point = temperature_point();
+        point.group = group.into();
+        batch.points.push(point);
+        let mut s = sample("jbc1", "air_temperature", MIDNIGHT_MS, value);
+        s.group = group.into();
+        batch.samples.push(s);
+        let mut e = event(MIDNIGHT_MS, "station restarted");
+        e.group = group.into();
+        batch.events.push(e);
+    }
+    let written = store.write(&batch).await.expect("write");
+    assert_eq!(
+        (written.points, written.samples, written.events),
+        (2, 2, 2),
+        "nothing taken for a duplicate of the other group's"
+    );
+    let both = store
+        .find_points("cell1/jbc1.air_temperature")
+        .await
+        .expect("find");
+    let groups: Vec<&str> = both.iter().map(|p| p.group.as_str()).collect();
+    assert_eq!(groups, ["north", "south"]);
+    for (group, value) in [("north", 1.0), ("south", 2.0)] {
+        let point = id(&store, &format!("{group}/cell1/jbc1.air_temperature")).await;
+        let raw = store
+            .raw(point, UNIX_EPOCH, at(MIDNIGHT_MS + 1), 10)
+            .await
+            .expect("raw");
+        assert_eq!(
+            raw.iter().map(|r| r.value).collect::<Vec<_>>(),
+            [Some(value)]
+        );
+    }
+    let sql = client(&url).await;
+    assert_eq!(
+        column(
+            &sql,
+            "SELECT group_id || ' ' || value FROM cellbus_samples ORDER BY 1"
+        )
+        .await,
+        ["north 1", "south 2"]
+    );
+    assert_eq!(
+        column(&sql, "SELECT group_id FROM cellbus_events ORDER BY 1").await,
+        ["north", "south"]
+    );
+    assert_eq!(
+        store.nodes_in_several_groups().await.expect("shared"),
+        ["cell1".to_owned()].into_iter().collect()
+    );
+}
+
+#[tokio::test]
+async fn a_device_id_with_a_dot_is_found_by_trying_each_split() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let batch = Batch {
+        samples: vec![
+            sample("meter.1", "power", MIDNIGHT_MS, 1.0),
+            sample("meter", "1.power", MIDNIGHT_MS, 2.0),
+            sample("meter.2", "power", MIDNIGHT_MS, 3.0),
+        ],
+        ..Batch::default()
+    };
+    store.write(&batch).await.expect("write");
+    let found = store
+        .find_points("cell1/meter.2.power")
+        .await
+        .expect("find");
+    assert_eq!(
+        found
+            .iter()
+            .map(|p| (p.device.as_str(), p.point.as_str()))
+            .collect::<Vec<_>>(),
+        [("meter.2", "power")]
+    );
+    let two = store
+        .find_points("cell1/meter.1.power")
+        .await
+        .expect("find");
+    assert_eq!(two.len(), 2, "{two:?}");
+    assert!(
+        store
+            .find_points("cell1/meter.3.power")
+            .await
+            .expect("find")
+            .is_empty()
+    );
+    assert!(
+        store
+            .find_points("no slash")
+            .await
+            .expect("find")
+            .is_empty()
+    );
 }

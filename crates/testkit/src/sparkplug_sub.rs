@@ -11,6 +11,9 @@ use sparkplug::proto::{Metric, Payload, metric::Value};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
+/// The largest MQTT packet: its remaining length's maximum (256 MiB).
+const MAX_PACKET: usize = 268_435_455;
+
 /// One received Sparkplug message.
 #[derive(Debug, Clone)]
 pub struct SparkplugMessage {
@@ -92,7 +95,8 @@ impl std::fmt::Debug for Incoming {
 }
 
 impl Subscriber {
-    /// Connects to the broker on 127.0.0.1:`port`, subscribes to `filter` (QoS 1) and
+    /// Connects to the broker on 127.0.0.1:`port` (messages of any size MQTT allows, both
+    /// ways), subscribes to `filter` (QoS 1) and
     /// returns once the broker acknowledged the subscription.
     ///
     /// # Panics
@@ -104,7 +108,7 @@ impl Subscriber {
         options
             .set_clean_session(false)
             .set_keep_alive(Duration::from_secs(30))
-            .set_max_packet_size(16 << 20, 16 << 20);
+            .set_max_packet_size(MAX_PACKET, MAX_PACKET);
         let (client, mut eventloop) = AsyncClient::new(options, 100);
         let (tx, mut messages) = mpsc::unbounded_channel();
         let resubscribe = client.clone();

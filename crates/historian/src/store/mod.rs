@@ -10,23 +10,29 @@
 //! # Schema
 //!
 //! - `points(id, node, device, point, datatype, unit, description, writable, write_min,
-//!   write_max)`, unique by (node, device, point); a node's own metrics have device `''`.
+//!   write_max, group_id)`, unique by (node, device, point, group_id): the same edge node id
+//!   in two Sparkplug groups is two nodes. A node's own metrics have device `''`. Points
+//!   stored by schema version 1 have group `''` until their node's next birth claims them
+//!   ([`adopt_ungrouped`]).
 //! - `samples(point_id, t, value, text, quality)`, primary key (point_id, t), partitioned
 //!   by range on `t`, one partition per UTC day (`samples_2026_01_31`) created before the
 //!   first batch that needs it; or, when TimescaleDB can be used, a hypertable with one-day
 //!   chunks. `quality` is 0 good, 1 stale, 2 bad. No foreign key to `points` (it would cost
 //!   a lookup per row on ingest; the store writes only ids it got from `points`).
-//! - `events(id, t, node, device, point, line, kind, severity, message)`, unique by (node,
-//!   device, point, t, kind, md5(message)).
+//! - `events(id, t, node, device, point, line, kind, severity, message, group_id)`, unique
+//!   by (node, device, point, t, kind, md5(message), group_id).
 //! - The views users and Grafana query, whose shape stays: `cellbus_samples(node, device,
-//!   point, t, value, text, quality)` with quality as `good`/`stale`/`bad`,
-//!   `cellbus_events(t, node, device, point, line, kind, severity, message)` and
+//!   point, t, value, text, quality, group_id)` with quality as `good`/`stale`/`bad`,
+//!   `cellbus_events(t, node, device, point, line, kind, severity, message, group_id)` and
 //!   `cellbus_points(node, device, point, unit, description, datatype, writable, write_min,
-//!   write_max)`.
+//!   write_max, group_id)` (columns are only ever added at the end).
 //!
-//! Samples dated before 2000 or more than a day ahead of the historian's clock are refused
-//! and counted ([`Written::refused_samples`]), never written: they would create partitions
-//! for a wrong clock's dates.
+//! Samples dated before 2000, more than a day ahead of the historian's clock, or older
+//! than the maximum age ([`Store::set_max_age`]; the historian's `--max-age`, 31 days by
+//! default) are refused and counted ([`Written::refused_samples`]), never written: they
+//! would create partitions for a wrong clock's dates, and a rogue birth dated a day apart
+//! per metric would create thousands (each a table PostgreSQL plans and locks for every
+//! query of `samples`).
 //!
 //! Durability is PostgreSQL's: a write returns after its commit is flushed. For a faster,
 //! less durable ingest add `options=-c%20synchronous_commit%3Doff` to the URL.
@@ -46,6 +52,7 @@ use tokio_postgres::types::Type;
 use tokio_postgres::{Client, Config, NoTls, Statement, Transaction};
 
 pub use error::StoreError;
+pub use query::FoundPoint;
 pub use rows::{
     Batch, Bucket, EARLIEST_UNIX_SECS, EventRow, MAX_AHEAD, PointRow, Quality, Refusal,
     RefusalReason, SampleRow, StoredSample, UNKNOWN_DATATYPE, Written, check_time,
@@ -94,11 +101,14 @@ pub struct Store {
     /// Reused for building keys.
     scratch: String,
     migrated: Vec<i32>,
+    /// Rows older than this are refused (`None`: any age after 2000).
+    max_age: Option<Duration>,
 }
 
 /// The statements of the write path, prepared once per connection.
 #[derive(Debug)]
 struct Statements {
+    adopt_ungrouped: Statement,
     upsert_points: Statement,
     insert_bare_points: Statement,
     point_ids: Statement,
@@ -171,7 +181,14 @@ impl Store {
             days: HashSet::new(),
             scratch: String::new(),
             migrated,
+            max_age: None,
         })
+    }
+
+    /// Refuses samples and events older than `max_age` from then on (`None`: any age after
+    /// 2000, the default).
+    pub fn set_max_age(&mut self, max_age: Option<Duration>) {
+        self.max_age = max_age;
     }
 
     /// How the samples are split by time in this database.
@@ -209,7 +226,7 @@ impl Store {
 
     async fn write_at(&mut self, batch: &Batch, now: SystemTime) -> Result<Written, StoreError> {
         let mut written = Written::default();
-        let accepted = Accepted::sort(batch, now, &mut written);
+        let accepted = Accepted::sort(batch, now, self.max_age, &mut written);
         if accepted.is_empty() {
             return Ok(written);
         }
@@ -296,28 +313,39 @@ impl Statements {
                 .map_err(|e| StoreError::statement("preparing the write statements", e))
         };
         Ok(Statements {
+            // A point of a node's version-1 rows (group '') goes to the group now seen
+            // with that node, unless that group has the point already.
+            adopt_ungrouped: prepare(
+                "UPDATE points p SET group_id = k.group_id \
+                 FROM (SELECT DISTINCT * FROM unnest($1::text[], $2::text[])) \
+                 AS k(group_id, node) \
+                 WHERE p.group_id = '' AND k.group_id <> '' AND p.node = k.node \
+                 AND NOT EXISTS (SELECT 1 FROM points q WHERE q.node = p.node \
+                 AND q.device = p.device AND q.point = p.point AND q.group_id = k.group_id)",
+            )
+            .await?,
             upsert_points: prepare(
-                "INSERT INTO points (node, device, point, datatype, unit, description, \
-                 writable, write_min, write_max) \
+                "INSERT INTO points (group_id, node, device, point, datatype, unit, \
+                 description, writable, write_min, write_max) \
                  SELECT * FROM unnest($1::text[], $2::text[], $3::text[], $4::text[], \
-                 $5::text[], $6::text[], $7::bool[], $8::float8[], $9::float8[]) \
-                 ON CONFLICT (node, device, point) DO UPDATE SET \
+                 $5::text[], $6::text[], $7::text[], $8::bool[], $9::float8[], $10::float8[]) \
+                 ON CONFLICT (node, device, point, group_id) DO UPDATE SET \
                  datatype = EXCLUDED.datatype, unit = EXCLUDED.unit, \
                  description = EXCLUDED.description, writable = EXCLUDED.writable, \
                  write_min = EXCLUDED.write_min, write_max = EXCLUDED.write_max \
-                 RETURNING id, node, device, point",
+                 RETURNING id, group_id, node, device, point",
             )
             .await?,
             insert_bare_points: prepare(
-                "INSERT INTO points (node, device, point) \
-                 SELECT * FROM unnest($1::text[], $2::text[], $3::text[]) \
-                 ON CONFLICT (node, device, point) DO NOTHING",
+                "INSERT INTO points (group_id, node, device, point) \
+                 SELECT * FROM unnest($1::text[], $2::text[], $3::text[], $4::text[]) \
+                 ON CONFLICT (node, device, point, group_id) DO NOTHING",
             )
             .await?,
             point_ids: prepare(
-                "SELECT p.id, p.node, p.device, p.point FROM points p \
-                 JOIN unnest($1::text[], $2::text[], $3::text[]) AS k(node, device, point) \
-                 USING (node, device, point)",
+                "SELECT p.id, p.group_id, p.node, p.device, p.point FROM points p \
+                 JOIN unnest($1::text[], $2::text[], $3::text[], $4::text[]) \
+                 AS k(group_id, node, device, point) USING (group_id, node, device, point)",
             )
             .await?,
             insert_samples: prepare(
@@ -327,10 +355,11 @@ impl Statements {
             )
             .await?,
             insert_events: prepare(
-                "INSERT INTO events (t, node, device, point, line, kind, severity, message) \
+                "INSERT INTO events (t, node, device, point, line, kind, severity, message, \
+                 group_id) \
                  SELECT * FROM unnest($1::timestamptz[], $2::text[], $3::text[], $4::text[], \
-                 $5::text[], $6::text[], $7::int4[], $8::text[]) \
-                 ON CONFLICT (node, device, point, t, kind, md5(message)) DO NOTHING",
+                 $5::text[], $6::text[], $7::int4[], $8::text[], $9::text[]) \
+                 ON CONFLICT (node, device, point, t, kind, md5(message), group_id) DO NOTHING",
             )
             .await?,
         })
@@ -346,7 +375,12 @@ struct Accepted<'a> {
 }
 
 impl<'a> Accepted<'a> {
-    fn sort(batch: &'a Batch, now: SystemTime, written: &mut Written) -> Self {
+    fn sort(
+        batch: &'a Batch,
+        now: SystemTime,
+        max_age: Option<Duration>,
+        written: &mut Written,
+    ) -> Self {
         let mut refuse = |row: String, t: SystemTime, reason: RefusalReason| {
             written
                 .first_refusal
@@ -355,7 +389,7 @@ impl<'a> Accepted<'a> {
         let mut by_key: HashMap<String, usize> = HashMap::new();
         let mut points: Vec<&PointRow> = Vec::new();
         for p in &batch.points {
-            let texts = [&p.node, &p.device, &p.point, &p.datatype];
+            let texts = [&p.group, &p.node, &p.device, &p.point, &p.datatype];
             let optional = [&p.unit, &p.description];
             if texts.iter().any(|t| has_nul(t)) || optional.iter().any(|t| has_nul_opt(t)) {
                 written.refused_points += 1;
@@ -367,7 +401,7 @@ impl<'a> Accepted<'a> {
                 continue;
             }
             let mut key = String::new();
-            point_key(&mut key, &p.node, &p.device, &p.point);
+            point_key(&mut key, &p.group, &p.node, &p.device, &p.point);
             match by_key.get(&key) {
                 Some(&i) => points[i] = p,
                 None => {
@@ -378,15 +412,19 @@ impl<'a> Accepted<'a> {
         }
         // In one order everywhere, so two historians upserting the same points lock their
         // rows in the same order and cannot deadlock.
-        points.sort_by(|a, b| (&a.node, &a.device, &a.point).cmp(&(&b.node, &b.device, &b.point)));
+        points.sort_by(|a, b| {
+            (&a.node, &a.device, &a.point, &a.group).cmp(&(&b.node, &b.device, &b.point, &b.group))
+        });
         let mut samples = Vec::with_capacity(batch.samples.len());
         for s in &batch.samples {
-            let verdict = if [&s.node, &s.device, &s.point].iter().any(|t| has_nul(t))
+            let verdict = if [&s.group, &s.node, &s.device, &s.point]
+                .iter()
+                .any(|t| has_nul(t))
                 || has_nul_opt(&s.text)
             {
                 Err(RefusalReason::NulCharacter)
             } else {
-                check_time(s.t, now)
+                check_time(s.t, now, max_age)
             };
             match verdict {
                 Ok(()) => samples.push(s),
@@ -399,13 +437,13 @@ impl<'a> Accepted<'a> {
         }
         let mut events = Vec::with_capacity(batch.events.len());
         for e in &batch.events {
-            let texts = [&e.node, &e.kind, &e.message];
+            let texts = [&e.group, &e.node, &e.kind, &e.message];
             let optional = [&e.device, &e.point, &e.line];
             let verdict =
                 if texts.iter().any(|t| has_nul(t)) || optional.iter().any(|t| has_nul_opt(t)) {
                     Err(RefusalReason::NulCharacter)
                 } else {
-                    check_time(e.t, now)
+                    check_time(e.t, now, max_age)
                 };
             match verdict {
                 Ok(()) => events.push(e),
@@ -437,6 +475,12 @@ async fn upsert_points(
     if points.is_empty() {
         return Ok(0);
     }
+    adopt_ungrouped(
+        tx,
+        statements,
+        points.iter().map(|p| (p.group.as_str(), p.node.as_str())),
+    )
+    .await?;
     let column = |f: fn(&PointRow) -> &str| points.iter().map(|p| f(p)).collect::<Vec<_>>();
     let optional =
         |f: fn(&PointRow) -> Option<&str>| points.iter().map(|p| f(p)).collect::<Vec<_>>();
@@ -445,6 +489,7 @@ async fn upsert_points(
         .query(
             &statements.upsert_points,
             &[
+                &column(|p| &p.group),
                 &column(|p| &p.node),
                 &column(|p| &p.device),
                 &column(|p| &p.point),
@@ -462,23 +507,48 @@ async fn upsert_points(
     Ok(rows.len() as u64)
 }
 
+/// A point's names: group, node, device, metric.
+type Names<'a> = (&'a str, &'a str, &'a str, &'a str);
+
 /// The distinct points of `samples` whose id is known neither before nor in this batch.
 fn missing_points<'a>(
     samples: &[&'a SampleRow],
     known: &HashMap<String, i32>,
     new: &HashMap<String, i32>,
-) -> Vec<(&'a str, &'a str, &'a str)> {
+) -> Vec<Names<'a>> {
     let mut key = String::new();
     let mut seen = HashSet::new();
     let mut missing = Vec::new();
     for s in samples {
-        point_key(&mut key, &s.node, &s.device, &s.point);
+        point_key(&mut key, &s.group, &s.node, &s.device, &s.point);
         if !known.contains_key(&key) && !new.contains_key(&key) && seen.insert(key.clone()) {
-            missing.push((s.node.as_str(), s.device.as_str(), s.point.as_str()));
+            missing.push((
+                s.group.as_str(),
+                s.node.as_str(),
+                s.device.as_str(),
+                s.point.as_str(),
+            ));
         }
     }
-    missing.sort_unstable(); // One lock order for every historian (see `Accepted::sort`).
+    // One lock order for every historian (see `Accepted::sort`).
+    missing.sort_unstable_by_key(|&(group, node, device, point)| (node, device, point, group));
     missing
+}
+
+/// Gives the points of version-1 rows (group `''`) of each node to the group it is now
+/// seen in, unless that group has the point already: a database written before the group
+/// was recorded keeps one history per point across the upgrade. Runs only for points this
+/// connection has no id for (births, and samples of points not born), so rarely.
+async fn adopt_ungrouped<'a>(
+    tx: &Transaction<'_>,
+    statements: &Statements,
+    pairs: impl Iterator<Item = (&'a str, &'a str)>,
+) -> Result<(), StoreError> {
+    let (groups, nodes): (Vec<&str>, Vec<&str>) = pairs.unzip();
+    tx.execute(&statements.adopt_ungrouped, &[&groups, &nodes])
+        .await
+        .map_err(|e| StoreError::statement("giving points stored without a group theirs", e))?;
+    Ok(())
 }
 
 /// Gives points known only by name a bare row (unless another historian just did) and
@@ -486,21 +556,26 @@ fn missing_points<'a>(
 async fn insert_bare_points(
     tx: &Transaction<'_>,
     statements: &Statements,
-    missing: &[(&str, &str, &str)],
+    missing: &[Names<'_>],
     ids: &mut HashMap<String, i32>,
 ) -> Result<u64, StoreError> {
     if missing.is_empty() {
         return Ok(0);
     }
-    let nodes: Vec<&str> = missing.iter().map(|m| m.0).collect();
-    let devices: Vec<&str> = missing.iter().map(|m| m.1).collect();
-    let names: Vec<&str> = missing.iter().map(|m| m.2).collect();
+    adopt_ungrouped(tx, statements, missing.iter().map(|m| (m.0, m.1))).await?;
+    let groups: Vec<&str> = missing.iter().map(|m| m.0).collect();
+    let nodes: Vec<&str> = missing.iter().map(|m| m.1).collect();
+    let devices: Vec<&str> = missing.iter().map(|m| m.2).collect();
+    let names: Vec<&str> = missing.iter().map(|m| m.3).collect();
     let created = tx
-        .execute(&statements.insert_bare_points, &[&nodes, &devices, &names])
+        .execute(
+            &statements.insert_bare_points,
+            &[&groups, &nodes, &devices, &names],
+        )
         .await
         .map_err(|e| StoreError::statement("inserting points known only by name", e))?;
     let rows = tx
-        .query(&statements.point_ids, &[&nodes, &devices, &names])
+        .query(&statements.point_ids, &[&groups, &nodes, &devices, &names])
         .await
         .map_err(|e| StoreError::statement("reading the ids of points", e))?;
     record_ids(&rows, ids);
@@ -510,7 +585,7 @@ async fn insert_bare_points(
 fn record_ids(rows: &[tokio_postgres::Row], ids: &mut HashMap<String, i32>) {
     for row in rows {
         let mut key = String::new();
-        point_key(&mut key, row.get(1), row.get(2), row.get(3));
+        point_key(&mut key, row.get(1), row.get(2), row.get(3), row.get(4));
         ids.insert(key, row.get(0));
     }
 }
@@ -534,7 +609,7 @@ async fn copy_samples(
     let writer = BinaryCopyInWriter::new(sink, &STAGING_TYPES);
     pin_mut!(writer);
     for s in samples {
-        point_key(key, &s.node, &s.device, &s.point);
+        point_key(key, &s.group, &s.node, &s.device, &s.point);
         // Every point got an id above: known, from the batch's points or bare (unless the
         // row was deleted meanwhile by hand).
         let Some(id) = known.get(key.as_str()).or_else(|| new.get(key.as_str())) else {
@@ -580,16 +655,19 @@ async fn insert_events(
             &text(|e| &e.kind),
             &events.iter().map(|e| e.severity).collect::<Vec<_>>(),
             &text(|e| &e.message),
+            &text(|e| &e.group),
         ],
     )
     .await
     .map_err(|e| StoreError::statement("inserting events", e))
 }
 
-/// The cache key of a point: its three names joined by NUL (which no name holds: rows
+/// The cache key of a point: its four names joined by NUL (which no name holds: rows
 /// with a NUL are refused).
-fn point_key(key: &mut String, node: &str, device: &str, point: &str) {
+fn point_key(key: &mut String, group: &str, node: &str, device: &str, point: &str) {
     key.clear();
+    key.push_str(group);
+    key.push('\0');
     key.push_str(node);
     key.push('\0');
     key.push_str(device);
@@ -637,6 +715,7 @@ mod tests {
 
     fn sample(point: &str, ms: u64) -> SampleRow {
         SampleRow {
+            group: "plant".into(),
             node: "cell1".into(),
             device: "jbc1".into(),
             point: point.into(),
@@ -654,11 +733,14 @@ mod tests {
         let mut batch = Batch::default();
         for i in 0..200 {
             let name = format!("p{i}");
-            batch.points.push(PointRow::bare("cell1", "jbc1", &name));
+            batch
+                .points
+                .push(PointRow::bare("plant", "cell1", "jbc1", &name));
             batch.samples.push(sample(&name, NOW_MS));
             batch.samples.push(sample(&name, NOW_MS + 1));
         }
         batch.events.push(EventRow {
+            group: "plant".into(),
             node: "cell1".into(),
             device: None,
             point: None,
@@ -701,7 +783,7 @@ mod tests {
             ..Batch::default()
         };
         let mut written = Written::default();
-        let accepted = Accepted::sort(&batch, now, &mut written);
+        let accepted = Accepted::sort(&batch, now, None, &mut written);
         let names: Vec<&str> = accepted.samples.iter().map(|s| s.point.as_str()).collect();
         assert_eq!(names, ["ok", "edge"]);
         assert_eq!(written.refused_samples, 2);
@@ -714,7 +796,7 @@ mod tests {
     fn a_text_with_a_nul_is_refused_instead_of_failing_the_batch() {
         let mut bad = sample("t", NOW_MS);
         bad.text = Some("a\0b".into());
-        let mut bad_point = PointRow::bare("cell1", "jbc1", "p");
+        let mut bad_point = PointRow::bare("plant", "cell1", "jbc1", "p");
         bad_point.unit = Some("\0".into());
         let batch = Batch {
             points: vec![bad_point],
@@ -725,6 +807,7 @@ mod tests {
         let accepted = Accepted::sort(
             &batch,
             UNIX_EPOCH + Duration::from_millis(NOW_MS),
+            None,
             &mut written,
         );
         assert!(accepted.is_empty());
@@ -737,15 +820,144 @@ mod tests {
 
     #[test]
     fn a_point_defined_twice_in_a_batch_keeps_its_last_definition() {
-        let mut second = PointRow::bare("cell1", "jbc1", "p");
+        let mut second = PointRow::bare("plant", "cell1", "jbc1", "p");
         second.unit = Some("°C".into());
         let batch = Batch {
-            points: vec![PointRow::bare("cell1", "jbc1", "p"), second.clone()],
+            points: vec![
+                PointRow::bare("plant", "cell1", "jbc1", "p"),
+                second.clone(),
+            ],
             ..Batch::default()
         };
         let mut written = Written::default();
-        let accepted = Accepted::sort(&batch, SystemTime::now(), &mut written);
+        let accepted = Accepted::sort(&batch, SystemTime::now(), None, &mut written);
         assert_eq!(accepted.points, [&second]);
+    }
+
+    #[test]
+    fn rows_older_than_the_maximum_age_are_refused_so_a_rogue_birth_makes_no_partitions() {
+        const DAY_MS: u64 = 86_400_000;
+        let now = UNIX_EPOCH + Duration::from_millis(NOW_MS);
+        // A rogue birth: one metric per day back to 2000.
+        let mut batch = Batch::default();
+        for day in 0..6_000 {
+            batch
+                .samples
+                .push(sample(&format!("m{day}"), NOW_MS - day * DAY_MS));
+        }
+        let mut event = EventRow {
+            group: "plant".into(),
+            node: "cell1".into(),
+            device: None,
+            point: None,
+            line: None,
+            t: UNIX_EPOCH + Duration::from_millis(NOW_MS - 32 * DAY_MS),
+            kind: "device_down".into(),
+            severity: 700,
+            message: "old".into(),
+        };
+        batch.events.push(event.clone());
+        event.t = now;
+        batch.events.push(event);
+        let mut written = Written::default();
+        let max_age = Some(Duration::from_secs(31 * 86_400));
+        let accepted = Accepted::sort(&batch, now, max_age, &mut written);
+        assert_eq!(accepted.samples.len(), 32, "today and the 31 days before");
+        let days: HashSet<i64> = accepted.samples.iter().map(|s| days::day_of(s.t)).collect();
+        assert!(days.len() <= 33, "{} partitions", days.len());
+        assert_eq!(accepted.events.len(), 1);
+        assert_eq!(
+            (written.refused_samples, written.refused_events),
+            (6_000 - 32, 1)
+        );
+        let first = written.first_refusal.expect("a refusal");
+        assert_eq!(first.reason, RefusalReason::TooOld { max_age_days: 31 });
+        assert!(
+            first
+                .to_string()
+                .contains("more than 31 days before this clock"),
+            "{first}"
+        );
+    }
+
+    #[tokio::test]
+    async fn a_version_1_database_keeps_each_points_history_when_its_node_is_born_in_a_group() {
+        let pg = testkit::Postgres::start();
+        let url = pg.create_database("v1");
+        let config = parse_url(&url).unwrap();
+        let (mut client, connection) = config.connect(NoTls).await.unwrap();
+        tokio::spawn(connection);
+        schema::migrate_to(&mut client, 1).await.unwrap();
+        // What a version-1 historian wrote: a point, a sample of it, an event.
+        client
+            .batch_execute(
+                "CREATE TABLE samples_2025_03_10 PARTITION OF samples \
+                     FOR VALUES FROM ('2025-03-10') TO ('2025-03-11');
+                 INSERT INTO points (node, device, point, datatype) \
+                     VALUES ('cell1', 'jbc1', 'air_temperature', 'Double');
+                 INSERT INTO samples SELECT id, '2025-03-10 01:00:00+00', 300, NULL, 0 \
+                     FROM points;
+                 INSERT INTO events (t, node, kind, severity, message) \
+                     VALUES ('2025-03-10 01:00:00+00', 'cell1', 'device_down', 700, 'down')",
+            )
+            .await
+            .unwrap();
+        drop(client);
+
+        let mut store = Store::connect(&url).await.unwrap();
+        assert_eq!(store.migrated(), [2]);
+        let old = store
+            .find_points("cell1/jbc1.air_temperature")
+            .await
+            .unwrap();
+        assert_eq!((old.len(), old[0].group.as_str()), (1, ""));
+        // The node's birth in its group claims the point: the same row, its history kept.
+        let mut birth = PointRow::bare("plant", "cell1", "jbc1", "air_temperature");
+        birth.datatype = "Double".into();
+        let later = sample("air_temperature", 1_741_575_600_000);
+        store
+            .write(&Batch {
+                points: vec![birth],
+                samples: vec![later],
+                ..Batch::default()
+            })
+            .await
+            .unwrap();
+        let claimed = store
+            .find_points("plant/cell1/jbc1.air_temperature")
+            .await
+            .unwrap();
+        assert_eq!(claimed.len(), 1);
+        assert_eq!(claimed[0].id, old[0].id, "the same point row");
+        let history = store
+            .raw(claimed[0].id, UNIX_EPOCH, SystemTime::now(), 10)
+            .await
+            .unwrap();
+        assert_eq!(history.len(), 2, "the version-1 sample and the new one");
+        // Another group's node of the same id is another node.
+        store
+            .write(&Batch {
+                points: vec![PointRow::bare("other", "cell1", "jbc1", "air_temperature")],
+                ..Batch::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(
+            store
+                .find_points("cell1/jbc1.air_temperature")
+                .await
+                .unwrap()
+                .len(),
+            2
+        );
+        let events = store
+            .events(UNIX_EPOCH, SystemTime::now(), 10)
+            .await
+            .unwrap();
+        assert_eq!(
+            events[0].group, "",
+            "an event keeps the group it was stored with"
+        );
     }
 
     #[test]

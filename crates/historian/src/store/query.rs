@@ -1,13 +1,74 @@
 //! The read side: the queries of the plant's history API (the gateway's `/api/history`,
 //! `/api/points`, `/api/events` and `/healthz` shapes).
 
+use std::collections::HashSet;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use tokio_postgres::Row;
 
 use super::{Bucket, EventRow, PointRow, Quality, Store, StoreError, StoredSample};
 
+/// A stored point found by its plant id.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FoundPoint {
+    /// Its row id (what [`Store::raw`], [`Store::last_before`] and [`Store::buckets`] take).
+    pub id: i32,
+    /// The Sparkplug group (`""` for a point stored before groups were recorded).
+    pub group: String,
+    /// The edge node.
+    pub node: String,
+    /// The device (`""` for the node's own metrics).
+    pub device: String,
+    /// The metric's name.
+    pub point: String,
+}
+
 impl Store {
+    /// The points a plant point id names: `NODE/DEVICE.POINT` (a node's own metric
+    /// `NODE/.POINT`), or `GROUP/NODE/DEVICE.POINT`. More than one when the node id is in
+    /// several groups, or when a device id holds a `.` (`a.b` + `c` and `a` + `b.c`); none
+    /// for an unknown point.
+    ///
+    /// # Errors
+    ///
+    /// As [`Store::raw`].
+    pub async fn find_points(&self, id: &str) -> Result<Vec<FoundPoint>, StoreError> {
+        let Some((first, rest)) = id.split_once('/') else {
+            return Ok(Vec::new());
+        };
+        // Ids hold no `/`, so a second `/` before the device's `.` can only be the group
+        // form's; a metric's name may hold `/` (`Node Control/Rebirth`), so both forms
+        // are asked for and the rows say which matched.
+        let grouped = rest.split_once('/');
+        let rows = self
+            .client
+            .query(
+                "SELECT id, group_id, node, device, point FROM points \
+                 WHERE (node = $1 AND device || '.' || point = $2) \
+                 OR (group_id = $3 AND node = $4 AND device || '.' || point = $5) \
+                 ORDER BY group_id, node, device, point LIMIT 100",
+                &[
+                    &first,
+                    &rest,
+                    &grouped.map(|_| first),
+                    &grouped.map(|g| g.0),
+                    &grouped.map(|g| g.1),
+                ],
+            )
+            .await
+            .map_err(|e| StoreError::statement("looking a point up", e))?;
+        Ok(rows
+            .iter()
+            .map(|r| FoundPoint {
+                id: r.get(0),
+                group: r.get(1),
+                node: r.get(2),
+                device: r.get(3),
+                point: r.get(4),
+            })
+            .collect())
+    }
+
     /// The samples of one point with `from <= t < to`, oldest first, at most `limit`.
     ///
     /// # Errors
@@ -15,9 +76,7 @@ impl Store {
     /// As [`Store::write`]'s, for the query.
     pub async fn raw(
         &self,
-        node: &str,
-        device: &str,
-        point: &str,
+        point: i32,
         from: SystemTime,
         to: SystemTime,
         limit: usize,
@@ -27,11 +86,9 @@ impl Store {
         let rows = self
             .client
             .query(
-                "SELECT s.t, s.value, s.text, s.quality FROM samples s \
-                 JOIN points p ON p.id = s.point_id \
-                 WHERE p.node = $1 AND p.device = $2 AND p.point = $3 \
-                 AND s.t >= $4 AND s.t < $5 ORDER BY s.t LIMIT $6",
-                &[&node, &device, &point, &from, &to, &limit],
+                "SELECT t, value, text, quality FROM samples \
+                 WHERE point_id = $1 AND t >= $2 AND t < $3 ORDER BY t LIMIT $4",
+                &[&point, &from, &to, &limit],
             )
             .await
             .map_err(|e| StoreError::statement("reading a point's samples", e))?;
@@ -45,20 +102,16 @@ impl Store {
     /// As [`Store::raw`].
     pub async fn last_before(
         &self,
-        node: &str,
-        device: &str,
-        point: &str,
+        point: i32,
         at: SystemTime,
     ) -> Result<Option<StoredSample>, StoreError> {
         let at = within_calendar(at);
         let row = self
             .client
             .query_opt(
-                "SELECT s.t, s.value, s.text, s.quality FROM samples s \
-                 JOIN points p ON p.id = s.point_id \
-                 WHERE p.node = $1 AND p.device = $2 AND p.point = $3 AND s.t < $4 \
-                 ORDER BY s.t DESC LIMIT 1",
-                &[&node, &device, &point, &at],
+                "SELECT t, value, text, quality FROM samples \
+                 WHERE point_id = $1 AND t < $2 ORDER BY t DESC LIMIT 1",
+                &[&point, &at],
             )
             .await
             .map_err(|e| StoreError::statement("reading a point's sample before a time", e))?;
@@ -74,9 +127,7 @@ impl Store {
     /// As [`Store::raw`].
     pub async fn buckets(
         &self,
-        node: &str,
-        device: &str,
-        point: &str,
+        point: i32,
         from: SystemTime,
         to: SystemTime,
         step: Duration,
@@ -89,13 +140,13 @@ impl Store {
         let rows = self
             .client
             .query(
-                "SELECT date_bin(make_interval(secs => $6::float8 / 1000), s.t, \
-                 timestamptz 'epoch') AS b, avg(s.value), min(s.value), max(s.value), count(*) \
-                 FROM samples s JOIN points p ON p.id = s.point_id \
-                 WHERE p.node = $1 AND p.device = $2 AND p.point = $3 \
-                 AND s.t >= $4 AND s.t < $5 AND s.quality = 0 AND s.value IS NOT NULL \
+                "SELECT date_bin(make_interval(secs => $4::float8 / 1000), t, \
+                 timestamptz 'epoch') AS b, avg(value), min(value), max(value), count(*) \
+                 FROM samples \
+                 WHERE point_id = $1 AND t >= $2 AND t < $3 AND quality = 0 \
+                 AND value IS NOT NULL \
                  GROUP BY b ORDER BY b",
-                &[&node, &device, &point, &from, &to, &(step_ms as f64)],
+                &[&point, &from, &to, &(step_ms as f64)],
             )
             .await
             .map_err(|e| StoreError::statement("reading a point's buckets", e))?;
@@ -111,57 +162,73 @@ impl Store {
             .collect())
     }
 
-    /// Whether the point (node, device, name) is known.
+    /// The points (of `node` only, when given) by node, device, name and group: `limit`
+    /// of them after the first `offset`, and how many there are in all.
     ///
     /// # Errors
     ///
     /// As [`Store::raw`].
-    pub async fn has_point(
+    pub async fn points(
         &self,
-        node: &str,
-        device: &str,
-        point: &str,
-    ) -> Result<bool, StoreError> {
-        let row = self
-            .client
-            .query_opt(
-                "SELECT 1 FROM points WHERE node = $1 AND device = $2 AND point = $3",
-                &[&node, &device, &point],
-            )
-            .await
-            .map_err(|e| StoreError::statement("looking a point up", e))?;
-        Ok(row.is_some())
-    }
-
-    /// Every point, by node, device and name.
-    ///
-    /// # Errors
-    ///
-    /// As [`Store::raw`].
-    pub async fn points(&self) -> Result<Vec<PointRow>, StoreError> {
+        node: Option<&str>,
+        offset: usize,
+        limit: usize,
+    ) -> Result<(Vec<PointRow>, u64), StoreError> {
+        let offset = i64::try_from(offset).unwrap_or(i64::MAX);
+        let limit = i64::try_from(limit).unwrap_or(i64::MAX);
         let rows = self
             .client
             .query(
-                "SELECT node, device, point, datatype, unit, description, writable, \
-                 write_min, write_max FROM points ORDER BY node, device, point",
-                &[],
+                "SELECT group_id, node, device, point, datatype, unit, description, writable, \
+                 write_min, write_max FROM points WHERE $1::text IS NULL OR node = $1 \
+                 ORDER BY node, device, point, group_id OFFSET $2 LIMIT $3",
+                &[&node, &offset, &limit],
             )
             .await
             .map_err(|e| StoreError::statement("listing points", e))?;
-        Ok(rows
+        let total: i64 = self
+            .client
+            .query_one(
+                "SELECT count(*) FROM points WHERE $1::text IS NULL OR node = $1",
+                &[&node],
+            )
+            .await
+            .map_err(|e| StoreError::statement("counting points", e))?
+            .get(0);
+        let points = rows
             .iter()
             .map(|r| PointRow {
-                node: r.get(0),
-                device: r.get(1),
-                point: r.get(2),
-                datatype: r.get(3),
-                unit: r.get(4),
-                description: r.get(5),
-                writable: r.get(6),
-                write_min: r.get(7),
-                write_max: r.get(8),
+                group: r.get(0),
+                node: r.get(1),
+                device: r.get(2),
+                point: r.get(3),
+                datatype: r.get(4),
+                unit: r.get(5),
+                description: r.get(6),
+                writable: r.get(7),
+                write_min: r.get(8),
+                write_max: r.get(9),
             })
-            .collect())
+            .collect();
+        Ok((points, total.unsigned_abs()))
+    }
+
+    /// The edge node ids that have points in more than one Sparkplug group (their points
+    /// need the plant id's `GROUP/` form).
+    ///
+    /// # Errors
+    ///
+    /// As [`Store::raw`].
+    pub async fn nodes_in_several_groups(&self) -> Result<HashSet<String>, StoreError> {
+        let rows = self
+            .client
+            .query(
+                "SELECT node FROM points GROUP BY node HAVING count(DISTINCT group_id) > 1",
+                &[],
+            )
+            .await
+            .map_err(|e| StoreError::statement("listing nodes in several groups", e))?;
+        Ok(rows.iter().map(|r| r.get(0)).collect())
     }
 
     /// The events with `from <= t < to`, newest first, at most `limit`.
@@ -180,8 +247,8 @@ impl Store {
         let rows = self
             .client
             .query(
-                "SELECT node, device, point, line, t, kind, severity, message FROM events \
-                 WHERE t >= $1 AND t < $2 ORDER BY t DESC, id DESC LIMIT $3",
+                "SELECT node, device, point, line, t, kind, severity, message, group_id \
+                 FROM events WHERE t >= $1 AND t < $2 ORDER BY t DESC, id DESC LIMIT $3",
                 &[&from, &to, &limit],
             )
             .await
@@ -197,6 +264,7 @@ impl Store {
                 kind: r.get(5),
                 severity: r.get(6),
                 message: r.get(7),
+                group: r.get(8),
             })
             .collect())
     }

@@ -47,10 +47,13 @@ impl Quality {
 /// The data type of a point known only from its samples (no birth seen yet).
 pub const UNKNOWN_DATATYPE: &str = "unknown";
 
-/// A point as its birth defines it. Points are named by edge node, device and metric name;
-/// a node's own metrics have the device `""`.
+/// A point as its birth defines it. Points are named by Sparkplug group, edge node, device
+/// and metric name; a node's own metrics have the device `""`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PointRow {
+    /// The Sparkplug group id (`plant`); `""` for a point stored before the group was
+    /// recorded (schema version 1), until its node's next birth claims it.
+    pub group: String,
     /// The Sparkplug edge node id (`cell7`).
     pub node: String,
     /// The device id (`jbc1`), `""` for the node's own metrics.
@@ -75,8 +78,9 @@ pub struct PointRow {
 impl PointRow {
     /// A point known only by its name: unknown type, no unit, not writable (what the store
     /// records for a sample of a point no birth has described).
-    pub fn bare(node: &str, device: &str, point: &str) -> Self {
+    pub fn bare(group: &str, node: &str, device: &str, point: &str) -> Self {
         Self {
+            group: group.to_owned(),
             node: node.to_owned(),
             device: device.to_owned(),
             point: point.to_owned(),
@@ -93,6 +97,8 @@ impl PointRow {
 /// One value change of a point.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SampleRow {
+    /// The Sparkplug group id.
+    pub group: String,
     /// The edge node id.
     pub node: String,
     /// The device id, `""` for the node's own metrics.
@@ -113,6 +119,8 @@ pub struct SampleRow {
 /// An event of a gateway (alarm, transfer, machine state, device down).
 #[derive(Debug, Clone, PartialEq)]
 pub struct EventRow {
+    /// The Sparkplug group id.
+    pub group: String,
     /// The edge node id.
     pub node: String,
     /// The device, if any.
@@ -157,19 +165,19 @@ impl Batch {
     /// the same half, so two connections can write the halves at once without waiting for
     /// each other's point rows. Events go to the first half.
     pub fn split_by_point(self) -> [Batch; 2] {
-        fn half(node: &str, device: &str, point: &str) -> usize {
+        fn half(group: &str, node: &str, device: &str, point: &str) -> usize {
             let mut hasher = std::hash::DefaultHasher::new();
-            std::hash::Hash::hash(&(node, device, point), &mut hasher);
+            std::hash::Hash::hash(&(group, node, device, point), &mut hasher);
             usize::from(std::hash::Hasher::finish(&hasher) & 1 == 1)
         }
         let mut halves = [Batch::default(), Batch::default()];
         for row in self.points {
-            halves[half(&row.node, &row.device, &row.point)]
+            halves[half(&row.group, &row.node, &row.device, &row.point)]
                 .points
                 .push(row);
         }
         for row in self.samples {
-            halves[half(&row.node, &row.device, &row.point)]
+            halves[half(&row.group, &row.node, &row.device, &row.point)]
                 .samples
                 .push(row);
         }
@@ -239,6 +247,11 @@ pub enum RefusalReason {
     BeforeEarliest,
     /// Its time is more than [`MAX_AHEAD`] after the historian's clock.
     TooFarAhead,
+    /// Its time is further back than the store's maximum age ([`super::Store::set_max_age`]).
+    TooOld {
+        /// The maximum age, in whole days.
+        max_age_days: u64,
+    },
     /// A text contains a NUL character, which PostgreSQL's text cannot hold.
     NulCharacter,
 }
@@ -247,9 +260,14 @@ impl fmt::Display for Refusal {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let ms = super::days::epoch_millis(self.t);
         let why = match self.reason {
-            RefusalReason::BeforeEarliest => "its time is before 2000-01-01",
-            RefusalReason::TooFarAhead => "its time is more than a day ahead of this clock",
-            RefusalReason::NulCharacter => "a text holds a NUL character",
+            RefusalReason::BeforeEarliest => "its time is before 2000-01-01".to_owned(),
+            RefusalReason::TooFarAhead => {
+                "its time is more than a day ahead of this clock".to_owned()
+            }
+            RefusalReason::TooOld { max_age_days } => {
+                format!("its time is more than {max_age_days} days before this clock (--max-age)")
+            }
+            RefusalReason::NulCharacter => "a text holds a NUL character".to_owned(),
         };
         write!(f, "{} at {ms} ms since the epoch refused: {why}", self.row)
     }
@@ -263,13 +281,25 @@ pub const EARLIEST_UNIX_SECS: u64 = 946_684_800;
 /// more is a wrong clock, and would create partitions far in the future).
 pub const MAX_AHEAD: Duration = Duration::from_secs(24 * 3600);
 
-/// Whether a row at `t` may be stored when the historian's clock says `now`.
-pub fn check_time(t: SystemTime, now: SystemTime) -> Result<(), RefusalReason> {
+/// Whether a row at `t` may be stored when the historian's clock says `now`, and rows may
+/// be at most `max_age` old (any age after 2000 when `None`).
+pub fn check_time(
+    t: SystemTime,
+    now: SystemTime,
+    max_age: Option<Duration>,
+) -> Result<(), RefusalReason> {
     if t < UNIX_EPOCH + Duration::from_secs(EARLIEST_UNIX_SECS) {
         return Err(RefusalReason::BeforeEarliest);
     }
     if t > now + MAX_AHEAD {
         return Err(RefusalReason::TooFarAhead);
+    }
+    if let Some(max_age) = max_age
+        && now.duration_since(t).is_ok_and(|age| age > max_age)
+    {
+        return Err(RefusalReason::TooOld {
+            max_age_days: max_age.as_secs() / 86_400,
+        });
     }
     Ok(())
 }

@@ -10,7 +10,7 @@ use tokio_postgres::Client;
 use super::StoreError;
 
 /// The newest schema version this build writes.
-pub const SCHEMA_VERSION: i32 = 1;
+pub const SCHEMA_VERSION: i32 = 2;
 
 /// The advisory lock (per database) held while migrating: "cellbus" and 1.
 const MIGRATION_LOCK: i64 = 0x6365_6c6c_6275_7301;
@@ -36,11 +36,18 @@ struct Migration {
 }
 
 /// Every migration, oldest first. Never edit one that has shipped: add the next.
-const MIGRATIONS: &[Migration] = &[Migration {
-    version: 1,
-    what: "points, samples by day, events and the cellbus_* views",
-    statements: version_1,
-}];
+const MIGRATIONS: &[Migration] = &[
+    Migration {
+        version: 1,
+        what: "points, samples by day, events and the cellbus_* views",
+        statements: version_1,
+    },
+    Migration {
+        version: 2,
+        what: "the Sparkplug group in the identity of points and events",
+        statements: version_2,
+    },
+];
 
 fn version_1(layout: SamplesLayout) -> Vec<&'static str> {
     let samples = match layout {
@@ -120,13 +127,47 @@ fn version_1(layout: SamplesLayout) -> Vec<&'static str> {
     statements
 }
 
+/// Version 2: the same edge node id in two Sparkplug groups is two nodes. Points and events
+/// get `group_id` (`''` for the rows of version 1, whose group was not recorded: the next
+/// birth of their node claims them, see `store::adopt_ungrouped`), the views show it as
+/// their last column, and a point's unique key leads with its node (the plant API looks
+/// points up by node).
+fn version_2(_: SamplesLayout) -> Vec<&'static str> {
+    vec![
+        "ALTER TABLE points ADD COLUMN group_id text NOT NULL DEFAULT ''",
+        "ALTER TABLE points DROP CONSTRAINT points_node_device_point_key",
+        "ALTER TABLE points ADD CONSTRAINT points_identity UNIQUE (node, device, point, group_id)",
+        "ALTER TABLE events ADD COLUMN group_id text NOT NULL DEFAULT ''",
+        "DROP INDEX events_once",
+        "CREATE UNIQUE INDEX events_once
+            ON events (node, device, point, t, kind, md5(message), group_id) NULLS NOT DISTINCT",
+        "CREATE OR REPLACE VIEW cellbus_samples AS
+            SELECT p.node, p.device, p.point, s.t, s.value, s.text,
+                (CASE s.quality WHEN 0 THEN 'good' WHEN 1 THEN 'stale' ELSE 'bad' END)::text
+                    AS quality,
+                p.group_id
+            FROM samples s JOIN points p ON p.id = s.point_id",
+        "CREATE OR REPLACE VIEW cellbus_events AS
+            SELECT t, node, device, point, line, kind, severity, message, group_id FROM events",
+        "CREATE OR REPLACE VIEW cellbus_points AS
+            SELECT node, device, point, unit, description, datatype, writable, write_min,
+                write_max, group_id
+            FROM points",
+    ]
+}
+
 /// Brings the schema to [`SCHEMA_VERSION`]; returns the versions it applied.
 pub(crate) async fn migrate(client: &mut Client) -> Result<Vec<i32>, StoreError> {
+    migrate_to(client, SCHEMA_VERSION).await
+}
+
+/// Brings the schema to `target` (an older version only in tests of a migration).
+pub(crate) async fn migrate_to(client: &mut Client, target: i32) -> Result<Vec<i32>, StoreError> {
     client
         .execute("SELECT pg_advisory_lock($1)", &[&MIGRATION_LOCK])
         .await
         .map_err(|e| StoreError::statement("taking the migration lock", e))?;
-    let result = migrate_locked(client).await;
+    let result = migrate_locked(client, target).await;
     // Released with the session too, if this fails.
     let unlocked = client
         .execute("SELECT pg_advisory_unlock($1)", &[&MIGRATION_LOCK])
@@ -137,7 +178,7 @@ pub(crate) async fn migrate(client: &mut Client) -> Result<Vec<i32>, StoreError>
     Ok(applied)
 }
 
-async fn migrate_locked(client: &mut Client) -> Result<Vec<i32>, StoreError> {
+async fn migrate_locked(client: &mut Client, target: i32) -> Result<Vec<i32>, StoreError> {
     client
         .batch_execute(
             "CREATE TABLE IF NOT EXISTS cellbus_schema (
@@ -160,7 +201,10 @@ async fn migrate_locked(client: &mut Client) -> Result<Vec<i32>, StoreError> {
         });
     }
     let mut applied = Vec::new();
-    for migration in MIGRATIONS.iter().filter(|m| m.version > found) {
+    for migration in MIGRATIONS
+        .iter()
+        .filter(|m| m.version > found && m.version <= target)
+    {
         let tx = client
             .transaction()
             .await

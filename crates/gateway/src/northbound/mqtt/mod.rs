@@ -45,14 +45,20 @@ pub const RETRY_FIRST: Duration = Duration::from_millis(500);
 pub const RETRY_CAP: Duration = Duration::from_secs(30);
 /// A connection that lasted this long resets the wait to [`RETRY_FIRST`]; a shorter one
 /// doubles it like a failed attempt. A broker that ends every session at once (another
-/// client with the same client id takes it over, a retained message over the size limit)
-/// would otherwise be reconnected to, and sent births and stored history, twice a second.
+/// client with the same client id takes it over) would otherwise be reconnected to, and
+/// sent births and stored history, twice a second.
 pub const STABLE_SESSION: Duration = Duration::from_secs(30);
 
 /// Requests queued for the MQTT client.
 const QUEUE: usize = 1024;
-/// Largest MQTT packet sent or accepted: large cells make large births.
+/// Largest MQTT packet sent: large cells make large births.
 const MAX_PACKET: usize = 4 << 20;
+/// Largest MQTT packet accepted: any the protocol allows (its remaining length's maximum,
+/// 256 MiB). A smaller bound would not protect anything: the client drops the connection
+/// on a larger packet, and a retained one (or one kept for a persistent session) comes
+/// again at every reconnection, so one message would keep the link down for good. What a
+/// message says is checked after it is read.
+pub const MAX_INCOMING: usize = 268_435_455;
 /// How long a graceful stop waits for the last messages and DISCONNECT to leave.
 const STOP_GRACE: Duration = Duration::from_secs(3);
 
@@ -244,11 +250,9 @@ impl Link {
                     let why = if connected && lasted < STABLE_SESSION {
                         format!(
                             "{why} (the session lasted {:.1} s; if that repeats, another \
-                             client may be using the client id {:?}, or a message over {} MiB \
-                             may be waiting for it; next attempt in {:.1} s)",
+                             client may be using the client id {:?}; next attempt in {:.1} s)",
                             lasted.as_secs_f64(),
                             self.config.client_id,
-                            MAX_PACKET >> 20,
                             retry.as_secs_f64()
                         )
                     } else {
@@ -293,7 +297,7 @@ impl Link {
         options
             .set_keep_alive(c.keep_alive)
             .set_clean_session(true)
-            .set_max_packet_size(MAX_PACKET, MAX_PACKET)
+            .set_max_packet_size(MAX_INCOMING, MAX_PACKET)
             .set_transport(self.transport.clone())
             .set_last_will(LastWill::new(
                 will.topic.clone(),
