@@ -3,7 +3,7 @@
 //! needs names and datatypes) and the [`crate::Host`] (which keeps, beside each metric,
 //! the point it records it as).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use crate::proto::Metric;
 
@@ -25,6 +25,8 @@ pub(crate) struct Table<T> {
     metrics: Vec<Known<T>>,
     by_alias: HashMap<u64, usize>,
     by_name: HashMap<String, usize>,
+    /// Aliases the birth gave to more than one metric: data by them cannot be resolved.
+    ambiguous: Vec<u64>,
 }
 
 impl<T> Default for Table<T> {
@@ -33,6 +35,7 @@ impl<T> Default for Table<T> {
             metrics: Vec::new(),
             by_alias: HashMap::new(),
             by_name: HashMap::new(),
+            ambiguous: Vec::new(),
         }
     }
 }
@@ -40,10 +43,12 @@ impl<T> Default for Table<T> {
 impl<T> Table<T> {
     /// The table of a birth's `metrics`: every metric with a name, `extra` giving the
     /// reader's data for each (by its place in the payload). Metrics without a name are
-    /// left out (the caller may report them); when a name or alias comes twice, the
-    /// later metric wins.
+    /// left out (the caller may report them); when a name comes twice, the later metric
+    /// wins. An alias given to two metrics names neither: data by it falls back to its
+    /// name, if it has one ([`Table::ambiguous_aliases`]).
     pub(crate) fn of_birth(metrics: &[Metric], mut extra: impl FnMut(usize, &Metric) -> T) -> Self {
         let mut table = Self::default();
+        let mut ambiguous = HashSet::new();
         for (index, m) in metrics.iter().enumerate() {
             let Some(name) = &m.name else { continue };
             let at = table.metrics.len();
@@ -53,11 +58,21 @@ impl<T> Table<T> {
                 extra: extra(index, m),
             });
             table.by_name.insert(name.clone(), at);
-            if let Some(alias) = m.alias {
-                table.by_alias.insert(alias, at);
+            if let Some(alias) = m.alias
+                && !ambiguous.contains(&alias)
+                && table.by_alias.insert(alias, at).is_some()
+            {
+                table.by_alias.remove(&alias);
+                ambiguous.insert(alias);
+                table.ambiguous.push(alias);
             }
         }
         table
+    }
+
+    /// The aliases the birth gave to more than one metric, in the order first seen twice.
+    pub(crate) fn ambiguous_aliases(&self) -> &[u64] {
+        &self.ambiguous
     }
 
     /// The metric a data or command metric stands for: by its alias when the birth

@@ -286,6 +286,13 @@ pub enum Problem {
         /// Its place in the payload, from 0.
         index: usize,
     },
+    /// A birth gave one alias to several metrics: data by that alias cannot be resolved
+    /// (a data metric that also has its name is still read by it).
+    #[error("the birth gives alias {alias} to more than one metric: data by that alias is dropped")]
+    DuplicateAlias {
+        /// The alias.
+        alias: u64,
+    },
     /// A birth metric of a datatype this crate does not read.
     #[error("metric {metric:?} has {}, which is not recorded", datatype(.code))]
     UnsupportedDataType {
@@ -703,7 +710,7 @@ fn birth_table(msg: &Message<'_>, metrics: &[Metric], out: &mut Received) -> Tab
             out.problem(msg.topic, Problem::UnnamedBirthMetric { index });
         }
     }
-    Table::of_birth(metrics, |_, m| {
+    let table = Table::of_birth(metrics, |_, m| {
         let name = m.name.as_deref().unwrap_or_default();
         if msg.device.is_none() {
             if name == BD_SEQ || name.starts_with(NODE_CONTROL) {
@@ -743,7 +750,11 @@ fn birth_table(msg: &Message<'_>, metrics: &[Metric], out: &mut Received) -> Tab
             ),
         }
         Role::Point(point, datatype)
-    })
+    });
+    for &alias in table.ambiguous_aliases() {
+        out.problem(msg.topic, Problem::DuplicateAlias { alias });
+    }
+    table
 }
 
 fn point_info(point: &Arc<PointKey>, datatype: DataType, m: &Metric) -> PointInfo {
@@ -1298,6 +1309,53 @@ mod tests {
         );
         assert_eq!(got.commands.len(), 1);
         assert_eq!(host.stats().dropped, 1);
+    }
+
+    #[test]
+    fn an_alias_a_birth_gives_twice_resolves_no_data_and_is_a_problem() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let dbirth = node.device_birth(&id("jbc9"), &station(), T0).unwrap();
+        let mut payload = Payload::decode(&dbirth.payload[..]).unwrap();
+        let shared = payload.metrics[0].alias.expect("births give aliases");
+        payload.metrics[1].alias = Some(shared);
+        let got = host.receive(&dbirth.topic.to_string(), &payload.encode_to_vec(), at(1));
+        assert_eq!(
+            got.problems.iter().map(|p| &p.problem).collect::<Vec<_>>(),
+            [&Problem::DuplicateAlias { alias: shared }]
+        );
+        assert_eq!(
+            got.points.len(),
+            station().len(),
+            "the points are still defined"
+        );
+
+        let data = ddata(&mut node, "jbc9", 60.0, at(10));
+        let mut payload = Payload::decode(&data.payload[..]).unwrap();
+        let mut by_alias = payload.metrics[0].clone();
+        by_alias.name = None;
+        by_alias.alias = Some(shared);
+        let mut by_name = by_alias.clone();
+        by_name.name = Some("air_temp".into());
+        payload.metrics = vec![by_alias, by_name];
+        let got = host.receive(&data.topic.to_string(), &payload.encode_to_vec(), at(10));
+        assert_eq!(
+            got.samples
+                .iter()
+                .map(|s| s.point.name.as_str())
+                .collect::<Vec<_>>(),
+            ["air_temp"],
+            "only the metric that also has its name"
+        );
+        assert!(
+            got.problems.iter().any(|p| p.problem
+                == Problem::UnknownAlias {
+                    device: Some(id("jbc9")),
+                    alias: shared
+                }),
+            "{:?}",
+            got.problems
+        );
     }
 
     #[test]
