@@ -380,9 +380,15 @@ async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_n
         )
     };
     // A command kept by the broker from before the node's session: delivered as retained
-    // when the node subscribes, and refused.
+    // when the node subscribes, and refused. It is 5 MiB (its payload's body), more than a
+    // message the gateway publishes: a client that dropped the connection on it would get
+    // it again at every reconnection and never stay connected.
     let stale = old + 7.0;
-    sub.publish_retained(topic, command(stale)).await;
+    let mut large = <sparkplug::proto::Payload as prost::Message>::decode(&command(stale)[..])
+        .expect("a Sparkplug payload");
+    large.body = Some(vec![0x55; 5 << 20]);
+    sub.publish_retained(topic, prost::Message::encode_to_vec(&large))
+        .await;
     let config = MqttConfig {
         commands: true,
         ..config(&broker)

@@ -669,9 +669,12 @@ impl Node {
         value: MetricValue,
     ) {
         let Some(device) = device else {
-            tracing::warn!(
-                "MQTT: NCMD {metric} on {topic} refused: the node has no writable metrics"
-            );
+            if let Some(count) = self.node_refused.count(tokio::time::Instant::now()) {
+                tracing::warn!(
+                    "refused {count} MQTT node command(s) since the last report; the latest: \
+                     NCMD {metric} on {topic}: the node has no writable metrics"
+                );
+            }
             return;
         };
         if !self.writes {
