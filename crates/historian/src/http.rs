@@ -105,6 +105,13 @@ async fn reader(s: &AppState) -> ApiResult<Reader<'_>> {
     Ok(guard)
 }
 
+/// The query connection a [`reader`] guard holds (it always holds one once connected).
+fn connected<'g>(guard: &'g Reader<'_>) -> ApiResult<&'g Store> {
+    guard
+        .as_ref()
+        .ok_or_else(|| ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "no query connection"))
+}
+
 /// Runs `result`'s error handling: a lost connection is dropped so the next query opens
 /// a new one.
 fn checked<T>(guard: &mut Reader<'_>, result: Result<T, StoreError>) -> ApiResult<T> {
@@ -204,12 +211,7 @@ const MAX_QUOTED: usize = 256;
 
 /// The one point `text` names, or a 404 (none) or 400 (several, listed).
 async fn find_point(guard: &mut Reader<'_>, text: &str) -> ApiResult<crate::store::FoundPoint> {
-    let Some(store) = guard.as_ref() else {
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "no query connection",
-        ));
-    };
+    let store = connected(guard)?;
     let found = store.find_points(text).await;
     let mut found = checked(guard, found)?;
     match found.len() {
@@ -273,12 +275,7 @@ async fn history(
     let HistoryRange { from, to, step } = history_range(&q, Timestamp::now())?;
     let mut guard = reader(&s).await?;
     let p = find_point(&mut guard, text).await?;
-    let Some(store) = guard.as_ref() else {
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "no query connection",
-        ));
-    };
+    let store = connected(&guard)?;
     let (from_t, to_t) = (system_time(from), system_time(to));
     let before = store.last_before(p.id, from_t).await;
     let step_ms = step.map(|d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX));
@@ -354,22 +351,12 @@ async fn points(
         ));
     }
     let mut guard = reader(&s).await?;
-    let Some(store) = guard.as_ref() else {
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "no query connection",
-        ));
-    };
+    let store = connected(&guard)?;
     let page = store
         .points(q.node.as_deref(), q.offset.unwrap_or(0), limit)
         .await;
     let (rows, total) = checked(&mut guard, page)?;
-    let Some(store) = guard.as_ref() else {
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "no query connection",
-        ));
-    };
+    let store = connected(&guard)?;
     let shared = store.nodes_in_several_groups().await;
     let shared = checked(&mut guard, shared)?;
     let points: Vec<_> = rows
@@ -419,12 +406,7 @@ async fn events(
     let to = parse_time("to", q.to.as_deref(), now)?.unwrap_or(Timestamp(i64::MAX));
     let limit = check_limit(q.limit)?;
     let mut guard = reader(&s).await?;
-    let Some(store) = guard.as_ref() else {
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "no query connection",
-        ));
-    };
+    let store = connected(&guard)?;
     let rows = store
         .events(system_time(from), system_time(to), limit)
         .await;
