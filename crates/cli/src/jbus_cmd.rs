@@ -382,7 +382,10 @@ async fn scan(
         let unit = UnitId::jbus(number).map_err(usage)?;
         match client.read_holding_registers(unit, 0, 1).await {
             Ok(_) => answering.push((number, None)),
-            Err(ClientError::Refused { refusal, .. }) => {
+            // A Modbus gateway's "no path" or "no answer from the target" is no answer.
+            Err(ClientError::Refused { refusal, .. })
+                if !refusal.exception.code.is_target_silent() =>
+            {
                 answering.push((number, Some(refusal.exception.code)));
             }
             Err(err @ ClientError::Line { .. }) => return Err(output::failure(err)),
@@ -881,6 +884,11 @@ pub struct SimModbusArgs {
     /// and coils and holding registers are writable.
     #[arg(long, value_name = "FILE")]
     pub map: Option<PathBuf>,
+    /// With --framing tcp: answer as a serial-to-Ethernet gateway (a Moxa MGate) does for
+    /// a unit that does not answer, with exception 11 (gateway target failed to respond)
+    /// after this long, instead of silence.
+    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
+    pub gateway_timeout: Option<Duration>,
 }
 
 /// Refuses Modbus TCP on a PTY: a serial line has no MBAP.
@@ -893,10 +901,12 @@ fn check_framing(serve: &ServeArgs, framing: SimFraming) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Serves the RTU device `make` gives, in `framing`.
+/// Serves the RTU device `make` gives, in `framing`; over Modbus TCP, silence is answered
+/// with exception 11 after `gateway_timeout`, when given.
 async fn serve_modbus<D, F>(
     serve_args: &ServeArgs,
     framing: SimFraming,
+    gateway_timeout: Option<Duration>,
     make: F,
 ) -> anyhow::Result<ExitCode>
 where
@@ -907,7 +917,11 @@ where
         SimFraming::Rtu => serve(serve_args, JBUS_LINE, make).await,
         SimFraming::Tcp => {
             crate::sim::serve_as(serve_args, JBUS_LINE, "modbus-tcp", move || {
-                jbus::tcp::MbapServer::new(make())
+                let server = jbus::tcp::MbapServer::new(make());
+                match gateway_timeout {
+                    Some(after) => server.answering_silence(after),
+                    None => server,
+                }
             })
             .await
         }
@@ -932,11 +946,17 @@ pub async fn sim_cross(args: SimCrossArgs) -> anyhow::Result<ExitCode> {
             }
         });
     }
-    serve_modbus(&args.serve, args.framing, move || twin.line()).await
+    serve_modbus(&args.serve, args.framing, None, move || twin.line()).await
 }
 
 pub async fn sim_modbus(args: SimModbusArgs) -> anyhow::Result<ExitCode> {
     check_framing(&args.serve, args.framing)?;
+    if args.gateway_timeout.is_some() && args.framing != SimFraming::Tcp {
+        return Err(usage(
+            "--gateway-timeout is how a Modbus TCP gateway answers for a silent unit: give \
+             --framing tcp too",
+        ));
+    }
     let map = match &args.map {
         Some(path) => {
             let text = std::fs::read_to_string(path)
@@ -950,7 +970,10 @@ pub async fn sim_modbus(args: SimModbusArgs) -> anyhow::Result<ExitCode> {
         None => map,
     };
     let slave = SharedModel::new(Slave::new(map));
-    serve_modbus(&args.serve, args.framing, move || slave.line()).await
+    serve_modbus(&args.serve, args.framing, args.gateway_timeout, move || {
+        slave.line()
+    })
+    .await
 }
 
 #[cfg(test)]

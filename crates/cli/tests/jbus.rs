@@ -1168,6 +1168,51 @@ fn scan_lists_the_units_that_answer_and_exits_0_when_none_does() {
 }
 
 #[test]
+fn scan_behind_a_gateway_does_not_count_its_no_answer_exception_as_an_answer() {
+    // A serial-to-Ethernet gateway answers exception 11 for every unit that is not there.
+    let sim = Sim::start(&[
+        "modbus",
+        "--listen",
+        "127.0.0.1:0",
+        "--framing",
+        "tcp",
+        "--unit",
+        "3",
+        "--gateway-timeout",
+        "20ms",
+    ]);
+    let out = run(&[
+        "modbus",
+        "scan",
+        "--endpoint",
+        &sim.endpoint,
+        "--units",
+        "1-5",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(json_of(&out), json!({"units": [3]}));
+    // A read of such a unit says who did not answer, and exits 1.
+    let out = run(&[
+        "modbus",
+        "--endpoint",
+        &sim.endpoint,
+        "--unit",
+        "4",
+        "read-holding",
+        "0",
+        "1",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("unit 4 did not answer")
+            && stderr(&out).contains("the Modbus gateway in between says exception 11"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
 fn scan_over_rtu_counts_an_exception_as_an_answer() {
     // A map without holding register 0: unit 9 answers the scan's read with exception 2.
     let dir = tempfile::tempdir().unwrap();

@@ -189,11 +189,27 @@ pub struct UnitRefusal {
 
 impl wire::exchange::Refusal for UnitRefusal {
     fn describe(&self, _endpoint: &str, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.exception.code.is_target_silent() {
+            return write!(
+                f,
+                "unit {} did not answer \"{}\": the Modbus gateway in between says {}",
+                self.unit, self.request, self.exception.code
+            );
+        }
         write!(
             f,
             "unit {} refused \"{}\": {}",
             self.unit, self.request, self.exception.code
         )
+    }
+
+    /// A gateway's "no path" or "no answer from the target" is the unit's silence.
+    fn kind(&self) -> FailureKind {
+        if self.exception.code.is_target_silent() {
+            FailureKind::Timeout
+        } else {
+            FailureKind::Refused
+        }
     }
 }
 

@@ -134,6 +134,13 @@ where
 pub trait Refusal: fmt::Debug {
     /// Writes what the device refused and why; `endpoint` names the line.
     fn describe(&self, endpoint: &str, f: &mut fmt::Formatter<'_>) -> fmt::Result;
+
+    /// What the refusal means for the device: [`FailureKind::Refused`] (it is there and
+    /// said no), unless the answer comes from a go-between saying the device itself did
+    /// not answer ([`FailureKind::Timeout`]: a Modbus gateway's exception 11).
+    fn kind(&self) -> FailureKind {
+        FailureKind::Refused
+    }
 }
 
 /// Why a request did not get its answer: one type for every request/response client.
@@ -284,7 +291,7 @@ where
     fn kind(&self) -> FailureKind {
         match self {
             Self::Request(_) => FailureKind::Usage,
-            Self::Refused { .. } => FailureKind::Refused,
+            Self::Refused { refusal, .. } => refusal.kind(),
             Self::NoAnswer { last, .. } => last.kind(),
             Self::Line { source, .. } => source.kind(),
         }

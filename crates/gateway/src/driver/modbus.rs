@@ -41,11 +41,13 @@
 //!
 //! One group, `live` (1 s). The registers are planned once into the fewest reads
 //! ([`jbus::plan`]): each poll sends the plan's reads. A merged read that the device
-//! refuses with exception 2 (illegal data address: a hole in its map) is split for good
-//! (logged once) and the rest of the poll goes on with the parts; a read of a single
-//! register that is refused marks that register's point bad with the exception in words,
-//! as does any other exception for its read's points. Silence or damage marks the device
-//! down. Coils, discrete inputs and `bit:N` registers are enumerations `0` off / `1` on;
+//! refuses with exception 2, 3 or 4 (an address it lacks, a range it does not take in one
+//! read, a failure on some register) is split for good (logged once) and the rest of the
+//! poll goes on with the parts; a read of a single register that is refused marks that
+//! register's point bad with the exception in words, as does any other exception (busy)
+//! for its read's points. Silence or damage marks the device down, and so does a Modbus
+//! gateway's exception 10 or 11 (no path to the unit, no answer from it): through a
+//! serial-to-Ethernet gateway that is how a meter switched off looks. Coils, discrete inputs and `bit:N` registers are enumerations `0` off / `1` on;
 //! `string:N` registers are text.
 //!
 //! Pacing: the driver waits `delay_between_requests` between two of its own requests (the
@@ -62,6 +64,7 @@ use jbus::rtu::{ExceptionCode, UnitId};
 use jbus::slave::Table;
 use link::{SerialSettings, SharedLine};
 use tokio::time::Instant;
+use wire::{Failure as _, FailureKind};
 
 use super::{
     BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
@@ -543,7 +546,7 @@ impl ModbusDriver {
                 Ok(answer) => answers.push(Ok(answer)),
                 Err(e)
                     if jbus::client::exception_code(&e)
-                        == Some(ExceptionCode::ILLEGAL_DATA_ADDRESS) =>
+                        .is_some_and(ExceptionCode::is_about_the_addresses) =>
                 {
                     match Arc::make_mut(&mut self.plan).split(index) {
                         Some(split @ Split::Into { .. }) => {
@@ -552,7 +555,10 @@ impl ModbusDriver {
                         _ => answers.push(Err(DeviceError::of(&e))),
                     }
                 }
-                Err(e @ ClientError::Refused { .. }) => answers.push(Err(DeviceError::of(&e))),
+                // A refusal from the device itself, not a go-between's "no answer from it".
+                Err(e @ ClientError::Refused { .. }) if e.kind() == FailureKind::Refused => {
+                    answers.push(Err(DeviceError::of(&e)));
+                }
                 Err(e) => {
                     self.requests = Some(requests);
                     return Err(DeviceError::of(&e));
@@ -905,6 +911,88 @@ mod tests {
         assert!(ghost.message.contains("illegal data address"), "{ghost}");
         assert_eq!(value(&live, "flow"), Ok(Value::Number(42.0)));
         assert_eq!(value(&live, "mode"), Ok(Value::Number(2.0)));
+    }
+
+    /// A device that answers a request with an exception when `refuse` says so (a read
+    /// that covers a register it fails on, a unit behind a gateway that is not there),
+    /// and is `inner` otherwise.
+    struct Refusing<D> {
+        inner: D,
+        refuse: fn(&jbus::rtu::RequestPdu) -> Option<ExceptionCode>,
+    }
+
+    impl<D: wire::Device> wire::Device for Refusing<D> {
+        fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<wire::Transmit> {
+            if let Ok(Some((adu, _))) = jbus::rtu::codec::decode_request(bytes)
+                && let Some(code) = (self.refuse)(&adu.pdu)
+            {
+                let answer = jbus::rtu::ResponseAdu {
+                    unit: adu.unit,
+                    response: jbus::rtu::Response::exception(
+                        jbus::rtu::FunctionCode::of_exception(adu.pdu.function_byte()),
+                        code,
+                    ),
+                };
+                let mut out = Vec::new();
+                jbus::rtu::codec::encode_response(&answer, &mut out);
+                return vec![wire::Transmit::now(out)];
+            }
+            self.inner.receive(bytes, now)
+        }
+    }
+
+    fn rig_refusing(
+        registers: Vec<RegisterConfig>,
+        refuse: fn(&jbus::rtu::RequestPdu) -> Option<ExceptionCode>,
+    ) -> ModbusDriver {
+        let slave = SharedModel::new(Slave::new(SlaveMap::parse(MAP).unwrap()));
+        let (a, b) = tokio::io::duplex(1024);
+        let device = Refusing {
+            inner: slave.line(),
+            refuse,
+        };
+        tokio::spawn(link::serve::serve_stream(b, device, None));
+        let (mut driver, _) = rig_with(MAP, registers, ModbusOptions::default());
+        driver.attach(SharedLine::new(link::Line::from_stream(
+            a,
+            "modbus",
+            Some(DEFAULT_SERIAL),
+        )));
+        driver
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_merged_read_refused_with_exception_4_is_split_so_only_the_failing_register_is_bad() {
+        // Holding 0-7 are one read; the device fails on holding 7 (exception 4).
+        let mut driver = rig_refusing(registers(), |pdu| match *pdu {
+            jbus::rtu::RequestPdu::ReadHoldingRegisters { address, count }
+                if address <= 7 && 7 < address + count =>
+            {
+                Some(ExceptionCode::SERVER_DEVICE_FAILURE)
+            }
+            _ => None,
+        });
+        let live = driver.poll(LIVE).await.unwrap();
+        assert_eq!(value(&live, "setpoint"), Ok(Value::Number(21.5)));
+        let mode = value(&live, "mode").unwrap_err();
+        assert_eq!(mode.kind, ErrorKind::Refused, "{mode}");
+        assert!(mode.message.contains("exception 4"), "{mode}");
+        assert_eq!(value(&live, "flow"), Ok(Value::Number(42.0)));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_unit_a_modbus_gateway_says_does_not_answer_is_down_not_up_with_bad_points() {
+        let mut driver = rig_refusing(registers(), |_| Some(ExceptionCode::GATEWAY_TARGET_FAILED));
+        let down = driver.poll(LIVE).await.unwrap_err();
+        assert_eq!(down.kind, ErrorKind::Timeout, "{down}");
+        assert!(down.message.contains("did not answer"), "{down}");
+        let mut driver = rig_refusing(registers(), |_| {
+            Some(ExceptionCode::GATEWAY_PATH_UNAVAILABLE)
+        });
+        assert_eq!(
+            driver.poll(LIVE).await.unwrap_err().kind,
+            ErrorKind::Timeout
+        );
     }
 
     const TYPED: &str = "unit 17\n\

@@ -325,6 +325,23 @@ impl ExceptionCode {
     /// 11 (0x0B): a gateway's target did not respond.
     pub const GATEWAY_TARGET_FAILED: Self = Self::known(11);
 
+    /// Whether the exception comes from a Modbus gateway saying the unit behind it is not
+    /// there: no path to it (10) or no answer from it (11). As far as the master can tell,
+    /// the unit is silent.
+    pub fn is_target_silent(self) -> bool {
+        self == Self::GATEWAY_PATH_UNAVAILABLE || self == Self::GATEWAY_TARGET_FAILED
+    }
+
+    /// Whether a read refused with this exception may be split to find the registers it
+    /// is refused for: 2 (an address the device lacks), 3 (a count or range it does not
+    /// take in one read) and 4 (it failed on some register). Busy (6) and the rest say
+    /// nothing about the addresses.
+    pub fn is_about_the_addresses(self) -> bool {
+        self == Self::ILLEGAL_DATA_ADDRESS
+            || self == Self::ILLEGAL_DATA_VALUE
+            || self == Self::SERVER_DEVICE_FAILURE
+    }
+
     const fn known(code: u8) -> Self {
         match NonZeroU8::new(code) {
             Some(n) => Self(n),

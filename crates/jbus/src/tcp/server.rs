@@ -6,9 +6,11 @@
 //! header (same transaction id, same unit id). The device stays the one model that also
 //! serves RTU: its units, refusals, reply delay and silences are unchanged. A request
 //! for a unit the device does not answer gets silence, as behind a gateway whose device
-//! does not answer, and a broadcast (unit 0) write is applied and not answered.
+//! does not answer, or, [`MbapServer::answering_silence`], exception 11 after the
+//! gateway's own wait, as a serial-to-Ethernet gateway (a Moxa MGate) answers for a unit
+//! that is switched off. A broadcast (unit 0) write is applied and not answered.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use wire::{Deframer, Device, LineTiming, Transmit};
 
@@ -23,6 +25,8 @@ pub struct MbapServer<D> {
     inner: D,
     requests: Deframer<RequestCodec>,
     dropped: u64,
+    /// When set, silence is answered with exception 11 after this long.
+    target_timeout: Option<Duration>,
 }
 
 impl<D: Device> MbapServer<D> {
@@ -32,7 +36,15 @@ impl<D: Device> MbapServer<D> {
             inner,
             requests: Deframer::new(RequestCodec),
             dropped: 0,
+            target_timeout: None,
         }
+    }
+
+    /// Answers a request the device is silent to (a unit it does not have) as a gateway
+    /// does: exception 11, "gateway target failed to respond", `after` the request.
+    pub fn answering_silence(mut self, after: Duration) -> Self {
+        self.target_timeout = Some(after);
+        self
     }
 
     /// How many runs of bytes were dropped because they made no Modbus TCP frame.
@@ -65,11 +77,32 @@ impl<D: Device> MbapServer<D> {
                 .to_bytes(),
             )];
         }
-        self.inner
+        let answers: Vec<Transmit> = self
+            .inner
             .receive(&adu.to_bytes(), now)
             .into_iter()
             .flat_map(|reply| behind_header(transaction, reply))
-            .collect()
+            .collect();
+        match self.target_timeout {
+            Some(after) if answers.is_empty() && !adu.is_broadcast() => {
+                let silent = ResponseAdu {
+                    unit: adu.unit,
+                    response: Response::exception(
+                        FunctionCode::of_exception(adu.pdu.function_byte()),
+                        ExceptionCode::GATEWAY_TARGET_FAILED,
+                    ),
+                };
+                vec![Transmit::after(
+                    after,
+                    Mbap {
+                        transaction,
+                        adu: silent,
+                    }
+                    .to_bytes(),
+                )]
+            }
+            _ => answers,
+        }
     }
 }
 
@@ -169,6 +202,41 @@ mod tests {
         let mut s = server();
         let read = Addressed::new(unit(4), Request::read_coils(0, 1).expect("1"));
         assert!(ask(&mut s, 1, &read).is_empty());
+    }
+
+    #[test]
+    fn as_a_gateway_a_unit_that_does_not_answer_gets_exception_11_after_the_wait() {
+        let wait = std::time::Duration::from_millis(150);
+        let mut s = server().answering_silence(wait);
+        let read = Addressed::new(unit(4), Request::read_coils(0, 1).expect("1"));
+        let answers = ask(&mut s, 7, &read);
+        let [(frame, delay)] = answers.as_slice() else {
+            panic!("one answer: {answers:?}")
+        };
+        assert_eq!(*delay, wait);
+        assert_eq!((frame.transaction, frame.adu.unit), (TransactionId(7), 4));
+        assert_eq!(
+            frame.adu.response,
+            Response::exception(
+                FunctionCode::of_exception(1),
+                ExceptionCode::GATEWAY_TARGET_FAILED
+            )
+        );
+        // The unit that is there answers as before; a broadcast still gets nothing.
+        let there = Addressed::new(unit(3), Request::read_coils(0, 1).expect("1"));
+        assert_eq!(ask(&mut s, 8, &there)[0].1, DEFAULT_REPLY_DELAY);
+        let bytes = Mbap {
+            transaction: TransactionId(9),
+            adu: crate::rtu::Broadcast(crate::rtu::Write::SingleRegister(
+                crate::rtu::WriteRegister {
+                    address: 1,
+                    value: 2,
+                },
+            ))
+            .to_adu(),
+        }
+        .to_bytes();
+        assert!(s.receive(&bytes, Instant::now()).is_empty());
     }
 
     #[test]
