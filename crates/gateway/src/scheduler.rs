@@ -18,7 +18,10 @@
 //!
 //! When the line itself fails (a TCP serial server closes, a USB adapter is pulled), every
 //! device on it goes down and the task reopens the line, waiting [`REOPEN_FIRST`] doubling
-//! to [`REOPEN_MAX`] between attempts. A line can also hang while it stays open (a serial
+//! to [`REOPEN_MAX`] between attempts. The wait starts again from [`REOPEN_FIRST`] only
+//! once a device has answered on the line: one that opens and is lost before any answer (a
+//! serial server that accepts the connection and closes it) counts as a failed attempt.
+//! A line can also hang while it stays open (a serial
 //! server's session stuck, an adapter wedged): when every device on it has timed out
 //! `reopen_after_timeouts` times in a row, the task closes and reopens it at once, and
 //! records a `line_reopened` event and `cellbus_line_reopens_for_silence_total`. If no
@@ -88,6 +91,8 @@ pub struct LineTask {
     /// Timeouts in a row every device must reach before the line is reopened for silence
     /// (0: never); doubles while reopening does not help.
     silence_threshold: u32,
+    /// A device answered (even with a refusal) since the line was last opened.
+    answered: bool,
 }
 
 impl std::fmt::Debug for LineTask {
@@ -278,6 +283,7 @@ impl LineTask {
                 .get_or_create(&labels)
                 .clone(),
             silence_threshold: line.reopen_after_timeouts,
+            answered: false,
             cell,
             line,
             opener,
@@ -322,7 +328,10 @@ impl LineTask {
                     continue;
                 }
             };
-            reopen.reset();
+            // The wait is reset once a device answers on the line, not when it opens: a
+            // serial server that accepts the connection and drops it at once would
+            // otherwise be reconnected to every second, with two events each time.
+            self.answered = false;
             self.line_opened();
             let shared = SharedLine::new(line);
             let now = Instant::now();
@@ -334,6 +343,9 @@ impl LineTask {
                 }
             }
             let ended = self.poll_loop(&mut shutdown).await;
+            if self.answered {
+                reopen.reset();
+            }
             // Close the line before opening it again (a serial port opens only once).
             drop(shared);
             for slot in &mut self.slots {
@@ -343,8 +355,13 @@ impl LineTask {
                 Ended::Stop => return,
                 Ended::Silent => self.reopen_for_silence(),
                 Ended::LineLost(error) => {
-                    self.line_failed(&error, REOPEN_FIRST);
-                    let until = Instant::now() + REOPEN_FIRST;
+                    let wait = if self.answered {
+                        REOPEN_FIRST
+                    } else {
+                        reopen.next_wait()
+                    };
+                    self.line_failed(&error, wait);
+                    let until = Instant::now() + wait;
                     if !self
                         .wait_refusing_writes(until, &error, &mut shutdown)
                         .await
@@ -424,6 +441,7 @@ impl LineTask {
         let mut lost = None;
         match result {
             Ok(readings) => {
+                self.answered = true;
                 slot.m.ok.inc();
                 slot.timeouts_in_a_row = 0;
                 self.silence_threshold = self.line.reopen_after_timeouts;
@@ -455,8 +473,11 @@ impl LineTask {
                 self.window.errors += 1;
                 if error.kind == ErrorKind::Timeout {
                     slot.timeouts_in_a_row += 1;
-                } else {
+                } else if error.kind != ErrorKind::Disconnected {
                     // An answer, even a refusal or a damaged one: the line carries bytes.
+                    slot.timeouts_in_a_row = 0;
+                    self.answered = true;
+                } else {
                     slot.timeouts_in_a_row = 0;
                 }
                 slot.m.up.set(0);

@@ -55,6 +55,9 @@ pub struct Rig {
     pub models: Vec<SharedModel<Station>>,
     pub plugged: Vec<Arc<AtomicBool>>,
     pub line_available: Arc<AtomicBool>,
+    /// When set, a line opens and its other end closes at once (a serial server that
+    /// accepts the connection and drops it).
+    pub line_drops: Arc<AtomicBool>,
     pub opens: Arc<AtomicUsize>,
     /// Every byte the gateway sent on the line.
     pub heard: Arc<std::sync::Mutex<Vec<u8>>>,
@@ -105,6 +108,7 @@ pub fn rig(count: u8) -> Rig {
         .map(|_| Arc::new(AtomicBool::new(true)))
         .collect();
     let line_available = Arc::new(AtomicBool::new(true));
+    let line_drops = Arc::new(AtomicBool::new(false));
     let opens = Arc::new(AtomicUsize::new(0));
     let servers = Arc::new(std::sync::Mutex::new(Vec::new()));
     let heard = Arc::new(std::sync::Mutex::new(Vec::new()));
@@ -114,10 +118,15 @@ pub fn rig(count: u8) -> Rig {
         let heard = Arc::clone(&heard);
         let sessions = Arc::clone(&sessions);
         let (available, opens) = (Arc::clone(&line_available), Arc::clone(&opens));
+        let drops = Arc::clone(&line_drops);
         let servers = Arc::clone(&servers);
         Arc::new(move || {
             opens.fetch_add(1, Ordering::SeqCst);
-            let result = if available.load(Ordering::SeqCst) {
+            let result = if drops.load(Ordering::SeqCst) {
+                let (a, b) = tokio::io::duplex(4096);
+                drop(b);
+                Ok(Line::from_stream(a, "memory", None))
+            } else if available.load(Ordering::SeqCst) {
                 let (a, b) = tokio::io::duplex(4096);
                 let hung = Arc::new(AtomicBool::new(false));
                 sessions.lock().unwrap().push(Arc::clone(&hung));
@@ -165,6 +174,7 @@ pub fn rig(count: u8) -> Rig {
         models,
         plugged,
         line_available,
+        line_drops,
         opens,
         heard,
         sessions,

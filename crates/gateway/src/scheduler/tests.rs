@@ -425,6 +425,34 @@ async fn a_line_closed_by_the_other_end_is_reopened_and_polling_resumes() {
     );
 }
 
+#[tokio::test(start_paused = true)]
+async fn a_line_dropped_as_soon_as_it_opens_is_retried_less_and_less_often() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+    // The serial server now takes every connection and closes it at once.
+    rig.line_drops.store(true, Ordering::SeqCst);
+    for server in rig.servers.lock().unwrap().drain(..) {
+        server.abort();
+    }
+    tokio::time::sleep(Duration::from_secs(120)).await;
+    let opens = rig.opens.load(Ordering::SeqCst);
+    // 1, 1, 2, 4, 8, 16, 30, 30, 30 s: about 9 attempts in two minutes, not 120.
+    assert!((5..=12).contains(&opens), "{opens} opens in two minutes");
+    // The server works again: the station answers within the longest wait, and the
+    // wait starts over, so the next loss is retried after a second.
+    rig.line_drops.store(false, Ordering::SeqCst);
+    tokio::time::sleep(REOPEN_MAX + Duration::from_secs(5)).await;
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+    let before = rig.opens.load(Ordering::SeqCst);
+    for server in rig.servers.lock().unwrap().drain(..) {
+        server.abort();
+    }
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    assert_eq!(rig.opens.load(Ordering::SeqCst), before + 1);
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+}
+
 fn due(slot: usize, at: tokio::time::Instant, period_s: u64) -> Due {
     Due {
         slot,
