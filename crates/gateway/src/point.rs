@@ -435,6 +435,17 @@ pub enum ValueError {
         /// The states accepted.
         known: String,
     },
+    /// A value within the range that the device's representation cannot hold (a number
+    /// too close to 0 for a float32 register).
+    #[error("{point} ({name}) cannot be set to that: {why}")]
+    NotRepresentable {
+        /// The point.
+        point: PointId,
+        /// Its name.
+        name: String,
+        /// Why, in words, with the value.
+        why: String,
+    },
 }
 
 impl PointSpec {

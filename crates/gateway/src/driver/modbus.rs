@@ -618,15 +618,20 @@ impl ModbusDriver {
                 unit: String::new(),
             })
         };
-        let words = match register.table {
-            RegisterTable::Coil => None,
-            _ => Some(
-                register
-                    .format
-                    .encode(&TypedValue::Float(number))
-                    .map_err(|_| out_of_range())?,
-            ),
-        };
+        let words =
+            match register.table {
+                RegisterTable::Coil => None,
+                _ => Some(register.format.encode(&TypedValue::Float(number)).map_err(
+                    |e| match e {
+                        jbus::data::EncodeError::OutOfRange { .. } => out_of_range(),
+                        other => WriteError::Invalid(crate::point::ValueError::NotRepresentable {
+                            point: point.id.clone(),
+                            name: point.name.to_string(),
+                            why: other.to_string(),
+                        }),
+                    },
+                )?),
+            };
         self.pace().await;
         let (unit, address) = (self.unit, register.address);
         let client = self.client.as_mut().ok_or_else(DeviceError::not_attached)?;
@@ -1091,6 +1096,18 @@ mod tests {
             .await
             .unwrap_err();
         assert!(matches!(err, WriteError::Invalid(_)), "{err}");
+        // Within the range, but a float32 would hold 0: refused with that reason.
+        let err = driver
+            .write(point("limit"), &Value::Number(1e-50))
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(
+                &err,
+                WriteError::Invalid(crate::point::ValueError::NotRepresentable { .. })
+            ) && err.to_string().contains("too small for float32"),
+            "{err}"
+        );
     }
 
     #[tokio::test(start_paused = true)]

@@ -1010,6 +1010,40 @@ async fn the_page_and_its_assets_are_served_and_fetch_nothing_from_elsewhere() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn a_write_of_true_switches_on_and_a_whole_number_beyond_2_to_the_53_is_refused() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let on = app(&rig, true);
+    let (status, reply) = call(
+        &on,
+        write_request(
+            "jbc1",
+            Some(TOKEN),
+            r#"{"point": "tool_on", "value": true}"#,
+        ),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{reply}");
+    assert!(rig.models[0].lock().port_status().tool_on);
+    let (status, reply) = call(
+        &on,
+        write_request(
+            "jbc1",
+            Some(TOKEN),
+            r#"{"point": "air_temperature_setpoint", "value": 9007199254740993}"#,
+        ),
+    )
+    .await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+    assert!(
+        error_of(&reply).contains("beyond 9007199254740992"),
+        "{reply}"
+    );
+    let (_, audit) = get(&on, "/api/audit?device=jbc1").await;
+    assert_eq!(audit["audit"][0]["result"], "refused", "{audit}");
+}
+
+#[tokio::test(start_paused = true)]
 async fn a_write_the_device_does_not_answer_is_a_504_and_audited_as_failed() {
     let rig = rig(1);
     tokio::time::sleep(Duration::from_secs(2)).await;

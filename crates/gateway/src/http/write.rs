@@ -37,6 +37,9 @@ use crate::driver::{ErrorKind, WriteError};
 use crate::point::{PointId, Value};
 use crate::write::{Attempt, LOG_EVERY, MAX_NAME, MAX_VALUE, Unauthorised, cut};
 
+/// 2^53: whole numbers up to it are exact as the double every written value is.
+const MAX_EXACT: u64 = 1 << 53;
+
 /// Largest write request body accepted.
 pub const BODY_LIMIT: usize = 4096;
 /// How long an authorised write's body may take to arrive (a client that sends the
@@ -225,9 +228,25 @@ pub(super) async fn write(
             return Err(refuse(&attempt, error).await);
         }
     };
-    let Ok(value) = serde_json::from_value::<Value>(body.value.clone()) else {
+    // Whole numbers beyond 2^53 do not survive as the double every value is: the device
+    // would get a neighbour of the number asked for.
+    if let serde_json::Value::Number(n) = &body.value
+        && (n.as_u64().is_some_and(|n| n > MAX_EXACT)
+            || n.as_i64().is_some_and(|n| n < -(MAX_EXACT as i64)))
+    {
         let error = ApiError::bad_request(format!(
-            "value must be a number or a string, not {}",
+            "value {n} is beyond {MAX_EXACT}, the largest whole number a write carries exactly"
+        ));
+        return Err(refuse(&attempt, error).await);
+    }
+    let value = match &body.value {
+        // A coil or on/off point: true is 1, false 0.
+        serde_json::Value::Bool(on) => Ok(Value::Number(if *on { 1.0 } else { 0.0 })),
+        other => serde_json::from_value::<Value>(other.clone()),
+    };
+    let Ok(value) = value else {
+        let error = ApiError::bad_request(format!(
+            "value must be a number, a string or true/false, not {}",
             cut(&body.value.to_string(), MAX_VALUE)
         ));
         return Err(refuse(&attempt, error).await);
