@@ -92,8 +92,9 @@ async fn open(endpoint: &Endpoint, config: ClientConfig) -> anyhow::Result<Clien
 pub struct ModbusArgs {
     #[command(flatten)]
     pub line: LineArgs,
-    /// The unit number: 1–247 (JBUS devices: up to 255); 0 sends a write to every unit at
-    /// once (broadcast: nobody answers). Needed by every action but `scan`.
+    /// The unit number: 1–247 (JBUS devices: up to 255); 0 sends a write to every unit of
+    /// a serial line at once (broadcast: nobody answers; not over Modbus TCP). Needed by
+    /// every action but `scan`.
     #[arg(long, value_name = "N")]
     pub unit: Option<u8>,
     #[command(subcommand)]
@@ -238,6 +239,12 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
     let Some(unit) = args.unit else {
         return Err(usage("--unit N is needed: the unit number to ask (1-247)"));
     };
+    if unit == 0 && Framing::of(&endpoint) == Framing::Tcp {
+        return Err(usage(
+            "--unit 0 is a serial broadcast, which Modbus TCP does not carry (a server may \
+             answer it as a request of its own); give the device's unit number, often 1 or 255",
+        ));
+    }
     // Build the request before opening the line: bad arguments never touch the device.
     let request = modbus_request(&args.action)?;
     let send = if unit == 0 {

@@ -513,6 +513,15 @@ fn a_broadcast_write_is_done_without_an_answer_and_a_broadcast_read_is_refused()
         "{}",
         stderr(&out)
     );
+    // Modbus TCP has no broadcast: refused before anything is sent.
+    let tcp = Sim::start(&["modbus", "--listen", "127.0.0.1:0", "--framing", "tcp"]);
+    let out = modbus(&tcp, "0", &["write-register", "5", "42"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("Modbus TCP does not carry"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]
