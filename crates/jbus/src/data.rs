@@ -199,7 +199,11 @@ impl DataType {
             Self::Float32 => {
                 let float = self.float(value)?;
                 if float.abs() > f64::from(f32::MAX) {
-                    return Err(self.out_of_range(value, f32::MIN, f32::MAX));
+                    return Err(self.out_of_range(
+                        value,
+                        format_args!("{:e}", f32::MIN),
+                        format_args!("{:e}", f32::MAX),
+                    ));
                 }
                 let narrow = float as f32;
                 if narrow == 0.0 && float != 0.0 {
@@ -506,10 +510,21 @@ impl fmt::Display for TypedValue {
         match self {
             Self::Int(i) => write!(f, "{i}"),
             Self::Uint(u) => write!(f, "{u}"),
-            Self::Float(x) => write!(f, "{x}"),
+            Self::Float(x) => write_number(f, *x),
             Self::Text(text) => write!(f, "{text:?}"),
             Self::Bool(b) => write!(f, "{}", u8::from(*b)),
         }
+    }
+}
+
+/// A number as people read it: `229.7`, and with an exponent when it is very small or very
+/// large (`1.4e-45`, `3.4028235e38`), never forty zeros.
+fn write_number(f: &mut fmt::Formatter<'_>, x: f64) -> fmt::Result {
+    let magnitude = x.abs();
+    if magnitude != 0.0 && x.is_finite() && !(1e-6..1e16).contains(&magnitude) {
+        write!(f, "{x:e}")
+    } else {
+        write!(f, "{x}")
     }
 }
 
@@ -970,6 +985,18 @@ mod tests {
     }
 
     use Order::{Abcd, Badc, Cdab, Dcba};
+
+    #[test]
+    fn numbers_are_shown_plainly_and_with_an_exponent_only_when_very_small_or_large() {
+        let shown = |x: f64| TypedValue::Float(x).to_string();
+        assert_eq!(shown(229.7), "229.7");
+        assert_eq!(shown(-0.5), "-0.5");
+        assert_eq!(shown(0.0), "0");
+        assert_eq!(shown(1e-45), "1e-45");
+        assert_eq!(shown(3.4028235e38), "3.4028235e38");
+        assert_eq!(shown(123_456_789.0), "123456789");
+        assert_eq!(shown(f64::NAN), "NaN");
+    }
 
     #[test]
     fn float32_229_7_is_0x4365b333_in_each_order() {
