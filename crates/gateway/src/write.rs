@@ -134,6 +134,11 @@ impl Attempt {
         }
     }
 
+    /// The point is known: its rows name it by its full id (`meter1.setpoint`) from now on.
+    pub fn names(&mut self, point: &PointId) {
+        self.point = point.to_string();
+    }
+
     /// Records a refusal before the wire (`detail` says why).
     pub async fn refuse(&self, detail: &str, old: Option<Value>) {
         self.record(AuditResult::Refused, old, detail).await;
@@ -144,7 +149,7 @@ impl Attempt {
     /// when the caller may leave before the answer: the write and its record then run to
     /// the end.
     pub async fn carry_out(mut self, point: PointId, value: Value) -> Result<Accepted, WriteError> {
-        self.point = point.to_string();
+        self.names(&point);
         let old = self
             .cell
             .device_entry(point.device())

@@ -1041,6 +1041,10 @@ async fn a_write_of_true_switches_on_and_a_whole_number_beyond_2_to_the_53_is_re
     );
     let (_, audit) = get(&on, "/api/audit?device=jbc1").await;
     assert_eq!(audit["audit"][0]["result"], "refused", "{audit}");
+    assert_eq!(
+        audit["audit"][0]["point"], "jbc1.air_temperature_setpoint",
+        "a refusal of a known point names it by its full id: {audit}"
+    );
 }
 
 #[tokio::test(start_paused = true)]

@@ -196,7 +196,7 @@ pub(super) async fn write(
         Ok(Json(b)) => (b.point.clone(), b.value.clone()),
         Err(_) => (String::new(), serde_json::Value::Null),
     };
-    let attempt = Attempt::new(Arc::clone(&s.cell), client, id.clone(), point_text, new);
+    let mut attempt = Attempt::new(Arc::clone(&s.cell), client, id.clone(), point_text, new);
     let Some(device) = s.cell.device_entry(&id) else {
         return Err(refuse(&attempt, unknown_device(&s.cell, &id)).await);
     };
@@ -228,6 +228,7 @@ pub(super) async fn write(
             return Err(refuse(&attempt, error).await);
         }
     };
+    attempt.names(&point);
     // Whole numbers beyond 2^53 do not survive as the double every value is: the device
     // would get a neighbour of the number asked for.
     if let serde_json::Value::Number(n) = &body.value
