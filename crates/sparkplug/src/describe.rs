@@ -21,7 +21,6 @@
 use std::collections::HashMap;
 use std::fmt::Write as _;
 
-use prost::Message as _;
 use serde::Serialize;
 use serde::ser::{SerializeMap, Serializer};
 
@@ -30,7 +29,7 @@ use crate::metric::{
     DOCUMENTATION, DataType, ENG_UNIT, MetricValue, QUALITY, Quality, WRITABLE, WRITE_MAX,
     WRITE_MIN,
 };
-use crate::proto::{Metric, Payload, PropertySet, PropertyValue, metric, property_value};
+use crate::proto::{Metric, PropertySet, PropertyValue, metric, property_value};
 use crate::topic::{Id, MessageKind, NAMESPACE, Topic};
 
 /// What one message says.
@@ -214,12 +213,18 @@ impl Describer {
                 };
             }
         };
-        let decoded = match Payload::decode(payload) {
+        let decoded = match crate::proto::decode_payload(payload) {
             Ok(decoded) => decoded,
             Err(e) => {
+                let error = match e {
+                    crate::proto::PayloadError::Undecodable(e) => {
+                        format!("not a Sparkplug B payload: {e}")
+                    }
+                    too_many => too_many.to_string(),
+                };
                 return Description::Undecodable {
                     topic: topic.to_owned(),
-                    error: format!("not a Sparkplug B payload: {e}"),
+                    error,
                 };
             }
         };

@@ -54,8 +54,6 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use prost::Message as _;
-
 use crate::births::Table;
 use crate::event::{self, EVENT};
 use crate::metric::{
@@ -220,9 +218,10 @@ pub enum Problem {
     /// The topic is not a Sparkplug topic.
     #[error("not a Sparkplug topic: {0}")]
     Topic(#[from] TopicError),
-    /// The payload is not a Sparkplug B protobuf payload.
-    #[error("the payload is not a Sparkplug B payload: {0}")]
-    Undecodable(#[from] prost::DecodeError),
+    /// The payload is not a Sparkplug B protobuf payload, or carries more metrics than
+    /// [`crate::proto::MAX_METRICS`].
+    #[error(transparent)]
+    Undecodable(#[from] crate::proto::PayloadError),
     /// A message of a node whose NBIRTH was not seen, or that died since.
     #[error("a {message_type} from an edge node without a current NBIRTH: dropped")]
     NodeNotBorn {
@@ -521,7 +520,7 @@ impl Host {
         if kind == MessageKind::Command || self.group.as_ref().is_some_and(|g| *g != group) {
             return;
         }
-        let payload = match Payload::decode(payload) {
+        let payload = match crate::proto::decode_payload(payload) {
             Ok(payload) => payload,
             Err(e) => {
                 self.stats.undecodable += 1;
@@ -903,6 +902,7 @@ mod tests {
     use crate::event::NodeEvent;
     use crate::metric::{MetricSpec, Sample};
     use crate::node::{BdSeq, Command, Delivery, EdgeNode, REBIRTH};
+    use prost::Message as _;
 
     /// 2025-11-24T16:00:00.000Z.
     const T0: Timestamp = Timestamp::from_millis(1_764_000_000_000);

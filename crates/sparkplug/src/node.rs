@@ -194,9 +194,10 @@ pub enum CommandError {
         /// Our edge node.
         edge_node: Id,
     },
-    /// The payload is not a Sparkplug protobuf payload.
-    #[error("the payload is not a Sparkplug B payload: {0}")]
-    Payload(#[from] prost::DecodeError),
+    /// The payload is not a Sparkplug protobuf payload, or carries more metrics than
+    /// [`crate::proto::MAX_METRICS`].
+    #[error(transparent)]
+    Payload(#[from] crate::proto::PayloadError),
     /// An NCMD came before the NBIRTH.
     #[error("an NCMD came before this session's NBIRTH")]
     NodeNotBorn,
@@ -539,7 +540,7 @@ impl EdgeNode {
                 .get(d)
                 .ok_or_else(|| CommandError::UnknownDevice { device: d.clone() })?,
         };
-        let payload = Payload::decode(payload)?;
+        let payload = crate::proto::decode_payload(payload)?;
         let mut commands = Vec::new();
         for (index, m) in payload.metrics.iter().enumerate() {
             let entry = lookup(table, &device, index, m)?;

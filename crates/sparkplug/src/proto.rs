@@ -5,6 +5,70 @@
 //! These are the wire's loose shapes; [`crate::metric`] turns them into values that
 //! cannot be invalid.
 
+/// Most metrics one payload may carry. A metric can be 4 bytes on the wire (`12 02 10 01`:
+/// an alias alone) and about 500 in memory once decoded, so a 20 MiB payload of such
+/// metrics would take gigabytes and seconds to decode; a gateway's largest payloads (a
+/// device's birth, a batch of 500 stored changes) hold far fewer.
+pub const MAX_METRICS: usize = 100_000;
+
+/// Why a payload was not decoded.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PayloadError {
+    /// The bytes are not a Sparkplug B protobuf payload.
+    #[error("the payload is not a Sparkplug B payload: {0}")]
+    Undecodable(#[from] prost::DecodeError),
+    /// More than [`MAX_METRICS`] metrics: counted on the wire and not decoded.
+    #[error("the payload carries more than {MAX_METRICS} metrics: not decoded")]
+    TooManyMetrics,
+}
+
+/// Decodes a payload, after counting its metrics on the wire: one with more than
+/// [`MAX_METRICS`] is refused before anything is built.
+///
+/// # Errors
+///
+/// [`PayloadError::TooManyMetrics`], or the protobuf decoder's error.
+pub fn decode_payload(bytes: &[u8]) -> Result<Payload, PayloadError> {
+    if count_metrics(bytes) > MAX_METRICS {
+        return Err(PayloadError::TooManyMetrics);
+    }
+    Ok(<Payload as prost::Message>::decode(bytes)?)
+}
+
+/// The payload's metrics (its top-level fields 2), counted up to one past
+/// [`MAX_METRICS`] without decoding them; bytes that are not protobuf stop the count
+/// (the decoder then says what is wrong).
+fn count_metrics(mut bytes: &[u8]) -> usize {
+    use prost::encoding::{WireType, decode_key, decode_varint};
+    let mut count = 0;
+    while !bytes.is_empty() && count <= MAX_METRICS {
+        let Ok((tag, wire_type)) = decode_key(&mut bytes) else {
+            break;
+        };
+        let skip = match wire_type {
+            WireType::Varint => match decode_varint(&mut bytes) {
+                Ok(_) => 0,
+                Err(_) => break,
+            },
+            WireType::SixtyFourBit => 8,
+            WireType::ThirtyTwoBit => 4,
+            WireType::LengthDelimited => match decode_varint(&mut bytes) {
+                Ok(len) => usize::try_from(len).unwrap_or(usize::MAX),
+                Err(_) => break,
+            },
+            WireType::StartGroup | WireType::EndGroup => break,
+        };
+        if skip > bytes.len() {
+            break;
+        }
+        bytes = &bytes[skip..];
+        if tag == 2 {
+            count += 1;
+        }
+    }
+    count
+}
+
 /// A whole Sparkplug B message body.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct Payload {
@@ -196,4 +260,42 @@ pub struct MetaData {
     /// Words about the contents.
     #[prost(string, optional, tag = "8")]
     pub description: Option<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use prost::Message as _;
+
+    use super::*;
+
+    #[test]
+    fn a_payload_of_more_metrics_than_the_bound_is_refused_before_it_is_decoded() {
+        // 08 01: timestamp 1; then metrics of one alias each, 4 bytes apiece.
+        let tiny = |n: usize| {
+            let mut bytes = vec![0x08, 0x01];
+            for _ in 0..n {
+                bytes.extend([0x12, 0x02, 0x10, 0x01]);
+            }
+            bytes
+        };
+        let at_the_bound = decode_payload(&tiny(MAX_METRICS)).expect("decoded");
+        assert_eq!(at_the_bound.metrics.len(), MAX_METRICS);
+        assert_eq!(
+            decode_payload(&tiny(MAX_METRICS + 1)),
+            Err(PayloadError::TooManyMetrics)
+        );
+        // Other fields and nested metrics do not count; garbage is the decoder's to name.
+        let payload = Payload {
+            timestamp: Some(5),
+            metrics: vec![Metric::default(); 3],
+            seq: Some(7),
+            uuid: Some("u".into()),
+            body: Some(vec![1; 300]),
+        };
+        assert_eq!(decode_payload(&payload.encode_to_vec()), Ok(payload));
+        assert!(matches!(
+            decode_payload(&[0xFF, 0xFF, 0xFF]),
+            Err(PayloadError::Undecodable(_))
+        ));
+    }
 }

@@ -117,8 +117,14 @@ impl Delivery {
     }
 
     /// The mark goes back to `at` at the latest (a primary host that went offline did not
-    /// see what the broker got before it noticed): returns the new mark if it moved.
+    /// see what the broker got before it noticed): returns the new mark if it moved. What
+    /// this connection published is no longer confirmed by a later PINGRESP or the clean
+    /// DISCONNECT that follows: the broker got it, the host may not have, and confirming
+    /// it would move the mark forward past the rewind again.
     pub fn rewind_to(&mut self, at: Timestamp) -> Option<Timestamp> {
+        self.unconfirmed.clear();
+        self.at_ping = None;
+        self.latest_handed = None;
         (at < self.forwarded).then(|| {
             self.forwarded = at;
             at
@@ -298,5 +304,28 @@ mod tests {
         assert_eq!(d.closed_cleanly(2), Some(Timestamp(600)));
         assert_eq!(d.rewind_to(Timestamp(550)), Some(Timestamp(550)));
         assert_eq!(d.rewind_to(Timestamp(700)), None);
+    }
+
+    #[test]
+    fn a_rewind_for_a_host_gone_offline_is_not_undone_by_the_disconnect_that_follows_it() {
+        let mut d = Delivery::new(Timestamp(100));
+        // Live changes published, not yet confirmed by a PINGRESP.
+        d.handed(Some(Timestamp(800)));
+        d.handed(Some(Timestamp(900)));
+        d.wrote_ping(2);
+        // The host went offline: back to 300; the connection then closes cleanly.
+        d.rewind_to(Timestamp(300));
+        assert_eq!(d.ping_answered(), None);
+        assert_eq!(d.closed_cleanly(2), None);
+        assert_eq!(
+            d.forwarded(),
+            Timestamp(100),
+            "the mark never moved past the rewind"
+        );
+        let mut d = Delivery::new(Timestamp(850));
+        d.handed(Some(Timestamp(900)));
+        assert_eq!(d.rewind_to(Timestamp(300)), Some(Timestamp(300)));
+        assert_eq!(d.closed_cleanly(1), None);
+        assert_eq!(d.forwarded(), Timestamp(300));
     }
 }
