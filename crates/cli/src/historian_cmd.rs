@@ -68,9 +68,19 @@ pub struct HistorianArgs {
     /// counted as dropped: a gateway clock gone wrong, or a rogue birth naming a day per
     /// metric, would otherwise create a day partition for each day it names. Raise it to
     /// take a longer backlog.
-    #[arg(long, value_name = "DURATION", default_value = "31days",
-          value_parser = humantime::parse_duration)]
+    #[arg(long, value_name = "DURATION", default_value = "31days", value_parser = parse_max_age)]
     max_age: std::time::Duration,
+}
+
+/// `--max-age`: a duration longer than 0 (0 would refuse every sample, live ones too).
+fn parse_max_age(text: &str) -> Result<std::time::Duration, String> {
+    match humantime::parse_duration(text) {
+        Ok(d) if d.is_zero() => Err("0 would refuse every sample, live ones too: give the \
+             oldest age to keep, e.g. 31days"
+            .to_owned()),
+        Ok(d) => Ok(d),
+        Err(e) => Err(format!("{e}; e.g. 31days")),
+    }
 }
 
 pub async fn run(args: HistorianArgs) -> anyhow::Result<ExitCode> {

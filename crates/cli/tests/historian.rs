@@ -640,7 +640,7 @@ async fn a_retained_message_larger_than_any_usual_limit_is_read_not_a_reason_to_
 }
 
 #[test]
-fn a_database_that_is_not_postgresql_or_no_pending_room_exits_2_before_anything_starts() {
+fn a_database_that_is_not_postgresql_no_pending_room_or_no_age_exits_2_before_anything_starts() {
     for (args, words) in [
         (
             ["--database", "mysql://u:secret@127.0.0.1/db"],
@@ -674,4 +674,12 @@ fn a_database_that_is_not_postgresql_or_no_pending_room_exits_2_before_anything_
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
+    let out = cellbus()
+        .args(["historian", "--mqtt", "mqtt://127.0.0.1:1"])
+        .args(["--database", "postgres://u@127.0.0.1/db", "--max-age", "0s"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("would refuse every sample"), "{stderr}");
 }

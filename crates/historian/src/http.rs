@@ -404,6 +404,12 @@ async fn events(
     let now = Timestamp::now();
     let from = parse_time("from", q.from.as_deref(), now)?.unwrap_or(Timestamp::MIN);
     let to = parse_time("to", q.to.as_deref(), now)?.unwrap_or(Timestamp(i64::MAX));
+    if from > to {
+        // As the gateway's /api/events says it.
+        return Err(ApiError::bad_request(format!(
+            "from ({from}) must not be after to ({to})"
+        )));
+    }
     let limit = check_limit(q.limit)?;
     let mut guard = reader(&s).await?;
     let store = connected(&guard)?;

@@ -167,4 +167,13 @@ async fn point_ids_name_one_point_or_say_which_and_the_listings_are_bounded() {
     assert!(events[0]["message"].as_str().unwrap().starts_with('1'));
     assert_eq!(events[0]["group"], "north");
     assert_eq!(body["truncated"], true);
+    let (status, body) = get(&state, "/api/events?from=-1h&to=-2h").await;
+    assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("must not be after"),
+        "{body}"
+    );
 }

@@ -875,7 +875,9 @@ fn node_event(msg: &Message<'_>, m: &Metric) -> Result<HostEvent, ValueError> {
         line: read::string(p, event::LINE),
         t: m.timestamp.map_or(msg.t, Timestamp::from_millis),
         kind: read::string(p, event::KIND),
-        severity: read::uint32(p, event::SEVERITY),
+        // 1–1000 whatever number type it came as: −5 is the least severe, 4e9 the most.
+        severity: read::integer(p, event::SEVERITY)
+            .map(|n| u32::try_from(n.clamp(1, 1000)).unwrap_or(1000)),
         message,
         historical: m.is_historical == Some(true),
     })
@@ -1505,6 +1507,77 @@ mod tests {
         let again = node.node_event(&event, at(131)).unwrap();
         assert_eq!(feed(&mut host, &again, at(141)).events.len(), 1);
         assert_eq!(host.stats().events, 2);
+    }
+
+    #[test]
+    fn an_event_severity_of_any_number_type_is_read_by_its_sign_and_kept_within_1_to_1000() {
+        use crate::proto::{PropertyValue, property_value::Value as P};
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let event = NodeEvent {
+            t: at(123),
+            kind: "alarm_raised".into(),
+            severity: 700,
+            message: "over".into(),
+            line: None,
+            device: None,
+            point: None,
+        };
+        let published = node.node_event(&event, at(130)).unwrap();
+        let template = Payload::decode(&published.payload[..]).unwrap();
+        let severity_of = |host: &mut Host, datatype: DataType, value: P| {
+            let mut payload = template.clone();
+            let properties = payload.metrics[0].properties.as_mut().unwrap();
+            let i = properties
+                .keys
+                .iter()
+                .position(|k| k == "severity")
+                .unwrap();
+            properties.values[i] = PropertyValue {
+                r#type: Some(datatype.code()),
+                is_null: None,
+                value: Some(value),
+            };
+            payload.seq = None;
+            let got = host.receive(
+                &published.topic.to_string(),
+                &payload.encode_to_vec(),
+                at(140),
+            );
+            got.events[0].severity
+        };
+        assert_eq!(
+            severity_of(
+                &mut host,
+                DataType::Int32,
+                P::IntValue(u32::from_ne_bytes((-5i32).to_ne_bytes()))
+            ),
+            Some(1)
+        );
+        assert_eq!(
+            severity_of(
+                &mut host,
+                DataType::Int64,
+                P::LongValue(u64::from_ne_bytes((-5i64).to_ne_bytes()))
+            ),
+            Some(1)
+        );
+        assert_eq!(
+            severity_of(&mut host, DataType::Double, P::DoubleValue(700.0)),
+            Some(700)
+        );
+        assert_eq!(
+            severity_of(&mut host, DataType::UInt32, P::IntValue(5000)),
+            Some(1000)
+        );
+        assert_eq!(
+            severity_of(&mut host, DataType::UInt64, P::LongValue(u64::MAX)),
+            Some(1000)
+        );
+        assert_eq!(
+            severity_of(&mut host, DataType::String, P::StringValue("high".into())),
+            None
+        );
     }
 
     #[test]

@@ -665,11 +665,30 @@ pub(crate) mod read {
         }
     }
 
-    /// An unsigned integer property that fits 32 bits (UInt8–32, or a 64-bit one).
-    pub(crate) fn uint32(set: Option<&PropertySet>, key: &str) -> Option<u32> {
-        match *property(set, key)? {
-            Value::IntValue(n) => Some(n),
-            Value::LongValue(n) => u32::try_from(n).ok(),
+    /// A number property as a whole number, read by its declared type: Int8–32 carried
+    /// in 32 bits are signed (`0xFFFFFFFB` is −5), Int64 is signed, unsigned types are
+    /// not, and a Double or Float is rounded. `None` for text, booleans and NaN.
+    pub(crate) fn integer(set: Option<&PropertySet>, key: &str) -> Option<i64> {
+        use crate::metric::DataType;
+        let set = set?;
+        let i = set.keys.iter().position(|k| k == key)?;
+        let declared = set
+            .values
+            .get(i)?
+            .r#type
+            .and_then(|code| DataType::from_code(code).ok());
+        let signed = matches!(
+            declared,
+            Some(DataType::Int8 | DataType::Int16 | DataType::Int32 | DataType::Int64)
+        );
+        match *property(Some(set), key)? {
+            Value::IntValue(n) if signed => Some(i64::from(i32::from_ne_bytes(n.to_ne_bytes()))),
+            Value::IntValue(n) => Some(i64::from(n)),
+            Value::LongValue(n) if signed => Some(i64::from_ne_bytes(n.to_ne_bytes())),
+            Value::LongValue(n) => Some(i64::try_from(n).unwrap_or(i64::MAX)),
+            // Saturating: a huge double is the largest integer, NaN is no number.
+            Value::DoubleValue(d) if !d.is_nan() => Some(d.round() as i64),
+            Value::FloatValue(f) if !f.is_nan() => Some(f64::from(f).round() as i64),
             _ => None,
         }
     }

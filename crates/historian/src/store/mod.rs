@@ -109,6 +109,7 @@ pub struct Store {
 #[derive(Debug)]
 struct Statements {
     adopt_ungrouped: Statement,
+    adopt_ungrouped_events: Statement,
     upsert_points: Statement,
     insert_bare_points: Statement,
     point_ids: Statement,
@@ -324,6 +325,18 @@ impl Statements {
                  AND q.device = p.device AND q.point = p.point AND q.group_id = k.group_id)",
             )
             .await?,
+            // The same for events, so one resent across the upgrade is still a duplicate.
+            adopt_ungrouped_events: prepare(
+                "UPDATE events e SET group_id = k.group_id \
+                 FROM (SELECT DISTINCT * FROM unnest($1::text[], $2::text[])) \
+                 AS k(group_id, node) \
+                 WHERE e.group_id = '' AND k.group_id <> '' AND e.node = k.node \
+                 AND NOT EXISTS (SELECT 1 FROM events f WHERE f.node = e.node \
+                 AND f.device IS NOT DISTINCT FROM e.device \
+                 AND f.point IS NOT DISTINCT FROM e.point AND f.t = e.t AND f.kind = e.kind \
+                 AND md5(f.message) = md5(e.message) AND f.group_id = k.group_id)",
+            )
+            .await?,
             upsert_points: prepare(
                 "INSERT INTO points (group_id, node, device, point, datatype, unit, \
                  description, writable, write_min, write_max) \
@@ -535,8 +548,8 @@ fn missing_points<'a>(
     missing
 }
 
-/// Gives the points of version-1 rows (group `''`) of each node to the group it is now
-/// seen in, unless that group has the point already: a database written before the group
+/// Gives the points and events of version-1 rows (group `''`) of each node to the group it
+/// is now seen in, unless that group has the same point or event already: a database written before the group
 /// was recorded keeps one history per point across the upgrade. Runs only for points this
 /// connection has no id for (births, and samples of points not born), so rarely.
 async fn adopt_ungrouped<'a>(
@@ -548,6 +561,9 @@ async fn adopt_ungrouped<'a>(
     tx.execute(&statements.adopt_ungrouped, &[&groups, &nodes])
         .await
         .map_err(|e| StoreError::statement("giving points stored without a group theirs", e))?;
+    tx.execute(&statements.adopt_ungrouped_events, &[&groups, &nodes])
+        .await
+        .map_err(|e| StoreError::statement("giving events stored without a group theirs", e))?;
     Ok(())
 }
 
@@ -954,10 +970,28 @@ mod tests {
             .events(UNIX_EPOCH, SystemTime::now(), 10)
             .await
             .unwrap();
-        assert_eq!(
-            events[0].group, "",
-            "an event keeps the group it was stored with"
-        );
+        assert_eq!(events.len(), 1);
+        assert_eq!(events[0].group, "plant", "the event went with its node");
+        // The same event sent again by the gateway (a replayed backlog) is a duplicate.
+        let again = EventRow {
+            group: "plant".into(),
+            node: "cell1".into(),
+            device: None,
+            point: None,
+            line: None,
+            t: events[0].t,
+            kind: "device_down".into(),
+            severity: 700,
+            message: "down".into(),
+        };
+        let written = store
+            .write(&Batch {
+                events: vec![again],
+                ..Batch::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!((written.events, written.duplicate_events), (0, 1));
     }
 
     #[test]
