@@ -24,7 +24,8 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::{Json, Router};
 use gateway::http::{
-    ApiError, ApiResult, HistoryQuery, HistoryRange, check_limit, history_range, parse_time,
+    ApiError, ApiResult, HistoryQuery, HistoryRange, bounded_by_bytes, check_limit, history_range,
+    parse_time,
 };
 use gateway::point::{Quality as ApiQuality, Value};
 use gateway::store::{Bucket as ApiBucket, HistorySample, MAX_RAW_SAMPLES, Series};
@@ -194,20 +195,10 @@ pub fn point_id(p: &PointRow, grouped: bool) -> String {
     }
 }
 
-/// A point id as an error message quotes it: at most [`MAX_QUOTED`] bytes.
-fn cut(text: &str) -> &str {
-    if text.len() <= MAX_QUOTED {
-        return text;
-    }
-    let mut end = MAX_QUOTED;
-    while !text.is_char_boundary(end) {
-        end -= 1;
-    }
-    &text[..end]
+/// A point id as an error message quotes it: as the gateway's errors quote a name.
+fn cut(text: &str) -> String {
+    gateway::write::cut(text, gateway::write::MAX_NAME)
 }
-
-/// The most of a client's text an error repeats.
-const MAX_QUOTED: usize = 256;
 
 /// The one point `text` names, or a 404 (none) or 400 (several, listed).
 async fn find_point(guard: &mut Reader<'_>, text: &str) -> ApiResult<crate::store::FoundPoint> {
@@ -417,11 +408,8 @@ async fn events(
         .events(system_time(from), system_time(to), limit)
         .await;
     let rows = checked(&mut guard, rows)?;
-    let mut events = Vec::with_capacity(rows.len());
-    let mut bytes = 0;
-    let mut truncated = false;
-    for e in rows {
-        let event = json!({
+    let events = rows.into_iter().map(|e| {
+        json!({
             "t": ms(e.t),
             "group": e.group,
             "node": e.node,
@@ -431,14 +419,9 @@ async fn events(
             "kind": e.kind,
             "severity": e.severity,
             "message": e.message,
-        });
-        bytes += event.to_string().len();
-        if bytes > MAX_EVENTS_BYTES && !events.is_empty() {
-            truncated = true;
-            break;
-        }
-        events.push(event);
-    }
+        })
+    });
+    let (events, truncated) = bounded_by_bytes(events, MAX_EVENTS_BYTES);
     Ok(Json(json!({ "events": events, "truncated": truncated })).into_response())
 }
 

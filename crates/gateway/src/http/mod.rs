@@ -820,21 +820,32 @@ async fn audit(
     let Query(q) = query?;
     let limit = check_limit(q.limit)?;
     let rows = run_query(&s, move |store| store.audit_log(q.device.as_deref(), limit)).await?;
-    // Bounded by bytes as well as rows: a listing stops before MAX_AUDIT_BYTES.
-    let mut kept = Vec::with_capacity(rows.len());
+    let rows = rows
+        .into_iter()
+        .map(serde_json::to_value)
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
+    let (kept, truncated) = bounded_by_bytes(rows, MAX_AUDIT_BYTES);
+    Ok(Json(json!({ "audit": kept, "truncated": truncated })).into_response())
+}
+
+/// A listing bounded by bytes as well as rows: the first `rows` whose JSON stays within
+/// `max` bytes (at least one, so a listing always moves on), and whether some were left
+/// out. Rows come from users' and devices' text, and a row limit alone bounds nothing.
+pub fn bounded_by_bytes(
+    rows: impl IntoIterator<Item = serde_json::Value>,
+    max: usize,
+) -> (Vec<serde_json::Value>, bool) {
+    let mut kept = Vec::new();
     let mut bytes = 0;
-    let mut truncated = false;
     for row in rows {
-        let row = serde_json::to_value(row)
-            .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
         bytes += row.to_string().len();
-        if bytes > MAX_AUDIT_BYTES {
-            truncated = true;
-            break;
+        if bytes > max && !kept.is_empty() {
+            return (kept, true);
         }
         kept.push(row);
     }
-    Ok(Json(json!({ "audit": kept, "truncated": truncated })).into_response())
+    (kept, false)
 }
 
 async fn openapi() -> Response {

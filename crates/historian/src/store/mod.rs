@@ -550,8 +550,10 @@ fn missing_points<'a>(
 
 /// Gives the points and events of version-1 rows (group `''`) of each node to the group it
 /// is now seen in, unless that group has the same point or event already: a database written before the group
-/// was recorded keeps one history per point across the upgrade. Runs only for points this
-/// connection has no id for (births, and samples of points not born), so rarely.
+/// was recorded keeps one history per point across the upgrade. Runs for the batches that
+/// define points (births) or name points this connection has no id for; the partial
+/// indexes of version 2 (`points_ungrouped`, `events_ungrouped`) keep it to the rows still
+/// without a group, none once every node has been born.
 async fn adopt_ungrouped<'a>(
     tx: &Transaction<'_>,
     statements: &Statements,

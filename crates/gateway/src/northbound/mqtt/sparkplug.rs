@@ -658,6 +658,17 @@ impl Node {
         }
     }
 
+    /// A refused node command: not a write, so logged with a throttle of its own and not
+    /// counted as one.
+    fn node_command_refused(&mut self, topic: &str, why: &str) {
+        if let Some(count) = self.node_refused.count(tokio::time::Instant::now()) {
+            tracing::warn!(
+                "refused {count} MQTT node command(s) since the last report; the latest on \
+                 {topic}: {why}"
+            );
+        }
+    }
+
     /// Queues a DCMD write for the node's write task, which carries the writes out one
     /// after the other in the order they came (the audit records how each ended), or
     /// refuses it when writes are off.
@@ -669,12 +680,10 @@ impl Node {
         value: MetricValue,
     ) {
         let Some(device) = device else {
-            if let Some(count) = self.node_refused.count(tokio::time::Instant::now()) {
-                tracing::warn!(
-                    "refused {count} MQTT node command(s) since the last report; the latest: \
-                     NCMD {metric} on {topic}: the node has no writable metrics"
-                );
-            }
+            self.node_command_refused(
+                topic,
+                &format!("{metric}: the node has no writable metrics"),
+            );
             return;
         };
         if !self.writes {
@@ -742,13 +751,7 @@ impl Node {
             ..
         }) = topic.parse::<Topic>()
         else {
-            // Not a write: logged with a throttle of its own, not counted as one.
-            if let Some(count) = self.node_refused.count(tokio::time::Instant::now()) {
-                tracing::warn!(
-                    "refused {count} MQTT node command(s) since the last report; the latest on \
-                     {topic}: {why}"
-                );
-            }
+            self.node_command_refused(topic, why);
             return;
         };
         tracing::debug!("MQTT: command on {topic} refused: {why}");
