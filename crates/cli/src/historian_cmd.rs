@@ -122,3 +122,17 @@ pub async fn run(args: HistorianArgs) -> anyhow::Result<ExitCode> {
     started.run(crate::serve_cmd::shutdown_signal()).await?;
     Ok(ExitCode::SUCCESS)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::parse_max_age;
+
+    #[test]
+    fn the_default_max_age_is_the_writers() {
+        // `--max-age`'s default is text for clap; it must stay the writer's constant.
+        assert_eq!(
+            parse_max_age("31days"),
+            Ok(historian::writer::DEFAULT_MAX_AGE)
+        );
+    }
+}
