@@ -193,10 +193,15 @@ impl WriterCache {
 pub(super) const WAL_CHECKPOINT_PAGES: i64 = 10_000;
 
 /// The writer's connection: [`configure`], plus its checkpoint size and its smallest
-/// cache ([`WriterCache`] resizes it per batch).
+/// cache ([`WriterCache`] resizes it per batch), and no foreign-key checks: the writer
+/// gives samples only point ids it has just read or inserted, and deletes no point, so
+/// the check (a lookup in `points` for every sample, on by default in the bundled SQLite)
+/// could never fail; without it a multi-row insert needs no statement journal
+/// (`writer::insert_samples`).
 pub(super) fn configure_writer(conn: &Connection) -> rusqlite::Result<()> {
     configure(conn)?;
     conn.pragma_update(None, "cache_size", -WRITER_CACHE_MIN_KIB)?;
+    conn.pragma_update(None, "foreign_keys", false)?;
     conn.pragma_update(None, "wal_autocheckpoint", WAL_CHECKPOINT_PAGES)?;
     Ok(())
 }

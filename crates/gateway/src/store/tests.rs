@@ -66,6 +66,53 @@ async fn samples_come_back_in_time_order_for_their_point_and_range() {
 }
 
 #[tokio::test]
+async fn a_batch_larger_than_one_multi_row_insert_keeps_every_value_and_quality_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    // Two full multi-row statements and a remainder of single rows, over two points.
+    let count = writer::INSERT_ROWS as i64 * 2 + 7;
+    let value = |t: i64| match t % 3 {
+        0 => Some(Value::Number(t as f64 / 4.0)),
+        1 => Some(Value::Text(format!("text {t}"))),
+        _ => None,
+    };
+    let quality = |t: i64| {
+        if t % 3 == 2 {
+            Quality::Bad
+        } else {
+            Quality::Good
+        }
+    };
+    for t in 0..count {
+        h.sample(Sample {
+            point: point(if t % 2 == 0 { "a.mixed" } else { "b.mixed" }),
+            t: Timestamp(t),
+            value: value(t),
+            quality: quality(t),
+        });
+    }
+    assert_eq!(h.flush().await.unwrap(), count as u64);
+    for (name, parity) in [("a.mixed", 0), ("b.mixed", 1)] {
+        let got = h
+            .history(&point(name), Timestamp(0), Timestamp(count), None)
+            .unwrap();
+        let Series::Samples(got) = got.series else {
+            panic!("expected raw samples")
+        };
+        let want: Vec<(i64, Option<Value>, Quality)> = (0..count)
+            .filter(|t| t % 2 == parity)
+            .map(|t| (t, value(t), quality(t)))
+            .collect();
+        let got: Vec<(i64, Option<Value>, Quality)> = got
+            .into_iter()
+            .map(|s| (s.t.0, s.value, s.quality))
+            .collect();
+        assert_eq!(got, want, "{name}");
+    }
+}
+
+#[tokio::test]
 async fn a_step_gives_average_min_and_max_per_bucket_of_good_values() {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();

@@ -4,7 +4,7 @@ use std::collections::{HashMap, VecDeque};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
-use std::sync::{Arc, mpsc};
+use std::sync::{Arc, LazyLock, mpsc};
 use std::time::{Duration, Instant};
 
 use rusqlite::{Connection, OptionalExtension, Transaction, params};
@@ -769,24 +769,60 @@ fn write_rows(
     Ok(counts)
 }
 
-/// Inserts samples (with their point ids) in order, through one prepared statement.
+/// Samples a multi-row insert takes at once.
+pub(super) const INSERT_ROWS: usize = 64;
+
+/// `INSERT OR FAIL INTO samples … VALUES` with [`INSERT_ROWS`] rows of five parameters.
+static INSERT_MANY: LazyLock<String> = LazyLock::new(|| {
+    format!(
+        "INSERT OR FAIL INTO samples (point, t, value, text, quality) VALUES {}",
+        vec!["(?,?,?,?,?)"; INSERT_ROWS].join(",")
+    )
+});
+
+/// Inserts samples (with their point ids) in order: [`INSERT_ROWS`] a statement, the rest
+/// one a statement, each through a prepared statement.
 ///
-/// One row per statement on purpose: a multi-row `INSERT … VALUES (…), (…)` (128 rows,
-/// also `OR FAIL`) cost 40–70 % more CPU per row in the `store_ingest` bench, SQLite
-/// keeping a statement journal of every page such a statement touches.
+/// A multi-row insert is cheaper per row only because nothing in it can abort halfway: the
+/// writer's connection does not check foreign keys ([`schema::configure_writer`]) and the
+/// statement says `OR FAIL` (a NOT NULL failure keeps the rows before it, and the whole
+/// transaction is rolled back anyway). Otherwise SQLite keeps a statement journal of every
+/// page such a statement touches, which cost 40–70 % more CPU per row than single-row
+/// inserts. Without it, 64 rows a statement and no foreign-key check cost 25–35 % less CPU
+/// a row than single rows with the check (`store_ingest`; 16 or 256 rows: the same within
+/// the spread; DESIGN.md has the figures).
 fn insert_samples(tx: &Transaction<'_>, samples: &[(i64, &Sample)]) -> rusqlite::Result<()> {
-    let mut stmt = tx.prepare_cached(
+    let mut chunks = samples.chunks_exact(INSERT_ROWS);
+    let mut many = tx.prepare_cached(&INSERT_MANY)?;
+    for chunk in &mut chunks {
+        for (row, (id, s)) in chunk.iter().enumerate() {
+            let (number, text) = sample_value(s);
+            let first = row * 5 + 1;
+            many.raw_bind_parameter(first, id)?;
+            many.raw_bind_parameter(first + 1, s.t.0)?;
+            many.raw_bind_parameter(first + 2, number)?;
+            many.raw_bind_parameter(first + 3, text)?;
+            many.raw_bind_parameter(first + 4, s.quality.code())?;
+        }
+        many.raw_execute()?;
+    }
+    let mut one = tx.prepare_cached(
         "INSERT INTO samples (point, t, value, text, quality) VALUES (?1, ?2, ?3, ?4, ?5)",
     )?;
-    for (id, s) in samples {
-        let (number, text) = match &s.value {
-            Some(Value::Number(n)) => (Some(*n), None),
-            Some(Value::Text(t)) => (None, Some(t.as_str())),
-            None => (None, None),
-        };
-        stmt.execute(params![id, s.t.0, number, text, s.quality.code()])?;
+    for (id, s) in chunks.remainder() {
+        let (number, text) = sample_value(s);
+        one.execute(params![id, s.t.0, number, text, s.quality.code()])?;
     }
     Ok(())
+}
+
+/// A sample's `value` and `text` columns.
+fn sample_value(s: &Sample) -> (Option<f64>, Option<&str>) {
+    match &s.value {
+        Some(Value::Number(n)) => (Some(*n), None),
+        Some(Value::Text(t)) => (None, Some(t.as_str())),
+        None => (None, None),
+    }
 }
 
 /// The id of `point`: cached (sharing the id's text), else from the table, else a new row.
