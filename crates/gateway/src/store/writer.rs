@@ -796,13 +796,7 @@ fn insert_samples(tx: &Transaction<'_>, samples: &[(i64, &Sample)]) -> rusqlite:
     let mut many = tx.prepare_cached(&INSERT_MANY)?;
     for chunk in &mut chunks {
         for (row, (id, s)) in chunk.iter().enumerate() {
-            let (number, text) = sample_value(s);
-            let first = row * 5 + 1;
-            many.raw_bind_parameter(first, id)?;
-            many.raw_bind_parameter(first + 1, s.t.0)?;
-            many.raw_bind_parameter(first + 2, number)?;
-            many.raw_bind_parameter(first + 3, text)?;
-            many.raw_bind_parameter(first + 4, s.quality.code())?;
+            bind_sample(&mut many, row * 5 + 1, *id, s)?;
         }
         many.raw_execute()?;
     }
@@ -810,19 +804,29 @@ fn insert_samples(tx: &Transaction<'_>, samples: &[(i64, &Sample)]) -> rusqlite:
         "INSERT INTO samples (point, t, value, text, quality) VALUES (?1, ?2, ?3, ?4, ?5)",
     )?;
     for (id, s) in chunks.remainder() {
-        let (number, text) = sample_value(s);
-        one.execute(params![id, s.t.0, number, text, s.quality.code()])?;
+        bind_sample(&mut one, 1, *id, s)?;
+        one.raw_execute()?;
     }
     Ok(())
 }
 
-/// A sample's `value` and `text` columns.
-fn sample_value(s: &Sample) -> (Option<f64>, Option<&str>) {
-    match &s.value {
+/// Binds a sample's five columns (point, t, value, text, quality) from parameter `first` on.
+fn bind_sample(
+    stmt: &mut rusqlite::Statement<'_>,
+    first: usize,
+    id: i64,
+    s: &Sample,
+) -> rusqlite::Result<()> {
+    let (number, text) = match &s.value {
         Some(Value::Number(n)) => (Some(*n), None),
         Some(Value::Text(t)) => (None, Some(t.as_str())),
         None => (None, None),
-    }
+    };
+    stmt.raw_bind_parameter(first, id)?;
+    stmt.raw_bind_parameter(first + 1, s.t.0)?;
+    stmt.raw_bind_parameter(first + 2, number)?;
+    stmt.raw_bind_parameter(first + 3, text)?;
+    stmt.raw_bind_parameter(first + 4, s.quality.code())
 }
 
 /// The id of `point`: cached (sharing the id's text), else from the table, else a new row.
