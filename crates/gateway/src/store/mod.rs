@@ -65,6 +65,7 @@ use std::time::Duration;
 
 use crate::time::Timestamp;
 
+mod changes;
 mod fault;
 mod inbox;
 mod open;
@@ -75,6 +76,7 @@ mod schema;
 mod settings;
 mod writer;
 
+pub use changes::ChangeCursor;
 pub use records::*;
 pub use settings::{read_setting, write_setting};
 
@@ -82,6 +84,7 @@ pub use settings::{read_setting, write_setting};
 pub const AUDIT_FIELD_MAX: i64 = 2048;
 
 use crate::event::{Event, EventKind};
+use changes::*;
 use query::*;
 use schema::*;
 use writer::*;

@@ -87,7 +87,11 @@ fn open_checked(path: &Path) -> Result<Connection, Checked> {
     conn.pragma_update(None, "auto_vacuum", "INCREMENTAL")
         .map_err(damaged_or_failed)?;
     configure_writer(&conn).map_err(damaged_or_failed)?;
-    let report = quick_check(&conn).map_err(damaged_or_failed)?;
+    // A damaged page can also make the check itself fail.
+    let report = quick_check(&conn).map_err(|e| match damaged_or_failed(e) {
+        Checked::Damaged(fault) => Checked::Damaged(format!("quick_check failed: {fault}")),
+        failed => failed,
+    })?;
     if report != "ok" {
         return Err(Checked::Damaged(format!("quick_check found: {report}")));
     }

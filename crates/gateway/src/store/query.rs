@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use rusqlite::{Connection, OptionalExtension, params};
 
-use crate::point::{PointId, Quality, Value};
+use crate::point::PointId;
 use crate::time::{Timestamp, duration_millis};
 
 use super::rollup::{Aggregate, MINUTE_MS, Marks, aggregate_at, minute_of, next_minute};
@@ -265,86 +265,6 @@ impl StoreHandle {
                 },
             )?;
             rows.collect()
-        })
-    }
-
-    /// At most `limit` stored changes of any point after `after` and at or before `until`,
-    /// in time order (ties in the order they were stored).
-    pub fn changes(
-        &self,
-        after: ChangeKey,
-        until: Timestamp,
-        limit: usize,
-    ) -> Result<Vec<StoredChange>, StoreError> {
-        self.readers.with(|conn| {
-            let mut stmt = conn.prepare_cached(
-                "SELECT s.t, s.rowid, p.name, s.value, s.text, s.quality \
-                 FROM samples s JOIN points p ON p.id = s.point \
-                 WHERE (s.t, s.rowid) > (?1, ?2) AND s.t <= ?3 \
-                 ORDER BY s.t, s.rowid LIMIT ?4",
-            )?;
-            let rows = stmt.query_map(
-                params![
-                    after.t.0,
-                    after.row,
-                    until.0,
-                    i64::try_from(limit).unwrap_or(i64::MAX)
-                ],
-                |r| {
-                    let number: Option<f64> = r.get(3)?;
-                    let text: Option<String> = r.get(4)?;
-                    Ok(StoredChange {
-                        key: ChangeKey {
-                            t: Timestamp(r.get(0)?),
-                            row: r.get(1)?,
-                        },
-                        point: r.get(2)?,
-                        value: number.map(Value::Number).or(text.map(Value::Text)),
-                        quality: Quality::from_code(r.get(5)?),
-                    })
-                },
-            )?;
-            rows.collect()
-        })
-    }
-
-    /// How many changes are stored after `after` and at or before `until`, and, when more
-    /// than `keep`, the key after which the newest `keep` of them start.
-    pub fn count_changes(
-        &self,
-        after: ChangeKey,
-        until: Timestamp,
-        keep: u64,
-    ) -> Result<(u64, Option<ChangeKey>), StoreError> {
-        self.readers.with(|conn| {
-            let count: i64 = conn.query_row(
-                "SELECT count(*) FROM samples WHERE (t, rowid) > (?1, ?2) AND t <= ?3",
-                params![after.t.0, after.row, until.0],
-                |r| r.get(0),
-            )?;
-            let count = count.unsigned_abs();
-            if count <= keep {
-                return Ok((count, None));
-            }
-            let start = conn
-                .query_row(
-                    "SELECT t, rowid FROM samples WHERE (t, rowid) > (?1, ?2) AND t <= ?3 \
-                     ORDER BY t DESC, rowid DESC LIMIT 1 OFFSET ?4",
-                    params![
-                        after.t.0,
-                        after.row,
-                        until.0,
-                        i64::try_from(keep).unwrap_or(i64::MAX)
-                    ],
-                    |r| {
-                        Ok(ChangeKey {
-                            t: Timestamp(r.get(0)?),
-                            row: r.get(1)?,
-                        })
-                    },
-                )
-                .optional()?;
-            Ok((count, start))
         })
     }
 

@@ -30,6 +30,8 @@ use rusqlite::{Connection, OptionalExtension, Transaction, params};
 
 use crate::point::{Quality, Value};
 
+use super::changes::newest_sample_time;
+
 /// One minute in milliseconds: the rollups' granularity.
 pub(super) const MINUTE_MS: i64 = 60_000;
 
@@ -329,6 +331,12 @@ impl Staged {
     }
 }
 
+/// The good numeric samples from `?1` on, a point at a time (`samples` has no index on
+/// time alone).
+pub(super) const OPEN_MINUTES_SAMPLES: &str = "SELECT s.point, s.t, s.value FROM points p \
+    CROSS JOIN samples s INDEXED BY samples_by_point_time ON s.point = p.id \
+    WHERE s.t >= ?1 AND s.quality = 0 AND s.value IS NOT NULL";
+
 impl OpenMinutes {
     /// Reads the marks and rebuilds the open minutes from the samples committed at or
     /// after `until` (after a restart, a `kill -9` included).
@@ -342,20 +350,13 @@ impl OpenMinutes {
             newest: i64::MIN,
         };
         let from = marks.until.max(marks.since).max(0);
-        let mut stmt = conn.prepare(
-            "SELECT point, t, value FROM samples WHERE t >= ?1 \
-             AND quality = 0 AND value IS NOT NULL",
-        )?;
+        let mut stmt = conn.prepare(OPEN_MINUTES_SAMPLES)?;
         let mut rows = stmt.query([from])?;
         while let Some(r) = rows.next()? {
             let (id, t, x): (i64, i64, f64) = (r.get(0)?, r.get(1)?, r.get(2)?);
             state.open.add(id, minute_of(t), x);
         }
-        state.newest = conn
-            .query_row("SELECT max(t) FROM samples", [], |r| {
-                r.get::<_, Option<i64>>(0)
-            })?
-            .unwrap_or(i64::MIN);
+        state.newest = newest_sample_time(conn)?.unwrap_or(i64::MIN);
         Ok(state)
     }
 

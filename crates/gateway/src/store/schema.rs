@@ -22,7 +22,6 @@ CREATE TABLE IF NOT EXISTS samples (
     quality INTEGER NOT NULL
 );
 CREATE INDEX IF NOT EXISTS samples_by_point_time ON samples(point, t);
-CREATE INDEX IF NOT EXISTS samples_by_time ON samples(t);
 CREATE TABLE IF NOT EXISTS events (
     id      INTEGER PRIMARY KEY,
     t       INTEGER NOT NULL,
@@ -66,32 +65,40 @@ CREATE TABLE IF NOT EXISTS rollup_marks (
 );
 ";
 
-/// The schema's version in `PRAGMA user_version`: 1 before the rollups, 2 with them.
-pub(super) const VERSION: i64 = 2;
+/// The schema's version in `PRAGMA user_version`: 1 before the rollups, 2 with them, 3
+/// without the index on `samples(t)` (see `changes`).
+pub(super) const VERSION: i64 = 3;
 
 /// Creates the tables of a new file, or brings an older file up to [`VERSION`], in one
 /// transaction. A file from version 1 gets empty rollups that start at the first minute
 /// after its newest sample: older minutes are answered from the samples (as before) until
-/// retention removes them, so opening a large old file costs no rewrite.
+/// retention removes them, so opening a large old file costs no rewrite. A file from
+/// version 1 or 2 loses its index on `samples(t)`: its pages become free pages, which
+/// the next retention gives back to the disk.
 pub(super) fn migrate(conn: &mut Connection) -> rusqlite::Result<()> {
     let tx = conn.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
     let version: i64 = tx.query_row("PRAGMA user_version", [], |r| r.get(0))?;
     tx.execute_batch(SCHEMA)?;
     tx.execute_batch(ROLLUPS)?;
-    if version < VERSION {
-        let newest: Option<i64> = tx.query_row("SELECT max(t) FROM samples", [], |r| r.get(0))?;
+    if version < 2 {
+        let newest = newest_sample_time(&tx)?;
         let since = newest.map_or(0, |t| rollup::next_minute(t.saturating_add(1)).max(0));
         tx.execute(
             "INSERT OR IGNORE INTO rollup_marks (id, since, until) VALUES (1, ?1, ?1)",
             [since],
         )?;
-        tx.pragma_update(None, "user_version", VERSION)?;
         if newest.is_some() {
             tracing::info!(
-                "history upgraded to schema {VERSION}: per-minute rollups from {} on",
+                "history upgraded to schema 2: per-minute rollups from {} on",
                 Timestamp(since)
             );
         }
+    }
+    if version < 3 {
+        tx.execute_batch("DROP INDEX IF EXISTS samples_by_time")?;
+    }
+    if version < VERSION {
+        tx.pragma_update(None, "user_version", VERSION)?;
     }
     tx.commit()
 }

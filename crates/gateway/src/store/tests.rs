@@ -949,6 +949,250 @@ async fn stored_changes_of_every_point_come_back_in_time_order_in_pages() {
     );
 }
 
+/// Every stored change as (time, row id, point, value), in time order, read the slow way:
+/// the whole table, sorted.
+fn every_change(dir: &std::path::Path) -> Vec<(ChangeKey, String, Option<f64>)> {
+    let conn = rusqlite::Connection::open(dir.join(DB_FILE)).unwrap();
+    let mut stmt = conn
+        .prepare(
+            "SELECT s.t, s.rowid, p.name, s.value FROM samples s NOT INDEXED \
+             JOIN points p ON p.id = s.point ORDER BY s.t, s.rowid",
+        )
+        .unwrap();
+    stmt.query_map([], |r| {
+        Ok((
+            ChangeKey {
+                t: Timestamp(r.get(0)?),
+                row: r.get(1)?,
+            },
+            r.get(2)?,
+            r.get(3)?,
+        ))
+    })
+    .unwrap()
+    .collect::<Result<_, _>>()
+    .unwrap()
+}
+
+/// A history with what a time-ordered read must get through: a dense second with ties,
+/// stored out of order; a gap of three days; a day with one change every seven minutes; a
+/// dense stretch again.
+async fn store_dense_gap_sparse_dense(h: &StoreHandle) {
+    let day = 86_400_000;
+    let mut rows = Vec::new();
+    for i in 0..3_000i64 {
+        let t = 10_000 + i / 3;
+        rows.push((format!("a.p{}", i % 7), t, i as f64));
+    }
+    // Out of order in blocks of fifty, as lines' changes can arrive.
+    for block in rows.chunks_mut(50) {
+        block.reverse();
+    }
+    for i in 0..200i64 {
+        rows.push((format!("b.p{}", i % 3), 3 * day + i * 7 * 60_000, i as f64));
+    }
+    for i in 0..1_000i64 {
+        rows.push((format!("a.p{}", i % 7), 5 * day + i, -(i as f64)));
+    }
+    for (p, t, v) in rows {
+        h.sample(sample(&p, t, v));
+    }
+    h.flush().await.unwrap();
+}
+
+#[tokio::test]
+async fn stored_changes_come_back_in_time_order_through_gaps_sparse_and_dense_stretches() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    store_dense_gap_sparse_dense(&h).await;
+    let expected = every_change(dir.path());
+    assert_eq!(expected.len(), 4_200);
+    for limit in [1, 13, 5_000] {
+        let mut read = Vec::new();
+        let mut after = ChangeKey::before(Timestamp(0));
+        loop {
+            let page = h.changes(after, Timestamp(i64::MAX), limit).unwrap();
+            assert!(page.len() <= limit);
+            let Some(last) = page.last() else { break };
+            after = last.key;
+            read.extend(page.into_iter().map(|c| {
+                let number = match c.value {
+                    Some(Value::Number(x)) => Some(x),
+                    other => panic!("a number was stored, read {other:?}"),
+                };
+                (c.key, c.point, number)
+            }));
+        }
+        assert!(
+            read == expected,
+            "pages of {limit} read the changes in time order"
+        );
+    }
+    let until = Timestamp(3 * 86_400_000 + 100 * 7 * 60_000);
+    let page = h.changes(expected[4].0, until, 10_000).unwrap();
+    let within: Vec<_> = expected[5..]
+        .iter()
+        .take_while(|c| c.0.t <= until)
+        .map(|c| c.0)
+        .collect();
+    assert_eq!(
+        page.iter().map(|c| c.key).collect::<Vec<_>>(),
+        within,
+        "nothing after `until`, nothing at or before the key"
+    );
+}
+
+#[tokio::test]
+async fn the_newest_changes_to_keep_start_where_a_sorted_list_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    store_dense_gap_sparse_dense(&h).await;
+    let every = every_change(dir.path());
+    for after in [
+        ChangeKey::before(Timestamp(0)),
+        every[100].0,
+        every[3_500].0,
+    ] {
+        for until in [
+            Timestamp(i64::MAX),
+            Timestamp(3 * 86_400_000 + 100 * 7 * 60_000),
+        ] {
+            let within: Vec<ChangeKey> = every
+                .iter()
+                .map(|c| c.0)
+                .filter(|k| *k > after && k.t <= until)
+                .collect();
+            let n = within.len() as u64;
+            for keep in [0, 1, 17, 999, n.saturating_sub(1), n, n + 5] {
+                let (count, start) = h.count_changes(after, until, keep).unwrap();
+                let expected = (n > keep).then(|| within[(n - keep - 1) as usize]);
+                assert_eq!(
+                    (count, start),
+                    (n, expected),
+                    "after {after:?}, until {until:?}, keeping {keep}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_window_grows_to_hold_the_rows_still_wanted_at_most_eightfold() {
+    let first = Window::first();
+    assert_eq!(first.ms(), 1_000);
+    assert_eq!(
+        first.after(1_000, 4_000).ms(),
+        3_000,
+        "three times more to read"
+    );
+    assert_eq!(first.after(10, 5_000).ms(), 8_000);
+    assert_eq!(first.after(4_999, 5_000).ms(), 1_000, "never shorter");
+    assert_eq!(
+        first.after(0, 5_000),
+        first,
+        "an empty window tells no density"
+    );
+    let mut w = first;
+    for _ in 0..20 {
+        w = w.after(1, 1_000_000);
+    }
+    assert_eq!(w.ms(), 86_400_000, "at most a day");
+    assert_eq!(first.halved().ms(), 500);
+    assert_eq!(
+        Window::fitted(1, 1, 1).halved().ms(),
+        1,
+        "never under a millisecond"
+    );
+}
+
+#[test]
+fn a_window_cut_by_the_limit_fits_the_next_to_the_density_it_saw() {
+    assert_eq!(
+        Window::fitted(400, 2_000, 5_000).ms(),
+        1_125,
+        "an eighth more than the density says"
+    );
+    assert_eq!(Window::fitted(8_000, 50_000, 50_000).ms(), 9_000);
+    assert_eq!(
+        Window::fitted(1, 5_000, 1).ms(),
+        1,
+        "never under a millisecond"
+    );
+    assert_eq!(Window::fitted(86_400_000, 1, 5_000).ms(), 86_400_000);
+}
+
+#[tokio::test]
+async fn a_read_in_many_calls_gets_every_change_once_in_time_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    store_dense_gap_sparse_dense(&h).await;
+    let expected: Vec<ChangeKey> = every_change(dir.path()).into_iter().map(|c| c.0).collect();
+    let mut cursor = ChangeCursor::new(ChangeKey::before(Timestamp(0)), Timestamp(i64::MAX));
+    let mut read = Vec::new();
+    for limit in [7, 500, 1, 2_000].into_iter().cycle() {
+        let keys = h.change_keys(&mut cursor, limit).unwrap();
+        if keys.is_empty() {
+            break;
+        }
+        assert!(keys.len() == limit || read.len() + keys.len() == expected.len());
+        read.extend(keys);
+    }
+    assert!(
+        read == expected,
+        "{} keys read of {}",
+        read.len(),
+        expected.len()
+    );
+    assert!(
+        h.change_keys(&mut cursor, 10).unwrap().is_empty(),
+        "the end stays the end"
+    );
+}
+
+#[test]
+fn the_time_ordered_reads_never_scan_the_samples_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    drop(store);
+    let conn = rusqlite::Connection::open(dir.path().join(DB_FILE)).unwrap();
+    for query in [
+        WINDOW_KEYS,
+        CHANGES_AT,
+        WINDOW_COUNT,
+        WINDOW_NTH_NEWEST,
+        WINDOW_BOUNDS,
+        NEWEST_SAMPLE_TIME,
+        rollup::OPEN_MINUTES_SAMPLES,
+    ] {
+        let mut stmt = conn
+            .prepare(&format!("EXPLAIN QUERY PLAN {query}"))
+            .unwrap();
+        let n = stmt.parameter_count();
+        let plan: Vec<String> = stmt
+            .query_map(rusqlite::params_from_iter((0..n).map(|_| 0i64)), |r| {
+                r.get(3)
+            })
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        for step in &plan {
+            let words: Vec<&str> = step.split_whitespace().collect();
+            let reads_all_samples = words.first() == Some(&"SCAN")
+                && ["s", "row", "samples"].contains(words.get(1).unwrap_or(&""))
+                && !step.contains("USING");
+            assert!(!reads_all_samples, "{step} in the plan of {query}");
+        }
+        assert!(
+            plan.iter().any(|s| s.contains("samples_by_point_time")
+                || s.starts_with("SEARCH s USING INTEGER PRIMARY KEY")),
+            "{plan:?}"
+        );
+    }
+}
+
 // --- Per-minute rollups --------------------------------------------------------------------
 
 /// The bucketed query as before the rollups: SQLite's own `avg`, `min`, `max`, `count`.
@@ -1189,7 +1433,15 @@ async fn a_file_of_the_previous_schema_opens_answers_and_rolls_up_what_comes_aft
     let version: i64 = conn
         .query_row("PRAGMA user_version", [], |r| r.get(0))
         .unwrap();
-    assert_eq!(version, 2);
+    assert_eq!(version, 3);
+    let time_index: i64 = conn
+        .query_row(
+            "SELECT count(*) FROM sqlite_master WHERE name = 'samples_by_time'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(time_index, 0, "the index on time alone is dropped");
     // The old minutes come from the samples, as before.
     let old = buckets_of(
         h.history(

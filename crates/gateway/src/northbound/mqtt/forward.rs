@@ -27,13 +27,17 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::cell::Cell;
-use crate::store::{ChangeKey, StoredChange};
+use crate::store::{ChangeCursor, ChangeKey, StoredChange};
 use crate::time::{Timestamp, duration_millis};
 
 /// How far before the forwarded mark the stored changes are sent again.
 pub const MARGIN: Duration = Duration::from_secs(1);
 /// Stored changes read from the database at a time.
 pub const PAGE: usize = 5_000;
+/// Keys of stored changes read ahead at a time (16 bytes each): the history has no index on
+/// time alone and pays a seek a point for each window of time it reads (`store::changes`),
+/// so it reads many pages' keys at once.
+pub const KEYS_AHEAD: usize = 50_000;
 
 /// The key of the forwarded mark in the database's `settings` table.
 pub const FORWARDED_KEY: &str = "mqtt.forwarded_until";
@@ -153,8 +157,10 @@ impl Delivery {
 #[derive(Debug)]
 pub struct Backlog {
     cell: Arc<Cell>,
-    next: ChangeKey,
-    until: Timestamp,
+    /// Where the next keys are read from.
+    cursor: ChangeCursor,
+    /// Keys read, not yet sent.
+    ahead: VecDeque<ChangeKey>,
     /// Changes not sent because of `max_backlog`.
     pub skipped: u64,
     /// Changes to send.
@@ -188,8 +194,8 @@ impl Backlog {
         };
         Ok(Self {
             cell: Arc::clone(cell),
-            next,
-            until,
+            cursor: ChangeCursor::new(next, until),
+            ahead: VecDeque::new(),
             skipped,
             total,
         })
@@ -233,16 +239,34 @@ impl Backlog {
 
     /// The next page, oldest first; empty when all were read.
     pub async fn next_page(&mut self) -> Result<Vec<StoredChange>, String> {
-        let store = self.cell.store().clone();
-        let (after, until) = (self.next, self.until);
-        let page = tokio::task::spawn_blocking(move || store.changes(after, until, PAGE))
-            .await
-            .map_err(|e| e.to_string())?
-            .map_err(|e| format!("the stored changes cannot be read: {e}"))?;
-        if let Some(last) = page.last() {
-            self.next = last.key;
+        loop {
+            if self.ahead.is_empty() {
+                let store = self.cell.store().clone();
+                let mut cursor = self.cursor;
+                let (cursor, keys) = tokio::task::spawn_blocking(move || {
+                    let keys = store.change_keys(&mut cursor, KEYS_AHEAD);
+                    (cursor, keys)
+                })
+                .await
+                .map_err(|e| e.to_string())?;
+                let keys = keys.map_err(|e| format!("the stored changes cannot be read: {e}"))?;
+                if keys.is_empty() {
+                    return Ok(Vec::new());
+                }
+                self.cursor = cursor;
+                self.ahead.extend(keys);
+            }
+            let keys: Vec<ChangeKey> = self.ahead.drain(..PAGE.min(self.ahead.len())).collect();
+            let store = self.cell.store().clone();
+            let page = tokio::task::spawn_blocking(move || store.changes_at(&keys))
+                .await
+                .map_err(|e| e.to_string())?
+                .map_err(|e| format!("the stored changes cannot be read: {e}"))?;
+            // Empty only if retention pruned every change of the page meanwhile.
+            if !page.is_empty() {
+                return Ok(page);
+            }
         }
-        Ok(page)
     }
 }
 
