@@ -1,11 +1,12 @@
 //! The stored changes of every point in time order: what the MQTT backlog sends after an
 //! outage, read without an index on time.
 //!
-//! `samples` has one index, on (point, t). An index on t alone cost about a sixth of every
+//! `samples` has one index, on (point, t). An index on t alone cost 13–15 % of every
 //! insert (DESIGN.md, "Ingest") for reads that happen only after an outage, so a
 //! time-ordered read goes through windows of time instead: for each point the index gives
-//! the window's keys (one seek a point), and SQLite orders them (time, row id: both in the
-//! index). A window's length follows how many keys the last one held ([`Window`]); after a
+//! the window's keys (one seek a point; time and row id are both in the index), which are
+//! sorted here. A window's length follows how many keys the last one held ([`Window`]),
+//! and one holding far more than wanted is halved and read again; after a
 //! window that held none the read jumps to the next stored time, so a gap of days costs
 //! one query. A seek a point and window is most of the cost, so the backlog reads many
 //! pages' keys at a time ([`StoreHandle::change_keys`]) and then each page's rows by their
@@ -105,7 +106,7 @@ macro_rules! window {
 }
 
 /// The keys of at most `?5` changes of a window, in the index's order (by point): sorted
-/// here, which costs a tenth of SQLite's sorting them into a B-tree.
+/// here, which is cheaper than an `ORDER BY`, for which SQLite builds a B-tree of them.
 pub(super) const WINDOW_KEYS: &str = window!("s.t, s.rowid", " LIMIT ?5");
 
 /// The changes whose row ids `?1` lists (a JSON array), looked up in the list's order (a
