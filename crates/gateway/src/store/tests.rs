@@ -974,9 +974,24 @@ fn every_change(dir: &std::path::Path) -> Vec<(ChangeKey, String, Option<f64>)> 
     .unwrap()
 }
 
-/// A history with what a time-ordered read must get through: a dense second with ties,
-/// stored out of order; a gap of three days; a day with one change every seven minutes; a
-/// dense stretch again.
+/// A new history (its directory, store and handle) with what a time-ordered read must get
+/// through, and its changes read the slow way ([`every_change`]).
+async fn dense_gap_sparse_dense() -> (
+    tempfile::TempDir,
+    Store,
+    StoreHandle,
+    Vec<(ChangeKey, String, Option<f64>)>,
+) {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    store_dense_gap_sparse_dense(&h).await;
+    let every = every_change(dir.path());
+    (dir, store, h, every)
+}
+
+/// A dense second with ties, stored out of order; a gap of three days; a day with one
+/// change every seven minutes; a dense stretch again.
 async fn store_dense_gap_sparse_dense(h: &StoreHandle) {
     let day = 86_400_000;
     let mut rows = Vec::new();
@@ -1002,11 +1017,7 @@ async fn store_dense_gap_sparse_dense(h: &StoreHandle) {
 
 #[tokio::test]
 async fn stored_changes_come_back_in_time_order_through_gaps_sparse_and_dense_stretches() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
-    let h = store.handle();
-    store_dense_gap_sparse_dense(&h).await;
-    let expected = every_change(dir.path());
+    let (_dir, _store, h, expected) = dense_gap_sparse_dense().await;
     assert_eq!(expected.len(), 4_200);
     for limit in [1, 13, 5_000] {
         let mut read = Vec::new();
@@ -1045,11 +1056,7 @@ async fn stored_changes_come_back_in_time_order_through_gaps_sparse_and_dense_st
 
 #[tokio::test]
 async fn the_newest_changes_to_keep_start_where_a_sorted_list_says() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
-    let h = store.handle();
-    store_dense_gap_sparse_dense(&h).await;
-    let every = every_change(dir.path());
+    let (_dir, _store, h, every) = dense_gap_sparse_dense().await;
     for after in [
         ChangeKey::before(Timestamp(0)),
         every[100].0,
@@ -1125,11 +1132,8 @@ fn a_window_cut_by_the_limit_fits_the_next_to_the_density_it_saw() {
 
 #[tokio::test]
 async fn a_read_in_many_calls_gets_every_change_once_in_time_order() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
-    let h = store.handle();
-    store_dense_gap_sparse_dense(&h).await;
-    let expected: Vec<ChangeKey> = every_change(dir.path()).into_iter().map(|c| c.0).collect();
+    let (_dir, _store, h, every) = dense_gap_sparse_dense().await;
+    let expected: Vec<ChangeKey> = every.into_iter().map(|c| c.0).collect();
     let mut cursor = ChangeCursor::new(ChangeKey::before(Timestamp(0)), Timestamp(i64::MAX));
     let mut read = Vec::new();
     for limit in [7, 500, 1, 2_000].into_iter().cycle() {
