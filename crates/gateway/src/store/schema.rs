@@ -95,7 +95,15 @@ pub(super) fn migrate(conn: &mut Connection) -> rusqlite::Result<()> {
         }
     }
     if version < 3 {
-        tx.execute_batch("DROP INDEX IF EXISTS samples_by_time")?;
+        let indexed: bool = tx.query_row(
+            "SELECT count(*) > 0 FROM sqlite_master WHERE name = 'samples_by_time'",
+            [],
+            |r| r.get(0),
+        )?;
+        if indexed {
+            tx.execute_batch("DROP INDEX samples_by_time")?;
+            tracing::info!("history upgraded to schema 3: the index on time alone is dropped");
+        }
     }
     if version < VERSION {
         tx.pragma_update(None, "user_version", VERSION)?;
