@@ -2,7 +2,8 @@
 //! store as fast as one producer can, committed by the writer thread in its batches (WAL,
 //! synchronous=FULL, per-minute rollups), one flush at the end. Prints rows per second
 //! (wall time from the first row sent to the last commit), commits made, the writer
-//! process's CPU and the file's size.
+//! process's CPU and the file's size; at the end, how long the MQTT backlog's reads take on
+//! the file written.
 //!
 //! ```text
 //! nice cargo bench -p gateway --bench store_ingest                       # 1M rows, 1000 points
@@ -17,7 +18,7 @@
 use std::time::{Duration, Instant};
 
 use gateway::point::{PointId, Quality, Value};
-use gateway::store::{Sample, Store, StoreOptions};
+use gateway::store::{ChangeCursor, ChangeKey, Sample, Store, StoreHandle, StoreOptions};
 use gateway::time::Timestamp;
 
 fn arg(name: &str, default: usize) -> usize {
@@ -86,7 +87,40 @@ fn main() {
             bytes as f64 / 1e6
         );
     }
+    backlog_reads(&handle, t, rows * runs);
     store.close();
+}
+
+/// How long the MQTT backlog's reads take on the file written (every point's changes in
+/// time order, without an index on time): counting a backlog of the newest half and finding
+/// where it starts, then reading the keys of 50,000 changes and the rows of 5,000.
+fn backlog_reads(handle: &StoreHandle, newest: i64, stored: usize) {
+    let from = ChangeKey::before(Timestamp(0));
+    let keep = (stored / 2) as u64;
+    let started = Instant::now();
+    let (count, start) = handle
+        .count_changes(from, Timestamp(newest), keep)
+        .expect("count");
+    let counted = started.elapsed();
+    let start = start.unwrap_or(from);
+    let started = Instant::now();
+    let keys = handle
+        .change_keys(&mut ChangeCursor::new(start, Timestamp(newest)), 50_000)
+        .expect("keys");
+    let keyed = started.elapsed();
+    let started = Instant::now();
+    let page = handle
+        .changes_at(&keys[..keys.len().min(5_000)])
+        .expect("rows");
+    println!(
+        "store_ingest backlog: {count} changes counted and the start of the newest {keep} found \
+         in {:.0} ms; {} keys after it in {:.1} ms; {} rows of them in {:.1} ms",
+        counted.as_secs_f64() * 1e3,
+        keys.len(),
+        keyed.as_secs_f64() * 1e3,
+        page.len(),
+        started.elapsed().as_secs_f64() * 1e3
+    );
 }
 
 /// User + system CPU time of this process, from `/proc/self/stat` (zero elsewhere).
