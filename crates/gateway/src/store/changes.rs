@@ -14,7 +14,7 @@
 
 use std::fmt::Write as _;
 
-use rusqlite::{Connection, OptionalExtension, params};
+use rusqlite::{Connection, OptionalExtension};
 
 use crate::point::{Quality, Value};
 use crate::time::Timestamp;
@@ -124,14 +124,26 @@ pub(super) const WINDOW_NTH_NEWEST: &str = window!(
     " ORDER BY s.t DESC, s.rowid DESC LIMIT 1 OFFSET ?5"
 );
 
-/// The earliest and the latest stored time in a window (`NULL` when it holds none): one
-/// seek a point.
-pub(super) const WINDOW_BOUNDS: &str = "SELECT min(first), max(last) FROM (SELECT \
-    (SELECT min(s.t) FROM samples s INDEXED BY samples_by_point_time \
-     WHERE s.point = p.id AND s.t >= ?3 AND s.t <= ?4 AND (s.t, s.rowid) > (?1, ?2)) AS first, \
-    (SELECT max(s.t) FROM samples s INDEXED BY samples_by_point_time \
-     WHERE s.point = p.id AND s.t >= ?3 AND s.t <= ?4 AND (s.t, s.rowid) > (?1, ?2)) AS last \
-    FROM points p)";
+/// `min` or `max` of the stored times in a window: one seek a point.
+macro_rules! window_time {
+    ($fold:literal) => {
+        concat!(
+            "SELECT ",
+            $fold,
+            "((SELECT ",
+            $fold,
+            "(s.t) FROM samples s INDEXED BY samples_by_point_time \
+             WHERE s.point = p.id AND s.t >= ?3 AND s.t <= ?4 AND (s.t, s.rowid) > (?1, ?2))) \
+             FROM points p"
+        )
+    };
+}
+
+/// The earliest stored time in a window (`NULL` when it holds none).
+pub(super) const WINDOW_FIRST: &str = window_time!("min");
+
+/// The latest stored time in a window (`NULL` when it holds none).
+pub(super) const WINDOW_LAST: &str = window_time!("max");
 
 /// Where a time-ordered read of the stored changes is between calls of
 /// [`StoreHandle::change_keys`]: after which change, up to when, and how long its next
@@ -162,23 +174,52 @@ struct Span {
     hi: i64,
 }
 
+/// The key in a row's first two columns (t, rowid).
+fn key(r: &rusqlite::Row<'_>) -> rusqlite::Result<ChangeKey> {
+    Ok(ChangeKey {
+        t: Timestamp(r.get(0)?),
+        row: r.get(1)?,
+    })
+}
+
 impl Span {
+    /// Every stored change.
+    fn everything() -> Self {
+        Self {
+            after: ChangeKey::before(Timestamp(i64::MIN)),
+            lo: i64::MIN,
+            hi: i64::MAX,
+        }
+    }
+
+    /// The window's parameters `?1` to `?4`, and `?5`.
+    fn with(self, fifth: u64) -> [i64; 5] {
+        let [a, b, c, d] = self.bounds();
+        [a, b, c, d, i64::try_from(fifth).unwrap_or(i64::MAX)]
+    }
+
+    /// The window's parameters `?1` to `?4`.
+    fn bounds(self) -> [i64; 4] {
+        [self.after.t.0, self.after.row, self.lo, self.hi]
+    }
+
     fn count(self, conn: &Connection) -> rusqlite::Result<u64> {
-        let n: i64 = conn.prepare_cached(WINDOW_COUNT)?.query_row(
-            params![self.after.t.0, self.after.row, self.lo, self.hi],
-            |r| r.get(0),
-        )?;
+        let n: i64 = conn
+            .prepare_cached(WINDOW_COUNT)?
+            .query_row(self.bounds(), |r| r.get(0))?;
         Ok(n.unsigned_abs())
     }
 
-    /// The earliest and the latest stored time in the span.
-    fn bounds(self, conn: &Connection) -> rusqlite::Result<Option<(i64, i64)>> {
-        let (first, last): (Option<i64>, Option<i64>) =
-            conn.prepare_cached(WINDOW_BOUNDS)?.query_row(
-                params![self.after.t.0, self.after.row, self.lo, self.hi],
-                |r| Ok((r.get(0)?, r.get(1)?)),
-            )?;
-        Ok(first.zip(last))
+    /// The earliest stored time in the span.
+    fn first_time(self, conn: &Connection) -> rusqlite::Result<Option<i64>> {
+        conn.prepare_cached(WINDOW_FIRST)?
+            .query_row(self.bounds(), |r| r.get(0))
+    }
+
+    /// The latest stored time in the span.
+    fn last_time(self, conn: &Connection) -> rusqlite::Result<Option<i64>> {
+        conn.prepare_cached(WINDOW_LAST)?
+            .query_row(self.bounds(), |r| r.get(0))
     }
 
     /// Appends the keys of the span's first `limit` changes to `out`, oldest first, and
@@ -197,21 +238,7 @@ impl Span {
         };
         let mut stmt = conn.prepare_cached(WINDOW_KEYS)?;
         let mut keys = stmt
-            .query_map(
-                params![
-                    self.after.t.0,
-                    self.after.row,
-                    self.lo,
-                    self.hi,
-                    i64::try_from(most + 1).unwrap_or(i64::MAX)
-                ],
-                |r| {
-                    Ok(ChangeKey {
-                        t: Timestamp(r.get(0)?),
-                        row: r.get(1)?,
-                    })
-                },
-            )?
+            .query_map(self.with(most as u64 + 1), key)?
             .collect::<rusqlite::Result<Vec<_>>>()?;
         if keys.len() > most {
             return Ok(None);
@@ -226,21 +253,7 @@ impl Span {
     /// The key of the change with `newer` newer ones in the span.
     fn nth_newest(self, conn: &Connection, newer: u64) -> rusqlite::Result<Option<ChangeKey>> {
         conn.prepare_cached(WINDOW_NTH_NEWEST)?
-            .query_row(
-                params![
-                    self.after.t.0,
-                    self.after.row,
-                    self.lo,
-                    self.hi,
-                    i64::try_from(newer).unwrap_or(i64::MAX)
-                ],
-                |r| {
-                    Ok(ChangeKey {
-                        t: Timestamp(r.get(0)?),
-                        row: r.get(1)?,
-                    })
-                },
-            )
+            .query_row(self.with(newer), key)
             .optional()
     }
 }
@@ -252,8 +265,10 @@ fn window_end(lo: i64, window: Window, until: i64) -> i64 {
 
 impl StoreHandle {
     /// At most `limit` stored changes of any point after `after` and at or before `until`,
-    /// in time order (ties in the order they were stored).
-    pub fn changes(
+    /// in time order (ties in the order they were stored): the keys, then the rows (the
+    /// backlog does the two apart, reading keys ahead).
+    #[cfg(test)]
+    pub(super) fn changes(
         &self,
         after: ChangeKey,
         until: Timestamp,
@@ -295,8 +310,8 @@ impl StoreHandle {
                 if held == 0 {
                     // Jump to the next stored time.
                     let rest = Span { hi: until, ..span };
-                    match rest.bounds(conn)? {
-                        Some((first, _)) if first > hi => lo = first,
+                    match rest.first_time(conn)? {
+                        Some(first) if first > hi => lo = first,
                         _ => break,
                     }
                 } else if out.len() == limit {
@@ -333,10 +348,7 @@ impl StoreHandle {
                 let number: Option<f64> = r.get(3)?;
                 let text: Option<String> = r.get(4)?;
                 Ok(StoredChange {
-                    key: ChangeKey {
-                        t: Timestamp(r.get(0)?),
-                        row: r.get(1)?,
-                    },
+                    key: key(r)?,
                     point: r.get(2)?,
                     value: number.map(Value::Number).or(text.map(Value::Text)),
                     quality: Quality::from_code(r.get(5)?),
@@ -387,9 +399,9 @@ impl StoreHandle {
                         lo: after.t.0,
                         ..span
                     })
-                    .bounds(conn)?
+                    .last_time(conn)?
                     {
-                        Some((_, last)) if last < lo => hi = last,
+                        Some(last) if last < lo => hi = last,
                         _ => break,
                     }
                 } else {
@@ -403,12 +415,7 @@ impl StoreHandle {
     }
 }
 
-/// The newest stored time (`NULL` with none), one seek a point: `samples` has no index on
-/// time alone.
-pub(super) const NEWEST_SAMPLE_TIME: &str = "SELECT max((SELECT max(s.t) FROM samples s \
-    INDEXED BY samples_by_point_time WHERE s.point = p.id)) FROM points p";
-
-/// The newest stored time.
+/// The newest stored time, one seek a point (`samples` has no index on time alone).
 pub(super) fn newest_sample_time(conn: &Connection) -> rusqlite::Result<Option<i64>> {
-    conn.query_row(NEWEST_SAMPLE_TIME, [], |r| r.get(0))
+    Span::everything().last_time(conn)
 }

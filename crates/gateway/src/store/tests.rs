@@ -975,7 +975,9 @@ fn every_change(dir: &std::path::Path) -> Vec<(ChangeKey, String, Option<f64>)> 
 }
 
 /// A new history (its directory, store and handle) with what a time-ordered read must get
-/// through, and its changes read the slow way ([`every_change`]).
+/// through: a dense second with ties, stored out of order; a gap of three days; a day with
+/// one change every seven minutes; a dense stretch again. With its changes read the slow
+/// way ([`every_change`]).
 async fn dense_gap_sparse_dense() -> (
     tempfile::TempDir,
     Store,
@@ -985,14 +987,6 @@ async fn dense_gap_sparse_dense() -> (
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
     let h = store.handle();
-    store_dense_gap_sparse_dense(&h).await;
-    let every = every_change(dir.path());
-    (dir, store, h, every)
-}
-
-/// A dense second with ties, stored out of order; a gap of three days; a day with one
-/// change every seven minutes; a dense stretch again.
-async fn store_dense_gap_sparse_dense(h: &StoreHandle) {
     let day = 86_400_000;
     let mut rows = Vec::new();
     for i in 0..3_000i64 {
@@ -1013,6 +1007,8 @@ async fn store_dense_gap_sparse_dense(h: &StoreHandle) {
         h.sample(sample(&p, t, v));
     }
     h.flush().await.unwrap();
+    let every = every_change(dir.path());
+    (dir, store, h, every)
 }
 
 #[tokio::test]
@@ -1167,8 +1163,8 @@ fn the_time_ordered_reads_never_scan_the_samples_table() {
         CHANGES_AT,
         WINDOW_COUNT,
         WINDOW_NTH_NEWEST,
-        WINDOW_BOUNDS,
-        NEWEST_SAMPLE_TIME,
+        WINDOW_FIRST,
+        WINDOW_LAST,
         rollup::OPEN_MINUTES_SAMPLES,
     ] {
         let mut stmt = conn
