@@ -155,6 +155,9 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
         ConfigCommand::ImportCsv { file } => {
             let registers = gateway::config::registers_from_csv(&file).map_err(usage)?;
             print!("{}", gateway::config::registers_toml(&registers));
+            for overlap in gateway::config::overlapping_registers(&registers) {
+                eprintln!("warning: {}: {overlap}", file.display());
+            }
             Ok(ExitCode::SUCCESS)
         }
         ConfigCommand::Check { file } => {
@@ -170,6 +173,9 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
                 for device in &line.devices {
                     output::line(format!("    {}", device.name))?;
                 }
+            }
+            for warning in cell.warnings() {
+                output::line(format!("warning: {warning}"))?;
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -220,6 +220,79 @@ fn the_example_configuration_passes_its_own_check() {
 }
 
 #[test]
+fn config_check_import_csv_and_serve_warn_about_registers_sharing_a_register_and_go_on() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("meter.csv"),
+        "name,table,address,type\nvoltage,input,0,float32\ncurrent,input,1,float32\n",
+    )
+    .unwrap();
+    let path = dir.path().join("cell.toml");
+    std::fs::write(
+        &path,
+        "[[line]]\nname = \"meters\"\nendpoint = \"modbus-tcp://127.0.0.1:5020\"\n\n\
+         [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\naddress = 1\n\
+         registers_csv = \"meter.csv\"\n"
+            .replace("5020", &closed_port().to_string()),
+    )
+    .unwrap();
+    let shared =
+        "registers \"voltage\" (input 0–1) and \"current\" (input 1–2) share input register 1";
+    let out = run(&["config", "check", path.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stdout(&out).contains(&format!("warning: device \"meter1\": {shared}")),
+        "{}",
+        stdout(&out)
+    );
+    let csv = dir.path().join("meter.csv");
+    let out = run(&["config", "import-csv", csv.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stdout(&out).starts_with("[[line.device.register]]"),
+        "{}",
+        stdout(&out)
+    );
+    assert!(
+        stderr(&out).contains(&format!("warning: {}: {shared}", csv.display())),
+        "{}",
+        stderr(&out)
+    );
+    // The gateway logs it at its start, then runs: once it prints where it listens, the
+    // warning (written before) is on its standard error.
+    let data = tempfile::tempdir().unwrap();
+    let mut serve = common::cellbus()
+        .args(["serve", "--listen", "127.0.0.1:0", "--config"])
+        .arg(&path)
+        .arg("--data")
+        .arg(data.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("cellbus runs");
+    let mut first = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(serve.stdout.take().expect("piped")),
+        &mut first,
+    )
+    .unwrap();
+    assert!(first.starts_with("listening on http://"), "{first:?}");
+    serve.kill().unwrap();
+    let out = serve.wait_with_output().unwrap();
+    assert!(
+        stderr(&out).contains(&format!("cell.toml: device \"meter1\": {shared}")),
+        "{}",
+        stderr(&out)
+    );
+}
+
+/// A loopback port nothing listens on (it was free a moment ago).
+fn closed_port() -> u16 {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    listener.local_addr().unwrap().port()
+}
+
+#[test]
 fn config_check_points_at_the_bad_line() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("cell.toml");

@@ -1219,6 +1219,80 @@ pub fn registers_toml(registers: &[RegisterConfig]) -> String {
     register_csv::to_toml(registers)
 }
 
+/// Registers of one list that share a register (a `float32` at 100 and another at 101),
+/// one sentence per pair, in address order: how an address off by one shows. The file is
+/// still valid (reading a `uint32` and its low word apart can be meant), so these are
+/// warnings. Bits (`bit:N`, coils, discrete inputs) are left out: several of one
+/// register is what they are for.
+pub fn overlapping_registers(registers: &[RegisterConfig]) -> Vec<String> {
+    let mut words: Vec<&RegisterConfig> = registers.iter().filter(|r| !r.is_bool()).collect();
+    words.sort_by_key(|r| (r.table, r.address));
+    let end = |r: &RegisterConfig| u32::from(r.address) + u32::from(r.length());
+    let span = |r: &RegisterConfig| match r.length() {
+        1 => format!("{} {}", r.table.as_str(), r.address),
+        _ => format!("{} {}–{}", r.table.as_str(), r.address, end(r) - 1),
+    };
+    let mut found = Vec::new();
+    for (i, a) in words.iter().enumerate() {
+        let later = words[i + 1..]
+            .iter()
+            .take_while(|b| b.table == a.table && u32::from(b.address) < end(a));
+        for b in later {
+            let shared_end = end(a).min(end(b)) - 1;
+            let shared = if shared_end == u32::from(b.address) {
+                format!("register {}", b.address)
+            } else {
+                format!("registers {}–{shared_end}", b.address)
+            };
+            found.push(format!(
+                "registers {:?} ({}) and {:?} ({}) share {} {shared}",
+                a.name,
+                span(a),
+                b.name,
+                span(b),
+                a.table.as_str()
+            ));
+        }
+    }
+    found
+}
+
+impl CellConfig {
+    /// What the file allows but is likely a mistake, one sentence each, naming the device:
+    /// Modbus registers that share a register ([`overlapping_registers`]). Devices with
+    /// the same register list (one `registers_csv`) are named once, with how many more.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut lists: Vec<(&DriverConfig, usize)> = Vec::new();
+        for device in self.lines.iter().flat_map(|line| &line.devices) {
+            let driver = &device.driver;
+            if driver.registers.is_empty() {
+                continue;
+            }
+            match lists
+                .iter_mut()
+                .find(|(first, _)| first.registers == driver.registers)
+            {
+                Some((_, more)) => *more += 1,
+                None => lists.push((driver, 0)),
+            }
+        }
+        let mut warnings = Vec::new();
+        for (driver, more) in lists {
+            let who = match more {
+                0 => format!("device {:?}", driver.id.as_str()),
+                n => format!(
+                    "device {:?} (and {n} more with the same registers)",
+                    driver.id.as_str()
+                ),
+            };
+            for overlap in overlapping_registers(&driver.registers) {
+                warnings.push(format!("{who}: {overlap}"));
+            }
+        }
+        warnings
+    }
+}
+
 fn check_register_list(
     raw: &[RawRegister],
     deadband: Option<Deadband>,
@@ -2451,6 +2525,80 @@ writable = { min = 5.0, max = 30.0 }
         assert_eq!(driver.registers[1].format.data_type, DataType::Uint16);
         assert_eq!(supply.unit.as_deref(), Some("°C"));
         assert_eq!(driver.registers[1].writable, Some((5.0, 30.0)));
+    }
+
+    /// A Modbus TCP line of meters `ids`, each with the registers `registers`
+    /// (`(name, table, address, type)`, no type written when it is empty).
+    fn meters(ids: &[&str], registers: &[(&str, &str, u16, &str)]) -> String {
+        let mut toml =
+            "[[line]]\nname = \"utilities\"\nendpoint = \"modbus-tcp://192.0.2.61\"\n".to_owned();
+        for (unit, id) in ids.iter().enumerate() {
+            toml += &format!(
+                "\n[[line.device]]\nid = \"{id}\"\nprotocol = \"modbus\"\naddress = {}\n",
+                unit + 1
+            );
+            for (name, table, address, data_type) in registers {
+                toml += &format!(
+                    "[[line.device.register]]\nname = \"{name}\"\ntable = \"{table}\"\n\
+                     address = {address}\n"
+                );
+                if !data_type.is_empty() {
+                    toml += &format!("type = \"{data_type}\"\n");
+                }
+            }
+        }
+        toml
+    }
+
+    #[test]
+    fn registers_that_share_a_register_are_warned_about_with_names_and_addresses() {
+        let config = parse(&meters(
+            &["meter1"],
+            &[
+                ("voltage", "holding", 100, "float32"),
+                ("current", "holding", 101, "float32"),
+                ("energy", "holding", 300, "uint64"),
+                ("energy_low", "holding", 302, "uint32"),
+                ("status", "holding", 200, "uint16"),
+                ("running", "holding", 200, "bit:0"),
+                ("tripped", "holding", 200, "bit:1"),
+                ("frequency", "input", 100, "float32"),
+                ("alarm", "coil", 100, ""),
+                ("reset", "coil", 100, ""),
+            ],
+        ))
+        .unwrap();
+        assert_eq!(
+            config.warnings(),
+            [
+                "device \"meter1\": registers \"voltage\" (holding 100–101) and \"current\" \
+                 (holding 101–102) share holding register 101",
+                "device \"meter1\": registers \"energy\" (holding 300–303) and \"energy_low\" \
+                 (holding 302–303) share holding registers 302–303",
+            ],
+            "bits of one register, another table and coils are not warned about"
+        );
+        assert!(parse(CHILLER).unwrap().warnings().is_empty());
+        assert!(
+            parse(EXAMPLE_CONFIG).unwrap().warnings().is_empty(),
+            "the example has no overlap"
+        );
+    }
+
+    #[test]
+    fn devices_with_the_same_overlapping_registers_are_warned_about_once() {
+        let config = parse(&meters(
+            &["meter1", "meter2", "meter3"],
+            &[("a", "input", 0, "uint32"), ("b", "input", 1, "uint16")],
+        ))
+        .unwrap();
+        assert_eq!(
+            config.warnings(),
+            [
+                "device \"meter1\" (and 2 more with the same registers): registers \"a\" \
+              (input 0–1) and \"b\" (input 1) share input register 1"
+            ]
+        );
     }
 
     #[test]

@@ -184,7 +184,13 @@ impl Gateway {
     /// `/healthz` degraded, history queries 503) while live values are served.
     pub async fn start(options: ServeOptions) -> anyhow::Result<Self> {
         let (config, demo) = match &options.config {
-            Some(path) => (check_config(path)?, None),
+            Some(path) => {
+                let config = check_config(path)?;
+                for warning in config.warnings() {
+                    tracing::warn!("{}: {warning}", path.display());
+                }
+                (config, None)
+            }
             None => {
                 let demo = DemoCell::start()
                     .await
