@@ -1219,11 +1219,15 @@ pub fn registers_toml(registers: &[RegisterConfig]) -> String {
     register_csv::to_toml(registers)
 }
 
+/// Most pairs of registers [`overlapping_registers`] names for one list.
+pub const MAX_OVERLAPS_NAMED: usize = 20;
+
 /// Registers of one list that share a register (a `float32` at 100 and another at 101),
 /// one sentence per pair, in address order: how an address off by one shows. The file is
 /// still valid (reading a `uint32` and its low word apart can be meant), so these are
 /// warnings. Bits (`bit:N`, coils, discrete inputs) are left out: several of one
-/// register is what they are for.
+/// register is what they are for. At most [`MAX_OVERLAPS_NAMED`] pairs are named, then
+/// one sentence says there are more (a list of thousands at one address stays quick).
 pub fn overlapping_registers(registers: &[RegisterConfig]) -> Vec<String> {
     let mut words: Vec<&RegisterConfig> = registers.iter().filter(|r| !r.is_bool()).collect();
     words.sort_by_key(|r| (r.table, r.address));
@@ -1238,6 +1242,13 @@ pub fn overlapping_registers(registers: &[RegisterConfig]) -> Vec<String> {
             .iter()
             .take_while(|b| b.table == a.table && u32::from(b.address) < end(a));
         for b in later {
+            if found.len() == MAX_OVERLAPS_NAMED {
+                found.push(format!(
+                    "more registers share a register (the first {MAX_OVERLAPS_NAMED} pairs \
+                     are named)"
+                ));
+                return found;
+            }
             let shared_end = end(a).min(end(b)) - 1;
             let shared = if shared_end == u32::from(b.address) {
                 format!("register {}", b.address)
@@ -2582,6 +2593,23 @@ writable = { min = 5.0, max = 30.0 }
         assert!(
             parse(EXAMPLE_CONFIG).unwrap().warnings().is_empty(),
             "the example has no overlap"
+        );
+    }
+
+    #[test]
+    fn a_list_of_many_registers_at_one_address_names_a_few_pairs_and_says_there_are_more() {
+        let registers: Vec<RegisterConfig> = (0..50_000)
+            .map(|i| RegisterConfig::holding(&format!("r{i}"), 7))
+            .collect();
+        let overlaps = overlapping_registers(&registers);
+        assert_eq!(overlaps.len(), MAX_OVERLAPS_NAMED + 1);
+        assert_eq!(
+            overlaps[0],
+            "registers \"r0\" (holding 7) and \"r1\" (holding 7) share holding register 7"
+        );
+        assert_eq!(
+            overlaps[MAX_OVERLAPS_NAMED],
+            "more registers share a register (the first 20 pairs are named)"
         );
     }
 
