@@ -280,11 +280,7 @@ fn sub_with_a_bad_broker_url_exits_2_naming_it() {
 
 #[test]
 fn sub_to_a_closed_port_exits_1_naming_the_broker() {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .unwrap()
-        .port();
-    let url = format!("mqtt://127.0.0.1:{port}");
+    let url = format!("mqtt://127.0.0.1:{}", testkit::free_port());
     let out = run(&["mqtt", "sub", "--broker", &url, "--timeout", "30s"]);
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
     assert!(

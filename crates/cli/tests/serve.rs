@@ -233,7 +233,7 @@ fn config_check_import_csv_and_serve_warn_about_registers_sharing_a_register_and
         "[[line]]\nname = \"meters\"\nendpoint = \"modbus-tcp://127.0.0.1:5020\"\n\n\
          [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\naddress = 1\n\
          registers_csv = \"meter.csv\"\n"
-            .replace("5020", &closed_port().to_string()),
+            .replace("5020", &testkit::free_port().to_string()),
     )
     .unwrap();
     let shared =
@@ -284,12 +284,6 @@ fn config_check_import_csv_and_serve_warn_about_registers_sharing_a_register_and
         "{}",
         stderr(&out)
     );
-}
-
-/// A loopback port nothing listens on (it was free a moment ago).
-fn closed_port() -> u16 {
-    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    listener.local_addr().unwrap().port()
 }
 
 #[test]

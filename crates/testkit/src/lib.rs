@@ -19,6 +19,8 @@
 //! - [`tricks`]: [`Tricky`], any simulated device behind a line that plays scripted
 //!   tricks on its next replies (drop, damage, delay, replace, bytes or an echo before),
 //!   for client tests.
+//! - [`free_port`]: a loopback port nothing listens on, for a server a test starts or
+//!   for a connection that must be refused.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -43,3 +45,11 @@ pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
 #[cfg(feature = "mqtt")]
 pub use sparkplug_sub::{SparkplugMessage, Subscriber, command_payload, rebirth_command};
 pub use tricks::{At, Tap, Trick, Tricky};
+
+/// A free loopback port: nothing listened on it when it was picked.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind((std::net::Ipv4Addr::LOCALHOST, 0))
+        .and_then(|l| l.local_addr())
+        .expect("a free loopback port")
+        .port()
+}

@@ -9,7 +9,6 @@
 //! [`Postgres::restart`] is a crash and a recovery (an immediate stop, then a start on the
 //! same data and port): every client loses its connection, and what was committed stays.
 
-use std::net::{Ipv4Addr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -69,7 +68,7 @@ impl Postgres {
         loop {
             // A fresh port for every try: one that another process took between the pick
             // and the server's bind is not tried again.
-            cluster.port = free_port();
+            cluster.port = crate::free_port();
             if cluster.try_start() {
                 return cluster;
             }
@@ -282,14 +281,6 @@ impl Drop for Postgres {
     }
 }
 
-/// A free loopback port (free when picked).
-fn free_port() -> u16 {
-    TcpListener::bind((Ipv4Addr::LOCALHOST, 0))
-        .and_then(|l| l.local_addr())
-        .expect("a free loopback port")
-        .port()
-}
-
 /// Whether this process runs as root (the owner of `/proc/self` is the effective user).
 fn running_as_root() -> bool {
     use std::os::unix::fs::MetadataExt;
@@ -353,7 +344,7 @@ mod tests {
         let mut pg = Postgres::start();
         pg.stop();
         assert!(
-            std::net::TcpStream::connect((Ipv4Addr::LOCALHOST, pg.port())).is_err(),
+            std::net::TcpStream::connect((std::net::Ipv4Addr::LOCALHOST, pg.port())).is_err(),
             "nothing listens while stopped"
         );
         pg.start_again();
