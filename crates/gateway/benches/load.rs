@@ -255,6 +255,10 @@ usage: cargo bench -p gateway --bench load -- [options]
                       its own monitoring --opcua-items points and counting what arrives
   --opcua-items N     points the OPC UA client monitors (default 10000; at most
                       10000: ten subscriptions of 1000, async-opcua's limits)
+  --bare              the floor instead of the gateway: a bare loop on one thread
+                      sends the JBC driver's requests to the same stations at the
+                      same periods and reads each reply to its last byte, with no
+                      parsing, state or history (JBC over TCP only)
 
 1,000 devices over 50 lines for a minute:
   nice cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 60
@@ -262,6 +266,8 @@ usage: cargo bench -p gateway --bench load -- [options]
   cargo bench -p gateway --bench load -- --mix modbus=1 --devices 1000 --lines 50 --seconds 30
 400 Thermosald regulators, 8 on each of 50 RS-485 lines:
   cargo bench -p gateway --bench load -- --mix thermosald=1 --devices 400 --lines 50 --seconds 30
+What the same requests cost without the gateway, at 1,000 stations:
+  cargo bench -p gateway --bench load -- --devices 1000 --lines 50 --seconds 30 --bare
 ";
 
 fn main() -> ExitCode {
@@ -320,10 +326,27 @@ fn main() -> ExitCode {
     }
     let result = if simulators {
         run_simulators(&args)
+    } else if args.bare {
+        run_bare(&args).map(|report| print!("{report}"))
     } else {
         run_bench(&args).and_then(|report| {
             print!("{report}");
-            if smoke { report.check_smoke() } else { Ok(()) }
+            if !smoke {
+                return Ok(());
+            }
+            report.check_smoke()?;
+            // And the floor, on two stations of one line.
+            let bare = Args {
+                devices: 2,
+                lines: 1,
+                mix: vec![(Kind::Jbc, 1)],
+                serial: false,
+                mqtt: false,
+                opcua: false,
+                bare: true,
+                ..args.clone()
+            };
+            run_bare(&bare).map(|report| print!("{report}"))
         })
     };
     match result {
@@ -355,6 +378,8 @@ struct Args {
     /// Whether to time the heavy GETs after the window (off for a heap profile of the
     /// polling alone: `/api/devices` builds megabytes).
     scrapes: bool,
+    /// The floor instead of the gateway: the same requests sent by a bare loop.
+    bare: bool,
 }
 
 impl Args {
@@ -373,6 +398,7 @@ impl Args {
             opcua: false,
             opcua_items: DEFAULT_OPCUA_ITEMS,
             scrapes: true,
+            bare: false,
         };
         let mut it = raw.iter();
         while let Some(flag) = it.next() {
@@ -390,6 +416,10 @@ impl Args {
             }
             if flag == "--serial" {
                 args.serial = true;
+                continue;
+            }
+            if flag == "--bare" {
+                args.bare = true;
                 continue;
             }
             let value = it
@@ -448,6 +478,17 @@ impl Args {
                 "{} lines need at least {} devices (one per line), not {}",
                 args.lines, args.lines, args.devices
             ));
+        }
+        if args.bare
+            && (args.mix.iter().any(|(kind, _)| *kind != Kind::Jbc)
+                || args.serial
+                || args.baud.is_some()
+                || args.mqtt
+                || args.opcua)
+        {
+            return Err("--bare sends JBC requests over TCP at loopback speed: \
+                        leave out --mix other than jbc, --serial, --baud, --mqtt and --opcua"
+                .into());
         }
         plan(&args)?;
         Ok(args)
@@ -1901,6 +1942,279 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         mqtt_totals,
         opcua_totals,
     })
+}
+
+// ---- the floor: a bare exchange loop ------------------------------------------------------
+
+/// The JBC framing's end of text, after which one byte (the BCC) ends a frame.
+const ETX: u8 = 0x03;
+
+/// What the bare loop did, counted as it goes.
+#[derive(Debug, Default)]
+struct BareCounts {
+    exchanges: std::sync::atomic::AtomicU64,
+    polls: std::sync::atomic::AtomicU64,
+    points: std::sync::atomic::AtomicU64,
+}
+
+/// [`BareCounts`] at one moment, with the process's CPU time.
+#[derive(Debug, Clone, Copy)]
+struct BareTake {
+    at: Instant,
+    exchanges: u64,
+    polls: u64,
+    points: u64,
+    process: ProcessUse,
+}
+
+impl BareCounts {
+    fn take(&self, ticks: u64) -> anyhow::Result<BareTake> {
+        Ok(BareTake {
+            at: Instant::now(),
+            exchanges: self.exchanges.load(Ordering::Relaxed),
+            polls: self.polls.load(Ordering::Relaxed),
+            points: self.points.load(Ordering::Relaxed),
+            process: ProcessUse::of("self", ticks)?,
+        })
+    }
+}
+
+/// `--bare`: the floor under the gateway's cost. One thread with a current-thread runtime
+/// (as the gateway's pollers have) runs a task per line that sends, at each group's
+/// period, every station's requests for that group, the very bytes the JBC client sends
+/// (the codes and periods [`gateway::driver::jbc::group_reads`] gives), each under a
+/// timeout as any client needs, and reads the reply up to its last byte. Nothing is
+/// parsed, kept or stored. The process's CPU time over the window, divided by the
+/// exchanges and points, is what the requests cost with nothing of the gateway around
+/// them: the gateway's figure less this one is all the gateway adds.
+fn run_bare(args: &Args) -> anyhow::Result<BareReport> {
+    let plans = plan(args).map_err(anyhow::Error::msg)?;
+    let ticks = ticks_per_second();
+    let simulators = Simulators::start(args)?;
+    let mut groups = gateway::driver::jbc::group_reads();
+    if let Some(period) = args.live_period {
+        for group in groups
+            .iter_mut()
+            .filter(|g| g.group == gateway::driver::jbc::LIVE)
+        {
+            group.period = period;
+        }
+    }
+    let mut lines = Vec::with_capacity(plans.len());
+    for (plan, endpoint) in plans.iter().zip(&simulators.endpoints) {
+        let addr = endpoint
+            .url
+            .strip_prefix("tcp://")
+            .with_context(|| format!("a JBC line that is not tcp://: {}", endpoint.url))?
+            .to_owned();
+        // Each group's requests, station after station, as the client encodes them.
+        let mut requests: Vec<Vec<Vec<u8>>> = vec![Vec::new(); groups.len()];
+        for d in 0..plan.devices {
+            let route = Route {
+                source: Address::ROBOT,
+                target: plan.address(d, Address::new)?,
+            };
+            for (g, group) in groups.iter().enumerate() {
+                for &code in &group.codes {
+                    let request = Request::read(code)
+                        .map_err(|e| anyhow::anyhow!("a read of {code:?}: {e}"))?;
+                    requests[g].push(request.to_frame(Some(route)).to_bytes());
+                }
+            }
+        }
+        lines.push((addr, plan.devices, requests));
+    }
+    let counts = Arc::new(BareCounts::default());
+    let (stop, stopped) = tokio::sync::watch::channel(false);
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the bare loop's runtime")?;
+    let thread = {
+        let counts = Arc::clone(&counts);
+        let groups: Arc<[gateway::driver::jbc::GroupReads]> = groups.into();
+        std::thread::Builder::new()
+            .name("bare-poll".into())
+            .spawn(move || {
+                runtime.block_on(async move {
+                    let tasks: Vec<_> = lines
+                        .into_iter()
+                        .map(|(addr, stations, requests)| {
+                            tokio::spawn(bare_line(
+                                addr,
+                                stations,
+                                requests,
+                                Arc::clone(&groups),
+                                Arc::clone(&counts),
+                                stopped.clone(),
+                            ))
+                        })
+                        .collect();
+                    for task in tasks {
+                        task.await.context("a bare line task panicked")??;
+                    }
+                    anyhow::Ok(())
+                })
+            })
+            .context("cannot start the bare loop's thread")?
+    };
+    let load_before = loadavg();
+    std::thread::sleep(args.warmup);
+    let before = counts.take(ticks)?;
+    let simulators_before = ProcessUse::of(&simulators.pid().to_string(), ticks)?;
+    std::thread::sleep(args.seconds);
+    let after = counts.take(ticks)?;
+    let simulators_after = ProcessUse::of(&simulators.pid().to_string(), ticks)?;
+    let load_after = loadavg();
+    let _ = stop.send(true);
+    thread
+        .join()
+        .map_err(|_| anyhow::anyhow!("the bare loop's thread panicked"))??;
+    drop(simulators);
+    if after.exchanges <= before.exchanges {
+        bail!("no exchange was done in the measured window: the simulators are stuck");
+    }
+    Ok(BareReport {
+        args: args.clone(),
+        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        load_before,
+        load_after,
+        before,
+        after,
+        simulators: simulators_after.without(&simulators_before),
+    })
+}
+
+/// A line of the bare loop: each group at its period (the first at once), every station
+/// of the line in turn, one request at a time.
+async fn bare_line(
+    addr: String,
+    stations: usize,
+    requests: Vec<Vec<Vec<u8>>>,
+    groups: Arc<[gateway::driver::jbc::GroupReads]>,
+    counts: Arc<BareCounts>,
+    mut stop: tokio::sync::watch::Receiver<bool>,
+) -> anyhow::Result<()> {
+    let timeout = jbc::client::ClientConfig::default().timeout;
+    let mut stream = tokio::net::TcpStream::connect(&addr)
+        .await
+        .with_context(|| format!("cannot connect to the simulated line at {addr}"))?;
+    stream.set_nodelay(true)?;
+    let mut due: Vec<tokio::time::Instant> = vec![tokio::time::Instant::now(); groups.len()];
+    let mut reply = [0u8; 64];
+    loop {
+        let (g, &at) = due
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, at)| **at)
+            .context("the driver has no groups")?;
+        tokio::select! {
+            _ = tokio::time::sleep_until(at) => {}
+            _ = stop.changed() => return Ok(()),
+        }
+        for request in &requests[g] {
+            let exchange = async {
+                stream.write_all(request).await?;
+                let mut len = 0;
+                loop {
+                    let n = stream.read(&mut reply[len..]).await?;
+                    if n == 0 {
+                        bail!("the simulated line at {addr} closed");
+                    }
+                    len += n;
+                    if let Some(etx) = reply[..len].iter().position(|&b| b == ETX)
+                        && len > etx + 1
+                    {
+                        return anyhow::Ok(());
+                    }
+                    if len == reply.len() {
+                        bail!("a reply longer than {len} bytes from {addr}");
+                    }
+                }
+            };
+            tokio::time::timeout(timeout, exchange)
+                .await
+                .with_context(|| format!("no reply from {addr} within {timeout:?}"))??;
+            counts.exchanges.fetch_add(1, Ordering::Relaxed);
+        }
+        counts.polls.fetch_add(stations as u64, Ordering::Relaxed);
+        counts
+            .points
+            .fetch_add((stations * groups[g].points) as u64, Ordering::Relaxed);
+        // The next poll one period after this one was due, or now if the line is behind.
+        due[g] = (at + groups[g].period).max(tokio::time::Instant::now());
+    }
+}
+
+/// What `--bare` prints.
+struct BareReport {
+    args: Args,
+    cores: usize,
+    load_before: String,
+    load_after: String,
+    before: BareTake,
+    after: BareTake,
+    simulators: ProcessUse,
+}
+
+impl std::fmt::Display for BareReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (a, b) = (&self.after, &self.before);
+        let secs = (a.at - b.at).as_secs_f64();
+        let exchanges = a.exchanges - b.exchanges;
+        let polls = a.polls - b.polls;
+        let points = a.points - b.points;
+        let window = a.process.without(&b.process);
+        let cpu_us = window.cpu.as_secs_f64() * 1e6;
+        let user_us = window.user.as_secs_f64() * 1e6;
+        let per = |us: f64, n: u64| us / n.max(1) as f64;
+        writeln!(f, "gateway load benchmark: the floor (--bare, no gateway)")?;
+        writeln!(
+            f,
+            "  cell         {} JBC stations on {} lines; lines not paced (loopback speed), reply delay {}",
+            self.args.devices,
+            self.args.lines,
+            humantime::format_duration(self.args.reply_delay),
+        )?;
+        writeln!(
+            f,
+            "  run          {:.1} s measured after {} s warm-up; machine: {} cores, load average {} before, {} after",
+            secs,
+            self.args.warmup.as_secs_f64(),
+            self.cores,
+            self.load_before,
+            self.load_after
+        )?;
+        writeln!(
+            f,
+            "  work         {:.0} exchanges/s, {:.0} polls/s, {:.0} points/s (what the gateway's polls would give)",
+            exchanges as f64 / secs,
+            polls as f64 / secs,
+            points as f64 / secs,
+        )?;
+        writeln!(
+            f,
+            "  bare loop    CPU {:.2} cores, peak RSS {:.1} MiB",
+            window.cpu.as_secs_f64() / secs,
+            mib(a.process.peak_rss_kib)
+        )?;
+        writeln!(
+            f,
+            "  cost         {:.1} µs CPU per poll, {:.2} µs per point (user {:.2}, kernel {:.2}), {:.2} µs per exchange",
+            per(cpu_us, polls),
+            per(cpu_us, points),
+            per(user_us, points),
+            per(cpu_us - user_us, points),
+            per(cpu_us, exchanges),
+        )?;
+        let s = self.simulators.cpu.as_secs_f64() / secs;
+        writeln!(
+            f,
+            "  simulators   CPU {:.2} cores ({:.0} % of the machine) (separate process)",
+            s,
+            s * 100.0 / self.cores as f64,
+        )
+    }
 }
 
 impl Report {

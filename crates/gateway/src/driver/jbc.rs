@@ -547,6 +547,43 @@ static PLANS: LazyLock<Vec<GroupPlan>> = LazyLock::new(|| {
     plans
 });
 
+/// The groups and their default periods.
+const GROUPS: [(&str, Duration); 3] = [
+    (LIVE, Duration::from_secs(1)),
+    (SETTINGS, Duration::from_secs(10)),
+    (INFO, Duration::from_secs(60)),
+];
+
+/// What a poll of one group sends and gives, the same for every station.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroupReads {
+    /// The group's name.
+    pub group: &'static str,
+    /// Its default period.
+    pub period: Duration,
+    /// The codes a poll reads, one request each, in the order it sends them.
+    pub codes: Vec<Code>,
+    /// The points a poll gives.
+    pub points: usize,
+}
+
+/// What a poll of each group sends and gives. The load bench's floor (`--bare`) sends
+/// the same requests at the same periods with nothing of the gateway around them.
+pub fn group_reads() -> Vec<GroupReads> {
+    GROUPS
+        .iter()
+        .map(|&(group, period)| {
+            let plan = PLANS.iter().find(|p| p.group == group);
+            GroupReads {
+                group,
+                period,
+                codes: plan.map_or_else(Vec::new, |p| p.reads.iter().map(|r| r.code).collect()),
+                points: plan.map_or(0, |p| p.points.len()),
+            }
+        })
+        .collect()
+}
+
 /// How one group is read.
 struct GroupPlan {
     group: &'static str,
@@ -740,11 +777,7 @@ impl Driver for JbcDriver {
     }
 
     fn groups(&self) -> Vec<PollGroup> {
-        PollGroup::list(&[
-            (LIVE, Duration::from_secs(1)),
-            (SETTINGS, Duration::from_secs(10)),
-            (INFO, Duration::from_secs(60)),
-        ])
+        PollGroup::list(&GROUPS)
     }
 
     fn attach(&mut self, line: SharedLine) {
@@ -1044,6 +1077,43 @@ mod tests {
         assert_eq!(value(&readings, "connected_tool"), Ok(Value::Number(1.0)));
         let info = driver.poll(INFO).await.unwrap();
         assert_eq!(value(&info, "model"), Ok(Value::Text("JTSE".into())));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn group_reads_says_what_each_group_reads_and_gives() {
+        let (mut driver, _model) = rig(StationConfig::default(), Some(1));
+        let groups = driver.groups();
+        let reads = group_reads();
+        assert_eq!(
+            reads
+                .iter()
+                .map(|r| (r.group, r.period))
+                .collect::<Vec<_>>(),
+            groups
+                .iter()
+                .map(|g| (g.name.as_str(), g.period))
+                .collect::<Vec<_>>()
+        );
+        for read in &reads {
+            let readings = driver.poll(read.group).await.unwrap();
+            assert_eq!(readings.len(), read.points, "{}", read.group);
+            for (i, code) in read.codes.iter().enumerate() {
+                assert!(
+                    !read.codes[..i].contains(code),
+                    "{}: {code:?} twice",
+                    read.group
+                );
+            }
+            // Every code named is one a point of the group is read with, and back.
+            for point in POINTS.iter().filter(|d| d.group == read.group) {
+                assert!(read.codes.contains(&point.code), "{}", point.name);
+            }
+            assert!(
+                read.codes
+                    .iter()
+                    .all(|c| POINTS.iter().any(|d| d.group == read.group && d.code == *c))
+            );
+        }
     }
 
     #[tokio::test(start_paused = true)]
