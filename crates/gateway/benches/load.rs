@@ -2171,19 +2171,18 @@ impl std::fmt::Display for BareReport {
         writeln!(f, "gateway load benchmark: the floor (--bare, no gateway)")?;
         writeln!(
             f,
-            "  cell         {} JBC stations on {} lines; lines not paced (loopback speed), reply delay {}",
+            "  cell         {} JBC stations on {} line{}; lines not paced (loopback speed), reply delay {}",
             self.args.devices,
             self.args.lines,
+            if self.args.lines == 1 { "" } else { "s" },
             humantime::format_duration(self.args.reply_delay),
         )?;
-        writeln!(
+        write_run(
             f,
-            "  run          {:.1} s measured after {} s warm-up; machine: {} cores, load average {} before, {} after",
             secs,
-            self.args.warmup.as_secs_f64(),
+            &self.args,
             self.cores,
-            self.load_before,
-            self.load_after
+            (&self.load_before, &self.load_after),
         )?;
         writeln!(
             f,
@@ -2286,6 +2285,21 @@ fn loadavg() -> String {
 
 // ---- the report --------------------------------------------------------------------------
 
+/// A report's `run` line: the window, the warm-up and the machine's load around them.
+fn write_run(
+    f: &mut std::fmt::Formatter<'_>,
+    secs: f64,
+    args: &Args,
+    cores: usize,
+    (before, after): (&str, &str),
+) -> std::fmt::Result {
+    writeln!(
+        f,
+        "  run          {secs:.1} s measured after {} s warm-up; machine: {cores} cores, load average {before} before, {after} after",
+        args.warmup.as_secs_f64(),
+    )
+}
+
 fn mib(kib: u64) -> f64 {
     kib as f64 / 1024.0
 }
@@ -2340,14 +2354,12 @@ impl std::fmt::Display for Report {
                 (false, false) => "",
             },
         )?;
-        writeln!(
+        write_run(
             f,
-            "  run          {:.1} s measured after {} s warm-up; machine: {} cores, load average {} before, {} after",
             secs,
-            self.args.warmup.as_secs_f64(),
+            &self.args,
             self.cores,
-            self.load_before,
-            self.load_after
+            (&self.load_before, &self.load_after),
         )?;
         let polls = rate(a.polls_ok, b.polls_ok);
         let failed = rate(a.polls_failed, b.polls_failed);

@@ -561,7 +561,8 @@ pub struct GroupReads {
     pub group: &'static str,
     /// Its default period.
     pub period: Duration,
-    /// The codes a poll reads, one request each, in the order it sends them.
+    /// The codes a poll reads, one request each, in the order it sends them (a changed
+    /// value of a code that is confirmed is read a second time: see the module doc).
     pub codes: Vec<Code>,
     /// The points a poll gives.
     pub points: usize,
