@@ -485,6 +485,12 @@ impl LineTask {
                 let delay = backoff_delay(failures, slot.clocks[slot.probe].period);
                 slot.backoff = Some(BackedOff { next: now + delay });
                 let entry = Arc::clone(&slot.entry);
+                // What the poll read before it failed is recorded first: those values were
+                // good when read.
+                let partial = slot.driver.take_partial();
+                if !partial.is_empty() {
+                    apply_readings(&self.cell, &entry, partial);
+                }
                 mark_down(&self.cell, &entry, &error, delay);
                 if error.kind == ErrorKind::Disconnected {
                     lost = Some(Lost::Line(error.message));

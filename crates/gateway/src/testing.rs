@@ -28,6 +28,9 @@ pub struct Bus {
     /// Set when this session of the line hangs (a serial server's session stuck): nothing
     /// on it is heard any more, though a new session works.
     pub hung: Arc<AtomicBool>,
+    /// Replies the line still carries (`usize::MAX`: no limit); at 0 the stations' replies
+    /// are lost, as when a cable is pulled in the middle of a poll.
+    pub replies_left: Arc<AtomicUsize>,
 }
 
 impl Device for Bus {
@@ -42,11 +45,21 @@ impl Device for Bus {
         if self.hung.load(Ordering::SeqCst) {
             return Vec::new();
         }
-        self.stations
+        let replies: Vec<Transmit> = self
+            .stations
             .iter_mut()
             .filter(|(plugged, _)| plugged.load(Ordering::SeqCst))
             .flat_map(|(_, station)| station.receive(bytes, now))
-            .collect()
+            .collect();
+        let left = self.replies_left.load(Ordering::SeqCst);
+        if replies.is_empty() || left == usize::MAX {
+            return replies;
+        }
+        if left == 0 {
+            return Vec::new();
+        }
+        self.replies_left.store(left - 1, Ordering::SeqCst);
+        replies
     }
 }
 
@@ -59,6 +72,8 @@ pub struct Rig {
     /// accepts the connection and drops it).
     pub line_drops: Arc<AtomicBool>,
     pub opens: Arc<AtomicUsize>,
+    /// Replies the line still carries ([`Bus::replies_left`]; `usize::MAX` at first).
+    pub replies_left: Arc<AtomicUsize>,
     /// Every byte the gateway sent on the line.
     pub heard: Arc<std::sync::Mutex<Vec<u8>>>,
     /// Per line session opened so far, its switch to make that session hang.
@@ -110,6 +125,7 @@ pub fn rig(count: u8) -> Rig {
     let line_available = Arc::new(AtomicBool::new(true));
     let line_drops = Arc::new(AtomicBool::new(false));
     let opens = Arc::new(AtomicUsize::new(0));
+    let replies_left = Arc::new(AtomicUsize::new(usize::MAX));
     let servers = Arc::new(std::sync::Mutex::new(Vec::new()));
     let heard = Arc::new(std::sync::Mutex::new(Vec::new()));
     let sessions = Arc::new(std::sync::Mutex::new(Vec::new()));
@@ -120,6 +136,7 @@ pub fn rig(count: u8) -> Rig {
         let (available, opens) = (Arc::clone(&line_available), Arc::clone(&opens));
         let drops = Arc::clone(&line_drops);
         let servers = Arc::clone(&servers);
+        let replies_left = Arc::clone(&replies_left);
         Arc::new(move || {
             opens.fetch_add(1, Ordering::SeqCst);
             let result = if drops.load(Ordering::SeqCst) {
@@ -138,6 +155,7 @@ pub fn rig(count: u8) -> Rig {
                         .zip(models.iter().map(SharedModel::line))
                         .collect(),
                     heard: Arc::clone(&heard),
+                    replies_left: Arc::clone(&replies_left),
                 };
                 let server = tokio::spawn(link::serve::serve_stream(b, bus, None));
                 servers.lock().unwrap().push(server);
@@ -176,6 +194,7 @@ pub fn rig(count: u8) -> Rig {
         line_available,
         line_drops,
         opens,
+        replies_left,
         heard,
         sessions,
         servers,

@@ -436,6 +436,8 @@ pub struct JbcDriver {
     /// The last confirmed value of each code that is confirmed (see the module doc); the
     /// limit codes among them check set points before the wire.
     confirmed: Confirmed,
+    /// The good readings of a poll that then failed, until the scheduler takes them.
+    partial: Vec<Reading>,
 }
 
 /// The last confirmed value of each code: a few codes, so a short list searched in
@@ -506,6 +508,7 @@ impl JbcDriver {
             },
             client: None,
             confirmed: Confirmed::default(),
+            partial: Vec::new(),
         })
     }
 }
@@ -657,7 +660,16 @@ impl JbcDriver {
         for &(index, read) in &plan.points {
             if answers[read].is_none() {
                 let code = &plan.reads[read];
-                answers[read] = Some(self.read_code(code.code, &code.defs).await?);
+                match self.read_code(code.code, &code.defs).await {
+                    Ok(answer) => answers[read] = Some(answer),
+                    Err(e) => {
+                        // The points read so far are kept (a code's points are
+                        // neighbours in the list, so no later point has its read done).
+                        readings.retain(|r: &Reading| r.value.is_ok());
+                        self.partial = readings;
+                        return Err(e);
+                    }
+                }
             }
             let Some(answer) = &answers[read] else {
                 continue;
@@ -787,6 +799,10 @@ impl Driver for JbcDriver {
 
     fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>> {
         Box::pin(self.poll_group(group))
+    }
+
+    fn take_partial(&mut self) -> Vec<Reading> {
+        std::mem::take(&mut self.partial)
     }
 
     fn write<'a>(
@@ -1114,6 +1130,15 @@ mod tests {
                     .iter()
                     .all(|c| POINTS.iter().any(|d| d.group == read.group && d.code == *c))
             );
+            // A code's points are neighbours in the group (what a poll that fails midway
+            // hands over relies on): the codes in point order change once per code.
+            let mut in_order: Vec<Code> = POINTS
+                .iter()
+                .filter(|d| d.group == read.group)
+                .map(|d| d.code)
+                .collect();
+            in_order.dedup();
+            assert_eq!(in_order, read.codes, "{}", read.group);
         }
     }
 

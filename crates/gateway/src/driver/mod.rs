@@ -78,6 +78,14 @@ pub trait Driver: Send {
         Vec::new()
     }
 
+    /// The good readings a poll got before it failed: a meter's first reads answered, then
+    /// the line dropped or the meter fell silent. The scheduler takes them after every
+    /// `Err` from [`Driver::poll`] and records them before it marks the device down, so
+    /// what was read is kept. Drivers that read a group in one request have none.
+    fn take_partial(&mut self) -> Vec<Reading> {
+        Vec::new()
+    }
+
     /// How many requests the last poll sent, for drivers that plan their reads (generic
     /// Modbus); shown in `/metrics` as `cellbus_modbus_requests_per_poll`.
     fn requests_per_poll(&self) -> Option<u64> {

@@ -424,6 +424,8 @@ pub struct ModbusDriver {
     fresh_line: bool,
     /// Requests the last poll sent.
     requests: Option<u64>,
+    /// The good readings of a poll that then failed, until the scheduler takes them.
+    partial: Vec<Reading>,
     /// Each register's point id, in the registers' order (made once: readings share them
     /// with the cell's point specs).
     ids: Vec<PointId>,
@@ -480,6 +482,7 @@ impl ModbusDriver {
             last_request: None,
             fresh_line: false,
             requests: None,
+            partial: Vec::new(),
             ids,
         })
     }
@@ -561,37 +564,45 @@ impl ModbusDriver {
                 }
                 Err(e) => {
                     self.requests = Some(requests);
+                    // The registers of the reads answered so far are kept.
+                    self.partial = self
+                        .readings(&answers)
+                        .filter(|r| r.value.is_ok())
+                        .collect();
                     return Err(DeviceError::of(&e));
                 }
             }
         }
         self.requests = Some(requests);
-        Ok(self
-            .registers
-            .iter()
-            .enumerate()
-            .map(|(i, r)| {
-                let value = match self.plan.locate(i) {
-                    Some(at) => match answers.get(at.read) {
-                        Some(Ok(Answer::Words(words))) => at
-                            .slice(words)
-                            .ok_or_else(|| missing(r))
-                            .and_then(|words| r.value(Part::Words(words))),
-                        Some(Ok(Answer::Bits(bits))) => at
-                            .slice(bits)
-                            .ok_or_else(|| missing(r))
-                            .and_then(|bits| r.value(Part::Bits(bits))),
-                        Some(Err(e)) => Err(e.clone()),
-                        None => Err(missing(r)),
-                    },
-                    None => Err(missing(r)),
-                };
-                Reading {
-                    point: self.ids[i].clone(),
-                    value,
-                }
+        Ok(self.readings(&answers).collect())
+    }
+
+    /// The readings of the registers whose reads are among `answers` (the plan's first
+    /// reads, in order): all of them once every read is answered.
+    fn readings<'a>(
+        &'a self,
+        answers: &'a [Result<Answer, DeviceError>],
+    ) -> impl Iterator<Item = Reading> + 'a {
+        self.registers.iter().enumerate().filter_map(move |(i, r)| {
+            let value = match self.plan.locate(i) {
+                Some(at) => match answers.get(at.read)? {
+                    Ok(Answer::Words(words)) => at
+                        .slice(words)
+                        .ok_or_else(|| missing(r))
+                        .and_then(|words| r.value(Part::Words(words))),
+                    Ok(Answer::Bits(bits)) => at
+                        .slice(bits)
+                        .ok_or_else(|| missing(r))
+                        .and_then(|bits| r.value(Part::Bits(bits))),
+                    Err(e) => Err(e.clone()),
+                },
+                None => Err(missing(r)),
+            };
+            Some(Reading {
+                point: self.ids[i].clone(),
+                value,
             })
-            .collect())
+        })
     }
 
     async fn write_point(&mut self, point: &PointSpec, value: &Value) -> Result<(), WriteError> {
@@ -686,6 +697,10 @@ impl Driver for ModbusDriver {
         value: &'a Value,
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(self.write_point(point, value))
+    }
+
+    fn take_partial(&mut self) -> Vec<Reading> {
+        std::mem::take(&mut self.partial)
     }
 
     fn requests_per_poll(&self) -> Option<u64> {
@@ -964,6 +979,65 @@ mod tests {
             Some(DEFAULT_SERIAL),
         )));
         driver
+    }
+
+    /// A device that answers its first `left` requests, then falls silent (a cable pulled).
+    struct AnswersFirst<D> {
+        inner: D,
+        left: usize,
+    }
+
+    impl<D: wire::Device> wire::Device for AnswersFirst<D> {
+        fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<wire::Transmit> {
+            let replies = self.inner.receive(bytes, now);
+            if replies.is_empty() {
+                return replies;
+            }
+            if self.left == 0 {
+                return Vec::new();
+            }
+            self.left -= 1;
+            replies
+        }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_poll_that_fails_midway_hands_over_what_its_answered_reads_gave() {
+        // Holding 0-7 all defined, so the first read is answered whole.
+        const FULL: &str = "unit 17\nholding 0 = 215 0 0 0 0 0 0 2\ninput 100 = 0xFFF6 42\n";
+        let slave = SharedModel::new(Slave::new(SlaveMap::parse(FULL).unwrap()));
+        let (a, b) = tokio::io::duplex(1024);
+        let device = AnswersFirst {
+            inner: slave.line(),
+            left: 1,
+        };
+        tokio::spawn(link::serve::serve_stream(b, device, None));
+        let (mut driver, _) = rig_with(FULL, registers(), ModbusOptions::default());
+        driver.attach(SharedLine::new(link::Line::from_stream(
+            a,
+            "modbus",
+            Some(DEFAULT_SERIAL),
+        )));
+        assert_eq!(driver.plan.reads().len(), 2, "holding 0-7, input 100-101");
+        let in_first_read =
+            |driver: &ModbusDriver, i: usize| driver.plan.locate(i).is_some_and(|at| at.read == 0);
+        let first: Vec<String> = (0..driver.registers.len())
+            .filter(|&i| in_first_read(&driver, i))
+            .map(|i| driver.registers[i].name.to_string())
+            .collect();
+        assert_eq!(first, ["setpoint", "mode"]);
+
+        let down = driver.poll(LIVE).await.unwrap_err();
+        assert_eq!(down.kind, ErrorKind::Timeout, "{down}");
+        let partial = driver.take_partial();
+        let names: Vec<String> = partial.iter().map(|r| r.point.name().to_owned()).collect();
+        assert_eq!(
+            names, first,
+            "the first read's registers, none of the second's"
+        );
+        assert_eq!(value(&partial, "setpoint"), Ok(Value::Number(21.5)));
+        assert_eq!(value(&partial, "mode"), Ok(Value::Number(2.0)));
+        assert!(driver.take_partial().is_empty(), "taken once");
     }
 
     #[tokio::test(start_paused = true)]

@@ -192,6 +192,63 @@ async fn value_changes_are_stored_and_alarms_become_events() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn what_a_poll_read_before_the_line_failed_is_recorded_before_the_device_goes_down() {
+    let rig = rig(1);
+    tokio::time::sleep(Duration::from_millis(3500)).await;
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Up);
+    // Between two live polls: the tool error changes, and the line carries the replies of
+    // the next poll up to the tool error's (read, then read again to confirm the change),
+    // then nothing, as if the cable were pulled there.
+    rig.models[0]
+        .lock()
+        .set_tool_error(ToolError::HeaterMalfunction);
+    let live = crate::driver::jbc::group_reads()
+        .into_iter()
+        .find(|g| g.group == crate::driver::jbc::LIVE)
+        .unwrap();
+    let tool_error = live
+        .codes
+        .iter()
+        .position(|c| *c == jbc::code::Code::PortError(jbc::code::Port::One))
+        .unwrap();
+    assert!(
+        tool_error + 1 < live.codes.len(),
+        "reads follow the tool error's"
+    );
+    rig.replies_left.store(tool_error + 2, Ordering::SeqCst);
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Down);
+
+    let store = rig.cell.store();
+    store.flush().await.unwrap();
+    let history = store
+        .history(
+            &point("jbc1.tool_error"),
+            Timestamp(0),
+            Timestamp(i64::MAX),
+            None,
+        )
+        .unwrap();
+    let Series::Samples(samples) = history.series else {
+        panic!("raw samples expected")
+    };
+    let recorded: Vec<(Option<Value>, Quality)> =
+        samples.into_iter().map(|s| (s.value, s.quality)).collect();
+    assert_eq!(
+        recorded,
+        vec![
+            (Some(Value::Number(0.0)), Quality::Good),
+            (Some(Value::Number(3.0)), Quality::Good),
+            (None, Quality::Bad),
+        ],
+        "the value read before the line failed is kept, then the device is down"
+    );
+    let device = rig.cell.device_entry("jbc1").unwrap();
+    let index = device.point_index("tool_error").unwrap();
+    assert_eq!(device.read().points[index].quality, Some(Quality::Bad));
+}
+
+#[tokio::test(start_paused = true)]
 async fn writes_go_out_between_polls_and_are_read_back() {
     let rig = rig(1);
     tokio::time::sleep(Duration::from_secs(2)).await;
