@@ -20,6 +20,33 @@ use crate::point::DeviceId;
 use crate::scheduler::Opener;
 use crate::store::{Store, StoreOptions};
 
+/// A device that answers its first `left` requests, then falls silent, as when a cable
+/// is pulled in the middle of a poll.
+pub struct AnswersFirst<D> {
+    inner: D,
+    left: usize,
+}
+
+impl<D> AnswersFirst<D> {
+    pub fn new(inner: D, left: usize) -> Self {
+        Self { inner, left }
+    }
+}
+
+impl<D: Device> Device for AnswersFirst<D> {
+    fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
+        let replies = self.inner.receive(bytes, now);
+        if replies.is_empty() {
+            return replies;
+        }
+        if self.left == 0 {
+            return Vec::new();
+        }
+        self.left -= 1;
+        replies
+    }
+}
+
 /// Stations sharing one line; each can be unplugged (it then hears nothing).
 pub struct Bus {
     pub stations: Vec<(Arc<AtomicBool>, wire::device::ModelLine<Station>)>,

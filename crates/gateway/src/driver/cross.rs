@@ -214,6 +214,8 @@ pub struct CrossDriver {
     /// The discrete parts at the last poll, to see transfers.
     last: Option<Discrete>,
     events: Vec<DeviceEvent>,
+    /// The good readings of a poll that then failed, until the scheduler takes them.
+    partial: Vec<Reading>,
 }
 
 impl CrossDriver {
@@ -238,6 +240,7 @@ impl CrossDriver {
             ids: point_ids(&config.id, DEFS.iter().map(|def| def.name.as_str())),
             last: None,
             events: Vec::new(),
+            partial: Vec::new(),
         })
     }
 
@@ -312,33 +315,21 @@ impl CrossDriver {
                 .await?
                 .and_then(|w| words::<{ InternalState::LEN }>(&w, Area::InternalState))
                 .map(|w| InternalState::from_words(&w));
-            let measures = self
-                .read_area(Area::Measures)
-                .await?
-                .and_then(|w| words::<{ Measures::LEN }>(&w, Area::Measures))
-                .map(|w| Measures::from_words(&w));
+            let measures = match self.read_area(Area::Measures).await {
+                Ok(measures) => measures
+                    .and_then(|w| words::<{ Measures::LEN }>(&w, Area::Measures))
+                    .map(|w| Measures::from_words(&w)),
+                Err(e) => {
+                    // The state was read: its points are kept.
+                    self.partial = self.live_readings(&internal, None);
+                    self.partial.retain(|r| r.value.is_ok());
+                    return Err(e);
+                }
+            };
             if let Ok(internal) = &internal {
                 self.note_changes(internal);
             }
-            for (def, id) in DEFS.iter().zip(&self.ids) {
-                if def.group() != LIVE {
-                    continue;
-                }
-                let value = match def.show {
-                    Show::Measure(quantity, phase) => measures
-                        .as_ref()
-                        .map(|m| number((quantity.read)(m), phase))
-                        .map_err(Clone::clone),
-                    _ => internal
-                        .as_ref()
-                        .map(|s| live_value(def.show, s))
-                        .map_err(Clone::clone),
-                };
-                readings.push(Reading {
-                    point: id.clone(),
-                    value,
-                });
-            }
+            readings = self.live_readings(&internal, Some(&measures));
         } else if group == RATINGS {
             let ratings = self
                 .read_area(Area::Ratings)
@@ -366,6 +357,35 @@ impl CrossDriver {
             ));
         }
         Ok(readings)
+    }
+
+    /// The live group's readings from the state and the measures read (the measures'
+    /// points left out when they were not read).
+    fn live_readings(
+        &self,
+        internal: &Result<InternalState, DeviceError>,
+        measures: Option<&Result<Measures, DeviceError>>,
+    ) -> Vec<Reading> {
+        DEFS.iter()
+            .zip(&self.ids)
+            .filter(|(def, _)| def.group() == LIVE)
+            .filter_map(|(def, id)| {
+                let value = match def.show {
+                    Show::Measure(quantity, phase) => measures?
+                        .as_ref()
+                        .map(|m| number((quantity.read)(m), phase))
+                        .map_err(Clone::clone),
+                    _ => internal
+                        .as_ref()
+                        .map(|s| live_value(def.show, s))
+                        .map_err(Clone::clone),
+                };
+                Some(Reading {
+                    point: id.clone(),
+                    value,
+                })
+            })
+            .collect()
     }
 
     /// Records a change of what feeds the load (a transfer names both sources), as
@@ -437,6 +457,10 @@ impl Driver for CrossDriver {
 
     fn take_events(&mut self) -> Vec<DeviceEvent> {
         std::mem::take(&mut self.events)
+    }
+
+    fn take_partial(&mut self) -> Vec<Reading> {
+        std::mem::take(&mut self.partial)
     }
 }
 
@@ -579,6 +603,36 @@ mod tests {
         let ratings = driver.poll(RATINGS).await.unwrap();
         assert_eq!(number(&ratings, "rated_current"), 100.0);
         assert!(driver.take_events().is_empty());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_live_poll_cut_after_the_state_hands_over_the_states_points() {
+        let twin = SharedModel::new(CrossTwin::new(UnitId::jbus(1).unwrap(), 7));
+        let (a, b) = tokio::io::duplex(1024);
+        let device = crate::testing::AnswersFirst::new(twin.line(), 1);
+        tokio::spawn(link::serve::serve_stream(b, device, None));
+        let mut driver = CrossDriver::new(&config(1)).unwrap();
+        driver.attach(SharedLine::new(link::Line::from_stream(
+            a,
+            "cross",
+            Some(DEFAULT_SERIAL),
+        )));
+        let down = driver.poll(LIVE).await.unwrap_err();
+        assert_eq!(down.kind, ErrorKind::Timeout, "{down}");
+        let partial = driver.take_partial();
+        let state_points = DEFS
+            .iter()
+            .filter(|d| d.group() == LIVE && !matches!(d.show, Show::Measure(..)))
+            .count();
+        assert!(state_points > 0);
+        assert_eq!(
+            partial.len(),
+            state_points,
+            "the state's points, no measure"
+        );
+        assert_eq!(value(&partial, "load_feed"), Ok(Value::Number(1.0)));
+        assert!(partial.iter().all(|r| r.value.is_ok()));
+        assert!(driver.take_partial().is_empty(), "taken once");
     }
 
     #[tokio::test(start_paused = true)]

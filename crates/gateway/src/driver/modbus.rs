@@ -981,36 +981,13 @@ mod tests {
         driver
     }
 
-    /// A device that answers its first `left` requests, then falls silent (a cable pulled).
-    struct AnswersFirst<D> {
-        inner: D,
-        left: usize,
-    }
-
-    impl<D: wire::Device> wire::Device for AnswersFirst<D> {
-        fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<wire::Transmit> {
-            let replies = self.inner.receive(bytes, now);
-            if replies.is_empty() {
-                return replies;
-            }
-            if self.left == 0 {
-                return Vec::new();
-            }
-            self.left -= 1;
-            replies
-        }
-    }
-
     #[tokio::test(start_paused = true)]
     async fn a_poll_that_fails_midway_hands_over_what_its_answered_reads_gave() {
         // Holding 0-7 all defined, so the first read is answered whole.
         const FULL: &str = "unit 17\nholding 0 = 215 0 0 0 0 0 0 2\ninput 100 = 0xFFF6 42\n";
         let slave = SharedModel::new(Slave::new(SlaveMap::parse(FULL).unwrap()));
         let (a, b) = tokio::io::duplex(1024);
-        let device = AnswersFirst {
-            inner: slave.line(),
-            left: 1,
-        };
+        let device = crate::testing::AnswersFirst::new(slave.line(), 1);
         tokio::spawn(link::serve::serve_stream(b, device, None));
         let (mut driver, _) = rig_with(FULL, registers(), ModbusOptions::default());
         driver.attach(SharedLine::new(link::Line::from_stream(
