@@ -308,6 +308,7 @@ impl CrossDriver {
     }
 
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
+        self.partial.clear();
         let mut readings = Vec::new();
         if group == LIVE {
             let internal = self

@@ -651,6 +651,7 @@ fn describe(def: &Def) -> PointDescription {
 
 impl JbcDriver {
     async fn poll_group(&mut self, group: &str) -> Result<Vec<Reading>, DeviceError> {
+        self.partial.clear();
         let Some(plan) = PLANS.iter().find(|p| p.group == group) else {
             return Ok(Vec::new());
         };

@@ -537,6 +537,8 @@ impl ModbusDriver {
     }
 
     async fn poll_live(&mut self) -> Result<Vec<Reading>, DeviceError> {
+        // What a failed poll hands over is this poll's only.
+        self.partial.clear();
         if self.client.is_none() {
             return Err(DeviceError::not_attached());
         }
