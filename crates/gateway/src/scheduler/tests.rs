@@ -32,6 +32,19 @@ fn value(cell: &Cell, id: &str) -> Option<Value> {
     device.read().points[index].value.clone()
 }
 
+/// Every sample of `id` the store holds, once what is queued is committed.
+async fn recorded(cell: &Cell, id: &str) -> Vec<crate::store::HistorySample> {
+    let store = cell.store();
+    store.flush().await.unwrap();
+    let history = store
+        .history(&point(id), Timestamp(0), Timestamp(i64::MAX), None)
+        .unwrap();
+    let Series::Samples(samples) = history.series else {
+        panic!("raw samples expected")
+    };
+    samples
+}
+
 #[test]
 fn backoff_doubles_from_two_seconds_up_to_ten() {
     let second = Duration::from_secs(1);
@@ -130,20 +143,8 @@ async fn value_changes_are_stored_and_alarms_become_events() {
     tokio::time::sleep(Duration::from_secs(2)).await;
     rig.models[0].lock().set_tool_error(ToolError::Ok);
     tokio::time::sleep(Duration::from_secs(2)).await;
+    let samples = recorded(&rig.cell, "jbc1.tool_error").await;
     let store = rig.cell.store();
-    store.flush().await.unwrap();
-
-    let history = store
-        .history(
-            &point("jbc1.tool_error"),
-            Timestamp(0),
-            Timestamp(i64::MAX),
-            None,
-        )
-        .unwrap();
-    let Series::Samples(samples) = history.series else {
-        panic!("raw samples expected")
-    };
     let values: Vec<Option<Value>> = samples.into_iter().map(|s| s.value).collect();
     assert_eq!(
         values,
@@ -219,23 +220,11 @@ async fn what_a_poll_read_before_the_line_failed_is_recorded_before_the_device_g
     tokio::time::sleep(Duration::from_secs(3)).await;
     assert_eq!(status(&rig.cell, "jbc1"), DeviceStatus::Down);
 
-    let store = rig.cell.store();
-    store.flush().await.unwrap();
-    let history = store
-        .history(
-            &point("jbc1.tool_error"),
-            Timestamp(0),
-            Timestamp(i64::MAX),
-            None,
-        )
-        .unwrap();
-    let Series::Samples(samples) = history.series else {
-        panic!("raw samples expected")
-    };
-    let recorded: Vec<(Option<Value>, Quality)> =
+    let samples = recorded(&rig.cell, "jbc1.tool_error").await;
+    let values: Vec<(Option<Value>, Quality)> =
         samples.into_iter().map(|s| (s.value, s.quality)).collect();
     assert_eq!(
-        recorded,
+        values,
         vec![
             (Some(Value::Number(0.0)), Quality::Good),
             (Some(Value::Number(3.0)), Quality::Good),
@@ -416,20 +405,7 @@ async fn values_not_refreshed_in_time_turn_stale_and_good_again_at_the_next_read
         }
     }
     assert!(back, "the return to good is published");
-    rig.cell.store().flush().await.unwrap();
-    let history = rig
-        .cell
-        .store()
-        .history(
-            &point("jbc1.air_temperature"),
-            Timestamp(0),
-            Timestamp(i64::MAX),
-            None,
-        )
-        .unwrap();
-    let Series::Samples(samples) = history.series else {
-        panic!("raw samples expected")
-    };
+    let samples = recorded(&rig.cell, "jbc1.air_temperature").await;
     assert!(samples.iter().any(|s| s.quality == Quality::Stale));
 }
 
@@ -630,19 +606,7 @@ async fn record(
         };
         apply_readings(&cell, entry, vec![reading]);
     }
-    cell.store().flush().await.unwrap();
-    let history = cell
-        .store()
-        .history(
-            &point("jbc1.air_temperature"),
-            Timestamp(0),
-            Timestamp(i64::MAX),
-            None,
-        )
-        .unwrap();
-    let Series::Samples(samples) = history.series else {
-        panic!("raw samples expected")
-    };
+    let samples = recorded(&cell, "jbc1.air_temperature").await;
     let mut published = 0;
     while let Ok(message) = live.try_recv() {
         published += usize::from(matches!(message, LiveMessage::Value(_)));
