@@ -1731,9 +1731,7 @@ async fn get(addr: std::net::SocketAddr, path: &str) -> anyhow::Result<(String, 
 struct Report {
     args: Args,
     plans: Vec<LinePlan>,
-    cores: usize,
-    load_before: String,
-    load_after: String,
+    host: Host,
     window: Duration,
     before: Counters,
     after: Counters,
@@ -1764,8 +1762,7 @@ struct OpcuaTotals {
 fn run_bench(args: &Args) -> anyhow::Result<Report> {
     let plans = plan(args).map_err(anyhow::Error::msg)?;
     let ticks = ticks_per_second();
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let load_before = loadavg();
+    let mut host = Host::before();
     let simulators = Simulators::start(args)?;
     if simulators.endpoints.len() != plans.len() {
         bail!(
@@ -1849,7 +1846,7 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
             opcua.as_mut().map(|(c, _)| (c, false)),
         )?;
         let groups = sampler.finish()?;
-        let load_after = loadavg();
+        let load_after = Host::load();
         // The window's notifications, counted by source time while the server still runs
         // (the last changes of the window are published after it).
         let opcua = match (opcua, &before.opcua, &after.opcua) {
@@ -1900,6 +1897,7 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     runtime.shutdown_timeout(Duration::from_secs(5));
     drop(simulators);
     let (before, after, groups, load_after, scrapes, stop_took, published, opcua) = report;
+    host.load_after = load_after;
     let mqtt_totals = match &mut mqtt {
         Some(side) => Some((published.get(), side.settled(Duration::from_secs(10))?)),
         None => None,
@@ -1928,9 +1926,7 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     Ok(Report {
         args: args.clone(),
         plans,
-        cores,
-        load_before,
-        load_after,
+        host,
         window,
         before,
         after,
@@ -1945,9 +1941,6 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
 }
 
 // ---- the floor: a bare exchange loop ------------------------------------------------------
-
-/// The JBC framing's end of text, after which one byte (the BCC) ends a frame.
-const ETX: u8 = 0x03;
 
 /// What the bare loop did, counted as it goes.
 #[derive(Debug, Default)]
@@ -2058,14 +2051,14 @@ fn run_bare(args: &Args) -> anyhow::Result<BareReport> {
             })
             .context("cannot start the bare loop's thread")?
     };
-    let load_before = loadavg();
+    let mut host = Host::before();
     std::thread::sleep(args.warmup);
     let before = counts.take(ticks)?;
     let simulators_before = ProcessUse::of(&simulators.pid().to_string(), ticks)?;
     std::thread::sleep(args.seconds);
     let after = counts.take(ticks)?;
     let simulators_after = ProcessUse::of(&simulators.pid().to_string(), ticks)?;
-    let load_after = loadavg();
+    host.load_after = Host::load();
     let _ = stop.send(true);
     thread
         .join()
@@ -2076,9 +2069,7 @@ fn run_bare(args: &Args) -> anyhow::Result<BareReport> {
     }
     Ok(BareReport {
         args: args.clone(),
-        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
-        load_before,
-        load_after,
+        host,
         before,
         after,
         simulators: simulators_after.without(&simulators_before),
@@ -2122,7 +2113,8 @@ async fn bare_line(
                         bail!("the simulated line at {addr} closed");
                     }
                     len += n;
-                    if let Some(etx) = reply[..len].iter().position(|&b| b == ETX)
+                    // A frame ends one byte (the BCC) after its ETX.
+                    if let Some(etx) = reply[..len].iter().position(|&b| b == jbc::frame::ETX)
                         && len > etx + 1
                     {
                         return anyhow::Ok(());
@@ -2149,9 +2141,7 @@ async fn bare_line(
 /// What `--bare` prints.
 struct BareReport {
     args: Args,
-    cores: usize,
-    load_before: String,
-    load_after: String,
+    host: Host,
     before: BareTake,
     after: BareTake,
     simulators: ProcessUse,
@@ -2177,13 +2167,7 @@ impl std::fmt::Display for BareReport {
             if self.args.lines == 1 { "" } else { "s" },
             humantime::format_duration(self.args.reply_delay),
         )?;
-        write_run(
-            f,
-            secs,
-            &self.args,
-            self.cores,
-            (&self.load_before, &self.load_after),
-        )?;
+        self.host.write_run(f, secs, &self.args)?;
         writeln!(
             f,
             "  work         {:.0} exchanges/s, {:.0} polls/s, {:.0} points/s (what the gateway's polls would give)",
@@ -2211,7 +2195,7 @@ impl std::fmt::Display for BareReport {
             f,
             "  simulators   CPU {:.2} cores ({:.0} % of the machine) (separate process)",
             s,
-            s * 100.0 / self.cores as f64,
+            s * 100.0 / self.host.cores as f64,
         )
     }
 }
@@ -2276,28 +2260,49 @@ fn store_rows(data_dir: &std::path::Path) -> anyhow::Result<u64> {
     Ok(rows)
 }
 
-fn loadavg() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
-        .unwrap_or_else(|| "unknown".into())
-}
-
 // ---- the report --------------------------------------------------------------------------
 
-/// A report's `run` line: the window, the warm-up and the machine's load around them.
-fn write_run(
-    f: &mut std::fmt::Formatter<'_>,
-    secs: f64,
-    args: &Args,
+/// The machine a run measured on: its cores, and its load average before and after.
+struct Host {
     cores: usize,
-    (before, after): (&str, &str),
-) -> std::fmt::Result {
-    writeln!(
-        f,
-        "  run          {secs:.1} s measured after {} s warm-up; machine: {cores} cores, load average {before} before, {after} after",
-        args.warmup.as_secs_f64(),
-    )
+    load_before: String,
+    load_after: String,
+}
+
+impl Host {
+    /// The machine at the start of a run (its load after is filled in at the end).
+    fn before() -> Self {
+        Self {
+            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            load_before: Self::load(),
+            load_after: String::new(),
+        }
+    }
+
+    /// The load average now (1, 5 and 15 minutes).
+    fn load() -> String {
+        std::fs::read_to_string("/proc/loadavg")
+            .ok()
+            .map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+            .unwrap_or_else(|| "unknown".into())
+    }
+
+    /// A report's `run` line: the window, the warm-up and the machine's load around them.
+    fn write_run(
+        &self,
+        f: &mut std::fmt::Formatter<'_>,
+        secs: f64,
+        args: &Args,
+    ) -> std::fmt::Result {
+        writeln!(
+            f,
+            "  run          {secs:.1} s measured after {} s warm-up; machine: {} cores, load average {} before, {} after",
+            args.warmup.as_secs_f64(),
+            self.cores,
+            self.load_before,
+            self.load_after
+        )
+    }
 }
 
 fn mib(kib: u64) -> f64 {
@@ -2354,13 +2359,7 @@ impl std::fmt::Display for Report {
                 (false, false) => "",
             },
         )?;
-        write_run(
-            f,
-            secs,
-            &self.args,
-            self.cores,
-            (&self.load_before, &self.load_after),
-        )?;
+        self.host.write_run(f, secs, &self.args)?;
         let polls = rate(a.polls_ok, b.polls_ok);
         let failed = rate(a.polls_failed, b.polls_failed);
         writeln!(
@@ -2460,7 +2459,7 @@ impl std::fmt::Display for Report {
             f,
             "  gateway      CPU {:.2} cores ({:.0} % of the machine), peak RSS {:.1} MiB",
             g,
-            g * 100.0 / self.cores as f64,
+            g * 100.0 / self.host.cores as f64,
             mib(a.gateway.peak_rss_kib)
         )?;
         // The gateway's whole CPU time (scheduler, drivers, clients, line I/O, live state,
@@ -2488,7 +2487,7 @@ impl std::fmt::Display for Report {
             f,
             "  simulators   CPU {:.2} cores ({:.0} % of the machine), peak RSS {:.1} MiB (separate process)",
             s,
-            s * 100.0 / self.cores as f64,
+            s * 100.0 / self.host.cores as f64,
             mib(a.simulators.peak_rss_kib)
         )?;
         if let (Some(ma), Some(mb)) = (&a.mqtt, &b.mqtt) {
