@@ -20,29 +20,39 @@ use crate::point::DeviceId;
 use crate::scheduler::Opener;
 use crate::store::{Store, StoreOptions};
 
-/// A device that answers its first `left` requests, then falls silent, as when a cable
-/// is pulled in the middle of a poll.
+/// A device that answers its next `left` requests, then falls silent, as when a cable is
+/// pulled in the middle of a poll (`usize::MAX`: no limit).
 pub struct AnswersFirst<D> {
     inner: D,
-    left: usize,
+    left: Arc<AtomicUsize>,
 }
 
 impl<D> AnswersFirst<D> {
     pub fn new(inner: D, left: usize) -> Self {
+        Self::sharing(inner, Arc::new(AtomicUsize::new(left)))
+    }
+
+    /// With the count shared, so a test can set it while the device runs.
+    pub fn sharing(inner: D, left: Arc<AtomicUsize>) -> Self {
         Self { inner, left }
     }
 }
 
 impl<D: Device> Device for AnswersFirst<D> {
+    fn set_timing(&mut self, timing: wire::LineTiming) {
+        self.inner.set_timing(timing);
+    }
+
     fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
         let replies = self.inner.receive(bytes, now);
-        if replies.is_empty() {
+        let left = self.left.load(Ordering::SeqCst);
+        if replies.is_empty() || left == usize::MAX {
             return replies;
         }
-        if self.left == 0 {
+        if left == 0 {
             return Vec::new();
         }
-        self.left -= 1;
+        self.left.store(left - 1, Ordering::SeqCst);
         replies
     }
 }
@@ -55,9 +65,6 @@ pub struct Bus {
     /// Set when this session of the line hangs (a serial server's session stuck): nothing
     /// on it is heard any more, though a new session works.
     pub hung: Arc<AtomicBool>,
-    /// Replies the line still carries (`usize::MAX`: no limit); at 0 the stations' replies
-    /// are lost, as when a cable is pulled in the middle of a poll.
-    pub replies_left: Arc<AtomicUsize>,
 }
 
 impl Device for Bus {
@@ -72,21 +79,11 @@ impl Device for Bus {
         if self.hung.load(Ordering::SeqCst) {
             return Vec::new();
         }
-        let replies: Vec<Transmit> = self
-            .stations
+        self.stations
             .iter_mut()
             .filter(|(plugged, _)| plugged.load(Ordering::SeqCst))
             .flat_map(|(_, station)| station.receive(bytes, now))
-            .collect();
-        let left = self.replies_left.load(Ordering::SeqCst);
-        if replies.is_empty() || left == usize::MAX {
-            return replies;
-        }
-        if left == 0 {
-            return Vec::new();
-        }
-        self.replies_left.store(left - 1, Ordering::SeqCst);
-        replies
+            .collect()
     }
 }
 
@@ -99,7 +96,8 @@ pub struct Rig {
     /// accepts the connection and drops it).
     pub line_drops: Arc<AtomicBool>,
     pub opens: Arc<AtomicUsize>,
-    /// Replies the line still carries ([`Bus::replies_left`]; `usize::MAX` at first).
+    /// Replies the line still carries (its bus is behind [`AnswersFirst`]; `usize::MAX`
+    /// at first: no limit).
     pub replies_left: Arc<AtomicUsize>,
     /// Every byte the gateway sent on the line.
     pub heard: Arc<std::sync::Mutex<Vec<u8>>>,
@@ -182,8 +180,8 @@ pub fn rig(count: u8) -> Rig {
                         .zip(models.iter().map(SharedModel::line))
                         .collect(),
                     heard: Arc::clone(&heard),
-                    replies_left: Arc::clone(&replies_left),
                 };
+                let bus = AnswersFirst::sharing(bus, Arc::clone(&replies_left));
                 let server = tokio::spawn(link::serve::serve_stream(b, bus, None));
                 servers.lock().unwrap().push(server);
                 Ok(Line::from_stream(a, "memory", None))
