@@ -20,43 +20,6 @@ use crate::point::DeviceId;
 use crate::scheduler::Opener;
 use crate::store::{Store, StoreOptions};
 
-/// A device that answers its next `left` requests, then falls silent, as when a cable is
-/// pulled in the middle of a poll (`usize::MAX`: no limit).
-pub struct AnswersFirst<D> {
-    inner: D,
-    left: Arc<AtomicUsize>,
-}
-
-impl<D> AnswersFirst<D> {
-    pub fn new(inner: D, left: usize) -> Self {
-        Self::sharing(inner, Arc::new(AtomicUsize::new(left)))
-    }
-
-    /// With the count shared, so a test can set it while the device runs.
-    pub fn sharing(inner: D, left: Arc<AtomicUsize>) -> Self {
-        Self { inner, left }
-    }
-}
-
-impl<D: Device> Device for AnswersFirst<D> {
-    fn set_timing(&mut self, timing: wire::LineTiming) {
-        self.inner.set_timing(timing);
-    }
-
-    fn receive(&mut self, bytes: &[u8], now: std::time::Instant) -> Vec<Transmit> {
-        let replies = self.inner.receive(bytes, now);
-        let left = self.left.load(Ordering::SeqCst);
-        if replies.is_empty() || left == usize::MAX {
-            return replies;
-        }
-        if left == 0 {
-            return Vec::new();
-        }
-        self.left.store(left - 1, Ordering::SeqCst);
-        replies
-    }
-}
-
 /// Stations sharing one line; each can be unplugged (it then hears nothing).
 pub struct Bus {
     pub stations: Vec<(Arc<AtomicBool>, wire::device::ModelLine<Station>)>,
@@ -96,8 +59,8 @@ pub struct Rig {
     /// accepts the connection and drops it).
     pub line_drops: Arc<AtomicBool>,
     pub opens: Arc<AtomicUsize>,
-    /// Replies the line still carries (its bus is behind [`AnswersFirst`]; `usize::MAX`
-    /// at first: no limit).
+    /// Answers the line still carries (its bus is behind [`testkit::Tricky::silent_after`];
+    /// `usize::MAX` at first: no limit).
     pub replies_left: Arc<AtomicUsize>,
     /// Every byte the gateway sent on the line.
     pub heard: Arc<std::sync::Mutex<Vec<u8>>>,
@@ -181,7 +144,7 @@ pub fn rig(count: u8) -> Rig {
                         .collect(),
                     heard: Arc::clone(&heard),
                 };
-                let bus = AnswersFirst::sharing(bus, Arc::clone(&replies_left));
+                let bus = testkit::Tricky::new(bus, []).silent_after(Arc::clone(&replies_left));
                 let server = tokio::spawn(link::serve::serve_stream(b, bus, None));
                 servers.lock().unwrap().push(server);
                 Ok(Line::from_stream(a, "memory", None))

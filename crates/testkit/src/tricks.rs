@@ -5,8 +5,11 @@
 //!
 //! [`Tricky`] wraps any [`wire::Device`] and notes on a [`Tap`] what it heard and said,
 //! with the time, so tests can count requests and check the line's timing.
+//! [`Tricky::silent_after`] cuts the line after a number of answers (a cable pulled in
+//! the middle of a poll).
 
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
@@ -116,6 +119,8 @@ pub struct Tricky<D> {
     inner: D,
     tricks: VecDeque<Trick>,
     tap: Tap,
+    /// Answers still let through ([`Tricky::silent_after`]); none: no limit.
+    answers_left: Option<Arc<AtomicUsize>>,
 }
 
 impl<D: Device> Tricky<D> {
@@ -125,7 +130,17 @@ impl<D: Device> Tricky<D> {
             inner,
             tricks: tricks.into_iter().collect(),
             tap: Tap::default(),
+            answers_left: None,
         }
+    }
+
+    /// Lets the device answer only while `answers` is above 0, one less for each request
+    /// it answers: at 0 it falls silent, as when a cable is pulled in the middle of a poll.
+    /// The count is shared, so a test can set it while the device runs (`usize::MAX`: no
+    /// limit).
+    pub fn silent_after(mut self, answers: Arc<AtomicUsize>) -> Self {
+        self.answers_left = Some(answers);
+        self
     }
 
     /// What the device heard and said.
@@ -140,8 +155,17 @@ impl<D: Device> Device for Tricky<D> {
     }
 
     fn receive(&mut self, bytes: &[u8], now: Instant) -> Vec<Transmit> {
-        let replies = self.inner.receive(bytes, now);
+        let mut replies = self.inner.receive(bytes, now);
         let answered = replies.len();
+        if let Some(left) = &self.answers_left
+            && !replies.is_empty()
+        {
+            match left.load(Ordering::SeqCst) {
+                usize::MAX => {}
+                0 => replies.clear(),
+                n => left.store(n - 1, Ordering::SeqCst),
+            }
+        }
         let mut out = Vec::with_capacity(replies.len());
         for mut tx in replies {
             match self.tricks.pop_front() {
@@ -233,6 +257,23 @@ mod tests {
         assert_eq!(replies(&mut device), [b"ok".to_vec()]);
         assert_eq!(tap.requests(), 6);
         assert_eq!(tap.replies(), 6);
+    }
+
+    #[test]
+    fn a_device_silent_after_two_answers_answers_two_then_none_until_the_count_is_raised() {
+        let left = Arc::new(AtomicUsize::new(2));
+        let mut device = Tricky::new(Ok, []).silent_after(Arc::clone(&left));
+        assert_eq!(replies(&mut device), [b"ok".to_vec()]);
+        assert_eq!(replies(&mut device), [b"ok".to_vec()]);
+        assert!(replies(&mut device).is_empty());
+        assert!(replies(&mut device).is_empty());
+        left.store(usize::MAX, Ordering::SeqCst);
+        assert_eq!(replies(&mut device), [b"ok".to_vec()]);
+        assert_eq!(
+            left.load(Ordering::SeqCst),
+            usize::MAX,
+            "no limit is not counted down"
+        );
     }
 
     #[test]

@@ -610,7 +610,8 @@ mod tests {
     async fn a_live_poll_cut_after_the_state_hands_over_the_states_points() {
         let twin = SharedModel::new(CrossTwin::new(UnitId::jbus(1).unwrap(), 7));
         let (a, b) = tokio::io::duplex(1024);
-        let device = crate::testing::AnswersFirst::new(twin.line(), 1);
+        let device =
+            testkit::Tricky::new(twin.line(), []).silent_after(std::sync::Arc::new(1.into()));
         tokio::spawn(link::serve::serve_stream(b, device, None));
         let mut driver = CrossDriver::new(&config(1)).unwrap();
         driver.attach(SharedLine::new(link::Line::from_stream(

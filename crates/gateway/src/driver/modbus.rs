@@ -989,7 +989,8 @@ mod tests {
         const FULL: &str = "unit 17\nholding 0 = 215 0 0 0 0 0 0 2\ninput 100 = 0xFFF6 42\n";
         let slave = SharedModel::new(Slave::new(SlaveMap::parse(FULL).unwrap()));
         let (a, b) = tokio::io::duplex(1024);
-        let device = crate::testing::AnswersFirst::new(slave.line(), 1);
+        let device =
+            testkit::Tricky::new(slave.line(), []).silent_after(std::sync::Arc::new(1.into()));
         tokio::spawn(link::serve::serve_stream(b, device, None));
         let (mut driver, _) = rig_with(FULL, registers(), ModbusOptions::default());
         driver.attach(SharedLine::new(link::Line::from_stream(
