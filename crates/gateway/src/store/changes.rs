@@ -265,7 +265,8 @@ fn window_end(lo: i64, window: Window, until: i64) -> i64 {
 
 impl StoreHandle {
     /// At most `limit` stored changes of any point after `after` and at or before `until`,
-    /// in time order (ties in the order they were stored): the keys, then the rows (the
+    /// in time order (ties in the order they were stored, which within a commit is point
+    /// by point): the keys, then the rows (the
     /// backlog does the two apart, reading keys ahead).
     #[cfg(test)]
     pub(super) fn changes(
@@ -279,7 +280,8 @@ impl StoreHandle {
     }
 
     /// The keys of the next `limit` stored changes of the read `cursor` is at, in time
-    /// order (ties in the order they were stored); fewer at its end. Moves `cursor` on.
+    /// order (ties in the order they were stored, which within a commit is point by
+    /// point); fewer at its end. Moves `cursor` on.
     pub fn change_keys(
         &self,
         cursor: &mut ChangeCursor,

@@ -113,6 +113,72 @@ async fn a_batch_larger_than_one_multi_row_insert_keeps_every_value_and_quality_
 }
 
 #[tokio::test]
+async fn a_batch_keeps_each_points_samples_in_the_order_they_came_even_at_one_time() {
+    // The writer inserts a batch point by point (stable): samples of one point at one
+    // time, such as a poll's good readings and then the bad ones of the device going
+    // down, must keep their order; three points interleaved over several multi-row
+    // statements, every sample at the same time.
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let h = store.handle();
+    let names = ["c.level", "a.level", "b.level"];
+    let count = writer::INSERT_ROWS * 3 + 5;
+    for i in 0..count {
+        h.sample(Sample {
+            point: point(names[i % 3]),
+            t: Timestamp(1000),
+            value: Some(Value::Number(i as f64)),
+            quality: if i % 4 == 3 {
+                Quality::Bad
+            } else {
+                Quality::Good
+            },
+        });
+    }
+    assert_eq!(h.flush().await.unwrap(), count as u64);
+    for (k, name) in names.iter().enumerate() {
+        let got = h
+            .history(&point(name), Timestamp(0), Timestamp(2000), None)
+            .unwrap();
+        let Series::Samples(got) = got.series else {
+            panic!("expected raw samples")
+        };
+        let got: Vec<(Option<Value>, Quality)> =
+            got.into_iter().map(|s| (s.value, s.quality)).collect();
+        let want: Vec<(Option<Value>, Quality)> = (0..count)
+            .filter(|i| i % 3 == k)
+            .map(|i| {
+                let quality = if i % 4 == 3 {
+                    Quality::Bad
+                } else {
+                    Quality::Good
+                };
+                (Some(Value::Number(i as f64)), quality)
+            })
+            .collect();
+        assert_eq!(got, want, "{name}");
+    }
+    let stored: Vec<(String, Option<f64>)> = every_change(dir.path())
+        .into_iter()
+        .map(|(_, name, value)| (name, value))
+        .collect();
+    let order: Vec<(String, Option<f64>)> = names
+        .iter()
+        .enumerate()
+        .flat_map(|(k, name)| {
+            (0..count)
+                .filter(move |i| i % 3 == k)
+                .map(move |i| (name.to_string(), Some(i as f64)))
+        })
+        .collect();
+    assert_eq!(
+        stored, order,
+        "the stored changes of one time: point by point, in the order the points were first \
+         stored, each point's in the order they came"
+    );
+}
+
+#[tokio::test]
 async fn a_step_gives_average_min_and_max_per_bucket_of_good_values() {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
@@ -932,7 +998,8 @@ async fn stored_changes_of_every_point_come_back_in_time_order_in_pages() {
     assert_eq!(
         all(first[1].key),
         vec![("a.temp".to_owned(), 3000), ("b.temp".to_owned(), 3000)],
-        "the page after the last key, ties in the order stored, nothing after `until`"
+        "the page after the last key, ties in the order stored (within a commit point by \
+         point), nothing after `until`"
     );
     let (count, start) = h
         .count_changes(ChangeKey::before(Timestamp(0)), Timestamp(4000), 10)
