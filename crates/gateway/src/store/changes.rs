@@ -266,8 +266,8 @@ fn window_end(lo: i64, window: Window, until: i64) -> i64 {
 impl StoreHandle {
     /// At most `limit` stored changes of any point after `after` and at or before `until`,
     /// in time order (ties in the order they were stored, which within a commit is point
-    /// by point): the keys, then the rows (the
-    /// backlog does the two apart, reading keys ahead).
+    /// by point): the keys, then the rows (the backlog does the two apart, reading keys
+    /// ahead).
     #[cfg(test)]
     pub(super) fn changes(
         &self,

@@ -123,16 +123,19 @@ async fn a_batch_keeps_each_points_samples_in_the_order_they_came_even_at_one_ti
     let h = store.handle();
     let names = ["c.level", "a.level", "b.level"];
     let count = writer::INSERT_ROWS * 3 + 5;
+    let quality = |i: usize| {
+        if i % 4 == 3 {
+            Quality::Bad
+        } else {
+            Quality::Good
+        }
+    };
     for i in 0..count {
         h.sample(Sample {
             point: point(names[i % 3]),
             t: Timestamp(1000),
             value: Some(Value::Number(i as f64)),
-            quality: if i % 4 == 3 {
-                Quality::Bad
-            } else {
-                Quality::Good
-            },
+            quality: quality(i),
         });
     }
     assert_eq!(h.flush().await.unwrap(), count as u64);
@@ -147,14 +150,7 @@ async fn a_batch_keeps_each_points_samples_in_the_order_they_came_even_at_one_ti
             got.into_iter().map(|s| (s.value, s.quality)).collect();
         let want: Vec<(Option<Value>, Quality)> = (0..count)
             .filter(|i| i % 3 == k)
-            .map(|i| {
-                let quality = if i % 4 == 3 {
-                    Quality::Bad
-                } else {
-                    Quality::Good
-                };
-                (Some(Value::Number(i as f64)), quality)
-            })
+            .map(|i| (Some(Value::Number(i as f64)), quality(i)))
             .collect();
         assert_eq!(got, want, "{name}");
     }
