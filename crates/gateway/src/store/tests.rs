@@ -25,6 +25,14 @@ fn samples_of(h: &History) -> Vec<(i64, Option<Value>)> {
     }
 }
 
+/// `h`'s raw samples with their quality: (time, value, quality).
+fn samples_with_quality(h: History) -> Vec<(i64, Option<Value>, Quality)> {
+    match h.series {
+        Series::Samples(s) => s.into_iter().map(|s| (s.t.0, s.value, s.quality)).collect(),
+        Series::Buckets(_) => panic!("expected raw samples"),
+    }
+}
+
 #[tokio::test]
 async fn samples_come_back_in_time_order_for_their_point_and_range() {
     let dir = tempfile::tempdir().unwrap();
@@ -97,18 +105,11 @@ async fn a_batch_larger_than_one_multi_row_insert_keeps_every_value_and_quality_
         let got = h
             .history(&point(name), Timestamp(0), Timestamp(count), None)
             .unwrap();
-        let Series::Samples(got) = got.series else {
-            panic!("expected raw samples")
-        };
         let want: Vec<(i64, Option<Value>, Quality)> = (0..count)
             .filter(|t| t % 2 == parity)
             .map(|t| (t, value(t), quality(t)))
             .collect();
-        let got: Vec<(i64, Option<Value>, Quality)> = got
-            .into_iter()
-            .map(|s| (s.t.0, s.value, s.quality))
-            .collect();
-        assert_eq!(got, want, "{name}");
+        assert_eq!(samples_with_quality(got), want, "{name}");
     }
 }
 
@@ -143,16 +144,11 @@ async fn a_batch_keeps_each_points_samples_in_the_order_they_came_even_at_one_ti
         let got = h
             .history(&point(name), Timestamp(0), Timestamp(2000), None)
             .unwrap();
-        let Series::Samples(got) = got.series else {
-            panic!("expected raw samples")
-        };
-        let got: Vec<(Option<Value>, Quality)> =
-            got.into_iter().map(|s| (s.value, s.quality)).collect();
-        let want: Vec<(Option<Value>, Quality)> = (0..count)
+        let want: Vec<(i64, Option<Value>, Quality)> = (0..count)
             .filter(|i| i % 3 == k)
-            .map(|i| (Some(Value::Number(i as f64)), quality(i)))
+            .map(|i| (1000, Some(Value::Number(i as f64)), quality(i)))
             .collect();
-        assert_eq!(got, want, "{name}");
+        assert_eq!(samples_with_quality(got), want, "{name}");
     }
     let stored: Vec<(String, Option<f64>)> = every_change(dir.path())
         .into_iter()
