@@ -47,6 +47,11 @@ use crate::topic::{Id, MessageKind, Topic, TopicError};
 pub const BD_SEQ: &str = "bdSeq";
 /// The name of the node metric a host sets to true to ask for a rebirth.
 pub const REBIRTH: &str = "Node Control/Rebirth";
+/// A Boolean metric, true, in an NDEATH the node publishes itself because its primary
+/// host went offline ([`EdgeNode::host_offline_death`]): the node is alive and stores
+/// what it reads until the host is back, so a host that reads this death does not mark
+/// the node's points bad. cellbus's own convention; other hosts read only the `bdSeq`.
+pub const HOST_OFFLINE: &str = "Node Control/Host Offline";
 
 /// MQTT quality of service, as much as Sparkplug uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -371,6 +376,32 @@ impl EdgeNode {
             qos: Qos::AtLeastOnce,
             retain: false,
         }
+    }
+
+    /// The NDEATH to publish before a clean disconnect because the primary host went
+    /// offline: the session's `bdSeq`, [`HOST_OFFLINE`] = true and the payload time `now`;
+    /// QoS 1, not retained. `None` when not connected.
+    pub fn host_offline_death(&self, now: Timestamp) -> Option<Publish> {
+        let bd_seq = self.session?;
+        let payload = Payload {
+            timestamp: Some(now.as_millis()),
+            metrics: vec![
+                bd_seq_metric(bd_seq),
+                Metric {
+                    name: Some(HOST_OFFLINE.to_owned()),
+                    datatype: Some(DataType::Boolean.code()),
+                    value: Some(metric::Value::BooleanValue(true)),
+                    ..Metric::default()
+                },
+            ],
+            ..Payload::default()
+        };
+        Some(Publish {
+            topic: self.node_topic(MessageKind::Death),
+            payload: payload.encode_to_vec(),
+            qos: Qos::AtLeastOnce,
+            retain: false,
+        })
     }
 
     /// The connection is up (CONNACK): the Will's `bdSeq` becomes the session's and the

@@ -2,7 +2,7 @@
 //! births, data, deaths and commands, each message decoded back from its bytes.
 
 use prost::Message as _;
-use sparkplug::node::{BD_SEQ, REBIRTH};
+use sparkplug::node::{BD_SEQ, HOST_OFFLINE, REBIRTH};
 use sparkplug::proto::{Metric, Payload, metric::Value};
 use sparkplug::{
     BdSeq, Command, CommandError, DataType, Delivery, EdgeNode, Id, MetricName, MetricSpec,
@@ -122,6 +122,31 @@ fn bd_seq_in_the_ndeath_equals_the_nbirths_after_connect() {
     assert_eq!(bd(&death), Some(Value::LongValue(8)));
     assert_eq!(bd(&birth), bd(&death));
     assert_eq!(birth.seq, Some(0), "seq starts again after each connect");
+}
+
+#[test]
+fn a_death_for_an_offline_host_carries_the_sessions_bd_seq_and_says_why() {
+    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+    assert!(
+        node.host_offline_death(T0).is_none(),
+        "no session before the connection"
+    );
+    node.on_connect();
+    let death = node.host_offline_death(at(5)).expect("connected");
+    assert_eq!(death.topic.to_string(), "spBv1.0/cell/NDEATH/gw1");
+    assert_eq!((death.qos, death.retain), (Qos::AtLeastOnce, false));
+    let payload = decode(&death);
+    assert_eq!(
+        by_name(&payload, BD_SEQ).value,
+        Some(Value::LongValue(7)),
+        "the session's bdSeq, not the next Will's"
+    );
+    assert_eq!(
+        by_name(&payload, HOST_OFFLINE).value,
+        Some(Value::BooleanValue(true))
+    );
+    assert_eq!(payload.timestamp, Some(at(5).as_millis()));
+    assert_eq!(payload.seq, None, "NDEATH carries no seq");
 }
 
 #[test]
