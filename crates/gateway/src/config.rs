@@ -120,6 +120,8 @@ pub struct MqttConfig {
     pub primary_host: Option<String>,
     /// The most stored changes sent after an outage (the newest are kept).
     pub max_backlog: u64,
+    /// The most metrics one DCMD may carry; a larger command is refused whole.
+    pub max_command_metrics: usize,
     /// TLS to the broker (`mqtts://`); `None` for `mqtt://`.
     pub tls: Option<MqttTls>,
 }
@@ -189,6 +191,9 @@ impl MqttMode {
 
 /// Default of `max_backlog`: stored changes sent after an outage.
 pub const DEFAULT_MQTT_BACKLOG: u64 = 1_000_000;
+/// Default of `max_command_metrics`: writes in one DCMD. An operator's screen sets a few
+/// values at once; a thousand in one command is a flood.
+pub const DEFAULT_MQTT_COMMAND_METRICS: usize = 64;
 
 impl MqttConfig {
     /// The broker at `url` (`mqtt://host:port`, or `mqtts://host:port` trusting the
@@ -210,6 +215,7 @@ impl MqttConfig {
             commands: false,
             primary_host: None,
             max_backlog: DEFAULT_MQTT_BACKLOG,
+            max_command_metrics: DEFAULT_MQTT_COMMAND_METRICS,
             tls: tls.then(MqttTls::default),
         })
     }
@@ -691,6 +697,21 @@ fn check_mqtt(
             })?,
         None => DEFAULT_MQTT_BACKLOG,
     };
+    let max_command_metrics = match &raw.max_command_metrics {
+        Some(n) => usize::try_from(*n.get_ref())
+            .ok()
+            .filter(|n| (1..=10_000).contains(n))
+            .ok_or_else(|| {
+                at(
+                    n.span(),
+                    format!(
+                        "max_command_metrics {} is outside 1–10000 metrics in one command",
+                        n.get_ref()
+                    ),
+                )
+            })?,
+        None => DEFAULT_MQTT_COMMAND_METRICS,
+    };
     Ok(MqttConfig {
         host,
         port,
@@ -705,6 +726,7 @@ fn check_mqtt(
         commands: raw.commands.map(Spanned::into_inner).unwrap_or(false),
         primary_host,
         max_backlog,
+        max_command_metrics,
         tls,
     })
 }
@@ -1637,6 +1659,7 @@ struct RawMqtt {
     commands: Option<Spanned<bool>>,
     primary_host: Option<Spanned<String>>,
     max_backlog: Option<Spanned<i64>>,
+    max_command_metrics: Option<Spanned<i64>>,
     ca_file: Option<Spanned<String>>,
     client_cert: Option<Spanned<String>>,
     client_key: Option<Spanned<String>>,
@@ -3241,9 +3264,11 @@ type = "string:4"
         assert!(!mqtt.commands);
         assert_eq!(mqtt.primary_host, None);
         assert_eq!(mqtt.max_backlog, DEFAULT_MQTT_BACKLOG);
+        assert_eq!(mqtt.max_command_metrics, DEFAULT_MQTT_COMMAND_METRICS);
         let text = format!(
             "{ONE}\n[mqtt]\nbroker = \"mqtt://b\"\nmode = \"JSON\"\nprefix = \"plant/cell7/\"\n\
-             commands = true\nprimary_host = \"scada\"\nmax_backlog = 5000\n"
+             commands = true\nprimary_host = \"scada\"\nmax_backlog = 5000\n\
+             max_command_metrics = 8\n"
         );
         let mqtt = parse(&text).unwrap().mqtt.unwrap();
         assert_eq!(mqtt.mode, MqttMode::Json);
@@ -3251,6 +3276,7 @@ type = "string:4"
         assert!(mqtt.commands);
         assert_eq!(mqtt.primary_host.as_deref(), Some("scada"));
         assert_eq!(mqtt.max_backlog, 5000);
+        assert_eq!(mqtt.max_command_metrics, 8);
     }
 
     #[test]
@@ -3265,6 +3291,7 @@ type = "string:4"
         refused(&at("prefix = \"a/#\""), 12, 10, "not a usable topic prefix");
         refused(&at("primary_host = \"a+b\""), 12, 16, "primary_host");
         refused(&at("max_backlog = 0"), 12, 15, "outside 1–100000000");
+        refused(&at("max_command_metrics = 0"), 12, 23, "outside 1–10000");
         refused(&at("commands = \"yes\""), 12, 12, "bool");
     }
 

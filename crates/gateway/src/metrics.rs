@@ -115,6 +115,14 @@ pub struct Metrics {
     pub mqtt_reconnects: Counter,
     /// Stored changes sent after an outage (Sparkplug historical metrics, JSON backlog).
     pub mqtt_forwarded: Counter,
+    /// Primary host STATE messages refused: dated too far after this gateway's clock.
+    pub mqtt_state_refused: Counter,
+    /// Primary host `offline` STATEs the host contradicted within the grace (forged).
+    pub mqtt_offline_contradicted: Counter,
+    /// MQTT commands refused whole before any write reached a device.
+    pub mqtt_commands_refused: Counter,
+    /// Foreign messages on the gateway's own JSON topics, answered with its own state.
+    pub mqtt_foreign_reasserted: Counter,
     opcua_connections: Gauge,
     opcua_sessions: Gauge,
     opcua_subscriptions: Gauge,
@@ -193,6 +201,10 @@ impl Metrics {
         let mqtt_published = Counter::default();
         let mqtt_reconnects = Counter::default();
         let mqtt_forwarded = Counter::default();
+        let mqtt_state_refused = Counter::default();
+        let mqtt_offline_contradicted = Counter::default();
+        let mqtt_commands_refused = Counter::default();
+        let mqtt_foreign_reasserted = Counter::default();
         let history_rows = Counter::default();
         let history_commit_errors = Counter::default();
         let history_rows_dropped = Counter::default();
@@ -267,6 +279,29 @@ impl Metrics {
             mqtt_forwarded.clone(),
         );
         registry.register(
+            "mqtt_state_refused",
+            "Primary host STATE messages refused because they are dated too far after this \
+             gateway's clock",
+            mqtt_state_refused.clone(),
+        );
+        registry.register(
+            "mqtt_offline_contradicted",
+            "Primary host offline STATEs that the host contradicted within the grace \
+             (another client published them)",
+            mqtt_offline_contradicted.clone(),
+        );
+        registry.register(
+            "mqtt_commands_refused",
+            "MQTT commands refused whole before any write reached a device",
+            mqtt_commands_refused.clone(),
+        );
+        registry.register(
+            "mqtt_foreign_reasserted",
+            "Messages another client published on this gateway's JSON topics, answered by \
+             publishing the gateway's own state again",
+            mqtt_foreign_reasserted.clone(),
+        );
+        registry.register(
             "opcua_connections",
             "Open OPC UA TCP connections",
             opcua_connections.clone(),
@@ -326,6 +361,10 @@ impl Metrics {
             mqtt_published,
             mqtt_reconnects,
             mqtt_forwarded,
+            mqtt_state_refused,
+            mqtt_offline_contradicted,
+            mqtt_commands_refused,
+            mqtt_foreign_reasserted,
             sse_clients,
             opcua_connections,
             opcua_sessions,

@@ -86,6 +86,46 @@ impl LogThrottle {
         self.last_log = Some(now);
         Some(std::mem::take(&mut self.unlogged))
     }
+
+    /// Nothing counted since the last line, which is older than [`LOG_EVERY`].
+    fn is_quiet(&self, now: tokio::time::Instant) -> bool {
+        self.unlogged == 0 && self.last_log.is_none_or(|t| now >= t + LOG_EVERY)
+    }
+}
+
+/// Most sources [`RowThrottle`] follows at once; past it, the sources whose last row is
+/// older than [`LOG_EVERY`] are forgotten, and a new source beyond that shares one slot.
+pub const THROTTLED_SOURCES: usize = 256;
+
+/// Refused commands of an authorised interface (an undecodable or refused MQTT DCMD):
+/// anyone who can publish on the topic sends them at their own rate, so each source (a
+/// topic) gets at most one audit row every [`LOG_EVERY`], which says how many were refused
+/// since its last row. Commands that reach a device are never throttled.
+#[derive(Debug, Default)]
+pub struct RowThrottle {
+    sources: std::collections::HashMap<String, LogThrottle>,
+    /// The shared slot of the sources past [`THROTTLED_SOURCES`].
+    others: LogThrottle,
+}
+
+impl RowThrottle {
+    /// Counts one refusal from `source` at `now`; when a row is due, how many refusals it
+    /// stands for (this one and those not written since the source's last row).
+    pub fn count(&mut self, source: &str, now: tokio::time::Instant) -> Option<u64> {
+        if let Some(throttle) = self.sources.get_mut(source) {
+            return throttle.count(now);
+        }
+        if self.sources.len() >= THROTTLED_SOURCES {
+            self.sources.retain(|_, t| t.is_quiet(now));
+        }
+        if self.sources.len() >= THROTTLED_SOURCES {
+            return self.others.count(now);
+        }
+        let mut throttle = LogThrottle::default();
+        let due = throttle.count(now);
+        self.sources.insert(source.to_owned(), throttle);
+        due
+    }
 }
 
 /// An authorised write attempt on its way to the audit table.
@@ -278,4 +318,37 @@ pub fn cut(text: &str, max: usize) -> String {
         end -= 1;
     }
     format!("{}…", &text[..end])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_source_gets_one_row_an_interval_and_the_next_row_counts_what_was_left_out() {
+        let mut throttle = RowThrottle::default();
+        let t0 = tokio::time::Instant::now();
+        assert_eq!(throttle.count("a", t0), Some(1), "the first is written at once");
+        for _ in 0..99 {
+            assert_eq!(throttle.count("a", t0), None);
+        }
+        assert_eq!(throttle.count("b", t0), Some(1), "another source has its own");
+        assert_eq!(throttle.count("a", t0 + LOG_EVERY), Some(100));
+    }
+
+    #[test]
+    fn sources_past_the_cap_share_one_slot_until_quiet_ones_are_forgotten() {
+        let mut throttle = RowThrottle::default();
+        let t0 = tokio::time::Instant::now();
+        for n in 0..THROTTLED_SOURCES {
+            assert_eq!(throttle.count(&format!("topic/{n}"), t0), Some(1));
+        }
+        assert_eq!(throttle.count("one more", t0), Some(1));
+        assert_eq!(throttle.count("and another", t0), None, "the shared slot");
+        assert_eq!(throttle.sources.len(), THROTTLED_SOURCES, "bounded");
+        // An interval later the quiet sources are forgotten and new ones get a slot.
+        let later = t0 + LOG_EVERY;
+        assert_eq!(throttle.count("a new one", later), Some(1));
+        assert_eq!(throttle.sources.len(), 1);
+    }
 }

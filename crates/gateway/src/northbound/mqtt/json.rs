@@ -89,7 +89,7 @@ impl Mode for Publisher {
                     self.snapshot(conn, live, from).await
                 }
                 Step::Live(Err(broadcast::error::RecvError::Closed)) => return End::Stop,
-                Step::Message { .. } | Step::Tick => Ok(()),
+                Step::Message { .. } | Step::Tick | Step::Wake => Ok(()),
             };
             if let Err(why) = done {
                 return End::Lost(why);

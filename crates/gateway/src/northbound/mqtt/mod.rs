@@ -18,6 +18,7 @@
 
 pub mod forward;
 pub mod json;
+pub mod primary;
 pub mod sparkplug;
 pub mod tls;
 
@@ -135,9 +136,14 @@ pub struct Outgoing {
 pub enum End {
     /// Lost or refused; try again after a wait.
     Lost(String),
-    /// Ended on purpose (a primary host went offline): publish the Will, disconnect, and
-    /// connect again at once.
-    Again(String),
+    /// Ended on purpose (a primary host went offline): publish `goodbye` (else the Will),
+    /// disconnect, and connect again at once.
+    Again {
+        /// Why, in words.
+        why: String,
+        /// What to publish in place of the Will before disconnecting.
+        goodbye: Option<Outgoing>,
+    },
     /// The gateway stops.
     Stop,
 }
@@ -161,6 +167,8 @@ pub enum Step {
     Live(Result<LiveMessage, broadcast::error::RecvError>),
     /// The mode's timer.
     Tick,
+    /// The time the mode asked for with [`Connection::wake_at`] has come.
+    Wake,
 }
 
 /// One way of publishing the cell (Sparkplug B or JSON); the connection loop is shared.
@@ -214,6 +222,7 @@ impl Link {
                 delivery: &mut delivery,
                 stop: &mut stop,
                 tick,
+                wake: None,
                 connected: false,
                 connections: &mut connections,
             };
@@ -232,9 +241,9 @@ impl Link {
                     self.went_down(connected, "the gateway stopped".to_owned());
                     return;
                 }
-                End::Again(why) => {
+                End::Again { why, goodbye } => {
                     if connected {
-                        conn.close(&will).await;
+                        conn.close(goodbye.as_ref().unwrap_or(&will)).await;
                     }
                     pump.abort();
                     delivery.lost();
@@ -365,6 +374,8 @@ pub struct Connection<'a> {
     delivery: &'a mut Delivery,
     stop: &'a mut watch::Receiver<bool>,
     tick: tokio::time::Interval,
+    /// When to return [`Step::Wake`], once.
+    wake: Option<tokio::time::Instant>,
     connections: &'a mut u64,
     /// Whether the mode is serving (set by the mode once its first messages are out).
     pub connected: bool,
@@ -378,7 +389,12 @@ impl Connection<'_> {
         live_on: bool,
     ) -> Result<Step, End> {
         loop {
+            let wake = self.wake;
             let event = tokio::select! {
+                () = wait_until(wake) => {
+                    self.wake = None;
+                    return Ok(Step::Wake);
+                }
                 changed = self.stop.changed() => {
                     if changed.is_err() || *self.stop.borrow() {
                         return Err(End::Stop);
@@ -415,6 +431,11 @@ impl Connection<'_> {
                 None => return Err(End::Lost("the MQTT client stopped".to_owned())),
             }
         }
+    }
+
+    /// Asks for one [`Step::Wake`] at `at` (replacing an earlier request).
+    pub fn wake_at(&mut self, at: tokio::time::Instant) {
+        self.wake = Some(at);
     }
 
     /// Hands a message to the client (waiting while its queue is full).
@@ -485,6 +506,14 @@ impl Connection<'_> {
         {
             self.link.store_forwarded(t).await;
         }
+    }
+}
+
+/// Sleeps until `at`; never ends for `None`.
+async fn wait_until(at: Option<tokio::time::Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
     }
 }
 

@@ -15,9 +15,11 @@
 //!    `line`, `device`, `point` properties); a lagging change stream, or an NCMD
 //!    `Node Control/Rebirth`, gives a new birth cycle. Events are live only: those of an
 //!    outage, or missed in a lag, are not sent (the history's event log has them);
-//! 4. the primary host going offline ends the connection (NDEATH, DISCONNECT) and moves
-//!    the forwarded mark back by twice the keep-alive: the host may have been gone that
-//!    long before the broker noticed, and what it missed is sent again once it is back.
+//! 4. the primary host going offline ends the connection (an NDEATH saying why, with
+//!    [`sparkplug::node::HOST_OFFLINE`], then DISCONNECT) and moves the forwarded mark back
+//!    by twice the keep-alive: the host may have been gone that long before the broker
+//!    noticed, and what it missed is sent again once it is back. What a STATE is believed
+//!    for (forged, late or far-future ones) is [`super::primary`]'s.
 //!
 //! DCMD writes go through the gateway's one audited write path
 //! ([`crate::write::Attempt`]) when the gateway runs with `--allow-writes` and the
@@ -36,13 +38,14 @@ use sparkplug::{
 use tokio::sync::{broadcast, mpsc};
 
 use super::forward::Backlog;
+use super::primary::{OFFLINE_GRACE, PrimaryHost, STATE_SKEW_MS, Verdict};
 use super::{Connection, End, Link, Mode, Outgoing, Step};
 use crate::cell::{Cell, DeviceStatus, DeviceSummary, LiveMessage};
 use crate::event::Event;
 use crate::northbound::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
 use crate::point::{DeviceId, PointId, Value};
 use crate::time::{Timestamp, duration_millis};
-use crate::write::{Attempt, LOG_EVERY, LogThrottle, Unauthorised};
+use crate::write::{Attempt, LOG_EVERY, LogThrottle, RowThrottle, Unauthorised};
 
 /// The key of the stored `bdSeq` in the history database's `settings` table.
 pub const BD_SEQ_KEY: &str = "mqtt.bd_seq";
@@ -69,8 +72,10 @@ pub struct Node {
     primary_host: Option<Id>,
     /// Whether DCMD writes are carried out (`--allow-writes` and `commands = true`).
     writes: bool,
-    /// The newest STATE timestamp seen from the primary host.
-    host_seen: u64,
+    /// What the STATE messages of the primary host said in this connection.
+    host: PrimaryHost,
+    /// Refused STATE messages since the last log line.
+    state_refused: LogThrottle,
     /// Devices with a DDEATH since their last DBIRTH.
     dead: HashSet<DeviceId>,
     /// Births published in this connection.
@@ -83,38 +88,94 @@ pub struct Node {
     /// Whether the stored `bdSeq` was read (before the first connection).
     bd_seq_read: bool,
     /// The task that carries out DCMD writes in order, once the first came.
-    writer: Option<mpsc::Sender<Write>>,
+    writer: Option<mpsc::Sender<CheckedCommand>>,
     /// When the last rebirth asked for was published.
     last_rebirth: Option<tokio::time::Instant>,
     /// Refused NCMDs since the last log line.
     node_refused: LogThrottle,
+    /// Audit rows of refused DCMDs, at most one per topic every [`LOG_EVERY`].
+    refused_rows: RowThrottle,
+    /// The most metrics one DCMD may carry (`max_command_metrics`).
+    max_command_metrics: usize,
 }
 
-/// DCMD writes waiting for the write task; more are refused (and audited).
-const WRITES_WAITING: usize = 256;
+/// DCMDs waiting for the write task; more are refused whole (and audited).
+const COMMANDS_WAITING: usize = 256;
 
 /// Rebirth requests closer together than this get one birth cycle: each sends every
 /// metric of the node and its devices again.
 const REBIRTH_AT_MOST_EVERY: Duration = Duration::from_secs(2);
 
-/// One DCMD write, waiting for its turn.
+/// One DCMD, every write of it checked against its point: carried out in order by the
+/// write task, or not at all.
+struct CheckedCommand {
+    writes: Vec<Write>,
+}
+
+/// One write of a checked DCMD.
 struct Write {
     attempt: Attempt,
-    /// `None`: the metric's name is no point id.
-    point: Option<PointId>,
+    point: PointId,
     value: Value,
 }
 
-impl Write {
+impl CheckedCommand {
+    /// Carries the writes out in order; a write that fails stops the command, and each
+    /// write after it gets a refused row saying so.
     async fn carry_out(self) {
-        let Some(point) = self.point else {
-            self.attempt.refuse("no such point", None).await;
-            return;
-        };
-        match self.attempt.carry_out(point.clone(), self.value).await {
-            Ok(done) => tracing::info!("MQTT: {}", done.detail),
-            Err(e) => tracing::warn!("MQTT: DCMD write of {point} failed: {e}"),
+        let mut writes = self.writes.into_iter();
+        while let Some(write) = writes.next() {
+            let point = write.point.clone();
+            match write.attempt.carry_out(write.point, write.value).await {
+                Ok(done) => tracing::info!("MQTT: {}", done.detail),
+                Err(e) => {
+                    tracing::warn!("MQTT: DCMD write of {point} failed: {e}");
+                    let why = format!(
+                        "not carried out: the write of {point} before it in the same command \
+                         failed"
+                    );
+                    for left in writes {
+                        left.attempt.refuse(&why, None).await;
+                    }
+                    return;
+                }
+            }
         }
+    }
+}
+
+/// Why a command was refused, and what its audit row names.
+struct Refusal {
+    why: String,
+    /// The point (its name within the device) the refusal is about, if one.
+    point: String,
+    /// The value asked for that point.
+    new: serde_json::Value,
+}
+
+impl Refusal {
+    /// A refusal of the command as a whole.
+    fn whole(why: impl Into<String>) -> Self {
+        Self {
+            why: why.into(),
+            point: String::new(),
+            new: serde_json::Value::Null,
+        }
+    }
+}
+
+/// A DCMD value as the write path's.
+fn value_of(value: MetricValue) -> Result<Value, MetricValue> {
+    match value {
+        MetricValue::String(text) => Ok(Value::Text(text)),
+        other => other.as_f64().map(Value::Number).ok_or(other),
+    }
+}
+
+fn json_of(value: &Value) -> serde_json::Value {
+    match value {
+        Value::Number(n) => serde_json::json!(n),
+        Value::Text(t) => serde_json::json!(t),
     }
 }
 
@@ -138,7 +199,8 @@ impl Node {
             node: EdgeNode::new(group, edge_node, BdSeq::new(0)),
             primary_host,
             writes: allow_writes && config.commands,
-            host_seen: 0,
+            host: PrimaryHost::default(),
+            state_refused: LogThrottle::default(),
             dead: HashSet::new(),
             born: false,
             rows_published: -1,
@@ -148,6 +210,8 @@ impl Node {
             writer: None,
             last_rebirth: None,
             node_refused: LogThrottle::default(),
+            refused_rows: RowThrottle::default(),
+            max_command_metrics: config.max_command_metrics,
         })
     }
 }
@@ -208,6 +272,7 @@ impl Mode for Node {
                 }
                 Step::Live(Err(broadcast::error::RecvError::Closed)) => return End::Stop,
                 Step::Tick => self.node_data(conn).await,
+                Step::Wake => self.host_offline(conn).await,
             };
             if let Err(end) = done {
                 return end;
@@ -216,6 +281,7 @@ impl Mode for Node {
     }
 
     fn lost(&mut self) {
+        self.host.reconnected();
         self.node.on_disconnect();
         self.born = false;
         self.dead.clear();
@@ -578,8 +644,10 @@ impl Node {
         if retained {
             self.audit_refused_command(
                 topic,
-                "a command the broker kept as retained (Sparkplug commands are never \
-                 retained): not carried out again",
+                Refusal::whole(
+                    "a command the broker kept as retained (Sparkplug commands are never \
+                     retained): not carried out again",
+                ),
             )
             .await;
             return Ok(());
@@ -587,15 +655,17 @@ impl Node {
         let commands = match self.node.handle_command(topic, payload) {
             Ok(commands) => commands,
             Err(e) => {
-                self.audit_refused_command(topic, &e.to_string()).await;
+                self.audit_refused_command(topic, Refusal::whole(e.to_string()))
+                    .await;
                 return Ok(());
             }
         };
         if commands.is_empty() {
-            self.audit_refused_command(topic, "a command without metrics")
+            self.audit_refused_command(topic, Refusal::whole("a command without metrics"))
                 .await;
             return Ok(());
         }
+        let mut writes = Vec::new();
         for command in commands {
             match command {
                 Command::Rebirth => {
@@ -616,8 +686,11 @@ impl Node {
                     device,
                     metric,
                     value,
-                } => self.on_write(topic, device, &metric, value),
+                } => writes.push((device, metric, value)),
             }
+        }
+        if !writes.is_empty() {
+            self.on_writes(topic, writes).await;
         }
         Ok(())
     }
@@ -635,27 +708,63 @@ impl Node {
                 return Ok(());
             }
         };
-        if state.timestamp < self.host_seen {
-            return Ok(()); // an older state than one already seen
-        }
-        self.host_seen = state.timestamp;
-        match (state.online, self.born) {
-            (true, false) => {
+        let topic = self
+            .primary_host
+            .as_ref()
+            .map(|host| Topic::State { host: host.clone() }.to_string())
+            .unwrap_or_default();
+        let now = u64::try_from(Timestamp::now().0).unwrap_or(0);
+        match (self.host.receive(state, now), self.born) {
+            (Verdict::Online, false) => {
                 let from = conn.forwarded();
                 self.birth_cycle(conn, live, from).await?;
                 tracing::info!("MQTT: primary host online; births published");
                 Ok(())
             }
-            (false, true) => {
-                let window = duration_millis(self.keep_alive * 2);
-                conn.rewind_forwarded(Timestamp(Timestamp::now().0 - window))
-                    .await;
-                Err(End::Again(
-                    "the primary host went offline; storing until it is back".to_owned(),
-                ))
+            (Verdict::OfflinePending, true) => {
+                conn.wake_at(tokio::time::Instant::now() + OFFLINE_GRACE);
+                Ok(())
+            }
+            (Verdict::Contradicted, _) => {
+                self.cell.metrics().mqtt_offline_contradicted.inc();
+                tracing::warn!(
+                    "MQTT: an offline STATE on {topic} was contradicted by the host within {}                      s: another client of the broker published it; ignored (the broker's                      ACLs can keep it from happening, see the README)",
+                    OFFLINE_GRACE.as_secs()
+                );
+                Ok(())
+            }
+            (Verdict::FromTheFuture { ahead_ms }, _) => {
+                self.cell.metrics().mqtt_state_refused.inc();
+                if let Some(count) = self.state_refused.count(tokio::time::Instant::now()) {
+                    tracing::warn!(
+                        "MQTT: refused {count} STATE message(s) on {topic} since the last                          report; the latest is dated {:.0} s after this gateway's clock (at                          most {} s are taken): check both clocks (NTP), or another client                          of the broker is publishing on the host's topic",
+                        ahead_ms as f64 / 1000.0,
+                        STATE_SKEW_MS / 1000
+                    );
+                }
+                Ok(())
             }
             _ => Ok(()),
         }
+    }
+
+    /// The grace after an offline STATE has passed: unless the host contradicted it, the
+    /// session ends with an NDEATH that says the host is offline.
+    async fn host_offline(&mut self, conn: &mut Connection<'_>) -> Done {
+        if !self.host.offline_confirmed() || !self.born {
+            return Ok(());
+        }
+        let window = duration_millis(self.keep_alive * 2);
+        let now = Timestamp::now();
+        let goodbye = self
+            .node
+            .host_offline_death(sparkplug_time(now))
+            .map(|death| outgoing(death, None));
+        conn.rewind_forwarded(Timestamp(now.0 - window)).await;
+        Err(End::Again {
+            why: "the primary host went offline; storing until it is back".to_owned(),
+            goodbye,
+        })
     }
 
     /// A refused node command: not a write, so logged with a throttle of its own and not
@@ -669,17 +778,14 @@ impl Node {
         }
     }
 
-    /// Queues a DCMD write for the node's write task, which carries the writes out one
-    /// after the other in the order they came (the audit records how each ended), or
-    /// refuses it when writes are off.
-    fn on_write(
-        &mut self,
-        topic: &str,
-        device: Option<Id>,
-        metric: &MetricName,
-        value: MetricValue,
-    ) {
-        let Some(device) = device else {
+    /// Checks a DCMD's writes as one command and queues it whole for the node's write
+    /// task, which carries commands out one after the other in the order they came (the
+    /// audit records how each write ended); or refuses it whole: writes off, more metrics
+    /// than `max_command_metrics`, a point named twice, a value one of its points refuses,
+    /// or a full queue. A refusal is one (throttled) audit row, and nothing is written.
+    async fn on_writes(&mut self, topic: &str, writes: Vec<(Option<Id>, MetricName, MetricValue)>) {
+        let Some((Some(device), first, _)) = writes.first().cloned() else {
+            let metric = writes.first().map(|(_, m, _)| m.as_str()).unwrap_or_default();
             self.node_command_refused(
                 topic,
                 &format!("{metric}: the node has no writable metrics"),
@@ -687,86 +793,140 @@ impl Node {
             return;
         };
         if !self.writes {
-            self.refuse(topic, &device, metric.as_str());
+            self.refuse(topic, &device, first.as_str());
             return;
         }
-        let value = match value {
-            MetricValue::String(text) => Value::Text(text),
-            other => match other.as_f64() {
-                Some(n) => Value::Number(n),
-                None => {
-                    tracing::warn!("MQTT: DCMD {metric} on {topic}: {other:?} is not a number");
-                    return;
-                }
-            },
+        let command = match self.check_command(topic, &device, writes) {
+            Ok(command) => command,
+            Err(refusal) => return self.audit_refused_command(topic, refusal).await,
         };
-        let json = match &value {
-            Value::Number(n) => serde_json::json!(n),
-            Value::Text(t) => serde_json::json!(t),
-        };
-        let source = format!("mqtt {topic}");
-        let attempt = Attempt::new(
-            Arc::clone(&self.cell),
-            source,
-            device.as_str(),
-            metric.as_str(),
-            json,
-        );
-        let point = DeviceId::new(device.as_str())
-            .ok()
-            .and_then(|d| PointId::new(&d, metric.as_str()).ok());
         let queue = self.writer.get_or_insert_with(|| {
-            let (queue, mut writes) = mpsc::channel::<Write>(WRITES_WAITING);
+            let (queue, mut commands) = mpsc::channel::<CheckedCommand>(COMMANDS_WAITING);
             tokio::spawn(async move {
-                while let Some(write) = writes.recv().await {
-                    write.carry_out().await;
+                while let Some(command) = commands.recv().await {
+                    command.carry_out().await;
                 }
             });
             queue
         });
-        let write = Write {
-            attempt,
-            point,
-            value,
-        };
-        if let Err(refused) = queue.try_send(write) {
-            let write = match refused {
-                mpsc::error::TrySendError::Full(w) | mpsc::error::TrySendError::Closed(w) => w,
+        if let Err(refused) = queue.try_send(command) {
+            let n = match refused {
+                mpsc::error::TrySendError::Full(c) | mpsc::error::TrySendError::Closed(c) => {
+                    c.writes.len()
+                }
             };
-            tokio::spawn(async move {
-                let why = format!("{WRITES_WAITING} commands are waiting already");
-                write.attempt.refuse(&why, None).await;
-            });
+            let why = format!(
+                "{COMMANDS_WAITING} commands are waiting already; this one ({n} write(s)) was \
+                 not carried out"
+            );
+            self.audit_refused_command(topic, Refusal::whole(why)).await;
         }
     }
 
-    /// A command the node refused (a value of the wrong type or out of range, an unknown
-    /// metric, a retained or empty command): one audit row when writes are on, else
-    /// counted like any refused write; an NCMD's refusal is logged, at most once every
+    /// Every write of a DCMD against its point: all pass, or the command is refused.
+    fn check_command(
+        &self,
+        topic: &str,
+        device: &Id,
+        writes: Vec<(Option<Id>, MetricName, MetricValue)>,
+    ) -> Result<CheckedCommand, Refusal> {
+        let n = writes.len();
+        if n > self.max_command_metrics {
+            return Err(Refusal::whole(format!(
+                "{n} metrics in one command; at most {} are taken (max_command_metrics in \
+                 [mqtt]): nothing was written",
+                self.max_command_metrics
+            )));
+        }
+        let nothing = if n > 1 {
+            format!("; none of the command's {n} writes was carried out")
+        } else {
+            String::new()
+        };
+        let device_id = DeviceId::new(device.as_str())
+            .map_err(|e| Refusal::whole(format!("device {device}: {e}")))?;
+        let mut named = HashSet::with_capacity(n);
+        let mut checked = Vec::with_capacity(n);
+        for (_, metric, value) in writes {
+            let refusal = |why: String, new: serde_json::Value| Refusal {
+                why: format!("{why}{nothing}"),
+                point: metric.as_str().to_owned(),
+                new,
+            };
+            let value = value_of(value).map_err(|other| {
+                refusal(format!("{metric}: {other:?} is not a number"), serde_json::Value::Null)
+            })?;
+            let json = json_of(&value);
+            if !named.insert(metric.clone()) {
+                return Err(refusal(format!("{metric} is named twice in one command"), json));
+            }
+            let point = PointId::new(&device_id, metric.as_str())
+                .ok()
+                .filter(|p| self.cell.point(p).is_some());
+            let Some(point) = point else {
+                return Err(refusal(format!("no such point {device}.{metric}"), json));
+            };
+            if let Some(Err(e)) = self.cell.point(&point).map(|spec| spec.check_write(&value)) {
+                return Err(refusal(e.to_string(), json));
+            }
+            let attempt = Attempt::new(
+                Arc::clone(&self.cell),
+                format!("mqtt {topic}"),
+                device.as_str(),
+                metric.as_str(),
+                json,
+            );
+            checked.push(Write {
+                attempt,
+                point,
+                value,
+            });
+        }
+        Ok(CheckedCommand { writes: checked })
+    }
+
+    /// A command the node refused (undecodable, a value of the wrong type or out of
+    /// range, an unknown metric, a retained or empty command, one of the refusals of
+    /// [`Self::on_writes`]): counted, and when writes are on audited, at most one row per
+    /// topic every [`LOG_EVERY`] saying how many it stands for; counted like any refused
+    /// write when writes are off; an NCMD's refusal is logged, at most once every
     /// [`LOG_EVERY`].
-    async fn audit_refused_command(&mut self, topic: &str, why: &str) {
+    async fn audit_refused_command(&mut self, topic: &str, refusal: Refusal) {
         let Ok(Topic::Device {
             kind: MessageKind::Command,
             device,
             ..
         }) = topic.parse::<Topic>()
         else {
-            self.node_command_refused(topic, why);
+            self.node_command_refused(topic, &refusal.why);
             return;
         };
-        tracing::debug!("MQTT: command on {topic} refused: {why}");
+        tracing::debug!("MQTT: command on {topic} refused: {}", refusal.why);
         if !self.writes {
             self.refuse(topic, &device, "(refused command)");
             return;
         }
+        self.cell.metrics().mqtt_commands_refused.inc();
+        let Some(count) = self.refused_rows.count(topic, tokio::time::Instant::now()) else {
+            return;
+        };
+        let why = match count {
+            1 => refusal.why,
+            n => format!(
+                "{} ({} more command(s) refused on this topic since its last row are not \
+                 recorded one by one)",
+                refusal.why,
+                n - 1
+            ),
+        };
         let attempt = Attempt::new(
             Arc::clone(&self.cell),
             format!("mqtt {topic}"),
             device.as_str(),
-            "",
-            serde_json::Value::Null,
+            refusal.point,
+            refusal.new,
         );
-        attempt.refuse(why, None).await;
+        attempt.refuse(&why, None).await;
     }
 
     fn refuse(&mut self, topic: &str, device: &Id, metric: &str) {
