@@ -116,7 +116,7 @@ impl RowThrottle {
             return throttle.count(now);
         }
         if self.sources.len() >= THROTTLED_SOURCES {
-            self.sources.retain(|_, t| t.is_quiet(now));
+            self.sources.retain(|_, t| !t.is_quiet(now));
         }
         if self.sources.len() >= THROTTLED_SOURCES {
             return self.others.count(now);
@@ -328,11 +328,19 @@ mod tests {
     fn a_source_gets_one_row_an_interval_and_the_next_row_counts_what_was_left_out() {
         let mut throttle = RowThrottle::default();
         let t0 = tokio::time::Instant::now();
-        assert_eq!(throttle.count("a", t0), Some(1), "the first is written at once");
+        assert_eq!(
+            throttle.count("a", t0),
+            Some(1),
+            "the first is written at once"
+        );
         for _ in 0..99 {
             assert_eq!(throttle.count("a", t0), None);
         }
-        assert_eq!(throttle.count("b", t0), Some(1), "another source has its own");
+        assert_eq!(
+            throttle.count("b", t0),
+            Some(1),
+            "another source has its own"
+        );
         assert_eq!(throttle.count("a", t0 + LOG_EVERY), Some(100));
     }
 

@@ -547,3 +547,169 @@ async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes
 
     node.stop().await;
 }
+
+/// Polls `holds` until it is true, within [`LIMIT`].
+async fn until(what: &str, mut holds: impl FnMut() -> bool) {
+    let deadline = tokio::time::Instant::now() + LIMIT;
+    while !holds() {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "not {what} within {LIMIT:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+fn host_state_at(online: bool, timestamp: u64) -> Vec<u8> {
+    sparkplug::HostState { online, timestamp }.to_json()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn forged_host_states_cannot_latch_the_node_offline() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    let rig = rig(1);
+    let config = MqttConfig {
+        primary_host: Some("scada".into()),
+        ..config(&broker)
+    };
+    let node = Node::start(&rig, config, false);
+    let state_topic = "spBv1.0/STATE/scada";
+    let session = now_ms() - 60_000;
+    sub.publish_retained(state_topic, host_state_at(true, session))
+        .await;
+    let birth = sub
+        .next_where("the NBIRTH", LIMIT, |m| m.kind() == "NBIRTH")
+        .await;
+    let bd_seq = birth.bd_seq().unwrap();
+    let metrics = rig.cell.metrics();
+
+    // Any client's offline dated now, at once contradicted by the host's own session.
+    sub.publish(state_topic, host_state(false)).await;
+    sub.publish_retained(state_topic, host_state_at(true, session))
+        .await;
+    until("contradicted", || {
+        metrics.mqtt_offline_contradicted.get() == 1
+    })
+    .await;
+
+    // An offline dated in the year 9999, retained: refused and counted.
+    sub.publish_retained(state_topic, host_state_at(false, 253_402_300_799_000))
+        .await;
+    until("refused", || metrics.mqtt_state_refused.get() == 1).await;
+    // The session goes on: a rebirth is an NBIRTH with the same bdSeq, no NDEATH before it.
+    sub.publish("spBv1.0/rig/NCMD/cell", testkit::rebirth_command())
+        .await;
+    let again = sub
+        .next_where("the NBIRTH of the rebirth", LIMIT, |m| {
+            assert_ne!(m.kind(), "NDEATH", "the session ended");
+            m.kind() == "NBIRTH"
+        })
+        .await;
+    assert_eq!(again.bd_seq(), Some(bd_seq));
+
+    // An offline nobody contradicts: after the grace, an NDEATH that says why.
+    sub.publish(state_topic, host_state(false)).await;
+    let death = sub
+        .next_where("the NDEATH", LIMIT, |m| m.kind() == "NDEATH")
+        .await;
+    assert_eq!(death.bd_seq(), Some(bd_seq));
+    assert_eq!(
+        death
+            .metric(sparkplug::node::HOST_OFFLINE)
+            .and_then(|m| m.value.clone()),
+        Some(SpValue::BooleanValue(true))
+    );
+    // The next connection refuses the year-9999 STATE it finds retained and believes the
+    // host's own session, published again though older than the offline that ended the
+    // last connection: births follow.
+    until("the retained forgery refused again", || {
+        metrics.mqtt_state_refused.get() == 2
+    })
+    .await;
+    sub.publish_retained(state_topic, host_state_at(true, session))
+        .await;
+    let reborn = sub
+        .next_where("the NBIRTH of the next session", LIMIT, |m| {
+            m.kind() == "NBIRTH"
+        })
+        .await;
+    assert!(reborn.bd_seq().unwrap() > bd_seq);
+    node.stop().await;
+}
+
+/// A DCMD of `writes` (name, value) for jbc1's Double points.
+fn dcmd(writes: &[(&str, f64)]) -> Vec<u8> {
+    let payload = sparkplug::proto::Payload {
+        timestamp: Some(now_ms()),
+        metrics: writes
+            .iter()
+            .map(|&(name, value)| sparkplug::proto::Metric {
+                name: Some(name.to_owned()),
+                datatype: Some(sparkplug::DataType::Double.code()),
+                value: Some(SpValue::DoubleValue(value)),
+                ..sparkplug::proto::Metric::default()
+            })
+            .collect(),
+        ..sparkplug::proto::Payload::default()
+    };
+    prost::Message::encode_to_vec(&payload)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dcmd_is_carried_out_whole_or_refused_whole_and_refusals_do_not_fill_the_audit_log() {
+    let broker = Mosquitto::start();
+    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/DDATA/cell/#").await;
+    let rig = rig(1);
+    let mut live = rig.cell.subscribe();
+    let config = MqttConfig {
+        commands: true,
+        max_command_metrics: 8,
+        ..config(&broker)
+    };
+    let node = Node::start(&rig, config, true);
+    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
+        .await;
+    let (name, old, target) = writable_number(&rig);
+    let topic = "spBv1.0/rig/DCMD/cell/jbc1";
+    let metrics = rig.cell.metrics();
+
+    // A point named twice, and more metrics than max_command_metrics: each refused whole.
+    sub.publish(topic, dcmd(&[(&name, target), (&name, target)]))
+        .await;
+    until("the first refusal", || {
+        metrics.mqtt_commands_refused.get() == 1
+    })
+    .await;
+    let many: Vec<(&str, f64)> = (0..100).map(|_| (name.as_str(), target)).collect();
+    sub.publish(topic, dcmd(&many)).await;
+    // 200 commands that are not Sparkplug at all, from a client that reads nothing.
+    let rogue = Subscriber::start(broker.port(), "rogue/inbox").await;
+    for _ in 0..200 {
+        rogue.publish(topic, b"garbage".to_vec()).await;
+    }
+    until("every refusal counted", || {
+        metrics.mqtt_commands_refused.get() == 202
+    })
+    .await;
+    // Then a good one: carried out, with its full rows.
+    sub.publish(topic, dcmd(&[(&name, target)])).await;
+    next_event(&mut live, crate::event::EventKind::Write).await;
+
+    let audit = rig.cell.store().audit_log(None, 1000).unwrap();
+    let results: Vec<&str> = audit.iter().rev().map(|a| a.result.as_str()).collect();
+    // The first refusal has its row; the 201 after it within the interval are counted in
+    // at most one more row (a slow machine may cross the 10 s interval once).
+    let refused = results.iter().filter(|r| **r == "refused").count();
+    assert!((1..=2).contains(&refused), "{audit:#?}");
+    assert_eq!(
+        results[refused..],
+        ["attempted", "accepted"],
+        "nothing of the refused commands was written: {audit:#?}"
+    );
+    let first = audit.iter().rev().next().unwrap();
+    assert!(first.detail.contains("named twice"), "{}", first.detail);
+    assert_eq!(first.point, name);
+    assert_eq!(audit[0].old_value, Some(serde_json::json!(old)));
+    node.stop().await;
+}

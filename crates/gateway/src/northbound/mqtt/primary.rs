@@ -77,10 +77,7 @@ impl PrimaryHost {
         {
             return Verdict::FromTheFuture { ahead_ms };
         }
-        if state.online
-            && self.pending
-            && self.session.is_some_and(|t| state.timestamp >= t)
-        {
+        if state.online && self.pending && self.session.is_some_and(|t| state.timestamp >= t) {
             // The host's own session again: whatever offline came meanwhile was not its.
             self.pending = false;
             self.seen = Some(state.timestamp);
@@ -125,7 +122,10 @@ mod tests {
     /// A host believed online since `NOW - 60 s`.
     fn online_host() -> PrimaryHost {
         let mut host = PrimaryHost::default();
-        assert_eq!(host.receive(state(true, NOW - 60_000), NOW), Verdict::Online);
+        assert_eq!(
+            host.receive(state(true, NOW - 60_000), NOW),
+            Verdict::Online
+        );
         host
     }
 
@@ -142,7 +142,10 @@ mod tests {
             host.receive(state(true, NOW - 60_000), NOW + 5),
             Verdict::Contradicted
         );
-        assert!(!host.offline_confirmed(), "the grace ends with nothing to do");
+        assert!(
+            !host.offline_confirmed(),
+            "the grace ends with nothing to do"
+        );
     }
 
     #[test]
@@ -164,7 +167,10 @@ mod tests {
             host.receive(state(true, NOW - 60_000), NOW + 10),
             Verdict::Older
         );
-        assert_eq!(host.receive(state(true, NOW + 1), NOW + 10), Verdict::Online);
+        assert_eq!(
+            host.receive(state(true, NOW + 1), NOW + 10),
+            Verdict::Online
+        );
     }
 
     #[test]

@@ -785,7 +785,10 @@ impl Node {
     /// or a full queue. A refusal is one (throttled) audit row, and nothing is written.
     async fn on_writes(&mut self, topic: &str, writes: Vec<(Option<Id>, MetricName, MetricValue)>) {
         let Some((Some(device), first, _)) = writes.first().cloned() else {
-            let metric = writes.first().map(|(_, m, _)| m.as_str()).unwrap_or_default();
+            let metric = writes
+                .first()
+                .map(|(_, m, _)| m.as_str())
+                .unwrap_or_default();
             self.node_command_refused(
                 topic,
                 &format!("{metric}: the node has no writable metrics"),
@@ -854,11 +857,17 @@ impl Node {
                 new,
             };
             let value = value_of(value).map_err(|other| {
-                refusal(format!("{metric}: {other:?} is not a number"), serde_json::Value::Null)
+                refusal(
+                    format!("{metric}: {other:?} is not a number"),
+                    serde_json::Value::Null,
+                )
             })?;
             let json = json_of(&value);
             if !named.insert(metric.clone()) {
-                return Err(refusal(format!("{metric} is named twice in one command"), json));
+                return Err(refusal(
+                    format!("{metric} is named twice in one command"),
+                    json,
+                ));
             }
             let point = PointId::new(&device_id, metric.as_str())
                 .ok()
