@@ -713,3 +713,93 @@ async fn a_dcmd_is_carried_out_whole_or_refused_whole_and_refusals_do_not_fill_t
     assert_eq!(audit[0].old_value, Some(serde_json::json!(old)));
     node.stop().await;
 }
+
+/// A plain MQTT client on `broker` subscribed to `filter`: its messages as (topic,
+/// payload), and the client to publish with.
+async fn plain_client(
+    broker: &Mosquitto,
+    filter: &str,
+) -> (
+    rumqttc::AsyncClient,
+    tokio::sync::mpsc::UnboundedReceiver<(String, Vec<u8>)>,
+) {
+    let id = format!("plain-{}", fastrand::u64(..));
+    let options = rumqttc::MqttOptions::new(id, "127.0.0.1", broker.port());
+    let (client, mut eventloop) = rumqttc::AsyncClient::new(options, 100);
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    let (subscribed_tx, subscribed) = tokio::sync::oneshot::channel();
+    let mut subscribed_tx = Some(subscribed_tx);
+    client
+        .subscribe(filter, rumqttc::QoS::AtLeastOnce)
+        .await
+        .unwrap();
+    tokio::spawn(async move {
+        while let Ok(event) = eventloop.poll().await {
+            match event {
+                rumqttc::Event::Incoming(rumqttc::Packet::SubAck(_)) => {
+                    if let Some(tx) = subscribed_tx.take() {
+                        let _ = tx.send(());
+                    }
+                }
+                rumqttc::Event::Incoming(rumqttc::Packet::Publish(p)) => {
+                    let _ = tx.send((p.topic, p.payload.to_vec()));
+                }
+                _ => {}
+            }
+        }
+    });
+    tokio::time::timeout(LIMIT, subscribed)
+        .await
+        .expect("subscribed")
+        .unwrap();
+    (client, rx)
+}
+
+/// The next message on `topic` with `payload`, within [`LIMIT`].
+async fn next_on(
+    messages: &mut tokio::sync::mpsc::UnboundedReceiver<(String, Vec<u8>)>,
+    topic: &str,
+    payload: &str,
+) {
+    tokio::time::timeout(LIMIT, async {
+        while let Some((t, p)) = messages.recv().await {
+            if t == topic && p == payload.as_bytes() {
+                return;
+            }
+        }
+        panic!("the client stopped");
+    })
+    .await
+    .unwrap_or_else(|_| panic!("no {payload:?} on {topic} within {LIMIT:?}"));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn json_mode_answers_another_clients_retained_offline_with_its_true_status() {
+    let broker = Mosquitto::start();
+    let rig = rig(1);
+    let config = MqttConfig {
+        mode: crate::config::MqttMode::Json,
+        prefix: "plant/cell".into(),
+        ..config(&broker)
+    };
+    let (rogue, mut seen) = plain_client(&broker, "plant/cell/#").await;
+    let node = Node::start(&rig, config, false);
+    next_on(&mut seen, "plant/cell/status", "online").await;
+    next_on(&mut seen, "plant/cell/jbc1/status", "online").await;
+
+    for topic in ["plant/cell/status", "plant/cell/jbc1/status"] {
+        rogue
+            .publish(topic, rumqttc::QoS::AtLeastOnce, true, "offline")
+            .await
+            .unwrap();
+        next_on(&mut seen, topic, "offline").await;
+        next_on(&mut seen, topic, "online").await;
+    }
+    assert_eq!(rig.cell.metrics().mqtt_foreign_reasserted.get(), 2);
+    // What a new subscriber finds retained is the truth.
+    let (_, mut fresh) = plain_client(&broker, "plant/cell/+/status").await;
+    next_on(&mut fresh, "plant/cell/jbc1/status", "online").await;
+    let (_, mut fresh) = plain_client(&broker, "plant/cell/status").await;
+    next_on(&mut fresh, "plant/cell/status", "online").await;
+    node.stop().await;
+}

@@ -11,6 +11,14 @@
 //! with its last good value). After an outage the changes stored since the forwarded mark
 //! go first, not retained and with `"historical":true`, then every point's current value
 //! (retained), then the change stream.
+//!
+//! The gateway also reads its own status topics (`{prefix}/status`, `{prefix}/+/status`):
+//! a message there that says something else than the gateway's or the device's status
+//! (another client's retained `offline`) is answered at once by the true status,
+//! retained, so new subscribers are not misled. Point topics are not read back: MQTT 3.1.1
+//! has no "no local" option, so every point message would come back to the gateway and
+//! double the broker's traffic; the next change overwrites a forged value, and the
+//! broker's ACLs keep other clients off the prefix (README, "Broker access control").
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -24,6 +32,7 @@ use super::{Connection, End, Link, Mode, Outgoing, Step};
 use crate::cell::{Cell, DeviceStatus, LiveMessage};
 use crate::point::{PointId, Quality, Value};
 use crate::time::Timestamp;
+use crate::write::LogThrottle;
 
 /// JSON mode has no timer work; the tick only has to exist.
 const TICK: Duration = Duration::from_secs(3600);
@@ -34,6 +43,8 @@ pub struct Publisher {
     prefix: String,
     /// The snapshot was published in this connection.
     born: bool,
+    /// Foreign status messages answered since the last log line.
+    foreign: LogThrottle,
 }
 
 impl Publisher {
@@ -43,6 +54,7 @@ impl Publisher {
             cell: Arc::clone(link.cell()),
             prefix: link.config().prefix.clone(),
             born: false,
+            foreign: LogThrottle::default(),
         }
     }
 
@@ -75,7 +87,14 @@ impl Mode for Publisher {
             let done = match step {
                 Step::Connected => {
                     let from = conn.forwarded();
-                    let done = self.snapshot(conn, live, from).await;
+                    let mut done = self.snapshot(conn, live, from).await;
+                    // After the snapshot: the retained messages the subscription brings
+                    // are the gateway's own.
+                    for filter in self.status_filters() {
+                        if done.is_ok() {
+                            done = conn.subscribe(filter).await;
+                        }
+                    }
                     conn.serving(format!(
                         "MQTT connected; publishing JSON under {}/",
                         self.prefix
@@ -89,7 +108,10 @@ impl Mode for Publisher {
                     self.snapshot(conn, live, from).await
                 }
                 Step::Live(Err(broadcast::error::RecvError::Closed)) => return End::Stop,
-                Step::Message { .. } | Step::Tick | Step::Wake => Ok(()),
+                Step::Message { topic, payload, .. } => {
+                    self.on_status_message(conn, &topic, &payload).await
+                }
+                Step::Tick | Step::Wake => Ok(()),
             };
             if let Err(why) = done {
                 return End::Lost(why);
@@ -107,6 +129,53 @@ impl Mode for Publisher {
 }
 
 impl Publisher {
+    /// The gateway's and its devices' status topics.
+    fn status_filters(&self) -> [String; 2] {
+        [
+            format!("{}/status", self.prefix),
+            format!("{}/+/status", self.prefix),
+        ]
+    }
+
+    /// A message on a status topic: when it says something else than the truth (another
+    /// client published it), the true status again, retained.
+    async fn on_status_message(
+        &mut self,
+        conn: &mut Connection<'_>,
+        topic: &str,
+        payload: &[u8],
+    ) -> Result<(), String> {
+        let Some(rest) = topic
+            .strip_prefix(self.prefix.as_str())
+            .and_then(|r| r.strip_prefix('/'))
+        else {
+            return Ok(());
+        };
+        let truth = match rest.strip_suffix("/status") {
+            None if rest == "status" => self.status(true),
+            None => return Ok(()),
+            Some(device) => match self.cell.device_entry(device) {
+                Some(entry) => self.device_status(device, entry.summary().status),
+                None => return Ok(()),
+            },
+        };
+        if payload == truth.payload.as_slice() {
+            return Ok(());
+        }
+        self.cell.metrics().mqtt_foreign_reasserted.inc();
+        if let Some(count) = self.foreign.count(tokio::time::Instant::now()) {
+            tracing::warn!(
+                "MQTT: {count} message(s) on this gateway's status topics said something \
+                 else than the truth since the last report (the latest on {topic}: {:?}); \
+                 another client of the broker publishes there: the true status is published \
+                 again (the broker's ACLs can keep other clients off the prefix, see the \
+                 README)",
+                String::from_utf8_lossy(&payload[..payload.len().min(64)])
+            );
+        }
+        conn.publish(truth).await
+    }
+
     /// `online`, the changes stored since `from`, then every point and device status.
     async fn snapshot(
         &mut self,
