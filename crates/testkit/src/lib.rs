@@ -37,7 +37,7 @@ pub mod tricks;
 
 pub use chatter::{Chatter, ends_within, ends_within_paused};
 #[cfg(feature = "mqtt")]
-pub use mosquitto::{Mosquitto, TlsFiles};
+pub use mosquitto::{Mosquitto, TlsFiles, password_file};
 pub use noise::{Noise, NoiseConfig, NoiseCounts};
 #[cfg(feature = "postgres")]
 pub use postgres::Postgres;

@@ -7,7 +7,8 @@
 //! can judge what was sent without racing the client under test.
 //!
 //! [`Mosquitto::start_tls`] adds a TLS listener on a second port, with the plain one kept
-//! for the test's own subscriber.
+//! for the test's own subscriber. [`Mosquitto::start_with_access`] turns anonymous clients
+//! away and applies a password file and an ACL file (see [`password_file`]).
 
 use std::net::{Ipv4Addr, TcpListener};
 use std::path::{Path, PathBuf};
@@ -25,6 +26,8 @@ pub struct Mosquitto {
     dir: tempfile::TempDir,
     /// The TLS listener's port and files.
     tls: Option<(u16, TlsFiles)>,
+    /// The password file and the ACL file, when clients must log in.
+    access: Option<(PathBuf, PathBuf)>,
 }
 
 /// The PEM files of a TLS listener.
@@ -48,7 +51,7 @@ impl Mosquitto {
     /// When mosquitto is not installed (the message says what to install) or does not
     /// start in 20 s.
     pub fn start() -> Self {
-        Self::launched(None)
+        Self::launched(None, None)
     }
 
     /// Starts mosquitto with a plain listener on [`Mosquitto::port`] and a TLS listener
@@ -59,16 +62,29 @@ impl Mosquitto {
     ///
     /// As [`Mosquitto::start`].
     pub fn start_tls(files: &TlsFiles) -> Self {
-        Self::launched(Some(files.clone()))
+        Self::launched(Some(files.clone()), None)
     }
 
-    fn launched(files: Option<TlsFiles>) -> Self {
+    /// Starts mosquitto on a free loopback port where clients must log in with a user of
+    /// `password_file` (mosquitto's format, [`password_file`] makes one) and may publish
+    /// and subscribe only as `acl_file` (mosquitto's `acl_file` format) allows; anonymous
+    /// clients are refused.
+    ///
+    /// # Panics
+    ///
+    /// As [`Mosquitto::start`].
+    pub fn start_with_access(password_file: &Path, acl_file: &Path) -> Self {
+        Self::launched(None, Some((password_file.to_owned(), acl_file.to_owned())))
+    }
+
+    fn launched(files: Option<TlsFiles>, access: Option<(PathBuf, PathBuf)>) -> Self {
         let dir = tempfile::tempdir().expect("a temporary directory for mosquitto");
         let mut broker = Self {
             child: None,
             port: 0,
             dir,
             tls: None,
+            access,
         };
         let deadline = Instant::now() + START_LIMIT;
         loop {
@@ -174,8 +190,16 @@ impl Mosquitto {
         let binary = binary();
         let config = self.dir.path().join("mosquitto.conf");
         let log = self.dir.path().join("mosquitto.log");
+        let access = match &self.access {
+            Some((passwords, acl)) => format!(
+                "allow_anonymous false\npassword_file {}\nacl_file {}\n",
+                passwords.display(),
+                acl.display()
+            ),
+            None => "allow_anonymous true\n".to_owned(),
+        };
         let mut text = format!(
-            "listener {} 127.0.0.1\nallow_anonymous true\nuser root\n\
+            "listener {} 127.0.0.1\n{access}user root\n\
              persistence true\npersistence_location {}/\nqueue_qos0_messages true\n\
              message_size_limit 0\nlog_dest file {}\n",
             self.port,
@@ -214,6 +238,29 @@ impl Mosquitto {
 impl Drop for Mosquitto {
     fn drop(&mut self) {
         self.kill();
+    }
+}
+
+/// Writes a mosquitto password file at `path` with `users` (name, password), hashed by
+/// Debian's `mosquitto_passwd` (from the mosquitto package).
+///
+/// # Panics
+///
+/// When `mosquitto_passwd` is missing or fails.
+pub fn password_file(path: &Path, users: &[(&str, &str)]) {
+    std::fs::write(path, "").expect("the password file can be written");
+    for (user, password) in users {
+        let status = Command::new("mosquitto_passwd")
+            .arg("-b")
+            .arg(path)
+            .args([user, password])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .status()
+            .unwrap_or_else(|e| {
+                panic!("cannot run mosquitto_passwd (Debian's mosquitto package has it): {e}")
+            });
+        assert!(status.success(), "mosquitto_passwd failed for {user}");
     }
 }
 
