@@ -707,7 +707,7 @@ async fn a_dcmd_is_carried_out_whole_or_refused_whole_and_refusals_do_not_fill_t
         ["attempted", "accepted"],
         "nothing of the refused commands was written: {audit:#?}"
     );
-    let first = audit.iter().rev().next().unwrap();
+    let first = audit.last().unwrap();
     assert!(first.detail.contains("named twice"), "{}", first.detail);
     assert_eq!(first.point, name);
     assert_eq!(audit[0].old_value, Some(serde_json::json!(old)));
