@@ -707,6 +707,7 @@ impl Cell {
             device: None,
             point: None,
             message,
+            fields: crate::event::Fields::new(),
         });
     }
 }

@@ -1,5 +1,9 @@
 //! Events: what happened in the cell, for the event log (drivers, the scheduler and the
 //! gateway make them; the store keeps them).
+//!
+//! An event is words for people (`message`) and [`Fields`] for programs: which feeder ran
+//! out, the board's cycle time, the state a transfer switch went to. Whoever reads events
+//! (OEE, alarms, IPC-CFX, the historian) takes the fields and never parses the words.
 
 use serde::Serialize;
 
@@ -130,6 +134,20 @@ impl EventKind {
     }
 }
 
+/// An event's structured facts: names in snake_case, values numbers, text or booleans
+/// (`{"feeder": 7, "nozzle": 7, "step": 87}`). Empty for events that have none.
+pub type Fields = serde_json::Map<String, serde_json::Value>;
+
+/// Fields from `(name, value)` pairs, leaving out the `null` ones (a fact the device did
+/// not give).
+pub fn fields<const N: usize>(pairs: [(&str, serde_json::Value); N]) -> Fields {
+    pairs
+        .into_iter()
+        .filter(|(_, value)| !value.is_null())
+        .map(|(name, value)| (name.to_owned(), value))
+        .collect()
+}
+
 /// An event to record.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Event {
@@ -145,6 +163,8 @@ pub struct Event {
     pub point: Option<PointId>,
     /// Words for the event log.
     pub message: String,
+    /// The facts for programs (empty when the event has none).
+    pub fields: Fields,
 }
 
 impl Event {
@@ -157,6 +177,7 @@ impl Event {
             device: None,
             point: None,
             message,
+            fields: Fields::new(),
         }
     }
 }

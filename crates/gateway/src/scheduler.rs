@@ -754,6 +754,10 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
                             .label(&value)
                             .map(str::to_owned)
                             .unwrap_or_else(|| with_unit(&value, spec.unit.as_deref()));
+                        let fields = crate::event::fields([
+                            ("value", serde_json::json!(value)),
+                            ("label", serde_json::json!(spec.label(&value))),
+                        ]);
                         let (kind, message) = if alarm {
                             (
                                 EventKind::AlarmRaised,
@@ -772,6 +776,7 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
                             device: Some(entry.id.clone()),
                             point: Some(spec.id.clone()),
                             message,
+                            fields,
                         });
                     }
                     point.value = Some(value);
@@ -862,6 +867,7 @@ fn record_events(cell: &Cell, entry: &DeviceEntry, events: Vec<DeviceEvent>) {
             device: Some(entry.id.clone()),
             point,
             message: format!("{}: {}", entry.name, event.message),
+            fields: event.fields,
         });
     }
 }
@@ -894,6 +900,7 @@ fn mark_up(cell: &Cell, entry: &DeviceEntry) {
             device: Some(entry.id.clone()),
             point: None,
             message: format!("{} ({}) answers again", entry.name, entry.id),
+            fields: crate::event::Fields::new(),
         });
     }
 }
@@ -954,6 +961,11 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
                 error.message,
                 retry.as_secs()
             ),
+            fields: crate::event::fields([
+                ("error_kind", serde_json::json!(error.kind.as_str())),
+                ("error", serde_json::json!(error.message)),
+                ("retry_s", serde_json::json!(retry.as_secs())),
+            ]),
         });
     }
 }

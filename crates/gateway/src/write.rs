@@ -242,6 +242,11 @@ impl Attempt {
                     device: device.map(|d| d.id.clone()),
                     point: Some(point.clone()),
                     message: detail.clone(),
+                    fields: crate::event::fields([
+                        ("value", serde_json::json!(outcome.new)),
+                        ("was", serde_json::json!(outcome.old)),
+                        ("by", serde_json::json!(self.client)),
+                    ]),
                 });
                 if let Err(e) = self.cell.store().flush().await {
                     tracing::error!("write event not committed: {e}");

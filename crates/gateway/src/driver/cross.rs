@@ -403,18 +403,28 @@ impl CrossDriver {
             if was.feed == load.feed {
                 continue;
             }
-            let message = match change.transfer() {
-                Some(Transfer { from, to }) => format!(
-                    "load transferred from {from} to {to}: {} (was {})",
-                    load.feed, was.feed
+            let (message, transfer) = match change.transfer() {
+                Some(Transfer { from, to }) => (
+                    format!(
+                        "load transferred from {from} to {to}: {} (was {})",
+                        load.feed, was.feed
+                    ),
+                    Some((from.to_string(), to.to_string())),
                 ),
-                None => format!("load {} (was {})", load.feed, was.feed),
+                None => (format!("load {} (was {})", load.feed, was.feed), None),
             };
+            let (from, to) = transfer.unzip();
             self.events.push(DeviceEvent {
                 kind: EventKind::StateChanged,
                 point: Some("load_feed"),
                 message,
                 at: None,
+                fields: crate::event::fields([
+                    ("feed", serde_json::json!(load.feed.to_string())),
+                    ("was", serde_json::json!(was.feed.to_string())),
+                    ("from", serde_json::json!(from)),
+                    ("to", serde_json::json!(to)),
+                ]),
             });
         }
     }
@@ -664,6 +674,13 @@ mod tests {
                 .starts_with("load transferred from source 1 (S1) to source 2 (S2)"),
             "{}",
             events[0].message
+        );
+        let fields = serde_json::Value::Object(events[0].fields.clone());
+        assert_eq!(fields["from"], "source 1 (S1)", "{fields}");
+        assert_eq!(fields["to"], "source 2 (S2)", "{fields}");
+        assert!(
+            fields["feed"].is_string() && fields["was"].is_string(),
+            "{fields}"
         );
         twin.lock().restore_source(Source::S1);
         let live = driver.poll(LIVE).await.unwrap();

@@ -107,6 +107,8 @@ pub struct DeviceEvent {
     /// When it happened, for an event that arrived on its own (a Panasonic R message);
     /// `None`: when the scheduler collects it, right after the poll that saw it.
     pub at: Option<crate::time::Timestamp>,
+    /// The facts for programs ([`crate::event::Fields`]).
+    pub fields: crate::event::Fields,
 }
 
 /// A group of points read together, at one period.

@@ -44,7 +44,7 @@ use super::{
     BoxFuture, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
     WriteError,
 };
-use crate::event::EventKind;
+use crate::event::{EventKind, Fields, fields};
 use crate::point::{
     AlarmRule, EnumState, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
 };
@@ -321,6 +321,10 @@ impl PanasonicDriver {
                     state.describe()
                 ),
                 at: None,
+                fields: fields([
+                    ("from", serde_json::json!(old.describe())),
+                    ("to", serde_json::json!(state.describe())),
+                ]),
             });
         }
     }
@@ -342,19 +346,66 @@ impl PanasonicDriver {
     /// Turns a Port 2 notice into an event, unless it is routine (keep-alive echoes,
     /// connections made, reconnection attempts: the device's status shows those).
     fn record_notice(&mut self, notice: &Notice, at: Timestamp) {
-        let message = match notice {
+        let (message, fields) = match notice {
             Notice::Event(Event::Heartbeat { .. })
             | Notice::Connected { .. }
             | Notice::ConnectFailed { .. } => return,
-            Notice::Event(event) => format!("R message {event}"),
-            other => other.to_string(),
+            Notice::Event(event) => (format!("R message {event}"), event_fields(event)),
+            other => (other.to_string(), Fields::new()),
         };
         self.events.push(DeviceEvent {
             kind: EventKind::DeviceEvent,
             point: None,
             message,
             at: Some(at),
+            fields,
         });
+    }
+}
+
+/// An R message's facts: `event` names it (`board_finished`, `parts_exhausted`,
+/// `error_stop`, `machine_started`, `recovery_started`, …), the other fields are what the
+/// message carries (a board's time in seconds; an error's code, step, nozzle and feeder).
+pub fn event_fields(event: &Event) -> Fields {
+    use serde_json::json;
+    let board = |name: &str, time: &Option<panasonic::event::BoardTime>| {
+        fields([
+            ("event", json!(name)),
+            ("board_time_s", json!(time.map(|t| t.seconds()))),
+        ])
+    };
+    match event {
+        Event::BoardFinished { time } => board("board_finished", time),
+        Event::ProductionFinished { time } => board("production_finished", time),
+        Event::Started => fields([("event", json!("machine_started"))]),
+        Event::ResetDone => fields([("event", json!("reset_done"))]),
+        Event::RecoveryStarted => fields([("event", json!("recovery_started"))]),
+        Event::Heartbeat { .. } => fields([("event", json!("heartbeat"))]),
+        Event::Se { program } => fields([
+            ("event", json!("program_selected")),
+            ("program", json!(program.as_ref().map(ToString::to_string))),
+        ]),
+        Event::SeNg { program, .. } => fields([
+            ("event", json!("program_selection_failed")),
+            ("program", json!(program.as_ref().map(ToString::to_string))),
+        ]),
+        Event::Error(info) => fields([
+            (
+                "event",
+                json!(if info.is_parts_exhausted() {
+                    "parts_exhausted"
+                } else {
+                    "error_stop"
+                }),
+            ),
+            ("error_code", json!(info.code())),
+            ("step", json!(info.step())),
+            ("nozzle", json!(info.nozzle())),
+            ("feeder", json!(info.feeder())),
+        ]),
+        Event::RecoveryOk => fields([("event", json!("recovery_succeeded"))]),
+        Event::RecoveryRetry => fields([("event", json!("recovery_retrying"))]),
+        Event::RecoveryStop => fields([("event", json!("recovery_failed_stopped"))]),
     }
 }
 
@@ -604,6 +655,10 @@ mod tests {
             .unwrap();
         assert_eq!(change.message, "machine went from ready to run");
         assert_eq!(change.point, Some("state"));
+        assert_eq!(
+            serde_json::Value::Object(change.fields.clone()),
+            serde_json::json!({"from": "ready", "to": "run"})
+        );
         twin.control().force_error(3).unwrap();
         let events = events_until(&mut driver, |events| {
             events
@@ -611,11 +666,45 @@ mod tests {
                 .any(|e| e.message == "machine went from run to error stop")
         })
         .await;
-        assert!(
-            events
-                .iter()
-                .any(|e| e.kind == EventKind::DeviceEvent && e.message.starts_with("R message R2E")),
-            "{events:?}"
+        let error = events
+            .iter()
+            .find(|e| e.kind == EventKind::DeviceEvent && e.message.starts_with("R message R2E"))
+            .unwrap_or_else(|| panic!("no R2E event: {events:?}"));
+        // The error's facts, for programs: no need to parse the words.
+        let fields = serde_json::Value::Object(error.fields.clone());
+        assert_eq!(fields["event"], "parts_exhausted", "{fields}");
+        assert_eq!(fields["error_code"], 3, "{fields}");
+        assert!(fields["feeder"].is_u64(), "{fields}");
+    }
+
+    #[test]
+    fn r_messages_become_facts_with_their_numbers() {
+        use panasonic::event::{BoardTime, ErrorInfo};
+        let of = |event: &Event| serde_json::Value::Object(event_fields(event));
+        assert_eq!(
+            of(&Event::BoardFinished {
+                time: Some(BoardTime::new(42).unwrap())
+            }),
+            serde_json::json!({"event": "board_finished", "board_time_s": 42})
+        );
+        assert_eq!(
+            of(&Event::BoardFinished { time: None }),
+            serde_json::json!({"event": "board_finished"}),
+            "a time the machine did not give is left out"
+        );
+        assert_eq!(
+            of(&Event::Error(ErrorInfo::new(3, 87, 7, 7).unwrap())),
+            serde_json::json!({
+                "event": "parts_exhausted", "error_code": 3, "step": 87, "nozzle": 7, "feeder": 7
+            })
+        );
+        assert_eq!(
+            of(&Event::Error(ErrorInfo::new(12, 1, 2, 3).unwrap()))["event"],
+            "error_stop"
+        );
+        assert_eq!(
+            of(&Event::RecoveryOk),
+            serde_json::json!({"event": "recovery_succeeded"})
         );
     }
 

@@ -195,7 +195,7 @@ impl StoreHandle {
     pub fn events(&self, filter: &EventFilter) -> Result<Vec<EventRecord>, StoreError> {
         self.readers.with(|conn| {
             let mut stmt = conn.prepare_cached(
-                "SELECT id, t, kind, line, device, point, message FROM events \
+                "SELECT id, t, kind, line, device, point, message, fields FROM events \
                  WHERE t >= ?1 AND t < ?2 AND (?3 IS NULL OR device = ?3) \
                  AND (?4 IS NULL OR kind = ?4) ORDER BY id DESC LIMIT ?5",
             )?;
@@ -216,6 +216,10 @@ impl StoreHandle {
                         device: r.get(4)?,
                         point: r.get(5)?,
                         message: r.get(6)?,
+                        fields: r
+                            .get::<_, Option<String>>(7)?
+                            .and_then(|text| serde_json::from_str(&text).ok())
+                            .unwrap_or_default(),
                     })
                 },
             )?;

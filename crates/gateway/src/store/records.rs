@@ -38,6 +38,9 @@ pub struct EventRecord {
     pub point: Option<String>,
     /// Words.
     pub message: String,
+    /// The facts for programs (`{}` for events without any, and for events stored before
+    /// events had fields).
+    pub fields: crate::event::Fields,
 }
 
 /// How a write attempt ended.

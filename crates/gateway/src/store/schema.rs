@@ -29,7 +29,8 @@ CREATE TABLE IF NOT EXISTS events (
     line    TEXT,
     device  TEXT,
     point   TEXT,
-    message TEXT NOT NULL
+    message TEXT NOT NULL,
+    fields  TEXT
 );
 CREATE INDEX IF NOT EXISTS events_by_time ON events(t);
 CREATE TABLE IF NOT EXISTS audit (
@@ -66,8 +67,9 @@ CREATE TABLE IF NOT EXISTS rollup_marks (
 ";
 
 /// The schema's version in `PRAGMA user_version`: 1 before the rollups, 2 with them, 3
-/// without the index on `samples(t)` (see `changes`).
-pub(super) const VERSION: i64 = 3;
+/// without the index on `samples(t)` (see `changes`), 4 with the events' `fields` (a JSON
+/// object, NULL when the event has none).
+pub(super) const VERSION: i64 = 4;
 
 /// Creates the tables of a new file, or brings an older file up to [`VERSION`], in one
 /// transaction. A file from version 1 gets empty rollups that start at the first minute
@@ -103,6 +105,19 @@ pub(super) fn migrate(conn: &mut Connection) -> rusqlite::Result<()> {
         if indexed {
             tx.execute_batch("DROP INDEX samples_by_time")?;
             tracing::info!("history upgraded to schema 3: the index on time alone is dropped");
+        }
+    }
+    if version < 4 {
+        // A file made by an older gateway has no column `fields` (a new file has it from
+        // SCHEMA); adding a nullable column rewrites nothing.
+        let has_fields: bool = tx.query_row(
+            "SELECT count(*) > 0 FROM pragma_table_info('events') WHERE name = 'fields'",
+            [],
+            |r| r.get(0),
+        )?;
+        if !has_fields {
+            tx.execute_batch("ALTER TABLE events ADD COLUMN fields TEXT")?;
+            tracing::info!("history upgraded to schema 4: events keep their fields");
         }
     }
     if version < VERSION {

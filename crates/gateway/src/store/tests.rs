@@ -288,6 +288,7 @@ async fn retention_deletes_samples_and_events_older_than_the_limit_and_keeps_aud
             device: Some(DeviceId::new("a").unwrap()),
             point: None,
             message: "down".into(),
+            fields: crate::event::Fields::new(),
         });
     }
     h.audit(AuditEntry {
@@ -338,6 +339,15 @@ async fn events_filter_by_device_kind_and_time_newest_first() {
         device: Some(DeviceId::new(device).unwrap()),
         point: None,
         message: format!("{device} {t}"),
+        // Odd times carry fields, even ones none.
+        fields: crate::event::fields([(
+            "odd_time",
+            if t % 2 == 1 {
+                serde_json::json!(t)
+            } else {
+                serde_json::Value::Null
+            },
+        )]),
     };
     h.event(ev(1, EventKind::DeviceDown, "a"));
     h.event(ev(2, EventKind::DeviceUp, "a"));
@@ -367,6 +377,22 @@ async fn events_filter_by_device_kind_and_time_newest_first() {
     assert_eq!(got.len(), 1);
     assert_eq!(got[0].message, "b 3");
     assert_eq!(got[0].line.as_deref(), Some("bench"));
+    assert_eq!(
+        serde_json::Value::Object(got[0].fields.clone()),
+        serde_json::json!({"odd_time": 3}),
+        "an event's fields are kept"
+    );
+    let all = h
+        .events(&EventFilter {
+            limit: 10,
+            ..EventFilter::default()
+        })
+        .unwrap();
+    assert!(
+        all.iter()
+            .any(|e| e.message == "a 2" && e.fields.is_empty()),
+        "an event without fields reads back with none: {all:?}"
+    );
 }
 
 #[tokio::test]
@@ -610,6 +636,7 @@ async fn back_pressure_drops_the_oldest_samples_and_never_an_audit_row_or_an_eve
                 device: None,
                 point: None,
                 message: format!("down at {t}"),
+                fields: crate::event::Fields::new(),
             });
         }
     }
@@ -1477,6 +1504,11 @@ async fn a_file_of_the_previous_schema_opens_answers_and_rolls_up_what_comes_aft
         conn.execute_batch(SCHEMA_1).unwrap();
         conn.execute("INSERT INTO points (id, name) VALUES (1, 'a.temp')", [])
             .unwrap();
+        conn.execute(
+            "INSERT INTO events (t, kind, message) VALUES (1, 'device_down', 'old')",
+            [],
+        )
+        .unwrap();
         let mut insert = conn
             .prepare("INSERT INTO samples (point, t, value, quality) VALUES (1, ?1, ?2, 0)")
             .unwrap();
@@ -1492,7 +1524,27 @@ async fn a_file_of_the_previous_schema_opens_answers_and_rolls_up_what_comes_aft
     let version: i64 = conn
         .query_row("PRAGMA user_version", [], |r| r.get(0))
         .unwrap();
-    assert_eq!(version, 3);
+    assert_eq!(version, 4);
+    // Events: the old one reads back without fields, a new one keeps its own.
+    h.event(Event {
+        fields: crate::event::fields([("feeder", serde_json::json!(7))]),
+        ..Event::of_gateway(EventKind::DeviceEvent, "new".into())
+    });
+    h.flush().await.unwrap();
+    let events = h
+        .events(&EventFilter {
+            limit: 10,
+            ..EventFilter::default()
+        })
+        .unwrap();
+    let fields_of = |message: &str| {
+        events
+            .iter()
+            .find(|e| e.message == message)
+            .map(|e| serde_json::Value::Object(e.fields.clone()))
+    };
+    assert_eq!(fields_of("old"), Some(serde_json::json!({})));
+    assert_eq!(fields_of("new"), Some(serde_json::json!({"feeder": 7})));
     let time_index: i64 = conn
         .query_row(
             "SELECT count(*) FROM sqlite_master WHERE name = 'samples_by_time'",

@@ -730,7 +730,8 @@ fn write_rows(
             }
             Row::Event(e) => {
                 tx.prepare_cached(
-                    "INSERT INTO events (t, kind, line, device, point, message) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+                    "INSERT INTO events (t, kind, line, device, point, message, fields) \
+                     VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
                 )?
                 .execute(params![
                     e.t.0,
@@ -738,7 +739,9 @@ fn write_rows(
                     e.line,
                     e.device.as_ref().map(DeviceId::as_str),
                     e.point.as_ref().map(PointId::as_str),
-                    e.message
+                    e.message,
+                    (!e.fields.is_empty())
+                        .then(|| serde_json::Value::Object(e.fields.clone()).to_string()),
                 ])?;
                 counts[1] += 1;
             }

@@ -401,6 +401,7 @@ mod tests {
             device: Some(device.clone()),
             point: None,
             message: "cross1: source lost".into(),
+            fields: crate::event::Fields::new(),
         };
         let id = event_id(Timestamp(5), 7);
         let e = base_event(2, &event, id.clone(), Timestamp(2_000));
