@@ -11,6 +11,7 @@
 //! | `line` | String | the line, when the event concerns one |
 //! | `device` | String | the device, when the event concerns one |
 //! | `point` | String | the point's name within its device, when it concerns one |
+//! | `fields` | String | the event's facts for programs as a JSON object (`{"feeder":7}`), when it has any |
 //!
 //! Events are sent live, never repeated (two equal events are two NDATA), and are not
 //! part of the store-and-forward backlog: events of an outage are not sent after it.
@@ -34,6 +35,8 @@ pub const LINE: &str = "line";
 pub const DEVICE: &str = "device";
 /// Event property: the point's name within its device (String).
 pub const POINT: &str = "point";
+/// Event property: the event's facts as a JSON object (String).
+pub const FIELDS: &str = "fields";
 
 /// One event as an edge node publishes it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -52,6 +55,8 @@ pub struct NodeEvent {
     pub device: Option<String>,
     /// The point's name within its device, if it concerns one.
     pub point: Option<String>,
+    /// The event's facts as a JSON object's text, if it has any.
+    pub fields: Option<String>,
 }
 
 /// The birth description of the [`EVENT`] metric, to put among a node's metrics in its
@@ -73,6 +78,7 @@ pub(crate) fn metric(alias: u64, event: &NodeEvent) -> Metric {
         (LINE, &event.line),
         (DEVICE, &event.device),
         (POINT, &event.point),
+        (FIELDS, &event.fields),
     ] {
         if let Some(value) = value {
             properties.push(key, string_property(value));

@@ -1475,6 +1475,7 @@ mod tests {
         let mut host = alone();
         let mut node = born(&mut host);
         let event = NodeEvent {
+            fields: None,
             t: at(123),
             kind: "alarm_raised".into(),
             severity: 700,
@@ -1515,6 +1516,7 @@ mod tests {
         let mut host = alone();
         let mut node = born(&mut host);
         let event = NodeEvent {
+            fields: None,
             t: at(123),
             kind: "alarm_raised".into(),
             severity: 700,

@@ -434,6 +434,7 @@ fn an_event_shows_its_message_and_properties_in_words() {
         line: None,
         device: Some("jbc".into()),
         point: Some("error".into()),
+        fields: None,
     };
     let ndata = node.node_event(&event, at(300)).unwrap();
     let mut describer = Describer::new();

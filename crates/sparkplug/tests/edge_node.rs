@@ -759,6 +759,7 @@ fn device_down_event() -> NodeEvent {
         line: Some("line1".into()),
         device: Some("jbc".into()),
         point: None,
+        fields: Some(r#"{"error_kind":"timeout","retry_s":2}"#.into()),
     }
 }
 
@@ -792,7 +793,17 @@ fn an_event_is_an_ndata_of_the_event_metric_by_alias_with_its_properties_and_tim
     assert_eq!(m.timestamp, Some(at(250).as_millis()), "the event's time");
     assert_eq!(m.value, Some(Value::StringValue("jbc: no answer".into())));
     let properties = m.properties.as_ref().unwrap();
-    assert_eq!(properties.keys, ["kind", "severity", "line", "device"]);
+    assert_eq!(
+        properties.keys,
+        ["kind", "severity", "line", "device", "fields"]
+    );
+    assert_eq!(
+        properties.values[4].value,
+        Some(sparkplug::proto::property_value::Value::StringValue(
+            r#"{"error_kind":"timeout","retry_s":2}"#.into()
+        )),
+        "the facts as a JSON object"
+    );
     assert_eq!(
         properties.values[1].r#type,
         Some(DataType::UInt32.code()),

@@ -976,6 +976,8 @@ fn node_event(event: &Event) -> NodeEvent {
         line: event.line.clone(),
         device: event.device.as_ref().map(|d| d.as_str().to_owned()),
         point: event.point.as_ref().map(|p| p.name().to_owned()),
+        fields: (!event.fields.is_empty())
+            .then(|| serde_json::Value::Object(event.fields.clone()).to_string()),
     }
 }
 
