@@ -8,6 +8,8 @@
 //! - [`auth`]: anonymous sessions read only; users log in on secure endpoints.
 //! - [`peers`]: the gateway accepts the clients and relays them to the server on
 //!   loopback, to know each secure channel's client address (for the audit log).
+//! - [`chunks`]: the relay's sans-IO view of the messages (whole chunks; on plain channels
+//!   the sessions created, and the CloseSession it sends).
 //!
 //! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
 //! monitored items are the server's own over those values (no second polling). A point's
@@ -24,6 +26,7 @@
 //! administrator to move.
 
 pub mod auth;
+pub mod chunks;
 pub mod history;
 pub mod nodes;
 pub mod peers;
