@@ -7,7 +7,8 @@
 //! - [`history`]: HistoryRead raw and processed (Average, Minimum, Maximum), sans-IO.
 //! - [`auth`]: anonymous sessions read only; users log in on secure endpoints.
 //! - [`peers`]: the gateway accepts the clients and relays them to the server on
-//!   loopback, to know each secure channel's client address (for the audit log).
+//!   loopback, to know each secure channel's client address (for the audit log), to close
+//!   sessions not activated in time and to cap the sessions of one address.
 //! - [`chunks`]: the relay's sans-IO view of the messages (whole chunks; on plain channels
 //!   the sessions created, and the CloseSession it sends).
 //!
@@ -50,9 +51,9 @@ use tokio::task::JoinHandle;
 
 use self::auth::{User, Users};
 use self::nodes::CellManager;
-use self::peers::Peers;
+use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
 use self::space::ids;
-use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaState};
+use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaRefused, OpcuaState};
 use crate::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
 use crate::time::Timestamp;
 
@@ -150,7 +151,12 @@ pub async fn start(
     let users = Users::new(options.users, options.anonymous, options.allow_writes);
     let peers = Arc::new(Peers::default());
     let (server, handle) = builder(&config, &pki, &url, users.clone())
-        .with_node_manager(nodes::builder(Arc::clone(&cell), users, Arc::clone(&peers)))
+        .with_node_manager(nodes::builder(
+            Arc::clone(&cell),
+            users,
+            Arc::clone(&peers),
+            config.max_monitored_items,
+        ))
         .build()
         .map_err(|e| anyhow::anyhow!("the OPC UA server's configuration is refused: {e}"))?;
     let manager = handle
@@ -176,9 +182,14 @@ pub async fn start(
     // Clients wait in the listener's backlog until the server's own port is put back.
     let (open, opened) = tokio::sync::oneshot::channel::<()>();
     let relay_stop = stop.clone();
+    let guard = Guard {
+        activation_timeout: config.activation_timeout,
+        sessions_per_address: config.sessions_per_address,
+        sessions: Arc::new(ServerSessions(handle.clone())),
+    };
     let relay = tokio::spawn(async move {
         if opened.await.is_ok() {
-            peers::relay(listener, inner_addr, peers, relay_stop).await;
+            peers::relay(listener, inner_addr, peers, guard, relay_stop).await;
         }
     });
     let rejected = tokio::spawn(trim_rejected_every(pki.join("rejected"), stop.clone()));
@@ -250,6 +261,10 @@ fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerB
         // async-opcua's default of 20 let 20 anonymous readers lock out everyone else,
         // the operator included (sessions are counted before anyone says who they are).
         .max_sessions(MAX_SESSIONS)
+        // The longest session timeout granted (a client asking for an hour gets this).
+        .max_session_timeout_ms(
+            u64::try_from(config.session_timeout.as_millis()).unwrap_or(u64::MAX),
+        )
         // For the session and subscription counts of /healthz and /metrics.
         .diagnostics_enabled(true)
         .with_authenticator(Arc::new(users));
@@ -290,8 +305,29 @@ fn probe(
                 VariableId::Server_ServerDiagnostics_ServerDiagnosticsSummary_CurrentSubscriptionCount,
             ),
             monitored_items: manager.inner().monitored_items(),
+            refused: OpcuaRefused {
+                sessions_not_activated: peers.refused(Refusal::NotActivated),
+                sessions_abandoned: peers.refused(Refusal::Abandoned),
+                sessions_per_address: peers.refused(Refusal::PerAddress),
+                monitored_items: manager.inner().monitored_items_refused(),
+            },
         }
     })
+}
+
+/// The server's sessions as the relay looks them up: async-opcua's session manager by
+/// authentication token.
+struct ServerSessions(ServerHandle);
+
+impl SessionStates for ServerSessions {
+    fn state(&self, token: &::opcua::types::NodeId) -> SessionState {
+        let session = self.0.session_manager().read().find_by_token(token);
+        match session {
+            None => SessionState::Gone,
+            Some(session) if session.read().is_activated() => SessionState::Activated,
+            Some(_) => SessionState::Waiting,
+        }
+    }
 }
 
 /// The endpoint's id in the server's configuration.
@@ -365,7 +401,7 @@ fn trim_rejected(dir: &Path, keep: usize) -> std::io::Result<usize> {
 }
 
 /// Sessions at once (of every client, anonymous or not).
-pub const MAX_SESSIONS: usize = 100;
+pub const MAX_SESSIONS: usize = crate::config::OPCUA_MAX_SESSIONS;
 
 /// Makes the private key's folder and files readable by this user only (on every start:
 /// a key made by an earlier version, under a umask of 022, was readable by all).
