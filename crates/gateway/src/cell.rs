@@ -69,7 +69,7 @@ pub struct OpcuaState {
     pub sessions: u64,
     /// Subscriptions.
     pub subscriptions: u64,
-    /// Monitored items on the cell's nodes (values and events).
+    /// Monitored items (of every node: the cell's and the server's own).
     pub monitored_items: u64,
     /// What the server refused or closed to protect itself, since it started.
     pub refused: OpcuaRefused,

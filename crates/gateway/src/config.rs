@@ -1739,9 +1739,8 @@ pub const DEFAULT_OPCUA_SESSION_TIMEOUT: Duration = Duration::from_secs(60);
 /// tool on one computer need a few; ten leave room and keep one computer from taking the
 /// server's 100.
 pub const DEFAULT_OPCUA_SESSIONS_PER_ADDRESS: usize = 10;
-/// Monitored items at once by default on the cell's nodes, all sessions together: ten
-/// clients watching 10,000 points each, about 135 MB of the server's memory (1.35 kB an
-/// item).
+/// Monitored items at once by default, all sessions and nodes together: ten clients
+/// watching 10,000 points each, about 135 MB of the server's memory (1.35 kB an item).
 pub const DEFAULT_OPCUA_MAX_MONITORED_ITEMS: u64 = 100_000;
 
 /// The `[opcua]` table: the OPC UA server, its security and its users.
@@ -1773,8 +1772,7 @@ pub struct OpcuaConfig {
     pub session_timeout: Duration,
     /// Sessions at once from one IP address (`sessions_per_address`).
     pub sessions_per_address: usize,
-    /// Monitored items at once on the cell's nodes, all sessions together
-    /// (`max_monitored_items`).
+    /// Monitored items at once, all sessions and nodes together (`max_monitored_items`).
     pub max_monitored_items: u64,
 }
 

@@ -290,7 +290,7 @@ impl Metrics {
         );
         registry.register(
             "opcua_monitored_items",
-            "OPC UA monitored items on the cell's nodes (values and events)",
+            "OPC UA monitored items (every node: the cell's and the server's own)",
             opcua_monitored_items.clone(),
         );
         registry.register(

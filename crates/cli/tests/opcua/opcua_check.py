@@ -31,9 +31,10 @@ than the server's 100 sessions; the server must refuse those beyond its per-addr
 a subscription within 40 s (the sessions, asking for an hour, would otherwise hold every
 slot for the server's session timeout, a minute); the waiting sessions are closed, those
 whose client stays (`not_activated`) and the one whose client leaves (`abandoned`).
-`items`: one client asks for CAP + 20 monitored items on the cell's nodes (the server's
-`max_monitored_items` is CAP): the 20 beyond get Bad_TooManyMonitoredItems, /healthz and
-/metrics count them, the server still answers, and deleting items frees their places.
+`items`: one client asks for CAP + 20 monitored items (the server's `max_monitored_items`
+is CAP), CAP - 50 on a device's Status and 70 on the server's own CurrentTime (namespace
+0): the 20 beyond get Bad_TooManyMonitoredItems, /healthz and /metrics count them, the
+server still answers, and deleting items frees their places.
 
 Prints `ok: ...` lines; any failure raises (exit 1). Every wait is bounded.
 """
@@ -780,13 +781,15 @@ async def items(url, addr, cap):
         sub = await client.create_subscription(500, Values())
         made = []
         refused = []
-        asked = 0
-        while asked < cap + 20:
-            n = min(500, cap + 20 - asked)
-            results = await sub.subscribe_data_change([node] * n, sampling_interval=1000)
-            asked += n
-            for r in results:
-                (made if isinstance(r, int) else refused).append(r)
+        # The cap counts every node's items: the server's own too.
+        current_time = client.get_node(ua.ObjectIds.Server_ServerStatus_CurrentTime)
+        for target, count in [(node, cap - 50), (current_time, 70)]:
+            while count > 0:
+                n = min(500, count)
+                results = await sub.subscribe_data_change([target] * n, sampling_interval=1000)
+                count -= n
+                for r in results:
+                    (made if isinstance(r, int) else refused).append(r)
         assert len(made) == cap, (len(made), cap)
         assert len(refused) == 20, refused[:3]
         assert all(r.value == ua.StatusCodes.BadTooManyMonitoredItems for r in refused), refused[:3]

@@ -11,6 +11,7 @@
 //!   sessions not activated in time and to cap the sessions of one address.
 //! - [`chunks`]: the relay's sans-IO view of the messages (whole chunks; on plain channels
 //!   the sessions created, and the CloseSession it sends).
+//! - [`items`]: every node manager wrapped to cap the server's monitored items.
 //!
 //! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
 //! monitored items are the server's own over those values (no second polling). A point's
@@ -29,6 +30,7 @@
 pub mod auth;
 pub mod chunks;
 pub mod history;
+pub mod items;
 pub mod nodes;
 pub mod peers;
 pub mod space;
@@ -40,6 +42,8 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use ::opcua::crypto::{CertificateStore, SecurityPolicy, X509Data};
+use ::opcua::server::diagnostics::DiagnosticsNodeManagerBuilder;
+use ::opcua::server::node_manager::memory::{CoreNodeManagerBuilder, InMemoryNodeManagerBuilder};
 use ::opcua::server::{ANONYMOUS_USER_TOKEN_ID, ServerBuilder, ServerEndpoint, ServerHandle};
 use ::opcua::types::{
     ApplicationDescription, ApplicationType, BuildInfo, DataValue, DateTime, LocalizedText,
@@ -50,6 +54,7 @@ use tokio::sync::{broadcast, watch};
 use tokio::task::JoinHandle;
 
 use self::auth::{User, Users};
+use self::items::{Capped, ItemCount, capped};
 use self::nodes::CellManager;
 use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
 use self::space::ids;
@@ -150,23 +155,20 @@ pub async fn start(
         .context("the certificate task failed")??;
     let users = Users::new(options.users, options.anonymous, options.allow_writes);
     let peers = Arc::new(Peers::default());
-    let (server, handle) = builder(&config, &pki, &url, users.clone())
-        .with_node_manager(nodes::builder(
-            Arc::clone(&cell),
-            users,
-            Arc::clone(&peers),
-            config.max_monitored_items,
+    let items = Arc::new(ItemCount::new(config.max_monitored_items));
+    let (server, handle) = builder(&config, &pki, &url, users.clone(), &items)
+        .with_node_manager(capped(
+            nodes::builder(Arc::clone(&cell), users, Arc::clone(&peers)),
+            Arc::clone(&items),
         ))
         .build()
         .map_err(|e| anyhow::anyhow!("the OPC UA server's configuration is refused: {e}"))?;
-    let manager = handle
-        .node_managers()
-        .get_of_type::<CellManager>()
-        .context("the OPC UA server has no node manager for the cell")?;
+    let manager =
+        cell_manager(&handle).context("the OPC UA server has no node manager for the cell")?;
     cell.set_opcua(probe(
         url.clone(),
         handle.clone(),
-        Arc::clone(&manager),
+        items,
         Arc::clone(&peers),
     ));
     let ns = manager.inner().namespace();
@@ -238,9 +240,37 @@ pub async fn start(
     Ok(Started { addr, url, task })
 }
 
-fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerBuilder {
+/// The cell's node manager, inside its [`Capped`] wrapper.
+fn cell_manager(handle: &ServerHandle) -> Option<Arc<CellManager>> {
+    handle.node_managers().iter().find_map(|manager| {
+        let capped = Arc::clone(manager)
+            .into_any_arc()
+            .downcast::<Capped>()
+            .ok()?;
+        Arc::clone(capped.inner())
+            .into_any_arc()
+            .downcast::<CellManager>()
+            .ok()
+    })
+}
+
+fn builder(
+    config: &OpcuaConfig,
+    pki: &Path,
+    url: &str,
+    users: Users,
+    items: &Arc<ItemCount>,
+) -> ServerBuilder {
     let anonymous = users.anonymous();
     let mut builder = ServerBuilder::new()
+        // async-opcua's own node managers (namespace 0, diagnostics) again, their
+        // monitored items counted with the cell's.
+        .without_node_managers()
+        .with_node_manager(capped(
+            InMemoryNodeManagerBuilder::new(CoreNodeManagerBuilder),
+            Arc::clone(items),
+        ))
+        .with_node_manager(capped(DiagnosticsNodeManagerBuilder, Arc::clone(items)))
         .application_name(config.application_name.clone())
         .application_uri(config.application_uri.clone())
         .product_uri("urn:cellbus")
@@ -284,12 +314,12 @@ fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerB
 }
 
 /// Reads the server's state for `/healthz` and `/metrics`: sessions and subscriptions
-/// from async-opcua's diagnostics summary, monitored items from the node manager,
-/// connections from the relay.
+/// from async-opcua's diagnostics summary, monitored items from their count, connections
+/// and sessions refused from the relay.
 fn probe(
     endpoint: String,
     handle: ServerHandle,
-    manager: Arc<CellManager>,
+    items: Arc<ItemCount>,
     peers: Arc<Peers>,
 ) -> OpcuaProbe {
     OpcuaProbe::new(move || {
@@ -304,12 +334,12 @@ fn probe(
             subscriptions: count(
                 VariableId::Server_ServerDiagnostics_ServerDiagnosticsSummary_CurrentSubscriptionCount,
             ),
-            monitored_items: manager.inner().monitored_items(),
+            monitored_items: items.current(),
             refused: OpcuaRefused {
                 sessions_not_activated: peers.refused(Refusal::NotActivated),
                 sessions_abandoned: peers.refused(Refusal::Abandoned),
                 sessions_per_address: peers.refused(Refusal::PerAddress),
-                monitored_items: manager.inner().monitored_items_refused(),
+                monitored_items: items.refused(),
             },
         }
     })

@@ -4,7 +4,6 @@
 
 use std::collections::HashMap;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use ::opcua::server::address_space::{
@@ -15,8 +14,7 @@ use ::opcua::server::node_manager::memory::{
     InMemoryNodeManager, InMemoryNodeManagerBuilder, InMemoryNodeManagerImpl,
 };
 use ::opcua::server::node_manager::{
-    HistoryNode, MonitoredItemRef, NodeManagerBuilder, ParsedReadValueId, RequestContext,
-    ServerContext, WriteNode,
+    HistoryNode, NodeManagerBuilder, ParsedReadValueId, RequestContext, ServerContext, WriteNode,
 };
 use ::opcua::server::{ContinuationPoint, CreateMonitoredItem};
 use ::opcua::sync::RwLock;
@@ -47,14 +45,6 @@ pub struct CellNodes {
     ns: u16,
     /// Point variables by node id.
     points: HashMap<NodeId, PointNode>,
-    /// Monitored items on these nodes.
-    monitored: AtomicU64,
-    /// The most monitored items on these nodes at once (`max_monitored_items`).
-    max_monitored: u64,
-    /// Monitored items refused because [`Self::max_monitored`] were there.
-    refused: AtomicU64,
-    /// Refusals are logged at most every 10 s.
-    refusals_logged: std::sync::Mutex<crate::write::LogThrottle>,
 }
 
 /// A point's variable.
@@ -72,14 +62,8 @@ struct PointNode {
 /// and restamp it a period after that one.)
 pub const EVERY_CHANGE_MS: f64 = 1.0;
 
-/// The builder the server takes: registers the namespace and builds the nodes; at most
-/// `max_monitored` monitored items on them at once, all sessions together.
-pub fn builder(
-    cell: Arc<Cell>,
-    users: Users,
-    peers: Arc<Peers>,
-    max_monitored: u64,
-) -> impl NodeManagerBuilder {
+/// The builder the server takes: registers the namespace and builds the nodes.
+pub fn builder(cell: Arc<Cell>, users: Users, peers: Arc<Peers>) -> impl NodeManagerBuilder {
     InMemoryNodeManagerBuilder::new(move |context: ServerContext, space: &mut AddressSpace| {
         let ns = context
             .type_tree
@@ -94,10 +78,6 @@ pub fn builder(
             peers,
             ns,
             points,
-            monitored: AtomicU64::new(0),
-            max_monitored,
-            refused: AtomicU64::new(0),
-            refusals_logged: std::sync::Mutex::default(),
         }
     })
 }
@@ -106,17 +86,6 @@ impl CellNodes {
     /// The namespace index of the cell's nodes.
     pub fn namespace(&self) -> u16 {
         self.ns
-    }
-
-    /// Monitored items (values and events) on the cell's nodes.
-    pub fn monitored_items(&self) -> u64 {
-        self.monitored.load(Ordering::Relaxed)
-    }
-
-    /// Monitored items refused (`Bad_TooManyMonitoredItems`) because the cell's nodes had
-    /// `max_monitored_items` already.
-    pub fn monitored_items_refused(&self) -> u64 {
-        self.refused.load(Ordering::Relaxed)
     }
 }
 
@@ -491,10 +460,6 @@ impl InMemoryNodeManagerImpl for CellNodes {
             .read_values(context, space, &to_read, 0.0, TimestampsToReturn::Both)
             .await;
         for (value, item) in values.into_iter().zip(items.iter_mut()) {
-            if !self.take_slot() {
-                item.set_status(StatusCode::BadTooManyMonitoredItems);
-                continue;
-            }
             if value.status() != StatusCode::BadAttributeIdInvalid {
                 item.set_initial_value(value);
             }
@@ -507,30 +472,6 @@ impl InMemoryNodeManagerImpl for CellNodes {
                 item.revise_sampling_interval(EVERY_CHANGE_MS);
             }
         }
-        self.report_refused(items);
-    }
-
-    async fn create_event_monitored_items(
-        &self,
-        _context: &RequestContext,
-        _space: &RwLock<AddressSpace>,
-        items: &mut [&mut &mut CreateMonitoredItem],
-    ) {
-        for item in items.iter_mut() {
-            if !self.take_slot() {
-                item.set_status(StatusCode::BadTooManyMonitoredItems);
-            }
-        }
-        self.report_refused(items);
-    }
-
-    async fn delete_monitored_items(&self, _context: &RequestContext, items: &[&MonitoredItemRef]) {
-        let gone = items.len() as u64;
-        let _ = self
-            .monitored
-            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| {
-                Some(n.saturating_sub(gone))
-            });
     }
 
     async fn history_read_processed(
@@ -619,40 +560,6 @@ impl CellNodes {
         let point = &self.points.get(node)?.id;
         let spec = self.cell.point(point)?;
         Some((point.clone(), spec.kind.clone()))
-    }
-
-    /// Counts one more monitored item unless there are `max_monitored` already.
-    fn take_slot(&self) -> bool {
-        let taken = take_slot(&self.monitored, self.max_monitored);
-        if !taken {
-            self.refused.fetch_add(1, Ordering::Relaxed);
-        }
-        taken
-    }
-
-    /// Logs the items of one request refused for the cap (at most a line every 10 s, so a
-    /// client asking again and again does not flood the log).
-    fn report_refused(&self, items: &[&mut &mut CreateMonitoredItem]) {
-        let refused = items
-            .iter()
-            .filter(|i| i.status_code() == StatusCode::BadTooManyMonitoredItems)
-            .count();
-        if refused == 0 {
-            return;
-        }
-        let due = self
-            .refusals_logged
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .count(tokio::time::Instant::now());
-        if let Some(requests) = due {
-            tracing::warn!(
-                "OPC UA: refused {refused} monitored item(s): the cell's nodes have {} already \
-                 (max_monitored_items in [opcua]); {requests} request(s) had items refused \
-                 since the last report",
-                self.max_monitored
-            );
-        }
     }
 
     /// What one call of a raw read needs from the history.
@@ -795,15 +702,6 @@ impl CellNodes {
     }
 }
 
-/// Counts one more in `count` unless it holds `max` already; says whether it did.
-fn take_slot(count: &AtomicU64, max: u64) -> bool {
-    count
-        .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| {
-            (n < max).then_some(n + 1)
-        })
-        .is_ok()
-}
-
 /// The status code of a refused or failed write.
 pub fn write_status(error: &WriteError) -> StatusCode {
     match error {
@@ -835,20 +733,4 @@ fn client_text(context: &RequestContext, peers: &Peers) -> String {
         context.session_id,
         session.application_description().application_uri.as_ref()
     )
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn monitored_item_slots_stop_at_the_cap_and_come_back_when_freed() {
-        let count = AtomicU64::new(0);
-        assert!((0..3).all(|_| take_slot(&count, 3)));
-        assert!(!take_slot(&count, 3));
-        assert_eq!(count.load(Ordering::Relaxed), 3);
-        count.fetch_sub(1, Ordering::Relaxed);
-        assert!(take_slot(&count, 3));
-        assert!(!take_slot(&count, 3));
-    }
 }
