@@ -694,8 +694,12 @@ async def eventually(what, check):
 
 
 async def legitimate(url):
-    """Connects anonymously, reads a point and gets a value on a subscription."""
-    async with Client(url, timeout=10) as client:
+    """Connects anonymously (asking for an hour's session timeout, granted the server's
+    session_timeout: 60 s), reads a point and gets a value on a subscription."""
+    client = Client(url, timeout=10)
+    client.session_timeout = 3_600_000
+    async with client:
+        assert client.session_timeout == 60_000, client.session_timeout
         _, tree = await cell_tree(client)
         _, children = next(iter(tree.values()))
         node = children["Status"]

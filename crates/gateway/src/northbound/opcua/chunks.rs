@@ -38,6 +38,8 @@ const LAST_SEQUENCE: u32 = u32::MAX - 1025;
 #[derive(Debug, Default)]
 pub struct Framer {
     buffer: Vec<u8>,
+    /// Where the next chunk starts in `buffer` (the bytes before were handed out).
+    start: usize,
 }
 
 /// A chunk header the relay will not pass.
@@ -51,13 +53,19 @@ pub struct BadChunk {
 impl Framer {
     /// Takes the next bytes of the stream.
     pub fn push(&mut self, bytes: &[u8]) {
+        // The bytes handed out go when they are half the buffer (no move per chunk).
+        if self.start > 0 && self.start * 2 >= self.buffer.len() {
+            self.buffer.drain(..self.start);
+            self.start = 0;
+        }
         self.buffer.extend_from_slice(bytes);
     }
 
     /// The next whole chunk, `Ok(None)` until it is all in, or the header's size when it
     /// is too small or too large (the connection is then broken).
     pub fn next_chunk(&mut self) -> Result<Option<Vec<u8>>, BadChunk> {
-        let Some(size) = self.buffer.get(4..HEADER_LEN) else {
+        let pending = &self.buffer[self.start..];
+        let Some(size) = pending.get(4..HEADER_LEN) else {
             return Ok(None);
         };
         let size = u32::from_le_bytes([size[0], size[1], size[2], size[3]]);
@@ -65,11 +73,12 @@ impl Framer {
         if !(HEADER_LEN..=MAX_CHUNK).contains(&len) {
             return Err(BadChunk { size });
         }
-        if self.buffer.len() < len {
+        let Some(chunk) = pending.get(..len) else {
             return Ok(None);
-        }
-        let rest = self.buffer.split_off(len);
-        Ok(Some(std::mem::replace(&mut self.buffer, rest)))
+        };
+        let chunk = chunk.to_vec();
+        self.start += len;
+        Ok(Some(chunk))
     }
 }
 
@@ -331,6 +340,23 @@ mod tests {
             assert_eq!(chunks.concat(), stream, "{split}");
             assert_eq!(chunks.len(), 2, "{split}");
         }
+    }
+
+    #[test]
+    fn the_framer_gives_many_chunks_pushed_piece_by_piece_in_order() {
+        let chunks: Vec<Vec<u8>> = (0..50_u8)
+            .map(|n| chunk(b"MSGF", &vec![n; usize::from(n)]))
+            .collect();
+        let stream = chunks.concat();
+        let mut framer = Framer::default();
+        let mut got = Vec::new();
+        for piece in stream.chunks(7) {
+            framer.push(piece);
+            while let Some(c) = framer.next_chunk().unwrap() {
+                got.push(c);
+            }
+        }
+        assert_eq!(got, chunks);
     }
 
     #[test]
