@@ -264,12 +264,16 @@ fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
     Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?))
 }
 
+/// Chunks as clients and servers send them, for the tests of the relay.
 #[cfg(test)]
-mod tests {
+pub(crate) mod testing {
     use super::*;
     use ::opcua::types::{ByteString, CreateSessionResponse, StatusCode};
 
-    fn chunk(kind: &[u8; 4], fields: &[u8]) -> Vec<u8> {
+    /// The security policy URI of plain channels.
+    pub(crate) const NONE: &[u8] = POLICY_NONE;
+
+    pub(crate) fn chunk(kind: &[u8; 4], fields: &[u8]) -> Vec<u8> {
         let mut c = kind.to_vec();
         c.extend_from_slice(&((HEADER_LEN + fields.len()) as u32).to_le_bytes());
         c.extend_from_slice(fields);
@@ -287,7 +291,7 @@ mod tests {
         }
     }
 
-    fn open(policy: &[u8], sequence: u32, request: u32) -> Vec<u8> {
+    pub(crate) fn open(policy: &[u8], sequence: u32, request: u32) -> Vec<u8> {
         let mut fields = 0_u32.to_le_bytes().to_vec();
         fields.extend(string(Some(policy)));
         fields.extend(string(None));
@@ -297,7 +301,13 @@ mod tests {
         chunk(b"OPNF", &fields)
     }
 
-    fn plain_msg(kind: &[u8; 4], token: u32, sequence: u32, request: u32, body: &[u8]) -> Vec<u8> {
+    pub(crate) fn plain_msg(
+        kind: &[u8; 4],
+        token: u32,
+        sequence: u32,
+        request: u32,
+        body: &[u8],
+    ) -> Vec<u8> {
         let mut fields = Vec::new();
         for n in [7_u32, token, sequence, request] {
             fields.extend_from_slice(&n.to_le_bytes());
@@ -306,8 +316,8 @@ mod tests {
         chunk(kind, &fields)
     }
 
-    fn create_session_response(status: StatusCode) -> (NodeId, Vec<u8>) {
-        let token = NodeId::new(0, ByteString::from(vec![9_u8; 32]));
+    pub(crate) fn create_session_response(status: StatusCode) -> (NodeId, Vec<u8>) {
+        let token = token();
         let mut header = ResponseHeader::new_good(1);
         header.service_result = status;
         let response = CreateSessionResponse {
@@ -324,6 +334,18 @@ mod tests {
         response.encode(&mut body, &context.context()).unwrap();
         (token, body)
     }
+
+    /// The authentication token [`create_session_response`] carries.
+    pub(crate) fn token() -> NodeId {
+        NodeId::new(0, ByteString::from(vec![9_u8; 32]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::testing::*;
+    use super::*;
+    use ::opcua::types::{ByteString, StatusCode};
 
     #[test]
     fn the_framer_gives_whole_chunks_however_the_bytes_are_split() {

@@ -633,6 +633,149 @@ mod tests {
         }
     }
 
+    /// One end of a relayed connection, read chunk by chunk.
+    struct Side {
+        stream: TcpStream,
+        framer: Framer,
+    }
+
+    impl Side {
+        fn new(stream: TcpStream) -> Self {
+            Self {
+                stream,
+                framer: Framer::default(),
+            }
+        }
+
+        async fn send(&mut self, chunk: &[u8]) {
+            self.stream.write_all(chunk).await.unwrap();
+        }
+
+        /// The next whole chunk, or None once the other side closed (60 s at most).
+        async fn chunk(&mut self) -> Option<Vec<u8>> {
+            let next = async {
+                let mut buffer = [0_u8; 4096];
+                loop {
+                    if let Ok(Some(chunk)) = self.framer.next_chunk() {
+                        return Some(chunk);
+                    }
+                    match self.stream.read(&mut buffer).await {
+                        Ok(0) | Err(_) => return None,
+                        Ok(n) => self.framer.push(&buffer[..n]),
+                    }
+                }
+            };
+            tokio::time::timeout(Duration::from_secs(60), next)
+                .await
+                .expect("the relay answers or closes within 60 s")
+        }
+    }
+
+    /// A relay guarded by `guard` to a scripted server; the client has opened a plain
+    /// channel (id 7, sequence numbers 1 and 2) and created the session `testing::token()`.
+    async fn session_created(guard: Guard) -> (Arc<Peers>, Side, Side, watch::Sender<bool>) {
+        use super::super::chunks::testing::{
+            NONE, chunk, create_session_response, open, plain_msg,
+        };
+        let server = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let peers = Arc::new(Peers::default());
+        let (stop, stopped) = watch::channel(false);
+        let server_addr = server.local_addr().unwrap();
+        tokio::spawn(relay(
+            listener,
+            server_addr,
+            Arc::clone(&peers),
+            guard,
+            stopped,
+        ));
+        let mut client = Side::new(TcpStream::connect(addr).await.unwrap());
+        let mut upstream = Side::new(server.accept().await.unwrap().0);
+        let mut exchange = async |request: Vec<u8>, answer: Vec<u8>| {
+            client.send(&request).await;
+            assert_eq!(upstream.chunk().await.as_deref(), Some(&request[..]));
+            upstream.send(&answer).await;
+            assert_eq!(client.chunk().await.as_deref(), Some(&answer[..]));
+        };
+        exchange(chunk(b"HELF", &[0; 24]), chunk(b"ACKF", &[0; 20])).await;
+        let mut opened = 7_u32.to_le_bytes().to_vec();
+        opened.extend_from_slice(&[0xAA; 40]);
+        exchange(open(NONE, 1, 1), chunk(b"OPNF", &opened)).await;
+        let (_, created) = create_session_response(::opcua::types::StatusCode::Good);
+        exchange(
+            plain_msg(b"MSGF", 1, 2, 2, &[0; 10]),
+            plain_msg(b"MSGF", 1, 1, 2, &created),
+        )
+        .await;
+        (peers, client, upstream, stop)
+    }
+
+    /// Checks that `chunk` is a CloseSession for `testing::token()` with `sequence`.
+    fn is_close_session(chunk: &[u8], sequence: u32) {
+        use ::opcua::types::{BinaryDecodable, CloseSessionRequest, ContextOwned};
+        assert_eq!(&chunk[..4], b"MSGF");
+        assert_eq!(chunk[16..20], sequence.to_le_bytes());
+        let context = ContextOwned::default();
+        let mut body = std::io::Cursor::new(&chunk[24..]);
+        let _kind = NodeId::decode(&mut body, &context.context()).unwrap();
+        let request = CloseSessionRequest::decode(&mut body, &context.context()).unwrap();
+        assert_eq!(
+            request.request_header.authentication_token,
+            super::super::chunks::testing::token()
+        );
+    }
+
+    #[tokio::test]
+    async fn a_session_left_waiting_when_its_client_closes_the_channel_is_closed_on_it() {
+        use super::super::chunks::testing::{plain_msg, token};
+        let (peers, mut client, mut upstream, _stop) =
+            session_created(guard(&[(token(), SessionState::Waiting)])).await;
+        client.send(&plain_msg(b"CLOF", 1, 3, 3, &[0; 4])).await;
+        // Not the CLO: a CloseSession first, next in the client's sequence.
+        let close = upstream.chunk().await.expect("a CloseSession");
+        is_close_session(&close, 4);
+        upstream.send(&plain_msg(b"MSGF", 1, 2, 4, &[0; 8])).await;
+        assert_eq!(upstream.chunk().await, None, "then the channel is closed");
+        assert_eq!(client.chunk().await, None);
+        assert_eq!(peers.refused(Refusal::Abandoned), 1);
+    }
+
+    #[tokio::test]
+    async fn a_session_not_activated_in_time_is_closed_with_its_connection() {
+        use super::super::chunks::testing::{plain_msg, token};
+        let mut quick = guard(&[(token(), SessionState::Waiting)]);
+        quick.activation_timeout = Duration::from_millis(50);
+        let (peers, mut client, mut upstream, _stop) = session_created(quick).await;
+        let close = upstream.chunk().await.expect("a CloseSession");
+        is_close_session(&close, 3);
+        upstream.send(&plain_msg(b"MSGF", 1, 2, 3, &[0; 8])).await;
+        assert_eq!(client.chunk().await, None, "the client is cut off");
+        assert_eq!(upstream.chunk().await, None);
+        assert_eq!(peers.refused(Refusal::NotActivated), 1);
+    }
+
+    #[tokio::test]
+    async fn an_activated_session_is_left_alone_when_its_client_leaves() {
+        use super::super::chunks::testing::token;
+        let mut quick = guard(&[(token(), SessionState::Activated)]);
+        quick.activation_timeout = Duration::from_millis(50);
+        let (peers, client, mut upstream, _stop) = session_created(quick).await;
+        drop(client);
+        assert_eq!(
+            upstream.chunk().await,
+            None,
+            "closed without a CloseSession"
+        );
+        for reason in [
+            Refusal::NotActivated,
+            Refusal::Abandoned,
+            Refusal::PerAddress,
+        ] {
+            assert_eq!(peers.refused(reason), 0);
+        }
+    }
+
     #[test]
     fn an_address_gets_sessions_up_to_its_cap_and_gone_sessions_free_their_places() {
         let token = |n: u32| NodeId::new(0, n);
