@@ -2242,6 +2242,24 @@ mod opcua_tests {
     }
 
     #[test]
+    fn the_examples_opcua_table_uncommented_parses_with_the_defaults_it_shows() {
+        let table: String = EXAMPLE_CONFIG
+            .lines()
+            .skip_while(|l| *l != "# [opcua]")
+            .take_while(|l| !l.starts_with("# [[opcua.user]]"))
+            .map(|l| l.strip_prefix("# ").unwrap_or(l.trim_start_matches('#')))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        assert!(table.contains("max_monitored_items"), "{table}");
+        let config = parse(&table).unwrap().unwrap();
+        let defaults = OpcuaConfig::at("127.0.0.1", 4840);
+        assert_eq!(config.activation_timeout, defaults.activation_timeout);
+        assert_eq!(config.session_timeout, defaults.session_timeout);
+        assert_eq!(config.sessions_per_address, defaults.sessions_per_address);
+        assert_eq!(config.max_monitored_items, defaults.max_monitored_items);
+    }
+
+    #[test]
     fn a_bad_session_or_monitored_item_limit_is_refused_naming_the_key_at_its_place() {
         for (line, column, key) in [
             ("activation_timeout = \"0s\"", 22, "activation_timeout"),
