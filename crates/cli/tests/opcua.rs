@@ -233,3 +233,42 @@ fn anonymous_sessions_are_refused_when_the_config_says_so() {
     let out = run_script(&["anonymous-refused", &served.opcua]);
     assert!(out.contains("anonymous session was refused"), "{out}");
 }
+
+#[test]
+fn never_activated_sessions_beyond_the_servers_limit_are_closed_and_a_legitimate_client_still_gets_in()
+ {
+    require_asyncua();
+    let data = tempfile::tempdir().expect("a temporary directory");
+    // The demo cell on loopback offers security None and anonymous reading: anyone may
+    // create sessions.
+    let served = Served::start(data.path(), &[], None);
+    let out = run_script(&["flood", &served.opcua, &served.http, "120"]);
+    for expected in [
+        "refused beyond the per-address cap",
+        "a legitimate client connected, read and subscribed",
+        "waiting sessions closed and counted",
+    ] {
+        assert!(out.contains(expected), "{expected:?} not in:\n{out}");
+    }
+}
+
+#[test]
+fn monitored_items_beyond_the_cap_are_refused_with_bad_too_many_monitored_items() {
+    require_asyncua();
+    let data = tempfile::tempdir().expect("a temporary directory");
+    let sim = common::Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
+    let config = station_cell(
+        data.path(),
+        &sim.endpoint,
+        "security = [\"None\"]\nanonymous = true\nmax_monitored_items = 300",
+    );
+    let config = config.to_str().expect("a UTF-8 path");
+    let served = Served::start(data.path(), &["--config", config], None);
+    let out = run_script(&["items", &served.opcua, &served.http, "300"]);
+    for expected in [
+        "300 made, 20 refused BadTooManyMonitoredItems",
+        "made room for 10 more",
+    ] {
+        assert!(out.contains(expected), "{expected:?} not in:\n{out}");
+    }
+}

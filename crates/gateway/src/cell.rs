@@ -69,7 +69,22 @@ pub struct OpcuaState {
     pub sessions: u64,
     /// Subscriptions.
     pub subscriptions: u64,
-    /// Monitored items on the cell's nodes (values and events).
+    /// Monitored items (of every node: the cell's and the server's own).
+    pub monitored_items: u64,
+    /// What the server refused or closed to protect itself, since it started.
+    pub refused: OpcuaRefused,
+}
+
+/// Sessions and monitored items the OPC UA server refused or closed since it started.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct OpcuaRefused {
+    /// Sessions closed because they were not activated within `activation_timeout`.
+    pub sessions_not_activated: u64,
+    /// Sessions closed because their client left before activating them.
+    pub sessions_abandoned: u64,
+    /// Sessions refused because their IP address had `sessions_per_address` already.
+    pub sessions_per_address: u64,
+    /// Monitored items refused (`Bad_TooManyMonitoredItems`) at `max_monitored_items`.
     pub monitored_items: u64,
 }
 

@@ -1750,6 +1750,21 @@ enum RawAddress {
 pub const DEFAULT_OPCUA_ENDPOINT: &str = "opc.tcp://127.0.0.1:4840";
 /// The OPC UA application name by default.
 pub const DEFAULT_OPCUA_APPLICATION_NAME: &str = "cellbus";
+/// How long a client has by default to activate the session it created: clients activate
+/// at once (milliseconds later); a session never activated holds one of the server's
+/// session slots for nothing.
+pub const DEFAULT_OPCUA_ACTIVATION_TIMEOUT: Duration = Duration::from_secs(5);
+/// The longest session timeout granted by default: a client that vanishes (cable pulled)
+/// holds its session and its subscriptions this long at most; clients keep a session alive
+/// with their publish requests or reads well within a minute.
+pub const DEFAULT_OPCUA_SESSION_TIMEOUT: Duration = Duration::from_secs(60);
+/// Sessions at once from one IP address by default: a SCADA, an HMI and an engineering
+/// tool on one computer need a few; ten leave room and keep one computer from taking the
+/// server's 100.
+pub const DEFAULT_OPCUA_SESSIONS_PER_ADDRESS: usize = 10;
+/// Monitored items at once by default, all sessions and nodes together: ten clients
+/// watching 10,000 points each, about 135 MB of the server's memory (1.35 kB an item).
+pub const DEFAULT_OPCUA_MAX_MONITORED_ITEMS: u64 = 100_000;
 
 /// The `[opcua]` table: the OPC UA server, its security and its users.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -1772,6 +1787,16 @@ pub struct OpcuaConfig {
     pub trust_all_clients: bool,
     /// Who may log in with a user name and password.
     pub users: Vec<OpcuaUser>,
+    /// How long a client has to activate the session it created before the gateway closes
+    /// it (`activation_timeout`).
+    pub activation_timeout: Duration,
+    /// The longest session timeout granted (`session_timeout`): a session without a
+    /// request for this long is closed.
+    pub session_timeout: Duration,
+    /// Sessions at once from one IP address (`sessions_per_address`).
+    pub sessions_per_address: usize,
+    /// Monitored items at once, all sessions and nodes together (`max_monitored_items`).
+    pub max_monitored_items: u64,
 }
 
 /// One endpoint's security: a policy and a message mode.
@@ -1901,6 +1926,10 @@ impl OpcuaConfig {
             anonymous: None,
             trust_all_clients: false,
             users: Vec::new(),
+            activation_timeout: DEFAULT_OPCUA_ACTIVATION_TIMEOUT,
+            session_timeout: DEFAULT_OPCUA_SESSION_TIMEOUT,
+            sessions_per_address: DEFAULT_OPCUA_SESSIONS_PER_ADDRESS,
+            max_monitored_items: DEFAULT_OPCUA_MAX_MONITORED_ITEMS,
         }
     }
 
@@ -2036,6 +2065,58 @@ fn check_opcua(
             write: user.write.map(Spanned::into_inner).unwrap_or(false),
         });
     }
+    let activation_timeout = match &raw.activation_timeout {
+        Some(text) => duration(
+            text,
+            Duration::from_secs(1),
+            Duration::from_secs(60),
+            "activation_timeout",
+            at,
+        )?,
+        None => DEFAULT_OPCUA_ACTIVATION_TIMEOUT,
+    };
+    let session_timeout = match &raw.session_timeout {
+        Some(text) => duration(
+            text,
+            Duration::from_secs(10),
+            Duration::from_secs(3600),
+            "session_timeout",
+            at,
+        )?,
+        None => DEFAULT_OPCUA_SESSION_TIMEOUT,
+    };
+    let sessions_per_address = match &raw.sessions_per_address {
+        Some(n) => usize::try_from(*n.get_ref())
+            .ok()
+            .filter(|n| (1..=OPCUA_MAX_SESSIONS).contains(n))
+            .ok_or_else(|| {
+                at(
+                    n.span(),
+                    format!(
+                        "sessions_per_address {} is outside 1–{OPCUA_MAX_SESSIONS} (the \
+                         server's sessions at once)",
+                        n.get_ref()
+                    ),
+                )
+            })?,
+        None => DEFAULT_OPCUA_SESSIONS_PER_ADDRESS,
+    };
+    let max_monitored_items = match &raw.max_monitored_items {
+        Some(n) => u64::try_from(*n.get_ref())
+            .ok()
+            .filter(|n| (1..=10_000_000).contains(n))
+            .ok_or_else(|| {
+                at(
+                    n.span(),
+                    format!(
+                        "max_monitored_items {} is outside 1–10000000 (each costs about \
+                         1.35 kB of memory)",
+                        n.get_ref()
+                    ),
+                )
+            })?,
+        None => DEFAULT_OPCUA_MAX_MONITORED_ITEMS,
+    };
     Ok(OpcuaConfig {
         host,
         port,
@@ -2048,8 +2129,15 @@ fn check_opcua(
             .map(Spanned::into_inner)
             .unwrap_or(false),
         users,
+        activation_timeout,
+        session_timeout,
+        sessions_per_address,
+        max_monitored_items,
     })
 }
+
+/// Sessions the OPC UA server holds at once (every client's, activated or not).
+pub const OPCUA_MAX_SESSIONS: usize = 100;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -2060,6 +2148,10 @@ struct RawOpcua {
     security: Option<Spanned<Vec<Spanned<String>>>>,
     anonymous: Option<Spanned<bool>>,
     trust_all_clients: Option<Spanned<bool>>,
+    activation_timeout: Option<Spanned<String>>,
+    session_timeout: Option<Spanned<String>>,
+    sessions_per_address: Option<Spanned<i64>>,
+    max_monitored_items: Option<Spanned<i64>>,
     #[serde(default)]
     user: Vec<RawOpcuaUser>,
 }
@@ -2151,6 +2243,61 @@ mod opcua_tests {
         assert_eq!(e.position(), Some((9, 12)), "{e}");
         let e = parse("[opcua]\nendpont = \"opc.tcp://127.0.0.1:4840\"\n").unwrap_err();
         assert!(e.to_string().contains("endpont"), "{e}");
+    }
+
+    #[test]
+    fn the_session_and_monitored_item_limits_have_safe_defaults_and_are_read() {
+        let config = parse("[opcua]\n").unwrap().unwrap();
+        assert_eq!(config.activation_timeout, Duration::from_secs(5));
+        assert_eq!(config.session_timeout, Duration::from_secs(60));
+        assert_eq!(config.sessions_per_address, 10);
+        assert_eq!(config.max_monitored_items, 100_000);
+        let config = parse(
+            "[opcua]\nactivation_timeout = \"2s\"\nsession_timeout = \"5m\"\n\
+             sessions_per_address = 3\nmax_monitored_items = 20000\n",
+        )
+        .unwrap()
+        .unwrap();
+        assert_eq!(config.activation_timeout, Duration::from_secs(2));
+        assert_eq!(config.session_timeout, Duration::from_secs(300));
+        assert_eq!(config.sessions_per_address, 3);
+        assert_eq!(config.max_monitored_items, 20_000);
+    }
+
+    #[test]
+    fn the_examples_opcua_table_uncommented_parses_with_the_defaults_it_shows() {
+        let table: String = EXAMPLE_CONFIG
+            .lines()
+            .skip_while(|l| *l != "# [opcua]")
+            .take_while(|l| !l.starts_with("# [[opcua.user]]"))
+            .map(|l| l.strip_prefix("# ").unwrap_or(l.trim_start_matches('#')))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        assert!(table.contains("max_monitored_items"), "{table}");
+        let config = parse(&table).unwrap().unwrap();
+        let defaults = OpcuaConfig::at("127.0.0.1", 4840);
+        assert_eq!(config.activation_timeout, defaults.activation_timeout);
+        assert_eq!(config.session_timeout, defaults.session_timeout);
+        assert_eq!(config.sessions_per_address, defaults.sessions_per_address);
+        assert_eq!(config.max_monitored_items, defaults.max_monitored_items);
+    }
+
+    #[test]
+    fn a_bad_session_or_monitored_item_limit_is_refused_naming_the_key_at_its_place() {
+        for (line, column, key) in [
+            ("activation_timeout = \"0s\"", 22, "activation_timeout"),
+            ("activation_timeout = \"soon\"", 22, "activation_timeout"),
+            ("session_timeout = \"2h\"", 19, "session_timeout"),
+            ("sessions_per_address = 0", 24, "sessions_per_address"),
+            ("sessions_per_address = 101", 24, "sessions_per_address"),
+            ("max_monitored_items = -1", 23, "max_monitored_items"),
+            ("max_monitored_items = 10000001", 23, "max_monitored_items"),
+            ("max_monitored_item = 5", 1, "max_monitored_item"),
+        ] {
+            let e = parse(&format!("[opcua]\n{line}\n")).unwrap_err();
+            assert_eq!(e.position(), Some((9, column)), "{line}: {e}");
+            assert!(e.to_string().contains(key), "{line}: {e}");
+        }
     }
 }
 

@@ -72,6 +72,13 @@ pub struct WriteLabels {
     pub result: String,
 }
 
+/// Labels of the OPC UA sessions refused.
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct OpcuaRefusalLabels {
+    /// `not_activated`, `abandoned` or `per_address`.
+    pub reason: &'static str,
+}
+
 type HistogramFamily = Family<LineLabels, Histogram, fn() -> Histogram>;
 
 /// Every metric of the gateway.
@@ -127,6 +134,8 @@ pub struct Metrics {
     opcua_sessions: Gauge,
     opcua_subscriptions: Gauge,
     opcua_monitored_items: Gauge,
+    opcua_sessions_refused: Family<OpcuaRefusalLabels, Counter>,
+    opcua_monitored_items_refused: Counter,
     history_rows: Counter,
     history_commit_errors: Counter,
     history_rows_dropped: Counter,
@@ -213,6 +222,8 @@ impl Metrics {
         let opcua_sessions = Gauge::default();
         let opcua_subscriptions = Gauge::default();
         let opcua_monitored_items = Gauge::default();
+        let opcua_sessions_refused = Family::<OpcuaRefusalLabels, Counter>::default();
+        let opcua_monitored_items_refused = Counter::default();
         registry.register("polls", "Polls of a device's point group", polls.clone());
         registry.register(
             "errors",
@@ -314,8 +325,18 @@ impl Metrics {
         );
         registry.register(
             "opcua_monitored_items",
-            "OPC UA monitored items on the cell's nodes (values and events)",
+            "OPC UA monitored items (every node: the cell's and the server's own)",
             opcua_monitored_items.clone(),
+        );
+        registry.register(
+            "opcua_sessions_refused",
+            "OPC UA sessions the gateway closed or refused, by reason (not_activated: not activated within activation_timeout; abandoned: the client left before activating; per_address: over sessions_per_address)",
+            opcua_sessions_refused.clone(),
+        );
+        registry.register(
+            "opcua_monitored_items_refused",
+            "OPC UA monitored items refused (Bad_TooManyMonitoredItems) at max_monitored_items",
+            opcua_monitored_items_refused.clone(),
         );
         registry.register(
             "sse_clients",
@@ -370,6 +391,8 @@ impl Metrics {
             opcua_sessions,
             opcua_subscriptions,
             opcua_monitored_items,
+            opcua_sessions_refused,
+            opcua_monitored_items_refused,
             history_rows,
             history_commit_errors,
             history_rows_dropped,
@@ -385,6 +408,20 @@ impl Metrics {
         self.opcua_sessions.set(gauge(state.sessions));
         self.opcua_subscriptions.set(gauge(state.subscriptions));
         self.opcua_monitored_items.set(gauge(state.monitored_items));
+        let refused = &state.refused;
+        for (reason, total) in [
+            ("not_activated", refused.sessions_not_activated),
+            ("abandoned", refused.sessions_abandoned),
+            ("per_address", refused.sessions_per_address),
+        ] {
+            catch_up(
+                &self
+                    .opcua_sessions_refused
+                    .get_or_create(&OpcuaRefusalLabels { reason }),
+                total,
+            );
+        }
+        catch_up(&self.opcua_monitored_items_refused, refused.monitored_items);
     }
 
     /// The metrics in Prometheus text format, with the history counters brought up to date.

@@ -4,6 +4,8 @@
     opcua_check.py write OPC_URL HTTP_ADDR DATA_DIR PASSWORD
     opcua_check.py down  OPC_URL DEVICE POINT
     opcua_check.py anonymous-refused OPC_URL
+    opcua_check.py flood OPC_URL HTTP_ADDR COUNT
+    opcua_check.py items OPC_URL HTTP_ADDR CAP
 
 `read`: browses Objects/Cell and compares every device and point with /api/devices
 (data type, description, unit, range, access, enumeration labels); subscribes to the point that changes most
@@ -23,6 +25,16 @@ returnBounds) and Average with /api/history.
 `down`: subscribes anonymously to DEVICE's POINT, prints `subscribed` once it is Good, and
 waits for it to turn Bad (the test stops the device meanwhile), with no value.
 `anonymous-refused`: an anonymous session must be refused.
+`flood`: COUNT clients (security None) each create a session and never activate it, more
+than the server's 100 sessions; the server must refuse those beyond its per-address cap
+(/healthz, /metrics), and a legitimate client must still connect, read and get a value on
+a subscription within 40 s (the sessions, asking for an hour, would otherwise hold every
+slot for the server's session timeout, a minute); the waiting sessions are closed, those
+whose client stays (`not_activated`) and the one whose client leaves (`abandoned`).
+`items`: one client asks for CAP + 20 monitored items (the server's `max_monitored_items`
+is CAP), CAP - 50 on a device's Status and 70 on the server's own CurrentTime (namespace
+0): the 20 beyond get Bad_TooManyMonitoredItems, /healthz and /metrics count them, the
+server still answers, and deleting items frees their places.
 
 Prints `ok: ...` lines; any failure raises (exit 1). Every wait is bounded.
 """
@@ -647,8 +659,167 @@ async def anonymous_refused(url):
     raise AssertionError("an anonymous session was accepted")
 
 
+async def never_activated(url, keep):
+    """A client that creates a session and never activates it (asking for an hour); the
+    client when `keep` and the session was created, else None (socket closed)."""
+    client = Client(url, timeout=5)
+    client.session_timeout = 3_600_000
+    try:
+        await client.connect_socket()
+        await client.send_hello()
+        await client.open_secure_channel()
+        await client.create_session()
+    except Exception:  # refused: the connection was closed, or the server said no
+        client.disconnect_socket()
+        return None
+    if keep:
+        return client
+    client.disconnect_socket()
+    return None
+
+
+def opcua_state(addr):
+    state = http(addr, "/healthz")["opcua"]
+    assert state is not None, "/healthz has no OPC UA part"
+    return state
+
+
+async def eventually(what, check):
+    """Polls `check` (no sleeping to wait: every 0.2 s up to LIMIT) until it is true."""
+    deadline = time.monotonic() + LIMIT
+    while not check():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"not within {LIMIT} s: {what}")
+        await asyncio.sleep(0.2)
+
+
+async def legitimate(url):
+    """Connects anonymously (asking for an hour's session timeout, granted the server's
+    session_timeout: 60 s), reads a point and gets a value on a subscription."""
+    client = Client(url, timeout=10)
+    client.session_timeout = 3_600_000
+    async with client:
+        assert client.session_timeout == 60_000, client.session_timeout
+        _, tree = await cell_tree(client)
+        _, children = next(iter(tree.values()))
+        node = children["Status"]
+        value = await node.read_data_value()
+        assert value.Value is not None, value
+        handler = Values()
+        sub = await client.create_subscription(100, handler)
+        await sub.subscribe_data_change(node)
+        await asyncio.wait_for(handler.first.wait(), LIMIT)
+        await sub.delete()
+
+
+class Values:
+    def __init__(self):
+        self.first = asyncio.Event()
+
+    def datachange_notification(self, node, val, data):
+        self.first.set()
+
+
+async def flood(url, addr, count):
+    count = int(count)
+    started = time.monotonic()
+    kept = []
+    for at in range(0, count, 20):
+        batch = await asyncio.gather(
+            *(never_activated(url, keep=True) for _ in range(min(20, count - at)))
+        )
+        kept.extend(c for c in batch if c is not None)
+    # The sessions refused beyond the cap are closed on their channels as they come.
+    await eventually("at most 10 sessions held", lambda: opcua_state(addr)["sessions"] <= 10)
+    state = opcua_state(addr)
+    refused = state["refused"]
+    assert refused["sessions_per_address"] >= 1, state
+    ok(
+        f"{count} never-activated sessions asked for: {len(kept)} created, "
+        f"{refused['sessions_per_address']} refused beyond the per-address cap, "
+        f"{state['sessions']} held"
+    )
+    # A legitimate client gets in (retrying while the waiting sessions hold its address's
+    # places) well within the minute the sessions would otherwise last.
+    deadline = time.monotonic() + 40
+    tries = 0
+    while True:
+        tries += 1
+        try:
+            await legitimate(url)
+            break
+        except Exception as e:
+            if time.monotonic() > deadline:
+                raise AssertionError(f"a legitimate client was locked out for 40 s: {e!r}")
+            await asyncio.sleep(0.5)
+    ok(
+        f"a legitimate client connected, read and subscribed {time.monotonic() - started:.1f} s "
+        f"after the flood began ({tries} tries)"
+    )
+    await eventually(
+        "the waiting sessions are closed (not_activated)",
+        lambda: opcua_state(addr)["refused"]["sessions_not_activated"] >= 1,
+    )
+    for client in kept:
+        client.disconnect_socket()
+    await never_activated(url, keep=False)
+    await eventually(
+        "a session whose client left unactivated is closed (abandoned)",
+        lambda: opcua_state(addr)["refused"]["sessions_abandoned"] >= 1,
+    )
+    await eventually("every waiting session is gone", lambda: opcua_state(addr)["sessions"] == 0)
+    with urllib.request.urlopen(f"http://{addr}/metrics", timeout=LIMIT) as r:
+        metrics = r.read().decode()
+    for reason in ["per_address", "not_activated", "abandoned"]:
+        assert f'cellbus_opcua_sessions_refused_total{{reason="{reason}"}}' in metrics, reason
+    state = opcua_state(addr)
+    ok(f"waiting sessions closed and counted in /healthz and /metrics: {state['refused']}")
+
+
+async def items(url, addr, cap):
+    cap = int(cap)
+    async with Client(url, timeout=LIMIT) as client:
+        _, tree = await cell_tree(client)
+        _, children = next(iter(tree.values()))
+        node = children["Status"]
+        sub = await client.create_subscription(500, Values())
+        made = []
+        refused = []
+        # The cap counts every node's items: the server's own too.
+        current_time = client.get_node(ua.ObjectIds.Server_ServerStatus_CurrentTime)
+        for target, count in [(node, cap - 50), (current_time, 70)]:
+            while count > 0:
+                n = min(500, count)
+                results = await sub.subscribe_data_change([target] * n, sampling_interval=1000)
+                count -= n
+                for r in results:
+                    (made if isinstance(r, int) else refused).append(r)
+        assert len(made) == cap, (len(made), cap)
+        assert len(refused) == 20, refused[:3]
+        assert all(r.value == ua.StatusCodes.BadTooManyMonitoredItems for r in refused), refused[:3]
+        state = opcua_state(addr)
+        assert state["monitored_items"] == cap, state
+        assert state["refused"]["monitored_items"] == 20, state
+        with urllib.request.urlopen(f"http://{addr}/metrics", timeout=LIMIT) as r:
+            metrics = r.read().decode()
+        assert "cellbus_opcua_monitored_items_refused_total 20" in metrics
+        ok(f"{cap + 20} monitored items asked for: {cap} made, 20 refused BadTooManyMonitoredItems")
+        # The server still answers, and deleted items free their places.
+        await node.read_data_value()
+        await sub.unsubscribe(made[:10])
+        again = await sub.subscribe_data_change([node] * 10, sampling_interval=1000)
+        assert all(isinstance(r, int) for r in again), again
+        ok("the server still answers, and 10 items deleted made room for 10 more")
+
+
 def main():
     mode = sys.argv[1]
+    if mode == "flood":
+        asyncio.run(asyncio.wait_for(flood(*sys.argv[2:5]), SCRIPT_LIMIT))
+        return
+    if mode == "items":
+        asyncio.run(asyncio.wait_for(items(*sys.argv[2:5]), SCRIPT_LIMIT))
+        return
     if mode == "down":
         asyncio.run(asyncio.wait_for(down(*sys.argv[2:5]), 240))
         return

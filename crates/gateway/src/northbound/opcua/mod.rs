@@ -7,7 +7,11 @@
 //! - [`history`]: HistoryRead raw and processed (Average, Minimum, Maximum), sans-IO.
 //! - [`auth`]: anonymous sessions read only; users log in on secure endpoints.
 //! - [`peers`]: the gateway accepts the clients and relays them to the server on
-//!   loopback, to know each secure channel's client address (for the audit log).
+//!   loopback, to know each secure channel's client address (for the audit log), to close
+//!   sessions not activated in time and to cap the sessions of one address.
+//! - [`chunks`]: the relay's sans-IO view of the messages (whole chunks; on plain channels
+//!   the sessions created, and the CloseSession it sends).
+//! - [`items`]: every node manager wrapped to cap the server's monitored items.
 //!
 //! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
 //! monitored items are the server's own over those values (no second polling). A point's
@@ -24,7 +28,9 @@
 //! administrator to move.
 
 pub mod auth;
+pub mod chunks;
 pub mod history;
+pub mod items;
 pub mod nodes;
 pub mod peers;
 pub mod space;
@@ -36,6 +42,8 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use ::opcua::crypto::{CertificateStore, SecurityPolicy, X509Data};
+use ::opcua::server::diagnostics::DiagnosticsNodeManagerBuilder;
+use ::opcua::server::node_manager::memory::{CoreNodeManagerBuilder, InMemoryNodeManagerBuilder};
 use ::opcua::server::{ANONYMOUS_USER_TOKEN_ID, ServerBuilder, ServerEndpoint, ServerHandle};
 use ::opcua::types::{
     ApplicationDescription, ApplicationType, BuildInfo, DataValue, DateTime, LocalizedText,
@@ -46,10 +54,11 @@ use tokio::sync::{broadcast, watch};
 use tokio::task::JoinHandle;
 
 use self::auth::{User, Users};
+use self::items::{Capped, ItemCount, capped};
 use self::nodes::CellManager;
-use self::peers::Peers;
+use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
 use self::space::ids;
-use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaState};
+use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaRefused, OpcuaState};
 use crate::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
 use crate::time::Timestamp;
 
@@ -146,18 +155,20 @@ pub async fn start(
         .context("the certificate task failed")??;
     let users = Users::new(options.users, options.anonymous, options.allow_writes);
     let peers = Arc::new(Peers::default());
-    let (server, handle) = builder(&config, &pki, &url, users.clone())
-        .with_node_manager(nodes::builder(Arc::clone(&cell), users, Arc::clone(&peers)))
+    let items = Arc::new(ItemCount::new(config.max_monitored_items));
+    let (server, handle) = builder(&config, &pki, &url, users.clone(), &items)
+        .with_node_manager(capped(
+            nodes::builder(Arc::clone(&cell), users, Arc::clone(&peers)),
+            Arc::clone(&items),
+        ))
         .build()
         .map_err(|e| anyhow::anyhow!("the OPC UA server's configuration is refused: {e}"))?;
-    let manager = handle
-        .node_managers()
-        .get_of_type::<CellManager>()
-        .context("the OPC UA server has no node manager for the cell")?;
+    let manager =
+        cell_manager(&handle).context("the OPC UA server has no node manager for the cell")?;
     cell.set_opcua(probe(
         url.clone(),
         handle.clone(),
-        Arc::clone(&manager),
+        items,
         Arc::clone(&peers),
     ));
     let ns = manager.inner().namespace();
@@ -173,9 +184,14 @@ pub async fn start(
     // Clients wait in the listener's backlog until the server's own port is put back.
     let (open, opened) = tokio::sync::oneshot::channel::<()>();
     let relay_stop = stop.clone();
+    let guard = Guard {
+        activation_timeout: config.activation_timeout,
+        sessions_per_address: config.sessions_per_address,
+        sessions: Arc::new(ServerSessions(handle.clone())),
+    };
     let relay = tokio::spawn(async move {
         if opened.await.is_ok() {
-            peers::relay(listener, inner_addr, peers, relay_stop).await;
+            peers::relay(listener, inner_addr, peers, guard, relay_stop).await;
         }
     });
     let rejected = tokio::spawn(trim_rejected_every(pki.join("rejected"), stop.clone()));
@@ -224,9 +240,37 @@ pub async fn start(
     Ok(Started { addr, url, task })
 }
 
-fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerBuilder {
+/// The cell's node manager, inside its [`Capped`] wrapper.
+fn cell_manager(handle: &ServerHandle) -> Option<Arc<CellManager>> {
+    handle.node_managers().iter().find_map(|manager| {
+        let capped = Arc::clone(manager)
+            .into_any_arc()
+            .downcast::<Capped>()
+            .ok()?;
+        Arc::clone(capped.inner())
+            .into_any_arc()
+            .downcast::<CellManager>()
+            .ok()
+    })
+}
+
+fn builder(
+    config: &OpcuaConfig,
+    pki: &Path,
+    url: &str,
+    users: Users,
+    items: &Arc<ItemCount>,
+) -> ServerBuilder {
     let anonymous = users.anonymous();
     let mut builder = ServerBuilder::new()
+        // async-opcua's own node managers (namespace 0, diagnostics) again, their
+        // monitored items counted with the cell's.
+        .without_node_managers()
+        .with_node_manager(capped(
+            InMemoryNodeManagerBuilder::new(CoreNodeManagerBuilder),
+            Arc::clone(items),
+        ))
+        .with_node_manager(capped(DiagnosticsNodeManagerBuilder, Arc::clone(items)))
         .application_name(config.application_name.clone())
         .application_uri(config.application_uri.clone())
         .product_uri("urn:cellbus")
@@ -247,6 +291,10 @@ fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerB
         // async-opcua's default of 20 let 20 anonymous readers lock out everyone else,
         // the operator included (sessions are counted before anyone says who they are).
         .max_sessions(MAX_SESSIONS)
+        // The longest session timeout granted (a client asking for an hour gets this).
+        .max_session_timeout_ms(
+            u64::try_from(config.session_timeout.as_millis()).unwrap_or(u64::MAX),
+        )
         // For the session and subscription counts of /healthz and /metrics.
         .diagnostics_enabled(true)
         .with_authenticator(Arc::new(users));
@@ -266,12 +314,12 @@ fn builder(config: &OpcuaConfig, pki: &Path, url: &str, users: Users) -> ServerB
 }
 
 /// Reads the server's state for `/healthz` and `/metrics`: sessions and subscriptions
-/// from async-opcua's diagnostics summary, monitored items from the node manager,
-/// connections from the relay.
+/// from async-opcua's diagnostics summary, monitored items from their count, connections
+/// and sessions refused from the relay.
 fn probe(
     endpoint: String,
     handle: ServerHandle,
-    manager: Arc<CellManager>,
+    items: Arc<ItemCount>,
     peers: Arc<Peers>,
 ) -> OpcuaProbe {
     OpcuaProbe::new(move || {
@@ -286,9 +334,30 @@ fn probe(
             subscriptions: count(
                 VariableId::Server_ServerDiagnostics_ServerDiagnosticsSummary_CurrentSubscriptionCount,
             ),
-            monitored_items: manager.inner().monitored_items(),
+            monitored_items: items.current(),
+            refused: OpcuaRefused {
+                sessions_not_activated: peers.refused(Refusal::NotActivated),
+                sessions_abandoned: peers.refused(Refusal::Abandoned),
+                sessions_per_address: peers.refused(Refusal::PerAddress),
+                monitored_items: items.refused(),
+            },
         }
     })
+}
+
+/// The server's sessions as the relay looks them up: async-opcua's session manager by
+/// authentication token.
+struct ServerSessions(ServerHandle);
+
+impl SessionStates for ServerSessions {
+    fn state(&self, token: &::opcua::types::NodeId) -> SessionState {
+        let session = self.0.session_manager().read().find_by_token(token);
+        match session {
+            None => SessionState::Gone,
+            Some(session) if session.read().is_activated() => SessionState::Activated,
+            Some(_) => SessionState::Waiting,
+        }
+    }
 }
 
 /// The endpoint's id in the server's configuration.
@@ -362,7 +431,7 @@ fn trim_rejected(dir: &Path, keep: usize) -> std::io::Result<usize> {
 }
 
 /// Sessions at once (of every client, anonymous or not).
-pub const MAX_SESSIONS: usize = 100;
+pub const MAX_SESSIONS: usize = crate::config::OPCUA_MAX_SESSIONS;
 
 /// Makes the private key's folder and files readable by this user only (on every start:
 /// a key made by an earlier version, under a umask of 022, was readable by all).

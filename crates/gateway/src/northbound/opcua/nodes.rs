@@ -4,7 +4,6 @@
 
 use std::collections::HashMap;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use ::opcua::server::address_space::{
@@ -15,8 +14,7 @@ use ::opcua::server::node_manager::memory::{
     InMemoryNodeManager, InMemoryNodeManagerBuilder, InMemoryNodeManagerImpl,
 };
 use ::opcua::server::node_manager::{
-    HistoryNode, MonitoredItemRef, NodeManagerBuilder, ParsedReadValueId, RequestContext,
-    ServerContext, WriteNode,
+    HistoryNode, NodeManagerBuilder, ParsedReadValueId, RequestContext, ServerContext, WriteNode,
 };
 use ::opcua::server::{ContinuationPoint, CreateMonitoredItem};
 use ::opcua::sync::RwLock;
@@ -47,8 +45,6 @@ pub struct CellNodes {
     ns: u16,
     /// Point variables by node id.
     points: HashMap<NodeId, PointNode>,
-    /// Monitored items on these nodes.
-    monitored: AtomicU64,
 }
 
 /// A point's variable.
@@ -82,7 +78,6 @@ pub fn builder(cell: Arc<Cell>, users: Users, peers: Arc<Peers>) -> impl NodeMan
             peers,
             ns,
             points,
-            monitored: AtomicU64::new(0),
         }
     })
 }
@@ -91,11 +86,6 @@ impl CellNodes {
     /// The namespace index of the cell's nodes.
     pub fn namespace(&self) -> u16 {
         self.ns
-    }
-
-    /// Monitored items (values and events) on the cell's nodes.
-    pub fn monitored_items(&self) -> u64 {
-        self.monitored.load(Ordering::Relaxed)
     }
 }
 
@@ -482,25 +472,6 @@ impl InMemoryNodeManagerImpl for CellNodes {
                 item.revise_sampling_interval(EVERY_CHANGE_MS);
             }
         }
-        self.count_created(items);
-    }
-
-    async fn create_event_monitored_items(
-        &self,
-        _context: &RequestContext,
-        _space: &RwLock<AddressSpace>,
-        items: &mut [&mut &mut CreateMonitoredItem],
-    ) {
-        self.count_created(items);
-    }
-
-    async fn delete_monitored_items(&self, _context: &RequestContext, items: &[&MonitoredItemRef]) {
-        let gone = items.len() as u64;
-        let _ = self
-            .monitored
-            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| {
-                Some(n.saturating_sub(gone))
-            });
     }
 
     async fn history_read_processed(
@@ -589,11 +560,6 @@ impl CellNodes {
         let point = &self.points.get(node)?.id;
         let spec = self.cell.point(point)?;
         Some((point.clone(), spec.kind.clone()))
-    }
-
-    fn count_created(&self, items: &[&mut &mut CreateMonitoredItem]) {
-        let made = items.iter().filter(|i| i.status_code().is_good()).count();
-        self.monitored.fetch_add(made as u64, Ordering::Relaxed);
     }
 
     /// What one call of a raw read needs from the history.
