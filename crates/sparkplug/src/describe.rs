@@ -261,7 +261,7 @@ impl Describer {
                 .retain(|o, _| o.group != owner.group || o.edge_node != owner.edge_node);
         }
         self.births
-            .insert(owner.clone(), Table::of_birth(metrics, |_, _| ()));
+            .insert(owner.clone(), Table::of_birth(metrics, |_, _, _| Some(())));
     }
 }
 
@@ -271,7 +271,7 @@ fn describe_metric(m: &Metric, known: Option<&Table<()>>) -> MetricDescription {
     let name = m
         .name
         .clone()
-        .or_else(|| from_birth.map(|k| k.name.clone()));
+        .or_else(|| from_birth.map(|k| k.name.to_string()));
     let datatype = m.datatype.or_else(|| from_birth.and_then(|k| k.datatype));
     MetricDescription {
         name,

@@ -36,8 +36,8 @@ pub use host::{
     Sharing, Stats, Subscription,
 };
 pub use metric::{
-    DataType, MetricName, MetricSpec, MetricValue, Quality, Reading, Sample, Timestamp, ValueError,
-    Writable, WriteRange,
+    DataType, MetricName, MetricSpec, MetricValue, NameError, Quality, Reading, Sample, Timestamp,
+    ValueError, Writable, WriteRange,
 };
 pub use node::{BdSeq, Command, CommandError, Delivery, EdgeNode, NodeError, Publish, Qos};
 pub use state::HostState;
