@@ -956,7 +956,8 @@ impl Host {
         out: &mut Received,
     ) {
         let key = (msg.group.clone(), msg.node.clone());
-        let tracked = self.nodes.contains_key(&key) || self.room_for_a_node();
+        // Only a birth makes room by forgetting an unborn node; data does not.
+        let tracked = self.nodes.contains_key(&key) || self.nodes.len() < self.limits.max_nodes;
         let message_type = || match &msg.device {
             Some(_) => format!("D{}", suffix(kind)),
             None => format!("N{}", suffix(kind)),
