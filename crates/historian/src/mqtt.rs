@@ -292,6 +292,9 @@ impl Pump {
         // SUBSCRIBEs in the order queued, then by packet id once sent.
         let mut queued: VecDeque<Sent> = VecDeque::new();
         let mut sent: HashMap<u16, Sent> = HashMap::new();
+        // Until its own STATE subscription is acknowledged, a STATE can only come from the
+        // persistent session's earlier one: queued while the historian was away.
+        let mut state_subscribed = false;
         loop {
             match eventloop.poll().await {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
@@ -358,7 +361,9 @@ impl Pump {
                             "historian: the broker refused the subscription to {}",
                             filter.map_or("?", |f| f.path.as_str())
                         );
-                    } else if subscribe.data {
+                    } else if !subscribe.data {
+                        state_subscribed = true;
+                    } else {
                         self.health.set_broker(None);
                         self.metrics.mqtt_connected.set(1);
                         tracing::info!(
@@ -370,7 +375,7 @@ impl Pump {
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
                     if p.topic == self.state_topic {
-                        if let Err(e) = self.on_own_state(&p.payload) {
+                        if let Err(e) = self.on_own_state(&p.payload, state_subscribed) {
                             return e;
                         }
                     } else if let Err(e) = self.on_message(&p.topic, &p.payload).await {
@@ -400,9 +405,21 @@ impl Pump {
     }
 
     /// A STATE on the historian's own topic: anything but online is answered with online,
-    /// unless the historian is going offline itself.
-    fn on_own_state(&self, payload: &[u8]) -> Result<(), String> {
+    /// unless the historian is going offline itself, or it is an offline older than this
+    /// connection queued for the session (its own Will after a `kill -9`: the online this
+    /// connection published since is the retained STATE already).
+    fn on_own_state(&self, payload: &[u8], subscribed: bool) -> Result<(), String> {
         if self.leaving.load(Ordering::SeqCst) {
+            return Ok(());
+        }
+        if !subscribed
+            && let Ok(state) = sparkplug::HostState::from_json(payload)
+            && state.timestamp < self.online_at.as_millis()
+        {
+            tracing::debug!(
+                "historian: an earlier session's STATE {} queued while away, ignored",
+                String::from_utf8_lossy(payload)
+            );
             return Ok(());
         }
         let Some(online) = lock(&self.host).reassert_online(payload, self.online_at, now_ms())
