@@ -39,7 +39,6 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
 use gateway::write::LogThrottle;
-
 use rumqttc::{
     AsyncClient, Event, EventLoop, LastWill, MqttOptions, Outgoing, Packet, QoS, SubscribeFilter,
     SubscribeReasonCode, Transport,
@@ -375,9 +374,7 @@ impl Pump {
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
                     if p.topic == self.state_topic {
-                        if let Err(e) = self.on_own_state(&p.payload, state_subscribed) {
-                            return e;
-                        }
+                        self.on_own_state(&p.payload, state_subscribed);
                     } else if let Err(e) = self.on_message(&p.topic, &p.payload).await {
                         return e;
                     }
@@ -408,29 +405,33 @@ impl Pump {
     /// unless the historian is going offline itself, or it is an offline older than this
     /// connection queued for the session (its own Will after a `kill -9`: the online this
     /// connection published since is the retained STATE already).
-    fn on_own_state(&self, payload: &[u8], subscribed: bool) -> Result<(), String> {
+    fn on_own_state(&self, payload: &[u8], subscribed: bool) {
         if self.leaving.load(Ordering::SeqCst) {
-            return Ok(());
+            return;
         }
         if !subscribed
             && let Ok(state) = sparkplug::HostState::from_json(payload)
             && state.timestamp < self.online_at.as_millis()
         {
             tracing::debug!(
-                "historian: an earlier session's STATE {} queued while away, ignored",
+                "historian: an earlier session's STATE {:?} queued while away, ignored",
                 String::from_utf8_lossy(payload)
             );
-            return Ok(());
+            return;
         }
         let Some(online) = lock(&self.host).reassert_online(payload, self.online_at, now_ms())
         else {
-            return Ok(());
+            return;
         };
         let topic = online.topic.to_string();
         if let Ok(state) = sparkplug::HostState::from_json(&online.payload) {
             self.announced.fetch_max(state.timestamp, Ordering::SeqCst);
         }
-        self.publish(online)?;
+        if let Err(e) = self.publish(online) {
+            // The next such STATE is answered again.
+            tracing::warn!("historian: {e}");
+            return;
+        }
         self.metrics.state_reasserted.inc();
         let due = lock_throttles(&self.throttles)
             .state_reasserted
@@ -438,12 +439,11 @@ impl Pump {
         if let Some(count) = due {
             tracing::warn!(
                 "historian: {count} STATE message(s) on {topic} that did not say online while \
-                 the historian is (the latest: {}); online announced again. Another client \
+                 the historian is (the latest: {:?}); online announced again. Another client \
                  publishes on the historian's STATE topic: restrict it in the broker's ACL",
                 String::from_utf8_lossy(&payload[..payload.len().min(200)])
             );
         }
-        Ok(())
     }
 
     async fn on_message(&self, topic: &str, payload: &[u8]) -> Result<(), String> {

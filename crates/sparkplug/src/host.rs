@@ -75,10 +75,9 @@ use std::sync::Arc;
 
 use crate::births::Table;
 use crate::event::{self, EVENT};
-use crate::metric::NameError;
 use crate::metric::{
-    DOCUMENTATION, DataType, ENG_UNIT, MetricName, MetricValue, Quality, Timestamp, ValueError,
-    WRITABLE, WRITE_MAX, WRITE_MIN, Writable, WriteRange, read,
+    DOCUMENTATION, DataType, ENG_UNIT, MetricName, MetricValue, NameError, Quality, Timestamp,
+    ValueError, WRITABLE, WRITE_MAX, WRITE_MIN, Writable, WriteRange, read,
 };
 use crate::node::{BD_SEQ, HOST_OFFLINE, Publish, Qos, rebirth_request};
 use crate::proto::{Metric, Payload, metric};
@@ -465,7 +464,8 @@ pub struct Stats {
     /// Birth metrics left out for their name (too long, or a control or bidirectional
     /// formatting character).
     pub names_refused: u64,
-    /// Edge nodes forgotten after [`DEAD_NODE_GRACE_MS`] dead or unborn.
+    /// Edge nodes forgotten: dead or unborn for [`DEAD_NODE_GRACE_MS`], or unborn the
+    /// longest when a new node's NBIRTH needed the room ([`Limits::max_nodes`]).
     pub nodes_freed: u64,
     /// Problems returned.
     pub problems: u64,
@@ -829,7 +829,7 @@ impl Host {
         match &msg.device {
             None => {
                 if let Some(old) = state.birth.take() {
-                    self.points -= old.points;
+                    self.points = self.points.saturating_sub(old.points);
                     state.unborn_since = msg.now;
                 }
             }
@@ -837,8 +837,8 @@ impl Host {
                 if let Some(birth) = &mut state.birth
                     && let Some(old) = birth.devices.remove(device)
                 {
-                    birth.points -= old.points;
-                    self.points -= old.points;
+                    birth.points = birth.points.saturating_sub(old.points);
+                    self.points = self.points.saturating_sub(old.points);
                 }
             }
         }
@@ -856,7 +856,7 @@ impl Host {
             .map_or(0, |birth| birth.points);
         let cap = if metrics > self.limits.max_node_points {
             Some(Cap::NodePoints)
-        } else if self.points - old + metrics > self.limits.max_points {
+        } else if self.points.saturating_sub(old) + metrics > self.limits.max_points {
             Some(Cap::Points)
         } else if !self.nodes.contains_key(&key) && !self.room_for_a_node() {
             Some(Cap::Nodes)
@@ -888,7 +888,7 @@ impl Host {
             points: metrics,
         };
         if let Some(old) = state.birth.replace(birth) {
-            self.points -= old.points;
+            self.points = self.points.saturating_sub(old.points);
         }
         self.points += metrics;
         state.rebirth_asked = None;
@@ -934,7 +934,7 @@ impl Host {
             return;
         };
         state.unborn_since = msg.now;
-        self.points -= birth.points;
+        self.points = self.points.saturating_sub(birth.points);
         // The node stores what it reads while its host is away: not a failure.
         let quality = if host_offline {
             Quality::Stale
@@ -1002,13 +1002,14 @@ impl Host {
             (MessageKind::Birth, Some(device)) => {
                 let metrics = payload.metrics.len();
                 let old = birth.devices.get(device).map_or(0, |d| d.points);
-                let cap = if birth.points - old + metrics > self.limits.max_node_points {
-                    Some(Cap::NodePoints)
-                } else if self.points - old + metrics > self.limits.max_points {
-                    Some(Cap::Points)
-                } else {
-                    None
-                };
+                let cap =
+                    if birth.points.saturating_sub(old) + metrics > self.limits.max_node_points {
+                        Some(Cap::NodePoints)
+                    } else if self.points.saturating_sub(old) + metrics > self.limits.max_points {
+                        Some(Cap::Points)
+                    } else {
+                        None
+                    };
                 if let Some(cap) = cap {
                     return self.refuse_birth(msg, metrics, cap, out);
                 }
@@ -1018,16 +1019,16 @@ impl Host {
                     points: metrics,
                 };
                 if let Some(old) = birth.devices.insert(device.clone(), known) {
-                    birth.points -= old.points;
-                    self.points -= old.points;
+                    birth.points = birth.points.saturating_sub(old.points);
+                    self.points = self.points.saturating_sub(old.points);
                 }
                 birth.points += metrics;
                 self.points += metrics;
             }
             (MessageKind::Death, Some(device)) => {
                 if let Some(old) = birth.devices.remove(device) {
-                    birth.points -= old.points;
-                    self.points -= old.points;
+                    birth.points = birth.points.saturating_sub(old.points);
+                    self.points = self.points.saturating_sub(old.points);
                     mark(&old.table, msg.t, Quality::Bad, out);
                 }
             }
