@@ -11,14 +11,12 @@ use std::sync::Arc;
 
 use crate::proto::Metric;
 
-/// One metric of a birth: its name, its datatype code as the birth gave it, and what the
-/// reader keeps beside it.
+/// One metric of a birth: its name and what the reader keeps beside it (the datatype, as
+/// the reader needs it).
 #[derive(Debug, Clone)]
 pub(crate) struct Known<T> {
     /// The name.
     pub(crate) name: Arc<str>,
-    /// The datatype code, if the birth gave one.
-    pub(crate) datatype: Option<u32>,
     /// The reader's own data about the metric.
     pub(crate) extra: T,
 }
@@ -72,11 +70,7 @@ impl<T> Table<T> {
             };
             let at = table.metrics.len();
             table.by_name.insert(Arc::clone(&name), at);
-            table.metrics.push(Known {
-                name,
-                datatype: m.datatype,
-                extra,
-            });
+            table.metrics.push(Known { name, extra });
             if let Some(alias) = m.alias
                 && !ambiguous.contains(&alias)
                 && table.by_alias.insert(alias, at).is_some()

@@ -159,17 +159,43 @@ pub struct Subscription {
     pub qos: Qos,
 }
 
-/// Which point: a metric of a node (`device: None`) or of one of its devices.
+/// Whose points: an edge node's own (`device: None`) or one of its devices'. One per
+/// birth, shared by all its points.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct PointKey {
+pub struct PointOwner {
     /// The group id.
     pub group: Id,
     /// The edge node id.
     pub node: Id,
     /// The device id, `None` for the node's own metrics.
     pub device: Option<Id>,
+}
+
+/// Which point: a metric of a node or of one of its devices. Small (a shared owner and
+/// a shared name), as the host keeps one per metric born.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PointKey {
+    /// The node or device it belongs to.
+    pub owner: Arc<PointOwner>,
     /// The metric's name.
     pub name: MetricName,
+}
+
+impl PointKey {
+    /// The group id.
+    pub fn group(&self) -> &Id {
+        &self.owner.group
+    }
+
+    /// The edge node id.
+    pub fn node(&self) -> &Id {
+        &self.owner.node
+    }
+
+    /// The device id, `None` for the node's own metrics.
+    pub fn device(&self) -> Option<&Id> {
+        self.owner.device.as_ref()
+    }
 }
 
 /// A point as a birth describes it.
@@ -1096,6 +1122,11 @@ fn birth_table(
             out.problem(msg.topic, Problem::UnnamedBirthMetric { index });
         }
     }
+    let owner = Arc::new(PointOwner {
+        group: msg.group.clone(),
+        node: msg.node.clone(),
+        device: msg.device.clone(),
+    });
     let table = Table::of_birth(metrics, |index, shared, m| {
         let metric_name = match MetricName::shared(shared) {
             Ok(name) => name,
@@ -1125,9 +1156,7 @@ fn birth_table(
             return Some(Role::Ignored);
         };
         let point = Arc::new(PointKey {
-            group: msg.group.clone(),
-            node: msg.node.clone(),
-            device: msg.device.clone(),
+            owner: Arc::clone(&owner),
             name: metric_name,
         });
         out.points.push(point_info(&point, datatype, m));
@@ -1396,9 +1425,11 @@ mod tests {
 
     fn key(device: Option<&str>, point: &str) -> PointKey {
         PointKey {
-            group: id("cell"),
-            node: id("gw1"),
-            device: device.map(id),
+            owner: Arc::new(PointOwner {
+                group: id("cell"),
+                node: id("gw1"),
+                device: device.map(id),
+            }),
             name: name(point),
         }
     }
@@ -1497,7 +1528,14 @@ mod tests {
         let samples: Vec<_> = got
             .samples
             .iter()
-            .map(|s| (s.point.device.clone(), s.t, s.value.clone(), s.historical))
+            .map(|s| {
+                (
+                    s.point.device().cloned(),
+                    s.t,
+                    s.value.clone(),
+                    s.historical,
+                )
+            })
             .collect();
         assert_eq!(
             samples,
@@ -1843,7 +1881,7 @@ mod tests {
         assert!(
             got.samples
                 .iter()
-                .all(|s| s.point.device == Some(id("jbc2"))
+                .all(|s| s.point.device() == Some(&id("jbc2"))
                     && s.t == at(500)
                     && s.quality == Quality::Bad)
         );

@@ -32,8 +32,8 @@ pub mod topic;
 pub use describe::{Describer, Description};
 pub use event::NodeEvent;
 pub use host::{
-    Host, HostEvent, HostProblem, HostSample, PointInfo, PointKey, Problem, Received, SampleValue,
-    Sharing, Stats, Subscription,
+    Host, HostEvent, HostProblem, HostSample, PointInfo, PointKey, PointOwner, Problem, Received,
+    SampleValue, Sharing, Stats, Subscription,
 };
 pub use metric::{
     DataType, MetricName, MetricSpec, MetricValue, NameError, Quality, Reading, Sample, Timestamp,
