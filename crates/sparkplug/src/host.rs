@@ -2420,6 +2420,86 @@ mod tests {
         }
     }
 
+    /// One step of a random plant: what an edge node (of three) publishes.
+    #[derive(Debug, Clone)]
+    enum Step {
+        /// A new session and its NBIRTH of this many metrics of its own.
+        NodeBirth(usize, usize),
+        /// A DBIRTH of device 0–2 with this many metrics.
+        DeviceBirth(usize, usize, usize),
+        /// A DDEATH of device 0–2.
+        DeviceDeath(usize, usize),
+        /// The session's Will.
+        NodeDeath(usize),
+        /// The NDEATH of a node whose primary host went offline.
+        HostOffline(usize),
+    }
+
+    fn step() -> impl proptest::strategy::Strategy<Value = Step> {
+        use proptest::prelude::*;
+        prop_oneof![
+            (0..3usize, 0..8usize).prop_map(|(n, k)| Step::NodeBirth(n, k)),
+            (0..3usize, 0..3usize, 0..8usize).prop_map(|(n, d, k)| Step::DeviceBirth(n, d, k)),
+            (0..3usize, 0..3usize).prop_map(|(n, d)| Step::DeviceDeath(n, d)),
+            (0..3usize).prop_map(Step::NodeDeath),
+            (0..3usize).prop_map(Step::HostOffline),
+        ]
+    }
+
+    fn metrics(k: usize) -> Vec<(MetricSpec, Sample)> {
+        (0..k)
+            .map(|i| {
+                (
+                    MetricSpec::new(name(&format!("m{i}")), DataType::Int64),
+                    Sample::good(MetricValue::Int64(i as i64), T0),
+                )
+            })
+            .collect()
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_births_and_deaths_keep_within_the_limits_and_give_every_point_back(
+            steps in proptest::collection::vec(step(), 0..60),
+        ) {
+            let limits = Limits { max_nodes: 2, max_node_points: 12, max_points: 20 };
+            let mut host = limited(limits);
+            let mut nodes: Vec<EdgeNode> = (0..3)
+                .map(|n| EdgeNode::new(id("cell"), id(&format!("gw{n}")), BdSeq::new(0)))
+                .collect();
+            let mut wills: Vec<Option<Publish>> = vec![None, None, None];
+            for (i, step) in steps.into_iter().enumerate() {
+                let t = at(i as u64 * 1_000);
+                let published = match step {
+                    Step::NodeBirth(n, k) => {
+                        wills[n] = Some(nodes[n].will());
+                        nodes[n].on_connect();
+                        nodes[n].node_birth(&metrics(k), t).ok()
+                    }
+                    Step::DeviceBirth(n, d, k) => nodes[n]
+                        .device_birth(&id(&format!("d{d}")), &metrics(k), t)
+                        .ok(),
+                    Step::DeviceDeath(n, d) => {
+                        nodes[n].device_death(&id(&format!("d{d}")), t).ok()
+                    }
+                    Step::NodeDeath(n) => wills[n].clone(),
+                    Step::HostOffline(n) => nodes[n].host_offline_death(t),
+                };
+                if let Some(p) = published {
+                    feed(&mut host, &p, t);
+                }
+                proptest::prop_assert!(host.points_held() <= limits.max_points);
+                proptest::prop_assert!(host.nodes_known() <= limits.max_nodes);
+            }
+            // Every session's Will: nothing is held any more.
+            for will in wills.into_iter().flatten() {
+                feed(&mut host, &will, at(100_000));
+            }
+            proptest::prop_assert_eq!(host.nodes_born(), 0);
+            proptest::prop_assert_eq!(host.points_held(), 0);
+        }
+    }
+
     proptest::proptest! {
         #[test]
         fn any_bytes_on_any_topic_never_panic(
