@@ -795,9 +795,8 @@ async fn a_forged_retained_state_offline_is_answered_and_births_past_max_points_
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
     let (_, metrics) = http_get(&historian.addr, "/metrics");
-    assert_eq!(
-        counter(&metrics, "cellbus_historian_births_refused_total"),
-        1.0,
+    assert!(
+        counter(&metrics, "cellbus_historian_births_refused_total") >= 1.0,
         "{metrics}"
     );
     historian.wait_healthy("after the rogue client");
