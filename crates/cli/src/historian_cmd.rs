@@ -70,6 +70,24 @@ pub struct HistorianArgs {
     /// take a longer backlog.
     #[arg(long, value_name = "DURATION", default_value = "31days", value_parser = parse_max_age)]
     max_age: std::time::Duration,
+    /// Most gateways (Sparkplug edge nodes) followed at once. A birth from one more is
+    /// refused, logged and counted (cellbus_historian_births_refused_total) until a
+    /// gateway that died 10 minutes ago or more is forgotten. Raise it for a larger plant.
+    #[arg(long, value_name = "N", default_value_t = 1_000,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    max_nodes: usize,
+    /// Most points of all gateways together (every metric of their current births). A
+    /// birth past it is refused whole: that gateway or device is not recorded, and it is
+    /// asked to send its birth again only every 5 minutes. Each point costs the historian
+    /// a few hundred bytes of memory.
+    #[arg(long, value_name = "N", default_value_t = 250_000,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    max_points: usize,
+    /// Most points of one gateway (its own metrics and all its devices'). A birth past it
+    /// is refused whole, as for --max-points. A large plant gateway has up to 100,000.
+    #[arg(long, value_name = "N", default_value_t = 100_000,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    max_node_points: usize,
 }
 
 /// `--max-age`: a duration longer than 0 (0 would refuse every sample, live ones too).
@@ -103,7 +121,13 @@ pub async fn run(args: HistorianArgs) -> anyhow::Result<ExitCode> {
         limits: historian::writer::Limits {
             max_pending: args.max_pending,
             max_age: args.max_age,
+            point_cache: args.max_points,
             ..historian::writer::Limits::default()
+        },
+        host_limits: sparkplug::host::Limits {
+            max_nodes: args.max_nodes,
+            max_points: args.max_points,
+            max_node_points: args.max_node_points,
         },
     };
     let started = historian::Historian::start(options)
@@ -126,6 +150,38 @@ pub async fn run(args: HistorianArgs) -> anyhow::Result<ExitCode> {
 #[cfg(test)]
 mod tests {
     use super::parse_max_age;
+
+    #[test]
+    fn the_default_limits_of_nodes_and_points_are_the_hosts() {
+        // The flags' defaults are numbers for clap; they must stay the host's.
+        use clap::Parser as _;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: super::HistorianArgs,
+        }
+        let cli = Cli::parse_from([
+            "cellbus",
+            "--mqtt",
+            "mqtt://h",
+            "--database",
+            "postgres://h",
+        ]);
+        let defaults = sparkplug::host::Limits::default();
+        assert_eq!(
+            (
+                cli.args.max_nodes,
+                cli.args.max_points,
+                cli.args.max_node_points
+            ),
+            (
+                defaults.max_nodes,
+                defaults.max_points,
+                defaults.max_node_points
+            )
+        );
+        assert_eq!(cli.args.max_points, historian::store::DEFAULT_POINT_CACHE);
+    }
 
     #[test]
     fn the_default_max_age_is_the_writers() {

@@ -683,3 +683,121 @@ fn a_database_that_is_not_postgresql_no_pending_room_or_no_age_exits_2_before_an
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("would refuse every sample"), "{stderr}");
 }
+
+/// The retained STATE on `spBv1.0/STATE/{HOST_ID}` as a fresh client reads it, as JSON;
+/// `None` when none comes within 5 s.
+async fn retained_state(port: u16) -> Option<serde_json::Value> {
+    use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
+    let id = format!("cellbus-test-state-{}", now_ms());
+    let (client, mut eventloop) = AsyncClient::new(MqttOptions::new(id, "127.0.0.1", port), 10);
+    let topic = format!("spBv1.0/STATE/{HOST_ID}");
+    let read = tokio::time::timeout(Duration::from_secs(5), async {
+        loop {
+            match eventloop.poll().await {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                    client.try_subscribe(&topic, QoS::AtLeastOnce).unwrap();
+                }
+                Ok(Event::Incoming(Packet::Publish(p))) if p.retain => {
+                    return serde_json::from_slice::<serde_json::Value>(&p.payload).ok();
+                }
+                Ok(_) => {}
+                Err(e) => panic!("the test's MQTT client: {e}"),
+            }
+        }
+    })
+    .await;
+    let _ = client.try_disconnect();
+    read.ok().flatten()
+}
+
+/// A fake edge node's NBIRTH of `metrics` Double metrics, as (topic, payload).
+fn fake_birth(node: &str, metrics: usize) -> (String, Vec<u8>) {
+    let mut edge = EdgeNode::new(
+        Id::new("cellbus").unwrap(),
+        Id::new(node).unwrap(),
+        BdSeq::new(0),
+    );
+    edge.on_connect();
+    let t = sparkplug::Timestamp::from_millis(now_ms().unsigned_abs());
+    let specs: Vec<_> = (0..metrics)
+        .map(|i| {
+            (
+                MetricSpec::new(MetricName::new(format!("m{i}")).unwrap(), DataType::Double),
+                Sample::good(MetricValue::Double(i as f64), t),
+            )
+        })
+        .collect();
+    let birth = edge.node_birth(&specs, t).unwrap();
+    (birth.topic.to_string(), birth.payload)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_forged_retained_state_offline_is_answered_and_births_past_max_points_are_refused() {
+    let broker = Mosquitto::start();
+    let pg = Postgres::start();
+    let database = pg.create_database("plant");
+    let historian = Historian::start(
+        &broker.url(),
+        &database,
+        &["--host-id", HOST_ID, "--max-points", "50"],
+    );
+    historian.wait_healthy("at start");
+
+    // A rogue client says the historian is offline, retained: gateways that connect later
+    // would wait for it for ever.
+    let rogue = Subscriber::start(broker.port(), "cellbus/test/nothing").await;
+    let forged = now_ms();
+    let offline = serde_json::json!({ "online": false, "timestamp": forged });
+    rogue
+        .publish_retained(
+            &format!("spBv1.0/STATE/{HOST_ID}"),
+            serde_json::to_vec(&offline).unwrap(),
+        )
+        .await;
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let state = retained_state(broker.port()).await;
+        let answered = state.as_ref().is_some_and(|s| {
+            s["online"] == true && s["timestamp"].as_i64().is_some_and(|t| t > forged)
+        });
+        if answered {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the retained STATE is still {state:?} after {LIMIT:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    let (_, metrics) = http_get(&historian.addr, "/metrics");
+    assert!(
+        counter(&metrics, "cellbus_historian_state_reasserted_total") >= 1.0,
+        "{metrics}"
+    );
+
+    // A rogue birth of 60 metrics passes --max-points 50: refused whole, nothing stored;
+    // a birth of 10 after it is taken.
+    for (node, metrics) in [("rogue", 60), ("small", 10)] {
+        let (topic, payload) = fake_birth(node, metrics);
+        rogue.publish(&topic, payload).await;
+    }
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let out = pg.psql(
+            "plant",
+            "SELECT node, count(*) FROM cellbus_points GROUP BY node ORDER BY node",
+        );
+        if out.contains("small|10") {
+            assert!(!out.contains("rogue"), "{out}");
+            break;
+        }
+        assert!(Instant::now() < deadline, "cellbus_points: {out}");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    let (_, metrics) = http_get(&historian.addr, "/metrics");
+    assert!(
+        counter(&metrics, "cellbus_historian_births_refused_total") >= 1.0,
+        "{metrics}"
+    );
+    historian.wait_healthy("after the rogue client");
+}

@@ -227,6 +227,7 @@ fn run_historian(broker: &str, database: &str) -> ExitCode {
             share: None,
             listen: Some("127.0.0.1:0".parse().expect("an address")),
             limits: historian::writer::Limits::default(),
+            host_limits: sparkplug::host::Limits::default(),
         };
         let started = historian::Historian::start(options).await?;
         println!(

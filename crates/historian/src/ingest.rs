@@ -63,9 +63,9 @@ fn point_row(info: &PointInfo) -> PointRow {
         Writable::Within(range) => (true, Some(range.min()), Some(range.max())),
     };
     PointRow {
-        group: info.point.group.as_str().to_owned(),
-        node: info.point.node.as_str().to_owned(),
-        device: device_of(info.point.device.as_ref()),
+        group: info.point.group().as_str().to_owned(),
+        node: info.point.node().as_str().to_owned(),
+        device: device_of(info.point.device()),
         point: info.point.name.as_str().to_owned(),
         datatype: info.datatype.to_string(),
         unit: info.unit.clone(),
@@ -91,9 +91,9 @@ fn sample_row(sample: &HostSample) -> SampleRow {
         SampleValue::Null => (None, None),
     };
     SampleRow {
-        group: sample.point.group.as_str().to_owned(),
-        node: sample.point.node.as_str().to_owned(),
-        device: device_of(sample.point.device.as_ref()),
+        group: sample.point.group().as_str().to_owned(),
+        node: sample.point.node().as_str().to_owned(),
+        device: device_of(sample.point.device()),
         point: sample.point.name.as_str().to_owned(),
         t: system_time(sample.t),
         value,
@@ -131,15 +131,17 @@ fn event_row(event: &HostEvent) -> EventRow {
 mod tests {
     use std::sync::Arc;
 
-    use sparkplug::{DataType, Id, MetricName, PointKey, WriteRange};
+    use sparkplug::{DataType, Id, MetricName, PointKey, PointOwner, WriteRange};
 
     use super::*;
 
     fn key(device: Option<&str>, name: &str) -> Arc<PointKey> {
         Arc::new(PointKey {
-            group: Id::new("plant").unwrap(),
-            node: Id::new("cellA").unwrap(),
-            device: device.map(|d| Id::new(d).unwrap()),
+            owner: Arc::new(PointOwner {
+                group: Id::new("plant").unwrap(),
+                node: Id::new("cellA").unwrap(),
+                device: device.map(|d| Id::new(d).unwrap()),
+            }),
             name: MetricName::new(name).unwrap(),
         })
     }

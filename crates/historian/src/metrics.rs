@@ -34,6 +34,17 @@ pub struct Metrics {
     pub seq_gaps: Counter,
     /// Messages with a problem (unreadable, unknown alias, data before a birth, …).
     pub problems: Counter,
+    /// Births refused for the host's limits (`--max-nodes`, `--max-points`,
+    /// `--max-node-points`).
+    pub births_refused: Counter,
+    /// Birth metrics left out for their name (too long, control or bidirectional
+    /// formatting characters).
+    pub names_refused: Counter,
+    /// STATE messages on the historian's own topic that did not say online while it was,
+    /// each answered with online.
+    pub state_reasserted: Counter,
+    /// Metrics in the current births of all edge nodes (a gauge; `--max-points` bounds it).
+    pub points_held: Gauge,
     /// Commits made.
     pub commits: Counter,
     /// Commits that failed (each retried).
@@ -101,6 +112,26 @@ impl Metrics {
             "message_problems",
             "Problems in received messages",
         );
+        let births_refused = counter(
+            &mut registry,
+            "births_refused",
+            "Births refused for the limits of nodes and points",
+        );
+        let names_refused = counter(
+            &mut registry,
+            "metric_names_refused",
+            "Birth metrics left out for a name too long or with control or bidi characters",
+        );
+        let state_reasserted = counter(
+            &mut registry,
+            "state_reasserted",
+            "STATE messages on the historian's own topic not saying online, answered with online",
+        );
+        let points_held = gauge(
+            &mut registry,
+            "points_held",
+            "Metrics in the current births of all edge nodes",
+        );
         let commits = counter(&mut registry, "commits", "Batches committed");
         let commit_errors = counter(
             &mut registry,
@@ -139,6 +170,10 @@ impl Metrics {
             rebirths,
             seq_gaps,
             problems,
+            births_refused,
+            names_refused,
+            state_reasserted,
+            points_held,
             commits,
             commit_errors,
             commit_seconds,

@@ -11,9 +11,16 @@
 //!    T − 1 ms and STATE online with T. The offline first makes every edge node that was
 //!    sending to an earlier session of this host (killed, or cut off before the broker
 //!    noticed) end its session and move its forwarded mark back by twice its keep-alive,
-//!    so what that session received but never committed is sent again;
+//!    so what that session received but never committed is sent again. Only then does it
+//!    subscribe to its own STATE topic ([`Host::state_subscription`]; the retained
+//!    message that brings is its own online);
 //! 3. hands every message to [`Host::receive`], sends its rows to the writer and publishes
-//!    its Rebirth requests.
+//!    its Rebirth requests. A birth the host refuses for a limit is counted and logged
+//!    (at most once every few seconds, naming the node);
+//! 4. answers any STATE on its own topic that is not online (a rogue client's retained
+//!    offline, which would keep every gateway away until the historian restarted, or a
+//!    stale one) with online again at once ([`Host::reassert_online`]), counted and
+//!    logged; except while it goes offline itself.
 //!
 //! When PostgreSQL fails (or too many rows wait) the historian publishes STATE offline and
 //! disconnects, so the edge nodes store and forward, and connects again once a commit
@@ -26,14 +33,17 @@
 //! (100 ms) and every message the broker dropped for it meanwhile. Gateways need a
 //! keep-alive of at least 10 s for this margin.
 
+use std::collections::{HashMap, VecDeque};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
+use gateway::write::LogThrottle;
 use rumqttc::{
     AsyncClient, Event, EventLoop, LastWill, MqttOptions, Outgoing, Packet, QoS, SubscribeFilter,
     SubscribeReasonCode, Transport,
 };
-use sparkplug::{Host, Problem, Publish, Qos};
+use sparkplug::{Host, Problem, Publish, Qos, Timestamp};
 use tokio::sync::{mpsc, watch};
 use wire::backoff::Backoff;
 
@@ -99,6 +109,10 @@ fn lock(host: &Mutex<Host>) -> std::sync::MutexGuard<'_, Host> {
     host.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+fn lock_throttles(throttles: &Mutex<Throttles>) -> std::sync::MutexGuard<'_, Throttles> {
+    throttles.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn now_ms() -> sparkplug::Timestamp {
     ingest::sparkplug_time(SystemTime::now())
 }
@@ -124,6 +138,8 @@ impl Link {
         } = self;
         let client_id = format!("cellbus-historian-{}", lock(&host).host_id());
         let mut retry = Backoff::new(RETRY_FIRST, RETRY_CAP).timer();
+        // Kept across connections: one log line every few seconds at most.
+        let throttles = Arc::new(Mutex::new(Throttles::default()));
         loop {
             // Online only while PostgreSQL takes commits.
             loop {
@@ -157,6 +173,8 @@ impl Link {
                 options.set_credentials(user, password);
             }
             let (client, eventloop) = AsyncClient::new(options, QUEUE);
+            let leaving = Arc::new(AtomicBool::new(false));
+            let announced = Arc::new(AtomicU64::new(t.as_millis()));
             let pump = Pump {
                 host: Arc::clone(&host),
                 client: client.clone(),
@@ -165,6 +183,10 @@ impl Link {
                 health: Arc::clone(&health),
                 online_at: t,
                 describe: (broker.host.clone(), broker.port),
+                leaving: Arc::clone(&leaving),
+                announced: Arc::clone(&announced),
+                throttles: Arc::clone(&throttles),
+                state_topic: lock(&host).state_subscription().filter,
             };
             let mut task = tokio::spawn(pump.run(eventloop));
             enum End {
@@ -200,9 +222,19 @@ impl Link {
                     }
                 }
                 End::Offline | End::Stop => {
-                    // Offline at once, so the edge nodes store and forward.
+                    // Offline at once, so the edge nodes store and forward; no later than
+                    // the last online announced (an edge node ignores an older offline),
+                    // and not answered as a forgery.
+                    leaving.store(true, Ordering::SeqCst);
+                    let at = Timestamp::from_millis(announced.load(Ordering::SeqCst));
+                    let offline = lock(&host).will(at);
                     let _ = client
-                        .publish(will.topic.to_string(), QoS::AtLeastOnce, true, will.payload)
+                        .publish(
+                            offline.topic.to_string(),
+                            QoS::AtLeastOnce,
+                            true,
+                            offline.payload,
+                        )
                         .await;
                     let _ = client.disconnect().await;
                     if tokio::time::timeout(CLOSE_GRACE, &mut task).await.is_err() {
@@ -220,6 +252,20 @@ impl Link {
     }
 }
 
+/// Log throttles for what a rogue client can cause by the thousand.
+#[derive(Default)]
+struct Throttles {
+    refused_births: LogThrottle,
+    state_reasserted: LogThrottle,
+}
+
+/// What a SUBSCRIBE was for, to read its SubAck.
+struct Sent {
+    filters: Vec<SubscribeFilter>,
+    /// The data subscriptions (their SubAck puts the historian online), not its STATE.
+    data: bool,
+}
+
 /// One connection's event loop: what it receives goes to the host and the writer.
 struct Pump {
     host: Arc<Mutex<Host>>,
@@ -229,50 +275,93 @@ struct Pump {
     health: Arc<Health>,
     online_at: sparkplug::Timestamp,
     describe: (String, u16),
+    /// Set by the link before it publishes STATE offline itself (PostgreSQL failing, a
+    /// stop): that offline is not answered.
+    leaving: Arc<AtomicBool>,
+    /// The latest online STATE timestamp published on this connection (ms).
+    announced: Arc<AtomicU64>,
+    throttles: Arc<Mutex<Throttles>>,
+    /// `spBv1.0/STATE/{host id}`.
+    state_topic: String,
 }
 
 impl Pump {
     /// Polls the event loop until the connection ends; returns why.
     async fn run(self, mut eventloop: EventLoop) -> String {
-        let mut filters = Vec::new();
+        // SUBSCRIBEs in the order queued, then by packet id once sent.
+        let mut queued: VecDeque<Sent> = VecDeque::new();
+        let mut sent: HashMap<u16, Sent> = HashMap::new();
+        // Until its own STATE subscription is acknowledged, a STATE can only come from the
+        // persistent session's earlier one: queued while the historian was away.
+        let mut state_subscribed = false;
         loop {
             match eventloop.poll().await {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                    let (subscriptions, offline, online) = {
+                    let (subscriptions, state, offline, online) = {
                         let host = lock(&self.host);
                         let earlier = sparkplug::Timestamp::from_millis(
                             self.online_at.as_millis().saturating_sub(1),
                         );
                         (
                             host.subscriptions(),
+                            host.state_subscription(),
                             host.will(earlier),
                             host.state_online(self.online_at),
                         )
                     };
-                    filters = subscriptions
+                    let filters: Vec<_> = subscriptions
                         .iter()
                         .map(|s| SubscribeFilter::new(s.filter.clone(), qos(s.qos)))
                         .collect();
+                    // The persistent session may still hold the STATE subscription of an
+                    // earlier connection: dropped first, so the offline below does not
+                    // come back to be answered.
+                    if let Err(e) = self.client.try_unsubscribe(state.filter.clone()) {
+                        return format!("cannot unsubscribe: {e}");
+                    }
                     if let Err(e) = self.client.try_subscribe_many(filters.clone()) {
                         return format!("cannot subscribe: {e}");
                     }
+                    queued.push_back(Sent {
+                        filters,
+                        data: true,
+                    });
                     for state in [offline, online] {
                         if let Err(e) = self.publish(state) {
                             return e;
                         }
                     }
+                    // After its own online: the retained message it brings is that one.
+                    let filter = SubscribeFilter::new(state.filter, qos(state.qos));
+                    if let Err(e) = self.client.try_subscribe_many([filter.clone()]) {
+                        return format!("cannot subscribe: {e}");
+                    }
+                    queued.push_back(Sent {
+                        filters: vec![filter],
+                        data: false,
+                    });
+                }
+                Ok(Event::Outgoing(Outgoing::Subscribe(pkid))) => {
+                    if let Some(subscribe) = queued.pop_front() {
+                        sent.insert(pkid, subscribe);
+                    }
                 }
                 Ok(Event::Incoming(Packet::SubAck(ack))) => {
+                    let Some(subscribe) = sent.remove(&ack.pkid) else {
+                        continue;
+                    };
                     if let Some(i) = ack
                         .return_codes
                         .iter()
                         .position(|c| matches!(c, SubscribeReasonCode::Failure))
                     {
-                        let filter: Option<&SubscribeFilter> = filters.get(i);
+                        let filter: Option<&SubscribeFilter> = subscribe.filters.get(i);
                         tracing::error!(
                             "historian: the broker refused the subscription to {}",
                             filter.map_or("?", |f| f.path.as_str())
                         );
+                    } else if !subscribe.data {
+                        state_subscribed = true;
                     } else {
                         self.health.set_broker(None);
                         self.metrics.mqtt_connected.set(1);
@@ -284,7 +373,9 @@ impl Pump {
                     }
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
-                    if let Err(e) = self.on_message(&p.topic, &p.payload).await {
+                    if p.topic == self.state_topic {
+                        self.on_own_state(&p.payload, state_subscribed);
+                    } else if let Err(e) = self.on_message(&p.topic, &p.payload).await {
                         return e;
                     }
                 }
@@ -310,20 +401,86 @@ impl Pump {
             .map_err(|e| format!("cannot publish {topic}: {e}"))
     }
 
+    /// A STATE on the historian's own topic: anything but online is answered with online,
+    /// unless the historian is going offline itself, or it is an offline older than this
+    /// connection queued for the session (its own Will after a `kill -9`: the online this
+    /// connection published since is the retained STATE already).
+    fn on_own_state(&self, payload: &[u8], subscribed: bool) {
+        if self.leaving.load(Ordering::SeqCst) {
+            return;
+        }
+        if !subscribed
+            && let Ok(state) = sparkplug::HostState::from_json(payload)
+            && state.timestamp < self.online_at.as_millis()
+        {
+            tracing::debug!(
+                "historian: an earlier session's STATE {:?} queued while away, ignored",
+                String::from_utf8_lossy(payload)
+            );
+            return;
+        }
+        let Some(online) = lock(&self.host).reassert_online(payload, self.online_at, now_ms())
+        else {
+            return;
+        };
+        let topic = online.topic.to_string();
+        if let Ok(state) = sparkplug::HostState::from_json(&online.payload) {
+            self.announced.fetch_max(state.timestamp, Ordering::SeqCst);
+        }
+        if let Err(e) = self.publish(online) {
+            // The next such STATE is answered again.
+            tracing::warn!("historian: {e}");
+            return;
+        }
+        self.metrics.state_reasserted.inc();
+        let due = lock_throttles(&self.throttles)
+            .state_reasserted
+            .count(tokio::time::Instant::now());
+        if let Some(count) = due {
+            tracing::warn!(
+                "historian: {count} STATE message(s) on {topic} that did not say online while \
+                 the historian is (the latest: {:?}); online announced again. Another client \
+                 publishes on the historian's STATE topic: restrict it in the broker's ACL",
+                String::from_utf8_lossy(&payload[..payload.len().min(200)])
+            );
+        }
+    }
+
     async fn on_message(&self, topic: &str, payload: &[u8]) -> Result<(), String> {
-        let (received, nodes) = {
+        let (received, nodes, points) = {
             let mut host = lock(&self.host);
             let received = host.receive(topic, payload, now_ms());
-            (received, host.nodes_born())
+            (received, host.nodes_born(), host.points_held())
         };
         self.health.set_nodes_online(nodes);
         let m = &self.metrics;
         m.messages.inc();
+        m.points_held.set(i64::try_from(points).unwrap_or(i64::MAX));
         m.samples_received.inc_by(received.samples.len() as u64);
         for problem in &received.problems {
             m.problems.inc();
-            if matches!(problem.problem, Problem::SeqGap { .. }) {
-                m.seq_gaps.inc();
+            match problem.problem {
+                Problem::SeqGap { .. } => {
+                    m.seq_gaps.inc();
+                }
+                Problem::BirthRefused { .. } => {
+                    m.births_refused.inc();
+                    let due = lock_throttles(&self.throttles)
+                        .refused_births
+                        .count(tokio::time::Instant::now());
+                    if let Some(count) = due {
+                        tracing::warn!(
+                            "historian: {count} birth(s) refused for the historian's limits \
+                             (--max-nodes, --max-points, --max-node-points) since the last \
+                             report; the latest on {problem}"
+                        );
+                    }
+                    continue;
+                }
+                Problem::BadMetricName { .. } => {
+                    m.names_refused.inc();
+                }
+                _ => {}
             }
             tracing::debug!("historian: {problem}");
         }

@@ -51,6 +51,8 @@ pub struct Options {
     pub listen: Option<SocketAddr>,
     /// The writer's bounds.
     pub limits: Limits,
+    /// What the Sparkplug host keeps at most: edge nodes, metrics per node and in all.
+    pub host_limits: sparkplug::host::Limits,
 }
 
 /// A started historian: arguments checked, HTTP port bound.
@@ -134,7 +136,7 @@ impl Historian {
             None => (None, None),
         };
         Ok(Historian {
-            host: Host::new(host_id, group, sharing),
+            host: Host::new(host_id, group, sharing).with_limits(options.host_limits),
             options,
             broker,
             listener,

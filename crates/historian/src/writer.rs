@@ -77,6 +77,9 @@ pub struct Limits {
     /// clock gone wrong, or a rogue birth, would otherwise create a day partition for
     /// every day it names.
     pub max_age: Duration,
+    /// Most point ids each PostgreSQL connection keeps in memory (the store's
+    /// [`Store::set_point_cache`]); the historian gives its `--max-points`.
+    pub point_cache: usize,
 }
 
 impl Default for Limits {
@@ -86,6 +89,7 @@ impl Default for Limits {
             stop_grace: Duration::from_secs(10),
             slow_commit: Duration::from_secs(10),
             max_age: DEFAULT_MAX_AGE,
+            point_cache: crate::store::DEFAULT_POINT_CACHE,
         }
     }
 }
@@ -292,6 +296,7 @@ impl Writer {
             self.stores[slot] = None;
             let mut store = self.inbox.while_doing(Store::connect(&self.url)).await?;
             store.set_max_age(Some(self.inbox.limits.max_age));
+            store.set_point_cache(self.inbox.limits.point_cache);
             if !store.migrated().is_empty() {
                 tracing::info!(
                     "historian: database schema migrated to {:?}",

@@ -227,6 +227,47 @@ async fn a_batch_written_twice_stores_its_samples_and_events_once() {
 }
 
 #[tokio::test]
+async fn the_point_id_cache_stays_within_its_bound_and_samples_of_forgotten_ids_still_land() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    store.set_point_cache(3);
+    let point = |device: &str| PointRow {
+        device: device.into(),
+        ..temperature_point()
+    };
+    let t = MIDNIGHT_MS + 3_600_000;
+    // Births of two devices at a time: the cache never holds more than 3 ids.
+    for (i, pair) in [["d0", "d1"], ["d2", "d3"], ["d4", "d5"]]
+        .iter()
+        .enumerate()
+    {
+        let batch = Batch {
+            points: pair.iter().map(|d| point(d)).collect(),
+            samples: pair
+                .iter()
+                .map(|d| sample(d, "air_temperature", t + i as u64, 1.0))
+                .collect(),
+            events: vec![],
+        };
+        store.write(&batch).await.expect("births");
+        assert!(store.cached_points() <= 3, "{} ids", store.cached_points());
+    }
+    // Samples of all six: the ids forgotten are read again.
+    let batch = Batch {
+        points: vec![],
+        samples: ["d0", "d1", "d2", "d3", "d4", "d5"]
+            .iter()
+            .map(|d| sample(d, "air_temperature", t + 10, 2.0))
+            .collect(),
+        events: vec![],
+    };
+    let written = store.write(&batch).await.expect("samples");
+    assert_eq!((written.samples, written.bare_points), (6, 0));
+    assert_eq!(store.count_samples().await.expect("count"), 12);
+    assert_eq!(all_points(&store).await.len(), 6, "no point twice");
+}
+
+#[tokio::test]
 async fn samples_across_midnight_land_in_two_day_partitions() {
     let (_pg, url) = database();
     let mut store = Store::connect(&url).await.expect("connect");

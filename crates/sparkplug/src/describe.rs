@@ -164,7 +164,7 @@ pub enum Value {
 /// Turns received messages into [`Description`]s, remembering the births seen.
 #[derive(Debug, Default)]
 pub struct Describer {
-    births: HashMap<Owner, Table<()>>,
+    births: HashMap<Owner, Table<Option<u32>>>,
 }
 
 /// A node (`device: None`) or one of its devices.
@@ -260,19 +260,21 @@ impl Describer {
             self.births
                 .retain(|o, _| o.group != owner.group || o.edge_node != owner.edge_node);
         }
-        self.births
-            .insert(owner.clone(), Table::of_birth(metrics, |_, _| ()));
+        self.births.insert(
+            owner.clone(),
+            Table::of_birth(metrics, |_, _, m| Some(m.datatype)),
+        );
     }
 }
 
-fn describe_metric(m: &Metric, known: Option<&Table<()>>) -> MetricDescription {
+fn describe_metric(m: &Metric, known: Option<&Table<Option<u32>>>) -> MetricDescription {
     let from_birth = known.and_then(|table| table.lookup(m));
     let resolved = m.name.is_none() && from_birth.is_some();
     let name = m
         .name
         .clone()
-        .or_else(|| from_birth.map(|k| k.name.clone()));
-    let datatype = m.datatype.or_else(|| from_birth.and_then(|k| k.datatype));
+        .or_else(|| from_birth.map(|k| k.name.to_string()));
+    let datatype = m.datatype.or_else(|| from_birth.and_then(|k| k.extra));
     MetricDescription {
         name,
         alias: m.alias,

@@ -20,14 +20,30 @@
 //! - **Deaths**: an NDEATH whose `bdSeq` is the current NBIRTH's marks every point of
 //!   the node and of its devices Bad (a null sample) at the death's time (the payload's
 //!   timestamp, else the arrival time); an NDEATH with another `bdSeq` is the Will of an
-//!   older session, delivered late, and is ignored (a [`Problem::StaleDeath`]). A DDEATH
-//!   marks its device's points Bad. After a death the node or device is unborn again.
+//!   older session, delivered late, and is ignored (a [`Problem::StaleDeath`]). An NDEATH
+//!   that carries [`HOST_OFFLINE`] = true (the node ended its session because its primary
+//!   host went offline, and stores what it reads until the host is back) marks them
+//!   Stale instead: the node kept reading, and what it stored follows. A DDEATH marks its
+//!   device's points Bad. After a death the node or device is unborn again.
 //! - **Rebirth requests** (NCMD `Node Control/Rebirth` = true, [`rebirth_request`]):
 //!   when data, a DBIRTH or a DDEATH comes from a node whose NBIRTH was not seen (or that
 //!   died since), data from a device without a DBIRTH, a metric whose alias or name no
 //!   birth gave, or (alone only) a `seq` gap. At most one per node every
-//!   [`REBIRTH_HOLD_OFF_MS`] (5 s) until its NBIRTH arrives. What cannot be resolved is
+//!   [`REBIRTH_HOLD_OFF_MS`] (5 s) until its NBIRTH arrives; after a birth refused for a
+//!   limit, one every [`REFUSED_REBIRTH_HOLD_OFF_MS`] (5 min). What cannot be resolved is
 //!   dropped and counted ([`Stats::dropped`]).
+//! - **Limits** ([`Limits`]): what a rogue client can make the host keep is bounded. A
+//!   birth that would make more edge nodes than [`Limits::max_nodes`], more metrics in the
+//!   node's current births than [`Limits::max_node_points`], or more in all current births
+//!   than [`Limits::max_points`] is refused whole ([`Problem::BirthRefused`], counted in
+//!   [`Stats::births_refused`]): the node or device stays unborn. Every metric of a birth
+//!   counts, points or not. Ids (group, node, device) and birth metric names longer than
+//!   [`crate::topic::MAX_NAME_BYTES`] or holding control or bidirectional formatting
+//!   characters are refused: a topic with such an id is not read ([`Problem::Topic`]), a
+//!   birth metric with such a name is left out ([`Problem::BadMetricName`]) and its data
+//!   is dropped without a Rebirth request. A node dead (or never born) for
+//!   [`DEAD_NODE_GRACE_MS`] (10 min) is forgotten, looked for at most once a minute as
+//!   messages arrive: a churn of made-up node names keeps nothing for long.
 //! - **`seq`**: every message of a node after its NBIRTH (NDATA, DBIRTH, DDATA, DDEATH)
 //!   carries the previous one's `seq` + 1, 0–255 wrapping, across the node and all its
 //!   devices; a gap means messages were lost. The data of the message that shows the
@@ -49,7 +65,10 @@
 //!
 //! Sparkplug 3.0 STATE: publish [`Host::will`] as the MQTT Will and, once connected,
 //! [`Host::state_online`] with the **same** `now`, so a node can tell this session's
-//! Will from an older one's.
+//! Will from an older one's. Then subscribe to [`Host::state_subscription`] (the host's
+//! own STATE topic): any client can publish a retained `online:false` there, and edge
+//! nodes would stay away until the host restarted. Every STATE read there that is not
+//! `online` is answered with [`Host::reassert_online`].
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -57,16 +76,62 @@ use std::sync::Arc;
 use crate::births::Table;
 use crate::event::{self, EVENT};
 use crate::metric::{
-    DOCUMENTATION, DataType, ENG_UNIT, MetricName, MetricValue, Quality, Timestamp, ValueError,
-    WRITABLE, WRITE_MAX, WRITE_MIN, Writable, WriteRange, read,
+    DOCUMENTATION, DataType, ENG_UNIT, MetricName, MetricValue, NameError, Quality, Timestamp,
+    ValueError, WRITABLE, WRITE_MAX, WRITE_MIN, Writable, WriteRange, read,
 };
-use crate::node::{BD_SEQ, Publish, Qos, rebirth_request};
+use crate::node::{BD_SEQ, HOST_OFFLINE, Publish, Qos, rebirth_request};
 use crate::proto::{Metric, Payload, metric};
 use crate::state::HostState;
 use crate::topic::{Id, MessageKind, NAMESPACE, Topic, TopicError};
 
 /// The least time between two Rebirth requests to one node, until its NBIRTH arrives.
 pub const REBIRTH_HOLD_OFF_MS: u64 = 5_000;
+/// The least time between two Rebirth requests to a node whose last birth was refused for
+/// a limit (5 min): its births would be refused again, and each costs the node a rebirth
+/// and the broker the whole birth.
+pub const REFUSED_REBIRTH_HOLD_OFF_MS: u64 = 300_000;
+/// How long a node stays known once dead or unborn (10 min): a late message of its last
+/// session is still read as before, and then its state is freed.
+pub const DEAD_NODE_GRACE_MS: u64 = 600_000;
+/// How often the host looks for nodes to forget, at most (1 min, as messages arrive).
+const SWEEP_EVERY_MS: u64 = 60_000;
+/// How far ahead of this host's clock a STATE timestamp is still believed (10 s): edge
+/// nodes refuse STATEs further ahead, so a forged one beyond this moved none of them.
+pub const STATE_SKEW_MS: u64 = 10_000;
+
+/// What a rogue or broken client can make the host keep; births past them are refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// Most edge nodes known at once (born, or dead or unborn for less than
+    /// [`DEAD_NODE_GRACE_MS`]).
+    pub max_nodes: usize,
+    /// Most metrics in one edge node's current births: its NBIRTH's and all its DBIRTHs'.
+    pub max_node_points: usize,
+    /// Most metrics in the current births of all nodes.
+    pub max_points: usize,
+}
+
+impl Default for Limits {
+    /// 1,000 edge nodes, 100,000 metrics per node (a large plant gateway), 250,000 in all.
+    fn default() -> Self {
+        Self {
+            max_nodes: 1_000,
+            max_node_points: 100_000,
+            max_points: 250_000,
+        }
+    }
+}
+
+/// Which of the [`Limits`] a refused birth would have passed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cap {
+    /// [`Limits::max_nodes`]: a new edge node while as many are known.
+    Nodes,
+    /// [`Limits::max_node_points`]: the metrics of the node's current births.
+    NodePoints,
+    /// [`Limits::max_points`]: the metrics of all current births.
+    Points,
+}
 
 /// The folder of node metrics that control the node and are not points.
 const NODE_CONTROL: &str = "Node Control/";
@@ -94,17 +159,43 @@ pub struct Subscription {
     pub qos: Qos,
 }
 
-/// Which point: a metric of a node (`device: None`) or of one of its devices.
+/// Whose points: an edge node's own (`device: None`) or one of its devices'. One per
+/// birth, shared by all its points.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct PointKey {
+pub struct PointOwner {
     /// The group id.
     pub group: Id,
     /// The edge node id.
     pub node: Id,
     /// The device id, `None` for the node's own metrics.
     pub device: Option<Id>,
+}
+
+/// Which point: a metric of a node or of one of its devices. Small (a shared owner and
+/// a shared name), as the host keeps one per metric born.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PointKey {
+    /// The node or device it belongs to.
+    pub owner: Arc<PointOwner>,
     /// The metric's name.
     pub name: MetricName,
+}
+
+impl PointKey {
+    /// The group id.
+    pub fn group(&self) -> &Id {
+        &self.owner.group
+    }
+
+    /// The edge node id.
+    pub fn node(&self) -> &Id {
+        &self.owner.node
+    }
+
+    /// The device id, `None` for the node's own metrics.
+    pub fn device(&self) -> Option<&Id> {
+        self.owner.device.as_ref()
+    }
 }
 
 /// A point as a birth describes it.
@@ -285,6 +376,30 @@ pub enum Problem {
         /// Its place in the payload, from 0.
         index: usize,
     },
+    /// A birth metric whose name is too long or holds a character that hides or
+    /// reorders text.
+    #[error("birth metric {index}: {error}: left out")]
+    BadMetricName {
+        /// Its place in the payload, from 0.
+        index: usize,
+        /// What is wrong with the name.
+        error: NameError,
+    },
+    /// A birth (NBIRTH or DBIRTH) that would pass one of the host's [`Limits`]: refused
+    /// whole, the node or device stays unborn.
+    #[error(
+        "a birth of {metrics} metrics refused: {}; no Rebirth is asked of this node for {} min",
+        refusal(*.cap, *.max),
+        REFUSED_REBIRTH_HOLD_OFF_MS / 60_000
+    )]
+    BirthRefused {
+        /// The metrics in the birth.
+        metrics: usize,
+        /// Which limit.
+        cap: Cap,
+        /// The limit's value.
+        max: usize,
+    },
     /// A birth gave one alias to several metrics: data by that alias cannot be resolved
     /// (a data metric that also has its name is still read by it).
     #[error("the birth gives alias {alias} to more than one metric: data by that alias is dropped")]
@@ -318,6 +433,18 @@ pub enum Problem {
         /// What is wrong with the value.
         error: ValueError,
     },
+}
+
+fn refusal(cap: Cap, max: usize) -> String {
+    match cap {
+        Cap::Nodes => format!("{max} edge nodes are known already (the limit of edge nodes)"),
+        Cap::NodePoints => format!(
+            "the node's births would hold more than {max} metrics (the limit per edge node)"
+        ),
+        Cap::Points => {
+            format!("all nodes' births would hold more than {max} metrics (the limit in all)")
+        }
+    }
 }
 
 fn owner(device: &Option<Id>) -> String {
@@ -358,6 +485,14 @@ pub struct Stats {
     pub dropped: u64,
     /// NDEATHs of older sessions, ignored.
     pub stale_deaths: u64,
+    /// Births refused for one of the [`Limits`].
+    pub births_refused: u64,
+    /// Birth metrics left out for their name (too long, or a control or bidirectional
+    /// formatting character).
+    pub names_refused: u64,
+    /// Edge nodes forgotten: dead or unborn for [`DEAD_NODE_GRACE_MS`], or unborn the
+    /// longest when a new node's NBIRTH needed the room ([`Limits::max_nodes`]).
+    pub nodes_freed: u64,
     /// Problems returned.
     pub problems: u64,
 }
@@ -370,14 +505,34 @@ pub struct Host {
     sharing: Sharing,
     nodes: HashMap<(Id, Id), NodeState>,
     stats: Stats,
+    limits: Limits,
+    /// Metrics in all current births.
+    points: usize,
+    /// When the host last looked for nodes to forget.
+    last_sweep: Option<Timestamp>,
 }
 
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct NodeState {
     /// The current NBIRTH's, until the node dies.
     birth: Option<Birth>,
     /// When the last Rebirth was asked, since the last NBIRTH.
     rebirth_asked: Option<Timestamp>,
+    /// The least time between two Rebirth requests: longer after a refused birth.
+    hold_off_ms: u64,
+    /// When the node was last seen unborn (first heard of, dead, refused), by arrival.
+    unborn_since: Timestamp,
+}
+
+impl NodeState {
+    fn unborn(now: Timestamp) -> Self {
+        Self {
+            birth: None,
+            rebirth_asked: None,
+            hold_off_ms: REBIRTH_HOLD_OFF_MS,
+            unborn_since: now,
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -386,7 +541,16 @@ struct Birth {
     /// The last `seq` received.
     last_seq: Option<u64>,
     metrics: Table<Role>,
-    devices: HashMap<Id, Table<Role>>,
+    devices: HashMap<Id, DeviceBirth>,
+    /// Metrics in the NBIRTH and the current DBIRTHs.
+    points: usize,
+}
+
+#[derive(Debug)]
+struct DeviceBirth {
+    table: Table<Role>,
+    /// Metrics in the DBIRTH.
+    points: usize,
 }
 
 /// What a born metric's data becomes.
@@ -414,15 +578,30 @@ struct Message<'a> {
 impl Received {
     fn problem(&mut self, topic: &str, problem: Problem) {
         self.problems.push(HostProblem {
-            topic: topic.to_owned(),
+            topic: shortened(topic),
             problem,
         });
     }
 }
 
+/// The most of a topic or name a problem repeats, in bytes: an MQTT topic may be 64 kB.
+const QUOTED_BYTES: usize = 2 * crate::topic::MAX_NAME_BYTES;
+
+/// `text`, or its first [`QUOTED_BYTES`] (at a character's boundary) and `…`.
+fn shortened(text: &str) -> String {
+    if text.len() <= QUOTED_BYTES {
+        return text.to_owned();
+    }
+    let mut end = QUOTED_BYTES;
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}…", &text[..end])
+}
+
 impl Host {
     /// The host `host_id`, following the nodes of `group` (every group when `None`),
-    /// alone or sharing the data with other hosts.
+    /// alone or sharing the data with other hosts, within the default [`Limits`].
     pub fn new(host_id: Id, group: Option<Id>, sharing: Sharing) -> Self {
         Self {
             host_id,
@@ -430,7 +609,16 @@ impl Host {
             sharing,
             nodes: HashMap::new(),
             stats: Stats::default(),
+            limits: Limits::default(),
+            points: 0,
+            last_sweep: None,
         }
+    }
+
+    /// The same host within `limits` instead of the defaults.
+    pub fn with_limits(mut self, limits: Limits) -> Self {
+        self.limits = limits;
+        self
     }
 
     /// The host id.
@@ -446,6 +634,17 @@ impl Host {
     /// How many edge nodes have a current NBIRTH (born and not dead since).
     pub fn nodes_born(&self) -> usize {
         self.nodes.values().filter(|n| n.birth.is_some()).count()
+    }
+
+    /// How many edge nodes the host keeps a state for: born, or dead or unborn for less
+    /// than [`DEAD_NODE_GRACE_MS`]; at most [`Limits::max_nodes`].
+    pub fn nodes_known(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// The metrics of all current births (what [`Limits::max_points`] bounds).
+    pub fn points_held(&self) -> usize {
+        self.points
     }
 
     /// The topic filters to subscribe to, again after every reconnect: births and deaths
@@ -479,6 +678,19 @@ impl Host {
         ]
     }
 
+    /// The host's own STATE topic, QoS 1: subscribe to it only after publishing
+    /// [`Host::state_online`] on the same connection, so the retained message it brings is
+    /// this host's own `online`. What arrives there goes to [`Host::reassert_online`].
+    pub fn state_subscription(&self) -> Subscription {
+        Subscription {
+            filter: Topic::State {
+                host: self.host_id.clone(),
+            }
+            .to_string(),
+            qos: Qos::AtLeastOnce,
+        }
+    }
+
     /// The STATE to register as the MQTT Will: `{"online":false,"timestamp":now}` on
     /// `spBv1.0/STATE/{host_id}`, QoS 1, retained. Also what to publish before a
     /// clean disconnect.
@@ -492,18 +704,73 @@ impl Host {
         HostState::new(true, now).publish(self.host_id.clone())
     }
 
+    /// What to publish when this host, online since `online_at` (its Will's timestamp)
+    /// and not going offline itself, reads `payload` on its own STATE topic at `now`:
+    /// `None` for an `online` STATE; for anything else (an `online:false`, which only a
+    /// forgery or a stale message can be while the host is up, or a payload that is no
+    /// STATE) `online` again, retained, so that no edge node stays away. Its timestamp:
+    ///
+    /// - `max(now, forged + 1)` when the forged timestamp is from `online_at` up to
+    ///   [`STATE_SKEW_MS`] ahead of `now`: edge nodes took it as newer than this session's
+    ///   `online` and ended theirs, and only a newer `online` brings them back;
+    /// - `online_at` otherwise (older, unreadable, or too far ahead for an edge node to
+    ///   believe): edge nodes ignored it, and the Will (timestamp `online_at`) stays the
+    ///   one they honour.
+    pub fn reassert_online(
+        &self,
+        payload: &[u8],
+        online_at: Timestamp,
+        now: Timestamp,
+    ) -> Option<Publish> {
+        let forged = match HostState::from_json(payload) {
+            Ok(state) if state.online => return None,
+            Ok(state) => Some(state.timestamp),
+            Err(_) => None,
+        };
+        let believed = |t: u64| t >= online_at.as_millis() && t <= now.as_millis() + STATE_SKEW_MS;
+        let t = match forged {
+            Some(t) if believed(t) => Timestamp::from_millis(now.as_millis().max(t + 1)),
+            _ => online_at,
+        };
+        Some(self.state_online(t))
+    }
+
     /// Reads one message received on `topic` at `now`. Never fails: what is wrong is
     /// in [`Received::problems`]. STATE, NCMD and DCMD messages and other groups' are
     /// ignored.
     pub fn receive(&mut self, topic: &str, payload: &[u8], now: Timestamp) -> Received {
         let mut out = Received::default();
         self.stats.messages += 1;
+        self.sweep(now);
         self.read(topic, payload, now, &mut out);
         self.stats.samples += out.samples.len() as u64;
         self.stats.events += out.events.len() as u64;
         self.stats.rebirths += out.commands.len() as u64;
         self.stats.problems += out.problems.len() as u64;
         out
+    }
+
+    /// Forgets the nodes dead or unborn for [`DEAD_NODE_GRACE_MS`]; at most once every
+    /// [`SWEEP_EVERY_MS`] (and at once when the clock went back).
+    fn sweep(&mut self, now: Timestamp) {
+        if let Some(last) = self.last_sweep
+            && last <= now
+            && now.as_millis() - last.as_millis() < SWEEP_EVERY_MS
+        {
+            return;
+        }
+        self.last_sweep = Some(now);
+        let before = self.nodes.len();
+        self.nodes.retain(|_, state| {
+            if state.birth.is_some() {
+                return true;
+            }
+            if state.unborn_since > now {
+                state.unborn_since = now; // the clock went back: the grace starts again
+            }
+            now.as_millis() - state.unborn_since.as_millis() < DEAD_NODE_GRACE_MS
+        });
+        self.stats.nodes_freed += (before - self.nodes.len()) as u64;
     }
 
     fn read(&mut self, topic: &str, payload: &[u8], now: Timestamp, out: &mut Received) {
@@ -542,7 +809,89 @@ impl Host {
         }
     }
 
+    /// Whether a state can be kept for one more node: there is room, or an unborn node
+    /// (the one unborn longest) is forgotten to make some.
+    fn room_for_a_node(&mut self) -> bool {
+        if self.nodes.len() < self.limits.max_nodes {
+            return true;
+        }
+        let oldest = self
+            .nodes
+            .iter()
+            .filter(|(_, state)| state.birth.is_none())
+            .min_by_key(|(_, state)| state.unborn_since)
+            .map(|(key, _)| key.clone());
+        match oldest {
+            Some(key) => {
+                self.nodes.remove(&key);
+                self.stats.nodes_freed += 1;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Refuses a birth of `metrics` metrics for `cap`: the node (an NBIRTH) or the device
+    /// (a DBIRTH) is unborn from now on, and asked no Rebirth for a long while.
+    fn refuse_birth(&mut self, msg: &Message<'_>, metrics: usize, cap: Cap, out: &mut Received) {
+        self.stats.births_refused += 1;
+        let max = match cap {
+            Cap::Nodes => self.limits.max_nodes,
+            Cap::NodePoints => self.limits.max_node_points,
+            Cap::Points => self.limits.max_points,
+        };
+        out.problem(msg.topic, Problem::BirthRefused { metrics, cap, max });
+        let key = (msg.group.clone(), msg.node.clone());
+        if !self.nodes.contains_key(&key) {
+            // A new node: its refusal is kept (for the hold-off) while there is room.
+            if cap == Cap::Nodes || !self.room_for_a_node() {
+                return;
+            }
+            self.nodes.insert(key.clone(), NodeState::unborn(msg.now));
+        }
+        let Some(state) = self.nodes.get_mut(&key) else {
+            return;
+        };
+        match &msg.device {
+            None => {
+                if let Some(old) = state.birth.take() {
+                    self.points = self.points.saturating_sub(old.points);
+                    state.unborn_since = msg.now;
+                }
+            }
+            Some(device) => {
+                if let Some(birth) = &mut state.birth
+                    && let Some(old) = birth.devices.remove(device)
+                {
+                    birth.points = birth.points.saturating_sub(old.points);
+                    self.points = self.points.saturating_sub(old.points);
+                }
+            }
+        }
+        state.rebirth_asked = Some(msg.now);
+        state.hold_off_ms = REFUSED_REBIRTH_HOLD_OFF_MS;
+    }
+
     fn node_birth(&mut self, msg: &Message<'_>, payload: &Payload, out: &mut Received) {
+        let key = (msg.group.clone(), msg.node.clone());
+        let metrics = payload.metrics.len();
+        let old = self
+            .nodes
+            .get(&key)
+            .and_then(|state| state.birth.as_ref())
+            .map_or(0, |birth| birth.points);
+        let cap = if metrics > self.limits.max_node_points {
+            Some(Cap::NodePoints)
+        } else if self.points.saturating_sub(old) + metrics > self.limits.max_points {
+            Some(Cap::Points)
+        } else if !self.nodes.contains_key(&key) && !self.room_for_a_node() {
+            Some(Cap::Nodes)
+        } else {
+            None
+        };
+        if let Some(cap) = cap {
+            return self.refuse_birth(msg, metrics, cap, out);
+        }
         let bd_seq = payload
             .metrics
             .iter()
@@ -552,30 +901,43 @@ impl Host {
                 Some(metric::Value::IntValue(n)) => Some(n.into()),
                 _ => None,
             });
-        let metrics = birth_table(msg, &payload.metrics, out);
+        let table = birth_table(msg, &payload.metrics, &mut self.stats, out);
         let state = self
             .nodes
-            .entry((msg.group.clone(), msg.node.clone()))
-            .or_default();
-        state.birth = Some(Birth {
+            .entry(key)
+            .or_insert_with(|| NodeState::unborn(msg.now));
+        let birth = Birth {
             bd_seq,
             last_seq: payload.seq,
-            metrics,
+            metrics: table,
             devices: HashMap::new(),
-        });
+            points: metrics,
+        };
+        if let Some(old) = state.birth.replace(birth) {
+            self.points = self.points.saturating_sub(old.points);
+        }
+        self.points += metrics;
         state.rebirth_asked = None;
+        state.hold_off_ms = REBIRTH_HOLD_OFF_MS;
     }
 
     fn node_death(&mut self, msg: &Message<'_>, payload: &Payload, out: &mut Received) {
-        let death = payload
-            .metrics
-            .iter()
-            .find(|m| m.name.as_deref() == Some(BD_SEQ))
-            .and_then(|m| match m.value {
-                Some(metric::Value::LongValue(n)) => Some(n),
-                Some(metric::Value::IntValue(n)) => Some(n.into()),
-                _ => None,
-            });
+        let value_of = |name: &str| {
+            payload
+                .metrics
+                .iter()
+                .find(|m| m.name.as_deref() == Some(name))
+                .and_then(|m| m.value.as_ref())
+        };
+        let death = value_of(BD_SEQ).and_then(|value| match value {
+            metric::Value::LongValue(n) => Some(*n),
+            metric::Value::IntValue(n) => Some((*n).into()),
+            _ => None,
+        });
+        let host_offline = matches!(
+            value_of(HOST_OFFLINE),
+            Some(metric::Value::BooleanValue(true))
+        );
         let key = (msg.group.clone(), msg.node.clone());
         let Some(state) = self.nodes.get_mut(&key) else {
             return; // never born here: nothing to mark
@@ -597,9 +959,17 @@ impl Host {
         let Some(birth) = state.birth.take() else {
             return;
         };
-        mark_bad(&birth.metrics, msg.t, out);
-        for table in birth.devices.values() {
-            mark_bad(table, msg.t, out);
+        state.unborn_since = msg.now;
+        self.points = self.points.saturating_sub(birth.points);
+        // The node stores what it reads while its host is away: not a failure.
+        let quality = if host_offline {
+            Quality::Stale
+        } else {
+            Quality::Bad
+        };
+        mark(&birth.metrics, msg.t, quality, out);
+        for device in birth.devices.values() {
+            mark(&device.table, msg.t, quality, out);
         }
     }
 
@@ -611,18 +981,30 @@ impl Host {
         payload: &Payload,
         out: &mut Received,
     ) {
-        let state = self
-            .nodes
-            .entry((msg.group.clone(), msg.node.clone()))
-            .or_default();
-        let Some(birth) = &mut state.birth else {
-            let message_type = match &msg.device {
-                Some(_) => format!("D{}", suffix(kind)),
-                None => format!("N{}", suffix(kind)),
-            };
+        let key = (msg.group.clone(), msg.node.clone());
+        // Only a birth makes room by forgetting an unborn node; data does not.
+        let tracked = self.nodes.contains_key(&key) || self.nodes.len() < self.limits.max_nodes;
+        let message_type = || match &msg.device {
+            Some(_) => format!("D{}", suffix(kind)),
+            None => format!("N{}", suffix(kind)),
+        };
+        if !tracked {
+            // As many nodes as allowed are known: this one is not asked for a birth.
             if kind == MessageKind::Data {
                 self.stats.dropped += payload.metrics.len() as u64;
             }
+            let message_type = message_type();
+            return out.problem(msg.topic, Problem::NodeNotBorn { message_type });
+        }
+        let state = self
+            .nodes
+            .entry(key)
+            .or_insert_with(|| NodeState::unborn(msg.now));
+        let Some(birth) = &mut state.birth else {
+            if kind == MessageKind::Data {
+                self.stats.dropped += payload.metrics.len() as u64;
+            }
+            let message_type = message_type();
             out.problem(msg.topic, Problem::NodeNotBorn { message_type });
             return ask_rebirth(state, msg, out);
         };
@@ -644,12 +1026,36 @@ impl Host {
         birth.last_seq = payload.seq.or(birth.last_seq);
         match (kind, &msg.device) {
             (MessageKind::Birth, Some(device)) => {
-                let table = birth_table(msg, &payload.metrics, out);
-                birth.devices.insert(device.clone(), table);
+                let metrics = payload.metrics.len();
+                let old = birth.devices.get(device).map_or(0, |d| d.points);
+                let cap =
+                    if birth.points.saturating_sub(old) + metrics > self.limits.max_node_points {
+                        Some(Cap::NodePoints)
+                    } else if self.points.saturating_sub(old) + metrics > self.limits.max_points {
+                        Some(Cap::Points)
+                    } else {
+                        None
+                    };
+                if let Some(cap) = cap {
+                    return self.refuse_birth(msg, metrics, cap, out);
+                }
+                let table = birth_table(msg, &payload.metrics, &mut self.stats, out);
+                let known = DeviceBirth {
+                    table,
+                    points: metrics,
+                };
+                if let Some(old) = birth.devices.insert(device.clone(), known) {
+                    birth.points = birth.points.saturating_sub(old.points);
+                    self.points = self.points.saturating_sub(old.points);
+                }
+                birth.points += metrics;
+                self.points += metrics;
             }
             (MessageKind::Death, Some(device)) => {
-                if let Some(table) = birth.devices.remove(device) {
-                    mark_bad(&table, msg.t, out);
+                if let Some(old) = birth.devices.remove(device) {
+                    birth.points = birth.points.saturating_sub(old.points);
+                    self.points = self.points.saturating_sub(old.points);
+                    mark(&old.table, msg.t, Quality::Bad, out);
                 }
             }
             (MessageKind::Data, None) => {
@@ -658,8 +1064,8 @@ impl Host {
                 rebirth |= unknown;
             }
             (MessageKind::Data, Some(device)) => match birth.devices.get(device) {
-                Some(table) => {
-                    let (dropped, unknown) = data(msg, table, &payload.metrics, out);
+                Some(known) => {
+                    let (dropped, unknown) = data(msg, &known.table, &payload.metrics, out);
                     self.stats.dropped += dropped;
                     rebirth |= unknown;
                 }
@@ -688,12 +1094,13 @@ fn suffix(kind: MessageKind) -> &'static str {
     }
 }
 
-/// A Rebirth request for the message's node, unless one was asked less than
-/// [`REBIRTH_HOLD_OFF_MS`] ago (a clock that went back does not hold it off).
+/// A Rebirth request for the message's node, unless one was asked less than its hold-off
+/// ago ([`REBIRTH_HOLD_OFF_MS`], or [`REFUSED_REBIRTH_HOLD_OFF_MS`] after a refused birth;
+/// a clock that went back does not hold it off).
 fn ask_rebirth(state: &mut NodeState, msg: &Message<'_>, out: &mut Received) {
     if let Some(asked) = state.rebirth_asked
         && asked <= msg.now
-        && msg.now.as_millis() - asked.as_millis() < REBIRTH_HOLD_OFF_MS
+        && msg.now.as_millis() - asked.as_millis() < state.hold_off_ms
     {
         return;
     }
@@ -703,24 +1110,42 @@ fn ask_rebirth(state: &mut NodeState, msg: &Message<'_>, out: &mut Received) {
 }
 
 /// The table of a birth's metrics; its points and their current values into `out`.
-fn birth_table(msg: &Message<'_>, metrics: &[Metric], out: &mut Received) -> Table<Role> {
+/// Metrics without a name, or with a name [`MetricName`] refuses, are left out.
+fn birth_table(
+    msg: &Message<'_>,
+    metrics: &[Metric],
+    stats: &mut Stats,
+    out: &mut Received,
+) -> Table<Role> {
     for (index, m) in metrics.iter().enumerate() {
         if m.name.is_none() {
             out.problem(msg.topic, Problem::UnnamedBirthMetric { index });
         }
     }
-    let table = Table::of_birth(metrics, |_, m| {
-        let name = m.name.as_deref().unwrap_or_default();
+    let owner = Arc::new(PointOwner {
+        group: msg.group.clone(),
+        node: msg.node.clone(),
+        device: msg.device.clone(),
+    });
+    let table = Table::of_birth(metrics, |index, shared, m| {
+        let metric_name = match MetricName::shared(shared) {
+            Ok(name) => name,
+            Err(error) => {
+                stats.names_refused += 1;
+                out.problem(msg.topic, Problem::BadMetricName { index, error });
+                return None;
+            }
+        };
+        let name: &str = shared;
         if msg.device.is_none() {
             if name == BD_SEQ || name.starts_with(NODE_CONTROL) {
-                return Role::Ignored;
+                return Some(Role::Ignored);
             }
             if name == EVENT {
-                return Role::Event;
+                return Some(Role::Event);
             }
         }
-        let datatype = m.datatype.and_then(|code| DataType::from_code(code).ok());
-        let (Some(datatype), Ok(metric_name)) = (datatype, MetricName::new(name)) else {
+        let Some(datatype) = m.datatype.and_then(|code| DataType::from_code(code).ok()) else {
             out.problem(
                 msg.topic,
                 Problem::UnsupportedDataType {
@@ -728,12 +1153,10 @@ fn birth_table(msg: &Message<'_>, metrics: &[Metric], out: &mut Received) -> Tab
                     code: m.datatype,
                 },
             );
-            return Role::Ignored;
+            return Some(Role::Ignored);
         };
         let point = Arc::new(PointKey {
-            group: msg.group.clone(),
-            node: msg.node.clone(),
-            device: msg.device.clone(),
+            owner: Arc::clone(&owner),
             name: metric_name,
         });
         out.points.push(point_info(&point, datatype, m));
@@ -748,7 +1171,7 @@ fn birth_table(msg: &Message<'_>, metrics: &[Metric], out: &mut Received) -> Tab
                 },
             ),
         }
-        Role::Point(point, datatype)
+        Some(Role::Point(point, datatype))
     });
     for &alias in table.ambiguous_aliases() {
         out.problem(msg.topic, Problem::DuplicateAlias { alias });
@@ -816,6 +1239,9 @@ fn data(
     for (index, m) in metrics.iter().enumerate() {
         let Some(known) = table.lookup(m) else {
             dropped += 1;
+            if table.left_out(m) {
+                continue; // reported at its birth
+            }
             let problem = match (m.alias, &m.name) {
                 (Some(alias), _) => Problem::UnknownAlias {
                     device: msg.device.clone(),
@@ -823,7 +1249,7 @@ fn data(
                 },
                 (None, Some(name)) => Problem::UnknownMetric {
                     device: msg.device.clone(),
-                    name: name.clone(),
+                    name: shortened(name),
                 },
                 (None, None) => Problem::NoMetricId { index },
             };
@@ -840,7 +1266,7 @@ fn data(
                     out.problem(
                         msg.topic,
                         Problem::DataTypeMismatch {
-                            metric: known.name.clone(),
+                            metric: known.name.to_string(),
                             expected: *datatype,
                             got,
                         },
@@ -852,7 +1278,7 @@ fn data(
         };
         if let Err(error) = read {
             dropped += 1;
-            let metric = known.name.clone();
+            let metric = known.name.to_string();
             out.problem(msg.topic, Problem::Value { metric, error });
         }
     }
@@ -883,15 +1309,15 @@ fn node_event(msg: &Message<'_>, m: &Metric) -> Result<HostEvent, ValueError> {
     })
 }
 
-/// A Bad null sample at `t` for every point of `table`.
-fn mark_bad(table: &Table<Role>, t: Timestamp, out: &mut Received) {
+/// A null sample of `quality` at `t` for every point of `table`.
+fn mark(table: &Table<Role>, t: Timestamp, quality: Quality, out: &mut Received) {
     for known in table.iter() {
         if let Role::Point(point, _) = &known.extra {
             out.samples.push(HostSample {
                 point: Arc::clone(point),
                 t,
                 value: SampleValue::Null,
-                quality: Quality::Bad,
+                quality,
                 historical: false,
             });
         }
@@ -999,9 +1425,11 @@ mod tests {
 
     fn key(device: Option<&str>, point: &str) -> PointKey {
         PointKey {
-            group: id("cell"),
-            node: id("gw1"),
-            device: device.map(id),
+            owner: Arc::new(PointOwner {
+                group: id("cell"),
+                node: id("gw1"),
+                device: device.map(id),
+            }),
             name: name(point),
         }
     }
@@ -1100,7 +1528,14 @@ mod tests {
         let samples: Vec<_> = got
             .samples
             .iter()
-            .map(|s| (s.point.device.clone(), s.t, s.value.clone(), s.historical))
+            .map(|s| {
+                (
+                    s.point.device().cloned(),
+                    s.t,
+                    s.value.clone(),
+                    s.historical,
+                )
+            })
             .collect();
         assert_eq!(
             samples,
@@ -1446,7 +1881,7 @@ mod tests {
         assert!(
             got.samples
                 .iter()
-                .all(|s| s.point.device == Some(id("jbc2"))
+                .all(|s| s.point.device() == Some(&id("jbc2"))
                     && s.t == at(500)
                     && s.quality == Quality::Bad)
         );
@@ -1609,6 +2044,462 @@ mod tests {
         }
         assert!(undecodable > 0, "cut inside a field is undecodable");
         assert_eq!(host.stats().undecodable, 2 + undecodable as u64);
+    }
+
+    /// A host within `limits`, following `cell`.
+    fn limited(limits: Limits) -> Host {
+        alone().with_limits(limits)
+    }
+
+    /// `p` with its payload changed by `change`.
+    fn edited(p: &Publish, change: impl FnOnce(&mut Payload)) -> Publish {
+        let mut payload = Payload::decode(&p.payload[..]).unwrap();
+        change(&mut payload);
+        Publish {
+            payload: payload.encode_to_vec(),
+            ..p.clone()
+        }
+    }
+
+    #[test]
+    fn a_birth_past_the_point_cap_is_refused_whole_and_not_asked_again_at_once() {
+        // The NBIRTH's 4 metrics (bdSeq, Rebirth, Event, Gateway/Lines) and jbc1's 4 fit;
+        // jbc2's 4 would make 12.
+        let mut host = limited(Limits {
+            max_points: 11,
+            ..Limits::default()
+        });
+        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+        node.on_connect();
+        feed(
+            &mut host,
+            &node.node_birth(&node_metrics(), T0).unwrap(),
+            T0,
+        );
+        let jbc1 = node.device_birth(&id("jbc1"), &station(), T0).unwrap();
+        assert_eq!(feed(&mut host, &jbc1, T0).problems, []);
+        assert_eq!(host.points_held(), 8);
+
+        let jbc2 = node.device_birth(&id("jbc2"), &station(), T0).unwrap();
+        let got = feed(&mut host, &jbc2, T0);
+        assert_eq!(
+            (got.points.len(), got.samples.len()),
+            (0, 0),
+            "refused whole"
+        );
+        assert_eq!(got.commands, []);
+        assert_eq!(
+            got.problems[0].problem,
+            Problem::BirthRefused {
+                metrics: 4,
+                cap: Cap::Points,
+                max: 11
+            }
+        );
+        let words = got.problems[0].to_string();
+        assert!(
+            words.starts_with("spBv1.0/cell/DBIRTH/gw1/jbc2: a birth of 4 metrics refused")
+                && words.contains("more than 11 metrics")
+                && words.contains("5 min"),
+            "{words}"
+        );
+        assert_eq!(host.stats().births_refused, 1);
+        assert_eq!(host.points_held(), 8);
+
+        // jbc2 stays unborn, and its data asks for no Rebirth for 5 minutes, not 5 s.
+        for (offset, asked) in [(1_000, 0), (6_000, 0), (299_000, 0), (301_000, 1)] {
+            let got = feed(
+                &mut host,
+                &ddata(&mut node, "jbc2", offset as f64, at(offset)),
+                at(offset),
+            );
+            assert_eq!(got.samples, []);
+            assert_eq!(
+                got.problems[0].problem,
+                Problem::DeviceNotBorn { device: id("jbc2") }
+            );
+            assert_eq!(got.commands.len(), asked, "at +{offset} ms");
+        }
+        // jbc1 lives on.
+        let got = feed(
+            &mut host,
+            &ddata(&mut node, "jbc1", 2.0, at(302_000)),
+            at(302_000),
+        );
+        assert_eq!((got.samples.len(), got.problems.len()), (1, 0));
+    }
+
+    #[test]
+    fn a_node_birth_past_the_per_node_cap_is_refused_and_a_smaller_one_is_taken() {
+        let mut host = limited(Limits {
+            max_node_points: 7,
+            ..Limits::default()
+        });
+        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+        node.on_connect();
+        let lines = (0..4).map(|i| {
+            (
+                MetricSpec::new(name(&format!("Line {i}")), DataType::Int64),
+                Sample::good(MetricValue::Int64(i), T0),
+            )
+        });
+        let big: Vec<_> = node_metrics().into_iter().chain(lines).collect();
+        let got = feed(&mut host, &node.node_birth(&big, T0).unwrap(), T0);
+        assert_eq!(got.points, []);
+        assert!(matches!(
+            got.problems[0].problem,
+            Problem::BirthRefused {
+                metrics: 8,
+                cap: Cap::NodePoints,
+                max: 7
+            }
+        ));
+        assert_eq!(host.nodes_born(), 0);
+        let dbirth = node.device_birth(&id("jbc1"), &station(), T0).unwrap();
+        let got = feed(&mut host, &dbirth, at(6_000));
+        assert!(matches!(
+            got.problems[0].problem,
+            Problem::NodeNotBorn { .. }
+        ));
+        assert_eq!(got.commands, [], "not asked again 6 s after a refusal");
+
+        // The node's own rebirth with fewer metrics is taken, and its DBIRTH then passes
+        // the node's limit (4 + 4 > 7).
+        node.on_connect();
+        let got = feed(
+            &mut host,
+            &node.node_birth(&node_metrics(), at(7_000)).unwrap(),
+            at(7_000),
+        );
+        assert_eq!((got.problems.len(), got.points.len()), (0, 1));
+        let dbirth = node
+            .device_birth(&id("jbc1"), &station(), at(7_000))
+            .unwrap();
+        let got = feed(&mut host, &dbirth, at(7_000));
+        assert!(matches!(
+            got.problems[0].problem,
+            Problem::BirthRefused {
+                cap: Cap::NodePoints,
+                ..
+            }
+        ));
+        assert_eq!(host.points_held(), 4);
+    }
+
+    #[test]
+    fn a_new_node_past_the_node_cap_is_refused_unless_an_unborn_one_makes_room() {
+        let mut host = limited(Limits {
+            max_nodes: 1,
+            ..Limits::default()
+        });
+        let (_gw1, gw1_will) = born_with_will(&mut host);
+        let mut gw2 = EdgeNode::new(id("cell"), id("gw2"), BdSeq::new(0));
+        gw2.on_connect();
+        let birth = gw2.node_birth(&node_metrics(), at(10)).unwrap();
+        let got = feed(&mut host, &birth, at(10));
+        assert!(matches!(
+            got.problems[0].problem,
+            Problem::BirthRefused {
+                cap: Cap::Nodes,
+                max: 1,
+                ..
+            }
+        ));
+        // Its data asks for nothing: no state is kept for it.
+        let data = gw2.node_event(&event_at(at(20)), at(20)).unwrap();
+        let got = feed(&mut host, &data, at(20));
+        assert!(matches!(
+            got.problems[0].problem,
+            Problem::NodeNotBorn { .. }
+        ));
+        assert_eq!((got.commands.len(), host.nodes_known()), (0, 1));
+
+        // gw1 dies: its place may go to gw2.
+        feed(&mut host, &gw1_will, at(30));
+        let got = feed(&mut host, &birth, at(40));
+        assert_eq!(got.problems, []);
+        assert_eq!((host.nodes_born(), host.nodes_known()), (1, 1));
+        assert_eq!(host.points_held(), 4, "gw1's 12 given back, gw2's 4 taken");
+    }
+
+    fn event_at(t: Timestamp) -> NodeEvent {
+        NodeEvent {
+            t,
+            kind: "line_down".into(),
+            severity: 500,
+            message: "line1 down".into(),
+            line: None,
+            device: None,
+            point: None,
+        }
+    }
+
+    #[test]
+    fn a_dead_nodes_state_is_freed_after_the_grace() {
+        let mut host = alone();
+        let (_node, will) = born_with_will(&mut host);
+        let mut other = EdgeNode::new(id("cell"), id("gw2"), BdSeq::new(0));
+        other.on_connect();
+        feed(
+            &mut host,
+            &other.node_birth(&node_metrics(), T0).unwrap(),
+            T0,
+        );
+        feed(&mut host, &will, at(1_000));
+        assert_eq!((host.nodes_born(), host.nodes_known()), (1, 2));
+        assert_eq!(host.points_held(), 4);
+
+        // Any message looks, at most once a minute: 9 minutes after the death gw1 is kept.
+        let nothing = |host: &mut Host, t| host.receive("spBv1.0/STATE/other", b"{}", t);
+        nothing(&mut host, at(1_000 + 9 * 60_000));
+        assert_eq!(host.nodes_known(), 2);
+        nothing(&mut host, at(1_000 + DEAD_NODE_GRACE_MS + 60_000));
+        assert_eq!(host.nodes_known(), 1, "gw1 freed, gw2 (born) kept");
+        assert_eq!(host.stats().nodes_freed, 1);
+        // A message of gw1's dead session changes nothing; a new birth is read as ever.
+        assert_eq!(
+            feed(&mut host, &will, at(DEAD_NODE_GRACE_MS * 2)),
+            Received::default()
+        );
+    }
+
+    #[test]
+    fn a_death_for_an_offline_host_marks_the_points_stale_not_bad() {
+        let mut host = alone();
+        let (mut node, _will) = born_with_will(&mut host);
+        let death = node.host_offline_death(at(9_000)).unwrap();
+        let got = feed(&mut host, &death, at(9_010));
+        assert_eq!(got.problems, []);
+        assert_eq!(
+            got.samples.len(),
+            1 + 4 + 4,
+            "Gateway/Lines and both stations"
+        );
+        assert!(got.samples.iter().all(|s| s.t == at(9_000)
+            && s.value == SampleValue::Null
+            && s.quality == Quality::Stale));
+        // Unborn as after any death: its data asks for a rebirth.
+        let got = feed(
+            &mut host,
+            &ddata(&mut node, "jbc1", 1.0, at(9_100)),
+            at(9_100),
+        );
+        assert_eq!((got.samples.len(), got.commands.len()), (0, 1));
+        assert_eq!(host.points_held(), 0);
+    }
+
+    #[test]
+    fn metric_names_with_a_right_to_left_override_are_left_out() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        node.on_connect();
+        feed(
+            &mut host,
+            &node.node_birth(&node_metrics(), at(1)).unwrap(),
+            at(1),
+        );
+        let long = "x".repeat(300);
+        let dbirth = edited(
+            &node.device_birth(&id("jbc1"), &station(), at(1)).unwrap(),
+            |payload| {
+                // air_temp shows as "air_temp" followed by a reversed "lio": "air_templio"
+                // would read "air_tempoil" in a table.
+                payload.metrics[0].name = Some("air_temp\u{202e}lio".into());
+                payload.metrics[1].name = Some(long.clone());
+                payload.metrics[2].name = Some("heater\non".into());
+            },
+        );
+        let got = feed(&mut host, &dbirth, at(2));
+        let names: Vec<_> = got.points.iter().map(|p| p.point.name.as_str()).collect();
+        assert_eq!(names, ["status"]);
+        assert_eq!(got.samples.len(), 1);
+        let problems: Vec<_> = got.problems.iter().map(|p| p.to_string()).collect();
+        assert_eq!(problems.len(), 3, "{problems:#?}");
+        assert!(
+            problems[0].contains("birth metric 0")
+                && problems[0].contains(r"\u{202e}")
+                && !problems[0].contains('\u{202e}')
+                && problems[0].ends_with("left out"),
+            "{}",
+            problems[0]
+        );
+        assert!(
+            problems[1].contains("300 bytes long") && !problems[1].contains(&long),
+            "{}",
+            problems[1]
+        );
+        assert_eq!(host.stats().names_refused, 3);
+        // Their data, by alias, is dropped without asking for a rebirth each time.
+        let got = feed(&mut host, &ddata(&mut node, "jbc1", 3.0, at(3)), at(3));
+        assert_eq!(got, Received::default());
+        assert_eq!(host.stats().dropped, 1);
+    }
+
+    #[test]
+    fn a_message_whose_ids_are_too_long_or_hold_control_characters_is_refused_whole() {
+        let mut host = alone();
+        let mut node = born(&mut host);
+        let birth = node.device_birth(&id("jbc1"), &station(), T0).unwrap();
+        let device = "d".repeat(60_000);
+        for (topic, level) in [
+            (format!("spBv1.0/cell/DBIRTH/gw1/{device}"), "device id"),
+            (
+                "spBv1.0/cell/DBIRTH/gw1/jbc\u{202e}1".to_owned(),
+                "device id",
+            ),
+            ("spBv1.0/cell/NBIRTH/gw\u{7}1".to_owned(), "edge node id"),
+        ] {
+            let got = host.receive(&topic, &birth.payload, at(1));
+            assert_eq!((got.points.len(), got.samples.len()), (0, 0));
+            let Problem::Topic(TopicError::Id {
+                level: got_level, ..
+            }) = &got.problems[0].problem
+            else {
+                panic!("{:?}", got.problems);
+            };
+            assert_eq!(*got_level, level);
+            assert!(
+                got.problems[0].to_string().len() < 2_000,
+                "the problem does not repeat a 60 kB topic"
+            );
+        }
+        assert_eq!(host.nodes_known(), 1);
+    }
+
+    #[test]
+    fn a_state_offline_on_the_hosts_own_topic_is_answered_with_online_newer_than_it() {
+        let host = alone();
+        let online_at = at(10);
+        let now = at(60_000);
+        assert_eq!(
+            host.state_subscription(),
+            Subscription {
+                filter: "spBv1.0/STATE/historian".into(),
+                qos: Qos::AtLeastOnce
+            }
+        );
+        let answer = |payload: &[u8]| {
+            host.reassert_online(payload, online_at, now).map(|p| {
+                assert_eq!(p.topic.to_string(), "spBv1.0/STATE/historian");
+                assert_eq!((p.qos, p.retain), (Qos::AtLeastOnce, true));
+                HostState::from_json(&p.payload).unwrap()
+            })
+        };
+        let state = |online, t: Timestamp| HostState::new(online, t).to_json();
+        assert_eq!(answer(&state(true, online_at)), None, "its own online");
+        assert_eq!(
+            answer(&state(true, at(1))),
+            None,
+            "an online is never answered"
+        );
+        // Forged now, or a little ahead: a newer online brings the edge nodes back.
+        assert_eq!(
+            answer(&state(false, now)),
+            Some(HostState::new(true, at(60_001)))
+        );
+        assert_eq!(
+            answer(&state(false, at(65_000))),
+            Some(HostState::new(true, at(65_001)))
+        );
+        assert_eq!(
+            answer(&state(false, at(30_000))),
+            Some(HostState::new(true, now))
+        );
+        // At the session's own time: edge nodes take an offline as new as the online.
+        assert_eq!(
+            answer(&state(false, online_at)),
+            Some(HostState::new(true, now))
+        );
+        // Older than this session (its own connect-time offline), too far ahead to be
+        // believed, or no STATE: the edge nodes ignored it; the retained message is put
+        // right with the session's own online, whose time its Will shares.
+        for payload in [
+            state(false, at(9)),
+            state(false, at(70_001)),
+            b"not json".to_vec(),
+        ] {
+            assert_eq!(answer(&payload), Some(HostState::new(true, online_at)));
+        }
+    }
+
+    /// One step of a random plant: what an edge node (of three) publishes.
+    #[derive(Debug, Clone)]
+    enum Step {
+        /// A new session and its NBIRTH of this many metrics of its own.
+        NodeBirth(usize, usize),
+        /// A DBIRTH of device 0–2 with this many metrics.
+        DeviceBirth(usize, usize, usize),
+        /// A DDEATH of device 0–2.
+        DeviceDeath(usize, usize),
+        /// The session's Will.
+        NodeDeath(usize),
+        /// The NDEATH of a node whose primary host went offline.
+        HostOffline(usize),
+    }
+
+    fn step() -> impl proptest::strategy::Strategy<Value = Step> {
+        use proptest::prelude::*;
+        prop_oneof![
+            (0..3usize, 0..8usize).prop_map(|(n, k)| Step::NodeBirth(n, k)),
+            (0..3usize, 0..3usize, 0..8usize).prop_map(|(n, d, k)| Step::DeviceBirth(n, d, k)),
+            (0..3usize, 0..3usize).prop_map(|(n, d)| Step::DeviceDeath(n, d)),
+            (0..3usize).prop_map(Step::NodeDeath),
+            (0..3usize).prop_map(Step::HostOffline),
+        ]
+    }
+
+    fn metrics(k: usize) -> Vec<(MetricSpec, Sample)> {
+        (0..k)
+            .map(|i| {
+                (
+                    MetricSpec::new(name(&format!("m{i}")), DataType::Int64),
+                    Sample::good(MetricValue::Int64(i as i64), T0),
+                )
+            })
+            .collect()
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn any_births_and_deaths_keep_within_the_limits_and_give_every_point_back(
+            steps in proptest::collection::vec(step(), 0..60),
+        ) {
+            let limits = Limits { max_nodes: 2, max_node_points: 12, max_points: 20 };
+            let mut host = limited(limits);
+            let mut nodes: Vec<EdgeNode> = (0..3)
+                .map(|n| EdgeNode::new(id("cell"), id(&format!("gw{n}")), BdSeq::new(0)))
+                .collect();
+            let mut wills: Vec<Option<Publish>> = vec![None, None, None];
+            for (i, step) in steps.into_iter().enumerate() {
+                let t = at(i as u64 * 1_000);
+                let published = match step {
+                    Step::NodeBirth(n, k) => {
+                        wills[n] = Some(nodes[n].will());
+                        nodes[n].on_connect();
+                        nodes[n].node_birth(&metrics(k), t).ok()
+                    }
+                    Step::DeviceBirth(n, d, k) => nodes[n]
+                        .device_birth(&id(&format!("d{d}")), &metrics(k), t)
+                        .ok(),
+                    Step::DeviceDeath(n, d) => {
+                        nodes[n].device_death(&id(&format!("d{d}")), t).ok()
+                    }
+                    Step::NodeDeath(n) => wills[n].clone(),
+                    Step::HostOffline(n) => nodes[n].host_offline_death(t),
+                };
+                if let Some(p) = published {
+                    feed(&mut host, &p, t);
+                }
+                proptest::prop_assert!(host.points_held() <= limits.max_points);
+                proptest::prop_assert!(host.nodes_known() <= limits.max_nodes);
+            }
+            // Every session's Will: nothing is held any more.
+            for will in wills.into_iter().flatten() {
+                feed(&mut host, &will, at(100_000));
+            }
+            proptest::prop_assert_eq!(host.nodes_born(), 0);
+            proptest::prop_assert_eq!(host.points_held(), 0);
+        }
     }
 
     proptest::proptest! {

@@ -32,12 +32,12 @@ pub mod topic;
 pub use describe::{Describer, Description};
 pub use event::NodeEvent;
 pub use host::{
-    Host, HostEvent, HostProblem, HostSample, PointInfo, PointKey, Problem, Received, SampleValue,
-    Sharing, Stats, Subscription,
+    Host, HostEvent, HostProblem, HostSample, PointInfo, PointKey, PointOwner, Problem, Received,
+    SampleValue, Sharing, Stats, Subscription,
 };
 pub use metric::{
-    DataType, MetricName, MetricSpec, MetricValue, Quality, Reading, Sample, Timestamp, ValueError,
-    Writable, WriteRange,
+    DataType, MetricName, MetricSpec, MetricValue, NameError, Quality, Reading, Sample, Timestamp,
+    ValueError, Writable, WriteRange,
 };
 pub use node::{BdSeq, Command, CommandError, Delivery, EdgeNode, NodeError, Publish, Qos};
 pub use state::HostState;

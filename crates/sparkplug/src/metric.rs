@@ -8,8 +8,10 @@
 //! good value.
 
 use std::fmt;
+use std::sync::Arc;
 
 use crate::proto::{Metric, PropertySet, PropertyValue, metric, property_value};
+use crate::topic::{MAX_NAME_BYTES, misleading_character, quoted_start};
 
 /// The name of the property that carries a reading's quality.
 pub const QUALITY: &str = "Quality";
@@ -445,23 +447,67 @@ impl Sample {
     }
 }
 
-/// A metric name: non-empty; `/` separates folders (`Node Control/Rebirth`).
+/// A metric name: non-empty, at most [`MAX_NAME_BYTES`] bytes, without control or
+/// bidirectional formatting characters (as ids); `/` separates folders
+/// (`Node Control/Rebirth`). Shared text: a clone copies no bytes.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct MetricName(String);
+pub struct MetricName(Arc<str>);
 
-/// A metric name was empty.
+/// Why a string is not a [`MetricName`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("a metric name must not be empty")]
-pub struct EmptyName;
+pub enum NameError {
+    /// The name is empty.
+    #[error("a metric name must not be empty")]
+    Empty,
+    /// The name is longer than [`MAX_NAME_BYTES`].
+    #[error("the metric name {start:?}… is {bytes} bytes long; at most {MAX_NAME_BYTES} are taken")]
+    TooLong {
+        /// Its first characters.
+        start: String,
+        /// Its length in bytes.
+        bytes: usize,
+    },
+    /// The name contains a control or bidirectional formatting character.
+    #[error(
+        "the metric name {name:?} contains {character:?}, a control or bidirectional \
+         formatting character, which would hide or reorder what is shown"
+    )]
+    Misleading {
+        /// The name as given.
+        name: String,
+        /// The first such character in it.
+        character: char,
+    },
+}
 
 impl MetricName {
     /// Checks `name` and keeps it.
-    pub fn new(name: impl Into<String>) -> Result<Self, EmptyName> {
-        let name = name.into();
+    pub fn new(name: impl AsRef<str>) -> Result<Self, NameError> {
+        Self::check(name.as_ref())?;
+        Ok(Self(Arc::from(name.as_ref())))
+    }
+
+    /// Checks `name` and keeps this very allocation (a birth's table shares it).
+    pub(crate) fn shared(name: &Arc<str>) -> Result<Self, NameError> {
+        Self::check(name)?;
+        Ok(Self(Arc::clone(name)))
+    }
+
+    fn check(name: &str) -> Result<(), NameError> {
         if name.is_empty() {
-            return Err(EmptyName);
+            return Err(NameError::Empty);
         }
-        Ok(Self(name))
+        if name.len() > MAX_NAME_BYTES {
+            return Err(NameError::TooLong {
+                start: quoted_start(name),
+                bytes: name.len(),
+            });
+        }
+        if let Some(character) = misleading_character(name) {
+            let name = name.to_owned();
+            return Err(NameError::Misleading { name, character });
+        }
+        Ok(())
     }
 
     /// The name as text.

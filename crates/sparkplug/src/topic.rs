@@ -4,6 +4,7 @@
 
 use std::fmt;
 use std::str::FromStr;
+use std::sync::Arc;
 
 /// The first level of every Sparkplug B topic.
 pub const NAMESPACE: &str = "spBv1.0";
@@ -13,9 +14,39 @@ pub const STATE: &str = "STATE";
 /// The characters an id must not contain: MQTT's level separator and wildcards.
 const FORBIDDEN: [char; 3] = ['/', '+', '#'];
 
-/// A group, edge node, device or host id: non-empty UTF-8 without `/`, `+` or `#`.
+/// The longest id or metric name taken, in bytes. A real one is a few dozen; a rogue
+/// client's 100 kB names would otherwise be kept and stored as sent.
+pub const MAX_NAME_BYTES: usize = 256;
+
+/// How many characters of a refused name an error quotes.
+const QUOTED_CHARS: usize = 32;
+
+/// The first character of `text` that would hide or reorder what a user reads: a control
+/// character (C0, DEL, C1) or a Unicode bidirectional formatting character (the marks
+/// U+200E, U+200F and U+061C, the embeddings and overrides U+202A–U+202E, the isolates
+/// U+2066–U+2069). Names and ids with one are refused: a right-to-left override shows
+/// `temp_lio` as `oil_pmet` in every table and dashboard.
+pub(crate) fn misleading_character(text: &str) -> Option<char> {
+    text.chars().find(|&c| {
+        c.is_control()
+            || matches!(
+                c,
+                '\u{200e}' | '\u{200f}' | '\u{061c}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}'
+            )
+    })
+}
+
+/// The start of a too long `text`, for an error message: its first few characters.
+pub(crate) fn quoted_start(text: &str) -> String {
+    text.chars().take(QUOTED_CHARS).collect()
+}
+
+/// A group, edge node, device or host id: non-empty UTF-8 of at most [`MAX_NAME_BYTES`]
+/// bytes, without `/`, `+`, `#` ([`FORBIDDEN`]), control or bidirectional formatting
+/// characters ([`misleading_character`]). Shared text: a clone (every point of a birth
+/// names its node) copies no bytes.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct Id(String);
+pub struct Id(Arc<str>);
 
 /// Why a string is not an [`Id`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -31,19 +62,49 @@ pub enum IdError {
         /// The first reserved character in it.
         character: char,
     },
+    /// The id is longer than [`MAX_NAME_BYTES`].
+    #[error("the id {start:?}… is {bytes} bytes long; at most {MAX_NAME_BYTES} are taken")]
+    TooLong {
+        /// Its first characters.
+        start: String,
+        /// Its length in bytes.
+        bytes: usize,
+    },
+    /// The id contains a control or bidirectional formatting character.
+    #[error(
+        "the id {id:?} contains {character:?}, a control or bidirectional formatting \
+         character, which would hide or reorder what is shown"
+    )]
+    Misleading {
+        /// The id as given.
+        id: String,
+        /// The first such character in it.
+        character: char,
+    },
 }
 
 impl Id {
     /// Checks `id` and keeps it.
-    pub fn new(id: impl Into<String>) -> Result<Self, IdError> {
-        let id = id.into();
+    pub fn new(id: impl AsRef<str>) -> Result<Self, IdError> {
+        let id = id.as_ref();
         if id.is_empty() {
             return Err(IdError::Empty);
         }
+        if id.len() > MAX_NAME_BYTES {
+            return Err(IdError::TooLong {
+                start: quoted_start(id),
+                bytes: id.len(),
+            });
+        }
         if let Some(character) = id.chars().find(|c| FORBIDDEN.contains(c)) {
+            let id = id.to_owned();
             return Err(IdError::Forbidden { id, character });
         }
-        Ok(Self(id))
+        if let Some(character) = misleading_character(id) {
+            let id = id.to_owned();
+            return Err(IdError::Misleading { id, character });
+        }
+        Ok(Self(Arc::from(id)))
     }
 
     /// The id as text.

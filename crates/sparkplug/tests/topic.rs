@@ -151,3 +151,64 @@ fn another_namespace_is_refused() {
     assert!("spBv1.0".parse::<Topic>().is_err());
     assert!("spBv1.0/STATE".parse::<Topic>().is_err());
 }
+
+#[test]
+fn an_id_of_256_bytes_is_taken_and_a_longer_one_is_refused_without_being_repeated() {
+    assert!(Id::new("é".repeat(128)).is_ok(), "256 bytes");
+    let long = "n".repeat(60_000);
+    let error = Id::new(&long).unwrap_err();
+    assert!(matches!(error, IdError::TooLong { bytes: 60_000, .. }));
+    let words = error.to_string();
+    assert!(
+        words.len() < 200 && words.contains("60000 bytes") && words.contains("at most 256"),
+        "{words}"
+    );
+}
+
+#[test]
+fn ids_and_metric_names_with_control_or_bidirectional_formatting_characters_are_refused() {
+    for bad in [
+        "jbc\u{0}1",
+        "jbc\t1",
+        "jbc\u{7f}",
+        "jbc\u{85}",
+        "a\u{200e}",
+        "a\u{200f}",
+        "a\u{061c}",
+        "a\u{202a}",
+        "temp\u{202e}lio",
+        "a\u{2066}",
+        "a\u{2069}",
+    ] {
+        let character = bad.chars().find(|c| !c.is_ascii_alphanumeric()).unwrap();
+        assert_eq!(
+            Id::new(bad),
+            Err(IdError::Misleading {
+                id: bad.into(),
+                character
+            }),
+            "{bad:?}"
+        );
+        assert_eq!(
+            sparkplug::MetricName::new(bad),
+            Err(sparkplug::NameError::Misleading {
+                name: bad.into(),
+                character
+            }),
+            "{bad:?}"
+        );
+    }
+    // What users write is still taken: folders, spaces, accents, other scripts.
+    for good in ["Node Control/Rebirth", "température four 2", "温度", "درجة"] {
+        assert!(sparkplug::MetricName::new(good).is_ok(), "{good}");
+    }
+    let words = Id::new("temp\u{202e}lio").unwrap_err().to_string();
+    assert!(
+        words.contains(r"\u{202e}") && !words.contains('\u{202e}'),
+        "the error shows the character escaped: {words}"
+    );
+    assert!(matches!(
+        sparkplug::MetricName::new("x".repeat(257)),
+        Err(sparkplug::NameError::TooLong { bytes: 257, .. })
+    ));
+}

@@ -61,6 +61,10 @@ pub use schema::{SCHEMA_VERSION, SamplesLayout};
 
 /// How long a connection attempt may take when the URL does not say
 /// (`connect_timeout=`).
+/// Point ids a connection keeps by default: the Sparkplug host's default limit of points
+/// (`--max-points`).
+pub const DEFAULT_POINT_CACHE: usize = 250_000;
+
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// The staging table of a connection's samples: temporary (never in the WAL), emptied by
@@ -94,8 +98,11 @@ pub struct Store {
     client: Client,
     layout: SamplesLayout,
     statements: Statements,
-    /// Point ids by [`point_key`].
+    /// Point ids by [`point_key`]; at most `point_cache` of them.
     point_ids: HashMap<String, i32>,
+    /// Most point ids kept: past it the cache starts again empty (births and churned
+    /// node names cannot grow it without bound; ids are read again as needed).
+    point_cache: usize,
     /// Days whose partition this connection has made sure of.
     days: HashSet<i64>,
     /// Reused for building keys.
@@ -179,6 +186,7 @@ impl Store {
             layout,
             statements,
             point_ids: HashMap::new(),
+            point_cache: DEFAULT_POINT_CACHE,
             days: HashSet::new(),
             scratch: String::new(),
             migrated,
@@ -190,6 +198,18 @@ impl Store {
     /// 2000, the default).
     pub fn set_max_age(&mut self, max_age: Option<Duration>) {
         self.max_age = max_age;
+    }
+
+    /// Keeps at most `points` point ids in memory from then on (the default is
+    /// [`DEFAULT_POINT_CACHE`]): when a batch would pass it, the cache is emptied first and
+    /// the ids are read again by the batches that need them.
+    pub fn set_point_cache(&mut self, points: usize) {
+        self.point_cache = points;
+    }
+
+    /// How many point ids this connection keeps in memory.
+    pub fn cached_points(&self) -> usize {
+        self.point_ids.len()
     }
 
     /// How the samples are split by time in this database.
@@ -266,6 +286,10 @@ impl Store {
         tx.commit()
             .await
             .map_err(|e| StoreError::statement("committing the batch", e))?;
+        if self.point_ids.len() + new_ids.len() > self.point_cache {
+            self.point_ids.clear();
+            self.point_ids.shrink_to(new_ids.len());
+        }
         self.point_ids.extend(new_ids);
         Ok(written)
     }
