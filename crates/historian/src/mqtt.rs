@@ -34,7 +34,7 @@
 //! keep-alive of at least 10 s for this margin.
 
 use std::collections::{HashMap, VecDeque};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
@@ -43,7 +43,7 @@ use rumqttc::{
     AsyncClient, Event, EventLoop, LastWill, MqttOptions, Outgoing, Packet, QoS, SubscribeFilter,
     SubscribeReasonCode, Transport,
 };
-use sparkplug::{Host, Problem, Publish, Qos, Timestamp};
+use sparkplug::{Host, Problem, Publish, Qos};
 use tokio::sync::{mpsc, watch};
 use wire::backoff::Backoff;
 
@@ -174,7 +174,6 @@ impl Link {
             }
             let (client, eventloop) = AsyncClient::new(options, QUEUE);
             let leaving = Arc::new(AtomicBool::new(false));
-            let announced = Arc::new(AtomicU64::new(t.as_millis()));
             let pump = Pump {
                 host: Arc::clone(&host),
                 client: client.clone(),
@@ -184,7 +183,6 @@ impl Link {
                 online_at: t,
                 describe: (broker.host.clone(), broker.port),
                 leaving: Arc::clone(&leaving),
-                announced: Arc::clone(&announced),
                 throttles: Arc::clone(&throttles),
                 state_topic: lock(&host).state_subscription().filter,
             };
@@ -222,19 +220,12 @@ impl Link {
                     }
                 }
                 End::Offline | End::Stop => {
-                    // Offline at once, so the edge nodes store and forward; no later than
-                    // the last online announced (an edge node ignores an older offline),
-                    // and not answered as a forgery.
+                    // Offline at once, so the edge nodes store and forward (at the session's
+                    // time, the Will's, which every online it announced carries too), and
+                    // not answered as a forgery.
                     leaving.store(true, Ordering::SeqCst);
-                    let at = Timestamp::from_millis(announced.load(Ordering::SeqCst));
-                    let offline = lock(&host).will(at);
                     let _ = client
-                        .publish(
-                            offline.topic.to_string(),
-                            QoS::AtLeastOnce,
-                            true,
-                            offline.payload,
-                        )
+                        .publish(will.topic.to_string(), QoS::AtLeastOnce, true, will.payload)
                         .await;
                     let _ = client.disconnect().await;
                     if tokio::time::timeout(CLOSE_GRACE, &mut task).await.is_err() {
@@ -278,8 +269,6 @@ struct Pump {
     /// Set by the link before it publishes STATE offline itself (PostgreSQL failing, a
     /// stop): that offline is not answered.
     leaving: Arc<AtomicBool>,
-    /// The latest online STATE timestamp published on this connection (ms).
-    announced: Arc<AtomicU64>,
     throttles: Arc<Mutex<Throttles>>,
     /// `spBv1.0/STATE/{host id}`.
     state_topic: String,
@@ -419,14 +408,10 @@ impl Pump {
             );
             return;
         }
-        let Some(online) = lock(&self.host).reassert_online(payload, self.online_at, now_ms())
-        else {
+        let Some(online) = lock(&self.host).reassert_online(payload, self.online_at) else {
             return;
         };
         let topic = online.topic.to_string();
-        if let Ok(state) = sparkplug::HostState::from_json(&online.payload) {
-            self.announced.fetch_max(state.timestamp, Ordering::SeqCst);
-        }
         if let Err(e) = self.publish(online) {
             // The next such STATE is answered again.
             tracing::warn!("historian: {e}");

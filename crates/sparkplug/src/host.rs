@@ -95,9 +95,6 @@ pub const REFUSED_REBIRTH_HOLD_OFF_MS: u64 = 300_000;
 pub const DEAD_NODE_GRACE_MS: u64 = 600_000;
 /// How often the host looks for nodes to forget, at most (1 min, as messages arrive).
 const SWEEP_EVERY_MS: u64 = 60_000;
-/// How far ahead of this host's clock a STATE timestamp is still believed (10 s): edge
-/// nodes refuse STATEs further ahead, so a forged one beyond this moved none of them.
-pub const STATE_SKEW_MS: u64 = 10_000;
 
 /// What a rogue or broken client can make the host keep; births past them are refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -705,34 +702,23 @@ impl Host {
     }
 
     /// What to publish when this host, online since `online_at` (its Will's timestamp)
-    /// and not going offline itself, reads `payload` on its own STATE topic at `now`:
-    /// `None` for an `online` STATE; for anything else (an `online:false`, which only a
-    /// forgery or a stale message can be while the host is up, or a payload that is no
-    /// STATE) `online` again, retained, so that no edge node stays away. Its timestamp:
+    /// and not going offline itself, reads `payload` on its own STATE topic: `None` for an
+    /// `online` STATE; for anything else (an `online:false`, which only a forgery or a
+    /// stale message can be while the host is up, or a payload that is no STATE) this
+    /// session's `online` again, with its own timestamp `online_at`, retained.
     ///
-    /// - `max(now, forged + 1)` when the forged timestamp is from `online_at` up to
-    ///   [`STATE_SKEW_MS`] ahead of `now`: edge nodes took it as newer than this session's
-    ///   `online` and ended theirs, and only a newer `online` brings them back;
-    /// - `online_at` otherwise (older, unreadable, or too far ahead for an edge node to
-    ///   believe): edge nodes ignored it, and the Will (timestamp `online_at`) stays the
-    ///   one they honour.
-    pub fn reassert_online(
-        &self,
-        payload: &[u8],
-        online_at: Timestamp,
-        now: Timestamp,
-    ) -> Option<Publish> {
-        let forged = match HostState::from_json(payload) {
-            Ok(state) if state.online => return None,
-            Ok(state) => Some(state.timestamp),
-            Err(_) => None,
-        };
-        let believed = |t: u64| t >= online_at.as_millis() && t <= now.as_millis() + STATE_SKEW_MS;
-        let t = match forged {
-            Some(t) if believed(t) => Timestamp::from_millis(now.as_millis().max(t + 1)),
-            _ => online_at,
-        };
-        Some(self.state_online(t))
+    /// Always `online_at`, never a newer time: the Will carries `online_at`, and an edge
+    /// node ignores an offline older than the newest STATE it believed, so a newer online
+    /// would make every node ignore this host's Will after a `kill -9`. A cellbus gateway
+    /// waits a grace after an offline for the host to say its same session is online
+    /// again (the gateway's `northbound::mqtt::primary`), so this answer is enough to keep it
+    /// publishing; a node that acts on an offline at once comes back at its next
+    /// connection, when it reads the retained STATE, which this answer has put right.
+    pub fn reassert_online(&self, payload: &[u8], online_at: Timestamp) -> Option<Publish> {
+        match HostState::from_json(payload) {
+            Ok(state) if state.online => None,
+            _ => Some(self.state_online(online_at)),
+        }
     }
 
     /// Reads one message received on `topic` at `now`. Never fails: what is wrong is
@@ -2231,6 +2217,7 @@ mod tests {
             line: None,
             device: None,
             point: None,
+            fields: None,
         }
     }
 
@@ -2367,7 +2354,7 @@ mod tests {
     }
 
     #[test]
-    fn a_state_offline_on_the_hosts_own_topic_is_answered_with_online_newer_than_it() {
+    fn a_state_offline_on_the_hosts_own_topic_is_answered_with_the_sessions_own_online() {
         let host = alone();
         let online_at = at(10);
         let now = at(60_000);
@@ -2379,7 +2366,7 @@ mod tests {
             }
         );
         let answer = |payload: &[u8]| {
-            host.reassert_online(payload, online_at, now).map(|p| {
+            host.reassert_online(payload, online_at).map(|p| {
                 assert_eq!(p.topic.to_string(), "spBv1.0/STATE/historian");
                 assert_eq!((p.qos, p.retain), (Qos::AtLeastOnce, true));
                 HostState::from_json(&p.payload).unwrap()
@@ -2392,30 +2379,15 @@ mod tests {
             None,
             "an online is never answered"
         );
-        // Forged now, or a little ahead: a newer online brings the edge nodes back.
-        assert_eq!(
-            answer(&state(false, now)),
-            Some(HostState::new(true, at(60_001)))
-        );
-        assert_eq!(
-            answer(&state(false, at(65_000))),
-            Some(HostState::new(true, at(65_001)))
-        );
-        assert_eq!(
-            answer(&state(false, at(30_000))),
-            Some(HostState::new(true, now))
-        );
-        // At the session's own time: edge nodes take an offline as new as the online.
-        assert_eq!(
-            answer(&state(false, online_at)),
-            Some(HostState::new(true, now))
-        );
-        // Older than this session (its own connect-time offline), too far ahead to be
-        // believed, or no STATE: the edge nodes ignored it; the retained message is put
-        // right with the session's own online, whose time its Will shares.
+        // Forged now, ahead, at the session's own time, older, far ahead, or no STATE at
+        // all: always this session's own online, whose time its Will shares (a newer one
+        // would make the edge nodes ignore the Will).
         for payload in [
+            state(false, now),
+            state(false, at(65_000)),
+            state(false, online_at),
             state(false, at(9)),
-            state(false, at(70_001)),
+            state(false, at(253_402_300_799_000)),
             b"not json".to_vec(),
         ] {
             assert_eq!(answer(&payload), Some(HostState::new(true, online_at)));
