@@ -739,12 +739,30 @@ async fn a_forged_retained_state_offline_is_answered_and_births_past_max_points_
     let historian = Historian::start(
         &broker.url(),
         &database,
-        &["--host-id", HOST_ID, "--max-points", "50"],
+        &["--host-id", HOST_ID, "--max-points", "1000"],
     );
     historian.wait_healthy("at start");
+    // A gateway whose primary host is the historian, born once the historian is online.
+    let dir = tempfile::tempdir().unwrap();
+    let gateway = start_gateway(&broker.url(), "cellF", dir.path());
+    let session = loop {
+        let state = retained_state(broker.port()).await;
+        if let Some(t) = state
+            .as_ref()
+            .filter(|s| s["online"] == true)
+            .and_then(|s| s["timestamp"].as_i64())
+        {
+            break t;
+        }
+    };
+    let deadline = Instant::now() + LIMIT;
+    while counter(&gateway.get("/metrics").1, "cellbus_mqtt_published_total") < 1.0 {
+        assert!(Instant::now() < deadline, "the gateway published nothing");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
 
     // A rogue client says the historian is offline, retained: gateways that connect later
-    // would wait for it for ever.
+    // would wait for it for ever, and those connected would end their sessions.
     let rogue = Subscriber::start(broker.port(), "cellbus/test/nothing").await;
     let forged = now_ms();
     let offline = serde_json::json!({ "online": false, "timestamp": forged });
@@ -757,9 +775,10 @@ async fn a_forged_retained_state_offline_is_answered_and_births_past_max_points_
     let deadline = Instant::now() + LIMIT;
     loop {
         let state = retained_state(broker.port()).await;
-        let answered = state.as_ref().is_some_and(|s| {
-            s["online"] == true && s["timestamp"].as_i64().is_some_and(|t| t > forged)
-        });
+        // Answered with the historian's own session (the time its Will carries too).
+        let answered = state
+            .as_ref()
+            .is_some_and(|s| s["online"] == true && s["timestamp"].as_i64() == Some(session));
         if answered {
             break;
         }
@@ -774,10 +793,26 @@ async fn a_forged_retained_state_offline_is_answered_and_births_past_max_points_
         counter(&metrics, "cellbus_historian_state_reasserted_total") >= 1.0,
         "{metrics}"
     );
+    // The gateway took the answer as the host contradicting the forgery, within its grace:
+    // it keeps its session and goes on publishing.
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let metrics = gateway.get("/metrics").1;
+        if counter(&metrics, "cellbus_mqtt_offline_contradicted_total") >= 1.0 {
+            assert_eq!(
+                counter(&metrics, "cellbus_mqtt_reconnects_total"),
+                0.0,
+                "{metrics}"
+            );
+            break;
+        }
+        assert!(Instant::now() < deadline, "{metrics}");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
 
-    // A rogue birth of 60 metrics passes --max-points 50: refused whole, nothing stored;
-    // a birth of 10 after it is taken.
-    for (node, metrics) in [("rogue", 60), ("small", 10)] {
+    // A rogue birth of 1,001 metrics passes --max-points 1000 alone: refused whole, nothing
+    // stored; a birth of 10 after it is taken (with the gateway's, well under 1,000).
+    for (node, metrics) in [("rogue", 1001), ("small", 10)] {
         let (topic, payload) = fake_birth(node, metrics);
         rogue.publish(&topic, payload).await;
     }
