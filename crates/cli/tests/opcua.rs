@@ -176,6 +176,16 @@ fn station_cell(dir: &std::path::Path, endpoint: &str, opcua: &str) -> std::path
     path
 }
 
+/// A simulated JBC station and `cellbus serve` of [`station_cell`] with `opcua` as its
+/// `[opcua]` table.
+fn station_served(dir: &std::path::Path, opcua: &str) -> (common::Sim, Served) {
+    let sim = common::Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
+    let config = station_cell(dir, &sim.endpoint, opcua);
+    let config = config.to_str().expect("a UTF-8 path");
+    let served = Served::start(dir, &["--config", config], None);
+    (sim, served)
+}
+
 #[test]
 fn a_device_that_stops_answering_turns_its_opcua_values_bad_without_a_value() {
     require_asyncua();
@@ -222,14 +232,7 @@ fn a_device_that_stops_answering_turns_its_opcua_values_bad_without_a_value() {
 fn anonymous_sessions_are_refused_when_the_config_says_so() {
     require_asyncua();
     let data = tempfile::tempdir().expect("a temporary directory");
-    let sim = common::Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
-    let config = station_cell(
-        data.path(),
-        &sim.endpoint,
-        "security = [\"None\"]\nanonymous = false",
-    );
-    let config = config.to_str().expect("a UTF-8 path");
-    let served = Served::start(data.path(), &["--config", config], None);
+    let (_sim, served) = station_served(data.path(), "security = [\"None\"]\nanonymous = false");
     let out = run_script(&["anonymous-refused", &served.opcua]);
     assert!(out.contains("anonymous session was refused"), "{out}");
 }
@@ -256,14 +259,10 @@ fn never_activated_sessions_beyond_the_servers_limit_are_closed_and_a_legitimate
 fn monitored_items_beyond_the_cap_are_refused_with_bad_too_many_monitored_items() {
     require_asyncua();
     let data = tempfile::tempdir().expect("a temporary directory");
-    let sim = common::Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
-    let config = station_cell(
+    let (_sim, served) = station_served(
         data.path(),
-        &sim.endpoint,
         "security = [\"None\"]\nanonymous = true\nmax_monitored_items = 300",
     );
-    let config = config.to_str().expect("a UTF-8 path");
-    let served = Served::start(data.path(), &["--config", config], None);
     let out = run_script(&["items", &served.opcua, &served.http, "300"]);
     for expected in [
         "300 made, 20 refused BadTooManyMonitoredItems",
