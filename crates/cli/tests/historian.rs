@@ -11,7 +11,8 @@
 //! row of `cellbus_samples` with its time, quality and (when good) value. Every row of
 //! `cellbus_samples` in the window is one of those changes, or repeats the value the
 //! gateway's history held at that time (a birth's current value), or is a death marker (a
-//! node's NDEATH marks all its points bad at one instant).
+//! node's NDEATH marks all its points bad at one instant, or stale when the node ended its
+//! session because the historian went away or started again).
 
 mod common;
 
@@ -228,13 +229,13 @@ fn differences(
     historian: &BTreeMap<String, Vec<Row>>,
 ) -> Vec<String> {
     let mut wrong = Vec::new();
-    // Death markers: instants at which the historian marked many points bad at once.
+    // Death markers: instants at which the historian marked many points bad at once (a
+    // node's Will), or stale (a node that ended its session because the historian went
+    // away or started again, and kept reading).
+    let marker = |r: &Row| (r.quality == "bad" || r.quality == "stale") && r.value.is_none();
     let mut bad_at: HashMap<i64, usize> = HashMap::new();
     for rows in historian.values() {
-        for r in rows
-            .iter()
-            .filter(|r| r.quality == "bad" && r.value.is_none())
-        {
+        for r in rows.iter().filter(|r| marker(r)) {
             *bad_at.entry(r.t).or_default() += 1;
         }
     }
@@ -264,7 +265,7 @@ fn differences(
             }
             let held = series.held_at(row.t);
             let repeats = held.is_some_and(|h| h.quality == row.quality && h.value == row.value);
-            let death = row.quality == "bad" && row.value.is_none() && deaths.contains(&row.t);
+            let death = marker(row) && deaths.contains(&row.t);
             if !repeats && !death {
                 wrong.push(format!(
                     "{point}: historian row {row:?} is neither a change of the gateway, nor the \

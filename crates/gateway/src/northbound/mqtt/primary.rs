@@ -19,6 +19,10 @@
 //!   session. A real host's Will is never contradicted (the host is gone), so the cost of
 //!   the grace is a node ending its session that much later, which the rewind of twice the
 //!   keep-alive covers.
+//! - An `online` of a *newer* session during the grace is a host that restarted (the
+//!   historian's `offline(T−1)` then `online(T)`): the offline was real, and the node ends
+//!   its session at once, so it rewinds and sends again what the host's old session may
+//!   have received and never kept.
 
 use std::time::Duration;
 
@@ -38,6 +42,9 @@ pub enum Verdict {
     Online,
     /// The host says again that its session is online: a pending offline is cancelled.
     Contradicted,
+    /// A newer session of the host came online after an offline: the host restarted, and
+    /// the node ends its session at once (to rewind), then reads the host's new state.
+    Restarted,
     /// An offline the node acts on after [`OFFLINE_GRACE`], unless contradicted; then ask
     /// [`PrimaryHost::offline_confirmed`].
     OfflinePending,
@@ -77,7 +84,7 @@ impl PrimaryHost {
         {
             return Verdict::FromTheFuture { ahead_ms };
         }
-        if state.online && self.pending && self.session.is_some_and(|t| state.timestamp >= t) {
+        if state.online && self.pending && self.session == Some(state.timestamp) {
             // The host's own session again: whatever offline came meanwhile was not its.
             self.pending = false;
             self.seen = Some(state.timestamp);
@@ -87,7 +94,11 @@ impl PrimaryHost {
             return Verdict::Older;
         }
         self.seen = Some(state.timestamp);
-        if state.online {
+        if state.online && self.pending && self.session.is_some() {
+            self.pending = false;
+            self.session = Some(state.timestamp);
+            Verdict::Restarted
+        } else if state.online {
             self.pending = false;
             self.session = Some(state.timestamp);
             Verdict::Online
@@ -146,6 +157,21 @@ mod tests {
             !host.offline_confirmed(),
             "the grace ends with nothing to do"
         );
+    }
+
+    #[test]
+    fn a_host_that_restarts_ends_the_session_at_once_so_the_node_rewinds() {
+        let mut host = online_host();
+        // The historian starting again: offline(T' - 1 ms), then online(T').
+        assert_eq!(
+            host.receive(state(false, NOW - 1), NOW),
+            Verdict::OfflinePending
+        );
+        assert_eq!(host.receive(state(true, NOW), NOW + 3), Verdict::Restarted);
+        assert!(!host.offline_confirmed(), "nothing left for the grace");
+        // The next connection reads the retained online of the new session.
+        host.reconnected();
+        assert_eq!(host.receive(state(true, NOW), NOW + 500), Verdict::Online);
     }
 
     #[test]

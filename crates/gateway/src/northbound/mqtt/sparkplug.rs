@@ -733,6 +733,19 @@ impl Node {
                 );
                 Ok(())
             }
+            (Verdict::Restarted, true) => {
+                tracing::info!(
+                    "MQTT: the primary host started a new session; ending this one to send \
+                     again what its last session may not have kept"
+                );
+                self.end_for_offline_host(conn).await
+            }
+            (Verdict::Restarted, false) => {
+                let from = conn.forwarded();
+                self.birth_cycle(conn, live, from).await?;
+                tracing::info!("MQTT: primary host online; births published");
+                Ok(())
+            }
             (Verdict::FromTheFuture { ahead_ms }, _) => {
                 self.cell.metrics().mqtt_state_refused.inc();
                 if let Some(count) = self.state_refused.count(tokio::time::Instant::now()) {
@@ -754,6 +767,13 @@ impl Node {
         if !self.host.offline_confirmed() || !self.born {
             return Ok(());
         }
+        self.end_for_offline_host(conn).await
+    }
+
+    /// Ends the session because the primary host went offline (or started anew): the
+    /// forwarded mark moves back by twice the keep-alive, and the goodbye is an NDEATH
+    /// that says why.
+    async fn end_for_offline_host(&mut self, conn: &mut Connection<'_>) -> Done {
         let window = duration_millis(self.keep_alive * 2);
         let now = Timestamp::now();
         let goodbye = self
