@@ -122,6 +122,9 @@ pub struct MqttConfig {
     pub max_backlog: u64,
     /// The most metrics one DCMD may carry; a larger command is refused whole.
     pub max_command_metrics: usize,
+    /// JSON mode: how often the retained point messages are read back and another
+    /// client's put right.
+    pub check_retained: Duration,
     /// TLS to the broker (`mqtts://`); `None` for `mqtt://`.
     pub tls: Option<MqttTls>,
 }
@@ -191,6 +194,9 @@ impl MqttMode {
 
 /// Default of `max_backlog`: stored changes sent after an outage.
 pub const DEFAULT_MQTT_BACKLOG: u64 = 1_000_000;
+/// Default of `check_retained`: JSON mode reads its retained point messages back this
+/// often (each check brings one message a point).
+pub const DEFAULT_MQTT_CHECK_RETAINED: Duration = Duration::from_secs(600);
 /// Default of `max_command_metrics`: writes in one DCMD. An operator's screen sets a few
 /// values at once; a thousand in one command is a flood.
 pub const DEFAULT_MQTT_COMMAND_METRICS: usize = 64;
@@ -216,6 +222,7 @@ impl MqttConfig {
             primary_host: None,
             max_backlog: DEFAULT_MQTT_BACKLOG,
             max_command_metrics: DEFAULT_MQTT_COMMAND_METRICS,
+            check_retained: DEFAULT_MQTT_CHECK_RETAINED,
             tls: tls.then(MqttTls::default),
         })
     }
@@ -712,6 +719,16 @@ fn check_mqtt(
             })?,
         None => DEFAULT_MQTT_COMMAND_METRICS,
     };
+    let check_retained = match &raw.check_retained {
+        Some(text) => duration(
+            text,
+            Duration::from_secs(10),
+            Duration::from_secs(24 * 3600),
+            "check_retained",
+            at,
+        )?,
+        None => DEFAULT_MQTT_CHECK_RETAINED,
+    };
     Ok(MqttConfig {
         host,
         port,
@@ -727,6 +744,7 @@ fn check_mqtt(
         primary_host,
         max_backlog,
         max_command_metrics,
+        check_retained,
         tls,
     })
 }
@@ -1660,6 +1678,7 @@ struct RawMqtt {
     primary_host: Option<Spanned<String>>,
     max_backlog: Option<Spanned<i64>>,
     max_command_metrics: Option<Spanned<i64>>,
+    check_retained: Option<Spanned<String>>,
     ca_file: Option<Spanned<String>>,
     client_cert: Option<Spanned<String>>,
     client_key: Option<Spanned<String>>,
@@ -3412,10 +3431,11 @@ type = "string:4"
         assert_eq!(mqtt.primary_host, None);
         assert_eq!(mqtt.max_backlog, DEFAULT_MQTT_BACKLOG);
         assert_eq!(mqtt.max_command_metrics, DEFAULT_MQTT_COMMAND_METRICS);
+        assert_eq!(mqtt.check_retained, DEFAULT_MQTT_CHECK_RETAINED);
         let text = format!(
             "{ONE}\n[mqtt]\nbroker = \"mqtt://b\"\nmode = \"JSON\"\nprefix = \"plant/cell7/\"\n\
              commands = true\nprimary_host = \"scada\"\nmax_backlog = 5000\n\
-             max_command_metrics = 8\n"
+             max_command_metrics = 8\ncheck_retained = \"1h\"\n"
         );
         let mqtt = parse(&text).unwrap().mqtt.unwrap();
         assert_eq!(mqtt.mode, MqttMode::Json);
@@ -3424,6 +3444,7 @@ type = "string:4"
         assert_eq!(mqtt.primary_host.as_deref(), Some("scada"));
         assert_eq!(mqtt.max_backlog, 5000);
         assert_eq!(mqtt.max_command_metrics, 8);
+        assert_eq!(mqtt.check_retained, Duration::from_secs(3600));
     }
 
     #[test]
@@ -3439,6 +3460,7 @@ type = "string:4"
         refused(&at("primary_host = \"a+b\""), 12, 16, "primary_host");
         refused(&at("max_backlog = 0"), 12, 15, "outside 1–100000000");
         refused(&at("max_command_metrics = 0"), 12, 23, "outside 1–10000");
+        refused(&at("check_retained = \"1s\""), 12, 18, "out of range");
         refused(&at("commands = \"yes\""), 12, 12, "bool");
     }
 

@@ -774,12 +774,13 @@ async fn next_on(
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn json_mode_answers_another_clients_retained_offline_with_its_true_status() {
+async fn json_mode_answers_another_clients_retained_status_and_point_values_with_the_truth() {
     let broker = Mosquitto::start();
     let rig = rig(1);
     let config = MqttConfig {
         mode: crate::config::MqttMode::Json,
         prefix: "plant/cell".into(),
+        check_retained: Duration::from_secs(1),
         ..config(&broker)
     };
     let (rogue, mut seen) = plain_client(&broker, "plant/cell/#").await;
@@ -801,5 +802,36 @@ async fn json_mode_answers_another_clients_retained_offline_with_its_true_status
     // What a new subscriber finds retained is the truth.
     let (_, mut fresh) = plain_client(&broker, "plant/cell/status").await;
     next_on(&mut fresh, "plant/cell/status", "online").await;
+
+    // A forged retained value of a point: the next check of the retained messages puts
+    // it right.
+    let (name, _, _) = writable_number(&rig);
+    let topic = format!("plant/cell/jbc1/{name}");
+    let forged = br#"{"t":1,"value":999999.0,"unit":null,"quality":"good"}"#;
+    rogue
+        .publish(topic.as_str(), rumqttc::QoS::AtLeastOnce, true, &forged[..])
+        .await
+        .unwrap();
+    // The forgery, then the gateway's answer (the set point does not change by itself).
+    tokio::time::timeout(LIMIT, async {
+        let mut forgery_seen = false;
+        while let Some((t, p)) = seen.recv().await {
+            if t == topic && p == forged {
+                forgery_seen = true;
+            } else if t == topic && forgery_seen {
+                return;
+            }
+        }
+    })
+    .await
+    .expect("the forged value answered");
+    let (_, mut fresh) = plain_client(&broker, &topic).await;
+    let retained = tokio::time::timeout(LIMIT, fresh.recv())
+        .await
+        .expect("a retained message")
+        .expect("the client runs");
+    assert_ne!(retained.1, forged, "the truth is retained again");
+    let truth: serde_json::Value = serde_json::from_slice(&retained.1).unwrap();
+    assert_eq!(truth["quality"], "good", "{truth}");
     node.stop().await;
 }

@@ -15,10 +15,14 @@
 //! The gateway also reads its own status topics (`{prefix}/status`, `{prefix}/+/status`):
 //! a message there that says something else than the gateway's or the device's status
 //! (another client's retained `offline`) is answered at once by the true status,
-//! retained, so new subscribers are not misled. Point topics are not read back: MQTT 3.1.1
-//! has no "no local" option, so every point message would come back to the gateway and
-//! double the broker's traffic; the next change overwrites a forged value, and the
-//! broker's ACLs keep other clients off the prefix (README, "Broker access control").
+//! retained, so new subscribers are not misled. Point topics are read back only every
+//! `check_retained` (10 min): MQTT 3.1.1 has no "no local" option, so a lasting
+//! subscription would bring every point message back to the gateway and double the
+//! broker's traffic. A check subscribes to `{prefix}/+/+` for [`CHECK_WINDOW`], takes the
+//! retained messages the subscription brings (the broker flags them; live ones are not
+//! looked at), publishes the truth for each point whose retained message is not what the
+//! gateway last published, and unsubscribes. The broker's ACLs keep other clients off the
+//! prefix in the first place (README, "Broker access control").
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -34,8 +38,8 @@ use crate::point::{PointId, Quality, Value};
 use crate::time::Timestamp;
 use crate::write::LogThrottle;
 
-/// JSON mode has no timer work; the tick only has to exist.
-const TICK: Duration = Duration::from_secs(3600);
+/// How long a check of the retained point messages listens for them.
+pub const CHECK_WINDOW: Duration = Duration::from_secs(5);
 
 /// The JSON publisher of one gateway.
 pub struct Publisher {
@@ -45,6 +49,10 @@ pub struct Publisher {
     born: bool,
     /// Foreign status messages answered since the last log line.
     foreign: LogThrottle,
+    /// How often the retained point messages are checked (`check_retained`).
+    check_every: Duration,
+    /// A check of the retained point messages is listening.
+    checking: bool,
 }
 
 impl Publisher {
@@ -55,6 +63,8 @@ impl Publisher {
             prefix: link.config().prefix.clone(),
             born: false,
             foreign: LogThrottle::default(),
+            check_every: link.config().check_retained,
+            checking: false,
         }
     }
 
@@ -108,10 +118,18 @@ impl Mode for Publisher {
                     self.snapshot(conn, live, from).await
                 }
                 Step::Live(Err(broadcast::error::RecvError::Closed)) => return End::Stop,
-                Step::Message { topic, payload, .. } => {
-                    self.on_status_message(conn, &topic, &payload).await
-                }
-                Step::Tick | Step::Wake => Ok(()),
+                Step::Message {
+                    topic,
+                    payload,
+                    retain,
+                } => match self.on_status_message(conn, &topic, &payload).await {
+                    Ok(()) if self.checking && retain => {
+                        self.on_retained_point(conn, &topic, &payload).await
+                    }
+                    done => done,
+                },
+                Step::Tick => self.start_check(conn).await,
+                Step::Wake => self.end_check(conn).await,
             };
             if let Err(why) = done {
                 return End::Lost(why);
@@ -121,10 +139,11 @@ impl Mode for Publisher {
 
     fn lost(&mut self) {
         self.born = false;
+        self.checking = false;
     }
 
     fn tick(&self) -> Duration {
-        TICK
+        self.check_every
     }
 }
 
@@ -135,6 +154,64 @@ impl Publisher {
             format!("{}/status", self.prefix),
             format!("{}/+/status", self.prefix),
         ]
+    }
+
+    fn points_filter(&self) -> String {
+        format!("{}/+/+", self.prefix)
+    }
+
+    /// Starts a check of the retained point messages (not before the snapshot is out).
+    async fn start_check(&mut self, conn: &mut Connection<'_>) -> Result<(), String> {
+        if !self.born || self.checking {
+            return Ok(());
+        }
+        conn.subscribe(self.points_filter()).await?;
+        self.checking = true;
+        conn.wake_at(tokio::time::Instant::now() + CHECK_WINDOW);
+        Ok(())
+    }
+
+    async fn end_check(&mut self, conn: &mut Connection<'_>) -> Result<(), String> {
+        if !self.checking {
+            return Ok(());
+        }
+        self.checking = false;
+        conn.unsubscribe(self.points_filter()).await
+    }
+
+    /// A retained point message brought by a check: when it is not the point's truth, the
+    /// truth again, retained.
+    async fn on_retained_point(
+        &mut self,
+        conn: &mut Connection<'_>,
+        topic: &str,
+        payload: &[u8],
+    ) -> Result<(), String> {
+        let Some((device, name)) = topic
+            .strip_prefix(self.prefix.as_str())
+            .and_then(|r| r.strip_prefix('/'))
+            .and_then(|r| r.split_once('/'))
+        else {
+            return Ok(());
+        };
+        let Some(entry) = self.cell.device_entry(device) else {
+            return Ok(());
+        };
+        let Some(index) = entry.point_index(name) else {
+            return Ok(());
+        };
+        let view = {
+            let state = entry.read();
+            let Some(point) = state.points.get(index) else {
+                return Ok(());
+            };
+            entry.point_view(index, point, Timestamp::now())
+        };
+        let truth = self.point_message(&view.id, view.value.as_ref(), view.quality, view.t, false);
+        if same_reading(payload, &truth.payload) {
+            return Ok(());
+        }
+        self.answer_foreign(conn, topic, payload, truth).await
     }
 
     /// A message on a status topic: when it says something else than the truth (another
@@ -159,17 +236,28 @@ impl Publisher {
                 None => return Ok(()),
             },
         };
+        self.answer_foreign(conn, topic, payload, truth).await
+    }
+
+    /// Publishes `truth` when `payload`, read on `topic`, is not it; counted and logged
+    /// (throttled).
+    async fn answer_foreign(
+        &mut self,
+        conn: &mut Connection<'_>,
+        topic: &str,
+        payload: &[u8],
+        truth: Outgoing,
+    ) -> Result<(), String> {
         if payload == truth.payload.as_slice() {
             return Ok(());
         }
         self.cell.metrics().mqtt_foreign_reasserted.inc();
         if let Some(count) = self.foreign.count(tokio::time::Instant::now()) {
             tracing::warn!(
-                "MQTT: {count} message(s) on this gateway's status topics said something \
-                 else than the truth since the last report (the latest on {topic}: {:?}); \
-                 another client of the broker publishes there: the true status is published \
-                 again (the broker's ACLs can keep other clients off the prefix, see the \
-                 README)",
+                "MQTT: {count} message(s) on this gateway's topics said something else than \
+                 the truth since the last report (the latest on {topic}: {:?}); another \
+                 client of the broker publishes there: the truth is published again (the \
+                 broker's ACLs can keep other clients off the prefix, see the README)",
                 String::from_utf8_lossy(&payload[..payload.len().min(64)])
             );
         }
@@ -296,6 +384,19 @@ impl Publisher {
     }
 }
 
+/// Whether two point messages say the same value, unit and quality. The time may differ:
+/// the gateway publishes a point when it changes, with that read's time, while its view
+/// holds the latest read, which did not change it.
+fn same_reading(a: &[u8], b: &[u8]) -> bool {
+    let read = |bytes: &[u8]| serde_json::from_slice::<serde_json::Value>(bytes).ok();
+    match (read(a), read(b)) {
+        (Some(a), Some(b)) => ["value", "unit", "quality"]
+            .iter()
+            .all(|key| a.get(key) == b.get(key)),
+        _ => false,
+    }
+}
+
 /// `{"t":ms,"value":…,"unit":…,"quality":…}` (plus `"historical":true` for a stored
 /// change); the value only when the quality is good.
 pub fn point_payload(
@@ -334,6 +435,21 @@ mod tests {
 
     fn parsed(bytes: &[u8]) -> serde_json::Value {
         serde_json::from_slice(bytes).unwrap()
+    }
+
+    #[test]
+    fn a_retained_point_message_is_the_truth_when_its_value_unit_and_quality_are() {
+        let published = br#"{"quality":"good","t":5,"unit":"degC","value":25.0}"#;
+        let now = br#"{"quality":"good","t":9,"unit":"degC","value":25.0}"#;
+        assert!(
+            same_reading(published, now),
+            "a later read of the same value"
+        );
+        let forged = br#"{"t":1,"value":999.0,"unit":"degC","quality":"good"}"#;
+        assert!(!same_reading(forged, now));
+        assert!(!same_reading(b"not json", now));
+        let bad = br#"{"quality":"bad","t":9,"unit":"degC","value":null}"#;
+        assert!(!same_reading(published, bad));
     }
 
     #[test]

@@ -458,6 +458,14 @@ impl Connection<'_> {
             .map_err(|e| format!("cannot subscribe to {filter}: {e}"))
     }
 
+    /// Unsubscribes from `filter`.
+    pub async fn unsubscribe(&self, filter: String) -> Result<(), String> {
+        self.client
+            .unsubscribe(filter.clone())
+            .await
+            .map_err(|e| format!("cannot unsubscribe from {filter}: {e}"))
+    }
+
     /// The forwarded mark.
     pub fn forwarded(&self) -> Timestamp {
         self.delivery.forwarded()
