@@ -419,6 +419,11 @@ async fn events(
             "kind": e.kind,
             "severity": e.severity,
             "message": e.message,
+            "fields": e
+                .fields
+                .as_deref()
+                .and_then(|f| serde_json::from_str::<serde_json::Value>(f).ok())
+                .unwrap_or_else(|| json!({})),
         })
     });
     let (events, truncated) = bounded_by_bytes(events, MAX_EVENTS_BYTES);

@@ -124,7 +124,32 @@ fn event_row(event: &HostEvent) -> EventRow {
             i32::try_from(s.clamp(1, MAX_SEVERITY)).unwrap_or(DEFAULT_SEVERITY)
         }),
         message: event.message.clone(),
+        fields: event.fields.as_deref().and_then(checked_fields),
     }
+}
+
+/// The longest `fields` text stored; a longer one is left out (the words stay).
+pub const MAX_FIELDS_BYTES: usize = 16 * 1024;
+
+/// An event's `fields` property when it is a JSON object PostgreSQL's jsonb takes (no NUL
+/// in any key or text, at most [`MAX_FIELDS_BYTES`]), in compact form; otherwise `None`:
+/// the event is stored with its words and without the facts, never refused for them.
+fn checked_fields(text: &str) -> Option<String> {
+    fn no_nul(value: &serde_json::Value) -> bool {
+        match value {
+            serde_json::Value::String(s) => !s.contains('\0'),
+            serde_json::Value::Array(items) => items.iter().all(no_nul),
+            serde_json::Value::Object(map) => {
+                map.iter().all(|(k, v)| !k.contains('\0') && no_nul(v))
+            }
+            _ => true,
+        }
+    }
+    if text.len() > MAX_FIELDS_BYTES {
+        return None;
+    }
+    let value: serde_json::Value = serde_json::from_str(text).ok()?;
+    (value.is_object() && no_nul(&value)).then(|| value.to_string())
 }
 
 #[cfg(test)]
@@ -219,6 +244,26 @@ mod tests {
     }
 
     #[test]
+    fn an_events_fields_are_kept_only_as_a_json_object_postgresql_takes() {
+        assert_eq!(
+            checked_fields(r#"{ "feeder": 7, "event": "parts_exhausted" }"#).as_deref(),
+            Some(r#"{"event":"parts_exhausted","feeder":7}"#)
+        );
+        for refused in [
+            "[1, 2]",
+            "\"words\"",
+            "not json",
+            r#"{"a": "\u0000"}"#,
+            r#"{"\u0000": 1}"#,
+            r#"{"deep": [{"x": "a\u0000b"}]}"#,
+        ] {
+            assert_eq!(checked_fields(refused), None, "{refused}");
+        }
+        let large = format!(r#"{{"x":"{}"}}"#, "a".repeat(MAX_FIELDS_BYTES));
+        assert_eq!(checked_fields(&large), None, "too large");
+    }
+
+    #[test]
     fn an_event_without_kind_or_severity_gets_words_that_say_so() {
         let mut batch = Batch::default();
         let received = Received {
@@ -232,6 +277,7 @@ mod tests {
                 kind: None,
                 severity: None,
                 message: "station restarted".into(),
+                fields: None,
                 historical: false,
             }],
             ..Received::default()
@@ -255,6 +301,7 @@ mod tests {
             kind: Some("alarm".into()),
             severity: Some(severity),
             message: "over".into(),
+            fields: None,
             historical: false,
         };
         let mut batch = Batch::default();

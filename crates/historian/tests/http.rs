@@ -36,6 +36,7 @@ fn event(t: SystemTime, message: String) -> EventRow {
         kind: "alarm".into(),
         severity: 700,
         message,
+        fields: None,
     }
 }
 

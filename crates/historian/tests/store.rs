@@ -69,6 +69,7 @@ fn event(ms: u64, message: &str) -> EventRow {
         kind: "device_down".into(),
         severity: 700,
         message: message.into(),
+        fields: None,
     }
 }
 
@@ -120,14 +121,14 @@ async fn column(client: &Client, sql: &str) -> Vec<String> {
 async fn the_schema_is_created_on_first_connect_and_not_migrated_again() {
     let (_pg, url) = database();
     let first = Store::connect(&url).await.expect("first connect");
-    assert_eq!(first.migrated(), [1, SCHEMA_VERSION]);
+    assert_eq!(first.migrated(), [1, 2, SCHEMA_VERSION]);
     assert_eq!(first.layout(), SamplesLayout::DayPartitions);
     let second = Store::connect(&url).await.expect("second connect");
     assert_eq!(second.migrated(), [] as [i32; 0]);
     let sql = client(&url).await;
     assert_eq!(
         column(&sql, "SELECT version::text FROM cellbus_schema ORDER BY 1").await,
-        ["1", "2"]
+        ["1", "2", "3"]
     );
 }
 
@@ -174,6 +175,7 @@ async fn the_views_have_exactly_the_stable_column_names_and_types() {
             "severity integer",
             "message text",
             "group_id text",
+            "fields jsonb",
         ]
     );
     assert_eq!(
@@ -223,6 +225,43 @@ async fn a_batch_written_twice_stores_its_samples_and_events_once() {
     assert_eq!(
         column(&sql, "SELECT count(*)::text FROM cellbus_events").await,
         ["1"]
+    );
+}
+
+#[tokio::test]
+async fn an_events_fields_are_kept_as_json_beside_its_words() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let t = MIDNIGHT_MS + 3_600_000;
+    let batch = Batch {
+        events: vec![
+            EventRow {
+                fields: Some(r#"{"event":"parts_exhausted","feeder":7}"#.into()),
+                ..event(t, "parts exhausted")
+            },
+            event(t + 1, "no fields"),
+        ],
+        ..Batch::default()
+    };
+    store.write(&batch).await.expect("write");
+    let sql = client(&url).await;
+    assert_eq!(
+        column(
+            &sql,
+            "SELECT coalesce(fields->>'feeder', '-') FROM cellbus_events ORDER BY t"
+        )
+        .await,
+        ["7", "-"]
+    );
+    let events = store
+        .events(at(t - 1), at(t + 10), 10)
+        .await
+        .expect("events");
+    let fields: Vec<Option<&str>> = events.iter().map(|e| e.fields.as_deref()).collect();
+    assert_eq!(
+        fields,
+        [None, Some(r#"{"event": "parts_exhausted", "feeder": 7}"#)],
+        "newest first, as PostgreSQL prints jsonb"
     );
 }
 

@@ -270,6 +270,9 @@ pub struct HostEvent {
     pub severity: Option<u32>,
     /// The value: words for the event log.
     pub message: String,
+    /// The `fields` property: the event's facts as JSON text, as sent (the reader
+    /// checks it).
+    pub fields: Option<String>,
     /// Sent with `is_historical`.
     pub historical: bool,
 }
@@ -1291,6 +1294,7 @@ fn node_event(msg: &Message<'_>, m: &Metric) -> Result<HostEvent, ValueError> {
         severity: read::integer(p, event::SEVERITY)
             .map(|n| u32::try_from(n.clamp(1, 1000)).unwrap_or(1000)),
         message,
+        fields: read::string(p, event::FIELDS),
         historical: m.is_historical == Some(true),
     })
 }
@@ -1896,7 +1900,7 @@ mod tests {
         let mut host = alone();
         let mut node = born(&mut host);
         let event = NodeEvent {
-            fields: None,
+            fields: Some(r#"{"value":3}"#.into()),
             t: at(123),
             kind: "alarm_raised".into(),
             severity: 700,
@@ -1922,6 +1926,7 @@ mod tests {
                 kind: Some("alarm_raised".into()),
                 severity: Some(700),
                 message: "jbc1: tool error".into(),
+                fields: Some(r#"{"value":3}"#.into()),
                 historical: false,
             }]
         );

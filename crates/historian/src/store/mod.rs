@@ -393,9 +393,12 @@ impl Statements {
             .await?,
             insert_events: prepare(
                 "INSERT INTO events (t, node, device, point, line, kind, severity, message, \
-                 group_id) \
-                 SELECT * FROM unnest($1::timestamptz[], $2::text[], $3::text[], $4::text[], \
-                 $5::text[], $6::text[], $7::int4[], $8::text[], $9::text[]) \
+                 group_id, fields) \
+                 SELECT t, node, device, point, line, kind, severity, message, group_id, \
+                 fields::jsonb FROM unnest($1::timestamptz[], $2::text[], $3::text[], \
+                 $4::text[], $5::text[], $6::text[], $7::int4[], $8::text[], $9::text[], \
+                 $10::text[]) AS e(t, node, device, point, line, kind, severity, message, \
+                 group_id, fields) \
                  ON CONFLICT (node, device, point, t, kind, md5(message), group_id) DO NOTHING",
             )
             .await?,
@@ -698,6 +701,7 @@ async fn insert_events(
             &events.iter().map(|e| e.severity).collect::<Vec<_>>(),
             &text(|e| &e.message),
             &text(|e| &e.group),
+            &optional(|e| e.fields.as_deref()),
         ],
     )
     .await
@@ -791,6 +795,7 @@ mod tests {
             kind: "device_down".into(),
             severity: 700,
             message: "down".into(),
+            fields: None,
         });
         let halves = batch.clone().split_by_point();
         assert_eq!(halves[0].len() + halves[1].len(), batch.len());
@@ -897,6 +902,7 @@ mod tests {
             kind: "device_down".into(),
             severity: 700,
             message: "old".into(),
+            fields: None,
         };
         batch.events.push(event.clone());
         event.t = now;
@@ -947,7 +953,7 @@ mod tests {
         drop(client);
 
         let mut store = Store::connect(&url).await.unwrap();
-        assert_eq!(store.migrated(), [2]);
+        assert_eq!(store.migrated(), [2, 3]);
         let old = store
             .find_points("cell1/jbc1.air_temperature")
             .await
@@ -1009,6 +1015,7 @@ mod tests {
             kind: "device_down".into(),
             severity: 700,
             message: "down".into(),
+            fields: None,
         };
         let written = store
             .write(&Batch {

@@ -247,8 +247,8 @@ impl Store {
         let rows = self
             .client
             .query(
-                "SELECT node, device, point, line, t, kind, severity, message, group_id \
-                 FROM events WHERE t >= $1 AND t < $2 ORDER BY t DESC, id DESC LIMIT $3",
+                "SELECT node, device, point, line, t, kind, severity, message, group_id, \
+                 fields::text FROM events WHERE t >= $1 AND t < $2 ORDER BY t DESC, id DESC LIMIT $3",
                 &[&from, &to, &limit],
             )
             .await
@@ -265,6 +265,7 @@ impl Store {
                 severity: r.get(6),
                 message: r.get(7),
                 group: r.get(8),
+                fields: r.get(9),
             })
             .collect())
     }

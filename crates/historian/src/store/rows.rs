@@ -137,6 +137,8 @@ pub struct EventRow {
     pub severity: i32,
     /// Words.
     pub message: String,
+    /// The facts for programs: a JSON object's text (checked by `ingest`), if any.
+    pub fields: Option<String>,
 }
 
 /// What one call of [`Store::write`](super::Store::write) commits, in one transaction.

@@ -10,7 +10,7 @@ use tokio_postgres::Client;
 use super::StoreError;
 
 /// The newest schema version this build writes.
-pub const SCHEMA_VERSION: i32 = 2;
+pub const SCHEMA_VERSION: i32 = 3;
 
 /// The advisory lock (per database) held while migrating: "cellbus" and 1.
 const MIGRATION_LOCK: i64 = 0x6365_6c6c_6275_7301;
@@ -46,6 +46,11 @@ const MIGRATIONS: &[Migration] = &[
         version: 2,
         what: "the Sparkplug group in the identity of points and events",
         statements: version_2,
+    },
+    Migration {
+        version: 3,
+        what: "events keep their fields (the facts beside the words)",
+        statements: version_3,
     },
 ];
 
@@ -157,6 +162,18 @@ fn version_2(_: SamplesLayout) -> Vec<&'static str> {
             SELECT node, device, point, unit, description, datatype, writable, write_min,
                 write_max, group_id
             FROM points",
+    ]
+}
+
+/// Version 3: an event's facts for programs (`{"feeder":7}`), as the gateways send them in
+/// the `Event` metric's `fields` property; NULL for events without any and for older rows.
+/// The events view shows them as its last column.
+fn version_3(_: SamplesLayout) -> Vec<&'static str> {
+    vec![
+        "ALTER TABLE events ADD COLUMN fields jsonb",
+        "CREATE OR REPLACE VIEW cellbus_events AS
+            SELECT t, node, device, point, line, kind, severity, message, group_id, fields
+            FROM events",
     ]
 }
 
