@@ -34,7 +34,7 @@
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
-use std::ops::Range;
+use std::ops::{Range, RangeInclusive};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -690,33 +690,17 @@ fn check_mqtt(
     };
     let primary_host = id_opt(&raw.primary_host, "primary_host", at)?;
     let max_backlog = match &raw.max_backlog {
-        Some(n) => u64::try_from(*n.get_ref())
-            .ok()
-            .filter(|n| (1..=100_000_000).contains(n))
-            .ok_or_else(|| {
-                at(
-                    n.span(),
-                    format!(
-                        "max_backlog {} is outside 1–100000000 stored changes",
-                        n.get_ref()
-                    ),
-                )
-            })?,
+        Some(n) => bounded(n, 1..=100_000_000, "max_backlog", " stored changes", at)?,
         None => DEFAULT_MQTT_BACKLOG,
     };
     let max_command_metrics = match &raw.max_command_metrics {
-        Some(n) => usize::try_from(*n.get_ref())
-            .ok()
-            .filter(|n| (1..=10_000).contains(n))
-            .ok_or_else(|| {
-                at(
-                    n.span(),
-                    format!(
-                        "max_command_metrics {} is outside 1–10000 metrics in one command",
-                        n.get_ref()
-                    ),
-                )
-            })?,
+        Some(n) => bounded(
+            n,
+            1..=10_000,
+            "max_command_metrics",
+            " metrics in one command",
+            at,
+        )?,
         None => DEFAULT_MQTT_COMMAND_METRICS,
     };
     let check_retained = match &raw.check_retained {
@@ -1572,6 +1556,34 @@ fn check_writable(
     }
 }
 
+/// An integer key within `range`, or an error at its place:
+/// `{what} {n} is outside {min}–{max}{unit}`.
+fn bounded<T>(
+    n: &Spanned<i64>,
+    range: RangeInclusive<T>,
+    what: &str,
+    unit: &str,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<T, ConfigError>
+where
+    T: TryFrom<i64> + PartialOrd + fmt::Display,
+{
+    T::try_from(*n.get_ref())
+        .ok()
+        .filter(|value| range.contains(value))
+        .ok_or_else(|| {
+            at(
+                n.span(),
+                format!(
+                    "{what} {} is outside {}–{}{unit}",
+                    n.get_ref(),
+                    range.start(),
+                    range.end()
+                ),
+            )
+        })
+}
+
 fn duration(
     text: &Spanned<String>,
     min: Duration,
@@ -2105,35 +2117,23 @@ fn check_opcua(
         None => DEFAULT_OPCUA_SESSION_TIMEOUT,
     };
     let sessions_per_address = match &raw.sessions_per_address {
-        Some(n) => usize::try_from(*n.get_ref())
-            .ok()
-            .filter(|n| (1..=OPCUA_MAX_SESSIONS).contains(n))
-            .ok_or_else(|| {
-                at(
-                    n.span(),
-                    format!(
-                        "sessions_per_address {} is outside 1–{OPCUA_MAX_SESSIONS} (the \
-                         server's sessions at once)",
-                        n.get_ref()
-                    ),
-                )
-            })?,
+        Some(n) => bounded(
+            n,
+            1..=OPCUA_MAX_SESSIONS,
+            "sessions_per_address",
+            " (the server's sessions at once)",
+            at,
+        )?,
         None => DEFAULT_OPCUA_SESSIONS_PER_ADDRESS,
     };
     let max_monitored_items = match &raw.max_monitored_items {
-        Some(n) => u64::try_from(*n.get_ref())
-            .ok()
-            .filter(|n| (1..=10_000_000).contains(n))
-            .ok_or_else(|| {
-                at(
-                    n.span(),
-                    format!(
-                        "max_monitored_items {} is outside 1–10000000 (each costs about \
-                         1.35 kB of memory)",
-                        n.get_ref()
-                    ),
-                )
-            })?,
+        Some(n) => bounded(
+            n,
+            1..=10_000_000,
+            "max_monitored_items",
+            " (each costs about 1.35 kB of memory)",
+            at,
+        )?,
         None => DEFAULT_OPCUA_MAX_MONITORED_ITEMS,
     };
     Ok(OpcuaConfig {

@@ -366,10 +366,14 @@ impl EdgeNode {
     /// The NDEATH to register as the MQTT Will of the next connection: a `bdSeq`
     /// (Int64) metric and nothing else; QoS 1, not retained.
     pub fn will(&self) -> Publish {
-        let payload = Payload {
+        self.death(Payload {
             metrics: vec![bd_seq_metric(self.bd_seq)],
             ..Payload::default()
-        };
+        })
+    }
+
+    /// An NDEATH of `payload`: QoS 1, not retained.
+    fn death(&self, payload: Payload) -> Publish {
         Publish {
             topic: self.node_topic(MessageKind::Death),
             payload: payload.encode_to_vec(),
@@ -396,12 +400,7 @@ impl EdgeNode {
             ],
             ..Payload::default()
         };
-        Some(Publish {
-            topic: self.node_topic(MessageKind::Death),
-            payload: payload.encode_to_vec(),
-            qos: Qos::AtLeastOnce,
-            retain: false,
-        })
+        Some(self.death(payload))
     }
 
     /// The connection is up (CONNACK): the Will's `bdSeq` becomes the session's and the

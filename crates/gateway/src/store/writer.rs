@@ -741,7 +741,7 @@ fn write_rows(
                     e.point.as_ref().map(PointId::as_str),
                     e.message,
                     (!e.fields.is_empty())
-                        .then(|| serde_json::Value::Object(e.fields.clone()).to_string()),
+                        .then(|| serde_json::to_string(&e.fields).unwrap_or_default()),
                 ])?;
                 counts[1] += 1;
             }

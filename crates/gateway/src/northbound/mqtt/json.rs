@@ -179,6 +179,11 @@ impl Publisher {
         conn.unsubscribe(self.points_filter()).await
     }
 
+    /// What follows `{prefix}/` in `topic`, if it is one of the gateway's topics.
+    fn under_prefix<'t>(&self, topic: &'t str) -> Option<&'t str> {
+        topic.strip_prefix(self.prefix.as_str())?.strip_prefix('/')
+    }
+
     /// A retained point message brought by a check: when it is not the point's truth, the
     /// truth again, retained.
     async fn on_retained_point(
@@ -187,11 +192,7 @@ impl Publisher {
         topic: &str,
         payload: &[u8],
     ) -> Result<(), String> {
-        let Some((device, name)) = topic
-            .strip_prefix(self.prefix.as_str())
-            .and_then(|r| r.strip_prefix('/'))
-            .and_then(|r| r.split_once('/'))
-        else {
+        let Some((device, name)) = self.under_prefix(topic).and_then(|r| r.split_once('/')) else {
             return Ok(());
         };
         let Some(entry) = self.cell.device_entry(device) else {
@@ -222,10 +223,7 @@ impl Publisher {
         topic: &str,
         payload: &[u8],
     ) -> Result<(), String> {
-        let Some(rest) = topic
-            .strip_prefix(self.prefix.as_str())
-            .and_then(|r| r.strip_prefix('/'))
-        else {
+        let Some(rest) = self.under_prefix(topic) else {
             return Ok(());
         };
         let truth = match rest.strip_suffix("/status") {

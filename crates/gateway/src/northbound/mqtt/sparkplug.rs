@@ -889,13 +889,13 @@ impl Node {
                     json,
                 ));
             }
-            let point = PointId::new(&device_id, metric.as_str())
+            let found = PointId::new(&device_id, metric.as_str())
                 .ok()
-                .filter(|p| self.cell.point(p).is_some());
-            let Some(point) = point else {
+                .and_then(|p| self.cell.point(&p).map(|spec| (p, spec)));
+            let Some((point, spec)) = found else {
                 return Err(refusal(format!("no such point {device}.{metric}"), json));
             };
-            if let Some(Err(e)) = self.cell.point(&point).map(|spec| spec.check_write(&value)) {
+            if let Err(e) = spec.check_write(&value) {
                 return Err(refusal(e.to_string(), json));
             }
             let attempt = Attempt::new(
@@ -997,7 +997,7 @@ fn node_event(event: &Event) -> NodeEvent {
         device: event.device.as_ref().map(|d| d.as_str().to_owned()),
         point: event.point.as_ref().map(|p| p.name().to_owned()),
         fields: (!event.fields.is_empty())
-            .then(|| serde_json::Value::Object(event.fields.clone()).to_string()),
+            .then(|| serde_json::to_string(&event.fields).unwrap_or_default()),
     }
 }
 
