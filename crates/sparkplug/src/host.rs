@@ -1393,6 +1393,13 @@ mod tests {
     }
 
     /// [`born`], and the Will the node registered for this session.
+    /// Edge node `cell/gw1` (bdSeq 7), connected, nothing born.
+    fn connected() -> EdgeNode {
+        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+        node.on_connect();
+        node
+    }
+
     fn born_with_will(host: &mut Host) -> (EdgeNode, Publish) {
         let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
         let will = node.will();
@@ -1438,8 +1445,7 @@ mod tests {
     #[test]
     fn births_define_points_with_units_and_ranges_and_ddata_by_alias_resolves_to_names() {
         let mut host = alone();
-        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-        node.on_connect();
+        let mut node = connected();
         let nbirth = node.node_birth(&node_metrics(), T0).unwrap();
         let got = feed(&mut host, &nbirth, at(5));
         let names: Vec<_> = got.points.iter().map(|p| p.point.name.as_str()).collect();
@@ -1673,8 +1679,7 @@ mod tests {
     #[test]
     fn data_before_a_birth_is_dropped_and_asks_for_a_rebirth() {
         let mut host = alone();
-        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-        node.on_connect();
+        let mut node = connected();
         node.node_birth(&node_metrics(), T0).unwrap();
         node.device_birth(&id("jbc1"), &station(), T0).unwrap();
         let got = feed(&mut host, &ddata(&mut node, "jbc1", 50.0, at(10)), at(10));
@@ -2060,8 +2065,7 @@ mod tests {
             max_points: 11,
             ..Limits::default()
         });
-        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-        node.on_connect();
+        let mut node = connected();
         feed(
             &mut host,
             &node.node_birth(&node_metrics(), T0).unwrap(),
@@ -2126,8 +2130,7 @@ mod tests {
             max_node_points: 7,
             ..Limits::default()
         });
-        let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-        node.on_connect();
+        let mut node = connected();
         let lines = (0..4).map(|i| {
             (
                 MetricSpec::new(name(&format!("Line {i}")), DataType::Int64),
