@@ -70,18 +70,18 @@ pub async fn run(command: MqttCommand) -> anyhow::Result<ExitCode> {
 }
 
 async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
-    let gateway::config::Broker { host, port, tls } =
-        gateway::config::parse_broker(&args.broker).map_err(|m| usage(format!("--broker: {m}")))?;
+    let gateway::northbound::mqtt::config::Broker { host, port, tls } =
+        gateway::northbound::mqtt::config::parse_broker(&args.broker).map_err(|m| usage(format!("--broker: {m}")))?;
     let scheme = if tls { "mqtts" } else { "mqtt" };
     let broker = format!("{scheme}://{host}:{port}");
     let transport = if tls {
-        let files = gateway::config::MqttTls {
+        let files = gateway::northbound::mqtt::config::MqttTls {
             ca_file: args.ca_file.clone(),
             client: args
                 .client_cert
                 .clone()
                 .zip(args.client_key.clone())
-                .map(|(cert, key)| gateway::config::MqttClientCert { cert, key }),
+                .map(|(cert, key)| gateway::northbound::mqtt::config::MqttClientCert { cert, key }),
         };
         let config = gateway::northbound::mqtt::tls::client_config(&files)
             .map_err(|e| usage(format!("--broker {broker}: {e}")))?;

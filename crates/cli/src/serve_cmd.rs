@@ -54,7 +54,7 @@ pub struct ServeArgs {
     /// What to publish on MQTT: `sparkplug` (Sparkplug B 3.0, the default) or `json` (one
     /// retained topic per point).
     #[arg(long, value_name = "MODE", value_parser = parse_mqtt_mode)]
-    pub mqtt_mode: Option<gateway::config::MqttMode>,
+    pub mqtt_mode: Option<gateway::northbound::mqtt::config::MqttMode>,
     /// The Sparkplug edge node id (default: the [mqtt] table's, else this machine's host
     /// name; `demo` for the demo cell).
     #[arg(long, value_name = "ID")]
@@ -101,8 +101,8 @@ fn parse_age(text: &str, least: Duration, what: &str) -> Result<Duration, String
     Ok(age)
 }
 
-fn parse_mqtt_mode(text: &str) -> Result<gateway::config::MqttMode, String> {
-    gateway::config::MqttMode::parse(text)
+fn parse_mqtt_mode(text: &str) -> Result<gateway::northbound::mqtt::config::MqttMode, String> {
+    gateway::northbound::mqtt::config::MqttMode::parse(text)
 }
 
 #[derive(Debug, Subcommand)]
@@ -153,9 +153,9 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         ConfigCommand::ImportCsv { file } => {
-            let registers = gateway::config::registers_from_csv(&file).map_err(usage)?;
-            print!("{}", gateway::config::registers_toml(&registers));
-            for overlap in gateway::config::overlapping_registers(&registers) {
+            let registers = gateway::driver::modbus::config::registers_from_csv(&file).map_err(usage)?;
+            print!("{}", gateway::driver::modbus::config::registers_toml(&registers));
+            for overlap in gateway::driver::modbus::config::overlapping_registers(&registers) {
                 eprintln!("warning: {}: {overlap}", file.display());
             }
             Ok(ExitCode::SUCCESS)

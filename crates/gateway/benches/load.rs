@@ -150,7 +150,6 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use gateway::cell::Cell;
 use gateway::driver::ErrorKind;
-use gateway::driver::Protocol;
 use gateway::metrics::{DeviceLabels, LineLabels, PollResult};
 use gateway::point::Quality;
 use gateway::{Gateway, ServeOptions};
@@ -1496,9 +1495,9 @@ impl Counters {
                 c.polls_failed += failed;
                 if let Some(entry) = cell.device_entry(device.as_str()) {
                     *c.polls_by_protocol
-                        .entry(entry.protocol.as_str())
+                        .entry(entry.protocol.name())
                         .or_default() += ok;
-                    if entry.protocol == Protocol::Modbus {
+                    if entry.protocol == gateway::driver::modbus::KIND {
                         let requests = metrics
                             .modbus_requests_per_poll
                             .get_or_create(&DeviceLabels {
@@ -1601,7 +1600,7 @@ impl Sampler {
                 };
                 let points = device.points.iter().filter(|p| p.group == g.name).count();
                 // Per kind of device: a Modbus device's live group is not a JTSE's.
-                let name = format!("{} {}", device.protocol.as_str(), g.name);
+                let name = format!("{} {}", device.protocol.name(), g.name);
                 let group = match groups
                     .iter()
                     .position(|(n, seen)| *n == name && seen.period == g.period)
@@ -1804,7 +1803,7 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     let report = runtime.block_on(async {
         let gateway = Gateway::start(options).await?;
         let addr = gateway.local_addr();
-        let gateway_opcua = gateway.opcua_url().map(str::to_owned);
+        let gateway_opcua = gateway.url_of("opcua").map(str::to_owned);
         let cell = Arc::clone(gateway.cell());
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         let run = tokio::spawn(gateway.run(async {

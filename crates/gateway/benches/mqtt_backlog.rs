@@ -49,7 +49,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use gateway::cell::Cell;
-use gateway::config::MqttConfig;
+use gateway::northbound::mqtt::config::MqttConfig;
 use gateway::metrics::Metrics;
 use gateway::northbound::mqtt::forward::FORWARDED_KEY;
 use gateway::point::{PointId, PointKind, Quality, Value};

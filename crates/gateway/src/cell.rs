@@ -14,7 +14,7 @@ use serde::Serialize;
 use tokio::sync::{broadcast, mpsc, oneshot};
 
 use crate::config::CellConfig;
-use crate::driver::{self, DeviceError, Driver, PollGroup, Protocol, WriteError};
+use crate::driver::{DeviceError, Driver, Kind, PollGroup, WriteError};
 use crate::event::{Event, EventKind};
 use crate::metrics::Metrics;
 use crate::point::{Deadband, DeviceId, PointId, PointKind, PointSpec, Quality, Value, Words};
@@ -117,7 +117,7 @@ pub struct DeviceEntry {
     /// Words for people.
     pub name: String,
     /// Its protocol.
-    pub protocol: Protocol,
+    pub protocol: Kind,
     /// The line it is on.
     pub line: String,
     /// Its address on the line.
@@ -367,7 +367,7 @@ pub struct DeviceView {
     /// Words.
     pub name: String,
     /// Its protocol.
-    pub protocol: Protocol,
+    pub protocol: Kind,
     /// The name of the line it is on.
     pub line: String,
     /// Its address on the line (JBC station, regulator, Modbus unit), if it has one.
@@ -427,7 +427,7 @@ pub struct WriteOutcome {
 }
 
 /// Opens a configured line: by its endpoint URL, or, for a protocol whose client keeps
-/// its own connections ([`Protocol::owns_connections`]), not at all: the line task then
+/// its own connections ([`DeviceKind::owns_connections`](crate::driver::DeviceKind::owns_connections)), not at all: the line task then
 /// gets a line that carries nothing and only schedules the device's polls.
 pub fn line_opener(line: &crate::config::LineConfig) -> Opener {
     if !owns_connections(line) {
@@ -444,7 +444,7 @@ pub fn line_opener(line: &crate::config::LineConfig) -> Opener {
 fn owns_connections(line: &crate::config::LineConfig) -> bool {
     line.devices
         .first()
-        .is_some_and(|d| d.driver.protocol.owns_connections())
+        .is_some_and(|d| d.driver.protocol.owns_connections().is_some())
 }
 
 /// Opens lines by their endpoint URL.
@@ -482,7 +482,7 @@ impl Cell {
             let (writes_tx, writes_rx) = mpsc::channel(WRITE_QUEUE);
             let mut slots: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)> = Vec::new();
             for device in &line.devices {
-                let driver = driver::build(&device.driver)?;
+                let driver = device.driver.build()?;
                 let points = driver.points();
                 let groups = driver
                     .groups()
@@ -500,16 +500,10 @@ impl Cell {
                 let deadbands = points
                     .iter()
                     .map(|p| {
-                        let register = device
-                            .driver
-                            .registers
-                            .iter()
-                            .find(|r| r.name == p.id.name());
-                        match register {
-                            Some(r) => r.deadband,
-                            None => device.deadband,
-                        }
-                        .filter(|_| p.kind == PointKind::Numeric)
+                        driver
+                            .deadband(p.id.name())
+                            .unwrap_or(device.deadband)
+                            .filter(|_| p.kind == PointKind::Numeric)
                     })
                     .collect::<Vec<_>>();
                 let deadbands = if deadbands.iter().all(Option::is_none) {
@@ -952,7 +946,7 @@ mod tests {
         let entry = DeviceEntry {
             id: device,
             name: "a device".into(),
-            protocol: Protocol::Jbc,
+            protocol: crate::driver::jbc::KIND,
             line: "line1".into(),
             address: None,
             deadbands: vec![None; points.len()],

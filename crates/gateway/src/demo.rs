@@ -50,7 +50,7 @@ use wire::device::SharedModel;
 
 use crate::config::{CellConfig, DeviceConfig, LineConfig};
 use crate::driver::jbc::DEFAULT_SERIAL;
-use crate::driver::{DriverConfig, Protocol};
+use crate::driver::{DriverConfig, Kind};
 use crate::point::DeviceId;
 
 /// The running simulators of the demo cell; they stop when it is dropped.
@@ -75,8 +75,7 @@ impl DemoCell {
         let mut demo = DemoCell {
             config: CellConfig {
                 source: None,
-                mqtt: None,
-                opcua: None,
+                interfaces: Default::default(),
                 token: None,
                 read_token: None,
                 lines: Vec::new(),
@@ -134,7 +133,7 @@ fn device_id(id: &str) -> std::io::Result<DeviceId> {
     DeviceId::new(id).map_err(|e| std::io::Error::other(e.to_string()))
 }
 
-fn device(id: DeviceId, protocol: Protocol, address: i64, name: &str) -> DeviceConfig {
+fn device(id: DeviceId, protocol: Kind, address: i64, name: &str) -> DeviceConfig {
     DeviceConfig {
         driver: DriverConfig {
             id,
@@ -142,10 +141,8 @@ fn device(id: DeviceId, protocol: Protocol, address: i64, name: &str) -> DeviceC
             address: Some(address),
             timeout: None,
             retries: None,
-            event_port: None,
             endpoint: None,
-            registers: Default::default(),
-            modbus: Default::default(),
+            settings: Default::default(),
         },
         name: name.to_owned(),
         period: None,
@@ -168,7 +165,7 @@ pub async fn start_jbc_station(demo: &mut DemoCell, id: &str, name: &str) -> std
         endpoint,
         devices: vec![device(
             id,
-            Protocol::Jbc,
+            crate::driver::jbc::KIND,
             crate::driver::jbc::DEFAULT_ADDRESS,
             name,
         )],
@@ -200,7 +197,7 @@ pub async fn start_thermosald_line(demo: &mut DemoCell, line: &str) -> std::io::
         regulators.push(Regulator::new(address, config, now));
         devices.push(device(
             device_id(&format!("sealer{n}"))?,
-            Protocol::Thermosald,
+            crate::driver::thermosald::KIND,
             i64::from(n),
             &format!("Sealer {n} (Thermosald ISC, address {n})"),
         ));
@@ -263,7 +260,7 @@ pub async fn start_cross(demo: &mut DemoCell, id: &str, name: &str) -> std::io::
         reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
         name: format!("{id}-rs485"),
         endpoint,
-        devices: vec![device(id, Protocol::Cross, 1, name)],
+        devices: vec![device(id, crate::driver::cross::KIND, 1, name)],
     });
     Ok(())
 }
@@ -288,9 +285,11 @@ pub async fn start_panasonic(demo: &mut DemoCell, id: &str, name: &str) -> std::
         framing: link::TcpFraming::Raw,
     };
     let id = device_id(id)?;
-    let mut device = device(id.clone(), Protocol::Panasonic, 0, name);
+    let mut device = device(id.clone(), crate::driver::panasonic::KIND, 0, name);
     device.driver.address = None;
-    device.driver.event_port = Some(event.port());
+    device.driver.settings = crate::config::Settings::new(crate::driver::panasonic::Keys {
+        event_port: Some(event.port()),
+    });
     device.driver.endpoint = Some(endpoint.clone());
     demo.config.lines.push(LineConfig {
         reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,

@@ -1,7 +1,7 @@
 //! Fuzz bodies, shared by the fuzz targets in `fuzz/` and the unit tests that run them.
 //!
 //! Each body feeds outside text through the code a user's input really takes: the TOML
-//! configuration through [`parse_config`](crate::config::parse_config) (what `cellbus config
+//! configuration through [`parse_config`](crate::plugins::parse_config) (what `cellbus config
 //! check` and `serve --config` run), query-parameter times and steps through the HTTP
 //! API's parsers, and whole query strings through axum's `Query` extractor and the checks
 //! the handlers run; and the bytes an OPC UA connection carries through the relay's
@@ -25,7 +25,7 @@ pub fn config(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    match crate::config::parse_config(text, Path::new("fuzz.toml")) {
+    match crate::plugins::parse_config(text, Path::new("fuzz.toml")) {
         Ok(cell) => {
             let _ = format!("{cell:?}");
         }

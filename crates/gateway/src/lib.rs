@@ -40,6 +40,8 @@ pub mod fuzzing;
 pub mod http;
 pub mod metrics;
 pub mod northbound;
+pub mod options;
+pub mod plugins;
 pub mod point;
 pub mod scheduler;
 pub mod serve;
@@ -50,7 +52,8 @@ pub mod write;
 #[cfg(test)]
 mod testing;
 
-pub use config::{CellConfig, ConfigError, EXAMPLE_CONFIG, check_config};
+pub use config::{CellConfig, ConfigError, EXAMPLE_CONFIG};
+pub use plugins::{check_config, parse_config};
 pub use serve::{
     DEFAULT_DATA_DIR, DEFAULT_LISTEN, DEFAULT_RETAIN, Gateway, MALLOC_ARENAS,
     MALLOC_MMAP_THRESHOLD, OptionError, ServeOptions, TOKEN_ENV, serve, tune_malloc,

@@ -230,7 +230,7 @@ impl LineTask {
                         })
                         .clone(),
                     up: metrics.device_up.get_or_create(&labels).clone(),
-                    requests_per_poll: (entry.protocol == crate::driver::Protocol::Modbus).then(
+                    requests_per_poll: entry.protocol.plans_reads().then(
                         || {
                             metrics
                                 .modbus_requests_per_poll

@@ -9,43 +9,22 @@ use std::time::Duration;
 
 use anyhow::Context;
 use tokio::sync::watch;
-use tokio::task::JoinHandle;
 
 use crate::cell::Cell;
-use crate::config::{
-    CellConfig, MqttConfig, MqttMode, OpcuaConfig, OpcuaSecurity, check_config,
-    default_edge_node_id, parse_broker,
-};
+use crate::config::{CellConfig, SAME_TOKENS, check_config, token_fault};
 use crate::demo::DemoCell;
 use crate::event::{Event, EventKind};
 use crate::http::{self, WritePolicy};
 use crate::metrics::Metrics;
-use crate::northbound;
+use crate::northbound::{Running, Start};
+pub use crate::options::{
+    DEFAULT_DATA_DIR, DEFAULT_LISTEN, DEFAULT_RETAIN, DEFAULT_RETAIN_AUDIT, OptionError,
+    ServeOptions,
+};
+use crate::plugins::Registry;
 use crate::scheduler::LineTask;
 use crate::store::{HistoryState, Store, StoreOptions};
 use crate::time::Timestamp;
-
-/// Address the gateway listens on by default: loopback only.
-pub const DEFAULT_LISTEN: SocketAddr =
-    SocketAddr::new(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST), 8080);
-
-/// Data directory by default, relative to the working directory.
-pub const DEFAULT_DATA_DIR: &str = "cellbus-data";
-
-/// History kept by default: 30 days.
-pub const DEFAULT_RETAIN: Duration = Duration::from_secs(30 * 24 * 3600);
-
-/// Audit rows kept by default: 365 days (never less than the history).
-pub const DEFAULT_RETAIN_AUDIT: Duration = Duration::from_secs(365 * 24 * 3600);
-
-/// The demo cell's Sparkplug edge node id (its group is `cellbus`).
-pub const DEMO_EDGE_NODE: &str = "demo";
-
-/// A mistake in the options `cellbus serve` was given (the CLI exits 2 for it), as opposed
-/// to a failure to start (a port in use, a data directory that cannot be made).
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct OptionError(pub String);
 
 /// Environment variable holding the write token.
 pub const TOKEN_ENV: &str = "CELLBUS_TOKEN";
@@ -79,62 +58,6 @@ pub fn tune_malloc() -> bool {
     arenas && mmap
 }
 
-/// What `cellbus serve` was asked for.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ServeOptions {
-    /// Where to listen (default 127.0.0.1:8080; port 0 for any free port).
-    pub listen: SocketAddr,
-    /// The cell's configuration; `None` starts the demo cell.
-    pub config: Option<PathBuf>,
-    /// Where the history database lives (default `./cellbus-data`).
-    pub data_dir: PathBuf,
-    /// How long history is kept (default 30 days).
-    pub retain: Duration,
-    /// How long audit rows are kept (default 365 days; never less than `retain`).
-    pub retain_audit: Duration,
-    /// Whether `POST /api/devices/{id}/write` is allowed.
-    pub allow_writes: bool,
-    /// The write token; else `CELLBUS_TOKEN`, else the config's `token`.
-    pub token: Option<String>,
-    /// The read token every API route then needs; else `CELLBUS_READ_TOKEN`, else the
-    /// config's `read_token`; none: reading is open.
-    pub read_token: Option<String>,
-    /// `--mqtt mqtt://HOST:PORT` (or `mqtts://HOST:PORT`, TLS): publish the cell as a
-    /// Sparkplug B edge node to this broker (the demo cell as group `cellbus`, edge node
-    /// `demo`); with a config, it replaces the `[mqtt]` table's broker (keeping its TLS
-    /// files for `mqtts://`; without a table, TLS trusts the system's roots).
-    pub mqtt: Option<String>,
-    /// `--mqtt-mode`: Sparkplug B or JSON, overriding the `[mqtt]` table's `mode`.
-    pub mqtt_mode: Option<MqttMode>,
-    /// `--mqtt-node`: the Sparkplug edge node id, overriding the `[mqtt]` table's.
-    pub mqtt_node: Option<String>,
-    /// `--mqtt-primary-host`: the Sparkplug primary host whose STATE gates the births.
-    pub mqtt_primary_host: Option<String>,
-    /// `--opcua IP:PORT`: serve the cell over OPC UA there (port 0: any free port); with
-    /// a config, it replaces the `[opcua]` table's endpoint.
-    pub opcua: Option<SocketAddr>,
-}
-
-impl Default for ServeOptions {
-    fn default() -> Self {
-        Self {
-            listen: DEFAULT_LISTEN,
-            config: None,
-            data_dir: PathBuf::from(DEFAULT_DATA_DIR),
-            retain: DEFAULT_RETAIN,
-            retain_audit: DEFAULT_RETAIN_AUDIT,
-            allow_writes: false,
-            token: None,
-            read_token: None,
-            mqtt: None,
-            mqtt_mode: None,
-            mqtt_node: None,
-            mqtt_primary_host: None,
-            opcua: None,
-        }
-    }
-}
-
 /// Runs the gateway until `shutdown` resolves (Ctrl-C, SIGTERM), then stops the pollers,
 /// commits the history and returns.
 ///
@@ -149,9 +72,12 @@ pub async fn serve(
     {
         let mut out = std::io::stdout().lock();
         writeln!(out, "listening on http://{}", gateway.local_addr())
-            .and_then(|()| match &gateway.opcua {
-                Some(opcua) => writeln!(out, "opcua on {}", opcua.url),
-                None => Ok(()),
+            .and_then(|()| {
+                gateway
+                    .interfaces
+                    .iter()
+                    .filter_map(|i| Some((i.name, i.url.as_ref()?)))
+                    .try_for_each(|(name, url)| writeln!(out, "{name} on {url}"))
             })
             .and_then(|()| out.flush())
             .context("cannot write to standard output")?;
@@ -169,8 +95,7 @@ pub struct Gateway {
     writes: WritePolicy,
     stop: watch::Sender<bool>,
     pollers: Pollers,
-    mqtt: Option<JoinHandle<()>>,
-    opcua: Option<northbound::opcua::Started>,
+    interfaces: Vec<Running>,
     _demo: Option<DemoCell>,
 }
 
@@ -183,9 +108,15 @@ impl Gateway {
     /// directory that cannot be used turns the history off (a `history_failed` event,
     /// `/healthz` degraded, history queries 503) while live values are served.
     pub async fn start(options: ServeOptions) -> anyhow::Result<Self> {
+        Self::start_with(options, &crate::plugins::builtin()).await
+    }
+
+    /// [`Gateway::start`] with the device kinds and interfaces of `registry` (a test adds
+    /// a kind of its own).
+    pub async fn start_with(options: ServeOptions, registry: &Registry) -> anyhow::Result<Self> {
         let (config, demo) = match &options.config {
             Some(path) => {
-                let config = check_config(path)?;
+                let config = check_config(path, &registry.config)?;
                 for warning in config.warnings() {
                     tracing::warn!("{}: {warning}", path.display());
                 }
@@ -199,8 +130,6 @@ impl Gateway {
             }
         };
         let writes = write_policy(&options, &config)?;
-        let mqtt = mqtt_config(&options, &config, demo.is_some())?;
-        let opcua = opcua_config(&options, &config, demo.is_some(), &writes)?;
         let store = Store::start(
             &options.data_dir,
             StoreOptions {
@@ -239,24 +168,20 @@ impl Gateway {
         report_history_off(&cell, options.data_dir.clone());
         let (stop, stopped) = watch::channel(false);
         let pollers = Pollers::start(tasks, stopped.clone())?;
-        let mqtt = mqtt
-            .map(|config| {
-                northbound::mqtt::start(
-                    Arc::clone(&cell),
-                    config,
-                    options.data_dir.clone(),
-                    options.allow_writes,
-                    stopped.clone(),
-                )
-            })
-            .transpose()?;
-        let opcua = match opcua {
-            Some((config, opcua_options)) => Some(
-                northbound::opcua::start(Arc::clone(&cell), config, opcua_options, stopped.clone())
-                    .await?,
-            ),
-            None => None,
-        };
+        let mut interfaces = Vec::new();
+        for interface in &registry.interfaces {
+            let start = Start {
+                cell: &cell,
+                config: &config,
+                options: &options,
+                demo: demo.is_some(),
+                writes: &writes,
+                stopped: stopped.clone(),
+            };
+            if let Some(running) = interface.start(start).await? {
+                interfaces.push(running);
+            }
+        }
         Ok(Self {
             listener,
             addr,
@@ -265,8 +190,7 @@ impl Gateway {
             writes,
             stop,
             pollers,
-            mqtt,
-            opcua,
+            interfaces,
             _demo: demo,
         })
     }
@@ -276,9 +200,12 @@ impl Gateway {
         self.addr
     }
 
-    /// The OPC UA endpoint URL, when the server runs.
-    pub fn opcua_url(&self) -> Option<&str> {
-        self.opcua.as_ref().map(|o| o.url.as_str())
+    /// Where clients reach the interface `name` (`opcua`), when it runs and listens.
+    pub fn url_of(&self, name: &str) -> Option<&str> {
+        self.interfaces
+            .iter()
+            .find(|i| i.name == name)
+            .and_then(|i| i.url.as_deref())
     }
 
     /// The live cell.
@@ -295,8 +222,7 @@ impl Gateway {
             writes,
             stop,
             pollers,
-            mqtt,
-            opcua,
+            interfaces,
             _demo,
             ..
         } = self;
@@ -323,15 +249,16 @@ impl Gateway {
         {
             tracing::warn!("the line tasks did not stop in {STOP_GRACE:?}");
         }
-        if let Some(mqtt) = mqtt
-            && tokio::time::timeout(STOP_GRACE, mqtt).await.is_err()
-        {
-            tracing::warn!("the MQTT task did not stop in {STOP_GRACE:?}");
-        }
-        if let Some(opcua) = opcua
-            && tokio::time::timeout(STOP_GRACE, opcua.task).await.is_err()
-        {
-            tracing::warn!("the OPC UA server did not stop in {STOP_GRACE:?}");
+        for interface in interfaces {
+            if tokio::time::timeout(STOP_GRACE, interface.task)
+                .await
+                .is_err()
+            {
+                tracing::warn!(
+                    "the {} interface did not stop in {STOP_GRACE:?}",
+                    interface.name
+                );
+            }
         }
         cell.emit(Event::of_gateway(
             EventKind::GatewayStopped,
@@ -398,125 +325,6 @@ impl Pollers {
             .context("cannot start the pollers' thread")?;
         Ok(Self { stopped })
     }
-}
-
-/// The MQTT connection to make, if any: `--mqtt` (the demo cell's, or replacing the
-/// config's broker), else the config's `[mqtt]` table; `--mqtt-mode`, `--mqtt-node` and
-/// `--mqtt-primary-host` override the table's fields.
-fn mqtt_config(
-    options: &ServeOptions,
-    config: &CellConfig,
-    demo: bool,
-) -> anyhow::Result<Option<MqttConfig>> {
-    let mut mqtt = match (&options.mqtt, &config.mqtt) {
-        (None, None) => {
-            if options.mqtt_mode.is_some()
-                || options.mqtt_node.is_some()
-                || options.mqtt_primary_host.is_some()
-            {
-                return Err(OptionError(
-                    "--mqtt-mode, --mqtt-node and --mqtt-primary-host need a broker: give \
-                     --mqtt URL or an [mqtt] table in the configuration"
-                        .to_owned(),
-                )
-                .into());
-            }
-            return Ok(None);
-        }
-        (None, Some(table)) => table.clone(),
-        (Some(url), Some(table)) => {
-            let broker = parse_broker(url).map_err(|m| OptionError(format!("--mqtt: {m}")))?;
-            MqttConfig {
-                host: broker.host,
-                port: broker.port,
-                // mqtts:// keeps the table's CA and client certificate, if it has them.
-                tls: broker.tls.then(|| table.tls.clone().unwrap_or_default()),
-                ..table.clone()
-            }
-        }
-        (Some(url), None) => {
-            let node = match &options.mqtt_node {
-                Some(node) => node.clone(),
-                None if demo => DEMO_EDGE_NODE.to_owned(),
-                None => default_edge_node_id(),
-            };
-            MqttConfig::for_broker(url, &node).map_err(|m| OptionError(format!("--mqtt: {m}")))?
-        }
-    };
-    if let Some(mode) = options.mqtt_mode {
-        mqtt.mode = mode;
-    }
-    if let Some(node) = &options.mqtt_node {
-        sparkplug::Id::new(node.as_str())
-            .map_err(|e| OptionError(format!("--mqtt-node {node:?}: {e}")))?;
-        if mqtt.prefix == format!("cellbus/{}", mqtt.edge_node_id) {
-            mqtt.prefix = format!("cellbus/{node}");
-        }
-        if mqtt.client_id == format!("cellbus-{}", mqtt.edge_node_id) {
-            mqtt.client_id = format!("cellbus-{node}");
-        }
-        mqtt.edge_node_id.clone_from(node);
-    }
-    if let Some(host) = &options.mqtt_primary_host {
-        sparkplug::Id::new(host.as_str())
-            .map_err(|e| OptionError(format!("--mqtt-primary-host {host:?}: {e}")))?;
-        mqtt.primary_host = Some(host.clone());
-    }
-    Ok(Some(mqtt))
-}
-
-/// The demo cell's OPC UA user: its password is the write token.
-pub const DEMO_OPCUA_USER: &str = "operator";
-
-/// The OPC UA server to start, if any: `--opcua` (the demo cell's, or replacing the
-/// config's endpoint), else the config's `[opcua]` table. The demo cell on loopback also
-/// offers security None, anonymous reading, and the user `operator` whose password is the
-/// write token (writing with `--allow-writes`). Elsewhere anonymous reading is on only
-/// while writes are off, unless the table says otherwise.
-fn opcua_config(
-    options: &ServeOptions,
-    config: &CellConfig,
-    demo: bool,
-    writes: &WritePolicy,
-) -> anyhow::Result<Option<(OpcuaConfig, northbound::opcua::Options)>> {
-    let table = match (options.opcua, &config.opcua) {
-        (None, None) => return Ok(None),
-        (None, Some(table)) => table.clone(),
-        (Some(addr), Some(table)) => OpcuaConfig {
-            host: addr.ip().to_string(),
-            port: addr.port(),
-            ..table.clone()
-        },
-        (Some(addr), None) => OpcuaConfig::at(&addr.ip().to_string(), addr.port()),
-    };
-    let mut users = northbound::opcua::users_of(&table)?;
-    let loopback = table
-        .host
-        .parse::<std::net::IpAddr>()
-        .is_ok_and(|ip| ip.is_loopback());
-    let mut table = table;
-    let anonymous = if demo && config.opcua.is_none() && loopback {
-        table.security.insert(0, OpcuaSecurity::NONE);
-        if let Some(token) = &writes.token {
-            users.push(northbound::opcua::auth::User {
-                name: DEMO_OPCUA_USER.to_owned(),
-                password: token.clone(),
-                write: true,
-            });
-        }
-        true
-    } else {
-        table.anonymous.unwrap_or(!options.allow_writes)
-    };
-    Ok(Some((
-        table,
-        northbound::opcua::Options {
-            data_dir: options.data_dir.clone(),
-            allow_writes: options.allow_writes,
-            users,
-            anonymous,
-        },
-    )))
 }
 
 /// Once the history has opened (or failed to), emits a `history_failed` event if it is off,
@@ -624,10 +432,6 @@ fn write_policy(options: &ServeOptions, config: &CellConfig) -> Result<WritePoli
     })
 }
 
-/// Why a read token equal to the write token is refused.
-pub(crate) const SAME_TOKENS: &str = "the read token is the write token, so everyone who may \
-     read could also write; give readers a token of their own, or no read token";
-
 /// Refuses an empty token, or one no client could send.
 fn check_token(token: Option<&str>, what: &str, env: &str, key: &str) -> Result<(), OptionError> {
     let Some(token) = token else {
@@ -638,7 +442,7 @@ fn check_token(token: Option<&str>, what: &str, env: &str, key: &str) -> Result<
             "the {what} is empty; set a non-empty {env} or {key} in the config"
         )));
     }
-    match crate::write::token_fault(token) {
+    match token_fault(token) {
         Some(fault) => Err(OptionError(format!("the {what} cannot be used: {fault}"))),
         None => Ok(()),
     }

@@ -14,7 +14,7 @@ use wire::device::{Device, SharedModel};
 
 use crate::cell::Cell;
 use crate::config::{CellConfig, DeviceConfig, LineConfig};
-use crate::driver::{DriverConfig, Protocol};
+use crate::driver::DriverConfig;
 use crate::metrics::Metrics;
 use crate::point::DeviceId;
 use crate::scheduler::Opener;
@@ -78,14 +78,12 @@ pub fn device(id: &str, address: i64) -> DeviceConfig {
     DeviceConfig {
         driver: DriverConfig {
             id: DeviceId::new(id).unwrap(),
-            protocol: Protocol::Jbc,
+            protocol: crate::driver::jbc::KIND,
             address: Some(address),
             timeout: None,
             retries: None,
-            event_port: None,
             endpoint: None,
-            registers: Default::default(),
-            modbus: Default::default(),
+            settings: Default::default(),
         },
         name: format!("Station {id}"),
         period: None,
@@ -156,8 +154,7 @@ pub fn rig(count: u8) -> Rig {
     };
     let config = CellConfig {
         source: None,
-        mqtt: None,
-        opcua: None,
+        interfaces: Default::default(),
         token: None,
         read_token: None,
         lines: vec![LineConfig {

@@ -23,19 +23,6 @@ use crate::point::{PointId, Value};
 use crate::store::{AuditEntry, AuditResult};
 use crate::time::Timestamp;
 
-/// What is wrong with `token` as a bearer token, if anything: clients send it in an HTTP
-/// header, which carries visible ASCII only (a token with `ä` or a space could be set but
-/// never sent). The words name the character's position, never the character: a token is
-/// a secret.
-pub fn token_fault(token: &str) -> Option<String> {
-    let at = token.chars().position(|c| !c.is_ascii_graphic())?;
-    Some(format!(
-        "character {} is not visible ASCII; a token is sent in an HTTP header, so use \
-         letters, digits and punctuation only, no spaces",
-        at + 1
-    ))
-}
-
 /// Longest stored text of a client, device or point as the request named them.
 pub const MAX_NAME: usize = 128;
 /// Longest stored value as given (its JSON text).

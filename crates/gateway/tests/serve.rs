@@ -220,7 +220,7 @@ async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
     .await
     .unwrap();
     let addr = gateway.local_addr();
-    let url = gateway.opcua_url().unwrap().to_owned();
+    let url = gateway.url_of("opcua").unwrap().to_owned();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let run = tokio::spawn(gateway.run(async {
         let _ = stopped.await;

@@ -12,7 +12,7 @@ use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 
 use anyhow::{Context as _, bail};
-use gateway::config::{MqttTls, parse_broker};
+use gateway::northbound::mqtt::config::{MqttTls, parse_broker};
 use rumqttc::Transport;
 use sparkplug::{Host, Id, Sharing};
 use tokio::sync::{mpsc, watch};

@@ -35,7 +35,7 @@ use jbus::rtu::UnitId;
 use link::{SerialSettings, SharedLine};
 
 use super::{
-    BoxFuture, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
+    BoxFuture, DeviceKind, Kind, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
     WriteError, point_ids,
 };
 use crate::event::EventKind;
@@ -54,6 +54,49 @@ pub const RATINGS: &str = "ratings";
 
 /// What an alarm point shows when no alarm is active.
 const NO_ALARM: &str = "none";
+
+/// The poll groups and their default periods.
+const GROUPS: [(&str, Duration); 2] = [
+    (LIVE, Duration::from_secs(1)),
+    (RATINGS, Duration::from_secs(60)),
+];
+
+/// The Chloride CROSS static transfer switch, JBUS (Modbus RTU) units 1–255.
+#[derive(Debug)]
+pub struct Cross;
+
+/// The kind's handle, as the config and the line tasks hold it.
+pub const KIND: Kind = Kind::new(&Cross);
+
+impl DeviceKind for Cross {
+    fn name(&self) -> &'static str {
+        "cross"
+    }
+
+    fn default_serial(&self) -> SerialSettings {
+        DEFAULT_SERIAL
+    }
+
+    fn default_address(&self) -> Option<i64> {
+        Some(DEFAULT_UNIT)
+    }
+
+    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
+        check_address(address)
+    }
+
+    fn groups(&self) -> &'static [(&'static str, Duration)] {
+        &GROUPS
+    }
+
+    fn speaks_modbus(&self) -> bool {
+        true
+    }
+
+    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
+        Ok(Box::new(CrossDriver::new(config)?))
+    }
+}
 
 /// Checks a JBUS unit number: 1–255 (JBUS allows numbers above Modbus's 247).
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
@@ -439,10 +482,7 @@ impl Driver for CrossDriver {
     }
 
     fn groups(&self) -> Vec<PollGroup> {
-        PollGroup::list(&[
-            (LIVE, Duration::from_secs(1)),
-            (RATINGS, Duration::from_secs(60)),
-        ])
+        PollGroup::list(&GROUPS)
     }
 
     fn attach(&mut self, line: SharedLine) {
@@ -532,14 +572,12 @@ mod tests {
     fn config(unit: i64) -> DriverConfig {
         DriverConfig {
             id: DeviceId::new("cross1").unwrap(),
-            protocol: super::super::Protocol::Cross,
+            protocol: super::KIND,
             address: Some(unit),
             timeout: Some(Duration::from_millis(200)),
             retries: Some(1),
-            event_port: None,
             endpoint: None,
-            registers: Default::default(),
-            modbus: Default::default(),
+            settings: Default::default(),
         }
     }
 

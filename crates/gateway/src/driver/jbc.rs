@@ -39,7 +39,7 @@ use jbc::frame::{Address, Route};
 use link::{SerialSettings, SharedLine};
 
 use super::{
-    BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
+    BoxFuture, DeviceKind, Kind, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
     enum_states, point_ids,
 };
 use crate::point::{
@@ -63,6 +63,39 @@ pub const INFO: &str = "info";
 use Meaning::{OnOff, Quantity};
 
 const PORT: Port = Port::One;
+
+/// The JBC JTSE hot-air station, RS-232 (the station–robot protocol).
+#[derive(Debug)]
+pub struct Jbc;
+
+/// The kind's handle, as the config and the line tasks hold it.
+pub const KIND: Kind = Kind::new(&Jbc);
+
+impl DeviceKind for Jbc {
+    fn name(&self) -> &'static str {
+        "jbc"
+    }
+
+    fn default_serial(&self) -> SerialSettings {
+        DEFAULT_SERIAL
+    }
+
+    fn default_address(&self) -> Option<i64> {
+        Some(DEFAULT_ADDRESS)
+    }
+
+    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
+        check_address(address)
+    }
+
+    fn groups(&self) -> &'static [(&'static str, Duration)] {
+        &GROUPS
+    }
+
+    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
+        Ok(Box::new(JbcDriver::new(config)?))
+    }
+}
 
 /// Checks a station address: 0–99, or `None` for the form without addresses.
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
@@ -847,14 +880,12 @@ mod tests {
     fn config(address: Option<i64>) -> DriverConfig {
         DriverConfig {
             id: DeviceId::new("jbc1").unwrap(),
-            protocol: super::super::Protocol::Jbc,
+            protocol: super::KIND,
             address,
             timeout: Some(Duration::from_millis(200)),
             retries: Some(1),
-            event_port: None,
             endpoint: None,
-            registers: Default::default(),
-            modbus: Default::default(),
+            settings: Default::default(),
         }
     }
 

@@ -7,16 +7,19 @@
 //! [`wire::Failure::kind`] ([`DeviceError::of`], mapped to [`ErrorKind`]) so the metrics can
 //! count timeouts apart from refusals, line trouble and our own bad requests.
 //!
-//! Protocols: [`jbc`] (JBC JTSE hot-air station), [`thermosald`] (ISC impulse-sealer
-//! regulators, several on one RS-485 line), [`cross`] (Chloride CROSS transfer switch over
-//! JBUS), [`panasonic`] (placement machine over TCP) and [`modbus`] (any Modbus RTU / JBUS
-//! device with its registers named in the config). Adding a protocol: a module
-//! implementing [`Driver`], a [`Protocol`] variant and its arms in [`Protocol::parse`],
-//! [`Protocol::check_address`] and [`build`].
+//! This module is the vocabulary the core shares with the drivers: [`DeviceKind`] (what a
+//! kind of device tells the config and the line tasks), [`Driver`] (one device's points,
+//! polls and writes), [`DeviceError`], [`WriteError`], [`ErrorKind`], [`PollGroup`]. It
+//! names no protocol. The kinds live in their own modules: [`jbc`] (JBC JTSE hot-air
+//! station), [`thermosald`] (ISC impulse-sealer regulators, several on one RS-485 line),
+//! [`cross`] (Chloride CROSS transfer switch over JBUS), [`panasonic`] (placement machine
+//! over TCP) and [`modbus`] (any Modbus RTU / JBUS device with its registers named in the
+//! config), each registered by one line in [`crate::plugins`]; DESIGN.md, "Adding a device
+//! kind", has the steps.
 //!
-//! A protocol whose client keeps its own connections (Panasonic: two TCP ports, keep-alive,
-//! reconnection) says so with [`Protocol::owns_connections`]: its line task opens nothing,
-//! the driver ignores [`Driver::attach`] and connects on its first poll from
+//! A kind whose client keeps its own connections (Panasonic: two TCP ports, keep-alive,
+//! reconnection) says so with [`DeviceKind::owns_connections`]: its line task opens
+//! nothing, the driver ignores [`Driver::attach`] and connects on its first poll from
 //! [`DriverConfig::endpoint`].
 //!
 //! State transitions a driver sees between polls (a CROSS transfer) and unsolicited
@@ -33,6 +36,7 @@ use link::{SerialSettings, SharedLine};
 use serde::Serialize;
 use wire::{Failure, FailureKind};
 
+use crate::config::table::{ConfigError, Scratch, Settings, Table};
 use crate::event::EventKind;
 use crate::point::{DeviceId, PointId, PointSpec, Value, ValueError};
 
@@ -84,6 +88,13 @@ pub trait Driver: Send {
     /// what was read is kept. Drivers that read a group in one request have none.
     fn take_partial(&mut self) -> Vec<Reading> {
         Vec::new()
+    }
+
+    /// The deadband of `point` when the device's own table sets it (a Modbus register's
+    /// `deadband`, which already falls back to the device's); `None`: the device's.
+    fn deadband(&self, point: &str) -> Option<Option<crate::point::Deadband>> {
+        let _ = point;
+        None
     }
 
     /// How many requests the last poll sent, for drivers that plan their reads (generic
@@ -297,98 +308,155 @@ pub enum WriteError {
     },
 }
 
-/// The protocols the gateway speaks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Protocol {
-    /// JBC station–robot protocol (JTSE hot-air station), RS-232.
-    Jbc,
-    /// Thermosald ISC/RS485 impulse-sealer regulators, addresses 0–7 on one line.
-    Thermosald,
-    /// Chloride CROSS static transfer switch, JBUS (Modbus RTU) units 1–255.
-    Cross,
-    /// Panasonic placement machine, PanaProtocol LAN (TCP, two ports, R events).
-    Panasonic,
-    /// Any Modbus RTU / JBUS device, registers named in the config.
-    Modbus,
-}
-
-impl Protocol {
-    /// Names accepted in the config.
-    pub const KNOWN: &'static str = "jbc, thermosald, cross, panasonic, modbus";
-
-    /// The protocol for its config name.
-    pub fn parse(name: &str) -> Option<Self> {
-        match name {
-            "jbc" => Some(Protocol::Jbc),
-            "thermosald" => Some(Protocol::Thermosald),
-            "cross" => Some(Protocol::Cross),
-            "panasonic" => Some(Protocol::Panasonic),
-            "modbus" => Some(Protocol::Modbus),
-            _ => None,
-        }
-    }
-
-    /// The name in the config.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Protocol::Jbc => "jbc",
-            Protocol::Thermosald => "thermosald",
-            Protocol::Cross => "cross",
-            Protocol::Panasonic => "panasonic",
-            Protocol::Modbus => "modbus",
-        }
-    }
+/// A kind of device the gateway speaks to: everything the core asks of a driver module
+/// (the config's checks, the line tasks, the API), so the core names no protocol. Each
+/// kind is a unit type in its own module, listed once in [`crate::plugins`].
+pub trait DeviceKind: Send + Sync + 'static {
+    /// Its name in the config (`protocol = "jbc"`) and the API.
+    fn name(&self) -> &'static str;
 
     /// Serial settings a line URL leaves out.
-    pub fn default_serial(self) -> SerialSettings {
-        match self {
-            Protocol::Jbc => jbc::DEFAULT_SERIAL,
-            Protocol::Thermosald => thermosald::DEFAULT_SERIAL,
-            Protocol::Cross => cross::DEFAULT_SERIAL,
-            // Never used: a Panasonic line must be a tcp:// endpoint.
-            Protocol::Panasonic => cross::DEFAULT_SERIAL,
-            Protocol::Modbus => modbus::DEFAULT_SERIAL,
-        }
-    }
+    fn default_serial(&self) -> SerialSettings;
 
     /// The address a device has when the config names none.
-    pub fn default_address(self) -> Option<i64> {
-        match self {
-            Protocol::Jbc => Some(jbc::DEFAULT_ADDRESS),
-            Protocol::Thermosald => Some(thermosald::DEFAULT_ADDRESS),
-            Protocol::Cross => Some(cross::DEFAULT_UNIT),
-            Protocol::Panasonic => None,
-            Protocol::Modbus => Some(modbus::DEFAULT_UNIT),
-        }
+    fn default_address(&self) -> Option<i64>;
+
+    /// Checks a device address; `Err` says what the kind accepts.
+    fn check_address(&self, address: Option<i64>) -> Result<(), String>;
+
+    /// Its poll groups, with their default periods: the names `poll = { … }` may use.
+    fn groups(&self) -> &'static [(&'static str, Duration)];
+
+    /// `Some(how to write its endpoint)` when its client keeps its own connections
+    /// (Panasonic: two TCP ports, reconnection and keep-alive in the client): its line
+    /// must be `tcp://`, carries one device, and the line task opens nothing for it, only
+    /// schedules the polls; the driver connects on its first poll from
+    /// [`DriverConfig::endpoint`].
+    fn owns_connections(&self) -> Option<&'static str> {
+        None
     }
 
-    /// Whether the protocol's client keeps its own connections (Panasonic: two TCP ports,
-    /// reconnection and keep-alive in the client), so the line task opens nothing for the
-    /// line and only schedules the polls.
-    pub fn owns_connections(self) -> bool {
-        matches!(self, Protocol::Panasonic)
+    /// Whether it speaks Modbus: it may sit on a `modbus-tcp://` line and share a line
+    /// with the other Modbus kinds (all JBUS on one RS-485 pair, one client each).
+    fn speaks_modbus(&self) -> bool {
+        false
     }
 
-    /// Whether devices of both protocols can share one line: the same protocol, or a CROSS
-    /// and other Modbus devices (both JBUS on one RS-485 pair, one client each).
-    pub fn shares_line_with(self, other: Protocol) -> bool {
-        self == other
-            || matches!(
-                (self, other),
-                (Protocol::Cross, Protocol::Modbus) | (Protocol::Modbus, Protocol::Cross)
-            )
+    /// Whether its driver plans its reads ([`Driver::requests_per_poll`]), so the metrics
+    /// keep a gauge for it.
+    fn plans_reads(&self) -> bool {
+        false
     }
 
-    /// Checks a device address; `Err` says what the protocol accepts.
-    pub fn check_address(self, address: Option<i64>) -> Result<(), String> {
-        match self {
-            Protocol::Jbc => jbc::check_address(address),
-            Protocol::Thermosald => thermosald::check_address(address),
-            Protocol::Cross => cross::check_address(address),
-            Protocol::Panasonic => panasonic::check_address(address),
-            Protocol::Modbus => modbus::check_address(address),
-        }
+    /// The keys of a `[[line.device]]` table that only this kind takes (beyond `id`,
+    /// `protocol`, `address` and the other keys every device has).
+    fn keys(&self) -> &'static [&'static str] {
+        &[]
+    }
+
+    /// Reads those keys: `table` holds only them (maybe none). What it returns comes back
+    /// to [`DeviceKind::build`] in [`DriverConfig::settings`].
+    fn read_keys(
+        &self,
+        table: &Table<'_>,
+        device: &DeviceContext,
+        scratch: &mut Scratch,
+    ) -> Result<Settings, ConfigError> {
+        let _ = (table, device, scratch);
+        Ok(Settings::default())
+    }
+
+    /// The error for one of this kind's keys given to a device of the kind `other`: where
+    /// it points (the value, by default) and what it says.
+    fn foreign_key(
+        &self,
+        key: &str,
+        value: &toml::Spanned<toml::de::DeValue<'_>>,
+        other: &str,
+    ) -> (std::ops::Range<usize>, String) {
+        (
+            value.span(),
+            format!("{key} is for {} devices only, not {other} devices", self.name()),
+        )
+    }
+
+    /// Checks what depends on the whole device once its keys are read (a Modbus read
+    /// plan that cannot be made); `Err` says why in words, shown at the device's id.
+    fn check(&self, config: &DriverConfig) -> Result<(), String> {
+        let _ = config;
+        Ok(())
+    }
+
+    /// What the file allows for these devices but is likely a mistake, one sentence each
+    /// naming the device (Modbus registers that share a register).
+    fn warnings(&self, devices: &[&DriverConfig]) -> Vec<String> {
+        let _ = devices;
+        Vec::new()
+    }
+
+    /// The driver for a device; `Err` says, in words, why the config cannot work (a
+    /// Modbus read plan that cannot be made), and the config check shows it at the device.
+    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String>;
+}
+
+/// What a kind knows of the device whose keys it reads.
+#[derive(Debug, Clone)]
+pub struct DeviceContext {
+    /// Where the device's id is in the file: for errors about the device as a whole.
+    pub id_span: std::ops::Range<usize>,
+    /// The device's deadband for its numeric points (`deadband`, `deadband_percent`).
+    pub deadband: Option<crate::point::Deadband>,
+}
+
+/// A device kind, as the config, the line tasks and the API hold it: compared, hashed and
+/// shown by its name.
+#[derive(Clone, Copy)]
+pub struct Kind(&'static dyn DeviceKind);
+
+impl Kind {
+    /// The handle of `kind`.
+    pub const fn new(kind: &'static dyn DeviceKind) -> Self {
+        Self(kind)
+    }
+}
+
+impl std::ops::Deref for Kind {
+    type Target = dyn DeviceKind;
+
+    fn deref(&self) -> &Self::Target {
+        self.0
+    }
+}
+
+impl PartialEq for Kind {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.name() == other.0.name()
+    }
+}
+
+impl Eq for Kind {}
+
+impl std::hash::Hash for Kind {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.0.name().hash(state);
+    }
+}
+
+impl fmt::Debug for Kind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.0.name())
+    }
+}
+
+impl fmt::Display for Kind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.0.name())
+    }
+}
+
+impl Serialize for Kind {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.0.name())
     }
 }
 
@@ -397,35 +465,41 @@ impl Protocol {
 pub struct DriverConfig {
     /// The device's id.
     pub id: DeviceId,
-    /// Its protocol.
-    pub protocol: Protocol,
-    /// Its address on the line, if the protocol has addresses.
+    /// Its kind (the config's `protocol`).
+    pub protocol: Kind,
+    /// Its address on the line, if the kind has addresses.
     pub address: Option<i64>,
-    /// Time to wait for each reply, if not the protocol's default.
+    /// Time to wait for each reply, if not the kind's default.
     pub timeout: Option<Duration>,
-    /// Retries after a failed attempt, if not the protocol's default.
+    /// Retries after a failed attempt, if not the kind's default.
     pub retries: Option<u8>,
-    /// Panasonic: the machine's Port 2 (R messages), if not the default 49153. The line's
-    /// endpoint names Port 1.
-    pub event_port: Option<u16>,
-    /// The line's endpoint, for drivers whose client keeps its own connections
-    /// ([`Protocol::owns_connections`]) and for Modbus devices on a `modbus-tcp://` line
+    /// The line's endpoint, for kinds whose client keeps its own connections
+    /// ([`DeviceKind::owns_connections`]) and for Modbus devices on a `modbus-tcp://` line
     /// (their client frames Modbus TCP).
     pub endpoint: Option<link::Endpoint>,
-    /// Generic Modbus: the registers the config names (empty for other protocols).
-    pub registers: modbus::RegisterList,
-    /// Generic Modbus: how reads are planned and paced (defaults for other protocols).
-    pub modbus: modbus::ModbusOptions,
+    /// What the kind read from its own keys ([`DeviceKind::read_keys`]): a Modbus
+    /// device's registers, a Panasonic machine's event port.
+    pub settings: Settings,
 }
 
-/// The driver for a device.
-pub fn build(config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
-    match config.protocol {
-        Protocol::Jbc => Ok(Box::new(jbc::JbcDriver::new(config)?)),
-        Protocol::Thermosald => Ok(Box::new(thermosald::ThermosaldDriver::new(config)?)),
-        Protocol::Cross => Ok(Box::new(cross::CrossDriver::new(config)?)),
-        Protocol::Panasonic => Ok(Box::new(panasonic::PanasonicDriver::new(config)?)),
-        Protocol::Modbus => Ok(Box::new(modbus::ModbusDriver::new(config)?)),
+impl DriverConfig {
+    /// A device `id` of `kind` at the kind's default address, with every other field at
+    /// its default.
+    pub fn new(id: DeviceId, protocol: Kind) -> Self {
+        Self {
+            id,
+            protocol,
+            address: protocol.default_address(),
+            timeout: None,
+            retries: None,
+            endpoint: None,
+            settings: Settings::default(),
+        }
+    }
+
+    /// The driver for the device.
+    pub fn build(&self) -> Result<Box<dyn Driver>, String> {
+        self.protocol.build(self)
     }
 }
 

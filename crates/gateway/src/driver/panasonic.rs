@@ -41,7 +41,7 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
 use super::{
-    BoxFuture, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
+    BoxFuture, DeviceKind, Kind, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
     WriteError,
 };
 use crate::event::{EventKind, Fields, fields};
@@ -56,6 +56,113 @@ pub const LIVE: &str = "live";
 pub const PROGRAM: &str = "program";
 /// The production management data, every 10 s.
 pub const PRODUCTION: &str = "production";
+
+/// A machine's own keys of `[[line.device]]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Keys {
+    /// The machine's Port 2 (R messages), if not the default 49153. The line's endpoint
+    /// names Port 1.
+    pub event_port: Option<u16>,
+}
+
+/// Reads `event_port`.
+fn read_keys(table: &crate::config::Table<'_>) -> Result<crate::config::Settings, crate::config::ConfigError> {
+    #[derive(serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Raw {
+        event_port: Option<toml::Spanned<i64>>,
+    }
+    let raw: Raw = table.read()?;
+    let Some(port) = raw.event_port else {
+        return Ok(crate::config::Settings::default());
+    };
+    let event_port = u16::try_from(*port.get_ref())
+        .ok()
+        .filter(|&p| p != 0)
+        .ok_or_else(|| {
+            table.at(
+                port.span(),
+                format!(
+                    "event_port {} is out of range: 1 to 65535 (the machine's default is {})",
+                    port.get_ref(),
+                    panasonic::DEFAULT_EVENT_PORT
+                ),
+            )
+        })?;
+    Ok(crate::config::Settings::new(Keys {
+        event_port: Some(event_port),
+    }))
+}
+
+/// The poll groups and their default periods.
+const GROUPS: [(&str, Duration); 3] = [
+    (LIVE, Duration::from_secs(1)),
+    (PROGRAM, Duration::from_secs(10)),
+    (PRODUCTION, Duration::from_secs(10)),
+];
+
+/// A Panasonic BM placement machine, host computer protocol over TCP (two ports, R events).
+#[derive(Debug)]
+pub struct Panasonic;
+
+/// The kind's handle, as the config and the line tasks hold it.
+pub const KIND: Kind = Kind::new(&Panasonic);
+
+impl DeviceKind for Panasonic {
+    fn name(&self) -> &'static str {
+        "panasonic"
+    }
+
+    fn default_serial(&self) -> link::SerialSettings {
+        // Never used: a Panasonic line must be a tcp:// endpoint.
+        link::SerialSettings::new_8n1(9600)
+    }
+
+    fn default_address(&self) -> Option<i64> {
+        None
+    }
+
+    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
+        check_address(address)
+    }
+
+    fn groups(&self) -> &'static [(&'static str, Duration)] {
+        &GROUPS
+    }
+
+    fn owns_connections(&self) -> Option<&'static str> {
+        Some("tcp://host:49152 (its Port 1)")
+    }
+
+    fn keys(&self) -> &'static [&'static str] {
+        &["event_port"]
+    }
+
+    fn read_keys(
+        &self,
+        table: &crate::config::Table<'_>,
+        _device: &super::DeviceContext,
+        _scratch: &mut crate::config::Scratch,
+    ) -> Result<crate::config::Settings, crate::config::ConfigError> {
+        read_keys(table)
+    }
+
+    fn foreign_key(
+        &self,
+        _key: &str,
+        value: &toml::Spanned<toml::de::DeValue<'_>>,
+        other: &str,
+    ) -> (std::ops::Range<usize>, String) {
+        (
+            value.span(),
+            format!("event_port is for Panasonic machines only, not {other} devices"),
+        )
+    }
+
+    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
+        Ok(Box::new(PanasonicDriver::new(config)?))
+    }
+}
 
 /// Checks the address: a Panasonic machine has none (its endpoint says where it is).
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
@@ -151,7 +258,13 @@ impl PanasonicDriver {
         };
         let mut client = ClientConfig::new(host);
         client.command_port = port;
-        client.event_port = Some(config.event_port.unwrap_or(panasonic::DEFAULT_EVENT_PORT));
+        client.event_port = Some(
+            config
+                .settings
+                .get::<Keys>()
+                .and_then(|keys| keys.event_port)
+                .unwrap_or(panasonic::DEFAULT_EVENT_PORT),
+        );
         if let Some(timeout) = config.timeout {
             client.timeout = timeout;
             client.connect_timeout = timeout;
@@ -479,11 +592,7 @@ impl Driver for PanasonicDriver {
     }
 
     fn groups(&self) -> Vec<PollGroup> {
-        PollGroup::list(&[
-            (LIVE, Duration::from_secs(1)),
-            (PROGRAM, Duration::from_secs(10)),
-            (PRODUCTION, Duration::from_secs(10)),
-        ])
+        PollGroup::list(&GROUPS)
     }
 
     /// The machine's client keeps its own connections: the line is not used.
@@ -531,19 +640,19 @@ mod tests {
             .unwrap();
         let driver = PanasonicDriver::new(&DriverConfig {
             id: DeviceId::new("placer1").unwrap(),
-            protocol: super::super::Protocol::Panasonic,
+            protocol: super::KIND,
             address: None,
             timeout: None,
             retries: None,
-            event_port: Some(twin.event_addr().port()),
+            settings: crate::config::Settings::new(Keys {
+                event_port: Some(twin.event_addr().port()),
+            }),
             endpoint: Some(Endpoint::Tcp {
                 host: "127.0.0.1".into(),
                 port: twin.command_addr().port(),
                 line: None,
                 framing: link::TcpFraming::Raw,
             }),
-            registers: Default::default(),
-            modbus: Default::default(),
         })
         .unwrap();
         (driver, twin)
@@ -603,14 +712,12 @@ mod tests {
     fn every_point_has_a_unique_id_and_none_is_writable() {
         let driver = PanasonicDriver::new(&DriverConfig {
             id: DeviceId::new("placer1").unwrap(),
-            protocol: super::super::Protocol::Panasonic,
+            protocol: super::KIND,
             address: None,
             timeout: None,
             retries: None,
-            event_port: None,
             endpoint: None,
-            registers: Default::default(),
-            modbus: Default::default(),
+            settings: Default::default(),
         })
         .unwrap();
         let points = driver.points();
@@ -715,19 +822,19 @@ mod tests {
         drop(closed);
         let mut driver = PanasonicDriver::new(&DriverConfig {
             id: DeviceId::new("placer1").unwrap(),
-            protocol: super::super::Protocol::Panasonic,
+            protocol: super::KIND,
             address: None,
             timeout: Some(Duration::from_secs(2)),
             retries: None,
-            event_port: Some(port),
+            settings: crate::config::Settings::new(Keys {
+                event_port: Some(port),
+            }),
             endpoint: Some(Endpoint::Tcp {
                 host: "127.0.0.1".into(),
                 port,
                 line: None,
                 framing: link::TcpFraming::Raw,
             }),
-            registers: Default::default(),
-            modbus: Default::default(),
         })
         .unwrap();
         let err = driver.poll(LIVE).await.unwrap_err();

@@ -64,7 +64,7 @@ use thermosald::tables::{self, Item, Table, machine, runtime, service, settings}
 use thermosald::{Address, RawValue, Read, Target};
 
 use super::{
-    BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
+    BoxFuture, DeviceKind, Kind, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
     enum_states, point_ids,
 };
 use crate::point::{
@@ -89,6 +89,47 @@ pub const SETTINGS: &str = "settings";
 pub const MACHINE: &str = "machine";
 /// The service table, every minute.
 pub const SERVICE: &str = "service";
+
+/// The poll groups and their default periods.
+const GROUPS: [(&str, Duration); 4] = [
+    (LIVE, Duration::from_secs(2)),
+    (SETTINGS, Duration::from_secs(10)),
+    (MACHINE, Duration::from_secs(60)),
+    (SERVICE, Duration::from_secs(60)),
+];
+
+/// Thermosald ISC impulse-sealer regulators, addresses 0–7 on one RS-485 line.
+#[derive(Debug)]
+pub struct Thermosald;
+
+/// The kind's handle, as the config and the line tasks hold it.
+pub const KIND: Kind = Kind::new(&Thermosald);
+
+impl DeviceKind for Thermosald {
+    fn name(&self) -> &'static str {
+        "thermosald"
+    }
+
+    fn default_serial(&self) -> SerialSettings {
+        DEFAULT_SERIAL
+    }
+
+    fn default_address(&self) -> Option<i64> {
+        Some(DEFAULT_ADDRESS)
+    }
+
+    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
+        check_address(address)
+    }
+
+    fn groups(&self) -> &'static [(&'static str, Duration)] {
+        &GROUPS
+    }
+
+    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
+        Ok(Box::new(ThermosaldDriver::new(config)?))
+    }
+}
 
 /// Checks a regulator address: 0–7.
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
@@ -539,12 +580,7 @@ impl Driver for ThermosaldDriver {
     }
 
     fn groups(&self) -> Vec<PollGroup> {
-        PollGroup::list(&[
-            (LIVE, Duration::from_secs(2)),
-            (SETTINGS, Duration::from_secs(10)),
-            (MACHINE, Duration::from_secs(60)),
-            (SERVICE, Duration::from_secs(60)),
-        ])
+        PollGroup::list(&GROUPS)
     }
 
     fn attach(&mut self, line: SharedLine) {
@@ -686,14 +722,12 @@ mod tests {
     fn config(id: &str, address: i64) -> DriverConfig {
         DriverConfig {
             id: DeviceId::new(id).unwrap(),
-            protocol: super::super::Protocol::Thermosald,
+            protocol: super::KIND,
             address: Some(address),
             timeout: None,
             retries: Some(1),
-            event_port: None,
             endpoint: None,
-            registers: Default::default(),
-            modbus: Default::default(),
+            settings: Default::default(),
         }
     }
 

@@ -1272,7 +1272,7 @@ fn example_cell_with_every_kind_of_state(
     use crate::driver::{DeviceError, ErrorKind};
     use crate::point::{PointKind, Quality, Value};
     let store = crate::store::Store::open(dir, crate::store::StoreOptions::default()).unwrap();
-    let config = crate::config::parse_config(
+    let config = crate::plugins::parse_config(
         crate::EXAMPLE_CONFIG,
         &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml"),
     )

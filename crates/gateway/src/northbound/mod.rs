@@ -28,11 +28,72 @@ pub mod opcua;
 #[cfg(test)]
 mod tests;
 
+use std::fmt;
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::Arc;
+
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+
+use crate::cell::Cell;
+use crate::config::{CellConfig, TableReader};
+use crate::http::WritePolicy;
+use crate::options::ServeOptions;
 use sparkplug::{DataType, MetricName, MetricSpec, MetricValue, Sample, Writable, WriteRange};
 
 use crate::cell::{DeviceView, PointDetail, PointView};
 use crate::point::{PointKind, Quality, Value};
 use crate::time::Timestamp;
+
+/// An interface that serves the cell to other systems: what `serve` asks of each. It is
+/// listed once in [`crate::plugins`]; `serve` starts every one the config or the options
+/// ask for and stops them in turn. It reads only the cell's change stream and writes only
+/// through the cell's write path.
+pub trait Northbound: Sync + fmt::Debug {
+    /// Its name in logs and messages (`mqtt`).
+    fn name(&self) -> &'static str;
+
+    /// The reader of its table in the config file (`[mqtt]`).
+    fn table(&self) -> &'static dyn TableReader;
+
+    /// Starts it when its table or the options ask for it (`Ok(None)`: not asked for).
+    /// An error stops the gateway's start: a port taken, a password variable not set.
+    fn start<'a>(&'a self, start: Start<'a>) -> BoxStart<'a>;
+}
+
+/// What [`Northbound::start`] returns.
+pub type BoxStart<'a> = Pin<Box<dyn Future<Output = anyhow::Result<Option<Running>>> + Send + 'a>>;
+
+/// What an interface starts with.
+#[derive(Debug, Clone)]
+pub struct Start<'a> {
+    /// The live cell: its change stream, its points, its write path.
+    pub cell: &'a Arc<Cell>,
+    /// The checked configuration (the interface's table is in
+    /// [`CellConfig::interfaces`]).
+    pub config: &'a CellConfig,
+    /// What `cellbus serve` was asked for.
+    pub options: &'a ServeOptions,
+    /// Whether this is the demo cell (no config file).
+    pub demo: bool,
+    /// Who may write.
+    pub writes: &'a WritePolicy,
+    /// Turns true when the gateway stops.
+    pub stopped: watch::Receiver<bool>,
+}
+
+/// A started interface.
+#[derive(Debug)]
+pub struct Running {
+    /// Its name.
+    pub name: &'static str,
+    /// Where clients reach it, printed under `listening on …` at start
+    /// (`opcua on opc.tcp://…`); `None` for an interface that connects out (MQTT).
+    pub url: Option<String>,
+    /// Ends when it has stopped.
+    pub task: JoinHandle<()>,
+}
 
 /// The Sparkplug data type of a point of `kind`.
 pub fn datatype_of(kind: &PointKind) -> DataType {

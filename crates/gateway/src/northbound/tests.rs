@@ -10,7 +10,7 @@ use sparkplug::proto::metric::Value as SpValue;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 use tokio::sync::watch;
 
-use crate::config::MqttConfig;
+use crate::northbound::mqtt::config::MqttConfig;
 use crate::point::Value;
 use crate::testing::rig;
 
@@ -778,7 +778,7 @@ async fn json_mode_answers_another_clients_retained_status_and_point_values_with
     let broker = Mosquitto::start();
     let rig = rig(1);
     let config = MqttConfig {
-        mode: crate::config::MqttMode::Json,
+        mode: crate::northbound::mqtt::config::MqttMode::Json,
         prefix: "plant/cell".into(),
         check_retained: Duration::from_secs(1),
         ..config(&broker)

@@ -19,7 +19,7 @@ use wire::device::SharedModel;
 use super::*;
 use crate::cell::{Cell, DeviceStatus};
 use crate::config::{CellConfig, DeviceConfig, LineConfig};
-use crate::driver::{DriverConfig, Protocol};
+use crate::driver::{DriverConfig, Kind};
 use crate::event::EventKind;
 use crate::metrics::Metrics;
 use crate::point::{DeviceId, PointId, ValueError};
@@ -34,7 +34,7 @@ struct Rig {
     _dir: tempfile::TempDir,
 }
 
-fn device(id: &str, protocol: Protocol, address: i64) -> DeviceConfig {
+fn device(id: &str, protocol: Kind, address: i64) -> DeviceConfig {
     DeviceConfig {
         driver: DriverConfig {
             id: DeviceId::new(id).unwrap(),
@@ -42,10 +42,8 @@ fn device(id: &str, protocol: Protocol, address: i64) -> DeviceConfig {
             address: Some(address),
             timeout: None,
             retries: None,
-            event_port: None,
             endpoint: None,
-            registers: Default::default(),
-            modbus: Default::default(),
+            settings: Default::default(),
         },
         name: format!("Device {id}"),
         period: None,
@@ -105,8 +103,7 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
     let jbus_line = crate::driver::cross::DEFAULT_SERIAL;
     let config = CellConfig {
         source: None,
-        mqtt: None,
-        opcua: None,
+        interfaces: Default::default(),
         token: None,
         read_token: None,
         lines: vec![
@@ -115,14 +112,14 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
                 name: "sealers".into(),
                 endpoint: Endpoint::parse("tcp://127.0.0.1:9", sealing).unwrap(),
                 devices: (0..3)
-                    .map(|a| device(&format!("sealer{a}"), Protocol::Thermosald, a))
+                    .map(|a| device(&format!("sealer{a}"), crate::driver::thermosald::KIND, a))
                     .collect(),
             },
             LineConfig {
                 reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
                 name: "mains".into(),
                 endpoint: Endpoint::parse("tcp://127.0.0.1:9", jbus_line).unwrap(),
-                devices: vec![device("cross1", Protocol::Cross, 1)],
+                devices: vec![device("cross1", crate::driver::cross::KIND, 1)],
             },
         ],
     };
@@ -363,7 +360,7 @@ async fn panasonic_rig() -> (
         twin.command_addr().port(),
         twin.event_addr().port()
     );
-    let config = crate::config::parse_config(&text, std::path::Path::new("cell.toml")).unwrap();
+    let config = crate::plugins::parse_config(&text, std::path::Path::new("cell.toml")).unwrap();
     let (cell, tasks) = Cell::new(&config, store.handle(), Arc::new(Metrics::new())).unwrap();
     let live = cell.subscribe();
     let (shutdown, stop) = watch::channel(false);

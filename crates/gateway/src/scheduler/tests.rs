@@ -561,8 +561,7 @@ fn cell_with(deadband: Option<Deadband>) -> (Arc<Cell>, crate::store::Store, tem
     device.deadband = deadband;
     let config = crate::config::CellConfig {
         source: None,
-        mqtt: None,
-        opcua: None,
+        interfaces: Default::default(),
         token: None,
         read_token: None,
         lines: vec![crate::config::LineConfig {

@@ -29,8 +29,8 @@ use std::time::Duration;
 
 use gateway::cell::{Cell, LiveMessage};
 use gateway::config::{CellConfig, DeviceConfig, LineConfig};
-use gateway::driver::modbus::RegisterConfig;
-use gateway::driver::{DriverConfig, Protocol};
+use gateway::driver::modbus::{ModbusSettings, RegisterConfig};
+use gateway::driver::{DriverConfig, Kind};
 use gateway::metrics::{Metrics, PollResult};
 use gateway::point::{DeviceId, PointId, Quality, Value};
 use gateway::scheduler::Opener;
@@ -371,8 +371,7 @@ impl CellSet {
         let mut set = CellSet {
             config: CellConfig {
                 source: None,
-                mqtt: None,
-                opcua: None,
+                interfaces: Default::default(),
                 token: None,
                 read_token: None,
                 lines: Vec::new(),
@@ -387,7 +386,7 @@ impl CellSet {
             // A JBC station on its own line.
             let station = SharedModel::new(Station::new(StationConfig::default()));
             let make: MakeBus = Arc::new(move || Bus(vec![Box::new(station.line())]));
-            let jbc = device(&format!("jbc{g}"), Protocol::Jbc, 1, options);
+            let jbc = device(&format!("jbc{g}"), gateway::driver::jbc::KIND, 1, options);
             set.add_line(
                 options,
                 control,
@@ -408,7 +407,7 @@ impl CellSet {
             let make: MakeBus = Arc::new(move || Bus(vec![Box::new(sealers.line())]));
             let devices = (0..3)
                 .map(|a| {
-                    let mut d = device(&format!("sealer{g}x{a}"), Protocol::Thermosald, a, options);
+                    let mut d = device(&format!("sealer{g}x{a}"), gateway::driver::thermosald::KIND, a, options);
                     d.driver.timeout = None;
                     d
                 })
@@ -432,8 +431,8 @@ impl CellSet {
             let slave = SharedModel::new(Slave::new(map));
             let make: MakeBus =
                 Arc::new(move || Bus(vec![Box::new(cross.line()), Box::new(slave.line())]));
-            let mut meter = device(&format!("meter{g}"), Protocol::Modbus, 1, options);
-            meter.driver.registers = (0u16..8)
+            let mut meter = device(&format!("meter{g}"), gateway::driver::modbus::KIND, 1, options);
+            let registers: Vec<RegisterConfig> = (0u16..8)
                 .map(|address| RegisterConfig {
                     title: format!("Register {address}"),
                     format: jbus::data::Format::new(
@@ -447,8 +446,12 @@ impl CellSet {
                     ..RegisterConfig::holding(&format!("r{address}"), address)
                 })
                 .collect();
+            meter.driver.settings = gateway::config::Settings::new(ModbusSettings {
+                registers: registers.into(),
+                options: Default::default(),
+            });
             let devices = vec![
-                device(&format!("cross{g}"), Protocol::Cross, 2, options),
+                device(&format!("cross{g}"), gateway::driver::cross::KIND, 2, options),
                 meter,
             ];
             set.add_line(
@@ -528,7 +531,7 @@ impl CellSet {
     }
 }
 
-fn device(id: &str, protocol: Protocol, address: i64, options: &SoakOptions) -> DeviceConfig {
+fn device(id: &str, protocol: Kind, address: i64, options: &SoakOptions) -> DeviceConfig {
     DeviceConfig {
         driver: DriverConfig {
             id: DeviceId::new(id).expect("the soak's ids are valid"),
@@ -536,10 +539,8 @@ fn device(id: &str, protocol: Protocol, address: i64, options: &SoakOptions) -> 
             address: Some(address),
             timeout: Some(options.timeout),
             retries: None,
-            event_port: None,
             endpoint: None,
-            registers: Default::default(),
-            modbus: Default::default(),
+            settings: Default::default(),
         },
         name: id.to_owned(),
         period: Some(options.period),
@@ -619,7 +620,7 @@ impl Watcher {
             };
             for point in &entry.points {
                 // Thermosald run-time values move with every sealing cycle: no truth.
-                if entry.protocol == Protocol::Thermosald
+                if entry.protocol == gateway::driver::thermosald::KIND
                     && point.group == gateway::driver::thermosald::LIVE
                     && point.id.name() != "fault"
                 {
@@ -628,18 +629,14 @@ impl Watcher {
                 // What the drivers do not confirm: values that change between two reads
                 // (an idle station's temperatures and power keep one value, so they can be
                 // judged, apart).
-                let measurement = match entry.protocol {
-                    Protocol::Jbc => {
-                        point.group == gateway::driver::jbc::LIVE
-                            && point.writable.is_none()
-                            && point.kind == gateway::point::PointKind::Numeric
-                    }
-                    _ => false,
-                };
+                let measurement = entry.protocol == gateway::driver::jbc::KIND
+                    && point.group == gateway::driver::jbc::LIVE
+                    && point.writable.is_none()
+                    && point.kind == gateway::point::PointKind::Numeric;
                 protocols.insert(
                     point.id.clone(),
                     Judged {
-                        protocol: entry.protocol.as_str(),
+                        protocol: entry.protocol.name(),
                         measurement,
                     },
                 );

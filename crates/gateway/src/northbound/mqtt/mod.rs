@@ -16,6 +16,7 @@
 //!
 //! A graceful stop publishes the Will itself before disconnecting.
 
+pub mod config;
 pub mod forward;
 pub mod json;
 pub mod primary;
@@ -36,7 +37,10 @@ use tokio::task::JoinHandle;
 
 use self::forward::{Delivery, FORWARDED_KEY};
 use crate::cell::{Cell, LiveMessage, MqttLink};
-use crate::config::{MqttConfig, MqttMode};
+use self::config::{MqttConfig, MqttMode};
+use super::{BoxStart, Northbound, Running, Start};
+use crate::config::{CellConfig, TableReader, default_edge_node_id};
+use crate::options::{OptionError, ServeOptions};
 use crate::event::{Event, EventKind};
 use crate::time::Timestamp;
 
@@ -582,6 +586,109 @@ fn first_wait(retry: Duration, connected: bool, lasted: Duration) -> Duration {
         retry
     }
 }
+
+/// The MQTT interface: the cell on a broker, as a Sparkplug B edge node or plain JSON.
+#[derive(Debug)]
+pub struct Mqtt;
+
+impl Northbound for Mqtt {
+    fn name(&self) -> &'static str {
+        "mqtt"
+    }
+
+    fn table(&self) -> &'static dyn TableReader {
+        &config::MqttTable
+    }
+
+    fn start<'a>(&'a self, start: Start<'a>) -> BoxStart<'a> {
+        Box::pin(async move {
+            let Some(config) = mqtt_config(start.options, start.config, start.demo)? else {
+                return Ok(None);
+            };
+            let task = self::start(
+                Arc::clone(start.cell),
+                config,
+                start.options.data_dir.clone(),
+                start.options.allow_writes,
+                start.stopped,
+            )?;
+            Ok(Some(Running {
+                name: "mqtt",
+                url: None,
+                task,
+            }))
+        })
+    }
+}
+
+/// The demo cell's Sparkplug edge node id (its group is `cellbus`).
+pub const DEMO_EDGE_NODE: &str = "demo";
+
+/// The MQTT connection to make, if any: `--mqtt` (the demo cell's, or replacing the
+/// config's broker), else the config's `[mqtt]` table; `--mqtt-mode`, `--mqtt-node` and
+/// `--mqtt-primary-host` override the table's fields.
+fn mqtt_config(
+    options: &ServeOptions,
+    cell_config: &CellConfig,
+    demo: bool,
+) -> anyhow::Result<Option<MqttConfig>> {
+    let mut mqtt = match (&options.mqtt, cell_config.interface::<MqttConfig>("mqtt")) {
+        (None, None) => {
+            if options.mqtt_mode.is_some()
+                || options.mqtt_node.is_some()
+                || options.mqtt_primary_host.is_some()
+            {
+                return Err(OptionError(
+                    "--mqtt-mode, --mqtt-node and --mqtt-primary-host need a broker: give \
+                     --mqtt URL or an [mqtt] table in the configuration"
+                        .to_owned(),
+                )
+                .into());
+            }
+            return Ok(None);
+        }
+        (None, Some(table)) => table.clone(),
+        (Some(url), Some(table)) => {
+            let broker = config::parse_broker(url).map_err(|m| OptionError(format!("--mqtt: {m}")))?;
+            MqttConfig {
+                host: broker.host,
+                port: broker.port,
+                // mqtts:// keeps the table's CA and client certificate, if it has them.
+                tls: broker.tls.then(|| table.tls.clone().unwrap_or_default()),
+                ..table.clone()
+            }
+        }
+        (Some(url), None) => {
+            let node = match &options.mqtt_node {
+                Some(node) => node.clone(),
+                None if demo => DEMO_EDGE_NODE.to_owned(),
+                None => default_edge_node_id(),
+            };
+            MqttConfig::for_broker(url, &node).map_err(|m| OptionError(format!("--mqtt: {m}")))?
+        }
+    };
+    if let Some(mode) = options.mqtt_mode {
+        mqtt.mode = mode;
+    }
+    if let Some(node) = &options.mqtt_node {
+        ::sparkplug::Id::new(node.as_str())
+            .map_err(|e| OptionError(format!("--mqtt-node {node:?}: {e}")))?;
+        if mqtt.prefix == format!("cellbus/{}", mqtt.edge_node_id) {
+            mqtt.prefix = format!("cellbus/{node}");
+        }
+        if mqtt.client_id == format!("cellbus-{}", mqtt.edge_node_id) {
+            mqtt.client_id = format!("cellbus-{node}");
+        }
+        mqtt.edge_node_id.clone_from(node);
+    }
+    if let Some(host) = &options.mqtt_primary_host {
+        ::sparkplug::Id::new(host.as_str())
+            .map_err(|e| OptionError(format!("--mqtt-primary-host {host:?}: {e}")))?;
+        mqtt.primary_host = Some(host.clone());
+    }
+    Ok(Some(mqtt))
+}
+
 
 #[cfg(test)]
 mod retry_tests {

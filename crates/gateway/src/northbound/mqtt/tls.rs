@@ -15,7 +15,7 @@ use rustls::pki_types::pem::{self, PemObject};
 use rustls::pki_types::{CertificateDer, PrivateKeyDer};
 use rustls::{AlertDescription, CertificateError, ClientConfig, RootCertStore};
 
-use crate::config::MqttTls;
+use super::config::MqttTls;
 
 /// Largest PEM file read: a system CA bundle is about 200 KiB.
 const MAX_PEM: u64 = 4 << 20;
@@ -178,7 +178,7 @@ fn pem_problem(e: &pem::Error) -> String {
 }
 
 fn read(key: &'static str, path: &Path) -> Result<Vec<u8>, TlsSetupError> {
-    crate::config::read_bounded(path, MAX_PEM).map_err(|why| {
+    crate::config::table::read_bounded(path, MAX_PEM).map_err(|why| {
         let why = if why.starts_with("is larger") {
             format!("{why}: not a PEM file")
         } else {

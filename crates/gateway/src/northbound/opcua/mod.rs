@@ -28,6 +28,7 @@
 //! administrator to move.
 
 pub mod auth;
+pub mod config;
 pub mod chunks;
 pub mod history;
 pub mod items;
@@ -59,7 +60,11 @@ use self::nodes::CellManager;
 use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
 use self::space::ids;
 use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaRefused, OpcuaState};
-use crate::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
+use self::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
+use super::{BoxStart, Northbound, Running, Start};
+use crate::config::{CellConfig, TableReader};
+use crate::http::WritePolicy;
+use crate::options::ServeOptions;
 use crate::time::Timestamp;
 
 /// How often the gateway object's history row count is refreshed.
@@ -431,7 +436,7 @@ fn trim_rejected(dir: &Path, keep: usize) -> std::io::Result<usize> {
 }
 
 /// Sessions at once (of every client, anonymous or not).
-pub const MAX_SESSIONS: usize = crate::config::OPCUA_MAX_SESSIONS;
+pub const MAX_SESSIONS: usize = config::OPCUA_MAX_SESSIONS;
 
 /// Makes the private key's folder and files readable by this user only (on every start:
 /// a key made by an earlier version, under a umask of 022, was readable by all).
@@ -623,6 +628,91 @@ fn set_values(
         tracing::warn!("an OPC UA value was not set: {status}");
     }
 }
+
+/// The OPC UA interface: the cell as an OPC UA server.
+#[derive(Debug)]
+pub struct Opcua;
+
+impl Northbound for Opcua {
+    fn name(&self) -> &'static str {
+        "opcua"
+    }
+
+    fn table(&self) -> &'static dyn TableReader {
+        &config::OpcuaTable
+    }
+
+    fn start<'a>(&'a self, start: Start<'a>) -> BoxStart<'a> {
+        Box::pin(async move {
+            let Some((config, options)) =
+                opcua_config(start.options, start.config, start.demo, start.writes)?
+            else {
+                return Ok(None);
+            };
+            let started = self::start(Arc::clone(start.cell), config, options, start.stopped).await?;
+            Ok(Some(Running {
+                name: "opcua",
+                url: Some(started.url),
+                task: started.task,
+            }))
+        })
+    }
+}
+
+/// The demo cell's OPC UA user: its password is the write token.
+pub const DEMO_OPCUA_USER: &str = "operator";
+
+/// The OPC UA server to start, if any: `--opcua` (the demo cell's, or replacing the
+/// config's endpoint), else the config's `[opcua]` table. The demo cell on loopback also
+/// offers security None, anonymous reading, and the user `operator` whose password is the
+/// write token (writing with `--allow-writes`). Elsewhere anonymous reading is on only
+/// while writes are off, unless the table says otherwise.
+fn opcua_config(
+    options: &ServeOptions,
+    config: &CellConfig,
+    demo: bool,
+    writes: &WritePolicy,
+) -> anyhow::Result<Option<(OpcuaConfig, Options)>> {
+    let table = match (options.opcua, config.interface::<OpcuaConfig>("opcua")) {
+        (None, None) => return Ok(None),
+        (None, Some(table)) => table.clone(),
+        (Some(addr), Some(table)) => OpcuaConfig {
+            host: addr.ip().to_string(),
+            port: addr.port(),
+            ..table.clone()
+        },
+        (Some(addr), None) => OpcuaConfig::at(&addr.ip().to_string(), addr.port()),
+    };
+    let mut users = users_of(&table)?;
+    let loopback = table
+        .host
+        .parse::<std::net::IpAddr>()
+        .is_ok_and(|ip| ip.is_loopback());
+    let mut table = table;
+    let anonymous = if demo && config.interface::<OpcuaConfig>("opcua").is_none() && loopback {
+        table.security.insert(0, OpcuaSecurity::NONE);
+        if let Some(token) = &writes.token {
+            users.push(auth::User {
+                name: DEMO_OPCUA_USER.to_owned(),
+                password: token.clone(),
+                write: true,
+            });
+        }
+        true
+    } else {
+        table.anonymous.unwrap_or(!options.allow_writes)
+    };
+    Ok(Some((
+        table,
+        Options {
+            data_dir: options.data_dir.clone(),
+            allow_writes: options.allow_writes,
+            users,
+            anonymous,
+        },
+    )))
+}
+
 
 #[cfg(test)]
 mod tests {

@@ -67,12 +67,100 @@ use tokio::time::Instant;
 use wire::{Failure as _, FailureKind};
 
 use super::{
-    BoxFuture, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
-    enum_states,
+    BoxFuture, DeviceContext, DeviceError, DeviceKind, Driver, DriverConfig, ErrorKind, Kind,
+    PollGroup, Reading, WriteError, enum_states,
 };
+use crate::config::{ConfigError, Scratch, Settings};
 use crate::point::{
     Deadband, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, WriteRange,
 };
+
+pub mod config;
+mod register_csv;
+
+pub use config::ModbusSettings;
+
+/// Any Modbus RTU / JBUS / Modbus TCP device, its registers named in the config.
+#[derive(Debug)]
+pub struct Modbus;
+
+/// The kind's handle, as the config and the line tasks hold it.
+pub const KIND: Kind = Kind::new(&Modbus);
+
+impl DeviceKind for Modbus {
+    fn name(&self) -> &'static str {
+        "modbus"
+    }
+
+    fn default_serial(&self) -> SerialSettings {
+        DEFAULT_SERIAL
+    }
+
+    fn default_address(&self) -> Option<i64> {
+        Some(DEFAULT_UNIT)
+    }
+
+    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
+        check_address(address)
+    }
+
+    fn groups(&self) -> &'static [(&'static str, Duration)] {
+        &GROUPS
+    }
+
+    fn speaks_modbus(&self) -> bool {
+        true
+    }
+
+    fn plans_reads(&self) -> bool {
+        true
+    }
+
+    fn keys(&self) -> &'static [&'static str] {
+        &config::KEYS
+    }
+
+    fn read_keys(
+        &self,
+        table: &crate::config::Table<'_>,
+        device: &DeviceContext,
+        scratch: &mut Scratch,
+    ) -> Result<Settings, ConfigError> {
+        config::read_keys(table, device, scratch)
+    }
+
+    fn foreign_key(
+        &self,
+        key: &str,
+        value: &toml::Spanned<toml::de::DeValue<'_>>,
+        other: &str,
+    ) -> (std::ops::Range<usize>, String) {
+        if key == "register" {
+            return (
+                config::first_register_name(value),
+                format!(
+                    "registers are named for modbus devices only; {other} devices have their points built in"
+                ),
+            );
+        }
+        (
+            value.span(),
+            format!("{key} is for modbus devices only, not {other} devices"),
+        )
+    }
+
+    fn check(&self, config: &DriverConfig) -> Result<(), String> {
+        ModbusDriver::new(config).map(drop)
+    }
+
+    fn warnings(&self, devices: &[&DriverConfig]) -> Vec<String> {
+        config::warnings(devices)
+    }
+
+    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
+        Ok(Box::new(ModbusDriver::new(config)?))
+    }
+}
 
 /// A Modbus line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
@@ -82,6 +170,9 @@ pub const DEFAULT_UNIT: i64 = 1;
 
 /// The only group.
 pub const LIVE: &str = "live";
+
+/// The poll group and its default period.
+const GROUPS: [(&str, Duration); 1] = [(LIVE, Duration::from_secs(1))];
 
 /// Which table a register is in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -454,13 +545,16 @@ impl ModbusDriver {
             .and_then(|a| u8::try_from(a).ok())
             .and_then(|a| UnitId::jbus(a).ok())
             .ok_or_else(|| "Modbus unit number out of range".to_owned())?;
-        let ids = config
+        let settings = config.settings.get::<ModbusSettings>().ok_or_else(|| {
+            "a modbus device needs its registers: add [[line.device.register]] tables with name and address, or registers_csv".to_owned()
+        })?;
+        let ids = settings
             .registers
             .iter()
             .map(|r| PointId::new(&config.id, &r.name).map_err(|e| e.to_string()))
             .collect::<Result<Vec<_>, _>>()?;
-        let plan = config.registers.plan(config.modbus.plan).map_err(|e| {
-            match config.registers.get(plan_error_index(&e)) {
+        let plan = settings.registers.plan(settings.options.plan).map_err(|e| {
+            match settings.registers.get(plan_error_index(&e)) {
                 Some(r) => format!("register {}: {e}", r.name),
                 None => e.to_string(),
             }
@@ -477,8 +571,8 @@ impl ModbusDriver {
             },
             client: None,
             plan,
-            options: config.modbus,
-            registers: config.registers.clone(),
+            options: settings.options,
+            registers: settings.registers.clone(),
             last_request: None,
             fresh_line: false,
             requests: None,
@@ -708,6 +802,13 @@ impl Driver for ModbusDriver {
     fn requests_per_poll(&self) -> Option<u64> {
         self.requests
     }
+
+    fn deadband(&self, point: &str) -> Option<Option<Deadband>> {
+        self.registers
+            .iter()
+            .find(|r| r.name == point)
+            .map(|r| r.deadband)
+    }
 }
 
 /// The register a plan error is about.
@@ -793,14 +894,15 @@ mod tests {
         tokio::spawn(link::serve::serve_stream(b, slave.line(), None));
         let mut driver = ModbusDriver::new(&DriverConfig {
             id: DeviceId::new("chiller1").unwrap(),
-            protocol: super::super::Protocol::Modbus,
+            protocol: super::KIND,
             address: Some(17),
             timeout: Some(Duration::from_millis(200)),
             retries: Some(1),
-            event_port: None,
             endpoint: None,
-            registers: registers.into(),
-            modbus: options,
+            settings: Settings::new(ModbusSettings {
+                registers: registers.into(),
+                options,
+            }),
         })
         .unwrap();
         driver.attach(SharedLine::new(link::Line::from_stream(

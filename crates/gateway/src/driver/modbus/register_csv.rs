@@ -21,7 +21,8 @@ use std::path::{Path, PathBuf};
 use jbus::data::{DataType, Order};
 use toml::Spanned;
 
-use super::{ConfigError, RawRange, RawRegister, RawWritable};
+use super::config::{RawRange, RawRegister, RawWritable};
+use crate::config::ConfigError;
 use crate::driver::modbus::{RegisterConfig, RegisterTable};
 use crate::point::Deadband;
 

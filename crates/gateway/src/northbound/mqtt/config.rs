@@ -1,0 +1,454 @@
+//! The `[mqtt]` table: where the broker is, who the edge node is, and how it publishes.
+//!
+//! ```toml
+//! [mqtt]
+//! broker = "mqtt://broker.plant:1883"   # or mqtts://host:8883 (TLS)
+//! group_id = "cellbus"                  # Sparkplug group (default cellbus)
+//! edge_node_id = "cell-7"               # default: this machine's host name
+//! ```
+//!
+//! Read and checked here, beside the interface's code; the cell's config hands the table
+//! over through [`TableReader`].
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::config::table::hide_userinfo;
+use crate::config::{
+    ConfigError, Settings, Table, TableReader, bounded, default_edge_node_id, duration,
+};
+
+/// The `[mqtt]` table's reader.
+#[derive(Debug)]
+pub struct MqttTable;
+
+impl TableReader for MqttTable {
+    fn table(&self) -> &'static str {
+        "mqtt"
+    }
+
+    fn read(&self, table: &Table<'_>) -> Result<Settings, ConfigError> {
+        let raw: RawMqtt = table.read()?;
+        check_mqtt(raw, table.path(), &|span, message| table.at(span, message))
+            .map(Settings::new)
+    }
+}
+
+/// Default keep-alive of the MQTT connection.
+pub const DEFAULT_MQTT_KEEP_ALIVE: Duration = Duration::from_secs(30);
+/// Default Sparkplug group id.
+pub const DEFAULT_MQTT_GROUP: &str = "cellbus";
+
+/// The `[mqtt]` table: where the broker is and who the edge node is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MqttConfig {
+    /// The broker's host.
+    pub host: String,
+    /// The broker's port.
+    pub port: u16,
+    /// The Sparkplug group id.
+    pub group_id: String,
+    /// The Sparkplug edge node id.
+    pub edge_node_id: String,
+    /// The MQTT client id.
+    pub client_id: String,
+    /// The user name, if the broker wants one.
+    pub username: Option<String>,
+    /// The environment variable holding the password (never the password itself).
+    pub password_env: Option<String>,
+    /// The MQTT keep-alive.
+    pub keep_alive: Duration,
+    /// What is published: Sparkplug B or plain JSON.
+    pub mode: MqttMode,
+    /// JSON mode's topic prefix (`cellbus/{edge_node_id}` by default).
+    pub prefix: String,
+    /// Whether DCMD writes are carried out (also needs `--allow-writes`).
+    pub commands: bool,
+    /// The Sparkplug primary host application whose STATE gates the births, if any.
+    pub primary_host: Option<String>,
+    /// The most stored changes sent after an outage (the newest are kept).
+    pub max_backlog: u64,
+    /// The most metrics one DCMD may carry; a larger command is refused whole.
+    pub max_command_metrics: usize,
+    /// JSON mode: how often the retained point messages are read back and another
+    /// client's put right.
+    pub check_retained: Duration,
+    /// TLS to the broker (`mqtts://`); `None` for `mqtt://`.
+    pub tls: Option<MqttTls>,
+}
+
+/// TLS to the broker (`mqtts://`): whom to trust and what to show. The files are PEM; a
+/// relative path in the config file is relative to the file's directory.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MqttTls {
+    /// `ca_file`: the CA certificates that sign the broker's; `None`: the system's roots.
+    pub ca_file: Option<PathBuf>,
+    /// `client_cert` and `client_key`: the certificate (chain) and private key the gateway
+    /// shows a broker that asks for one.
+    pub client: Option<MqttClientCert>,
+}
+
+/// A client certificate for the broker: `client_cert` and `client_key`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MqttClientCert {
+    /// The certificate, then any intermediates (PEM).
+    pub cert: PathBuf,
+    /// Its private key (PEM: PKCS#8, PKCS#1 or SEC1).
+    pub key: PathBuf,
+}
+
+/// A broker URL, read by [`parse_broker`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Broker {
+    /// The host.
+    pub host: String,
+    /// The port (1883 for `mqtt://`, 8883 for `mqtts://` when the URL has none).
+    pub port: u16,
+    /// `mqtts://`: TLS.
+    pub tls: bool,
+}
+
+/// What the gateway publishes on MQTT.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MqttMode {
+    /// A Sparkplug B 3.0 edge node.
+    #[default]
+    Sparkplug,
+    /// One retained JSON message per point under a prefix, for Node-RED, Telegraf and
+    /// home-made consumers.
+    Json,
+}
+
+impl MqttMode {
+    /// Reads `sparkplug` or `json`.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "sparkplug" => Ok(Self::Sparkplug),
+            "json" => Ok(Self::Json),
+            other => Err(format!(
+                "MQTT mode {other:?} is not one cellbus knows; write \"sparkplug\" or \"json\""
+            )),
+        }
+    }
+
+    /// `sparkplug` or `json`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Sparkplug => "sparkplug",
+            Self::Json => "json",
+        }
+    }
+}
+
+/// Default of `max_backlog`: stored changes sent after an outage.
+pub const DEFAULT_MQTT_BACKLOG: u64 = 1_000_000;
+/// Default of `check_retained`: JSON mode reads its retained point messages back this
+/// often (each check brings one message a point).
+pub const DEFAULT_MQTT_CHECK_RETAINED: Duration = Duration::from_secs(600);
+/// Default of `max_command_metrics`: writes in one DCMD. An operator's screen sets a few
+/// values at once; a thousand in one command is a flood.
+pub const DEFAULT_MQTT_COMMAND_METRICS: usize = 64;
+
+impl MqttConfig {
+    /// The broker at `url` (`mqtt://host:port`, or `mqtts://host:port` trusting the
+    /// system's roots) with every other field at its default and the edge node id
+    /// `edge_node_id`.
+    pub fn for_broker(url: &str, edge_node_id: &str) -> Result<Self, String> {
+        let Broker { host, port, tls } = parse_broker(url)?;
+        Ok(Self {
+            host,
+            port,
+            group_id: DEFAULT_MQTT_GROUP.to_owned(),
+            edge_node_id: edge_node_id.to_owned(),
+            client_id: format!("cellbus-{edge_node_id}"),
+            username: None,
+            password_env: None,
+            keep_alive: DEFAULT_MQTT_KEEP_ALIVE,
+            mode: MqttMode::Sparkplug,
+            prefix: format!("cellbus/{edge_node_id}"),
+            commands: false,
+            primary_host: None,
+            max_backlog: DEFAULT_MQTT_BACKLOG,
+            max_command_metrics: DEFAULT_MQTT_COMMAND_METRICS,
+            check_retained: DEFAULT_MQTT_CHECK_RETAINED,
+            tls: tls.then(MqttTls::default),
+        })
+    }
+}
+
+/// The longest MQTT client id: an MQTT string is at most 65,535 bytes.
+const MAX_CLIENT_ID: usize = 65_535;
+
+/// Reads `mqtt://host[:port]` (port 1883 by default) or `mqtts://host[:port]` (TLS, port
+/// 8883 by default).
+pub fn parse_broker(given: &str) -> Result<Broker, String> {
+    // Errors show the URL without its user name and password.
+    let text = &hide_userinfo(given);
+    let url = url::Url::parse(given.trim())
+        .map_err(|e| format!("broker {text:?} is not a URL ({e}); write mqtt://host:1883"))?;
+    let (tls, default_port) = match url.scheme() {
+        "mqtt" => (false, 1883),
+        "mqtts" => (true, 8883),
+        other => {
+            return Err(format!(
+                "broker {text:?} has scheme {other:?}; write mqtt://host:1883 or mqtts://host:8883"
+            ));
+        }
+    };
+    let host = url
+        .host_str()
+        .filter(|h| !h.is_empty())
+        .ok_or_else(|| format!("broker {text:?} names no host; write mqtt://host:1883"))?;
+    if url.path().len() > 1 || url.query().is_some() || !url.username().is_empty() {
+        return Err(format!(
+            "broker {text:?}: write only mqtt://host:port (user name and password go in username and password_env)"
+        ));
+    }
+    let host = host
+        .trim_start_matches('[')
+        .trim_end_matches(']')
+        .to_owned();
+    let port = url.port().unwrap_or(default_port);
+    if port == 0 {
+        return Err(format!(
+            "broker {text:?}: port 0 is not a port a broker listens on; write mqtt://host:1883"
+        ));
+    }
+    Ok(Broker { host, port, tls })
+}
+
+
+fn check_mqtt(
+    raw: RawMqtt,
+    path: &Path,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<MqttConfig, ConfigError> {
+    let Broker { host, port, tls } =
+        parse_broker(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
+    let tls = check_mqtt_tls(&raw, tls, path, at)?;
+    let group_id =
+        id_opt(&raw.group_id, "group_id", at)?.unwrap_or_else(|| DEFAULT_MQTT_GROUP.to_owned());
+    let edge_node_id =
+        id_opt(&raw.edge_node_id, "edge_node_id", at)?.unwrap_or_else(default_edge_node_id);
+    let client_id = match raw.client_id {
+        Some(c) if c.get_ref().trim().is_empty() => {
+            return Err(at(
+                c.span(),
+                "client_id is empty; remove it for the default".into(),
+            ));
+        }
+        Some(c) if c.get_ref().len() > MAX_CLIENT_ID => {
+            return Err(at(
+                c.span(),
+                format!(
+                    "client_id is {} bytes; MQTT carries at most {MAX_CLIENT_ID}",
+                    c.get_ref().len()
+                ),
+            ));
+        }
+        Some(c) => c.into_inner(),
+        None => format!("cellbus-{edge_node_id}"),
+    };
+    if let Some(env) = &raw.password_env
+        && env.get_ref().trim().is_empty()
+    {
+        return Err(at(
+            env.span(),
+            "password_env is empty; name the environment variable holding the password".into(),
+        ));
+    }
+    let keep_alive = match &raw.keep_alive {
+        Some(text) => duration(
+            text,
+            Duration::from_secs(5),
+            Duration::from_secs(3600),
+            "keep_alive",
+            at,
+        )?,
+        None => DEFAULT_MQTT_KEEP_ALIVE,
+    };
+    let mode = match &raw.mode {
+        Some(text) => MqttMode::parse(text.get_ref()).map_err(|m| at(text.span(), m))?,
+        None => MqttMode::Sparkplug,
+    };
+    let prefix = match &raw.prefix {
+        Some(text) => {
+            let p = text.get_ref().trim_end_matches('/');
+            if p.is_empty() || p.contains(['+', '#', '\0']) || p.starts_with('$') {
+                return Err(at(
+                    text.span(),
+                    format!(
+                        "prefix {:?} is not a usable topic prefix; write words separated by / \
+                         without +, # or a leading $",
+                        text.get_ref()
+                    ),
+                ));
+            }
+            p.to_owned()
+        }
+        None => format!("cellbus/{edge_node_id}"),
+    };
+    let primary_host = id_opt(&raw.primary_host, "primary_host", at)?;
+    let max_backlog = match &raw.max_backlog {
+        Some(n) => bounded(n, 1..=100_000_000, "max_backlog", " stored changes", at)?,
+        None => DEFAULT_MQTT_BACKLOG,
+    };
+    let max_command_metrics = match &raw.max_command_metrics {
+        Some(n) => bounded(
+            n,
+            1..=10_000,
+            "max_command_metrics",
+            " metrics in one command",
+            at,
+        )?,
+        None => DEFAULT_MQTT_COMMAND_METRICS,
+    };
+    let check_retained = match &raw.check_retained {
+        Some(text) => duration(
+            text,
+            Duration::from_secs(10),
+            Duration::from_secs(24 * 3600),
+            "check_retained",
+            at,
+        )?,
+        None => DEFAULT_MQTT_CHECK_RETAINED,
+    };
+    Ok(MqttConfig {
+        host,
+        port,
+        group_id,
+        edge_node_id,
+        client_id,
+        username: raw.username.map(Spanned::into_inner),
+        password_env: raw.password_env.map(Spanned::into_inner),
+        keep_alive,
+        mode,
+        prefix,
+        commands: raw.commands.map(Spanned::into_inner).unwrap_or(false),
+        primary_host,
+        max_backlog,
+        max_command_metrics,
+        check_retained,
+        tls,
+    })
+}
+
+/// An optional Sparkplug id (no `/`, `+`, `#`).
+fn id_opt(
+    field: &Option<Spanned<String>>,
+    what: &str,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Option<String>, ConfigError> {
+    field
+        .as_ref()
+        .map(|text| {
+            sparkplug::Id::new(text.get_ref().as_str())
+                .map(|_| text.get_ref().clone())
+                .map_err(|e| {
+                    at(
+                        text.span(),
+                        format!("{what} {:?} is not valid: {e}", text.get_ref()),
+                    )
+                })
+        })
+        .transpose()
+}
+
+/// The `[mqtt]` table's TLS keys, for an `mqtts://` broker (`tls`). The files are read
+/// here, so `cellbus config check` reports a missing file or bad PEM; the gateway reads
+/// them again when it starts.
+fn check_mqtt_tls(
+    raw: &RawMqtt,
+    tls: bool,
+    path: &Path,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<Option<MqttTls>, ConfigError> {
+    let keys = [
+        ("ca_file", &raw.ca_file),
+        ("client_cert", &raw.client_cert),
+        ("client_key", &raw.client_key),
+    ];
+    if !tls {
+        if let Some((key, Some(value))) = keys.iter().find(|(_, v)| v.is_some()) {
+            return Err(at(
+                value.span(),
+                format!(
+                    "{key} is for TLS: the broker is mqtt://; write mqtts://host:8883 or remove {key}"
+                ),
+            ));
+        }
+        return Ok(None);
+    }
+    let base = path.parent().unwrap_or(Path::new(""));
+    for (key, value) in keys {
+        if let Some(value) = value
+            && value.get_ref().trim().is_empty()
+        {
+            return Err(at(
+                value.span(),
+                format!("{key} is empty; name a PEM file or remove {key}"),
+            ));
+        }
+    }
+    let file = |value: &Spanned<String>| base.join(value.get_ref().trim());
+    let client = match (&raw.client_cert, &raw.client_key) {
+        (Some(cert), Some(key)) => Some(MqttClientCert {
+            cert: file(cert),
+            key: file(key),
+        }),
+        (None, None) => None,
+        (Some(cert), None) => {
+            return Err(at(
+                cert.span(),
+                "client_cert needs client_key (its private key, PEM)".into(),
+            ));
+        }
+        (None, Some(key)) => {
+            return Err(at(
+                key.span(),
+                "client_key needs client_cert (its certificate, PEM)".into(),
+            ));
+        }
+    };
+    let tls = MqttTls {
+        ca_file: raw.ca_file.as_ref().map(file),
+        client,
+    };
+    super::tls::check_files(&tls).map_err(|e| {
+        let span = match e.key {
+            "ca_file" => raw.ca_file.as_ref(),
+            "client_cert" => raw.client_cert.as_ref(),
+            "client_key" => raw.client_key.as_ref(),
+            _ => None,
+        }
+        .map_or(raw.broker.span(), Spanned::span);
+        at(span, e.message)
+    })?;
+    Ok(Some(tls))
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMqtt {
+    broker: Spanned<String>,
+    group_id: Option<Spanned<String>>,
+    edge_node_id: Option<Spanned<String>>,
+    client_id: Option<Spanned<String>>,
+    username: Option<Spanned<String>>,
+    password_env: Option<Spanned<String>>,
+    keep_alive: Option<Spanned<String>>,
+    mode: Option<Spanned<String>>,
+    prefix: Option<Spanned<String>>,
+    commands: Option<Spanned<bool>>,
+    primary_host: Option<Spanned<String>>,
+    max_backlog: Option<Spanned<i64>>,
+    max_command_metrics: Option<Spanned<i64>>,
+    check_retained: Option<Spanned<String>>,
+    ca_file: Option<Spanned<String>>,
+    client_cert: Option<Spanned<String>>,
+    client_key: Option<Spanned<String>>,
+}
