@@ -71,7 +71,8 @@ pub async fn run(command: MqttCommand) -> anyhow::Result<ExitCode> {
 
 async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
     let gateway::northbound::mqtt::config::Broker { host, port, tls } =
-        gateway::northbound::mqtt::config::parse_broker(&args.broker).map_err(|m| usage(format!("--broker: {m}")))?;
+        gateway::northbound::mqtt::config::parse_broker(&args.broker)
+            .map_err(|m| usage(format!("--broker: {m}")))?;
     let scheme = if tls { "mqtts" } else { "mqtt" };
     let broker = format!("{scheme}://{host}:{port}");
     let transport = if tls {

@@ -153,8 +153,12 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         ConfigCommand::ImportCsv { file } => {
-            let registers = gateway::driver::modbus::config::registers_from_csv(&file).map_err(usage)?;
-            print!("{}", gateway::driver::modbus::config::registers_toml(&registers));
+            let registers =
+                gateway::driver::modbus::config::registers_from_csv(&file).map_err(usage)?;
+            print!(
+                "{}",
+                gateway::driver::modbus::config::registers_toml(&registers)
+            );
             for overlap in gateway::driver::modbus::config::overlapping_registers(&registers) {
                 eprintln!("warning: {}: {overlap}", file.display());
             }

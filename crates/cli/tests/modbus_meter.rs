@@ -88,7 +88,8 @@ fn a_simulated_energy_meter_is_read_through_its_csv_register_list_in_the_planned
     // What the planner promises for the example list: the registers from 0x0000 to 0x0011,
     // and those from 0x0034 to 0x0049 (gaps of at most 10 bridged).
     let registers =
-        gateway::driver::modbus::config::registers_from_csv(&dir.path().join("energy-meter.csv")).unwrap();
+        gateway::driver::modbus::config::registers_from_csv(&dir.path().join("energy-meter.csv"))
+            .unwrap();
     let plan = jbus::plan::Plan::new(
         &gateway::driver::modbus::plan_items(&registers),
         jbus::plan::PlanOptions::default(),

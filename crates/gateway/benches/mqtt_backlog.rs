@@ -49,8 +49,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use gateway::cell::Cell;
-use gateway::northbound::mqtt::config::MqttConfig;
 use gateway::metrics::Metrics;
+use gateway::northbound::mqtt::config::MqttConfig;
 use gateway::northbound::mqtt::forward::FORWARDED_KEY;
 use gateway::point::{PointId, PointKind, Quality, Value};
 use gateway::store::{Sample, Store, StoreOptions};

@@ -230,14 +230,12 @@ impl LineTask {
                         })
                         .clone(),
                     up: metrics.device_up.get_or_create(&labels).clone(),
-                    requests_per_poll: entry.protocol.plans_reads().then(
-                        || {
-                            metrics
-                                .modbus_requests_per_poll
-                                .get_or_create(&labels)
-                                .clone()
-                        },
-                    ),
+                    requests_per_poll: entry.protocol.plans_reads().then(|| {
+                        metrics
+                            .modbus_requests_per_poll
+                            .get_or_create(&labels)
+                            .clone()
+                    }),
                     latency: line_latency.clone(),
                     failures: FailureMetrics {
                         polls: metrics.polls.clone(),

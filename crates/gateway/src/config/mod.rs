@@ -58,7 +58,6 @@ mod tests;
 pub use table::{ConfigError, MAX_CONFIG, Scratch, Settings, Table, bounded, duration};
 use table::{locate, plain_toml_message, read_text};
 
-
 /// An example configuration for a real cell (`cellbus config example` prints it); the
 /// same file is `crates/gateway/examples/cell.toml`.
 pub const EXAMPLE_CONFIG: &str = include_str!("../../examples/cell.toml");
@@ -228,7 +227,6 @@ pub fn default_edge_node_id() -> String {
         .unwrap_or_else(|| "cellbus".to_owned())
 }
 
-
 /// Device ids the gateway's own objects use: the OPC UA node ids of the `Cell` folder and
 /// the `Gateway` object, and the source of the gateway's own events.
 pub const RESERVED_DEVICE_IDS: [&str; 2] = ["cell", "gateway"];
@@ -259,7 +257,8 @@ const DEVICE_KEYS: [&str; 10] = [
 /// Checks configuration text; `path` names it in errors.
 pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellConfig, ConfigError> {
     let at = |span: Range<usize>, message: String| locate(text, path, span, message);
-    let toml_error = |e: toml::de::Error| at(e.span().unwrap_or(0..0), plain_toml_message(e.message()));
+    let toml_error =
+        |e: toml::de::Error| at(e.span().unwrap_or(0..0), plain_toml_message(e.message()));
     let raw: RawConfig = toml::from_str(text).map_err(toml_error)?;
     // The same text as toml's own tree, with every key's place: the tables the cell does not
     // read itself go to their owners (an interface, a device kind) from here.
@@ -551,7 +550,10 @@ fn device_tables<'a>(
 
 /// One device: the keys every device has, checked here, and its kind's own keys (`own`,
 /// where the device is in the file and its keys beyond [`DEVICE_KEYS`]), read by the kind.
-#[expect(clippy::too_many_arguments, reason = "the reading's whole context, passed down once")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the reading's whole context, passed down once"
+)]
 fn check_device(
     raw: RawDevice,
     protocol: Kind,
@@ -744,7 +746,6 @@ impl CellConfig {
             .collect()
     }
 }
-
 
 impl fmt::Display for LineConfig {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

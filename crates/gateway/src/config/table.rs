@@ -255,7 +255,6 @@ pub(crate) fn hide_secret(line: &str) -> String {
     }
 }
 
-
 /// `text` with what comes before an `@` in a URL's authority (a user name and a password)
 /// shown as `(hidden)`.
 pub fn hide_userinfo(text: &str) -> String {

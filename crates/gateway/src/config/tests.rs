@@ -15,7 +15,10 @@ use table::{hide_secret, hide_userinfo, read_bounded};
 
 /// A modbus device's registers and options.
 fn modbus(driver: &DriverConfig) -> &ModbusSettings {
-    driver.settings.get().expect("a modbus device has its settings")
+    driver
+        .settings
+        .get()
+        .expect("a modbus device has its settings")
 }
 
 /// A Panasonic machine's event port, if its table names one.
@@ -429,7 +432,10 @@ fn modbus_registers_are_read_from_their_tables() {
         (RegisterTable::Input, 0x10, 0.1, DataType::Int16),
         "the old signed = true is an int16"
     );
-    assert_eq!(modbus(driver).registers[1].format.data_type, DataType::Uint16);
+    assert_eq!(
+        modbus(driver).registers[1].format.data_type,
+        DataType::Uint16
+    );
     assert_eq!(supply.unit.as_deref(), Some("°C"));
     assert_eq!(modbus(driver).registers[1].writable, Some((5.0, 30.0)));
 }
@@ -528,8 +534,7 @@ fn devices_with_the_same_overlapping_registers_are_warned_about_once() {
 #[test]
 fn a_modbus_tcp_line_parses_and_gives_its_modbus_devices_the_endpoint() {
     let config =
-        parse(&CHILLER.replace("tcp://192.0.2.60:4001", "modbus-tcp://192.0.2.60:502"))
-            .unwrap();
+        parse(&CHILLER.replace("tcp://192.0.2.60:4001", "modbus-tcp://192.0.2.60:502")).unwrap();
     let line = &config.lines[0];
     assert!(line.endpoint.is_mbap());
     assert_eq!(
@@ -664,7 +669,13 @@ fn modbus_types_orders_tables_pacing_and_deadbands_are_read() {
     assert!(options.plan.one_request_per_item);
     assert_eq!(options.delay_between_requests, Duration::from_millis(50));
     assert_eq!(options.delay_after_connect, Duration::from_secs(1));
-    let r = |name: &str| modbus(driver).registers.iter().find(|r| r.name == name).unwrap();
+    let r = |name: &str| {
+        modbus(driver)
+            .registers
+            .iter()
+            .find(|r| r.name == name)
+            .unwrap()
+    };
     assert_eq!(
         r("voltage").format,
         Format::new(DataType::Float32, Order::Cdab)
@@ -688,7 +699,10 @@ fn modbus_types_orders_tables_pacing_and_deadbands_are_read() {
     let chiller = &defaults.lines[0].devices[0];
     assert_eq!(chiller.deadband, None);
     assert_eq!(modbus(&chiller.driver).options, ModbusOptions::default());
-    assert_eq!(modbus(&chiller.driver).options.plan.max_registers.get(), 125);
+    assert_eq!(
+        modbus(&chiller.driver).options.plan.max_registers.get(),
+        125
+    );
     assert_eq!(modbus(&chiller.driver).options.plan.max_bits.get(), 2000);
 }
 
@@ -1064,7 +1078,10 @@ fn the_example_energy_meter_csv_becomes_toml_that_parses_to_the_same_registers()
          [[line.device]]\nid = \"meter1\"\nprotocol = \"modbus\"\n\n{toml}"
     ))
     .unwrap();
-    assert_eq!(*modbus(&config.lines[0].devices[0].driver).registers, *registers);
+    assert_eq!(
+        *modbus(&config.lines[0].devices[0].driver).registers,
+        *registers
+    );
 }
 
 #[test]

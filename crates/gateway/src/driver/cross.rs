@@ -35,8 +35,8 @@ use jbus::rtu::UnitId;
 use link::{SerialSettings, SharedLine};
 
 use super::{
-    BoxFuture, DeviceKind, Kind, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
-    WriteError, point_ids,
+    BoxFuture, DeviceError, DeviceEvent, DeviceKind, Driver, DriverConfig, ErrorKind, Kind,
+    PollGroup, Reading, WriteError, point_ids,
 };
 use crate::event::EventKind;
 use crate::point::{AlarmRule, EnumState, PointDescription, PointId, PointKind, PointSpec, Value};

@@ -39,8 +39,8 @@ use jbc::frame::{Address, Route};
 use link::{SerialSettings, SharedLine};
 
 use super::{
-    BoxFuture, DeviceKind, Kind, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
-    enum_states, point_ids,
+    BoxFuture, DeviceError, DeviceKind, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
+    WriteError, enum_states, point_ids,
 };
 use crate::point::{
     AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,

@@ -376,7 +376,10 @@ pub trait DeviceKind: Send + Sync + 'static {
     ) -> (std::ops::Range<usize>, String) {
         (
             value.span(),
-            format!("{key} is for {} devices only, not {other} devices", self.name()),
+            format!(
+                "{key} is for {} devices only, not {other} devices",
+                self.name()
+            ),
         )
     }
 

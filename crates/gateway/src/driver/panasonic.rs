@@ -41,8 +41,8 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
 use super::{
-    BoxFuture, DeviceKind, Kind, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, PollGroup, Reading,
-    WriteError,
+    BoxFuture, DeviceError, DeviceEvent, DeviceKind, Driver, DriverConfig, ErrorKind, Kind,
+    PollGroup, Reading, WriteError,
 };
 use crate::event::{EventKind, Fields, fields};
 use crate::point::{
@@ -66,7 +66,9 @@ pub struct Keys {
 }
 
 /// Reads `event_port`.
-fn read_keys(table: &crate::config::Table<'_>) -> Result<crate::config::Settings, crate::config::ConfigError> {
+fn read_keys(
+    table: &crate::config::Table<'_>,
+) -> Result<crate::config::Settings, crate::config::ConfigError> {
     #[derive(serde::Deserialize)]
     #[serde(deny_unknown_fields)]
     struct Raw {

@@ -64,8 +64,8 @@ use thermosald::tables::{self, Item, Table, machine, runtime, service, settings}
 use thermosald::{Address, RawValue, Read, Target};
 
 use super::{
-    BoxFuture, DeviceKind, Kind, DeviceError, Driver, DriverConfig, ErrorKind, PollGroup, Reading, WriteError,
-    enum_states, point_ids,
+    BoxFuture, DeviceError, DeviceKind, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
+    WriteError, enum_states, point_ids,
 };
 use crate::point::{
     AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,

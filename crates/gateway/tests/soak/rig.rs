@@ -407,7 +407,12 @@ impl CellSet {
             let make: MakeBus = Arc::new(move || Bus(vec![Box::new(sealers.line())]));
             let devices = (0..3)
                 .map(|a| {
-                    let mut d = device(&format!("sealer{g}x{a}"), gateway::driver::thermosald::KIND, a, options);
+                    let mut d = device(
+                        &format!("sealer{g}x{a}"),
+                        gateway::driver::thermosald::KIND,
+                        a,
+                        options,
+                    );
                     d.driver.timeout = None;
                     d
                 })
@@ -431,7 +436,12 @@ impl CellSet {
             let slave = SharedModel::new(Slave::new(map));
             let make: MakeBus =
                 Arc::new(move || Bus(vec![Box::new(cross.line()), Box::new(slave.line())]));
-            let mut meter = device(&format!("meter{g}"), gateway::driver::modbus::KIND, 1, options);
+            let mut meter = device(
+                &format!("meter{g}"),
+                gateway::driver::modbus::KIND,
+                1,
+                options,
+            );
             let registers: Vec<RegisterConfig> = (0u16..8)
                 .map(|address| RegisterConfig {
                     title: format!("Register {address}"),
@@ -451,7 +461,12 @@ impl CellSet {
                 options: Default::default(),
             });
             let devices = vec![
-                device(&format!("cross{g}"), gateway::driver::cross::KIND, 2, options),
+                device(
+                    &format!("cross{g}"),
+                    gateway::driver::cross::KIND,
+                    2,
+                    options,
+                ),
                 meter,
             ];
             set.add_line(

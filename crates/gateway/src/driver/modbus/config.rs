@@ -269,7 +269,6 @@ pub fn overlapping_registers(registers: &[RegisterConfig]) -> Vec<String> {
     found
 }
 
-
 fn check_register_list(
     raw: &[RawRegister],
     deadband: Option<Deadband>,
@@ -531,7 +530,6 @@ pub(super) struct RawRange {
     pub(super) min: f64,
     pub(super) max: f64,
 }
-
 
 /// Where `[[line.device.register]]` tables given to another kind are shown: the first
 /// one's name.

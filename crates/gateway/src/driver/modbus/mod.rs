@@ -553,12 +553,13 @@ impl ModbusDriver {
             .iter()
             .map(|r| PointId::new(&config.id, &r.name).map_err(|e| e.to_string()))
             .collect::<Result<Vec<_>, _>>()?;
-        let plan = settings.registers.plan(settings.options.plan).map_err(|e| {
-            match settings.registers.get(plan_error_index(&e)) {
+        let plan = settings
+            .registers
+            .plan(settings.options.plan)
+            .map_err(|e| match settings.registers.get(plan_error_index(&e)) {
                 Some(r) => format!("register {}: {e}", r.name),
                 None => e.to_string(),
-            }
-        })?;
+            })?;
         let defaults = ClientConfig::default();
         Ok(Self {
             device: config.id.clone(),

@@ -33,8 +33,7 @@ impl TableReader for MqttTable {
 
     fn read(&self, table: &Table<'_>) -> Result<Settings, ConfigError> {
         let raw: RawMqtt = table.read()?;
-        check_mqtt(raw, table.path(), &|span, message| table.at(span, message))
-            .map(Settings::new)
+        check_mqtt(raw, table.path(), &|span, message| table.at(span, message)).map(Settings::new)
     }
 }
 
@@ -220,7 +219,6 @@ pub fn parse_broker(given: &str) -> Result<Broker, String> {
     }
     Ok(Broker { host, port, tls })
 }
-
 
 fn check_mqtt(
     raw: RawMqtt,

@@ -35,13 +35,13 @@ use rumqttc::{
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio::task::JoinHandle;
 
-use self::forward::{Delivery, FORWARDED_KEY};
-use crate::cell::{Cell, LiveMessage, MqttLink};
 use self::config::{MqttConfig, MqttMode};
+use self::forward::{Delivery, FORWARDED_KEY};
 use super::{BoxStart, Northbound, Running, Start};
+use crate::cell::{Cell, LiveMessage, MqttLink};
 use crate::config::{CellConfig, TableReader, default_edge_node_id};
-use crate::options::{OptionError, ServeOptions};
 use crate::event::{Event, EventKind};
+use crate::options::{OptionError, ServeOptions};
 use crate::time::Timestamp;
 
 /// First wait after a lost or refused connection; it doubles up to [`RETRY_CAP`].
@@ -649,7 +649,8 @@ fn mqtt_config(
         }
         (None, Some(table)) => table.clone(),
         (Some(url), Some(table)) => {
-            let broker = config::parse_broker(url).map_err(|m| OptionError(format!("--mqtt: {m}")))?;
+            let broker =
+                config::parse_broker(url).map_err(|m| OptionError(format!("--mqtt: {m}")))?;
             MqttConfig {
                 host: broker.host,
                 port: broker.port,
@@ -688,7 +689,6 @@ fn mqtt_config(
     }
     Ok(Some(mqtt))
 }
-
 
 #[cfg(test)]
 mod retry_tests {

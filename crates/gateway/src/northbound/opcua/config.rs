@@ -435,7 +435,6 @@ struct RawOpcuaUser {
     write: Option<Spanned<bool>>,
 }
 
-
 #[cfg(test)]
 mod tests {
     use std::path::Path;
@@ -577,4 +576,3 @@ mod tests {
         }
     }
 }
-

@@ -28,8 +28,8 @@
 //! administrator to move.
 
 pub mod auth;
-pub mod config;
 pub mod chunks;
+pub mod config;
 pub mod history;
 pub mod items;
 pub mod nodes;
@@ -55,13 +55,13 @@ use tokio::sync::{broadcast, watch};
 use tokio::task::JoinHandle;
 
 use self::auth::{User, Users};
+use self::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
 use self::items::{Capped, ItemCount, capped};
 use self::nodes::CellManager;
 use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
 use self::space::ids;
-use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaRefused, OpcuaState};
-use self::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
 use super::{BoxStart, Northbound, Running, Start};
+use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaRefused, OpcuaState};
 use crate::config::{CellConfig, TableReader};
 use crate::http::WritePolicy;
 use crate::options::ServeOptions;
@@ -649,7 +649,8 @@ impl Northbound for Opcua {
             else {
                 return Ok(None);
             };
-            let started = self::start(Arc::clone(start.cell), config, options, start.stopped).await?;
+            let started =
+                self::start(Arc::clone(start.cell), config, options, start.stopped).await?;
             Ok(Some(Running {
                 name: "opcua",
                 url: Some(started.url),
@@ -712,7 +713,6 @@ fn opcua_config(
         },
     )))
 }
-
 
 #[cfg(test)]
 mod tests {
