@@ -104,12 +104,12 @@ fn parse_max_age(text: &str) -> Result<std::time::Duration, String> {
 pub async fn run(args: HistorianArgs) -> anyhow::Result<ExitCode> {
     let options = historian::Options {
         mqtt: args.mqtt,
-        tls: gateway::northbound::mqtt::config::MqttTls {
+        tls: kit::mqtt::MqttTls {
             ca_file: args.ca_file,
             client: args
                 .client_cert
                 .zip(args.client_key)
-                .map(|(cert, key)| gateway::northbound::mqtt::config::MqttClientCert { cert, key }),
+                .map(|(cert, key)| kit::mqtt::MqttClientCert { cert, key }),
         },
         username: args.username,
         password_env: args.password_env,

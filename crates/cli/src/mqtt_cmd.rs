@@ -70,23 +70,22 @@ pub async fn run(command: MqttCommand) -> anyhow::Result<ExitCode> {
 }
 
 async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
-    let gateway::northbound::mqtt::config::Broker { host, port, tls } =
-        gateway::northbound::mqtt::config::parse_broker(&args.broker)
-            .map_err(|m| usage(format!("--broker: {m}")))?;
+    let kit::mqtt::Broker { host, port, tls } =
+        kit::mqtt::parse_broker(&args.broker).map_err(|m| usage(format!("--broker: {m}")))?;
     let scheme = if tls { "mqtts" } else { "mqtt" };
     let broker = format!("{scheme}://{host}:{port}");
     let transport = if tls {
-        let files = gateway::northbound::mqtt::config::MqttTls {
+        let files = kit::mqtt::MqttTls {
             ca_file: args.ca_file.clone(),
             client: args
                 .client_cert
                 .clone()
                 .zip(args.client_key.clone())
-                .map(|(cert, key)| gateway::northbound::mqtt::config::MqttClientCert { cert, key }),
+                .map(|(cert, key)| kit::mqtt::MqttClientCert { cert, key }),
         };
-        let config = gateway::northbound::mqtt::tls::client_config(&files)
+        let config = kit::mqtt::tls::client_config(&files)
             .map_err(|e| usage(format!("--broker {broker}: {e}")))?;
-        Some(gateway::northbound::mqtt::tls::transport(&config))
+        Some(kit::mqtt::tls::transport(&config))
     } else {
         if args.ca_file.is_some() || args.client_cert.is_some() {
             return Err(usage(format!(

@@ -9,7 +9,10 @@ use std::borrow::Cow;
 use std::fmt;
 use std::sync::Arc;
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
+
+// A point's value and its quality: the vocabulary the gateway shares with the historian.
+pub use kit::value::{Quality, Value};
 
 /// Words that a driver usually knows at compile time (a point's name in words, its unit,
 /// its poll group, an enumeration's labels): borrowed from the driver's tables, so a
@@ -143,67 +146,6 @@ impl PointId {
 impl fmt::Display for PointId {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.0)
-    }
-}
-
-/// A point's value: a number (enumerations are numbers with labels) or text.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(untagged)]
-pub enum Value {
-    /// A number.
-    Number(f64),
-    /// Text (a model name, a program name).
-    Text(String),
-}
-
-impl Value {
-    /// The number, if it is one.
-    pub fn as_number(&self) -> Option<f64> {
-        match self {
-            Value::Number(n) => Some(*n),
-            Value::Text(_) => None,
-        }
-    }
-}
-
-impl fmt::Display for Value {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Value::Number(n) => write!(f, "{n}"),
-            Value::Text(t) => f.write_str(t),
-        }
-    }
-}
-
-/// How far a point's current value can be trusted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Quality {
-    /// Read at its last poll.
-    Good,
-    /// The last good value is older than its poll period allows (the line is slow or busy).
-    Stale,
-    /// The last read failed; the point carries the error.
-    Bad,
-}
-
-impl Quality {
-    /// The number stored in the history (0 good, 1 stale, 2 bad).
-    pub fn code(self) -> i64 {
-        match self {
-            Quality::Good => 0,
-            Quality::Stale => 1,
-            Quality::Bad => 2,
-        }
-    }
-
-    /// The quality for a stored number; unknown numbers read as bad.
-    pub fn from_code(code: i64) -> Self {
-        match code {
-            0 => Quality::Good,
-            1 => Quality::Stale,
-            _ => Quality::Bad,
-        }
     }
 }
 

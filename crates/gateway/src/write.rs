@@ -23,15 +23,13 @@ use crate::point::{PointId, Value};
 use crate::store::{AuditEntry, AuditResult};
 use crate::time::Timestamp;
 
-/// Longest stored text of a client, device or point as the request named them.
-pub const MAX_NAME: usize = 128;
+// Bounds on names and logs, shared with the historian.
+pub use kit::bounded::{LOG_EVERY, LogThrottle, MAX_NAME, cut};
+
 /// Longest stored value as given (its JSON text).
 pub const MAX_VALUE: usize = 256;
 /// Longest stored detail.
 pub const MAX_DETAIL: usize = 1024;
-
-/// At most one log line about refused unauthorised writes this often.
-pub const LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Writes refused before anything is stored (writes off, a wrong token, DCMDs without
 /// `commands = true`): anyone who reaches the interface can send them by the thousand, so
@@ -52,31 +50,6 @@ impl Unauthorised {
             })
             .inc();
         self.log.count(now)
-    }
-}
-
-/// Something anyone can cause by the thousand (a refused write, command or connection),
-/// logged at most once every [`LOG_EVERY`] with how many there were since the last line.
-#[derive(Debug, Default)]
-pub struct LogThrottle {
-    last_log: Option<tokio::time::Instant>,
-    unlogged: u64,
-}
-
-impl LogThrottle {
-    /// Counts one at `now`; returns how many to report when a log line is due.
-    pub fn count(&mut self, now: tokio::time::Instant) -> Option<u64> {
-        self.unlogged += 1;
-        if self.last_log.is_some_and(|t| now < t + LOG_EVERY) {
-            return None;
-        }
-        self.last_log = Some(now);
-        Some(std::mem::take(&mut self.unlogged))
-    }
-
-    /// Nothing counted since the last line, which is older than [`LOG_EVERY`].
-    fn is_quiet(&self, now: tokio::time::Instant) -> bool {
-        self.unlogged == 0 && self.last_log.is_none_or(|t| now >= t + LOG_EVERY)
     }
 }
 
@@ -298,18 +271,6 @@ impl Attempt {
             tracing::error!("audit row not committed: {e}");
         }
     }
-}
-
-/// `text` cut to at most `max` bytes (on a character boundary), with `…` when cut.
-pub fn cut(text: &str, max: usize) -> String {
-    if text.len() <= max {
-        return text.to_owned();
-    }
-    let mut end = max.saturating_sub('…'.len_utf8());
-    while !text.is_char_boundary(end) {
-        end -= 1;
-    }
-    format!("{}…", &text[..end])
 }
 
 #[cfg(test)]

@@ -218,7 +218,7 @@ fn run_historian(broker: &str, database: &str) -> ExitCode {
     let result = runtime.block_on(async {
         let options = historian::Options {
             mqtt: broker.to_owned(),
-            tls: gateway::northbound::mqtt::config::MqttTls::default(),
+            tls: kit::mqtt::MqttTls::default(),
             username: None,
             password_env: None,
             database: database.to_owned(),

@@ -2,8 +2,8 @@
 //!
 //! - `GET /api/history?point=NODE/DEVICE.POINT&from=&to=&step=`: exactly the gateway's
 //!   `/api/history` answer (raw samples with `before` and `truncated`, or buckets), with the
-//!   same time forms (RFC 3339, `now`, `-1h`), defaults, limits and errors (the gateway's
-//!   own parsing is used). A node's own metrics are `NODE/.POINT`.
+//!   same time forms (RFC 3339, `now`, `-1h`), defaults, limits and errors (the parsing the
+//!   gateway uses, [`kit::history`]). A node's own metrics are `NODE/.POINT`.
 //! - `GET /api/points`: every point with node, device, unit, name in words, data type and
 //!   write range.
 //! - `GET /api/events?from=&to=&limit=`: events, newest first.
@@ -12,7 +12,7 @@
 //!
 //! Queries use a connection of their own (never the writer's), one query at a time, opened
 //! on the first query and again after it is lost. The server loop is the gateway's
-//! ([`gateway::http::server`]: header and write timeouts, a connection limit).
+//! ([`kit::http::server`]: header and write timeouts, a connection limit).
 
 use std::sync::Arc;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
@@ -23,18 +23,19 @@ use axum::http::{Method, StatusCode, Uri, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::{Json, Router};
-use gateway::http::{
-    ApiError, ApiResult, HistoryQuery, HistoryRange, bounded_by_bytes, check_limit, history_range,
-    parse_time,
+use kit::bounded::MAX_NAME;
+use kit::history::{
+    Bucket as ApiBucket, HistoryQuery, HistoryRange, HistorySample, MAX_RAW_SAMPLES, Series,
+    bounded_by_bytes, check_limit, history_range, parse_time,
 };
-use gateway::point::{Quality as ApiQuality, Value};
-use gateway::store::{Bucket as ApiBucket, HistorySample, MAX_RAW_SAMPLES, Series};
-use gateway::time::Timestamp;
+use kit::http::{ApiError, ApiResult};
+use kit::time::Timestamp;
+use kit::value::Value;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::metrics::{Health, Metrics};
-use crate::store::{PointRow, Quality, Store, StoreError, StoredSample};
+use crate::store::{PointRow, Store, StoreError, StoredSample};
 
 /// How long a query waits for the query connection before the answer is 503.
 const QUERY_WAIT: Duration = Duration::from_secs(10);
@@ -138,19 +139,11 @@ fn system_time(t: Timestamp) -> SystemTime {
         .unwrap_or(UNIX_EPOCH + Duration::from_secs(253_402_300_799))
 }
 
-fn api_quality(q: Quality) -> ApiQuality {
-    match q {
-        Quality::Good => ApiQuality::Good,
-        Quality::Stale => ApiQuality::Stale,
-        Quality::Bad => ApiQuality::Bad,
-    }
-}
-
 fn api_sample(s: StoredSample) -> HistorySample {
     HistorySample {
         t: ms(s.t),
         value: s.value.map(Value::Number).or(s.text.map(Value::Text)),
-        quality: api_quality(s.quality),
+        quality: s.quality,
     }
 }
 
@@ -197,7 +190,7 @@ pub fn point_id(p: &PointRow, grouped: bool) -> String {
 
 /// A point id as an error message quotes it: as the gateway's errors quote a name.
 fn cut(text: &str) -> String {
-    gateway::write::cut(text, gateway::write::MAX_NAME)
+    kit::bounded::cut(text, MAX_NAME)
 }
 
 /// The one point `text` names, or a 404 (none) or 400 (several, listed).

@@ -38,7 +38,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
-use gateway::write::LogThrottle;
+use kit::bounded::LogThrottle;
 use rumqttc::{
     AsyncClient, Event, EventLoop, LastWill, MqttOptions, Outgoing, Packet, QoS, SubscribeFilter,
     SubscribeReasonCode, Transport,
@@ -161,7 +161,7 @@ impl Link {
             options
                 .set_keep_alive(KEEP_ALIVE)
                 .set_clean_session(false)
-                .set_max_packet_size(gateway::northbound::mqtt::MAX_INCOMING, MAX_OUTGOING)
+                .set_max_packet_size(kit::mqtt::MAX_INCOMING, MAX_OUTGOING)
                 .set_transport(broker.transport.clone())
                 .set_last_will(LastWill::new(
                     will.topic.to_string(),
@@ -373,11 +373,7 @@ impl Pump {
                 }
                 Ok(_) => {}
                 Err(e) => {
-                    return gateway::northbound::mqtt::tls::describe(
-                        &e,
-                        &self.describe.0,
-                        self.describe.1,
-                    );
+                    return kit::mqtt::tls::describe(&e, &self.describe.0, self.describe.1);
                 }
             }
         }

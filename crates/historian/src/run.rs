@@ -12,7 +12,7 @@ use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 
 use anyhow::{Context as _, bail};
-use gateway::northbound::mqtt::config::{MqttTls, parse_broker};
+use kit::mqtt::{MqttTls, parse_broker};
 use rumqttc::Transport;
 use sparkplug::{Host, Id, Sharing};
 use tokio::sync::{mpsc, watch};
@@ -91,9 +91,8 @@ impl Historian {
         let parsed = parse_broker(&options.mqtt).map_err(|m| anyhow::anyhow!("--mqtt: {m}"))?;
         check_database(&options.database)?;
         let transport = if parsed.tls {
-            let config =
-                gateway::northbound::mqtt::tls::client_config(&options.tls).context("MQTT TLS")?;
-            gateway::northbound::mqtt::tls::transport(&config)
+            let config = kit::mqtt::tls::client_config(&options.tls).context("MQTT TLS")?;
+            kit::mqtt::tls::transport(&config)
         } else {
             if options.tls.ca_file.is_some() || options.tls.client.is_some() {
                 bail!(
@@ -196,10 +195,10 @@ impl Historian {
                 metrics: Arc::clone(&metrics),
                 health: Arc::clone(&health),
             });
-            tokio::spawn(gateway::http::server::serve(
+            tokio::spawn(kit::http::server::serve(
                 listener,
                 http::router(state),
-                gateway::http::server::Limits::default(),
+                kit::http::server::Limits::default(),
                 stop.clone(),
             ))
         });

@@ -19,6 +19,9 @@ use serde::de::DeserializeOwned;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
+pub use kit::bounded::read_bounded;
+pub use kit::mqtt::hide_userinfo;
+
 /// Why a configuration was refused.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -101,28 +104,6 @@ pub fn read_text(path: &Path) -> Result<String, ConfigError> {
         why,
     };
     read_bounded_text(path, MAX_CONFIG).map_err(unreadable)
-}
-
-/// The bytes of the regular file at `path`, refused when larger than `max` (a config that
-/// names `/dev/zero` or a huge file must not hang or exhaust the gateway); the error says
-/// why in words.
-pub fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>, String> {
-    use std::io::Read as _;
-    let file = std::fs::File::open(path).map_err(|e| format!("cannot be read: {e}"))?;
-    let meta = file
-        .metadata()
-        .map_err(|e| format!("cannot be read: {e}"))?;
-    if !meta.is_file() {
-        return Err("is not a file".into());
-    }
-    let mut bytes = Vec::new();
-    file.take(max + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| format!("cannot be read: {e}"))?;
-    if bytes.len() as u64 > max {
-        return Err(format!("is larger than {} MiB", max >> 20));
-    }
-    Ok(bytes)
 }
 
 /// The text of the file at `path`, as [`read_bounded`] reads it, refused unless UTF-8.
@@ -252,19 +233,6 @@ pub(crate) fn hide_secret(line: &str) -> String {
         format!("{key}={}", hide_userinfo(value))
     } else {
         line.to_owned()
-    }
-}
-
-/// `text` with what comes before an `@` in a URL's authority (a user name and a password)
-/// shown as `(hidden)`.
-pub fn hide_userinfo(text: &str) -> String {
-    let Some((scheme, rest)) = text.split_once("://") else {
-        return text.to_owned();
-    };
-    let end = rest.find(['/', '?', '#']).unwrap_or(rest.len());
-    match rest[..end].rfind('@') {
-        Some(at) => format!("{scheme}://(hidden){}", &rest[at..]),
-        None => text.to_owned(),
     }
 }
 

@@ -36,6 +36,13 @@ mod write;
 
 pub use write::{BODY_LIMIT, FAILURE_WINDOW, MAX_TOKEN_FAILURES};
 
+// The history query and the listings' limits, shared with the historian.
+pub(crate) use kit::history::parse_step;
+pub use kit::history::{
+    DEFAULT_HISTORY, HistoryQuery, HistoryRange, MAX_BUCKETS, MAX_LIMIT, bounded_by_bytes,
+    check_limit, history_range, parse_time,
+};
+
 /// The API's routes: method and path as axum writes them.
 pub const API_ROUTES: &[(&str, &str)] = &[
     ("GET", "/healthz"),
@@ -54,12 +61,6 @@ pub const API_ROUTES: &[(&str, &str)] = &[
 /// The OpenAPI 3 description of the API.
 pub const OPENAPI: &str = include_str!("openapi.json");
 
-/// Most rows one event or audit listing returns.
-pub const MAX_LIMIT: usize = 10_000;
-
-/// Most buckets one history query returns; a smaller `step` over the span is refused.
-pub const MAX_BUCKETS: usize = 10_000;
-
 /// Most bytes of rows one audit listing returns (`truncated` says when it stopped).
 pub const MAX_AUDIT_BYTES: usize = 4 << 20;
 
@@ -71,9 +72,6 @@ pub const MAX_EVENT_STREAMS: usize = 64;
 
 /// How long a query waits for its turn before the answer is 503.
 const QUERY_WAIT: Duration = Duration::from_secs(10);
-
-/// Default length of a history query without `from`.
-pub const DEFAULT_HISTORY: Duration = Duration::from_secs(3600);
 
 /// Who may write.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -245,21 +243,30 @@ impl ApiError {
     }
 }
 
+// The answer's shape and the query errors are kit's (shared with the historian); this
+// type stays the gateway's own while its body errors (`From<JsonRejection>`, which names
+// the write body) need a local type.
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        let mut response = (self.status, Json(json!({ "error": self.message }))).into_response();
-        if self.status == StatusCode::UNAUTHORIZED {
-            response
-                .headers_mut()
-                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
-        }
-        response
+        kit::http::ApiError::from(self).into_response()
     }
 }
 
 impl From<QueryRejection> for ApiError {
     fn from(rejection: QueryRejection) -> Self {
-        Self::bad_request(format!("bad query: {}", rejection.body_text()))
+        kit::http::ApiError::from(rejection).into()
+    }
+}
+
+impl From<kit::http::ApiError> for ApiError {
+    fn from(error: kit::http::ApiError) -> Self {
+        Self::new(error.status, error.message)
+    }
+}
+
+impl From<ApiError> for kit::http::ApiError {
+    fn from(error: ApiError) -> Self {
+        Self::new(error.status, error.message)
     }
 }
 
@@ -581,38 +588,6 @@ fn unknown_device(cell: &Cell, id: &str) -> ApiError {
     ))
 }
 
-/// Query of `/api/history` (also the plant historian's).
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct HistoryQuery {
-    /// The point (`jbc1.air_temperature`; the historian's `NODE/DEVICE.POINT`).
-    pub point: Option<String>,
-    /// Start: RFC 3339, `now` or `-DURATION`.
-    pub from: Option<String>,
-    /// End, the same forms.
-    pub to: Option<String>,
-    /// Bucket width (`1m`); raw samples without it.
-    pub step: Option<String>,
-}
-
-/// The time range and step a history query asks for, checked.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct HistoryRange {
-    /// Start (inclusive).
-    pub from: Timestamp,
-    /// End (exclusive).
-    pub to: Timestamp,
-    /// Bucket width, when downsampled.
-    pub step: Option<Duration>,
-}
-
-/// A query's time `name` (RFC 3339, `now` or `-DURATION`), read at `now`.
-pub fn parse_time(name: &str, text: Option<&str>, now: Timestamp) -> ApiResult<Option<Timestamp>> {
-    text.map(|t| Timestamp::parse_relative(t, now))
-        .transpose()
-        .map_err(|e| ApiError::bad_request(format!("{name}: {e}")))
-}
-
 /// The point a history query names, as written (whether the cell has it is the handler's
 /// question).
 pub(crate) fn history_point(q: &HistoryQuery) -> ApiResult<PointId> {
@@ -620,55 +595,6 @@ pub(crate) fn history_point(q: &HistoryQuery) -> ApiResult<PointId> {
         ApiError::bad_request("give the point: /api/history?point=jbc1.air_temperature&from=-1h")
     })?;
     PointId::parse(point).map_err(|e| ApiError::bad_request(e.to_string()))
-}
-
-/// The range of a history query at `now`: `to` defaults to now, `from` to an hour before
-/// `to` (not before 1970), and `from` must be before `to`.
-pub fn history_range(q: &HistoryQuery, now: Timestamp) -> ApiResult<HistoryRange> {
-    let to = parse_time("to", q.to.as_deref(), now)?.unwrap_or(now);
-    let from = parse_time("from", q.from.as_deref(), now)?
-        .unwrap_or(to.minus(DEFAULT_HISTORY).max(Timestamp::MIN));
-    if from >= to {
-        return Err(ApiError::bad_request(format!(
-            "from ({from}) must be before to ({to})"
-        )));
-    }
-    let step = q.step.as_deref().map(parse_step).transpose()?;
-    if let Some(step) = step {
-        check_buckets(from, to, step)?;
-    }
-    Ok(HistoryRange { from, to, step })
-}
-
-/// Refuses a step that would cut `from`..`to` into more than [`MAX_BUCKETS`] buckets,
-/// naming the smallest step that would do.
-fn check_buckets(from: Timestamp, to: Timestamp, step: Duration) -> ApiResult<()> {
-    let span = u128::try_from(to.millis().saturating_sub(from.millis())).unwrap_or(0);
-    let buckets = span.div_ceil(step.as_millis().max(1));
-    if buckets <= MAX_BUCKETS as u128 {
-        return Ok(());
-    }
-    let least = Duration::from_millis(
-        u64::try_from(span.div_ceil(MAX_BUCKETS as u128)).unwrap_or(u64::MAX),
-    );
-    Err(ApiError::bad_request(format!(
-        "from {from} to {to} in steps of {} would be {buckets} buckets; the most is \
-         {MAX_BUCKETS}: use a step of {} or more, or a shorter span",
-        humantime::format_duration(step),
-        humantime::format_duration(round_up_to_second(least))
-    )))
-}
-
-/// A history step: a duration of at least 1 ms.
-pub(crate) fn parse_step(text: &str) -> ApiResult<Duration> {
-    match humantime::parse_duration(text.trim()) {
-        Ok(d) if d >= Duration::from_millis(1) => Ok(d),
-        Ok(_) => Err(ApiError::bad_request("step must be at least 1ms")),
-        Err(e) => Err(ApiError::bad_request(format!(
-            "step {:?} is not a duration ({e}); write e.g. 10s, 1m or 1h",
-            crate::write::cut(text, crate::write::MAX_NAME)
-        ))),
-    }
 }
 
 async fn history(
@@ -741,22 +667,6 @@ async fn run_query_on<T: Send + 'static>(
     .map_err(ApiError::from)
 }
 
-/// `d` rounded up to whole seconds (at least one), for a step to suggest.
-fn round_up_to_second(d: Duration) -> Duration {
-    Duration::from_secs(d.as_secs() + u64::from(d.subsec_nanos() > 0)).max(Duration::from_secs(1))
-}
-
-/// A listing's `limit`: 100 by default, 1 to [`MAX_LIMIT`].
-pub fn check_limit(limit: Option<usize>) -> ApiResult<usize> {
-    match limit {
-        None => Ok(100),
-        Some(n) if (1..=MAX_LIMIT).contains(&n) => Ok(n),
-        Some(n) => Err(ApiError::bad_request(format!(
-            "limit {n} is out of range: 1 to {MAX_LIMIT}"
-        ))),
-    }
-}
-
 /// The filter an events query asks for at `now` (whether the cell has the device is the
 /// handler's question, asked first).
 pub(crate) fn events_filter(q: EventsQuery, now: Timestamp) -> ApiResult<EventFilter> {
@@ -827,25 +737,6 @@ async fn audit(
         .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
     let (kept, truncated) = bounded_by_bytes(rows, MAX_AUDIT_BYTES);
     Ok(Json(json!({ "audit": kept, "truncated": truncated })).into_response())
-}
-
-/// A listing bounded by bytes as well as rows: the first `rows` whose JSON stays within
-/// `max` bytes (at least one, so a listing always moves on), and whether some were left
-/// out. Rows come from users' and devices' text, and a row limit alone bounds nothing.
-pub fn bounded_by_bytes(
-    rows: impl IntoIterator<Item = serde_json::Value>,
-    max: usize,
-) -> (Vec<serde_json::Value>, bool) {
-    let mut kept = Vec::new();
-    let mut bytes = 0;
-    for row in rows {
-        bytes += row.to_string().len();
-        if bytes > max && !kept.is_empty() {
-            return (kept, true);
-        }
-        kept.push(row);
-    }
-    (kept, false)
 }
 
 async fn openapi() -> Response {

@@ -8,6 +8,9 @@ use crate::event::EventKind;
 use crate::point::{PointId, Quality, Value};
 use crate::time::Timestamp;
 
+// A history answer's series, shared with the historian.
+pub use kit::history::{Bucket, HistorySample, Series};
+
 /// A value change of a point, as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sample {
@@ -114,17 +117,6 @@ pub struct AuditRecord {
     pub detail: String,
 }
 
-/// One stored sample in a history answer.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct HistorySample {
-    /// When.
-    pub t: Timestamp,
-    /// The value, `null` when the read failed.
-    pub value: Option<Value>,
-    /// Its quality.
-    pub quality: Quality,
-}
-
 /// Where a stored change sits in a point's history: its time, then the order it was
 /// stored in (changes at the same millisecond keep their order).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -172,31 +164,6 @@ impl ChangeKey {
     pub fn before(t: Timestamp) -> Self {
         Self { t, row: i64::MIN }
     }
-}
-
-/// Statistics of the good numeric samples in one time bucket.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Bucket {
-    /// Start of the bucket (aligned to multiples of the step since the epoch).
-    pub t: Timestamp,
-    /// Mean of the changes stored in the bucket.
-    pub avg: f64,
-    /// Lowest.
-    pub min: f64,
-    /// Highest.
-    pub max: f64,
-    /// How many changes.
-    pub count: u64,
-}
-
-/// Raw samples or buckets.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Series {
-    /// Every stored change.
-    Samples(Vec<HistorySample>),
-    /// Downsampled; buckets without a change are left out (the value held).
-    Buckets(Vec<Bucket>),
 }
 
 /// The answer to a history query.

@@ -664,7 +664,7 @@ async fn copy_samples(
             );
             continue;
         };
-        let quality = s.quality.code();
+        let quality = rows::stored_quality(s.quality);
         writer
             .as_mut()
             .write(&[id, &s.t, &s.value, &s.text, &quality])

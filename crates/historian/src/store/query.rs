@@ -6,7 +6,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use tokio_postgres::Row;
 
-use super::{Bucket, EventRow, PointRow, Quality, Store, StoreError, StoredSample};
+use super::{Bucket, EventRow, PointRow, Store, StoreError, StoredSample};
 
 /// A stored point found by its plant id.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -306,6 +306,6 @@ fn stored_sample(r: &Row) -> StoredSample {
         t: r.get(0),
         value: r.get(1),
         text: r.get(2),
-        quality: Quality::from_code(r.get(3)),
+        quality: super::rows::quality_of_stored(r.get(3)),
     }
 }

@@ -3,45 +3,20 @@
 use std::fmt;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-/// How far a sample can be trusted (the gateway's qualities; Sparkplug's `Quality`
-/// property 192 / 500 / 0).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Quality {
-    /// Read at its last poll.
-    Good,
-    /// The last good value is older than its poll period allows.
-    Stale,
-    /// The read failed, or the node or device died.
-    Bad,
+/// How far a sample can be trusted: the gateway's quality, one type for both (Sparkplug's
+/// `Quality` property 192 / 500 / 0 is mapped to it where messages are ingested). Stored
+/// in `samples.quality` as its code (0 good, 1 stale, 2 bad: [`Quality::code`]).
+pub use kit::value::Quality;
+
+/// `q` as the column `samples.quality` (a `smallint`) stores it.
+pub(crate) fn stored_quality(q: Quality) -> i16 {
+    i16::try_from(q.code()).expect("the quality codes are 0, 1 and 2")
 }
 
-impl Quality {
-    /// The number stored in `samples.quality` (0 good, 1 stale, 2 bad: the gateway's codes).
-    pub fn code(self) -> i16 {
-        match self {
-            Quality::Good => 0,
-            Quality::Stale => 1,
-            Quality::Bad => 2,
-        }
-    }
-
-    /// The quality of a stored number; unknown numbers read as bad (as the view does).
-    pub fn from_code(code: i16) -> Self {
-        match code {
-            0 => Quality::Good,
-            1 => Quality::Stale,
-            _ => Quality::Bad,
-        }
-    }
-
-    /// The word the view `cellbus_samples` shows (`good`, `stale`, `bad`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Quality::Good => "good",
-            Quality::Stale => "stale",
-            Quality::Bad => "bad",
-        }
-    }
+/// The quality of a stored `samples.quality`; unknown numbers read as bad (as the view
+/// does).
+pub(crate) fn quality_of_stored(code: i16) -> Quality {
+    Quality::from_code(i64::from(code))
 }
 
 /// The data type of a point known only from its samples (no birth seen yet).

@@ -11,16 +11,16 @@
 //! over through [`TableReader`].
 
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::config::table::hide_userinfo;
 use crate::config::{
     ConfigError, Settings, Table, TableReader, bounded, default_edge_node_id, duration,
 };
+pub use kit::mqtt::{Broker, MqttClientCert, MqttTls, parse_broker};
 
 /// The `[mqtt]` table's reader.
 #[derive(Debug)]
@@ -78,37 +78,6 @@ pub struct MqttConfig {
     pub check_retained: Duration,
     /// TLS to the broker (`mqtts://`); `None` for `mqtt://`.
     pub tls: Option<MqttTls>,
-}
-
-/// TLS to the broker (`mqtts://`): whom to trust and what to show. The files are PEM; a
-/// relative path in the config file is relative to the file's directory.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct MqttTls {
-    /// `ca_file`: the CA certificates that sign the broker's; `None`: the system's roots.
-    pub ca_file: Option<PathBuf>,
-    /// `client_cert` and `client_key`: the certificate (chain) and private key the gateway
-    /// shows a broker that asks for one.
-    pub client: Option<MqttClientCert>,
-}
-
-/// A client certificate for the broker: `client_cert` and `client_key`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct MqttClientCert {
-    /// The certificate, then any intermediates (PEM).
-    pub cert: PathBuf,
-    /// Its private key (PEM: PKCS#8, PKCS#1 or SEC1).
-    pub key: PathBuf,
-}
-
-/// A broker URL, read by [`parse_broker`].
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Broker {
-    /// The host.
-    pub host: String,
-    /// The port (1883 for `mqtt://`, 8883 for `mqtts://` when the URL has none).
-    pub port: u16,
-    /// `mqtts://`: TLS.
-    pub tls: bool,
 }
 
 /// What the gateway publishes on MQTT.
@@ -181,44 +150,6 @@ impl MqttConfig {
 
 /// The longest MQTT client id: an MQTT string is at most 65,535 bytes.
 const MAX_CLIENT_ID: usize = 65_535;
-
-/// Reads `mqtt://host[:port]` (port 1883 by default) or `mqtts://host[:port]` (TLS, port
-/// 8883 by default).
-pub fn parse_broker(given: &str) -> Result<Broker, String> {
-    // Errors show the URL without its user name and password.
-    let text = &hide_userinfo(given);
-    let url = url::Url::parse(given.trim())
-        .map_err(|e| format!("broker {text:?} is not a URL ({e}); write mqtt://host:1883"))?;
-    let (tls, default_port) = match url.scheme() {
-        "mqtt" => (false, 1883),
-        "mqtts" => (true, 8883),
-        other => {
-            return Err(format!(
-                "broker {text:?} has scheme {other:?}; write mqtt://host:1883 or mqtts://host:8883"
-            ));
-        }
-    };
-    let host = url
-        .host_str()
-        .filter(|h| !h.is_empty())
-        .ok_or_else(|| format!("broker {text:?} names no host; write mqtt://host:1883"))?;
-    if url.path().len() > 1 || url.query().is_some() || !url.username().is_empty() {
-        return Err(format!(
-            "broker {text:?}: write only mqtt://host:port (user name and password go in username and password_env)"
-        ));
-    }
-    let host = host
-        .trim_start_matches('[')
-        .trim_end_matches(']')
-        .to_owned();
-    let port = url.port().unwrap_or(default_port);
-    if port == 0 {
-        return Err(format!(
-            "broker {text:?}: port 0 is not a port a broker listens on; write mqtt://host:1883"
-        ));
-    }
-    Ok(Broker { host, port, tls })
-}
 
 fn check_mqtt(
     raw: RawMqtt,

@@ -58,12 +58,7 @@ pub const STABLE_SESSION: Duration = Duration::from_secs(30);
 const QUEUE: usize = 1024;
 /// Largest MQTT packet sent: large cells make large births.
 const MAX_PACKET: usize = 4 << 20;
-/// Largest MQTT packet accepted: any the protocol allows (its remaining length's maximum,
-/// 256 MiB). A smaller bound would not protect anything: the client drops the connection
-/// on a larger packet, and a retained one (or one kept for a persistent session) comes
-/// again at every reconnection, so one message would keep the link down for good. What a
-/// message says is checked after it is read.
-pub const MAX_INCOMING: usize = 268_435_455;
+pub use kit::mqtt::MAX_INCOMING;
 /// How long a graceful stop waits for the last messages and DISCONNECT to leave.
 const STOP_GRACE: Duration = Duration::from_secs(3);
 
