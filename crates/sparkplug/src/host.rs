@@ -454,6 +454,24 @@ fn owner(device: &Option<Id>) -> String {
     }
 }
 
+/// The value of the metric named `name` in `payload`, if it has one.
+fn value_of<'p>(payload: &'p Payload, name: &str) -> Option<&'p metric::Value> {
+    payload
+        .metrics
+        .iter()
+        .find(|m| m.name.as_deref() == Some(name))
+        .and_then(|m| m.value.as_ref())
+}
+
+/// The `bdSeq` an NBIRTH or NDEATH carries (Int64, or Int32 from some nodes).
+fn bd_seq_of(payload: &Payload) -> Option<u64> {
+    match value_of(payload, BD_SEQ)? {
+        metric::Value::LongValue(n) => Some(*n),
+        metric::Value::IntValue(n) => Some((*n).into()),
+        _ => None,
+    }
+}
+
 fn bd(bd_seq: &Option<u64>) -> String {
     bd_seq.map_or_else(|| "(none)".to_owned(), |n| n.to_string())
 }
@@ -881,15 +899,7 @@ impl Host {
         if let Some(cap) = cap {
             return self.refuse_birth(msg, metrics, cap, out);
         }
-        let bd_seq = payload
-            .metrics
-            .iter()
-            .find(|m| m.name.as_deref() == Some(BD_SEQ))
-            .and_then(|m| match m.value {
-                Some(metric::Value::LongValue(n)) => Some(n),
-                Some(metric::Value::IntValue(n)) => Some(n.into()),
-                _ => None,
-            });
+        let bd_seq = bd_seq_of(payload);
         let table = birth_table(msg, &payload.metrics, &mut self.stats, out);
         let state = self
             .nodes
@@ -911,20 +921,9 @@ impl Host {
     }
 
     fn node_death(&mut self, msg: &Message<'_>, payload: &Payload, out: &mut Received) {
-        let value_of = |name: &str| {
-            payload
-                .metrics
-                .iter()
-                .find(|m| m.name.as_deref() == Some(name))
-                .and_then(|m| m.value.as_ref())
-        };
-        let death = value_of(BD_SEQ).and_then(|value| match value {
-            metric::Value::LongValue(n) => Some(*n),
-            metric::Value::IntValue(n) => Some((*n).into()),
-            _ => None,
-        });
+        let death = bd_seq_of(payload);
         let host_offline = matches!(
-            value_of(HOST_OFFLINE),
+            value_of(payload, HOST_OFFLINE),
             Some(metric::Value::BooleanValue(true))
         );
         let key = (msg.group.clone(), msg.node.clone());

@@ -2,55 +2,29 @@
 //! edge node: births with units and write ranges, data by alias resolved against the
 //! births seen, quality, history, STATE, other topics and payloads that are not Sparkplug.
 
+mod common;
+
+use common::{T0, air_temp, at, connected, id, set_point, status};
 use prost::Message as _;
 use sparkplug::describe::{RawPayload, Value, iso_time};
 use sparkplug::proto::{Metric, Payload};
 use sparkplug::{
-    BdSeq, DataType, Delivery, Describer, Description, EdgeNode, HostState, Id, MetricName,
-    MetricSpec, MetricValue, Publish, Quality, Sample, Timestamp, Writable, WriteRange,
+    DataType, Delivery, Describer, Description, EdgeNode, HostState, MetricSpec, MetricValue,
+    Publish, Quality, Sample,
 };
-
-/// 2025-11-24T16:00:00.000Z.
-const T0: Timestamp = Timestamp::from_millis(1_764_000_000_000);
-
-fn at(offset_ms: u64) -> Timestamp {
-    Timestamp::from_millis(T0.as_millis() + offset_ms)
-}
-
-fn id(s: &str) -> Id {
-    Id::new(s).expect("test ids are valid")
-}
-
-fn name(s: &str) -> MetricName {
-    MetricName::new(s).expect("test names are not empty")
-}
 
 /// A station with a temperature in °C, a writable set point 100–450 °C and a status text.
 fn station() -> Vec<(MetricSpec, Sample)> {
     vec![
-        (
-            MetricSpec::new(name("air_temp"), DataType::Double)
-                .unit("°C")
-                .description("Air temperature"),
-            Sample::good(MetricValue::Double(25.5), T0),
-        ),
-        (
-            MetricSpec::new(name("set_point"), DataType::Int32)
-                .unit("°C")
-                .writable(Writable::Within(WriteRange::new(100.0, 450.0).unwrap())),
-            Sample::good(MetricValue::Int32(300), T0),
-        ),
-        (
-            MetricSpec::new(name("status"), DataType::String),
-            Sample::good(MetricValue::String("idle".into()), T0),
-        ),
+        air_temp(MetricValue::Double(25.5), "Air temperature"),
+        set_point(),
+        status(),
     ]
 }
 
 /// A connected, born node `cell/gw1` with device `jbc` born; the births it sent.
 fn running() -> (EdgeNode, Publish, Publish) {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-    node.on_connect();
+    let mut node = connected();
     let nbirth = node.node_birth(&[], T0).unwrap();
     let dbirth = node.device_birth(&id("jbc"), &station(), T0).unwrap();
     (node, nbirth, dbirth)
@@ -415,8 +389,7 @@ fn iso_time_is_utc_with_milliseconds() {
 
 #[test]
 fn an_event_shows_its_message_and_properties_in_words() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-    node.on_connect();
+    let mut node = connected();
     let nbirth = node
         .node_birth(
             &[(

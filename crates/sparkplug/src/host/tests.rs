@@ -2,47 +2,20 @@ use super::*;
 use crate::event::NodeEvent;
 use crate::metric::{MetricSpec, Sample};
 use crate::node::{BdSeq, Command, Delivery, EdgeNode, REBIRTH};
+use common::{T0, air_temp, at, connected, heater_on, id, name, set_point, status};
 use prost::Message as _;
 
-/// 2025-11-24T16:00:00.000Z.
-const T0: Timestamp = Timestamp::from_millis(1_764_000_000_000);
-
-fn at(offset_ms: u64) -> Timestamp {
-    Timestamp::from_millis(T0.as_millis() + offset_ms)
-}
-
-fn id(s: &str) -> Id {
-    Id::new(s).expect("test ids are valid")
-}
-
-fn name(s: &str) -> MetricName {
-    MetricName::new(s).expect("test names are not empty")
-}
+#[path = "../../tests/common/mod.rs"]
+mod common;
 
 /// A station: a temperature in °C, a set point writable 100–450 °C, a heater switch
 /// and a status text.
 fn station() -> Vec<(MetricSpec, Sample)> {
     vec![
-        (
-            MetricSpec::new(name("air_temp"), DataType::Double)
-                .unit("°C")
-                .description("air temperature at the nozzle"),
-            Sample::good(MetricValue::Double(25.5), T0),
-        ),
-        (
-            MetricSpec::new(name("set_point"), DataType::Int32)
-                .unit("°C")
-                .writable(Writable::Within(WriteRange::new(100.0, 450.0).unwrap())),
-            Sample::good(MetricValue::Int32(300), T0),
-        ),
-        (
-            MetricSpec::new(name("heater_on"), DataType::Boolean),
-            Sample::good(MetricValue::Boolean(true), T0),
-        ),
-        (
-            MetricSpec::new(name("status"), DataType::String),
-            Sample::good(MetricValue::String("idle".into()), T0),
-        ),
+        air_temp(MetricValue::Double(25.5), "air temperature at the nozzle"),
+        set_point(),
+        heater_on(true),
+        status(),
     ]
 }
 
@@ -75,13 +48,6 @@ fn born(host: &mut Host) -> EdgeNode {
 }
 
 /// [`born`], and the Will the node registered for this session.
-/// Edge node `cell/gw1` (bdSeq 7), connected, nothing born.
-fn connected() -> EdgeNode {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-    node.on_connect();
-    node
-}
-
 fn born_with_will(host: &mut Host) -> (EdgeNode, Publish) {
     let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
     let will = node.will();
