@@ -21,14 +21,10 @@ impl Codec for Lines {
         if buf.first() == Some(&b'!') {
             return Err(Damage);
         }
-        Ok(buf
-            .iter()
-            .position(|&b| b == b'\n')
-            .map(|i| (buf[..i].to_vec(), i + 1)))
+        Ok(crate::test_lines::decode_line(buf))
     }
     fn encode(&self, frame: &Vec<u8>, out: &mut Vec<u8>) {
-        out.extend_from_slice(frame);
-        out.push(b'\n');
+        crate::test_lines::encode_line(frame, out);
     }
 }
 
