@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{T0, air_temp, at, connected, id, set_point, status};
+use common::{T0, air_temp, at, connected, event_metric, id, set_point, status};
 use prost::Message as _;
 use sparkplug::describe::{RawPayload, Value, iso_time};
 use sparkplug::proto::{Metric, Payload};
@@ -28,6 +28,21 @@ fn running() -> (EdgeNode, Publish, Publish) {
     let nbirth = node.node_birth(&[], T0).unwrap();
     let dbirth = node.device_birth(&id("jbc"), &station(), T0).unwrap();
     (node, nbirth, dbirth)
+}
+
+/// The DDATA of `jbc` after its air temperature changed to 312.5 at 500 ms.
+fn air_temp_data(node: &mut EdgeNode) -> Publish {
+    node.device_data(
+        &id("jbc"),
+        &[(
+            "air_temp",
+            Sample::good(MetricValue::Double(312.5), at(500)),
+        )],
+        at(500),
+        Delivery::Live,
+    )
+    .unwrap()
+    .expect("a change")
 }
 
 fn describe(describer: &mut Describer, p: &Publish) -> Description {
@@ -80,18 +95,7 @@ fn a_device_birth_is_described_with_names_aliases_types_units_and_write_ranges()
 #[test]
 fn data_by_alias_is_resolved_to_the_names_of_the_birth_seen_before() {
     let (mut node, nbirth, dbirth) = running();
-    let ddata = node
-        .device_data(
-            &id("jbc"),
-            &[(
-                "air_temp",
-                Sample::good(MetricValue::Double(312.5), at(500)),
-            )],
-            at(500),
-            Delivery::Live,
-        )
-        .unwrap()
-        .expect("a change");
+    let ddata = air_temp_data(&mut node);
     let mut describer = Describer::new();
     describe(&mut describer, &nbirth);
     describe(&mut describer, &dbirth);
@@ -116,18 +120,7 @@ fn data_by_alias_is_resolved_to_the_names_of_the_birth_seen_before() {
 #[test]
 fn data_without_a_birth_seen_shows_the_bare_alias_and_the_raw_value() {
     let (mut node, _, _) = running();
-    let ddata = node
-        .device_data(
-            &id("jbc"),
-            &[(
-                "air_temp",
-                Sample::good(MetricValue::Double(312.5), at(500)),
-            )],
-            at(500),
-            Delivery::Live,
-        )
-        .unwrap()
-        .unwrap();
+    let ddata = air_temp_data(&mut node);
     let m = sparkplug(describe(&mut Describer::new(), &ddata));
     let metric = &m.metrics[0];
     assert_eq!(metric.name, None);
@@ -390,15 +383,7 @@ fn iso_time_is_utc_with_milliseconds() {
 #[test]
 fn an_event_shows_its_message_and_properties_in_words() {
     let mut node = connected();
-    let nbirth = node
-        .node_birth(
-            &[(
-                sparkplug::event::spec(),
-                Sample::good(MetricValue::String(String::new()), T0),
-            )],
-            T0,
-        )
-        .unwrap();
+    let nbirth = node.node_birth(&[event_metric()], T0).unwrap();
     let event = sparkplug::NodeEvent {
         t: at(250),
         kind: "alarm_raised".into(),

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{T0, air_temp, at, connected, heater_on, id, name};
+use common::{T0, air_temp, at, connected, event_metric, heater_on, id, name};
 use prost::Message as _;
 use sparkplug::node::{BD_SEQ, HOST_OFFLINE, REBIRTH};
 use sparkplug::proto::{Metric, Payload, metric::Value};
@@ -740,15 +740,7 @@ fn device_down_event() -> NodeEvent {
 fn an_event_is_an_ndata_of_the_event_metric_by_alias_with_its_properties_and_time() {
     let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
     node.on_connect();
-    let birth = node
-        .node_birth(
-            &[(
-                sparkplug::event::spec(),
-                Sample::good(MetricValue::String(String::new()), T0),
-            )],
-            T0,
-        )
-        .unwrap();
+    let birth = node.node_birth(&[event_metric()], T0).unwrap();
     let event_alias = alias_of(&decode(&birth), sparkplug::event::EVENT);
     assert_eq!(
         by_name(&decode(&birth), sparkplug::event::EVENT).datatype,

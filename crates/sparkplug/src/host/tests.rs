@@ -2,7 +2,7 @@ use super::*;
 use crate::event::NodeEvent;
 use crate::metric::{MetricSpec, Sample};
 use crate::node::{BdSeq, Command, Delivery, EdgeNode, REBIRTH};
-use common::{T0, air_temp, at, connected, heater_on, id, name, set_point, status};
+use common::{T0, air_temp, at, connected, event_metric, heater_on, id, name, set_point, status};
 use prost::Message as _;
 
 #[path = "../../tests/common/mod.rs"]
@@ -22,10 +22,7 @@ fn station() -> Vec<(MetricSpec, Sample)> {
 /// The node's own metrics: the event channel and a line count.
 fn node_metrics() -> Vec<(MetricSpec, Sample)> {
     vec![
-        (
-            event::spec(),
-            Sample::good(MetricValue::String(String::new()), T0),
-        ),
+        event_metric(),
         (
             MetricSpec::new(name("Gateway/Lines"), DataType::Int64),
             Sample::good(MetricValue::Int64(3), T0),

@@ -70,3 +70,11 @@ pub fn status() -> (MetricSpec, Sample) {
         Sample::good(MetricValue::String("idle".into()), T0),
     )
 }
+
+/// The node's event metric (cellbus's convention), empty at [`T0`].
+pub fn event_metric() -> (MetricSpec, Sample) {
+    (
+        sparkplug::event::spec(),
+        Sample::good(MetricValue::String(String::new()), T0),
+    )
+}
