@@ -50,7 +50,7 @@ use super::mimic::{Element, Lamps, Mimic, Segment, Segments};
 use super::state::{CrossState, Source};
 use crate::rtu::{
     DecodeError, EXCEPTION_BIT, ExceptionCode, FunctionCode, RegisterValues, Request, RequestAdu,
-    RequestCodec, RequestPdu, Response, ResponseAdu, UnitId,
+    RequestCodec, RequestPdu, Response, UnitId,
 };
 
 /// How long after a request the twin's answer leaves: 5 ms, the order of a small
@@ -653,16 +653,7 @@ impl Model for CrossTwin {
             return Vec::new();
         }
         match self.answer(&adu.pdu, now) {
-            Some(response) => {
-                vec![Transmit::after(
-                    self.reply_delay,
-                    ResponseAdu {
-                        unit: adu.unit,
-                        response,
-                    }
-                    .to_bytes(),
-                )]
-            }
+            Some(response) => crate::slave::reply(adu.unit, response, self.reply_delay),
             None => Vec::new(),
         }
     }

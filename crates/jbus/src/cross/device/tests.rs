@@ -3,7 +3,7 @@ use crate::cross::bits::{Flags, NamedBit};
 use crate::cross::map::read_plan;
 use crate::cross::state::Feed;
 use crate::rtu::codec::{append_crc, decode_response};
-use crate::rtu::{Addressed, Answer, check_response};
+use crate::rtu::{Addressed, Answer, ResponseAdu, check_response};
 use wire::device::SharedModel;
 use wire::{Codec, Device};
 
