@@ -7,7 +7,8 @@ use std::time::Duration;
 use gateway::store::{EventFilter, Series, Store, StoreOptions};
 use gateway::time::Timestamp;
 use gateway::{Gateway, ServeOptions};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+mod running;
+use running::get_response;
 
 fn options(dir: &std::path::Path) -> ServeOptions {
     ServeOptions {
@@ -19,15 +20,7 @@ fn options(dir: &std::path::Path) -> ServeOptions {
 
 /// GETs `path` and returns the status line and the JSON body.
 async fn get(addr: SocketAddr, path: &str) -> (String, serde_json::Value) {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream
-        .write_all(
-            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-        )
-        .await
-        .unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
+    let response = get_response(addr, path).await;
     let (head, body) = response.split_once("\r\n\r\n").unwrap();
     let status = head.lines().next().unwrap().to_owned();
     (
@@ -180,20 +173,6 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     assert!(kinds.contains(&"line_up"), "{kinds:?}");
 }
 
-/// GETs `path` and returns its body as text.
-async fn get_text(addr: SocketAddr, path: &str) -> String {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream
-        .write_all(
-            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-        )
-        .await
-        .unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
-    response
-}
-
 /// Polls `/healthz` until its `opcua.connections` is `want` (bounded).
 async fn wait_for_opcua_connections(addr: SocketAddr, want: u64) -> serde_json::Value {
     let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
@@ -237,7 +216,7 @@ async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
         .await
         .unwrap();
     wait_for_opcua_connections(addr, 1).await;
-    let metrics = get_text(addr, "/metrics").await;
+    let metrics = get_response(addr, "/metrics").await;
     assert!(
         metrics.lines().any(|l| l == "cellbus_opcua_connections 1"),
         "{metrics}"
@@ -257,17 +236,20 @@ async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
         .unwrap();
 }
 
+/// Why the gateway refuses to start with `options`.
+async fn refusal(options: ServeOptions) -> String {
+    Gateway::start(options).await.unwrap_err().to_string()
+}
+
 #[tokio::test]
 async fn a_taken_port_is_reported_with_the_way_out() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let err = Gateway::start(ServeOptions {
+    let err = refusal(ServeOptions {
         listen: taken.local_addr().unwrap(),
         ..options(dir.path())
     })
-    .await
-    .unwrap_err()
-    .to_string();
+    .await;
     assert!(err.contains("already in use"), "{err}");
     assert!(err.contains("--listen 127.0.0.1:0"), "{err}");
 }
@@ -281,13 +263,11 @@ async fn a_bad_config_is_refused_at_start_with_file_line_and_reason() {
         "[[line]]\nname = \"a\"\nendpoint = \"tcp://127.0.0.1:1\"\n[[line.device]]\nid = \"x\"\nprotocol = \"jbc\"\naddress = 250\n",
     )
     .unwrap();
-    let err = Gateway::start(ServeOptions {
+    let err = refusal(ServeOptions {
         config: Some(path.clone()),
         ..options(dir.path())
     })
-    .await
-    .unwrap_err()
-    .to_string();
+    .await;
     assert!(
         err.starts_with(&format!("{}:7:11: ", path.display())),
         "{err}"
@@ -302,13 +282,11 @@ async fn writes_without_a_token_are_refused_at_start() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let err = Gateway::start(ServeOptions {
+    let err = refusal(ServeOptions {
         allow_writes: true,
         ..options(dir.path())
     })
-    .await
-    .unwrap_err()
-    .to_string();
+    .await;
     assert!(err.contains("--allow-writes needs a token"), "{err}");
     assert!(err.contains("CELLBUS_TOKEN"), "{err}");
 }
