@@ -7,7 +7,7 @@ use std::process::{Output, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
-use common::{Sim, cellbus, run, stderr, stdout};
+use common::{Sim, run, spawn_piped, start_listening, stderr, stdout};
 use serde_json::{Value, json};
 
 fn modbus(sim: &Sim, unit: &str, args: &[&str]) -> Output {
@@ -30,13 +30,7 @@ fn json_of(output: &Output) -> Value {
 /// Runs `cellbus ARGS…`, killing it if it is still running after `limit` (a watchdog for
 /// commands that wait for events; a passing run ends long before).
 fn run_within(args: &[&str], limit: Duration) -> Output {
-    let child = cellbus()
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("cellbus runs");
+    let child = spawn_piped(args);
     let id = child.id();
     let (done, finished) = mpsc::channel();
     std::thread::spawn(move || {
@@ -432,60 +426,65 @@ fn bad_types_orders_and_typed_values_exit_2_naming_the_text_and_the_choices() {
             );
         }
     };
-    usage(
-        &["read-holding", "0", "1", "--type", "float"],
-        &[
-            "`float` is not a data type",
-            "int16, uint16, int32",
-            "float32",
-            "string:N",
-        ],
-    );
-    usage(
-        &[
-            "read-holding",
-            "0",
-            "1",
-            "--type",
-            "float32",
-            "--order",
-            "ACBD",
-        ],
-        &["`ACBD` is not a byte order", "ABCD, CDAB, BADC, DCBA"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "int16", "40000"],
-        &["40000 does not fit int16 (-32768 to 32767)"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "uint16", "-1"],
-        &["-1 does not fit uint16"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "int32", "1.5"],
-        &["1.5 is not a whole number"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "string:1", "ABC"],
-        &["holds at most 2"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "bit:3", "1"],
-        &["bit 3"],
-    );
-    usage(
-        &["read-holding", "0", "63", "--type", "float32"],
-        &["63 values of float32 take 126 registers"],
-    );
-    usage(
-        &["read-holding", "0", "1", "--type", "string:200"],
-        &["1 to 125 registers"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "float32", "1e-50"],
-        &["1e-50 is too small for float32: it would be written as 0"],
-    );
-    usage(&["scan"], &["not --unit", "scan --units 1"]);
+    let cases: [(&[&str], &[&str]); 11] = [
+        (
+            &["read-holding", "0", "1", "--type", "float"],
+            &[
+                "`float` is not a data type",
+                "int16, uint16, int32",
+                "float32",
+                "string:N",
+            ],
+        ),
+        (
+            &[
+                "read-holding",
+                "0",
+                "1",
+                "--type",
+                "float32",
+                "--order",
+                "ACBD",
+            ],
+            &["`ACBD` is not a byte order", "ABCD, CDAB, BADC, DCBA"],
+        ),
+        (
+            &["write-registers", "0", "--type", "int16", "40000"],
+            &["40000 does not fit int16 (-32768 to 32767)"],
+        ),
+        (
+            &["write-registers", "0", "--type", "uint16", "-1"],
+            &["-1 does not fit uint16"],
+        ),
+        (
+            &["write-registers", "0", "--type", "int32", "1.5"],
+            &["1.5 is not a whole number"],
+        ),
+        (
+            &["write-registers", "0", "--type", "string:1", "ABC"],
+            &["holds at most 2"],
+        ),
+        (
+            &["write-registers", "0", "--type", "bit:3", "1"],
+            &["bit 3"],
+        ),
+        (
+            &["read-holding", "0", "63", "--type", "float32"],
+            &["63 values of float32 take 126 registers"],
+        ),
+        (
+            &["read-holding", "0", "1", "--type", "string:200"],
+            &["1 to 125 registers"],
+        ),
+        (
+            &["write-registers", "0", "--type", "float32", "1e-50"],
+            &["1e-50 is too small for float32: it would be written as 0"],
+        ),
+        (&["scan"], &["not --unit", "scan --units 1"]),
+    ];
+    for (args, expected) in cases {
+        usage(args, expected);
+    }
 }
 
 #[test]
@@ -850,22 +849,12 @@ impl PyServer {
     /// Runs an interop server script that prints `listening on URL` first.
     fn start_script(script: &str) -> Self {
         require_pymodbus();
-        let mut child = std::process::Command::new("python3")
-            .arg(interop_script(script))
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("python3 runs");
-        let stdout = child.stdout.take().expect("stdout is piped");
-        let mut first = String::new();
-        std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut first)
-            .expect("the server prints a line");
-        let endpoint = first
-            .trim_end()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("first line is `listening on …`, got {first:?}"))
-            .to_owned();
+        let (child, _, endpoint) = start_listening(
+            std::process::Command::new("python3")
+                .arg(interop_script(script))
+                .stdin(Stdio::null()),
+            "listening on ",
+        );
         Self { child, endpoint }
     }
 }

@@ -5,11 +5,11 @@ mod common;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
+use std::process::Child;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use common::{Gateway, cellbus, run, stderr};
+use common::{Gateway, run, spawn_piped, stderr};
 use testkit::{Mosquitto, Subscriber};
 
 /// Waits for MQTT: generous, for a loaded 2-core machine.
@@ -25,14 +25,7 @@ struct Sub {
 impl Sub {
     /// Starts `cellbus mqtt sub ARGS…` and returns once it says it has subscribed.
     fn start(args: &[&str]) -> Sub {
-        let mut child = cellbus()
-            .args(["mqtt", "sub"])
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("cellbus runs");
+        let mut child = spawn_piped(&[&["mqtt", "sub"], args].concat());
         let stdout = lines(child.stdout.take().expect("piped"));
         let stderr = lines(child.stderr.take().expect("piped"));
         let sub = Sub {

@@ -36,24 +36,10 @@ impl Sim {
     /// Starts `cellbus sim ARGS…` with `stdin`, waits for its `listening on …` line and
     /// gives its stdout, for simulators that print more lines after it.
     pub fn spawn(args: &[&str], stdin: Stdio) -> (Sim, BufReader<ChildStdout>) {
-        let mut child = cellbus()
-            .arg("sim")
-            .args(args)
-            .stdin(stdin)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("cellbus runs");
-        let mut stdout = BufReader::new(child.stdout.take().expect("stdout is piped"));
-        let mut first = String::new();
-        stdout
-            .read_line(&mut first)
-            .expect("the simulator prints a line");
-        let endpoint = first
-            .trim_end()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("first line is `listening on …`, got {first:?}"))
-            .to_owned();
+        let (child, stdout, endpoint) = start_listening(
+            cellbus().arg("sim").args(args).stdin(stdin),
+            "listening on ",
+        );
         (Sim { child, endpoint }, stdout)
     }
 }
@@ -111,6 +97,51 @@ impl Drop for Sim {
     }
 }
 
+/// Starts `command` with its stdout piped (its stderr goes to the test's) and reads its
+/// first line, which must be `prefix` followed by where it listens: the child, the rest of
+/// its stdout and that address.
+pub fn start_listening(
+    command: &mut Command,
+    prefix: &str,
+) -> (Child, BufReader<ChildStdout>, String) {
+    let mut child = command
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{:?} runs: {e}", command.get_program()));
+    let mut stdout = BufReader::new(child.stdout.take().expect("stdout is piped"));
+    let mut first = String::new();
+    stdout.read_line(&mut first).expect("a first line");
+    let address = first
+        .trim_end()
+        .strip_prefix(prefix)
+        .unwrap_or_else(|| panic!("first line is `{prefix}…`, got {first:?}"))
+        .to_owned();
+    (child, stdout, address)
+}
+
+/// Starts `cellbus ARGS…` with no input and its stdout and stderr piped.
+pub fn spawn_piped(args: &[&str]) -> Child {
+    cellbus()
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("cellbus runs")
+}
+
+/// Now, in ms since the epoch.
+pub fn now_ms() -> i64 {
+    i64::try_from(
+        std::time::SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap()
+            .as_millis(),
+    )
+    .unwrap()
+}
+
 /// Runs `cellbus ARGS…` to completion.
 pub fn run(args: &[&str]) -> Output {
     cellbus()
@@ -144,23 +175,13 @@ impl Gateway {
 
     /// Like [`Gateway::start`], with more `cellbus serve` arguments.
     pub fn start_with(data: &std::path::Path, args: &[&str]) -> Gateway {
-        let mut child = cellbus()
-            .args(["serve", "--listen", "127.0.0.1:0", "--data"])
-            .arg(data)
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("cellbus runs");
-        let mut first = String::new();
-        BufReader::new(child.stdout.take().expect("piped"))
-            .read_line(&mut first)
-            .expect("a first line");
-        let addr = first
-            .trim_end()
-            .strip_prefix("listening on http://")
-            .unwrap_or_else(|| panic!("first line is `listening on http://…`, got {first:?}"))
-            .to_owned();
+        let (child, _, addr) = start_listening(
+            cellbus()
+                .args(["serve", "--listen", "127.0.0.1:0", "--data"])
+                .arg(data)
+                .args(args),
+            "listening on http://",
+        );
         Gateway { child, addr }
     }
 
