@@ -2,11 +2,7 @@ use super::*;
 use crate::rtu::{Request, UnitId};
 use wire::Deframer;
 
-fn hex(text: &str) -> Vec<u8> {
-    text.split_whitespace()
-        .map(|b| u8::from_str_radix(b, 16).expect("test hex"))
-        .collect()
-}
+use crate::test_util::{good_frames, hex};
 
 fn one_request(bytes: &[u8]) -> RequestAdu {
     match decode_request(bytes) {
@@ -301,12 +297,7 @@ fn deframer_finds_frames_after_garbage_and_a_damaged_frame() {
     let mut stream = hex("FF 00 13");
     stream.extend_from_slice(&hex("01 03 00 00 00 0A C5 CE"));
     stream.extend_from_slice(&good);
-    let mut deframer = Deframer::new(RequestCodec);
-    deframer.push(&stream);
-    let frames: Vec<_> = std::iter::from_fn(|| deframer.next_frame())
-        .filter_map(Result::ok)
-        .collect();
-    assert_eq!(frames, vec![one_request(&good)]);
+    assert_eq!(good_frames(RequestCodec, &stream), vec![one_request(&good)]);
 }
 
 #[test]
