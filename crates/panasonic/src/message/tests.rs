@@ -168,37 +168,38 @@ fn decode_accepts_data_of_exactly_the_cap_and_refuses_one_more_byte() {
     ));
 }
 
-#[test]
-fn decode_skips_a_run_of_garbage_up_to_the_next_capital_letter() {
-    let mut bytes = b"\x00\x01xyz\r\n".to_vec();
+/// `garbage` before a C2ST request is refused in one step, as `error`, and the request
+/// decodes after it.
+fn assert_one_error_then_c2st(garbage: &[u8], error: DecodeError) {
+    let mut bytes = garbage.to_vec();
     bytes.extend(c2st_request_bytes());
-    assert_eq!(
-        MessageCodec.decode(&bytes),
-        Err(DecodeError::NotAStart {
-            byte: 0x00,
-            drop: 7
-        })
-    );
+    assert_eq!(MessageCodec.decode(&bytes), Err(error));
     let results = decode_all(&bytes);
     assert_eq!(results.len(), 2);
     assert_eq!(results[1].as_ref().map(Message::command), Ok("C2ST"));
 }
 
 #[test]
+fn decode_skips_a_run_of_garbage_up_to_the_next_capital_letter() {
+    assert_one_error_then_c2st(
+        b"\x00\x01xyz\r\n",
+        DecodeError::NotAStart {
+            byte: 0x00,
+            drop: 7,
+        },
+    );
+}
+
+#[test]
 fn decode_skips_past_a_control_byte_inside_the_command_field_in_one_step() {
-    let mut bytes = b"ABC\x00def".to_vec();
-    bytes.extend(c2st_request_bytes());
-    assert_eq!(
-        MessageCodec.decode(&bytes),
-        Err(DecodeError::CommandField {
+    assert_one_error_then_c2st(
+        b"ABC\x00def",
+        DecodeError::CommandField {
             offset: 3,
             byte: 0x00,
-            drop: 7
-        })
+            drop: 7,
+        },
     );
-    let results = decode_all(&bytes);
-    assert_eq!(results.len(), 2);
-    assert_eq!(results[1].as_ref().map(Message::command), Ok("C2ST"));
 }
 
 #[test]
