@@ -58,10 +58,7 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     let addr = gateway.local_addr();
     assert_eq!(addr.ip().to_string(), "127.0.0.1");
     assert_ne!(addr.port(), 0);
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let run = tokio::spawn(gateway.run(async {
-        let _ = stopped.await;
-    }));
+    let serving = run_until_stopped(gateway);
 
     // The station answers through the protocol and its air temperature moves: the demo
     // operator turns the tool on at once. Poll the API with a generous deadline.
@@ -134,12 +131,7 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     assert_eq!(health["devices_up"], DEMO.len());
     assert!(health["opcua"].is_null(), "no OPC UA server: {health}");
 
-    stop.send(()).unwrap();
-    tokio::time::timeout(Duration::from_secs(30), run)
-        .await
-        .expect("serve stops within 30 s")
-        .unwrap()
-        .unwrap();
+    serving.stop().await.unwrap();
 
     // Everything was committed: the history shows the rise, the events the start and stop.
     let store = Store::open(&dir.path().join("data"), StoreOptions::default()).unwrap();
@@ -200,10 +192,7 @@ async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
     .unwrap();
     let addr = gateway.local_addr();
     let url = gateway.opcua_url().unwrap().to_owned();
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let run = tokio::spawn(gateway.run(async {
-        let _ = stopped.await;
-    }));
+    let serving = run_until_stopped(gateway);
 
     let health = wait_for_opcua_connections(addr, 0).await;
     assert_eq!(health["opcua"]["endpoint"], url.as_str());
@@ -228,12 +217,7 @@ async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
     drop(client);
     wait_for_opcua_connections(addr, 0).await;
 
-    stop.send(()).unwrap();
-    tokio::time::timeout(Duration::from_secs(30), run)
-        .await
-        .expect("serve stops within 30 s")
-        .unwrap()
-        .unwrap();
+    serving.stop().await.unwrap();
 }
 
 /// Why the gateway refuses to start with `options`.
@@ -309,18 +293,30 @@ async fn wait_for_live_value(addr: SocketAddr) {
     }
 }
 
-/// Runs a started gateway until the returned sender is used; the handle gives its result.
-fn run_until_stopped(
-    gateway: Gateway,
-) -> (
-    tokio::sync::oneshot::Sender<()>,
-    tokio::task::JoinHandle<anyhow::Result<()>>,
-) {
+/// A started gateway running on a task of its own until [`Serving::stop`].
+struct Serving {
+    stop: tokio::sync::oneshot::Sender<()>,
+    run: tokio::task::JoinHandle<anyhow::Result<()>>,
+}
+
+impl Serving {
+    /// Stops the gateway and gives how its run ended (within 30 s).
+    async fn stop(self) -> anyhow::Result<()> {
+        self.stop.send(()).unwrap();
+        tokio::time::timeout(Duration::from_secs(30), self.run)
+            .await
+            .expect("serve stops within 30 s")
+            .unwrap()
+    }
+}
+
+/// Runs a started gateway until it is stopped.
+fn run_until_stopped(gateway: Gateway) -> Serving {
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let run = tokio::spawn(gateway.run(async {
         let _ = stopped.await;
     }));
-    (stop, run)
+    Serving { stop, run }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -333,7 +329,7 @@ async fn an_unusable_data_directory_leaves_live_values_served_and_reports_the_fa
     // Before the fix the gateway stopped here, exit 1.
     let gateway = Gateway::start(options(dir.path())).await.unwrap();
     let addr = gateway.local_addr();
-    let (stop, run) = run_until_stopped(gateway);
+    let serving = run_until_stopped(gateway);
     wait_for_live_value(addr).await;
 
     let (status, health) = get(addr, "/healthz").await;
@@ -355,11 +351,9 @@ async fn an_unusable_data_directory_leaves_live_values_served_and_reports_the_fa
     assert!(error.contains(&data.display().to_string()), "{error}");
     assert!(error.contains("os error"), "{error}");
 
-    stop.send(()).unwrap();
-    tokio::time::timeout(Duration::from_secs(30), run)
+    serving
+        .stop()
         .await
-        .expect("serve stops within 30 s")
-        .unwrap()
         .expect("a stop with the history off is clean");
 }
 
@@ -375,7 +369,7 @@ async fn a_garbage_history_file_is_moved_aside_and_the_gateway_serves_on() {
     // Before the fix: "file is not a database", exit 1.
     let gateway = Gateway::start(options(dir.path())).await.unwrap();
     let addr = gateway.local_addr();
-    let (stop, run) = run_until_stopped(gateway);
+    let serving = run_until_stopped(gateway);
     wait_for_live_value(addr).await;
 
     let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
@@ -405,10 +399,5 @@ async fn a_garbage_history_file_is_moved_aside_and_the_gateway_serves_on() {
     assert_eq!(health["status"], "ok", "{health}");
     assert_eq!(health["history"], "ok", "{health}");
 
-    stop.send(()).unwrap();
-    tokio::time::timeout(Duration::from_secs(30), run)
-        .await
-        .expect("serve stops within 30 s")
-        .unwrap()
-        .unwrap();
+    serving.stop().await.unwrap();
 }
