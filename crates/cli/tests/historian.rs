@@ -172,9 +172,7 @@ fn gateway_history(gateway: &Gateway, from: i64, to: i64) -> BTreeMap<String, Se
 }
 
 fn gateway_devices(gateway: &Gateway) -> Vec<String> {
-    let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200, "{body}");
-    let devices: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let devices = gateway.get_json("/api/devices");
     devices["devices"]
         .as_array()
         .unwrap()

@@ -19,9 +19,7 @@ fn example(name: &str) -> String {
 
 /// The points of `device` in `/api/devices`: name → (value, unit).
 fn points(gateway: &Gateway, device: &str) -> Vec<(String, serde_json::Value, Option<String>)> {
-    let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200, "{body}");
-    let body: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let body = gateway.get_json("/api/devices");
     let devices = body["devices"].as_array().unwrap();
     let meter = devices
         .iter()

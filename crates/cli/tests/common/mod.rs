@@ -142,6 +142,20 @@ pub fn now_ms() -> i64 {
     .unwrap()
 }
 
+/// Fails (never skips) when python3 is missing or cannot run `code` (the imports an
+/// interoperability test needs): `test` names the test, `missing` the packages, `hint`
+/// says how to install them. Gives what `code` printed.
+pub fn require_python(code: &str, test: &str, missing: &str, hint: &str) -> String {
+    match Command::new("python3").args(["-c", code]).output() {
+        Err(e) => panic!("python3 is needed for the {test} ({e}); {hint}"),
+        Ok(out) if !out.status.success() => panic!(
+            "{missing} is not installed for python3 ({}); {hint}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ),
+        Ok(out) => String::from_utf8_lossy(&out.stdout).trim().to_owned(),
+    }
+}
+
 /// Runs `cellbus ARGS…` to completion.
 pub fn run(args: &[&str]) -> Output {
     cellbus()
@@ -149,6 +163,18 @@ pub fn run(args: &[&str]) -> Output {
         .stdin(Stdio::null())
         .output()
         .expect("cellbus runs")
+}
+
+/// Asserts that `output`'s stdout contains `text`, showing all of it if not.
+#[track_caller]
+pub fn assert_stdout_has(output: &Output, text: &str) {
+    assert!(stdout(output).contains(text), "{}", stdout(output));
+}
+
+/// Asserts that `output`'s stderr contains `text`, showing all of it if not.
+#[track_caller]
+pub fn assert_stderr_has(output: &Output, text: &str) {
+    assert!(stderr(output).contains(text), "{}", stderr(output));
 }
 
 /// Stdout as text.
@@ -183,6 +209,13 @@ impl Gateway {
             "listening on http://",
         );
         Gateway { child, addr }
+    }
+
+    /// GETs `path`, which must answer 200 with JSON.
+    pub fn get_json(&self, path: &str) -> serde_json::Value {
+        let (status, body) = self.get(path);
+        assert_eq!(status, 200, "{body}");
+        serde_json::from_str(&body).unwrap()
     }
 
     /// A plain HTTP/1.1 GET; returns the status code and the body.
