@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{T0, air_temp, at, connected, event_metric, id, set_point, status};
+use common::{T0, air_temp, at, connected, ddata, event_metric, id, set_point, status};
 use prost::Message as _;
 use sparkplug::describe::{RawPayload, Value, iso_time};
 use sparkplug::proto::{Metric, Payload};
@@ -28,21 +28,6 @@ fn running() -> (EdgeNode, Publish, Publish) {
     let nbirth = node.node_birth(&[], T0).unwrap();
     let dbirth = node.device_birth(&id("jbc"), &station(), T0).unwrap();
     (node, nbirth, dbirth)
-}
-
-/// The DDATA of `jbc` after its air temperature changed to 312.5 at 500 ms.
-fn air_temp_data(node: &mut EdgeNode) -> Publish {
-    node.device_data(
-        &id("jbc"),
-        &[(
-            "air_temp",
-            Sample::good(MetricValue::Double(312.5), at(500)),
-        )],
-        at(500),
-        Delivery::Live,
-    )
-    .unwrap()
-    .expect("a change")
 }
 
 fn describe(describer: &mut Describer, p: &Publish) -> Description {
@@ -95,7 +80,7 @@ fn a_device_birth_is_described_with_names_aliases_types_units_and_write_ranges()
 #[test]
 fn data_by_alias_is_resolved_to_the_names_of_the_birth_seen_before() {
     let (mut node, nbirth, dbirth) = running();
-    let ddata = air_temp_data(&mut node);
+    let ddata = ddata(&mut node, "jbc", 312.5, at(500));
     let mut describer = Describer::new();
     describe(&mut describer, &nbirth);
     describe(&mut describer, &dbirth);
@@ -120,7 +105,7 @@ fn data_by_alias_is_resolved_to_the_names_of_the_birth_seen_before() {
 #[test]
 fn data_without_a_birth_seen_shows_the_bare_alias_and_the_raw_value() {
     let (mut node, _, _) = running();
-    let ddata = air_temp_data(&mut node);
+    let ddata = ddata(&mut node, "jbc", 312.5, at(500));
     let m = sparkplug(describe(&mut Describer::new(), &ddata));
     let metric = &m.metrics[0];
     assert_eq!(metric.name, None);
@@ -151,15 +136,7 @@ fn a_new_node_birth_forgets_the_aliases_of_the_devices_born_before_it() {
     describe(&mut describer, &nbirth);
     describe(&mut describer, &dbirth);
     describe(&mut describer, &nbirth);
-    let ddata = node
-        .device_data(
-            &id("jbc"),
-            &[("air_temp", Sample::good(MetricValue::Double(1.0), at(1)))],
-            at(1),
-            Delivery::Live,
-        )
-        .unwrap()
-        .unwrap();
+    let ddata = ddata(&mut node, "jbc", 1.0, at(1));
     let m = sparkplug(describe(&mut describer, &ddata));
     assert_eq!(m.metrics[0].name, None);
 }

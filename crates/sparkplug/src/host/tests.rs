@@ -2,7 +2,9 @@ use super::*;
 use crate::event::NodeEvent;
 use crate::metric::{MetricSpec, Sample};
 use crate::node::{BdSeq, Command, Delivery, EdgeNode, REBIRTH};
-use common::{T0, air_temp, at, connected, event_metric, heater_on, id, name, set_point, status};
+use common::{
+    T0, air_temp, at, connected, ddata, event_metric, heater_on, id, name, set_point, status,
+};
 use prost::Message as _;
 
 #[path = "../../tests/common/mod.rs"]
@@ -56,13 +58,6 @@ fn born_with_will(host: &mut Host) -> (EdgeNode, Publish) {
         assert!(feed(host, &dbirth, T0).problems.is_empty());
     }
     (node, will)
-}
-
-fn ddata(node: &mut EdgeNode, device: &str, temp: f64, t: Timestamp) -> Publish {
-    let changes = [("air_temp", Sample::good(MetricValue::Double(temp), t))];
-    node.device_data(&id(device), &changes, t, Delivery::Live)
-        .unwrap()
-        .expect("the temperature changed")
 }
 
 fn key(device: Option<&str>, point: &str) -> PointKey {
@@ -215,15 +210,7 @@ fn stale_and_bad_readings_are_null_samples_with_their_quality_and_good_comes_bac
 fn a_null_value_without_a_quality_is_bad_and_with_quality_good_is_still_bad() {
     let mut host = alone();
     let mut node = born(&mut host);
-    let data = node
-        .device_data(
-            &id("jbc1"),
-            &[("air_temp", Sample::good(MetricValue::Double(1.0), at(1)))],
-            at(1),
-            Delivery::Live,
-        )
-        .unwrap()
-        .unwrap();
+    let data = ddata(&mut node, "jbc1", 1.0, at(1));
     let mut payload = Payload::decode(&data.payload[..]).unwrap();
     let m = &mut payload.metrics[0];
     m.value = None;

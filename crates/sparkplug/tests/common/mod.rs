@@ -7,8 +7,8 @@
 #![allow(dead_code)]
 
 use sparkplug::{
-    BdSeq, DataType, EdgeNode, Id, MetricName, MetricSpec, MetricValue, Sample, Timestamp,
-    Writable, WriteRange,
+    BdSeq, DataType, Delivery, EdgeNode, Id, MetricName, MetricSpec, MetricValue, Publish, Sample,
+    Timestamp, Writable, WriteRange,
 };
 
 /// 2025-11-24T16:00:00.000Z.
@@ -77,4 +77,12 @@ pub fn event_metric() -> (MetricSpec, Sample) {
         sparkplug::event::spec(),
         Sample::good(MetricValue::String(String::new()), T0),
     )
+}
+
+/// The live DDATA of `device` after its air temperature changed to `temp` °C at `t`.
+pub fn ddata(node: &mut EdgeNode, device: &str, temp: f64, t: Timestamp) -> Publish {
+    let changes = [("air_temp", Sample::good(MetricValue::Double(temp), t))];
+    node.device_data(&id(device), &changes, t, Delivery::Live)
+        .unwrap()
+        .expect("the temperature changed")
 }
