@@ -350,34 +350,46 @@ impl fmt::Display for Request {
                 counted(r.count.get(), "input registers"),
                 Addr(r.address)
             ),
-            Self::WriteSingleCoil(w) => {
-                write!(
-                    f,
-                    "write coil {} {}",
-                    Addr(w.address),
-                    if w.value { "on" } else { "off" }
-                )
-            }
-            Self::WriteSingleRegister(w) => {
-                write!(f, "write register {} = {}", Addr(w.address), w.value)
-            }
+            Self::WriteSingleCoil(w) => w.show(f, "write"),
+            Self::WriteSingleRegister(w) => w.show(f, "write"),
             Self::WriteMultipleCoils(w) => {
-                write!(
-                    f,
-                    "write {} from {}",
-                    counted(w.values.len(), "coils"),
-                    Addr(w.address)
-                )
+                show_span(f, "write", w.values.len(), "coils", w.address)
             }
             Self::WriteMultipleRegisters(w) => {
-                write!(
-                    f,
-                    "write {} from {}",
-                    counted(w.values.len(), "registers"),
-                    Addr(w.address)
-                )
+                show_span(f, "write", w.values.len(), "registers", w.address)
             }
         }
+    }
+}
+
+/// `VERB N THINGS from ADDR`: a write of several coils or registers, or its answer.
+pub(crate) fn show_span(
+    f: &mut fmt::Formatter<'_>,
+    verb: &str,
+    count: usize,
+    plural: &str,
+    address: u16,
+) -> fmt::Result {
+    write!(
+        f,
+        "{verb} {} from {}",
+        counted(count, plural),
+        Addr(address)
+    )
+}
+
+impl WriteCoil {
+    /// `VERB coil ADDR on|off`: the request, or its answer.
+    pub(crate) fn show(&self, f: &mut fmt::Formatter<'_>, verb: &str) -> fmt::Result {
+        let state = if self.value { "on" } else { "off" };
+        write!(f, "{verb} coil {} {state}", Addr(self.address))
+    }
+}
+
+impl WriteRegister {
+    /// `VERB register ADDR = VALUE`: the request, or its answer.
+    pub(crate) fn show(&self, f: &mut fmt::Formatter<'_>, verb: &str) -> fmt::Result {
+        write!(f, "{verb} register {} = {}", Addr(self.address), self.value)
     }
 }
 
