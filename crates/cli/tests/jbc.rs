@@ -13,11 +13,7 @@ fn jbc(sim: &Sim, args: &[&str]) -> std::process::Output {
 #[test]
 fn sim_prints_its_tcp_address_first() {
     let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
-    assert!(
-        sim.endpoint.starts_with("tcp://127.0.0.1:"),
-        "{}",
-        sim.endpoint
-    );
+    sim.assert_listens_on("tcp://127.0.0.1:");
 }
 
 #[test]

@@ -53,11 +53,7 @@ fn run_within(args: &[&str], limit: Duration) -> Output {
 #[test]
 fn sim_cross_prints_its_tcp_address_first() {
     let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
-    assert!(
-        sim.endpoint.starts_with("tcp://127.0.0.1:"),
-        "{}",
-        sim.endpoint
-    );
+    sim.assert_listens_on("tcp://127.0.0.1:");
 }
 
 #[test]

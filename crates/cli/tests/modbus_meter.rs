@@ -61,11 +61,7 @@ fn a_simulated_energy_meter_is_read_through_its_csv_register_list_in_the_planned
         "--map",
         &example("energy-meter.map"),
     ]);
-    assert!(
-        sim.endpoint.starts_with("modbus-tcp://"),
-        "{}",
-        sim.endpoint
-    );
+    sim.assert_listens_on("modbus-tcp://");
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(
         example("energy-meter.csv"),

@@ -87,11 +87,7 @@ impl Untouched {
 #[test]
 fn sim_prints_its_tcp_address_first() {
     let sim = sim("0,1,2");
-    assert!(
-        sim.endpoint.starts_with("tcp://127.0.0.1:"),
-        "{}",
-        sim.endpoint
-    );
+    sim.assert_listens_on("tcp://127.0.0.1:");
 }
 
 #[test]

@@ -45,6 +45,12 @@ impl Sim {
 }
 
 impl Sim {
+    /// Asserts that the simulator's endpoint starts with `prefix`.
+    #[track_caller]
+    pub fn assert_listens_on(&self, prefix: &str) {
+        assert!(self.endpoint.starts_with(prefix), "{}", self.endpoint);
+    }
+
     /// The simulator's stdin, when it was started with a piped one.
     pub fn take_stdin(&mut self) -> ChildStdin {
         self.child.stdin.take().expect("stdin is piped")
