@@ -19,9 +19,9 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
-use common::{Gateway, api_value, cellbus, http_get, rfc3339, rfc3339_ms};
+use common::{Gateway, api_value, cellbus, http_get, now_ms, rfc3339, rfc3339_ms};
 use sparkplug::{BdSeq, DataType, EdgeNode, Id, MetricName, MetricSpec, MetricValue, Sample};
 use testkit::{Mosquitto, Postgres, Subscriber};
 
@@ -30,16 +30,6 @@ const LIMIT: Duration = Duration::from_secs(120);
 
 const NODES: [&str; 3] = ["cellA", "cellB", "cellC"];
 const HOST_ID: &str = "plant";
-
-fn now_ms() -> i64 {
-    i64::try_from(
-        SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .unwrap()
-            .as_millis(),
-    )
-    .unwrap()
-}
 
 /// A running `cellbus historian`, killed (`kill -9`) when dropped.
 struct Historian {
@@ -182,9 +172,7 @@ fn gateway_history(gateway: &Gateway, from: i64, to: i64) -> BTreeMap<String, Se
 }
 
 fn gateway_devices(gateway: &Gateway) -> Vec<String> {
-    let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200, "{body}");
-    let devices: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let devices = gateway.get_json("/api/devices");
     devices["devices"]
         .as_array()
         .unwrap()

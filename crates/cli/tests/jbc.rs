@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{Sim, run, stderr, stdout};
+use common::{Sim, assert_stderr_has, assert_stdout_has, run, stderr, stdout};
 
 fn jbc(sim: &Sim, args: &[&str]) -> std::process::Output {
     let mut all = vec!["jbc", "--endpoint", &sim.endpoint];
@@ -13,11 +13,7 @@ fn jbc(sim: &Sim, args: &[&str]) -> std::process::Output {
 #[test]
 fn sim_prints_its_tcp_address_first() {
     let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
-    assert!(
-        sim.endpoint.starts_with("tcp://127.0.0.1:"),
-        "{}",
-        sim.endpoint
-    );
+    sim.assert_listens_on("tcp://127.0.0.1:");
 }
 
 #[test]
@@ -25,12 +21,12 @@ fn read_prints_the_value_with_its_unit() {
     let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
     let out = jbc(&sim, &["read", "SMN"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(stdout(&out).contains("JTSE"), "{}", stdout(&out));
+    assert_stdout_has(&out, "JTSE");
 
     let out = jbc(&sim, &["write", "ST1", "350"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let out = jbc(&sim, &["read", "ST1"]);
-    assert!(stdout(&out).contains("350 °C"), "{}", stdout(&out));
+    assert_stdout_has(&out, "350 °C");
 }
 
 #[test]
@@ -69,11 +65,7 @@ fn a_refused_write_exits_1_with_the_reason_in_words() {
     let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
     let out = jbc(&sim, &["write", "ST1", "900"]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr(&out).contains("station refused WST1 00900: out of range (00003)"),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, "station refused WST1 00900: out of range (00003)");
 }
 
 #[test]
@@ -106,7 +98,7 @@ fn bad_arguments_exit_2_before_touching_the_line() {
     // No simulator: the endpoint is never opened.
     let out = run(&["jbc", "--endpoint", "tcp://127.0.0.1:9", "read", "XYZ"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(stderr(&out).contains("XYZ"), "{}", stderr(&out));
+    assert_stderr_has(&out, "XYZ");
     let out = run(&["jbc", "--endpoint", "bogus://x", "read", "ST1"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let out = run(&[
@@ -210,7 +202,7 @@ fn decode_reads_a_capture_file() {
     std::fs::write(&path, frame(b"0100AST100350")).unwrap();
     let out = run(&["decode", "jbc", "--file", path.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stdout(&out));
-    assert!(stdout(&out).contains("350"), "{}", stdout(&out));
+    assert_stdout_has(&out, "350");
 }
 
 /// STX + body + ETX + BCC (XOR of everything before it).
@@ -235,9 +227,5 @@ fn no_address_with_an_address_is_refused_instead_of_dropping_the_address() {
         "ST1",
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("'--no-address' cannot be used with '--address"),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, "'--no-address' cannot be used with '--address");
 }

@@ -7,7 +7,10 @@ use std::process::{Output, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
-use common::{Sim, cellbus, run, stderr, stdout};
+use common::{
+    Sim, assert_stderr_has, assert_stdout_has, require_python, run, spawn_piped, start_listening,
+    stderr, stdout,
+};
 use serde_json::{Value, json};
 
 fn modbus(sim: &Sim, unit: &str, args: &[&str]) -> Output {
@@ -30,13 +33,7 @@ fn json_of(output: &Output) -> Value {
 /// Runs `cellbus ARGS…`, killing it if it is still running after `limit` (a watchdog for
 /// commands that wait for events; a passing run ends long before).
 fn run_within(args: &[&str], limit: Duration) -> Output {
-    let child = cellbus()
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("cellbus runs");
+    let child = spawn_piped(args);
     let id = child.id();
     let (done, finished) = mpsc::channel();
     std::thread::spawn(move || {
@@ -56,11 +53,7 @@ fn run_within(args: &[&str], limit: Duration) -> Output {
 #[test]
 fn sim_cross_prints_its_tcp_address_first() {
     let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
-    assert!(
-        sim.endpoint.starts_with("tcp://127.0.0.1:"),
-        "{}",
-        sim.endpoint
-    );
+    sim.assert_listens_on("tcp://127.0.0.1:");
 }
 
 #[test]
@@ -186,10 +179,9 @@ fn every_read_and_write_form_works_against_the_generic_simulator() {
         out
     };
     let out = ok(&["write-register", "0x10", "-2"]);
-    assert!(
-        stdout(&out).contains("unit 1 acknowledged: write register 16 (0x0010) = 65534"),
-        "{}",
-        stdout(&out)
+    assert_stdout_has(
+        &out,
+        "unit 1 acknowledged: write register 16 (0x0010) = 65534",
     );
     ok(&["write-registers", "17", "1", "0x0002", "3"]);
     let out = ok(&["--json", "read-holding", "16", "4"]);
@@ -238,7 +230,7 @@ fn a_map_file_defines_the_simulators_tables_and_unit() {
     assert_eq!(json_of(&out)["values"], json!([100, 200]));
     let out = modbus(&sim, "17", &["read-holding", "0", "3"]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(stderr(&out).contains("exception 2"), "{}", stderr(&out));
+    assert_stderr_has(&out, "exception 2");
     let out = modbus(&sim, "17", &["--json", "read-input", "5", "1"]);
     assert_eq!(json_of(&out)["values"], json!([7]));
 
@@ -405,7 +397,7 @@ fn typed_writes_encode_each_value_in_its_registers() {
         &["--json", "read-holding", "0x50", "1", "--type", "string:1"],
     );
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
-    assert!(stderr(&out).contains("not ASCII"), "{}", stderr(&out));
+    assert_stderr_has(&out, "not ASCII");
     let seen = json_of(&out);
     assert_eq!(seen["registers"], json!([0xC3A4]));
     assert_eq!(seen["type"], "string:1");
@@ -432,60 +424,65 @@ fn bad_types_orders_and_typed_values_exit_2_naming_the_text_and_the_choices() {
             );
         }
     };
-    usage(
-        &["read-holding", "0", "1", "--type", "float"],
-        &[
-            "`float` is not a data type",
-            "int16, uint16, int32",
-            "float32",
-            "string:N",
-        ],
-    );
-    usage(
-        &[
-            "read-holding",
-            "0",
-            "1",
-            "--type",
-            "float32",
-            "--order",
-            "ACBD",
-        ],
-        &["`ACBD` is not a byte order", "ABCD, CDAB, BADC, DCBA"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "int16", "40000"],
-        &["40000 does not fit int16 (-32768 to 32767)"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "uint16", "-1"],
-        &["-1 does not fit uint16"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "int32", "1.5"],
-        &["1.5 is not a whole number"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "string:1", "ABC"],
-        &["holds at most 2"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "bit:3", "1"],
-        &["bit 3"],
-    );
-    usage(
-        &["read-holding", "0", "63", "--type", "float32"],
-        &["63 values of float32 take 126 registers"],
-    );
-    usage(
-        &["read-holding", "0", "1", "--type", "string:200"],
-        &["1 to 125 registers"],
-    );
-    usage(
-        &["write-registers", "0", "--type", "float32", "1e-50"],
-        &["1e-50 is too small for float32: it would be written as 0"],
-    );
-    usage(&["scan"], &["not --unit", "scan --units 1"]);
+    let cases: [(&[&str], &[&str]); 11] = [
+        (
+            &["read-holding", "0", "1", "--type", "float"],
+            &[
+                "`float` is not a data type",
+                "int16, uint16, int32",
+                "float32",
+                "string:N",
+            ],
+        ),
+        (
+            &[
+                "read-holding",
+                "0",
+                "1",
+                "--type",
+                "float32",
+                "--order",
+                "ACBD",
+            ],
+            &["`ACBD` is not a byte order", "ABCD, CDAB, BADC, DCBA"],
+        ),
+        (
+            &["write-registers", "0", "--type", "int16", "40000"],
+            &["40000 does not fit int16 (-32768 to 32767)"],
+        ),
+        (
+            &["write-registers", "0", "--type", "uint16", "-1"],
+            &["-1 does not fit uint16"],
+        ),
+        (
+            &["write-registers", "0", "--type", "int32", "1.5"],
+            &["1.5 is not a whole number"],
+        ),
+        (
+            &["write-registers", "0", "--type", "string:1", "ABC"],
+            &["holds at most 2"],
+        ),
+        (
+            &["write-registers", "0", "--type", "bit:3", "1"],
+            &["bit 3"],
+        ),
+        (
+            &["read-holding", "0", "63", "--type", "float32"],
+            &["63 values of float32 take 126 registers"],
+        ),
+        (
+            &["read-holding", "0", "1", "--type", "string:200"],
+            &["1 to 125 registers"],
+        ),
+        (
+            &["write-registers", "0", "--type", "float32", "1e-50"],
+            &["1e-50 is too small for float32: it would be written as 0"],
+        ),
+        (&["scan"], &["not --unit", "scan --units 1"]),
+    ];
+    for (args, expected) in cases {
+        usage(args, expected);
+    }
 }
 
 #[test]
@@ -495,7 +492,7 @@ fn a_bad_map_file_exits_2_naming_the_line() {
     std::fs::write(&path, "holding 0 = 1\nregister 4 = 2\n").unwrap();
     let out = run(&["sim", "modbus", "--map", path.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(stderr(&out).contains("line 2"), "{}", stderr(&out));
+    assert_stderr_has(&out, "line 2");
 }
 
 #[test]
@@ -503,25 +500,17 @@ fn a_broadcast_write_is_done_without_an_answer_and_a_broadcast_read_is_refused()
     let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0"]);
     let out = modbus(&sim, "0", &["write-register", "5", "42"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(stdout(&out).contains("broadcast"), "{}", stdout(&out));
+    assert_stdout_has(&out, "broadcast");
     let out = modbus(&sim, "1", &["--json", "read-holding", "5", "1"]);
     assert_eq!(json_of(&out)["values"], json!([42]));
     let out = modbus(&sim, "0", &["read-holding", "5", "1"]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr(&out).contains("only writes can be broadcast"),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, "only writes can be broadcast");
     // Modbus TCP has no broadcast: refused before anything is sent.
     let tcp = Sim::start(&["modbus", "--listen", "127.0.0.1:0", "--framing", "tcp"]);
     let out = modbus(&tcp, "0", &["write-register", "5", "42"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("Modbus TCP does not carry"),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, "Modbus TCP does not carry");
 }
 
 #[test]
@@ -621,11 +610,7 @@ fn the_simulator_serves_a_pty_that_the_client_opens_as_a_serial_port() {
     let url = format!("serial://{path_text}?baud=9600&framing=8N1");
     let out = run(&["cross", "--endpoint", &url, "status"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(
-        stdout(&out).contains("supplied by source 1"),
-        "{}",
-        stdout(&out)
-    );
+    assert_stdout_has(&out, "supplied by source 1");
     let out = run(&[
         "modbus",
         "--endpoint",
@@ -796,7 +781,7 @@ fn decode_reads_a_capture_file_and_the_spec_crc_example() {
     assert_eq!(frame(&[0x02, 0x07])[2..], [0x41, 0x12]);
     let out = run(&["decode", "modbus", "02 07 41 12"]);
     assert!(out.status.success(), "{}", stdout(&out));
-    assert!(stdout(&out).contains("CRC 0x1241 good"), "{}", stdout(&out));
+    assert_stdout_has(&out, "CRC 0x1241 good");
 }
 
 // --- Interoperability with pymodbus (scripts/test installs it) ---
@@ -814,26 +799,19 @@ fn interop_script(name: &str) -> String {
 
 /// Fails (never skips) when python3 or pymodbus is missing: CI installs them.
 fn require_pymodbus() {
-    let found = std::process::Command::new("python3")
-        .args(["-c", "import pymodbus; print(pymodbus.__version__)"])
-        .output();
     let hint = format!(
         "run scripts/test, which installs it, or: python3 -m pip install pymodbus=={PYMODBUS}"
     );
-    match found {
-        Err(e) => panic!("python3 is needed for the pymodbus interoperability tests ({e}); {hint}"),
-        Ok(out) if !out.status.success() => panic!(
-            "pymodbus is not installed for python3 ({}); {hint}",
-            String::from_utf8_lossy(&out.stderr).trim()
-        ),
-        Ok(out) => {
-            let version = String::from_utf8_lossy(&out.stdout).trim().to_owned();
-            assert!(
-                version.starts_with("3."),
-                "pymodbus {version} is installed, the tests need 3.x; {hint}"
-            );
-        }
-    }
+    let version = require_python(
+        "import pymodbus; print(pymodbus.__version__)",
+        "pymodbus interoperability tests",
+        "pymodbus",
+        &hint,
+    );
+    assert!(
+        version.starts_with("3."),
+        "pymodbus {version} is installed, the tests need 3.x; {hint}"
+    );
 }
 
 /// A pymodbus RTU server over TCP, killed when dropped.
@@ -850,22 +828,12 @@ impl PyServer {
     /// Runs an interop server script that prints `listening on URL` first.
     fn start_script(script: &str) -> Self {
         require_pymodbus();
-        let mut child = std::process::Command::new("python3")
-            .arg(interop_script(script))
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("python3 runs");
-        let stdout = child.stdout.take().expect("stdout is piped");
-        let mut first = String::new();
-        std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut first)
-            .expect("the server prints a line");
-        let endpoint = first
-            .trim_end()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("first line is `listening on …`, got {first:?}"))
-            .to_owned();
+        let (child, _, endpoint) = start_listening(
+            std::process::Command::new("python3")
+                .arg(interop_script(script))
+                .stdin(Stdio::null()),
+            "listening on ",
+        );
         Self { child, endpoint }
     }
 }
@@ -1110,7 +1078,7 @@ fn tcp_framing_on_a_pty_is_a_usage_error() {
         "tcp",
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(stderr(&out).contains("--framing tcp"), "{}", stderr(&out));
+    assert_stderr_has(&out, "--framing tcp");
 }
 
 #[test]
@@ -1167,11 +1135,7 @@ fn scan_lists_the_units_that_answer_and_exits_0_when_none_does() {
     assert_eq!(stdout(&out).trim(), "unit 3 answers");
     let out = scan("4-5", false);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(
-        stdout(&out).contains("no unit of 4-5 answered"),
-        "{}",
-        stdout(&out)
-    );
+    assert_stdout_has(&out, "no unit of 4-5 answered");
     let out = scan("5-4", false);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
 }
@@ -1258,11 +1222,7 @@ fn a_modbus_tcp_endpoint_is_refused_by_the_jbc_command() {
         "AT1",
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("modbus-tcp:// is for Modbus devices"),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, "modbus-tcp:// is for Modbus devices");
 }
 
 #[test]
@@ -1512,9 +1472,5 @@ fn a_simulator_map_that_cannot_be_read_says_why() {
     let missing = dir.path().join("missing.map");
     let out = run(&["sim", "modbus", "--map", missing.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("missing.map: No such file or directory"),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, "missing.map: No such file or directory");
 }

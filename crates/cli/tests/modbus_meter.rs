@@ -19,9 +19,7 @@ fn example(name: &str) -> String {
 
 /// The points of `device` in `/api/devices`: name → (value, unit).
 fn points(gateway: &Gateway, device: &str) -> Vec<(String, serde_json::Value, Option<String>)> {
-    let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200, "{body}");
-    let body: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let body = gateway.get_json("/api/devices");
     let devices = body["devices"].as_array().unwrap();
     let meter = devices
         .iter()
@@ -63,11 +61,7 @@ fn a_simulated_energy_meter_is_read_through_its_csv_register_list_in_the_planned
         "--map",
         &example("energy-meter.map"),
     ]);
-    assert!(
-        sim.endpoint.starts_with("modbus-tcp://"),
-        "{}",
-        sim.endpoint
-    );
+    sim.assert_listens_on("modbus-tcp://");
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(
         example("energy-meter.csv"),

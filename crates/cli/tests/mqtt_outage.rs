@@ -8,9 +8,9 @@
 mod common;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
-use common::{Gateway, api_value, rfc3339_ms};
+use common::{Gateway, api_value, now_ms, rfc3339_ms};
 use sparkplug::proto::metric::Value as SpValue;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 
@@ -23,16 +23,6 @@ fn outage() -> Duration {
         .and_then(|s| s.parse().ok())
         .unwrap_or(120);
     Duration::from_secs(secs)
-}
-
-fn now_ms() -> i64 {
-    i64::try_from(
-        SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .unwrap()
-            .as_millis(),
-    )
-    .unwrap()
 }
 
 /// A stored or received change: point, read time (ms), and the value when there is one.

@@ -5,11 +5,11 @@ mod common;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
+use std::process::Child;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use common::{Gateway, cellbus, run, stderr};
+use common::{Gateway, assert_stderr_has, run, spawn_piped, stderr};
 use testkit::{Mosquitto, Subscriber};
 
 /// Waits for MQTT: generous, for a loaded 2-core machine.
@@ -25,14 +25,7 @@ struct Sub {
 impl Sub {
     /// Starts `cellbus mqtt sub ARGS…` and returns once it says it has subscribed.
     fn start(args: &[&str]) -> Sub {
-        let mut child = cellbus()
-            .args(["mqtt", "sub"])
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("cellbus runs");
+        let mut child = spawn_piped(&[&["mqtt", "sub"], args].concat());
         let stdout = lines(child.stdout.take().expect("piped"));
         let stderr = lines(child.stderr.take().expect("piped"));
         let sub = Sub {
@@ -97,9 +90,7 @@ fn lines(reader: impl std::io::Read + Send + 'static) -> mpsc::Receiver<String> 
 fn api_devices(
     gateway: &Gateway,
 ) -> BTreeMap<String, BTreeMap<String, (Option<String>, &'static str)>> {
-    let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200, "{body}");
-    let body: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let body = gateway.get_json("/api/devices");
     body["devices"]
         .as_array()
         .unwrap()
@@ -267,15 +258,11 @@ fn sub_in_words_prints_births_then_data_with_aliases_named_from_the_births() {
 fn sub_with_a_bad_broker_url_exits_2_naming_it() {
     let out = run(&["mqtt", "sub", "--broker", "htp://127.0.0.1:1883"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("htp://127.0.0.1:1883"),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, "htp://127.0.0.1:1883");
 
     let out = run(&["mqtt", "sub", "--broker", "mqtt://127.0.0.1:1883", "a/#/b"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(stderr(&out).contains("\"a/#/b\""), "{}", stderr(&out));
+    assert_stderr_has(&out, "\"a/#/b\"");
 }
 
 #[test]
@@ -283,11 +270,7 @@ fn sub_to_a_closed_port_exits_1_naming_the_broker() {
     let url = format!("mqtt://127.0.0.1:{}", testkit::free_port());
     let out = run(&["mqtt", "sub", "--broker", &url, "--timeout", "30s"]);
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains(&format!("cannot connect to broker {url}")),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, &format!("cannot connect to broker {url}"));
 }
 
 #[test]
@@ -304,10 +287,9 @@ fn sub_exits_1_when_its_timeout_passes_without_a_message_and_when_the_broker_goe
         "nobody/#",
     ]);
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains(&format!("no message from {url} on nobody/# within 300ms")),
-        "{}",
-        stderr(&out)
+    assert_stderr_has(
+        &out,
+        &format!("no message from {url} on nobody/# within 300ms"),
     );
 
     let mut sub = Sub::start(&["--broker", &url, "nobody/#"]);

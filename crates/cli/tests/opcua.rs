@@ -7,6 +7,8 @@ use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
+use common::require_python;
+
 /// The version scripts/test installs.
 const PIP: &str = "asyncua==2.1.0";
 /// Ours: the script's own limit (120 s) and Python's start.
@@ -18,18 +20,12 @@ fn script() -> String {
 
 /// Fails (never skips) when python3 or asyncua is missing: scripts/test installs it.
 fn require_asyncua() {
-    let found = Command::new("python3")
-        .args(["-c", "import asyncua"])
-        .output();
-    let hint = format!("run scripts/test, which installs it, or: python3 -m pip install {PIP}");
-    match found {
-        Err(e) => panic!("python3 is needed for the OPC UA interoperability test ({e}); {hint}"),
-        Ok(out) if !out.status.success() => panic!(
-            "asyncua is not installed for python3 ({}); {hint}",
-            String::from_utf8_lossy(&out.stderr).trim()
-        ),
-        Ok(_) => {}
-    }
+    require_python(
+        "import asyncua",
+        "OPC UA interoperability test",
+        "asyncua",
+        &format!("run scripts/test, which installs it, or: python3 -m pip install {PIP}"),
+    );
 }
 
 /// `cellbus serve` on the demo cell with OPC UA, killed when dropped.

@@ -6,7 +6,7 @@ mod common;
 use std::io::{BufRead, BufReader};
 use std::process::{ChildStdin, ChildStdout, Stdio};
 
-use common::{Sim, SimControl, cellbus, run, stderr, stdout};
+use common::{Sim, SimControl, assert_stderr_has, cellbus, run, stderr, stdout};
 
 /// A running `cellbus sim panasonic`, killed when dropped.
 struct Machine {
@@ -187,11 +187,7 @@ fn download_upload_and_delete_a_program_through_files() {
     );
     let gone = machine.run(&["upload", "PCB-42"]);
     assert_eq!(code(&gone), 1);
-    assert!(
-        stderr(&gone).contains("program \"PCB-42\" does not exist on the machine"),
-        "{}",
-        stderr(&gone)
-    );
+    assert_stderr_has(&gone, "program \"PCB-42\" does not exist on the machine");
 }
 
 #[test]
@@ -244,7 +240,7 @@ fn remote_start_gets_a2_and_events_shows_r1st_in_words_and_json() {
     // A running machine refuses a second start.
     let again = machine.run(&["start"]);
     assert_eq!(code(&again), 1);
-    assert!(stderr(&again).contains("A4E00"), "{}", stderr(&again));
+    assert_stderr_has(&again, "A4E00");
 }
 
 #[test]
@@ -330,7 +326,7 @@ fn bad_arguments_exit_2_without_touching_the_machine() {
     }
     let out = run(&["panasonic", "--host", "127.0.0.1:99999", "status"]);
     assert_eq!(code(&out), 2);
-    assert!(stderr(&out).contains("not a TCP port"), "{}", stderr(&out));
+    assert_stderr_has(&out, "not a TCP port");
     // The other commands' --endpoint URLs are not hosts.
     let out = run(&["panasonic", "--host", "tcp://127.0.0.1:1", "status"]);
     assert_eq!(code(&out), 2);

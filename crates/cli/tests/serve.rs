@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{Gateway, run, stderr, stdout};
+use common::{Gateway, assert_stderr_has, assert_stdout_has, run, stderr, stdout};
 use testkit::{Mosquitto, Subscriber};
 
 /// MQTT waits: generous, for a loaded machine.
@@ -103,7 +103,7 @@ fn serve_with_a_bad_configuration_exits_2_naming_file_and_line() {
         "127.0.0.1:0",
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(stderr(&out).contains("cell.toml:"), "{}", stderr(&out));
+    assert_stderr_has(&out, "cell.toml:");
 }
 
 #[test]
@@ -125,11 +125,7 @@ fn serve_refuses_a_retention_that_would_delete_the_history_at_once() {
             age,
         ]);
         assert_eq!(out.status.code(), Some(2), "{flag} {age}: {}", stderr(&out));
-        assert!(
-            stderr(&out).contains(&format!("{age} would keep less than {least}")),
-            "{}",
-            stderr(&out)
-        );
+        assert_stderr_has(&out, &format!("{age} would keep less than {least}"));
     }
     assert!(
         std::fs::read_dir(dir.path()).unwrap().next().is_none(),
@@ -168,11 +164,7 @@ fn serve_refuses_a_token_no_client_could_send_and_writes_without_one_as_usage_er
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("--allow-writes needs a token"),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, "--allow-writes needs a token");
     // A read token that is the write token would let every reader write.
     let out = common::cellbus()
         .args(["serve", "--listen", "127.0.0.1:0", "--data", data])
@@ -216,7 +208,7 @@ fn the_example_configuration_passes_its_own_check() {
     std::fs::write(&path, &example.stdout).unwrap();
     let out = run(&["config", "check", path.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(stdout(&out).contains(": ok,"), "{}", stdout(&out));
+    assert_stdout_has(&out, ": ok,");
 }
 
 #[test]
@@ -240,11 +232,7 @@ fn config_check_import_csv_and_serve_warn_about_registers_sharing_a_register_and
         "registers \"voltage\" (input 0–1) and \"current\" (input 1–2) share input register 1";
     let out = run(&["config", "check", path.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(
-        stdout(&out).contains(&format!("warning: device \"meter1\": {shared}")),
-        "{}",
-        stdout(&out)
-    );
+    assert_stdout_has(&out, &format!("warning: device \"meter1\": {shared}"));
     let csv = dir.path().join("meter.csv");
     let out = run(&["config", "import-csv", csv.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -279,11 +267,7 @@ fn config_check_import_csv_and_serve_warn_about_registers_sharing_a_register_and
     assert!(first.starts_with("listening on http://"), "{first:?}");
     serve.kill().unwrap();
     let out = serve.wait_with_output().unwrap();
-    assert!(
-        stderr(&out).contains(&format!("cell.toml: device \"meter1\": {shared}")),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, &format!("cell.toml: device \"meter1\": {shared}"));
 }
 
 #[test]
@@ -296,10 +280,6 @@ fn config_check_points_at_the_bad_line() {
     std::fs::write(&path, text).unwrap();
     let out = run(&["config", "check", path.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(
-        stderr(&out).contains(&format!("cell.toml:{bad_line}:")),
-        "{}",
-        stderr(&out)
-    );
-    assert!(stderr(&out).contains("bogus"), "{}", stderr(&out));
+    assert_stderr_has(&out, &format!("cell.toml:{bad_line}:"));
+    assert_stderr_has(&out, "bogus");
 }

@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
-use common::Gateway;
+use common::{Gateway, require_python};
 use serde_json::Value;
 use testkit::Mosquitto;
 
@@ -32,21 +32,12 @@ fn script() -> String {
 
 /// Fails (never skips) when python3 or its packages are missing: scripts/test installs them.
 fn require_python_packages() {
-    let found = Command::new("python3")
-        .args([
-            "-c",
-            "import paho.mqtt.client, google.protobuf, grpc_tools.protoc",
-        ])
-        .output();
-    let hint = format!("run scripts/test, which installs them, or: python3 -m pip install {PIP}");
-    match found {
-        Err(e) => panic!("python3 is needed for the Sparkplug interoperability test ({e}); {hint}"),
-        Ok(out) if !out.status.success() => panic!(
-            "paho-mqtt, protobuf or grpcio-tools is not installed for python3 ({}); {hint}",
-            String::from_utf8_lossy(&out.stderr).trim()
-        ),
-        Ok(_) => {}
-    }
+    require_python(
+        "import paho.mqtt.client, google.protobuf, grpc_tools.protoc",
+        "Sparkplug interoperability test",
+        "paho-mqtt, protobuf or grpcio-tools",
+        &format!("run scripts/test, which installs them, or: python3 -m pip install {PIP}"),
+    );
 }
 
 /// The Sparkplug datatype code of a point of `/api/devices` by its kind.
@@ -118,9 +109,7 @@ fn an_independent_python_decoder_finds_every_device_and_point_in_the_births_with
     );
 
     // Every device and point of /api/devices, with its unit and datatype.
-    let (status, body) = gateway.get("/api/devices");
-    assert_eq!(status, 200, "{body}");
-    let api: Value = serde_json::from_str(&body).unwrap();
+    let api = gateway.get_json("/api/devices");
     let devices = api["devices"].as_array().unwrap();
     assert!(!devices.is_empty());
     for device in devices {

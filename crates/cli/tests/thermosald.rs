@@ -11,7 +11,7 @@ use std::io::ErrorKind;
 use std::net::TcpListener;
 use std::process::Output;
 
-use common::{Sim, run, stderr, stdout};
+use common::{Sim, assert_stderr_has, assert_stdout_has, run, stderr, stdout};
 use serde_json::{Value, json};
 
 /// `cellbus thermosald --endpoint SIM ARGS…`.
@@ -87,11 +87,7 @@ impl Untouched {
 #[test]
 fn sim_prints_its_tcp_address_first() {
     let sim = sim("0,1,2");
-    assert!(
-        sim.endpoint.starts_with("tcp://127.0.0.1:"),
-        "{}",
-        sim.endpoint
-    );
+    sim.assert_listens_on("tcp://127.0.0.1:");
 }
 
 #[test]
@@ -240,11 +236,7 @@ fn write_takes_user_units_and_the_echo_is_read_back() {
     );
     let out = thermosald(&sim, &["write", "service", "1", "0.25"]);
     assert_ok(&out);
-    assert!(
-        stdout(&out).contains("Sealing plate thickness = 0.25 mm"),
-        "{}",
-        stdout(&out)
-    );
+    assert_stdout_has(&out, "Sealing plate thickness = 0.25 mm");
     // Regulator 1 kept its own settings.
     let out = thermosald(
         &sim,
@@ -380,10 +372,9 @@ fn master_reset_needs_yes_then_the_regulator_needs_an_address_and_asks_for_balan
     let sim = sim("0");
     let out = thermosald(&sim, &["master-reset", "--yes"]);
     assert_ok(&out);
-    assert!(
-        stdout(&out).contains("regulator 0 is back to factory data: it has no address now"),
-        "{}",
-        stdout(&out)
+    assert_stdout_has(
+        &out,
+        "regulator 0 is back to factory data: it has no address now",
     );
     // No address until one is set: 0 is silent now.
     let out = thermosald(
@@ -394,25 +385,16 @@ fn master_reset_needs_yes_then_the_regulator_needs_an_address_and_asks_for_balan
 
     let out = thermosald(&sim, &["--address", "$", "set-address", "4"]);
     assert_ok(&out);
-    assert!(
-        stdout(&out).contains("every regulator listening to '$' now answers at address 4"),
-        "{}",
-        stdout(&out)
+    assert_stdout_has(
+        &out,
+        "every regulator listening to '$' now answers at address 4",
     );
     let out = thermosald(&sim, &["--address", "4", "read", "runtime", "--item", "2"]);
     assert_ok(&out);
-    assert!(
-        stdout(&out).contains("Fault/warning number: 35 (calibration request)"),
-        "{}",
-        stdout(&out)
-    );
+    assert_stdout_has(&out, "Fault/warning number: 35 (calibration request)");
     assert_ok(&thermosald(&sim, &["--address", "4", "balance"]));
     let out = thermosald(&sim, &["--address", "4", "read", "runtime", "--item", "2"]);
-    assert!(
-        stdout(&out).contains("Fault/warning number: 36 (calibration in progress)"),
-        "{}",
-        stdout(&out)
-    );
+    assert_stdout_has(&out, "Fault/warning number: 36 (calibration in progress)");
 }
 
 #[test]
@@ -666,11 +648,7 @@ fn the_simulator_serves_a_paced_pty_that_the_client_opens_as_a_serial_port() {
         "runtime",
     ]);
     assert_ok(&out);
-    assert!(
-        stdout(&out).contains("Fault/warning number  0 (ready)"),
-        "{}",
-        stdout(&out)
-    );
+    assert_stdout_has(&out, "Fault/warning number  0 (ready)");
 
     let out = run(&["thermosald", "--endpoint", &url, "scan"]);
     assert_ok(&out);
@@ -696,11 +674,7 @@ fn a_line_that_cannot_be_opened_exits_1_naming_it() {
     };
     let out = run(&["thermosald", "--endpoint", &closed, "read", "runtime"]);
     assert_eq!(out.status.code(), Some(1), "{}", stdout(&out));
-    assert!(
-        stderr(&out).contains(&format!("cannot connect to {closed}")),
-        "{}",
-        stderr(&out)
-    );
+    assert_stderr_has(&out, &format!("cannot connect to {closed}"));
 }
 
 fn sim_with_control(addresses: &str) -> (Sim, common::SimControl) {
@@ -728,11 +702,7 @@ fn a_typed_open_band_shows_in_words_and_clear_faults_clears_it_only_after_repair
     );
     let out = thermosald(&sim, &["--address", "1", "read", "runtime"]);
     assert_ok(&out);
-    assert!(
-        stdout(&out).contains("Fault/warning number  1 (sealing band open)"),
-        "{}",
-        stdout(&out)
-    );
+    assert_stdout_has(&out, "Fault/warning number  1 (sealing band open)");
     // The band is still broken: clearing does nothing.
     assert_ok(&thermosald(&sim, &["--address", "1", "clear-faults"]));
     assert!(fault().contains("1 (sealing band open)"), "{}", fault());
@@ -801,7 +771,7 @@ fn wrong_control_commands_answer_an_error_line_and_the_regulators_keep_answering
     assert!(control.ok("help").contains("power-cycle ADDR"));
     let out = thermosald(&sim, &["--address", "1", "read", "runtime", "--item", "2"]);
     assert_ok(&out);
-    assert!(stdout(&out).contains("0 (ready)"), "{}", stdout(&out));
+    assert_stdout_has(&out, "0 (ready)");
 }
 
 #[test]
@@ -813,6 +783,6 @@ fn the_simulators_help_lists_its_control_commands() {
         "repair ADDR",
         "power-cycle ADDR",
     ] {
-        assert!(stdout(&out).contains(command), "{}", stdout(&out));
+        assert_stdout_has(&out, command);
     }
 }

@@ -65,9 +65,7 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
     );
 
     // The API's filtered and slim listings of a cell this size stay small and quick.
-    let (status, slim) = gateway.get("/api/devices?fields=line,status");
-    assert_eq!(status, 200, "{slim}");
-    let slim: serde_json::Value = serde_json::from_str(&slim).unwrap();
+    let slim = gateway.get_json("/api/devices?fields=line,status");
     assert_eq!(slim["total"], LINES * PER_LINE);
     let page: Vec<String> = (951..=1000).map(|n| format!("jbc{n}")).collect();
     let (status, listed) = gateway.get(&format!("/api/devices?device={}", page.join(",")));
@@ -79,21 +77,14 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
     assert_eq!(listed["total"], 50);
 
     let screenshot = data.path().join("page.png");
-    let out = Command::new("node")
-        .arg(web.join("big.mjs"))
-        .arg(format!("http://{}", gateway.addr))
-        .arg(&screenshot)
-        .env("CHROMIUM", &chromium)
-        .env("TOKEN", TOKEN)
-        .output()
-        .expect("node runs (install Node.js: it comes with npm)");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    let seen = what_the_page_saw(
+        Command::new("node")
+            .arg(web.join("big.mjs"))
+            .arg(format!("http://{}", gateway.addr))
+            .arg(&screenshot)
+            .env("CHROMIUM", &chromium)
+            .env("TOKEN", TOKEN),
     );
-    let seen: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
     assert_eq!(seen["devices"], LINES * PER_LINE);
     assert_eq!(
         seen["dom"]["cards"], PER_LINE,
@@ -153,6 +144,20 @@ fn browser() -> (std::path::PathBuf, String) {
     (web, chromium)
 }
 
+/// Runs a page script (`node …`) that prints one JSON line: what it saw.
+fn what_the_page_saw(node: &mut Command) -> serde_json::Value {
+    let out = node
+        .output()
+        .expect("node runs (install Node.js: it comes with npm)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(stdout.trim()).expect("one JSON line")
+}
+
 /// Starts the demo gateway (with `read_token` if given, publishing to the MQTT broker
 /// `mqtt` if given), opens its page in Chromium and checks a card for every device and a
 /// value that changes; returns what the page saw.
@@ -165,22 +170,15 @@ fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Va
     }
     let gateway = Gateway::start_with(data.path(), &args);
     let screenshot = data.path().join("page.png");
-    let out = Command::new("node")
-        .arg(web.join("page.mjs"))
-        .arg(format!("http://{}", gateway.addr))
-        .arg(&screenshot)
-        .env("CHROMIUM", &chromium)
-        .env("READ_TOKEN", read_token.unwrap_or(""))
-        .env("MQTT", if mqtt.is_some() { "1" } else { "" })
-        .output()
-        .expect("node runs (install Node.js: it comes with npm)");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    let seen = what_the_page_saw(
+        Command::new("node")
+            .arg(web.join("page.mjs"))
+            .arg(format!("http://{}", gateway.addr))
+            .arg(&screenshot)
+            .env("CHROMIUM", &chromium)
+            .env("READ_TOKEN", read_token.unwrap_or(""))
+            .env("MQTT", if mqtt.is_some() { "1" } else { "" }),
     );
-    let seen: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
     let (status, body) = gateway.get("/api/devices");
     if read_token.is_some() {
         assert_eq!(status, 401, "the API needs the token: {body}");

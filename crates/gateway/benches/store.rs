@@ -13,22 +13,20 @@ use std::time::Duration;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use gateway::point::{PointId, Quality, Value};
-use gateway::store::{Sample, Store, StoreOptions};
+use gateway::store::{Sample, StoreOptions};
 use gateway::time::Timestamp;
+
+#[path = "support/store.rs"]
+mod temp;
+use temp::{device_points, temp_store};
 
 const ROWS: usize = 10_000;
 const POINTS: usize = 1_000;
 
 fn commit(c: &mut Criterion) {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let store = Store::open(dir.path(), StoreOptions::default()).expect("store");
+    let (_dir, store, runtime) = temp_store(StoreOptions::default());
     let handle = store.handle();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .build()
-        .expect("runtime");
-    let points: Vec<PointId> = (0..POINTS)
-        .map(|i| PointId::parse(&format!("dev{}.point{}", i / 20, i % 20)).expect("valid id"))
-        .collect();
+    let points = device_points(POINTS);
     let mut t = 0i64;
     let mut group = c.benchmark_group("history");
     group.throughput(Throughput::Elements(ROWS as u64));
@@ -50,12 +48,8 @@ fn commit(c: &mut Criterion) {
 }
 
 fn query(c: &mut Criterion) {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let store = Store::open(dir.path(), StoreOptions::default()).expect("store");
+    let (_dir, store, runtime) = temp_store(StoreOptions::default());
     let handle = store.handle();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .build()
-        .expect("runtime");
     let point = PointId::parse("jbc1.air_temperature").expect("valid id");
     // A day of changes every second.
     let day = 86_400i64;

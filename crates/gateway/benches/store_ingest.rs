@@ -17,9 +17,13 @@
 
 use std::time::{Duration, Instant};
 
-use gateway::point::{PointId, Quality, Value};
-use gateway::store::{ChangeCursor, ChangeKey, Sample, Store, StoreHandle, StoreOptions};
+use gateway::point::{Quality, Value};
+use gateway::store::{ChangeCursor, ChangeKey, Sample, StoreHandle, StoreOptions};
 use gateway::time::Timestamp;
+
+#[path = "support/store.rs"]
+mod temp;
+use temp::{device_points, temp_store};
 
 fn arg(name: &str, default: usize) -> usize {
     let args: Vec<String> = std::env::args().collect();
@@ -39,15 +43,9 @@ fn main() {
         batch_rows: arg("--batch-rows", StoreOptions::default().batch_rows),
         ..StoreOptions::default()
     };
-    let dir = tempfile::tempdir().expect("temp dir");
-    let store = Store::open(dir.path(), options).expect("store");
+    let (dir, store, runtime) = temp_store(options);
     let handle = store.handle();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .build()
-        .expect("runtime");
-    let points: Vec<PointId> = (0..points_n)
-        .map(|i| PointId::parse(&format!("dev{}.point{}", i / 20, i % 20)).expect("valid id"))
-        .collect();
+    let points = device_points(points_n);
     let mut t = 0i64;
     for run in 1..=runs {
         let commits = handle

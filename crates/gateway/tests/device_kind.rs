@@ -5,6 +5,8 @@
 use std::borrow::Cow;
 use std::time::Duration;
 
+mod running;
+
 use gateway::cell::LiveMessage;
 use gateway::config::{ConfigError, Scratch, Settings, Table};
 use gateway::driver::{
@@ -14,8 +16,8 @@ use gateway::driver::{
 use gateway::point::{PointDescription, PointId, PointKind, PointSpec, Value};
 use gateway::{Gateway, ServeOptions};
 use link::{SerialSettings, SharedLine};
+use running::get_response;
 use serde::Deserialize;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 /// A counter that counts up by its `step` at every poll.
 #[derive(Debug)]
@@ -209,15 +211,7 @@ async fn a_kind_registered_by_a_test_is_configured_polled_and_listed() {
 
 /// GETs `path` and returns the JSON body.
 async fn get(addr: std::net::SocketAddr, path: &str) -> serde_json::Value {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream
-        .write_all(
-            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-        )
-        .await
-        .unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
+    let response = get_response(addr, path).await;
     let (_, body) = response.split_once("\r\n\r\n").unwrap();
     serde_json::from_str(body).unwrap()
 }

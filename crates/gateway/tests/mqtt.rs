@@ -8,10 +8,9 @@ use std::time::{Duration, Instant};
 use gateway::ServeOptions;
 use gateway::cell::MqttLink;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 mod running;
-use running::{LIMIT, Running};
+use running::{LIMIT, Running, get_response};
 
 const NODE: &str = "spBv1.0/cellbus/+/demo";
 const DEVICES: &str = "spBv1.0/cellbus/+/demo/#";
@@ -34,16 +33,8 @@ async fn subscribe(broker: &Mosquitto) -> (Subscriber, Subscriber) {
 }
 
 async fn get(addr: SocketAddr, path: &str) -> String {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream
-        .write_all(
-            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-        )
+    get_response(addr, path)
         .await
-        .unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
-    response
         .split_once("\r\n\r\n")
         .map(|(_, b)| b.to_owned())
         .unwrap_or_default()

@@ -139,6 +139,28 @@ async fn refusal(gateway: &Running) -> String {
     }
 }
 
+/// A gateway (as [`start`]) that reaches `broker` over TLS trusting `ca.pem`, with
+/// `more` in its `[mqtt]` table.
+async fn start_over_tls(dir: &Path, broker: &Mosquitto, more: &str) -> Running {
+    let mqtt = format!(
+        "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n{more}",
+        broker.tls_port()
+    );
+    start(dir, &mqtt).await
+}
+
+/// The refusal reported, once there is one; it says the TLS handshake with `broker`
+/// failed.
+async fn handshake_refusal(gateway: &Running, broker: &Mosquitto) -> String {
+    let why = refusal(gateway).await;
+    let expected = format!(
+        "TLS handshake with broker 127.0.0.1:{} failed: ",
+        broker.tls_port()
+    );
+    assert!(why.starts_with(&expected), "{why}");
+    why
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_gateway_publishes_its_births_over_mqtts_trusting_the_given_ca_file() {
     let dir = tempfile::tempdir().unwrap();
@@ -146,14 +168,7 @@ async fn the_gateway_publishes_its_births_over_mqtts_trusting_the_given_ca_file(
     ca.write(dir.path(), "ca");
     let (broker, _files) = broker(dir.path(), &ca, &ca, false);
     let mut node = Subscriber::start(broker.port(), NODE).await;
-    let gateway = start(
-        dir.path(),
-        &format!(
-            "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n",
-            broker.tls_port()
-        ),
-    )
-    .await;
+    let gateway = start_over_tls(dir.path(), &broker, "").await;
 
     let birth = node
         .next_where("an NBIRTH over TLS", LIMIT, |m| m.kind() == "NBIRTH")
@@ -173,21 +188,9 @@ async fn a_broker_the_ca_file_does_not_vouch_for_is_refused_clearly_and_the_gate
     let strangers = Ca::new("someone else's CA");
     let (mut broker, _files) = broker(dir.path(), &strangers, &strangers, false);
     let mut node = Subscriber::start(broker.port(), NODE).await;
-    let gateway = start(
-        dir.path(),
-        &format!(
-            "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n",
-            broker.tls_port()
-        ),
-    )
-    .await;
+    let gateway = start_over_tls(dir.path(), &broker, "").await;
 
-    let why = refusal(&gateway).await;
-    let expected = format!(
-        "TLS handshake with broker 127.0.0.1:{} failed: ",
-        broker.tls_port()
-    );
-    assert!(why.starts_with(&expected), "{why}");
+    let why = handshake_refusal(&gateway, &broker).await;
     assert!(why.contains("UnknownIssuer"), "{why}");
     assert!(why.contains("check ca_file"), "{why}");
 
@@ -214,13 +217,10 @@ async fn a_broker_that_wants_a_client_certificate_takes_the_gateways_client_cert
     );
     let (broker, _files) = broker(dir.path(), &ca, &ca, true);
     let mut node = Subscriber::start(broker.port(), NODE).await;
-    let gateway = start(
+    let gateway = start_over_tls(
         dir.path(),
-        &format!(
-            "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n\
-             client_cert = \"gateway.pem\"\nclient_key = \"gateway.key\"\n",
-            broker.tls_port()
-        ),
+        &broker,
+        "client_cert = \"gateway.pem\"\nclient_key = \"gateway.key\"\n",
     )
     .await;
 
@@ -237,21 +237,9 @@ async fn a_broker_that_wants_a_client_certificate_refuses_a_gateway_without_one_
     let ca = Ca::new("cellbus test CA");
     ca.write(dir.path(), "ca");
     let (broker, _files) = broker(dir.path(), &ca, &ca, true);
-    let gateway = start(
-        dir.path(),
-        &format!(
-            "broker = \"mqtts://127.0.0.1:{}\"\nca_file = \"ca.pem\"\n",
-            broker.tls_port()
-        ),
-    )
-    .await;
+    let gateway = start_over_tls(dir.path(), &broker, "").await;
 
-    let why = refusal(&gateway).await;
-    let expected = format!(
-        "TLS handshake with broker 127.0.0.1:{} failed: ",
-        broker.tls_port()
-    );
-    assert!(why.starts_with(&expected), "{why}");
+    let why = handshake_refusal(&gateway, &broker).await;
     assert!(why.contains("client_cert"), "{why}");
     gateway.stop().await;
 }

@@ -7,7 +7,8 @@ use std::time::Duration;
 use gateway::store::{EventFilter, Series, Store, StoreOptions};
 use gateway::time::Timestamp;
 use gateway::{Gateway, ServeOptions};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+mod running;
+use running::get_response;
 
 fn options(dir: &std::path::Path) -> ServeOptions {
     ServeOptions {
@@ -19,15 +20,7 @@ fn options(dir: &std::path::Path) -> ServeOptions {
 
 /// GETs `path` and returns the status line and the JSON body.
 async fn get(addr: SocketAddr, path: &str) -> (String, serde_json::Value) {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream
-        .write_all(
-            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-        )
-        .await
-        .unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
+    let response = get_response(addr, path).await;
     let (head, body) = response.split_once("\r\n\r\n").unwrap();
     let status = head.lines().next().unwrap().to_owned();
     (
@@ -65,10 +58,7 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     let addr = gateway.local_addr();
     assert_eq!(addr.ip().to_string(), "127.0.0.1");
     assert_ne!(addr.port(), 0);
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let run = tokio::spawn(gateway.run(async {
-        let _ = stopped.await;
-    }));
+    let serving = run_until_stopped(gateway);
 
     // The station answers through the protocol and its air temperature moves: the demo
     // operator turns the tool on at once. Poll the API with a generous deadline.
@@ -141,12 +131,7 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     assert_eq!(health["devices_up"], DEMO.len());
     assert!(health["opcua"].is_null(), "no OPC UA server: {health}");
 
-    stop.send(()).unwrap();
-    tokio::time::timeout(Duration::from_secs(30), run)
-        .await
-        .expect("serve stops within 30 s")
-        .unwrap()
-        .unwrap();
+    serving.stop().await.unwrap();
 
     // Everything was committed: the history shows the rise, the events the start and stop.
     let store = Store::open(&dir.path().join("data"), StoreOptions::default()).unwrap();
@@ -180,20 +165,6 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     assert!(kinds.contains(&"line_up"), "{kinds:?}");
 }
 
-/// GETs `path` and returns its body as text.
-async fn get_text(addr: SocketAddr, path: &str) -> String {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream
-        .write_all(
-            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-        )
-        .await
-        .unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
-    response
-}
-
 /// Polls `/healthz` until its `opcua.connections` is `want` (bounded).
 async fn wait_for_opcua_connections(addr: SocketAddr, want: u64) -> serde_json::Value {
     let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
@@ -221,10 +192,7 @@ async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
     .unwrap();
     let addr = gateway.local_addr();
     let url = gateway.url_of("opcua").unwrap().to_owned();
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let run = tokio::spawn(gateway.run(async {
-        let _ = stopped.await;
-    }));
+    let serving = run_until_stopped(gateway);
 
     let health = wait_for_opcua_connections(addr, 0).await;
     assert_eq!(health["opcua"]["endpoint"], url.as_str());
@@ -237,7 +205,7 @@ async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
         .await
         .unwrap();
     wait_for_opcua_connections(addr, 1).await;
-    let metrics = get_text(addr, "/metrics").await;
+    let metrics = get_response(addr, "/metrics").await;
     assert!(
         metrics.lines().any(|l| l == "cellbus_opcua_connections 1"),
         "{metrics}"
@@ -249,25 +217,23 @@ async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
     drop(client);
     wait_for_opcua_connections(addr, 0).await;
 
-    stop.send(()).unwrap();
-    tokio::time::timeout(Duration::from_secs(30), run)
-        .await
-        .expect("serve stops within 30 s")
-        .unwrap()
-        .unwrap();
+    serving.stop().await.unwrap();
+}
+
+/// Why the gateway refuses to start with `options`.
+async fn refusal(options: ServeOptions) -> String {
+    Gateway::start(options).await.unwrap_err().to_string()
 }
 
 #[tokio::test]
 async fn a_taken_port_is_reported_with_the_way_out() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let err = Gateway::start(ServeOptions {
+    let err = refusal(ServeOptions {
         listen: taken.local_addr().unwrap(),
         ..options(dir.path())
     })
-    .await
-    .unwrap_err()
-    .to_string();
+    .await;
     assert!(err.contains("already in use"), "{err}");
     assert!(err.contains("--listen 127.0.0.1:0"), "{err}");
 }
@@ -281,13 +247,11 @@ async fn a_bad_config_is_refused_at_start_with_file_line_and_reason() {
         "[[line]]\nname = \"a\"\nendpoint = \"tcp://127.0.0.1:1\"\n[[line.device]]\nid = \"x\"\nprotocol = \"jbc\"\naddress = 250\n",
     )
     .unwrap();
-    let err = Gateway::start(ServeOptions {
+    let err = refusal(ServeOptions {
         config: Some(path.clone()),
         ..options(dir.path())
     })
-    .await
-    .unwrap_err()
-    .to_string();
+    .await;
     assert!(
         err.starts_with(&format!("{}:7:11: ", path.display())),
         "{err}"
@@ -302,13 +266,11 @@ async fn writes_without_a_token_are_refused_at_start() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let err = Gateway::start(ServeOptions {
+    let err = refusal(ServeOptions {
         allow_writes: true,
         ..options(dir.path())
     })
-    .await
-    .unwrap_err()
-    .to_string();
+    .await;
     assert!(err.contains("--allow-writes needs a token"), "{err}");
     assert!(err.contains("CELLBUS_TOKEN"), "{err}");
 }
@@ -331,18 +293,30 @@ async fn wait_for_live_value(addr: SocketAddr) {
     }
 }
 
-/// Runs a started gateway until the returned sender is used; the handle gives its result.
-fn run_until_stopped(
-    gateway: Gateway,
-) -> (
-    tokio::sync::oneshot::Sender<()>,
-    tokio::task::JoinHandle<anyhow::Result<()>>,
-) {
+/// A started gateway running on a task of its own until [`Serving::stop`].
+struct Serving {
+    stop: tokio::sync::oneshot::Sender<()>,
+    run: tokio::task::JoinHandle<anyhow::Result<()>>,
+}
+
+impl Serving {
+    /// Stops the gateway and gives how its run ended (within 30 s).
+    async fn stop(self) -> anyhow::Result<()> {
+        self.stop.send(()).unwrap();
+        tokio::time::timeout(Duration::from_secs(30), self.run)
+            .await
+            .expect("serve stops within 30 s")
+            .unwrap()
+    }
+}
+
+/// Runs a started gateway until it is stopped.
+fn run_until_stopped(gateway: Gateway) -> Serving {
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let run = tokio::spawn(gateway.run(async {
         let _ = stopped.await;
     }));
-    (stop, run)
+    Serving { stop, run }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -355,7 +329,7 @@ async fn an_unusable_data_directory_leaves_live_values_served_and_reports_the_fa
     // Before the fix the gateway stopped here, exit 1.
     let gateway = Gateway::start(options(dir.path())).await.unwrap();
     let addr = gateway.local_addr();
-    let (stop, run) = run_until_stopped(gateway);
+    let serving = run_until_stopped(gateway);
     wait_for_live_value(addr).await;
 
     let (status, health) = get(addr, "/healthz").await;
@@ -377,11 +351,9 @@ async fn an_unusable_data_directory_leaves_live_values_served_and_reports_the_fa
     assert!(error.contains(&data.display().to_string()), "{error}");
     assert!(error.contains("os error"), "{error}");
 
-    stop.send(()).unwrap();
-    tokio::time::timeout(Duration::from_secs(30), run)
+    serving
+        .stop()
         .await
-        .expect("serve stops within 30 s")
-        .unwrap()
         .expect("a stop with the history off is clean");
 }
 
@@ -397,7 +369,7 @@ async fn a_garbage_history_file_is_moved_aside_and_the_gateway_serves_on() {
     // Before the fix: "file is not a database", exit 1.
     let gateway = Gateway::start(options(dir.path())).await.unwrap();
     let addr = gateway.local_addr();
-    let (stop, run) = run_until_stopped(gateway);
+    let serving = run_until_stopped(gateway);
     wait_for_live_value(addr).await;
 
     let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
@@ -427,10 +399,5 @@ async fn a_garbage_history_file_is_moved_aside_and_the_gateway_serves_on() {
     assert_eq!(health["status"], "ok", "{health}");
     assert_eq!(health["history"], "ok", "{health}");
 
-    stop.send(()).unwrap();
-    tokio::time::timeout(Duration::from_secs(30), run)
-        .await
-        .expect("serve stops within 30 s")
-        .unwrap()
-        .unwrap();
+    serving.stop().await.unwrap();
 }

@@ -31,6 +31,8 @@ pub mod plan;
 pub mod rtu;
 pub mod slave;
 pub mod tcp;
+#[cfg(test)]
+mod test_util;
 
 #[doc(hidden)]
 pub mod fuzzing;

@@ -19,6 +19,11 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+// The shared test fixture (`tests/common`) names the crate `sparkplug`, as the integration
+// tests see it.
+#[cfg(test)]
+extern crate self as sparkplug;
+
 mod births;
 pub mod describe;
 pub mod event;

@@ -2,55 +2,29 @@
 //! edge node: births with units and write ranges, data by alias resolved against the
 //! births seen, quality, history, STATE, other topics and payloads that are not Sparkplug.
 
+mod common;
+
+use common::{T0, air_temp, at, connected, ddata, event_metric, id, set_point, status};
 use prost::Message as _;
 use sparkplug::describe::{RawPayload, Value, iso_time};
 use sparkplug::proto::{Metric, Payload};
 use sparkplug::{
-    BdSeq, DataType, Delivery, Describer, Description, EdgeNode, HostState, Id, MetricName,
-    MetricSpec, MetricValue, Publish, Quality, Sample, Timestamp, Writable, WriteRange,
+    DataType, Delivery, Describer, Description, EdgeNode, HostState, MetricSpec, MetricValue,
+    Publish, Quality, Sample,
 };
-
-/// 2025-11-24T16:00:00.000Z.
-const T0: Timestamp = Timestamp::from_millis(1_764_000_000_000);
-
-fn at(offset_ms: u64) -> Timestamp {
-    Timestamp::from_millis(T0.as_millis() + offset_ms)
-}
-
-fn id(s: &str) -> Id {
-    Id::new(s).expect("test ids are valid")
-}
-
-fn name(s: &str) -> MetricName {
-    MetricName::new(s).expect("test names are not empty")
-}
 
 /// A station with a temperature in °C, a writable set point 100–450 °C and a status text.
 fn station() -> Vec<(MetricSpec, Sample)> {
     vec![
-        (
-            MetricSpec::new(name("air_temp"), DataType::Double)
-                .unit("°C")
-                .description("Air temperature"),
-            Sample::good(MetricValue::Double(25.5), T0),
-        ),
-        (
-            MetricSpec::new(name("set_point"), DataType::Int32)
-                .unit("°C")
-                .writable(Writable::Within(WriteRange::new(100.0, 450.0).unwrap())),
-            Sample::good(MetricValue::Int32(300), T0),
-        ),
-        (
-            MetricSpec::new(name("status"), DataType::String),
-            Sample::good(MetricValue::String("idle".into()), T0),
-        ),
+        air_temp(MetricValue::Double(25.5), "Air temperature"),
+        set_point(),
+        status(),
     ]
 }
 
 /// A connected, born node `cell/gw1` with device `jbc` born; the births it sent.
 fn running() -> (EdgeNode, Publish, Publish) {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-    node.on_connect();
+    let mut node = connected();
     let nbirth = node.node_birth(&[], T0).unwrap();
     let dbirth = node.device_birth(&id("jbc"), &station(), T0).unwrap();
     (node, nbirth, dbirth)
@@ -106,18 +80,7 @@ fn a_device_birth_is_described_with_names_aliases_types_units_and_write_ranges()
 #[test]
 fn data_by_alias_is_resolved_to_the_names_of_the_birth_seen_before() {
     let (mut node, nbirth, dbirth) = running();
-    let ddata = node
-        .device_data(
-            &id("jbc"),
-            &[(
-                "air_temp",
-                Sample::good(MetricValue::Double(312.5), at(500)),
-            )],
-            at(500),
-            Delivery::Live,
-        )
-        .unwrap()
-        .expect("a change");
+    let ddata = ddata(&mut node, "jbc", 312.5, at(500));
     let mut describer = Describer::new();
     describe(&mut describer, &nbirth);
     describe(&mut describer, &dbirth);
@@ -142,18 +105,7 @@ fn data_by_alias_is_resolved_to_the_names_of_the_birth_seen_before() {
 #[test]
 fn data_without_a_birth_seen_shows_the_bare_alias_and_the_raw_value() {
     let (mut node, _, _) = running();
-    let ddata = node
-        .device_data(
-            &id("jbc"),
-            &[(
-                "air_temp",
-                Sample::good(MetricValue::Double(312.5), at(500)),
-            )],
-            at(500),
-            Delivery::Live,
-        )
-        .unwrap()
-        .unwrap();
+    let ddata = ddata(&mut node, "jbc", 312.5, at(500));
     let m = sparkplug(describe(&mut Describer::new(), &ddata));
     let metric = &m.metrics[0];
     assert_eq!(metric.name, None);
@@ -184,15 +136,7 @@ fn a_new_node_birth_forgets_the_aliases_of_the_devices_born_before_it() {
     describe(&mut describer, &nbirth);
     describe(&mut describer, &dbirth);
     describe(&mut describer, &nbirth);
-    let ddata = node
-        .device_data(
-            &id("jbc"),
-            &[("air_temp", Sample::good(MetricValue::Double(1.0), at(1)))],
-            at(1),
-            Delivery::Live,
-        )
-        .unwrap()
-        .unwrap();
+    let ddata = ddata(&mut node, "jbc", 1.0, at(1));
     let m = sparkplug(describe(&mut describer, &ddata));
     assert_eq!(m.metrics[0].name, None);
 }
@@ -415,17 +359,8 @@ fn iso_time_is_utc_with_milliseconds() {
 
 #[test]
 fn an_event_shows_its_message_and_properties_in_words() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-    node.on_connect();
-    let nbirth = node
-        .node_birth(
-            &[(
-                sparkplug::event::spec(),
-                Sample::good(MetricValue::String(String::new()), T0),
-            )],
-            T0,
-        )
-        .unwrap();
+    let mut node = connected();
+    let nbirth = node.node_birth(&[event_metric()], T0).unwrap();
     let event = sparkplug::NodeEvent {
         t: at(250),
         kind: "alarm_raised".into(),

@@ -1,28 +1,16 @@
 //! The edge node's state machine, driven as the gateway will drive it: Will, connect,
 //! births, data, deaths and commands, each message decoded back from its bytes.
 
+mod common;
+
+use common::{T0, air_temp, at, connected, event_metric, heater_on, id, name};
 use prost::Message as _;
 use sparkplug::node::{BD_SEQ, HOST_OFFLINE, REBIRTH};
 use sparkplug::proto::{Metric, Payload, metric::Value};
 use sparkplug::{
-    BdSeq, Command, CommandError, DataType, Delivery, EdgeNode, Id, MetricName, MetricSpec,
-    MetricValue, NodeError, NodeEvent, Publish, Qos, Quality, Sample, Timestamp, ValueError,
-    Writable, WriteRange,
+    BdSeq, Command, CommandError, DataType, Delivery, EdgeNode, MetricSpec, MetricValue, NodeError,
+    NodeEvent, Publish, Qos, Quality, Sample, ValueError,
 };
-
-const T0: Timestamp = Timestamp::from_millis(1_764_000_000_000);
-
-fn at(offset_ms: u64) -> Timestamp {
-    Timestamp::from_millis(T0.as_millis() + offset_ms)
-}
-
-fn id(s: &str) -> Id {
-    Id::new(s).expect("test ids are valid")
-}
-
-fn name(s: &str) -> MetricName {
-    MetricName::new(s).expect("test names are not empty")
-}
 
 fn decode(publish: &Publish) -> Payload {
     Payload::decode(&publish.payload[..]).expect("the node encodes valid payloads")
@@ -39,29 +27,15 @@ fn by_name<'p>(payload: &'p Payload, wanted: &str) -> &'p Metric {
 /// A station with a read-only temperature and a writable set point, 100–450 °C.
 fn station() -> Vec<(MetricSpec, Sample)> {
     vec![
-        (
-            MetricSpec::new(name("air_temp"), DataType::Int32)
-                .unit("°C")
-                .description("air temperature at the nozzle"),
-            Sample::good(MetricValue::Int32(25), T0),
-        ),
-        (
-            MetricSpec::new(name("set_point"), DataType::Int32)
-                .unit("°C")
-                .writable(Writable::Within(WriteRange::new(100.0, 450.0).unwrap())),
-            Sample::good(MetricValue::Int32(300), T0),
-        ),
-        (
-            MetricSpec::new(name("heater_on"), DataType::Boolean),
-            Sample::good(MetricValue::Boolean(false), T0),
-        ),
+        air_temp(MetricValue::Int32(25), "air temperature at the nozzle"),
+        common::set_point(),
+        heater_on(false),
     ]
 }
 
 /// A node connected with bdSeq 7, born, with device `jbc` born.
 fn running() -> EdgeNode {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-    node.on_connect();
+    let mut node = connected();
     node.node_birth(&[], T0).unwrap();
     node.device_birth(&id("jbc"), &station(), T0).unwrap();
     node
@@ -82,8 +56,7 @@ fn dcmd(metrics: Vec<Metric>) -> Vec<u8> {
 
 #[test]
 fn the_first_nbirth_after_connect_has_seq_zero() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
-    node.on_connect();
+    let mut node = connected();
     let birth = node.node_birth(&[], T0).unwrap();
     assert_eq!(birth.topic.to_string(), "spBv1.0/cell/NBIRTH/gw1");
     assert_eq!((birth.qos, birth.retain), (Qos::AtMostOnce, false));
@@ -767,15 +740,7 @@ fn device_down_event() -> NodeEvent {
 fn an_event_is_an_ndata_of_the_event_metric_by_alias_with_its_properties_and_time() {
     let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
     node.on_connect();
-    let birth = node
-        .node_birth(
-            &[(
-                sparkplug::event::spec(),
-                Sample::good(MetricValue::String(String::new()), T0),
-            )],
-            T0,
-        )
-        .unwrap();
+    let birth = node.node_birth(&[event_metric()], T0).unwrap();
     let event_alias = alias_of(&decode(&birth), sparkplug::event::EVENT);
     assert_eq!(
         by_name(&decode(&birth), sparkplug::event::EVENT).datatype,

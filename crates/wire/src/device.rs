@@ -453,14 +453,10 @@ mod tests {
         type Frame = Vec<u8>;
         type Error = std::convert::Infallible;
         fn decode(&self, buf: &[u8]) -> Result<Option<(Vec<u8>, usize)>, Self::Error> {
-            Ok(buf
-                .iter()
-                .position(|&b| b == b'\n')
-                .map(|i| (buf[..i].to_vec(), i + 1)))
+            Ok(crate::test_lines::decode_line(buf))
         }
         fn encode(&self, frame: &Vec<u8>, out: &mut Vec<u8>) {
-            out.extend_from_slice(frame);
-            out.push(b'\n');
+            crate::test_lines::encode_line(frame, out);
         }
     }
 

@@ -29,6 +29,8 @@ pub mod exchange;
 pub mod failure;
 pub mod operator;
 pub mod scan;
+#[cfg(test)]
+mod test_lines;
 pub mod words;
 
 pub use codec::{Codec, Deframer, Resync};

@@ -36,29 +36,21 @@ impl Sim {
     /// Starts `cellbus sim ARGS…` with `stdin`, waits for its `listening on …` line and
     /// gives its stdout, for simulators that print more lines after it.
     pub fn spawn(args: &[&str], stdin: Stdio) -> (Sim, BufReader<ChildStdout>) {
-        let mut child = cellbus()
-            .arg("sim")
-            .args(args)
-            .stdin(stdin)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("cellbus runs");
-        let mut stdout = BufReader::new(child.stdout.take().expect("stdout is piped"));
-        let mut first = String::new();
-        stdout
-            .read_line(&mut first)
-            .expect("the simulator prints a line");
-        let endpoint = first
-            .trim_end()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("first line is `listening on …`, got {first:?}"))
-            .to_owned();
+        let (child, stdout, endpoint) = start_listening(
+            cellbus().arg("sim").args(args).stdin(stdin),
+            "listening on ",
+        );
         (Sim { child, endpoint }, stdout)
     }
 }
 
 impl Sim {
+    /// Asserts that the simulator's endpoint starts with `prefix`.
+    #[track_caller]
+    pub fn assert_listens_on(&self, prefix: &str) {
+        assert!(self.endpoint.starts_with(prefix), "{}", self.endpoint);
+    }
+
     /// The simulator's stdin, when it was started with a piped one.
     pub fn take_stdin(&mut self) -> ChildStdin {
         self.child.stdin.take().expect("stdin is piped")
@@ -111,6 +103,65 @@ impl Drop for Sim {
     }
 }
 
+/// Starts `command` with its stdout piped (its stderr goes to the test's) and reads its
+/// first line, which must be `prefix` followed by where it listens: the child, the rest of
+/// its stdout and that address.
+pub fn start_listening(
+    command: &mut Command,
+    prefix: &str,
+) -> (Child, BufReader<ChildStdout>, String) {
+    let mut child = command
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{:?} runs: {e}", command.get_program()));
+    let mut stdout = BufReader::new(child.stdout.take().expect("stdout is piped"));
+    let mut first = String::new();
+    stdout.read_line(&mut first).expect("a first line");
+    let address = first
+        .trim_end()
+        .strip_prefix(prefix)
+        .unwrap_or_else(|| panic!("first line is `{prefix}…`, got {first:?}"))
+        .to_owned();
+    (child, stdout, address)
+}
+
+/// Starts `cellbus ARGS…` with no input and its stdout and stderr piped.
+pub fn spawn_piped(args: &[&str]) -> Child {
+    cellbus()
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("cellbus runs")
+}
+
+/// Now, in ms since the epoch.
+pub fn now_ms() -> i64 {
+    i64::try_from(
+        std::time::SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap()
+            .as_millis(),
+    )
+    .unwrap()
+}
+
+/// Fails (never skips) when python3 is missing or cannot run `code` (the imports an
+/// interoperability test needs): `test` names the test, `missing` the packages, `hint`
+/// says how to install them. Gives what `code` printed.
+pub fn require_python(code: &str, test: &str, missing: &str, hint: &str) -> String {
+    match Command::new("python3").args(["-c", code]).output() {
+        Err(e) => panic!("python3 is needed for the {test} ({e}); {hint}"),
+        Ok(out) if !out.status.success() => panic!(
+            "{missing} is not installed for python3 ({}); {hint}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ),
+        Ok(out) => String::from_utf8_lossy(&out.stdout).trim().to_owned(),
+    }
+}
+
 /// Runs `cellbus ARGS…` to completion.
 pub fn run(args: &[&str]) -> Output {
     cellbus()
@@ -118,6 +169,18 @@ pub fn run(args: &[&str]) -> Output {
         .stdin(Stdio::null())
         .output()
         .expect("cellbus runs")
+}
+
+/// Asserts that `output`'s stdout contains `text`, showing all of it if not.
+#[track_caller]
+pub fn assert_stdout_has(output: &Output, text: &str) {
+    assert!(stdout(output).contains(text), "{}", stdout(output));
+}
+
+/// Asserts that `output`'s stderr contains `text`, showing all of it if not.
+#[track_caller]
+pub fn assert_stderr_has(output: &Output, text: &str) {
+    assert!(stderr(output).contains(text), "{}", stderr(output));
 }
 
 /// Stdout as text.
@@ -144,24 +207,21 @@ impl Gateway {
 
     /// Like [`Gateway::start`], with more `cellbus serve` arguments.
     pub fn start_with(data: &std::path::Path, args: &[&str]) -> Gateway {
-        let mut child = cellbus()
-            .args(["serve", "--listen", "127.0.0.1:0", "--data"])
-            .arg(data)
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("cellbus runs");
-        let mut first = String::new();
-        BufReader::new(child.stdout.take().expect("piped"))
-            .read_line(&mut first)
-            .expect("a first line");
-        let addr = first
-            .trim_end()
-            .strip_prefix("listening on http://")
-            .unwrap_or_else(|| panic!("first line is `listening on http://…`, got {first:?}"))
-            .to_owned();
+        let (child, _, addr) = start_listening(
+            cellbus()
+                .args(["serve", "--listen", "127.0.0.1:0", "--data"])
+                .arg(data)
+                .args(args),
+            "listening on http://",
+        );
         Gateway { child, addr }
+    }
+
+    /// GETs `path`, which must answer 200 with JSON.
+    pub fn get_json(&self, path: &str) -> serde_json::Value {
+        let (status, body) = self.get(path);
+        assert_eq!(status, 200, "{body}");
+        serde_json::from_str(&body).unwrap()
     }
 
     /// A plain HTTP/1.1 GET; returns the status code and the body.

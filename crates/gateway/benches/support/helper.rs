@@ -80,3 +80,12 @@ impl Drop for Helper {
         let _ = self.child.wait();
     }
 }
+
+/// The whitespace-separated numbers of a helper's answer line; `None` if one is not a
+/// number.
+pub fn numbers(line: &str) -> Option<Vec<u64>> {
+    line.split_whitespace()
+        .map(str::parse)
+        .collect::<Result<_, _>>()
+        .ok()
+}

@@ -17,7 +17,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, bail};
 
-use super::helper::Helper;
+use super::helper::{Helper, numbers};
 use prost::Message as _;
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use sparkplug::proto::Payload;
@@ -71,11 +71,7 @@ impl Counts {
     }
 
     fn parse(line: &str) -> Option<Self> {
-        let n: Vec<u64> = line
-            .split_whitespace()
-            .map(str::parse)
-            .collect::<Result<_, _>>()
-            .ok()?;
+        let n = numbers(line)?;
         if n.len() != Self::FIELDS {
             return None;
         }

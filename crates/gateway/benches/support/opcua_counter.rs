@@ -25,7 +25,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 
-use super::helper::Helper;
+use super::helper::{Helper, numbers};
 use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
 use opcua::crypto::SecurityPolicy;
 use opcua::types::{
@@ -72,11 +72,7 @@ impl Counts {
     }
 
     fn parse(line: &str) -> Option<Self> {
-        let n: Vec<u64> = line
-            .split_whitespace()
-            .map(str::parse)
-            .collect::<Result<_, _>>()
-            .ok()?;
+        let n = numbers(line)?;
         let [notifications, timed, p50_ms, p99_ms, max_ms] = n[..] else {
             return None;
         };

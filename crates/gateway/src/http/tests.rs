@@ -56,6 +56,11 @@ fn write_request(device: &str, token: Option<&str>, body: &str) -> Request<Body>
     request.body(Body::from(body.to_owned())).unwrap()
 }
 
+/// A write to `jbc1` with the token.
+async fn write_jbc1(app: &Router, body: &str) -> (StatusCode, Json) {
+    call(app, write_request("jbc1", Some(TOKEN), body)).await
+}
+
 fn error_of(body: &Json) -> &str {
     body["error"]
         .as_str()
@@ -496,7 +501,7 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
     let on = app(&rig, true);
     let body = r#"{"point": "air_temperature_setpoint", "value": 333}"#;
 
-    let (status, reply) = call(&off, write_request("jbc1", Some(TOKEN), body)).await;
+    let (status, reply) = write_jbc1(&off, body).await;
     assert_eq!(status, StatusCode::FORBIDDEN);
     assert!(error_of(&reply).contains("--allow-writes"));
     let (status, reply) = call(&on, write_request("jbc1", None, body)).await;
@@ -504,40 +509,20 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
     assert!(error_of(&reply).contains("Bearer"));
     let (status, _) = call(&on, write_request("jbc1", Some("guess"), body)).await;
     assert_eq!(status, StatusCode::UNAUTHORIZED);
-    let (status, reply) = call(
+    let (status, reply) = write_jbc1(
         &on,
-        write_request(
-            "jbc1",
-            Some(TOKEN),
-            r#"{"point": "air_temperature_setpoint", "value": 999}"#,
-        ),
+        r#"{"point": "air_temperature_setpoint", "value": 999}"#,
     )
     .await;
     assert_eq!(status, StatusCode::BAD_REQUEST);
     assert!(error_of(&reply).contains("150 to 450 °C"), "{reply}");
-    let (status, reply) = call(&on, write_request("jbc1", Some(TOKEN), "{not json")).await;
+    let (status, reply) = write_jbc1(&on, "{not json").await;
     assert_eq!(status, StatusCode::BAD_REQUEST);
     assert!(error_of(&reply).contains("bad request body"), "{reply}");
-    let (status, reply) = call(
-        &on,
-        write_request(
-            "jbc1",
-            Some(TOKEN),
-            r#"{"point": "air_temperature", "value": 1}"#,
-        ),
-    )
-    .await;
+    let (status, reply) = write_jbc1(&on, r#"{"point": "air_temperature", "value": 1}"#).await;
     assert_eq!(status, StatusCode::BAD_REQUEST);
     assert!(error_of(&reply).contains("read-only"), "{reply}");
-    let (status, reply) = call(
-        &on,
-        write_request(
-            "jbc1",
-            Some(TOKEN),
-            r#"{"point": "warp_drive", "value": 1}"#,
-        ),
-    )
-    .await;
+    let (status, reply) = write_jbc1(&on, r#"{"point": "warp_drive", "value": 1}"#).await;
     assert_eq!(status, StatusCode::NOT_FOUND);
     assert!(
         error_of(&reply).contains("writable points: air_temperature_setpoint"),
@@ -551,19 +536,11 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
         "nothing reached the station"
     );
 
-    let (status, reply) = call(&on, write_request("jbc1", Some(TOKEN), body)).await;
+    let (status, reply) = write_jbc1(&on, body).await;
     assert_eq!(status, StatusCode::OK, "{reply}");
     assert_eq!(reply["new"], 333.0);
     assert_eq!(rig.models[0].lock().settings().air_temp, 333);
-    let (status, reply) = call(
-        &on,
-        write_request(
-            "jbc1",
-            Some(TOKEN),
-            r#"{"point": "jbc1.tool_on", "value": "on"}"#,
-        ),
-    )
-    .await;
+    let (status, reply) = write_jbc1(&on, r#"{"point": "jbc1.tool_on", "value": "on"}"#).await;
     assert_eq!(status, StatusCode::OK, "{reply}");
     assert!(
         reply["detail"]
@@ -621,13 +598,7 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
 async fn a_token_in_the_query_is_ignored_where_the_gateway_needs_none() {
     let rig = rig(1);
     let app = app(&rig, false);
-    let (status, body) = call(
-        &app,
-        Request::get("/api/events?token=look-only&limit=5")
-            .body(Body::empty())
-            .unwrap(),
-    )
-    .await;
+    let (status, body) = get(&app, "/api/events?token=look-only&limit=5").await;
     assert_eq!(status, StatusCode::OK, "{body}");
 }
 
@@ -639,7 +610,7 @@ async fn a_reversed_range_of_events_is_refused_as_a_reversed_history_range_is() 
         "/api/events?from=now&to=-1h",
         "/api/history?point=jbc1.tool_on&from=now&to=-1h",
     ] {
-        let (status, body) = call(&app, Request::get(uri).body(Body::empty()).unwrap()).await;
+        let (status, body) = get(&app, uri).await;
         assert_eq!(status, StatusCode::BAD_REQUEST, "{uri}: {body}");
         assert!(error_of(&body).starts_with("from ("), "{uri}: {body}");
     }
@@ -884,31 +855,13 @@ async fn an_event_stream_for_some_devices_carries_only_their_snapshot_and_change
     let response = open("/api/events/stream?device=").await.unwrap();
     let events = sse_events(response, |events| !events.is_empty()).await;
     assert_eq!(events[0].1["devices"], json!([]));
-    let (status, body) = call(
-        &app,
-        Request::get("/api/events/stream?line=nope")
-            .body(Body::empty())
-            .unwrap(),
-    )
-    .await;
+    let (status, body) = get(&app, "/api/events/stream?line=nope").await;
     assert_eq!(status, StatusCode::NOT_FOUND);
     assert!(error_of(&body).contains("bench"), "{body}");
-    let (status, body) = call(
-        &app,
-        Request::get("/api/events/stream?device=jbc2,jbc9")
-            .body(Body::empty())
-            .unwrap(),
-    )
-    .await;
+    let (status, body) = get(&app, "/api/events/stream?device=jbc2,jbc9").await;
     assert_eq!(status, StatusCode::NOT_FOUND);
     assert!(error_of(&body).contains("jbc9"), "{body}");
-    let (status, _) = call(
-        &app,
-        Request::get("/api/events/stream?colour=red")
-            .body(Body::empty())
-            .unwrap(),
-    )
-    .await;
+    let (status, _) = get(&app, "/api/events/stream?colour=red").await;
     assert_eq!(status, StatusCode::BAD_REQUEST);
 }
 
@@ -1014,24 +967,12 @@ async fn a_write_of_true_switches_on_and_a_whole_number_beyond_2_to_the_53_is_re
     let rig = rig(1);
     tokio::time::sleep(Duration::from_secs(2)).await;
     let on = app(&rig, true);
-    let (status, reply) = call(
-        &on,
-        write_request(
-            "jbc1",
-            Some(TOKEN),
-            r#"{"point": "tool_on", "value": true}"#,
-        ),
-    )
-    .await;
+    let (status, reply) = write_jbc1(&on, r#"{"point": "tool_on", "value": true}"#).await;
     assert_eq!(status, StatusCode::OK, "{reply}");
     assert!(rig.models[0].lock().port_status().tool_on);
-    let (status, reply) = call(
+    let (status, reply) = write_jbc1(
         &on,
-        write_request(
-            "jbc1",
-            Some(TOKEN),
-            r#"{"point": "air_temperature_setpoint", "value": 9007199254740993}"#,
-        ),
+        r#"{"point": "air_temperature_setpoint", "value": 9007199254740993}"#,
     )
     .await;
     assert_eq!(status, StatusCode::BAD_REQUEST);
@@ -1053,15 +994,7 @@ async fn a_write_the_device_does_not_answer_is_a_504_and_audited_as_failed() {
     tokio::time::sleep(Duration::from_secs(2)).await;
     rig.plugged[0].store(false, std::sync::atomic::Ordering::SeqCst);
     let on = app(&rig, true);
-    let (status, reply) = call(
-        &on,
-        write_request(
-            "jbc1",
-            Some(TOKEN),
-            r#"{"point": "air_flow_setpoint", "value": 50}"#,
-        ),
-    )
-    .await;
+    let (status, reply) = write_jbc1(&on, r#"{"point": "air_flow_setpoint", "value": 50}"#).await;
     assert_eq!(status, StatusCode::GATEWAY_TIMEOUT, "{reply}");
     assert!(error_of(&reply).contains("no valid answer"), "{reply}");
     let rows = rig.cell.store().audit_log(Some("jbc1"), 10).unwrap();

@@ -342,30 +342,18 @@ mod tests {
             1,
             Request::write_multiple_registers(100, vec![1, 2, 3]).expect("valid"),
         );
+        let wrote = |count| {
+            answer(
+                1,
+                Response::WriteMultipleRegisters {
+                    address: 100,
+                    count,
+                },
+            )
+        };
+        assert_eq!(check_response(&many, &wrote(3)), Ok(Answer::Written));
         assert_eq!(
-            check_response(
-                &many,
-                &answer(
-                    1,
-                    Response::WriteMultipleRegisters {
-                        address: 100,
-                        count: 3
-                    }
-                )
-            ),
-            Ok(Answer::Written)
-        );
-        assert_eq!(
-            check_response(
-                &many,
-                &answer(
-                    1,
-                    Response::WriteMultipleRegisters {
-                        address: 100,
-                        count: 2
-                    }
-                )
-            ),
+            check_response(&many, &wrote(2)),
             Err(Mismatch::Echo {
                 field: EchoField::Count,
                 expected: 3,

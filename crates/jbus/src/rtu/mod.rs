@@ -36,5 +36,6 @@ pub use response::{PackedBits, RegisterValues, Response, ResponseAdu};
 pub use timing::{LineTiming, char_time, inter_frame_silence};
 pub use value::{
     ADDRESS_SPACE, BROADCAST_UNIT, EXCEPTION_BIT, Exception, ExceptionCode, FunctionCode,
-    InvalidValue, ReadBitCount, ReadRegisterCount, UnitId, WriteBitCount, WriteRegisterCount,
+    InvalidValue, ReadBitCount, ReadRegisterCount, UnitId, UnitProblem, WriteBitCount,
+    WriteRegisterCount, check_unit,
 };

@@ -6,7 +6,7 @@
 
 use std::fmt;
 
-use super::request::{Addr, WriteCoil, WriteRegister, counted, pack_bits, unpack_bits};
+use super::request::{WriteCoil, WriteRegister, pack_bits, show_span, unpack_bits};
 use super::value::{Exception, ExceptionCode, FunctionCode, InvalidValue};
 
 /// The bits a read of coils or discrete inputs returns, 8 per byte, first bit in the
@@ -157,32 +157,13 @@ impl fmt::Display for Response {
             }
             Self::ReadHoldingRegisters(r) => write!(f, "holding registers: {:?}", r.0),
             Self::ReadInputRegisters(r) => write!(f, "input registers: {:?}", r.0),
-            Self::WriteSingleCoil(w) => {
-                write!(
-                    f,
-                    "wrote coil {} {}",
-                    Addr(w.address),
-                    if w.value { "on" } else { "off" }
-                )
-            }
-            Self::WriteSingleRegister(w) => {
-                write!(f, "wrote register {} = {}", Addr(w.address), w.value)
-            }
+            Self::WriteSingleCoil(w) => w.show(f, "wrote"),
+            Self::WriteSingleRegister(w) => w.show(f, "wrote"),
             Self::WriteMultipleCoils { address, count } => {
-                write!(
-                    f,
-                    "wrote {} from {}",
-                    counted(*count, "coils"),
-                    Addr(*address)
-                )
+                show_span(f, "wrote", (*count).into(), "coils", *address)
             }
             Self::WriteMultipleRegisters { address, count } => {
-                write!(
-                    f,
-                    "wrote {} from {}",
-                    counted(*count, "registers"),
-                    Addr(*address)
-                )
+                show_span(f, "wrote", (*count).into(), "registers", *address)
             }
             Self::Exception(e) => write!(f, "{e}"),
         }

@@ -116,6 +116,35 @@ impl UnitId {
     }
 }
 
+/// Checks the unit number a configuration gives a JBUS device (any integer, or none at
+/// all): one of 1–255, as [`UnitId::jbus`]. The one check for every configured JBUS or
+/// Modbus device; the caller words the error for its device.
+pub fn check_unit(number: Option<i64>) -> Result<UnitId, UnitProblem> {
+    let number = number.ok_or(UnitProblem::Missing)?;
+    u8::try_from(number)
+        .ok()
+        .and_then(|n| UnitId::jbus(n).ok())
+        .ok_or(UnitProblem::OutOfRange { number })
+}
+
+/// Why a configured unit number is not a JBUS unit number ([`check_unit`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum UnitProblem {
+    /// No unit number was given.
+    #[error("a unit number is needed, {} to {}", UnitId::MIN, UnitId::JBUS_MAX)]
+    Missing,
+    /// The number is outside 1–255 (0 is broadcast, which no device answers).
+    #[error(
+        "unit number {number} is out of range: {} to {} (0 is broadcast, never answered)",
+        UnitId::MIN,
+        UnitId::JBUS_MAX
+    )]
+    OutOfRange {
+        /// The number given.
+        number: i64,
+    },
+}
+
 impl TryFrom<u8> for UnitId {
     type Error = InvalidValue;
     /// Same as [`UnitId::new`] (1–247).
@@ -413,6 +442,27 @@ impl std::error::Error for Exception {}
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_configured_unit_is_checked_against_1_to_255_and_must_be_given() {
+        assert_eq!(check_unit(Some(1)).map(UnitId::get), Ok(1));
+        assert_eq!(check_unit(Some(255)).map(UnitId::get), Ok(255));
+        for number in [0, 256, -1, i64::MAX] {
+            assert_eq!(
+                check_unit(Some(number)),
+                Err(UnitProblem::OutOfRange { number })
+            );
+        }
+        assert_eq!(check_unit(None), Err(UnitProblem::Missing));
+        assert_eq!(
+            UnitProblem::OutOfRange { number: 0 }.to_string(),
+            "unit number 0 is out of range: 1 to 255 (0 is broadcast, never answered)"
+        );
+        assert_eq!(
+            UnitProblem::Missing.to_string(),
+            "a unit number is needed, 1 to 255"
+        );
+    }
 
     #[test]
     fn unit_accepts_1_to_247_and_refuses_0_and_248() {

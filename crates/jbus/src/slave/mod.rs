@@ -250,15 +250,17 @@ impl Model for Slave {
         } else {
             self.counters.answered += 1;
         }
-        vec![Transmit::after(
-            self.reply_delay,
-            ResponseAdu {
-                unit: adu.unit,
-                response,
-            }
-            .to_bytes(),
-        )]
+        reply(adu.unit, response, self.reply_delay)
     }
+}
+
+/// A device model's one transmission: `response` from `unit`, sent `delay` after the
+/// request.
+pub(crate) fn reply(unit: u8, response: Response, delay: Duration) -> Vec<Transmit> {
+    vec![Transmit::after(
+        delay,
+        ResponseAdu { unit, response }.to_bytes(),
+    )]
 }
 
 #[cfg(test)]
@@ -431,6 +433,17 @@ mod tests {
         assert_eq!(s.counters().refused, 8);
     }
 
+    /// The response `s` sends to `frame` (unit, function and data) with its CRC appended.
+    fn answer_to(s: &mut Slave, frame: &[u8]) -> Response {
+        let mut bytes = frame.to_vec();
+        append_crc(&mut bytes, 0);
+        let out = frame_to(s, &bytes);
+        let (adu, _) = decode_response(&out[0].bytes)
+            .expect("valid")
+            .expect("whole");
+        adu.response
+    }
+
     #[test]
     fn bad_counts_and_values_get_exception_3() {
         let mut s = Slave::all_writable(unit9());
@@ -444,14 +457,8 @@ mod tests {
             (vec![9, 16, 0, 0, 0, 2, 2, 0, 1], 16),
             (vec![9, 16, 0, 0, 0, 124, 0], 16),
         ] {
-            let mut bytes = frame.clone();
-            append_crc(&mut bytes, 0);
-            let out = frame_to(&mut s, &bytes);
-            let (adu, _) = decode_response(&out[0].bytes)
-                .expect("valid")
-                .expect("whole");
             assert_eq!(
-                adu.response,
+                answer_to(&mut s, &frame),
                 Response::exception(
                     FunctionCode::new(function).expect("fn"),
                     ExceptionCode::ILLEGAL_DATA_VALUE
@@ -470,14 +477,8 @@ mod tests {
             vec![9, 22, 0, 1, 0, 2, 0, 3],
             vec![9, 0x41, 1, 2],
         ] {
-            let mut bytes = frame.clone();
-            append_crc(&mut bytes, 0);
-            let out = frame_to(&mut s, &bytes);
-            let (adu, _) = decode_response(&out[0].bytes)
-                .expect("valid")
-                .expect("whole");
             assert_eq!(
-                adu.response,
+                answer_to(&mut s, &frame),
                 Response::exception(
                     FunctionCode::new(frame[1]).expect("fn"),
                     ExceptionCode::ILLEGAL_FUNCTION

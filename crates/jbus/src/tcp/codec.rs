@@ -306,13 +306,8 @@ mod tests {
     use crate::rtu::{
         Addressed, ExceptionCode, FunctionCode, RegisterValues, Request, Response, UnitId,
     };
-    use wire::Deframer;
 
-    fn hex(text: &str) -> Vec<u8> {
-        text.split_whitespace()
-            .map(|b| u8::from_str_radix(b, 16).expect("test hex"))
-            .collect()
-    }
+    use crate::test_util::{good_frames, hex};
 
     fn one_request(bytes: &[u8]) -> Mbap<RequestAdu> {
         match decode_request(bytes) {
@@ -514,12 +509,7 @@ mod tests {
         let good = hex("00 05 00 00 00 06 01 03 00 00 00 0A");
         let mut stream = hex("FF 00 13 00 09 00 07 00 06");
         stream.extend_from_slice(&good);
-        let mut deframer = Deframer::new(RequestCodec);
-        deframer.push(&stream);
-        let frames: Vec<_> = std::iter::from_fn(|| deframer.next_frame())
-            .filter_map(Result::ok)
-            .collect();
-        assert_eq!(frames, vec![one_request(&good)]);
+        assert_eq!(good_frames(RequestCodec, &stream), vec![one_request(&good)]);
     }
 
     #[test]

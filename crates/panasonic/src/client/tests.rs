@@ -69,6 +69,24 @@ async fn notice(events: &mut Events) -> Notice {
         .expect("the client is alive")
 }
 
+/// Waits for the next notice, which must say `port` is connected.
+async fn expect_connected(events: &mut Events, port: Port) {
+    let next = notice(events).await;
+    assert!(
+        matches!(&next, Notice::Connected { port: p, .. } if *p == port),
+        "{next}"
+    );
+}
+
+/// Waits for the next notice, which must say `port`'s connection is gone.
+async fn expect_disconnected(events: &mut Events, port: Port) {
+    let next = notice(events).await;
+    assert!(
+        matches!(&next, Notice::Disconnected { port: p, .. } if *p == port),
+        "{next}"
+    );
+}
+
 /// The next R message, within ten minutes of (virtual) time.
 async fn event(events: &mut Events) -> Event {
     tokio::time::timeout(Duration::from_secs(600), events.next_event())
@@ -193,13 +211,7 @@ async fn downloading_the_selected_program_is_refused_in_words() {
 async fn remote_start_gets_a2_then_r1st_then_boards_on_port_2() {
     let twin = twin(quiet(true)).await;
     let (client, mut events) = connect(config(&twin, None)).await;
-    assert!(matches!(
-        notice(&mut events).await,
-        Notice::Connected {
-            port: Port::Event,
-            ..
-        }
-    ));
+    expect_connected(&mut events, Port::Event).await;
     let started = Instant::now();
     client
         .start(Some(StopMode::Continuous))
@@ -366,20 +378,8 @@ async fn keep_alive_on_demand_reports_both_ports() {
 async fn a_silent_port_2_is_found_dead_by_the_keep_alive_and_reconnected() {
     let twin = twin(quiet(false)).await;
     let (client, mut events) = connect(config(&twin, Some(KeepAliveConfig::default()))).await;
-    assert!(matches!(
-        notice(&mut events).await,
-        Notice::Connected {
-            port: Port::Event,
-            ..
-        }
-    ));
-    assert!(matches!(
-        notice(&mut events).await,
-        Notice::Connected {
-            port: Port::Command,
-            ..
-        }
-    ));
+    expect_connected(&mut events, Port::Event).await;
+    expect_connected(&mut events, Port::Command).await;
     twin.control().connected(Port::Event).await;
     twin.control().break_port(Port::Event, PortFault::Silent);
     let started = Instant::now();
@@ -393,20 +393,8 @@ async fn a_silent_port_2_is_found_dead_by_the_keep_alive_and_reconnected() {
         }
     );
     assert_eq!(started.elapsed(), Duration::from_secs(40));
-    assert!(matches!(
-        notice(&mut events).await,
-        Notice::Disconnected {
-            port: Port::Event,
-            ..
-        }
-    ));
-    assert!(matches!(
-        notice(&mut events).await,
-        Notice::Connected {
-            port: Port::Event,
-            ..
-        }
-    ));
+    expect_disconnected(&mut events, Port::Event).await;
+    expect_connected(&mut events, Port::Event).await;
     assert_eq!(started.elapsed(), Duration::from_millis(40_500));
     assert_eq!(
         twin.control().fault(Port::Event),
@@ -552,20 +540,8 @@ async fn the_event_stream_survives_a_cut_port_2() {
     // Cut the connection the server holds, not one it has yet to accept.
     twin.control().connected(Port::Event).await;
     twin.control().cut(Port::Event);
-    assert!(matches!(
-        notice(&mut events).await,
-        Notice::Disconnected {
-            port: Port::Event,
-            ..
-        }
-    ));
-    assert!(matches!(
-        notice(&mut events).await,
-        Notice::Connected {
-            port: Port::Event,
-            ..
-        }
-    ));
+    expect_disconnected(&mut events, Port::Event).await;
+    expect_connected(&mut events, Port::Event).await;
     client.start(None).await.expect("started");
     assert_eq!(event(&mut events).await, Event::Started);
 }

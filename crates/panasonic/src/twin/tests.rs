@@ -16,6 +16,16 @@ struct Rig {
 }
 
 impl Rig {
+    /// The commands of the machine's replies on port 1 to the message `text`.
+    fn replies_to(&mut self, text: &str) -> Vec<String> {
+        let bytes = Message::new(text).expect("valid").to_bytes();
+        self.machine
+            .handle_port1(&bytes, self.now)
+            .iter()
+            .map(|m| m.command().to_owned())
+            .collect()
+    }
+
     fn new(config: MachineConfig) -> Rig {
         let now = Instant::now();
         let mut machine = Machine::new(config).expect("valid config");
@@ -706,34 +716,18 @@ fn malformed_bytes_get_one_a4e01_and_the_next_command_is_answered() {
 #[test]
 fn unknown_commands_get_a4e01_and_bad_keep_alives_a4e00() {
     let mut rig = Rig::remote();
-    let reply = |rig: &mut Rig, text: &str| {
-        let bytes = Message::new(text).expect("valid").to_bytes();
-        rig.machine
-            .handle_port1(&bytes, rig.now)
-            .iter()
-            .map(|m| m.command().to_owned())
-            .collect::<Vec<_>>()
-    };
-    assert_eq!(reply(&mut rig, "C5SP"), vec!["A4E01"]);
-    assert_eq!(reply(&mut rig, "C2HB00AB"), vec!["A4E00"]);
+    assert_eq!(rig.replies_to("C5SP"), vec!["A4E01"]);
+    assert_eq!(rig.replies_to("C2HB00AB"), vec!["A4E00"]);
     assert!(rig.events().is_empty(), "no R1HB for a bad keep-alive");
 }
 
 #[test]
 fn a_command_in_the_middle_of_an_exchange_gets_a4e00() {
     let mut rig = Rig::remote();
-    let send = |rig: &mut Rig, text: &str| {
-        let bytes = Message::new(text).expect("valid").to_bytes();
-        rig.machine
-            .handle_port1(&bytes, rig.now)
-            .iter()
-            .map(|m| m.command().to_owned())
-            .collect::<Vec<_>>()
-    };
-    assert_eq!(send(&mut rig, "C1RP"), vec!["D0"]);
-    assert_eq!(send(&mut rig, "C2ST"), vec!["A4E00"]);
+    assert_eq!(rig.replies_to("C1RP"), vec!["D0"]);
+    assert_eq!(rig.replies_to("C2ST"), vec!["A4E00"]);
     assert_eq!(
-        send(&mut rig, "C2ST"),
+        rig.replies_to("C2ST"),
         vec!["D1"],
         "the abandoned exchange is gone"
     );
