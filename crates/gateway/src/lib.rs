@@ -11,13 +11,15 @@
 //! ```
 //!
 //! - [`serve`] / [`Gateway`]: the whole thing, from [`ServeOptions`] to a graceful stop.
-//! - [`config`]: the TOML configuration, [`check_config`] and [`EXAMPLE_CONFIG`].
-//! - [`driver`]: one small module per protocol maps a device onto points: JBC,
+//! - [`config`]: the cell's TOML configuration, [`check_config`] and [`EXAMPLE_CONFIG`];
+//!   interfaces and device kinds read their own tables and keys.
+//! - [`driver`]: the device kinds, one module each, mapping a device onto points: JBC,
 //!   Thermosald (several regulators on one line), CROSS (JBUS) and Panasonic (a TCP
 //!   machine whose client keeps its own connections and whose R messages become events)
 //!   and generic Modbus (registers named in the config).
-//!   Adding one: a module implementing [`driver::Driver`], a [`driver::Protocol`] variant
-//!   and a `start_*` function in [`demo`].
+//! - [`northbound`]: the interfaces (MQTT, OPC UA) behind [`northbound::Northbound`].
+//! - [`plugins`]: the registry naming every device kind and interface; DESIGN.md, "Adding
+//!   a device kind" and "Adding an interface", has the steps.
 //! - [`scheduler`]: one task per line, strict serialisation, exponential backoff of silent
 //!   devices with prompt promotion, line reopening.
 //! - [`cell`]: the live state (values with time and quality), the change stream.
