@@ -426,6 +426,52 @@ pub struct WriteOutcome {
     pub new: Value,
 }
 
+/// A write that passed the gate's check ([`Cell::check_write`]): its point, found once,
+/// and its value as it will be sent (labels turned into numbers, whole for an integer
+/// point). Only the check makes one.
+#[derive(Debug, Clone)]
+pub struct CheckedWrite {
+    device: Arc<DeviceEntry>,
+    index: usize,
+    value: Value,
+}
+
+impl CheckedWrite {
+    /// The point.
+    pub fn point(&self) -> &PointId {
+        &self.spec().id
+    }
+
+    /// The point's spec.
+    pub fn spec(&self) -> &PointSpec {
+        &self.device.points[self.index]
+    }
+
+    /// The value as it will be sent.
+    pub fn value(&self) -> &Value {
+        &self.value
+    }
+
+    /// The device's line.
+    pub fn line(&self) -> &str {
+        &self.device.line
+    }
+
+    /// The device.
+    pub fn device(&self) -> &DeviceId {
+        &self.device.id
+    }
+
+    /// The point's value as last read.
+    pub fn old(&self) -> Option<Value> {
+        self.device
+            .read()
+            .points
+            .get(self.index)
+            .and_then(|p| p.value.clone())
+    }
+}
+
 /// Opens a configured line: by its endpoint URL, or, for a protocol whose client keeps
 /// its own connections ([`DeviceKind::owns_connections`](crate::driver::DeviceKind::owns_connections)), not at all: the line task then
 /// gets a line that carries nothing and only schedules the device's polls.
@@ -674,21 +720,32 @@ impl Cell {
         let _ = self.live.send(message);
     }
 
-    /// Checks `value` against the point's spec and has the line's task write it (between
-    /// two polls of that line).
-    pub async fn write(&self, point: &PointId, value: &Value) -> Result<WriteOutcome, WriteError> {
+    /// The write gate's check, the only one before the wire: looks `point` up once and
+    /// checks `value` against its spec ([`PointSpec::check_write`]). The checked write
+    /// carries what [`Cell::write_checked`] needs, so nothing is looked up or checked again.
+    /// Every interface writes through [`crate::write::Attempt`], which calls both.
+    pub fn check_write(&self, point: &PointId, value: &Value) -> Result<CheckedWrite, WriteError> {
         let unknown = || WriteError::UnknownPoint {
             point: point.clone(),
         };
         let device = self.device_entry(point.device()).ok_or_else(unknown)?;
         let index = device.point_index(point.name()).ok_or_else(unknown)?;
         let spec = device.points.get(index).ok_or_else(unknown)?;
-        let checked = spec.check_write(value)?;
-        let old = device
-            .read()
-            .points
-            .get(index)
-            .and_then(|p| p.value.clone());
+        let value = spec.check_write(value)?;
+        Ok(CheckedWrite {
+            device: Arc::clone(device),
+            index,
+            value,
+        })
+    }
+
+    /// Has the line's task write a checked write (between two polls of that line).
+    pub(crate) async fn write_checked(
+        &self,
+        write: &CheckedWrite,
+    ) -> Result<WriteOutcome, WriteError> {
+        let device = &write.device;
+        let old = write.old();
         let (reply, answer) = oneshot::channel();
         let not_running = || WriteError::NotRunning {
             line: device.line.clone(),
@@ -697,14 +754,28 @@ impl Cell {
             .writes
             .send(WriteRequest {
                 device: device.id.clone(),
-                point: index,
-                value: checked.clone(),
+                point: write.index,
+                value: write.value.clone(),
                 reply,
             })
             .await
             .map_err(|_| not_running())?;
         answer.await.map_err(|_| not_running())??;
-        Ok(WriteOutcome { old, new: checked })
+        Ok(WriteOutcome {
+            old,
+            new: write.value.clone(),
+        })
+    }
+
+    /// Checks and writes, unaudited: for the scheduler's tests.
+    #[cfg(test)]
+    pub(crate) async fn write(
+        &self,
+        point: &PointId,
+        value: &Value,
+    ) -> Result<WriteOutcome, WriteError> {
+        let write = self.check_write(point, value)?;
+        self.write_checked(&write).await
     }
 
     /// Emits the event for a line that could not be opened or failed.

@@ -16,7 +16,7 @@
 
 use std::sync::Arc;
 
-use crate::cell::Cell;
+use crate::cell::{Cell, CheckedWrite};
 use crate::driver::{ErrorKind, WriteError};
 use crate::event::{Event, EventKind};
 use crate::point::{PointId, Value};
@@ -144,37 +144,54 @@ impl Attempt {
         self.record(AuditResult::Refused, old, detail).await;
     }
 
-    /// Checks `value` against the point's spec (a refusal is recorded and returned), then
-    /// records the attempt, writes, and records how it ended. Run it in a task of its own
+    /// The gate's check ([`Cell::check_write`]: the point looked up once, the value checked
+    /// once against its spec); a refusal is recorded and returned. The point's rows name it
+    /// by its full id from now on.
+    pub async fn check(
+        &mut self,
+        point: &PointId,
+        value: &Value,
+    ) -> Result<CheckedWrite, WriteError> {
+        self.names(point);
+        match self.cell.check_write(point, value) {
+            Ok(write) => Ok(write),
+            Err(error) => {
+                // A value outside the point's range never reaches the wire, nor an
+                // `attempted` row.
+                let old = self
+                    .cell
+                    .device_entry(point.device())
+                    .and_then(|d| d.point_index(point.name()).map(|i| (d, i)))
+                    .and_then(|(d, i)| d.read().points.get(i).and_then(|p| p.value.clone()));
+                self.refuse(&error.to_string(), old).await;
+                Err(error)
+            }
+        }
+    }
+
+    /// [`Attempt::check`], then [`Attempt::carry_out_checked`]. Run it in a task of its own
     /// when the caller may leave before the answer: the write and its record then run to
     /// the end.
     pub async fn carry_out(mut self, point: PointId, value: Value) -> Result<Accepted, WriteError> {
+        let write = self.check(&point, &value).await?;
+        self.carry_out_checked(write).await
+    }
+
+    /// Records the attempt, has the line's task write, and records how it ended: the one
+    /// way a write reaches a device.
+    pub async fn carry_out_checked(mut self, write: CheckedWrite) -> Result<Accepted, WriteError> {
+        let point = write.point().clone();
         self.names(&point);
-        let old = self
-            .cell
-            .device_entry(point.device())
-            .and_then(|d| d.point_index(point.name()).map(|i| (d, i)))
-            .and_then(|(d, i)| d.read().points.get(i).and_then(|p| p.value.clone()));
-        let Some(spec) = self.cell.point(&point) else {
-            let error = WriteError::UnknownPoint { point };
-            self.refuse(&error.to_string(), None).await;
-            return Err(error);
-        };
-        // A value outside the point's range never reaches the wire, nor an `attempted` row.
-        if let Err(e) = spec.check_write(&value) {
-            let error = WriteError::Invalid(e);
-            self.refuse(&error.to_string(), old).await;
-            return Err(error);
-        }
-        let asked = format!("{point} to be set to {value} by {}", self.client);
+        let old = write.old();
+        let asked = format!("{point} to be set to {} by {}", write.value(), self.client);
         self.record(AuditResult::Attempted, old.clone(), &asked)
             .await;
-        match self.cell.write(&point, &value).await {
+        match self.cell.write_checked(&write).await {
             Ok(outcome) => {
-                let spec = self.cell.point(&point);
+                let spec = write.spec();
                 let shown = |v: &Value| {
-                    let label = spec.and_then(|p| p.label(v)).map(str::to_owned);
-                    let unit = spec.and_then(|p| p.unit.clone());
+                    let label = spec.label(v).map(str::to_owned);
+                    let unit = spec.unit.clone();
                     label.unwrap_or_else(|| match unit {
                         Some(u) => format!("{v} {u}"),
                         None => v.to_string(),
@@ -194,12 +211,11 @@ impl Attempt {
                 // committed before the caller hears the answer.
                 self.record(AuditResult::Accepted, outcome.old.clone(), &detail)
                     .await;
-                let device = self.cell.device_entry(point.device());
                 self.cell.emit(Event {
                     t: Timestamp::now(),
                     kind: EventKind::Write,
-                    line: device.map(|d| d.line.clone()),
-                    device: device.map(|d| d.id.clone()),
+                    line: Some(write.line().to_owned()),
+                    device: Some(write.device().clone()),
                     point: Some(point.clone()),
                     message: detail.clone(),
                     fields: crate::event::fields([

@@ -40,7 +40,8 @@ use tokio::sync::{broadcast, mpsc};
 use super::forward::Backlog;
 use super::primary::{OFFLINE_GRACE, PrimaryHost, STATE_SKEW_MS, Verdict};
 use super::{Connection, End, Link, Mode, Outgoing, Step};
-use crate::cell::{Cell, DeviceStatus, DeviceSummary, LiveMessage};
+use crate::cell::{Cell, CheckedWrite, DeviceStatus, DeviceSummary, LiveMessage};
+use crate::driver::WriteError;
 use crate::event::Event;
 use crate::northbound::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
 use crate::point::{DeviceId, PointId, Value};
@@ -115,8 +116,7 @@ struct CheckedCommand {
 /// One write of a checked DCMD.
 struct Write {
     attempt: Attempt,
-    point: PointId,
-    value: Value,
+    write: CheckedWrite,
 }
 
 impl CheckedCommand {
@@ -125,8 +125,8 @@ impl CheckedCommand {
     async fn carry_out(self) {
         let mut writes = self.writes.into_iter();
         while let Some(write) = writes.next() {
-            let point = write.point.clone();
-            match write.attempt.carry_out(write.point, write.value).await {
+            let point = write.write.point().clone();
+            match write.attempt.carry_out_checked(write.write).await {
                 Ok(done) => tracing::info!("MQTT: {}", done.detail),
                 Err(e) => {
                     tracing::warn!("MQTT: DCMD write of {point} failed: {e}");
@@ -889,15 +889,15 @@ impl Node {
                     json,
                 ));
             }
-            let found = PointId::new(&device_id, metric.as_str())
-                .ok()
-                .and_then(|p| self.cell.point(&p).map(|spec| (p, spec)));
-            let Some((point, spec)) = found else {
-                return Err(refusal(format!("no such point {device}.{metric}"), json));
+            let no_such = || format!("no such point {device}.{metric}");
+            let Ok(point) = PointId::new(&device_id, metric.as_str()) else {
+                return Err(refusal(no_such(), json));
             };
-            if let Err(e) = spec.check_write(&value) {
-                return Err(refusal(e.to_string(), json));
-            }
+            let write = match self.cell.check_write(&point, &value) {
+                Ok(write) => write,
+                Err(WriteError::UnknownPoint { .. }) => return Err(refusal(no_such(), json)),
+                Err(e) => return Err(refusal(e.to_string(), json)),
+            };
             let attempt = Attempt::new(
                 Arc::clone(&self.cell),
                 format!("mqtt {topic}"),
@@ -905,11 +905,7 @@ impl Node {
                 metric.as_str(),
                 json,
             );
-            checked.push(Write {
-                attempt,
-                point,
-                value,
-            });
+            checked.push(Write { attempt, write });
         }
         Ok(CheckedCommand { writes: checked })
     }
