@@ -174,3 +174,60 @@ fn check_buckets(from: Timestamp, to: Timestamp, step: Duration) -> ApiResult<()
 fn round_up_to_second(d: Duration) -> Duration {
     Duration::from_secs(d.as_secs() + u64::from(d.subsec_nanos() > 0)).max(Duration::from_secs(1))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const NOW: Timestamp = Timestamp(1_800_000_000_000);
+
+    fn query(from: Option<&str>, to: Option<&str>, step: Option<&str>) -> HistoryQuery {
+        HistoryQuery {
+            point: Some("jbc1.air_temperature".into()),
+            from: from.map(str::to_owned),
+            to: to.map(str::to_owned),
+            step: step.map(str::to_owned),
+        }
+    }
+
+    #[test]
+    fn a_range_defaults_to_the_last_hour_and_must_run_forward() {
+        let range = history_range(&query(None, None, None), NOW).unwrap();
+        assert_eq!(
+            (range.from, range.to, range.step),
+            (NOW.minus(DEFAULT_HISTORY), NOW, None)
+        );
+        let range = history_range(&query(Some("-2h"), Some("-1h"), Some("1m")), NOW).unwrap();
+        assert_eq!(range.step, Some(Duration::from_secs(60)));
+        let err = history_range(&query(Some("now"), Some("-1h"), None), NOW).unwrap_err();
+        assert_eq!(err.status, axum::http::StatusCode::BAD_REQUEST);
+        assert!(err.message.contains("must be before to"), "{}", err.message);
+    }
+
+    #[test]
+    fn too_many_buckets_are_refused_naming_the_smallest_step_that_would_do() {
+        let err = history_range(&query(Some("-1d"), None, Some("1s")), NOW).unwrap_err();
+        assert!(err.message.contains("86400 buckets"), "{}", err.message);
+        assert!(
+            err.message.contains("use a step of 9s or more"),
+            "{}",
+            err.message
+        );
+        let err = parse_step("0s").unwrap_err();
+        assert_eq!(err.message, "step must be at least 1ms");
+    }
+
+    #[test]
+    fn limits_and_byte_bounds_keep_listings_small_but_never_empty() {
+        assert_eq!(check_limit(None), Ok(100));
+        assert_eq!(check_limit(Some(MAX_LIMIT)), Ok(MAX_LIMIT));
+        assert!(check_limit(Some(0)).is_err());
+        assert!(check_limit(Some(MAX_LIMIT + 1)).is_err());
+        let rows = || (0..3).map(|n| serde_json::json!({ "n": n }));
+        assert_eq!(
+            bounded_by_bytes(rows(), 1),
+            (vec![serde_json::json!({"n": 0})], true)
+        );
+        assert_eq!(bounded_by_bytes(rows(), 1000).0.len(), 3);
+    }
+}
