@@ -33,14 +33,13 @@ fn a_code_for_port_three_is_refused_with_a_suggestion() {
         }
     );
     assert!(err.to_string().contains("only port 1"), "{err}");
-    assert!(matches!(
-        "PP3".parse::<Code>(),
-        Err(CodeError::NoSuchPort { .. })
-    ));
-    assert!(matches!(
-        "A21".parse::<Code>(),
-        Err(CodeError::NoSuchPort { .. })
-    ));
+    for text in ["PP3", "A21"] {
+        let parsed = text.parse::<Code>();
+        assert!(
+            matches!(parsed, Err(CodeError::NoSuchPort { .. })),
+            "{text}: {parsed:?}"
+        );
+    }
 }
 
 #[test]
@@ -75,19 +74,13 @@ fn unknown_codes_name_the_text_and_list_the_known_ones() {
         text.contains("ST1") && text.contains("A12") && text.contains("SC1"),
         "{text}"
     );
-    assert!(matches!(
-        "RST1".parse::<Code>(),
-        Err(CodeError::Unknown { .. })
-    ));
-    assert!(matches!("".parse::<Code>(), Err(CodeError::Unknown { .. })));
-    assert!(matches!(
-        "STX".parse::<Code>(),
-        Err(CodeError::Unknown { .. })
-    ));
-    assert!(matches!(
-        "é1".parse::<Code>(),
-        Err(CodeError::Unknown { .. })
-    ));
+    for text in ["RST1", "", "STX", "é1"] {
+        let parsed = text.parse::<Code>();
+        assert!(
+            matches!(parsed, Err(CodeError::Unknown { .. })),
+            "{text:?}: {parsed:?}"
+        );
+    }
 }
 
 #[test]
