@@ -142,15 +142,7 @@ fn the_form_without_addresses_works_end_to_end() {
 
 #[test]
 fn the_client_recovers_through_injected_line_faults() {
-    let sim = Sim::start(&[
-        "jbc",
-        "--listen",
-        "127.0.0.1:0",
-        "--fault-rate",
-        "0.3",
-        "--seed",
-        "11",
-    ]);
+    let sim = Sim::start_faulty("jbc", "11");
     // Late replies are up to 2 s late: keep the timeout short so a late one costs one retry.
     for _ in 0..5 {
         let out = jbc(

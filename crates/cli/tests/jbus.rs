@@ -571,15 +571,7 @@ fn bad_arguments_exit_2_before_touching_the_line() {
 
 #[test]
 fn the_client_recovers_through_injected_line_faults() {
-    let sim = Sim::start(&[
-        "cross",
-        "--listen",
-        "127.0.0.1:0",
-        "--fault-rate",
-        "0.3",
-        "--seed",
-        "11",
-    ]);
+    let sim = Sim::start_faulty("cross", "11");
     // Late replies are up to 2 s late: keep the timeout short so a late one costs one retry.
     for _ in 0..3 {
         let out = cross(

@@ -137,43 +137,32 @@ fn serve_refuses_a_retention_that_would_delete_the_history_at_once() {
 fn serve_refuses_a_token_no_client_could_send_and_writes_without_one_as_usage_errors() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().to_str().unwrap();
-    let out = common::cellbus()
-        .args(["serve", "--listen", "127.0.0.1:0", "--data", data])
-        .env("CELLBUS_TOKEN", "pässwörd")
-        .env_remove("CELLBUS_READ_TOKEN")
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    // `cellbus serve ARGS…` with `token` as CELLBUS_TOKEN (none if None): a usage error.
+    let refused = |args: &[&str], token: Option<&str>| {
+        let mut serve = common::cellbus();
+        serve
+            .args(["serve", "--listen", "127.0.0.1:0", "--data", data])
+            .args(args)
+            .env_remove("CELLBUS_READ_TOKEN");
+        match token {
+            Some(token) => serve.env("CELLBUS_TOKEN", token),
+            None => serve.env_remove("CELLBUS_TOKEN"),
+        };
+        let out = serve.output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+        out
+    };
+    let out = refused(&[], Some("pässwörd"));
     assert!(
         stderr(&out).contains("the write token cannot be used: character 2 is not visible ASCII")
             && !stderr(&out).contains('ä'),
         "{}",
         stderr(&out)
     );
-    let out = common::cellbus()
-        .args([
-            "serve",
-            "--listen",
-            "127.0.0.1:0",
-            "--data",
-            data,
-            "--allow-writes",
-        ])
-        .env_remove("CELLBUS_TOKEN")
-        .env_remove("CELLBUS_READ_TOKEN")
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let out = refused(&["--allow-writes"], None);
     assert_stderr_has(&out, "--allow-writes needs a token");
     // A read token that is the write token would let every reader write.
-    let out = common::cellbus()
-        .args(["serve", "--listen", "127.0.0.1:0", "--data", data])
-        .args(["--read-token", "s3cret"])
-        .env("CELLBUS_TOKEN", "s3cret")
-        .env_remove("CELLBUS_READ_TOKEN")
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let out = refused(&["--read-token", "s3cret"], Some("s3cret"));
     assert!(
         stderr(&out).contains("the read token is the write token")
             && !stderr(&out).contains("s3cret"),

@@ -604,15 +604,7 @@ fn decode_annotates_text_and_hex_and_marks_damaged_messages() {
 
 #[test]
 fn the_client_recovers_through_injected_line_faults() {
-    let sim = Sim::start(&[
-        "thermosald",
-        "--listen",
-        "127.0.0.1:0",
-        "--fault-rate",
-        "0.3",
-        "--seed",
-        "7",
-    ]);
+    let sim = Sim::start_faulty("thermosald", "7");
     for _ in 0..4 {
         let out = thermosald(
             &sim,

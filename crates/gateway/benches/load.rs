@@ -401,24 +401,17 @@ impl Args {
         };
         let mut it = raw.iter();
         while let Some(flag) = it.next() {
-            if flag == "--mqtt" {
-                args.mqtt = true;
-                continue;
-            }
-            if flag == "--opcua" {
-                args.opcua = true;
-                continue;
-            }
-            if flag == "--no-scrapes" {
-                args.scrapes = false;
-                continue;
-            }
-            if flag == "--serial" {
-                args.serial = true;
-                continue;
-            }
-            if flag == "--bare" {
-                args.bare = true;
+            // The switches, which take no value.
+            let switch = match flag.as_str() {
+                "--mqtt" => Some((&mut args.mqtt, true)),
+                "--opcua" => Some((&mut args.opcua, true)),
+                "--no-scrapes" => Some((&mut args.scrapes, false)),
+                "--serial" => Some((&mut args.serial, true)),
+                "--bare" => Some((&mut args.bare, true)),
+                _ => None,
+            };
+            if let Some((field, value)) = switch {
+                *field = value;
                 continue;
             }
             let value = it

@@ -13,7 +13,7 @@ use rcgen::{
     BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose, IsCa,
     KeyPair, KeyUsagePurpose,
 };
-use testkit::{Mosquitto, Subscriber, TlsFiles};
+use testkit::{Mosquitto, SparkplugMessage, Subscriber, TlsFiles};
 
 mod running;
 use running::{LIMIT, Running};
@@ -125,6 +125,19 @@ async fn start(dir: &Path, mqtt: &str) -> Running {
     .await
 }
 
+/// The gateway's CA, `cellbus test CA`, written to `dir` as `ca.pem`, what `ca_file`
+/// names.
+fn our_ca(dir: &Path) -> Ca {
+    let ca = Ca::new("cellbus test CA");
+    ca.write(dir, "ca");
+    ca
+}
+
+/// The next NBIRTH `node` sees (`what` names it if none comes).
+async fn next_nbirth(node: &mut Subscriber, what: &str) -> SparkplugMessage {
+    node.next_where(what, LIMIT, |m| m.kind() == "NBIRTH").await
+}
+
 /// The refusal reported in the cell's MQTT state, once there is one.
 async fn refusal(gateway: &Running) -> String {
     gateway
@@ -164,15 +177,12 @@ async fn handshake_refusal(gateway: &Running, broker: &Mosquitto) -> String {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_gateway_publishes_its_births_over_mqtts_trusting_the_given_ca_file() {
     let dir = tempfile::tempdir().unwrap();
-    let ca = Ca::new("cellbus test CA");
-    ca.write(dir.path(), "ca");
+    let ca = our_ca(dir.path());
     let (broker, _files) = broker(dir.path(), &ca, &ca, false);
     let mut node = Subscriber::start(broker.port(), NODE).await;
     let gateway = start_over_tls(dir.path(), &broker, "").await;
 
-    let birth = node
-        .next_where("an NBIRTH over TLS", LIMIT, |m| m.kind() == "NBIRTH")
-        .await;
+    let birth = next_nbirth(&mut node, "an NBIRTH over TLS").await;
     assert!(birth.bd_seq().is_some());
     gateway
         .wait_for_link("connected", |l| matches!(l, Some(MqttLink::Connected)))
@@ -183,8 +193,7 @@ async fn the_gateway_publishes_its_births_over_mqtts_trusting_the_given_ca_file(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_broker_the_ca_file_does_not_vouch_for_is_refused_clearly_and_the_gateway_keeps_trying() {
     let dir = tempfile::tempdir().unwrap();
-    let ours = Ca::new("cellbus test CA");
-    ours.write(dir.path(), "ca");
+    let ours = our_ca(dir.path());
     let strangers = Ca::new("someone else's CA");
     let (mut broker, _files) = broker(dir.path(), &strangers, &strangers, false);
     let mut node = Subscriber::start(broker.port(), NODE).await;
@@ -197,18 +206,14 @@ async fn a_broker_the_ca_file_does_not_vouch_for_is_refused_clearly_and_the_gate
     // The same broker with a certificate our CA signed: the gateway, still trying, gets in.
     ours.broker(dir.path());
     broker.restart();
-    node.next_where("an NBIRTH once the broker is vouched for", LIMIT, |m| {
-        m.kind() == "NBIRTH"
-    })
-    .await;
+    next_nbirth(&mut node, "an NBIRTH once the broker is vouched for").await;
     gateway.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_broker_that_wants_a_client_certificate_takes_the_gateways_client_cert() {
     let dir = tempfile::tempdir().unwrap();
-    let ca = Ca::new("cellbus test CA");
-    ca.write(dir.path(), "ca");
+    let ca = our_ca(dir.path());
     ca.sign(
         dir.path(),
         "gateway",
@@ -224,18 +229,14 @@ async fn a_broker_that_wants_a_client_certificate_takes_the_gateways_client_cert
     )
     .await;
 
-    node.next_where("an NBIRTH with a client certificate", LIMIT, |m| {
-        m.kind() == "NBIRTH"
-    })
-    .await;
+    next_nbirth(&mut node, "an NBIRTH with a client certificate").await;
     gateway.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_broker_that_wants_a_client_certificate_refuses_a_gateway_without_one_clearly() {
     let dir = tempfile::tempdir().unwrap();
-    let ca = Ca::new("cellbus test CA");
-    ca.write(dir.path(), "ca");
+    let ca = our_ca(dir.path());
     let (broker, _files) = broker(dir.path(), &ca, &ca, true);
     let gateway = start_over_tls(dir.path(), &broker, "").await;
 

@@ -3,7 +3,8 @@
 
 use std::hint::black_box;
 
-use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, Criterion, Throughput, criterion_group, criterion_main};
 use jbus::rtu::{
     Addressed, RegisterValues, Request, RequestAdu, RequestCodec, Response, ResponseAdu,
     ResponseCodec, UnitId,
@@ -31,33 +32,43 @@ fn codec(c: &mut Criterion) {
     let mut group = c.benchmark_group("rtu_125_registers");
     group.throughput(Throughput::Elements(1));
 
-    let frame = response();
     let mut buf = Vec::with_capacity(260);
-    group.bench_function("response_encode_decode", |b| {
-        b.iter(|| {
-            buf.clear();
-            ResponseCodec.encode(black_box(&frame), &mut buf);
-            let decoded = ResponseCodec
-                .decode(black_box(&buf))
-                .expect("valid")
-                .expect("whole");
-            black_box(decoded)
-        })
-    });
-
-    let frame = request();
-    group.bench_function("request_encode_decode", |b| {
-        b.iter(|| {
-            buf.clear();
-            RequestCodec.encode(black_box(&frame), &mut buf);
-            let decoded = RequestCodec
-                .decode(black_box(&buf))
-                .expect("valid")
-                .expect("whole");
-            black_box(decoded)
-        })
-    });
+    encode_decode(
+        &mut group,
+        "response_encode_decode",
+        ResponseCodec,
+        response(),
+        &mut buf,
+    );
+    encode_decode(
+        &mut group,
+        "request_encode_decode",
+        RequestCodec,
+        request(),
+        &mut buf,
+    );
     group.finish();
+}
+
+/// Benches encoding `frame` with `codec` into `buf` and decoding it back.
+fn encode_decode<C: Codec<Error: std::fmt::Debug>>(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    name: &str,
+    codec: C,
+    frame: C::Frame,
+    buf: &mut Vec<u8>,
+) {
+    group.bench_function(name, |b| {
+        b.iter(|| {
+            buf.clear();
+            codec.encode(black_box(&frame), buf);
+            let decoded = codec
+                .decode(black_box(buf.as_slice()))
+                .expect("valid")
+                .expect("whole");
+            black_box(decoded)
+        })
+    });
 }
 
 criterion_group!(benches, codec);

@@ -39,14 +39,7 @@ const UNIT: u8 = 2;
 const SEED: u64 = 1;
 
 fn main() {
-    let seconds = std::env::var("POLL_SECONDS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(if std::env::args().any(|a| a == "--bench") {
-            8u64
-        } else {
-            1
-        });
+    let seconds = testkit::bench_seconds("POLL_SECONDS", 8);
     let unit = UnitId::jbus(UNIT).expect("2 is a unit number");
     let plan = read_requests();
 

@@ -26,6 +26,16 @@ fn options() -> impl Strategy<Value = PlanOptions> {
         )
 }
 
+/// The default options, but reads of at most `max` registers (1–125) that never bridge
+/// a gap.
+fn without_gaps(max: u16) -> PlanOptions {
+    PlanOptions {
+        max_registers: ReadRegisterCount::new(max).expect("1 to 125 registers"),
+        register_gap: 0,
+        ..PlanOptions::default()
+    }
+}
+
 fn table() -> impl Strategy<Value = Table> {
     prop::sample::select(Table::ALL.to_vec())
 }
@@ -161,11 +171,7 @@ proptest! {
     ) {
         // Runs of single registers separated by holes of 1–5: with gap 0 each run is read
         // in ceil(run / max) reads.
-        let options = PlanOptions {
-            max_registers: ReadRegisterCount::new(max).expect("1-20"),
-            register_gap: 0,
-            ..PlanOptions::default()
-        };
+        let options = without_gaps(max);
         let mut items = Vec::new();
         let mut address = 0u16;
         let mut expected = 0;
@@ -184,11 +190,7 @@ proptest! {
         max in 1u16..=30,
         lengths in prop::collection::vec((1u16..=30, 0u16..=2), 1..30),
     ) {
-        let options = PlanOptions {
-            max_registers: ReadRegisterCount::new(max).expect("1-30"),
-            register_gap: 0,
-            ..PlanOptions::default()
-        };
+        let options = without_gaps(max);
         let mut items = Vec::new();
         let mut address = 0u16;
         for (length, hole) in lengths {

@@ -72,27 +72,31 @@ struct PortState {
     cuts: u64,
 }
 
+/// One `T` for each port.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-struct Faults {
-    command: PortState,
-    event: PortState,
+struct PerPort<T> {
+    command: T,
+    event: T,
 }
 
-impl Faults {
-    fn port(&self, port: Port) -> PortState {
+impl<T: Copy> PerPort<T> {
+    fn port(&self, port: Port) -> T {
         match port {
             Port::Command => self.command,
             Port::Event => self.event,
         }
     }
 
-    fn port_mut(&mut self, port: Port) -> &mut PortState {
+    fn port_mut(&mut self, port: Port) -> &mut T {
         match port {
             Port::Command => &mut self.command,
             Port::Event => &mut self.event,
         }
     }
 }
+
+/// Each port's fault.
+type Faults = PerPort<PortState>;
 
 /// What the server's tasks and the control handles share.
 struct Shared {
@@ -105,27 +109,7 @@ struct Shared {
 }
 
 /// Which ports have a host connection the server has accepted.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-struct Hosts {
-    command: bool,
-    event: bool,
-}
-
-impl Hosts {
-    fn port(&self, port: Port) -> bool {
-        match port {
-            Port::Command => self.command,
-            Port::Event => self.event,
-        }
-    }
-
-    fn port_mut(&mut self, port: Port) -> &mut bool {
-        match port {
-            Port::Command => &mut self.command,
-            Port::Event => &mut self.event,
-        }
-    }
-}
+type Hosts = PerPort<bool>;
 
 impl Shared {
     fn new(machine: Machine) -> Shared {

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{T0, air_temp, at, connected, event_metric, heater_on, id, name};
+use common::{T0, air_temp, at, connected, connected_with, event_metric, heater_on, id, name};
 use prost::Message as _;
 use sparkplug::node::{BD_SEQ, HOST_OFFLINE, REBIRTH};
 use sparkplug::proto::{Metric, Payload, metric::Value};
@@ -132,8 +132,7 @@ fn bd_seq_wraps_from_255_to_0() {
 
 #[test]
 fn the_nbirth_has_node_control_rebirth_false_and_writable() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     let birth = decode(&node.node_birth(&[], T0).unwrap());
     let rebirth = by_name(&birth, REBIRTH);
     assert_eq!(rebirth.datatype, Some(DataType::Boolean.code()));
@@ -189,8 +188,7 @@ fn a_rebirth_starts_seq_again_at_zero() {
 
 #[test]
 fn a_dbirth_describes_every_metric_with_unit_description_and_write_range() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     node.node_birth(&[], T0).unwrap();
     let birth = node.device_birth(&id("jbc"), &station(), T0).unwrap();
     assert_eq!(birth.topic.to_string(), "spBv1.0/cell/DBIRTH/gw1/jbc");
@@ -208,8 +206,7 @@ fn a_dbirth_describes_every_metric_with_unit_description_and_write_range() {
 
 #[test]
 fn ddata_uses_aliases_only_and_only_changed_metrics() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     node.node_birth(&[], T0).unwrap();
     let dbirth = decode(&node.device_birth(&id("jbc"), &station(), T0).unwrap());
     let changes = [
@@ -306,8 +303,7 @@ fn a_bad_reading_goes_as_null_with_quality_0_and_recovery_says_192() {
 
 #[test]
 fn a_birth_of_a_stale_metric_says_null_and_stale() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     node.node_birth(&[], T0).unwrap();
     let metrics = [(
         MetricSpec::new(name("v"), DataType::Float),
@@ -440,8 +436,7 @@ fn an_unknown_metric_in_data_is_refused_by_name() {
 
 #[test]
 fn node_metrics_may_not_use_the_reserved_names() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     let metrics = [(
         MetricSpec::new(name(BD_SEQ), DataType::Int64),
         Sample::good(MetricValue::Int64(0), T0),
@@ -454,41 +449,42 @@ fn node_metrics_may_not_use_the_reserved_names() {
 
 #[test]
 fn an_ncmd_setting_rebirth_true_asks_for_a_rebirth_by_name_or_alias() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     let birth = decode(&node.node_birth(&[], T0).unwrap());
     let topic = "spBv1.0/cell/NCMD/gw1";
-    let by_name = dcmd(vec![Metric {
+    let by_name = Metric {
         name: Some(REBIRTH.into()),
         datatype: Some(DataType::Boolean.code()),
         value: Some(Value::BooleanValue(true)),
         ..Metric::default()
-    }]);
-    assert_eq!(
-        node.handle_command(topic, &by_name),
-        Ok(vec![Command::Rebirth])
-    );
-    let by_alias = dcmd(vec![Metric {
+    };
+    let by_alias = Metric {
         alias: Some(alias_of(&birth, REBIRTH)),
         value: Some(Value::BooleanValue(true)),
         ..Metric::default()
-    }]);
-    assert_eq!(
-        node.handle_command(topic, &by_alias),
-        Ok(vec![Command::Rebirth])
-    );
-    let no = dcmd(vec![Metric {
+    };
+    let no = Metric {
         name: Some(REBIRTH.into()),
         value: Some(Value::BooleanValue(false)),
         ..Metric::default()
-    }]);
-    assert_eq!(node.handle_command(topic, &no), Ok(vec![]));
+    };
+    for (metric, commands) in [
+        (by_name, vec![Command::Rebirth]),
+        (by_alias, vec![Command::Rebirth]),
+        (no, vec![]),
+    ] {
+        let payload = dcmd(vec![metric.clone()]);
+        assert_eq!(
+            node.handle_command(topic, &payload),
+            Ok(commands),
+            "{metric:?}"
+        );
+    }
 }
 
 #[test]
 fn a_dcmd_by_alias_is_a_write_of_the_named_metric() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     node.node_birth(&[], T0).unwrap();
     let birth = decode(&node.device_birth(&id("jbc"), &station(), T0).unwrap());
     let payload = dcmd(vec![Metric {
@@ -674,8 +670,7 @@ fn a_command_of_garbage_bytes_is_an_error() {
 
 #[test]
 fn an_ncmd_before_the_nbirth_is_refused() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let node = connected_with(0);
     assert_eq!(
         node.handle_command("spBv1.0/cell/NCMD/gw1", &[]),
         Err(CommandError::NodeNotBorn)
@@ -693,8 +688,7 @@ fn the_command_filters_cover_ncmd_and_every_dcmd() {
 
 #[test]
 fn node_metrics_are_born_and_reported_like_device_metrics() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     let uptime = [(
         MetricSpec::new(name("uptime_s"), DataType::UInt64),
         Sample::good(MetricValue::UInt64(1), T0),
@@ -738,8 +732,7 @@ fn device_down_event() -> NodeEvent {
 
 #[test]
 fn an_event_is_an_ndata_of_the_event_metric_by_alias_with_its_properties_and_time() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     let birth = node.node_birth(&[event_metric()], T0).unwrap();
     let event_alias = alias_of(&decode(&birth), sparkplug::event::EVENT);
     assert_eq!(
@@ -782,8 +775,7 @@ fn an_event_is_an_ndata_of_the_event_metric_by_alias_with_its_properties_and_tim
 
 #[test]
 fn an_event_needs_the_event_metric_in_the_nbirth() {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     assert_eq!(
         node.node_event(&device_down_event(), T0),
         Err(NodeError::NodeNotBorn)

@@ -21,6 +21,7 @@
 //!   for client tests.
 //! - [`free_port`]: a loopback port nothing listens on, for a server a test starts or
 //!   for a connection that must be refused.
+//! - [`bench_seconds`]: how long a bench binary runs, short under `cargo test`.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -45,6 +46,20 @@ pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
 #[cfg(feature = "mqtt")]
 pub use sparkplug_sub::{SparkplugMessage, Subscriber, command_payload, rebirth_command};
 pub use tricks::{At, Tap, Trick, Tricky};
+
+/// How many seconds a bench binary that prints its figures runs: the environment
+/// variable `var` if it holds a number, else `benching` under `cargo bench` and 1 (a smoke
+/// run) under `cargo test`.
+pub fn bench_seconds(var: &str, benching: u64) -> u64 {
+    std::env::var(var)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(if std::env::args().any(|a| a == "--bench") {
+            benching
+        } else {
+            1
+        })
+}
 
 /// A free loopback port: nothing listened on it when it was picked.
 pub fn free_port() -> u16 {

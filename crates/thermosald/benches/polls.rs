@@ -57,14 +57,7 @@ enum Transport {
 }
 
 fn main() {
-    let seconds = std::env::var("POLLS_SECONDS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(if std::env::args().any(|a| a == "--bench") {
-            5u64
-        } else {
-            1
-        });
+    let seconds = testkit::bench_seconds("POLLS_SECONDS", 5);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

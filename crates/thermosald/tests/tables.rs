@@ -48,61 +48,33 @@ fn item_names_are_unique_within_a_table() {
 
 #[test]
 fn scaling_follows_the_spec_brackets() {
-    let item = |t: Table, i: u8| t.item(i).expect("exists");
-    // [xx.x]
-    assert_eq!(
-        item(Table::Machine, machine::KINT_GAIN).scale(),
-        Scale::Tenths
-    );
-    assert_eq!(
-        item(Table::Machine, machine::MAXIMUM_SEALING_TIME).scale(),
-        Scale::Tenths
-    );
-    assert_eq!(
-        item(Table::Runtime, runtime::MAXIMUM_CURRENT).scale(),
-        Scale::Tenths
-    );
-    assert_eq!(item(Table::Service, service::WIDTH).scale(), Scale::Tenths);
-    assert_eq!(
-        item(Table::Service, service::DUTY_CYCLE).scale(),
-        Scale::Tenths
-    );
-    // [x.xx]
-    assert_eq!(
-        item(Table::Runtime, runtime::RESISTANCE).scale(),
-        Scale::Hundredths
-    );
-    assert_eq!(
-        item(Table::Service, service::THICKNESS).scale(),
-        Scale::Hundredths
-    );
-    assert_eq!(
-        item(Table::Service, service::THEORETICAL_RESISTANCE).scale(),
-        Scale::Hundredths
-    );
-    assert_eq!(
-        item(Table::Service, service::SET_RESISTANCE).scale(),
-        Scale::Hundredths
-    );
-    // [xxx0]
-    assert_eq!(item(Table::Runtime, runtime::POWER).scale(), Scale::Tens);
-    assert_eq!(
-        item(Table::Service, service::THEORETICAL_POWER).scale(),
-        Scale::Tens
-    );
-    assert_eq!(
-        item(Table::Service, service::SET_POWER).scale(),
-        Scale::Tens
-    );
-    // Labels (x100) and (x 1000) over [xxx].
-    assert_eq!(
-        item(Table::Settings, settings::HEATING_FACTOR).scale(),
-        Scale::Hundredths
-    );
-    assert_eq!(
-        item(Table::Service, service::RESISTIVITY).scale(),
-        Scale::Thousandths
-    );
+    for (table, index, scale) in [
+        // [xx.x]
+        (Table::Machine, machine::KINT_GAIN, Scale::Tenths),
+        (Table::Machine, machine::MAXIMUM_SEALING_TIME, Scale::Tenths),
+        (Table::Runtime, runtime::MAXIMUM_CURRENT, Scale::Tenths),
+        (Table::Service, service::WIDTH, Scale::Tenths),
+        (Table::Service, service::DUTY_CYCLE, Scale::Tenths),
+        // [x.xx]
+        (Table::Runtime, runtime::RESISTANCE, Scale::Hundredths),
+        (Table::Service, service::THICKNESS, Scale::Hundredths),
+        (
+            Table::Service,
+            service::THEORETICAL_RESISTANCE,
+            Scale::Hundredths,
+        ),
+        (Table::Service, service::SET_RESISTANCE, Scale::Hundredths),
+        // [xxx0]
+        (Table::Runtime, runtime::POWER, Scale::Tens),
+        (Table::Service, service::THEORETICAL_POWER, Scale::Tens),
+        (Table::Service, service::SET_POWER, Scale::Tens),
+        // Labels (x100) and (x 1000) over [xxx].
+        (Table::Settings, settings::HEATING_FACTOR, Scale::Hundredths),
+        (Table::Service, service::RESISTIVITY, Scale::Thousandths),
+    ] {
+        let item = table.item(index).expect("exists");
+        assert_eq!(item.scale(), scale, "{table} item {index}");
+    }
 }
 
 #[test]

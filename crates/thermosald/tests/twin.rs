@@ -10,7 +10,7 @@ use thermosald::device::band::TCR_PER_K;
 use thermosald::device::{Phase, RegulatorBus, RegulatorConfig, Status};
 use thermosald::diagnostic::{self, Fault};
 use thermosald::exchange::{Classified, Exchange, ExchangeError};
-use thermosald::frame::Address;
+use thermosald::frame::{Address, Frame};
 use thermosald::request::Write;
 use thermosald::tables::{Table, machine, runtime, service, settings};
 
@@ -42,6 +42,25 @@ fn runtime_raw(line: &mut RegulatorBus, address: u8, now: Instant) -> Vec<u16> {
 
 fn fault(line: &mut RegulatorBus, address: u8, now: Instant) -> u16 {
     runtime_raw(line, address, now)[usize::from(runtime::FAULT)]
+}
+
+/// Regulator 0 gets `fault` at `now`.
+fn provoke(line: &mut RegulatorBus, fault: Fault, now: Instant) {
+    line.regulator_mut(addr(0))
+        .expect("present")
+        .provoke(fault, now);
+}
+
+/// The cause of regulator 0's `fault` is repaired at `now`.
+fn repair(line: &mut RegulatorBus, fault: Fault, now: Instant) {
+    line.regulator_mut(addr(0))
+        .expect("present")
+        .remove_cause(fault, now);
+}
+
+/// Clear faults (command 14) to regulator 0 at `now`; its echo.
+fn clear_faults(line: &mut RegulatorBus, now: Instant) -> Frame {
+    ask(line, b"%014Q000000\n", now)
 }
 
 fn close(actual: f64, expected: f64) -> bool {
@@ -249,9 +268,7 @@ fn run_time_values_follow_the_band_formulas_and_the_service_data() {
 #[test]
 fn an_open_band_is_latched_at_once_and_cleared_only_after_repair() {
     let (mut line, t0) = line_at_0();
-    line.regulator_mut(addr(0))
-        .expect("present")
-        .provoke(Fault::OpenBand, t0 + secs(1.0));
+    provoke(&mut line, Fault::OpenBand, t0 + secs(1.0));
     let open = runtime_raw(&mut line, 0, t0 + secs(1.0));
     assert_eq!(open[usize::from(runtime::FAULT)], Fault::OpenBand.code());
     assert_eq!(open[usize::from(runtime::RESISTANCE)], 999);
@@ -259,19 +276,17 @@ fn an_open_band_is_latched_at_once_and_cleared_only_after_repair() {
     assert_eq!(open[usize::from(runtime::VOLTAGE)], 0);
     // Clear faults is echoed, but the band is still open.
     assert_eq!(
-        ask(&mut line, b"%014Q000000\n", t0 + secs(1.5)).to_bytes(),
+        clear_faults(&mut line, t0 + secs(1.5)).to_bytes(),
         b"%014R000000\n"
     );
     assert_eq!(fault(&mut line, 0, t0 + secs(2.0)), Fault::OpenBand.code());
-    line.regulator_mut(addr(0))
-        .expect("present")
-        .remove_cause(Fault::OpenBand, t0 + secs(2.2));
+    repair(&mut line, Fault::OpenBand, t0 + secs(2.2));
     assert_eq!(
         fault(&mut line, 0, t0 + secs(2.5)),
         Fault::OpenBand.code(),
         "latched until cleared"
     );
-    ask(&mut line, b"%014Q000000\n", t0 + secs(3.0));
+    clear_faults(&mut line, t0 + secs(3.0));
     assert_eq!(fault(&mut line, 0, t0 + secs(3.5)), diagnostic::NONE);
     assert_eq!(
         status(&mut line, 0, t0 + secs(3.6)).phase,
@@ -282,31 +297,25 @@ fn an_open_band_is_latched_at_once_and_cleared_only_after_repair() {
 #[test]
 fn a_short_circuit_is_latched_and_cleared_after_repair() {
     let (mut line, t0) = line_at_0();
-    line.regulator_mut(addr(0))
-        .expect("present")
-        .provoke(Fault::ShortCircuit, t0 + secs(1.0));
+    provoke(&mut line, Fault::ShortCircuit, t0 + secs(1.0));
     assert_eq!(
         fault(&mut line, 0, t0 + secs(1.0)),
         Fault::ShortCircuit.code()
     );
-    ask(&mut line, b"%014Q000000\n", t0 + secs(1.5));
+    clear_faults(&mut line, t0 + secs(1.5));
     assert_eq!(
         fault(&mut line, 0, t0 + secs(2.0)),
         Fault::ShortCircuit.code()
     );
-    line.regulator_mut(addr(0))
-        .expect("present")
-        .remove_cause(Fault::ShortCircuit, t0 + secs(2.2));
-    ask(&mut line, b"%014Q000000\n", t0 + secs(2.5));
+    repair(&mut line, Fault::ShortCircuit, t0 + secs(2.2));
+    clear_faults(&mut line, t0 + secs(2.5));
     assert_eq!(fault(&mut line, 0, t0 + secs(3.0)), diagnostic::NONE);
 }
 
 #[test]
 fn over_current_is_latched_while_the_band_is_fired_and_stops_it() {
     let (mut line, t0) = line_at_0();
-    line.regulator_mut(addr(0))
-        .expect("present")
-        .provoke(Fault::OverCurrent, t0 + secs(1.0));
+    provoke(&mut line, Fault::OverCurrent, t0 + secs(1.0));
     let tripped = status(&mut line, 0, t0 + secs(1.0));
     assert_eq!(tripped.phase, Phase::Faulted(Fault::OverCurrent));
     assert_eq!(tripped.voltage, 0.0);
@@ -314,16 +323,14 @@ fn over_current_is_latched_while_the_band_is_fired_and_stops_it() {
         fault(&mut line, 0, t0 + secs(1.1)),
         Fault::OverCurrent.code()
     );
-    ask(&mut line, b"%014Q000000\n", t0 + secs(1.5));
+    clear_faults(&mut line, t0 + secs(1.5));
     assert_eq!(
         fault(&mut line, 0, t0 + secs(2.0)),
         Fault::OverCurrent.code(),
         "the supply is still too high"
     );
-    line.regulator_mut(addr(0))
-        .expect("present")
-        .remove_cause(Fault::OverCurrent, t0 + secs(2.2));
-    ask(&mut line, b"%014Q000000\n", t0 + secs(2.5));
+    repair(&mut line, Fault::OverCurrent, t0 + secs(2.2));
+    clear_faults(&mut line, t0 + secs(2.5));
     assert_eq!(fault(&mut line, 0, t0 + secs(3.0)), diagnostic::NONE);
 }
 
@@ -340,16 +347,14 @@ fn a_set_maximum_current_below_the_band_current_trips_over_current() {
         Fault::OverCurrent.code()
     );
     ask(&mut line, b"%018Q130045\n", t0 + secs(2.0));
-    ask(&mut line, b"%014Q000000\n", t0 + secs(2.5));
+    clear_faults(&mut line, t0 + secs(2.5));
     assert_eq!(fault(&mut line, 0, t0 + secs(3.0)), diagnostic::NONE);
 }
 
 #[test]
 fn a_weak_supply_is_found_at_the_end_of_the_next_impulse_as_temperature_not_reached() {
     let (mut line, t0) = line_at_0();
-    line.regulator_mut(addr(0))
-        .expect("present")
-        .provoke(Fault::TemperatureNotReached, t0 + secs(1.0));
+    provoke(&mut line, Fault::TemperatureNotReached, t0 + secs(1.0));
     assert_eq!(
         fault(&mut line, 0, t0 + secs(3.5)),
         diagnostic::NONE,
@@ -362,15 +367,13 @@ fn a_weak_supply_is_found_at_the_end_of_the_next_impulse_as_temperature_not_reac
         fault(&mut line, 0, t0 + secs(4.0)),
         Fault::TemperatureNotReached.code()
     );
-    ask(&mut line, b"%014Q000000\n", t0 + secs(4.5));
+    clear_faults(&mut line, t0 + secs(4.5));
     assert_eq!(
         fault(&mut line, 0, t0 + secs(5.0)),
         Fault::TemperatureNotReached.code()
     );
-    line.regulator_mut(addr(0))
-        .expect("present")
-        .remove_cause(Fault::TemperatureNotReached, t0 + secs(5.2));
-    ask(&mut line, b"%014Q000000\n", t0 + secs(5.5));
+    repair(&mut line, Fault::TemperatureNotReached, t0 + secs(5.2));
+    clear_faults(&mut line, t0 + secs(5.5));
     assert_eq!(fault(&mut line, 0, t0 + secs(6.0)), diagnostic::NONE);
     // Cycles restart from the clear: the next impulse at 8.5 s reaches 180 °C again.
     assert!(close(

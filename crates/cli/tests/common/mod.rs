@@ -20,6 +20,21 @@ pub struct Sim {
 }
 
 impl Sim {
+    /// Starts the simulator of `device` on a free loopback port with a faulty line: 30% of
+    /// its replies dropped, late, with a flipped bit or garbage before them, as `seed`
+    /// draws them.
+    pub fn start_faulty(device: &str, seed: &str) -> Sim {
+        Sim::start(&[
+            device,
+            "--listen",
+            "127.0.0.1:0",
+            "--fault-rate",
+            "0.3",
+            "--seed",
+            seed,
+        ])
+    }
+
     /// Starts `cellbus sim ARGS…` (stdin empty: no control channel) and waits for its
     /// `listening on …` line.
     pub fn start(args: &[&str]) -> Sim {

@@ -18,6 +18,14 @@ fn sample(p: &str, t: i64, v: f64) -> Sample {
     }
 }
 
+/// A store with the default options in a fresh temporary directory (removed when
+/// dropped).
+fn temp_store() -> (tempfile::TempDir, Store) {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    (dir, store)
+}
+
 fn samples_of(h: &History) -> Vec<(i64, Option<Value>)> {
     match &h.series {
         Series::Samples(s) => s.iter().map(|s| (s.t.0, s.value.clone())).collect(),
@@ -35,8 +43,7 @@ fn samples_with_quality(h: History) -> Vec<(i64, Option<Value>, Quality)> {
 
 #[tokio::test]
 async fn samples_come_back_in_time_order_for_their_point_and_range() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     for (t, v) in [(1000, 1.0), (2000, 2.0), (3000, 3.0), (4000, 4.0)] {
         h.sample(sample("a.temp", t, v));
@@ -75,8 +82,7 @@ async fn samples_come_back_in_time_order_for_their_point_and_range() {
 
 #[tokio::test]
 async fn a_batch_larger_than_one_multi_row_insert_keeps_every_value_and_quality_in_order() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     // Two full multi-row statements and a remainder of single rows, over two points.
     let count = writer::INSERT_ROWS as i64 * 2 + 7;
@@ -119,8 +125,7 @@ async fn a_batch_keeps_each_points_samples_in_the_order_they_came_even_at_one_ti
     // time, such as a poll's good readings and then the bad ones of the device going
     // down, must keep their order; three points interleaved over several multi-row
     // statements, every sample at the same time.
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (dir, store) = temp_store();
     let h = store.handle();
     let names = ["c.level", "a.level", "b.level"];
     let count = writer::INSERT_ROWS * 3 + 5;
@@ -172,8 +177,7 @@ async fn a_batch_keeps_each_points_samples_in_the_order_they_came_even_at_one_ti
 
 #[tokio::test]
 async fn a_step_gives_average_min_and_max_per_bucket_of_good_values() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     for (t, v) in [(0, 1.0), (400, 3.0), (999, 5.0), (1000, 10.0), (2500, 7.0)] {
         h.sample(sample("a.temp", t, v));
@@ -329,8 +333,7 @@ async fn retention_deletes_samples_and_events_older_than_the_limit_and_keeps_aud
 
 #[tokio::test]
 async fn events_filter_by_device_kind_and_time_newest_first() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     let ev = |t, kind, device: &str| Event {
         t: Timestamp(t),
@@ -397,8 +400,7 @@ async fn events_filter_by_device_kind_and_time_newest_first() {
 
 #[tokio::test]
 async fn audit_rows_keep_old_and_new_values_as_json() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     h.audit(AuditEntry {
         t: Timestamp(5),
@@ -484,8 +486,7 @@ fn audit(t: i64, detail: &str) -> AuditEntry {
 
 #[tokio::test]
 async fn a_full_disk_is_retried_with_a_doubling_wait_instead_of_a_busy_loop() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     h.fill_disk(true).await;
     fill(&h, "a.temp", 0, 5_000);
@@ -573,8 +574,7 @@ fn commits_forced_during_a_wait_still_log_at_most_one_line_per_wait() {
 
 #[tokio::test]
 async fn rows_kept_while_the_disk_is_full_are_committed_when_it_has_room_and_an_event_says_so() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     assert_eq!(h.health(Timestamp::now()).history, HistoryState::Ok);
     h.fill_disk(true).await;
@@ -619,8 +619,7 @@ async fn rows_kept_while_the_disk_is_full_are_committed_when_it_has_room_and_an_
 
 #[tokio::test]
 async fn back_pressure_drops_the_oldest_samples_and_never_an_audit_row_or_an_event() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     h.fill_disk(true).await;
     h.audit(audit(0, "first"));
@@ -986,8 +985,7 @@ async fn a_full_disk_leaves_live_values_served_and_healthz_reporting_the_fault()
 
 #[tokio::test]
 async fn stored_changes_of_every_point_come_back_in_time_order_in_pages() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     // Stored out of time order, as two lines' changes can be.
     for (p, t, v) in [
@@ -1070,8 +1068,7 @@ async fn dense_gap_sparse_dense() -> (
     StoreHandle,
     Vec<(ChangeKey, String, Option<f64>)>,
 ) {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (dir, store) = temp_store();
     let h = store.handle();
     let day = 86_400_000;
     let mut rows = Vec::new();
@@ -1240,8 +1237,7 @@ async fn a_read_in_many_calls_gets_every_change_once_in_time_order() {
 
 #[test]
 fn the_time_ordered_reads_never_scan_the_samples_table() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (dir, store) = temp_store();
     drop(store);
     let conn = rusqlite::Connection::open(dir.path().join(DB_FILE)).unwrap();
     for query in [
@@ -1357,8 +1353,7 @@ fn assert_rollups_agree(h: &StoreHandle, dir: &std::path::Path, p: &str, end: i6
 
 #[tokio::test]
 async fn a_rollup_served_query_equals_the_raw_computation_at_every_edge() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (dir, store) = temp_store();
     let h = store.handle();
     // 20 minutes of irregular samples with values that do not add up exactly in binary,
     // stale and bad readings, a text value and a NaN in between; several batches.
@@ -1631,8 +1626,7 @@ fn the_writer_cache_shrinks_only_after_ten_smaller_batches_in_a_row() {
 
 #[tokio::test]
 async fn a_burst_of_queries_at_once_leaves_only_a_few_read_connections_open() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let (_dir, store) = temp_store();
     let h = store.handle();
     h.sample(sample("a.temp", 1000, 1.0));
     h.flush().await.unwrap();

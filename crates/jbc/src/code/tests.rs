@@ -33,14 +33,13 @@ fn a_code_for_port_three_is_refused_with_a_suggestion() {
         }
     );
     assert!(err.to_string().contains("only port 1"), "{err}");
-    assert!(matches!(
-        "PP3".parse::<Code>(),
-        Err(CodeError::NoSuchPort { .. })
-    ));
-    assert!(matches!(
-        "A21".parse::<Code>(),
-        Err(CodeError::NoSuchPort { .. })
-    ));
+    for text in ["PP3", "A21"] {
+        let parsed = text.parse::<Code>();
+        assert!(
+            matches!(parsed, Err(CodeError::NoSuchPort { .. })),
+            "{text}: {parsed:?}"
+        );
+    }
 }
 
 #[test]
@@ -75,19 +74,13 @@ fn unknown_codes_name_the_text_and_list_the_known_ones() {
         text.contains("ST1") && text.contains("A12") && text.contains("SC1"),
         "{text}"
     );
-    assert!(matches!(
-        "RST1".parse::<Code>(),
-        Err(CodeError::Unknown { .. })
-    ));
-    assert!(matches!("".parse::<Code>(), Err(CodeError::Unknown { .. })));
-    assert!(matches!(
-        "STX".parse::<Code>(),
-        Err(CodeError::Unknown { .. })
-    ));
-    assert!(matches!(
-        "é1".parse::<Code>(),
-        Err(CodeError::Unknown { .. })
-    ));
+    for text in ["RST1", "", "STX", "é1"] {
+        let parsed = text.parse::<Code>();
+        assert!(
+            matches!(parsed, Err(CodeError::Unknown { .. })),
+            "{text:?}: {parsed:?}"
+        );
+    }
 }
 
 #[test]
@@ -155,6 +148,11 @@ fn units_and_words_follow_the_spec() {
     );
 }
 
+/// What the station's `text` for `code` reads as, in words.
+fn shown(code: Code, text: &str) -> String {
+    interpret(code, &data(text)).unwrap().to_string()
+}
+
 fn data(text: &str) -> Data {
     Data::from_bytes(text.as_bytes().try_into().expect("5 bytes")).expect("printable")
 }
@@ -167,53 +165,27 @@ fn interpret_gives_quantities_with_units() {
     assert_eq!(r.unit(), Some(Unit::Celsius));
     let r = interpret(Code::AdjustTemp(Port::One, Tool::Jt), &data("-0050")).unwrap();
     assert_eq!(r.to_string(), "-50 °C");
-    assert_eq!(
-        interpret(Code::PortPower(Port::One), &data("00412"))
-            .unwrap()
-            .to_string(),
-        "412 ‰"
-    );
+    assert_eq!(shown(Code::PortPower(Port::One), "00412"), "412 ‰");
 }
 
 #[test]
 fn interpret_gives_table_values_in_words() {
     let p = Port::One;
+    assert_eq!(shown(Code::ConnectedTool(p), "00001"), "JT");
+    assert_eq!(shown(Code::PortError(p), "00009"), "No tool (9)");
     assert_eq!(
-        interpret(Code::ConnectedTool(p), &data("00001"))
-            .unwrap()
-            .to_string(),
-        "JT"
-    );
-    assert_eq!(
-        interpret(Code::PortError(p), &data("00009"))
-            .unwrap()
-            .to_string(),
-        "No tool (9)"
-    );
-    assert_eq!(
-        interpret(Code::PortStatus(p), &data("00001"))
-            .unwrap()
-            .to_string(),
+        shown(Code::PortStatus(p), "00001"),
         "tool on, cooling off, suction off"
     );
     assert_eq!(
-        interpret(Code::PortStatus(p), &data("00110"))
-            .unwrap()
-            .to_string(),
+        shown(Code::PortStatus(p), "00110"),
         "tool off, cooling on, suction on"
     );
     assert_eq!(
-        interpret(Code::WorkMode(p), &data("00000"))
-            .unwrap()
-            .to_string(),
+        shown(Code::WorkMode(p), "00000"),
         "Manual mode (profiles off)"
     );
-    assert_eq!(
-        interpret(Code::StationError, &data("00004"))
-            .unwrap()
-            .to_string(),
-        "Mains frequency (4)"
-    );
+    assert_eq!(shown(Code::StationError, "00004"), "Mains frequency (4)");
     let model = interpret(Code::StationModel, &data(" JTSE")).unwrap();
     assert_eq!(model.to_string(), "JTSE");
     assert_eq!(model.value(), Value::Text("JTSE".into()));

@@ -146,30 +146,32 @@ impl Discrete {
                 now: self.load,
             });
         }
-        out.extend(
-            self.alarms
-                .difference(&before.alarms)
-                .map(|a| Change::AlarmRaised(a)),
+        came_and_went(
+            &mut out,
+            (&before.alarms, &self.alarms),
+            Change::AlarmRaised,
+            Change::AlarmCleared,
         );
-        out.extend(
-            before
-                .alarms
-                .difference(&self.alarms)
-                .map(|a| Change::AlarmCleared(a)),
-        );
-        out.extend(
-            self.states
-                .difference(&before.states)
-                .map(|s| Change::StateOn(s)),
-        );
-        out.extend(
-            before
-                .states
-                .difference(&self.states)
-                .map(|s| Change::StateOff(s)),
+        came_and_went(
+            &mut out,
+            (&before.states, &self.states),
+            Change::StateOn,
+            Change::StateOff,
         );
         out
     }
+}
+
+/// Appends what is in `now` and was not in `was` (as `came`), then what was and is no
+/// more (as `went`), each in sorted order.
+fn came_and_went(
+    out: &mut Vec<Change>,
+    (was, now): (&BTreeSet<&'static str>, &BTreeSet<&'static str>),
+    came: fn(&'static str) -> Change,
+    went: fn(&'static str) -> Change,
+) {
+    out.extend(now.difference(was).map(|&s| came(s)));
+    out.extend(was.difference(now).map(|&s| went(s)));
 }
 
 #[cfg(test)]

@@ -12,6 +12,19 @@ fn decode(data_type: &str, order: Order, registers: &[u16]) -> TypedValue {
     ty(data_type).decode(order, registers).expect("decodes")
 }
 
+/// `value` of `data_type` is encoded as the words of each order in `cases`, and those
+/// words decode back to it.
+fn assert_words_in_each_order<const N: usize>(
+    data_type: &str,
+    value: TypedValue,
+    cases: [(Order, [u16; N]); 4],
+) {
+    for (order, words) in cases {
+        assert_eq!(encode(data_type, order, value.clone()), words, "{order}");
+        assert_eq!(decode(data_type, order, &words), value, "{order}");
+    }
+}
+
 use Order::{Abcd, Badc, Cdab, Dcba};
 
 #[test]
@@ -34,18 +47,7 @@ fn float32_229_7_is_0x4365b333_in_each_order() {
         (Badc, [0x6543, 0x33B3]),
         (Dcba, [0x33B3, 0x6543]),
     ];
-    for (order, words) in cases {
-        assert_eq!(
-            encode("float32", order, TypedValue::Float(229.7)),
-            words,
-            "{order}"
-        );
-        assert_eq!(
-            decode("float32", order, &words),
-            TypedValue::Float(229.7),
-            "{order}"
-        );
-    }
+    assert_words_in_each_order("float32", TypedValue::Float(229.7), cases);
 }
 
 #[test]
@@ -56,14 +58,7 @@ fn int32_minus_2_is_0xfffffffe_in_each_order() {
         (Badc, [0xFFFF, 0xFEFF]),
         (Dcba, [0xFEFF, 0xFFFF]),
     ];
-    for (order, words) in cases {
-        assert_eq!(
-            encode("int32", order, TypedValue::Int(-2)),
-            words,
-            "{order}"
-        );
-        assert_eq!(decode("int32", order, &words), TypedValue::Int(-2));
-    }
+    assert_words_in_each_order("int32", TypedValue::Int(-2), cases);
 }
 
 #[test]
@@ -74,16 +69,7 @@ fn uint32_0x12345678_in_each_order() {
         (Badc, [0x3412, 0x7856]),
         (Dcba, [0x7856, 0x3412]),
     ];
-    for (order, words) in cases {
-        assert_eq!(
-            encode("uint32", order, TypedValue::Uint(0x1234_5678)),
-            words
-        );
-        assert_eq!(
-            decode("uint32", order, &words),
-            TypedValue::Uint(0x1234_5678)
-        );
-    }
+    assert_words_in_each_order("uint32", TypedValue::Uint(0x1234_5678), cases);
 }
 
 #[test]
@@ -94,11 +80,7 @@ fn uint64_0x0102030405060708_reverses_all_four_words_for_cdab() {
         (Badc, [0x0201, 0x0403, 0x0605, 0x0807]),
         (Dcba, [0x0807, 0x0605, 0x0403, 0x0201]),
     ];
-    for (order, words) in cases {
-        let value = TypedValue::Uint(0x0102_0304_0506_0708);
-        assert_eq!(encode("uint64", order, value.clone()), words, "{order}");
-        assert_eq!(decode("uint64", order, &words), value);
-    }
+    assert_words_in_each_order("uint64", TypedValue::Uint(0x0102_0304_0506_0708), cases);
 }
 
 #[test]

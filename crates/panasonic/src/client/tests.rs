@@ -48,6 +48,15 @@ async fn connect(config: ClientConfig) -> (Client, Events) {
     Client::connect(config).await.expect("connects")
 }
 
+/// A quiet twin in remote mode, and a client (no keep-alive) that started it and saw R1ST.
+async fn running() -> (RunningTwin, Client, Events) {
+    let twin = twin(quiet(true)).await;
+    let (client, mut events) = connect(config(&twin, None)).await;
+    client.start(None).await.expect("started");
+    assert_eq!(event(&mut events).await, Event::Started);
+    (twin, client, events)
+}
+
 fn name(text: &str) -> ProgramName {
     ProgramName::new(text).expect("a valid name")
 }
@@ -252,10 +261,7 @@ async fn start_in_online_mode_is_refused_with_the_reason_in_words() {
 
 #[tokio::test(start_paused = true)]
 async fn reset_after_an_error_stop_gets_a2_and_r1re_later() {
-    let twin = twin(quiet(true)).await;
-    let (client, mut events) = connect(config(&twin, None)).await;
-    client.start(None).await.expect("started");
-    assert_eq!(event(&mut events).await, Event::Started);
+    let (twin, client, mut events) = running().await;
     twin.control().force_error(7).expect("a valid error code");
     assert!(matches!(event(&mut events).await, Event::Error(info) if info.code() == 7));
     assert_eq!(client.status().await.expect("C2ST").state, RunState::Error);
@@ -270,10 +276,7 @@ async fn reset_after_an_error_stop_gets_a2_and_r1re_later() {
 
 #[tokio::test(start_paused = true)]
 async fn a_paused_feeder_stops_the_run_with_parts_exhausted() {
-    let twin = twin(quiet(true)).await;
-    let (client, mut events) = connect(config(&twin, None)).await;
-    client.start(None).await.expect("started");
-    assert_eq!(event(&mut events).await, Event::Started);
+    let (twin, client, mut events) = running().await;
     twin.control().pause_feeder(1).expect("feeder 1 exists");
     match event(&mut events).await {
         Event::Error(info) => {

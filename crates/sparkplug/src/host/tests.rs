@@ -3,7 +3,8 @@ use crate::event::NodeEvent;
 use crate::metric::{MetricSpec, Sample};
 use crate::node::{BdSeq, Command, Delivery, EdgeNode, REBIRTH};
 use common::{
-    T0, air_temp, at, connected, ddata, event_metric, heater_on, id, name, set_point, status,
+    T0, air_temp, at, connected, connected_with, ddata, event_metric, heater_on, id, name,
+    set_point, status,
 };
 use prost::Message as _;
 
@@ -73,8 +74,7 @@ fn key(device: Option<&str>, point: &str) -> PointKey {
 
 /// Whether `p` is an NCMD that a born edge node `cell/gw1` reads as a Rebirth.
 fn is_rebirth_of_gw1(p: &Publish) -> bool {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node.on_connect();
+    let mut node = connected_with(0);
     node.node_birth(&[], T0).unwrap();
     p.topic.to_string() == "spBv1.0/cell/NCMD/gw1"
         && !p.retain
@@ -516,8 +516,7 @@ fn ddeath_marks_that_devices_points_bad_and_its_later_data_asks_for_a_rebirth() 
     let got = feed(&mut host, &ddata(&mut node, "jbc1", 80.0, at(600)), at(600));
     assert_eq!((got.samples.len(), got.commands.len()), (1, 0));
     // Data of the dead device (a node that ignores its own DDEATH): rebirth.
-    let mut node2 = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(0));
-    node2.on_connect();
+    let mut node2 = connected_with(0);
     node2.node_birth(&node_metrics(), T0).unwrap();
     node2.device_birth(&id("jbc2"), &station(), T0).unwrap();
     let mut stray = ddata(&mut node2, "jbc2", 1.0, at(700));

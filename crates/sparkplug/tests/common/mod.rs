@@ -29,7 +29,12 @@ pub fn name(s: &str) -> MetricName {
 
 /// Edge node `cell/gw1` (bdSeq 7), connected, nothing born.
 pub fn connected() -> EdgeNode {
-    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(7));
+    connected_with(7)
+}
+
+/// Edge node `cell/gw1` with `bd_seq`, connected, nothing born.
+pub fn connected_with(bd_seq: u8) -> EdgeNode {
+    let mut node = EdgeNode::new(id("cell"), id("gw1"), BdSeq::new(bd_seq));
     node.on_connect();
     node
 }

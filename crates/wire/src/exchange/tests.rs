@@ -165,17 +165,25 @@ fn an_answer_in_the_input_that_crosses_the_deadline_still_counts() {
     assert_eq!(ex.poll_outcome(), Some(Ok(b"ok late".to_vec())));
 }
 
-#[test]
-fn a_timeout_after_line_noise_says_how_many_bytes_of_noise_came() {
+/// What a one-attempt exchange that got `input` and then no answer says went wrong.
+fn trouble_after_a_timeout(input: &[u8]) -> Trouble<Damage, String> {
     let mut ex = exchange(0);
     let t0 = Instant::now();
     send(&mut ex, t0);
-    ex.handle_input(b"noise noise\nnoise\n", t0 + Duration::from_millis(1));
+    ex.handle_input(input, t0 + Duration::from_millis(1));
     ex.handle_timeout(t0 + TIMEOUT);
     let Some(Err(Ended::GaveUp { last, .. })) = ex.poll_outcome() else {
         panic!("the attempt should have timed out");
     };
-    assert_eq!(last, Trouble::Noise { bytes: 18 });
+    last
+}
+
+#[test]
+fn a_timeout_after_line_noise_says_how_many_bytes_of_noise_came() {
+    assert_eq!(
+        trouble_after_a_timeout(b"noise noise\nnoise\n"),
+        Trouble::Noise { bytes: 18 }
+    );
     let words = |bytes| Trouble::<String, String>::Noise { bytes }.to_string();
     assert_eq!(words(18), "no reply, only 18 bytes of line noise");
     assert_eq!(words(1), "no reply, only 1 byte of line noise");
@@ -183,15 +191,10 @@ fn a_timeout_after_line_noise_says_how_many_bytes_of_noise_came() {
 
 #[test]
 fn a_timeout_after_frames_for_something_else_says_how_many_came() {
-    let mut ex = exchange(0);
-    let t0 = Instant::now();
-    send(&mut ex, t0);
-    ex.handle_input(b"other\nnoise\nother\n", t0 + Duration::from_millis(1));
-    ex.handle_timeout(t0 + TIMEOUT);
-    let Some(Err(Ended::GaveUp { last, .. })) = ex.poll_outcome() else {
-        panic!("the attempt should have timed out");
-    };
-    assert_eq!(last, Trouble::Others { frames: 2 });
+    assert_eq!(
+        trouble_after_a_timeout(b"other\nnoise\nother\n"),
+        Trouble::Others { frames: 2 }
+    );
     let words = |frames| Trouble::<String, String>::Others { frames }.to_string();
     assert_eq!(
         words(2),

@@ -37,27 +37,35 @@ fn bits_pack_first_coil_into_the_lowest_bit() {
 
 #[test]
 fn a_server_refuses_counts_out_of_range_with_exception_3() {
-    let zero = RequestPdu::ReadHoldingRegisters {
-        address: 0,
-        count: 0,
-    };
-    assert_eq!(zero.to_request(), Err(ExceptionCode::ILLEGAL_DATA_VALUE));
-    let many = RequestPdu::ReadHoldingRegisters {
-        address: 0,
-        count: 126,
-    };
-    assert_eq!(many.to_request(), Err(ExceptionCode::ILLEGAL_DATA_VALUE));
-    let coil = RequestPdu::WriteSingleCoil {
-        address: 0,
-        value: 0x1234,
-    };
-    assert_eq!(coil.to_request(), Err(ExceptionCode::ILLEGAL_DATA_VALUE));
-    let short = RequestPdu::WriteMultipleRegisters {
-        address: 0,
-        count: 2,
-        data: ByteField::new(vec![0, 1, 0]).expect("3 bytes"),
-    };
-    assert_eq!(short.to_request(), Err(ExceptionCode::ILLEGAL_DATA_VALUE));
+    for pdu in [
+        // No register.
+        RequestPdu::ReadHoldingRegisters {
+            address: 0,
+            count: 0,
+        },
+        // One more than a response carries.
+        RequestPdu::ReadHoldingRegisters {
+            address: 0,
+            count: 126,
+        },
+        // A coil is 0x0000 or 0xFF00.
+        RequestPdu::WriteSingleCoil {
+            address: 0,
+            value: 0x1234,
+        },
+        // Two registers in three bytes.
+        RequestPdu::WriteMultipleRegisters {
+            address: 0,
+            count: 2,
+            data: ByteField::new(vec![0, 1, 0]).expect("3 bytes"),
+        },
+    ] {
+        assert_eq!(
+            pdu.to_request(),
+            Err(ExceptionCode::ILLEGAL_DATA_VALUE),
+            "{pdu:?}"
+        );
+    }
 }
 
 #[test]
