@@ -31,7 +31,7 @@ use jbus::cross::points::{self, Amount, Phase, Quantity};
 use jbus::cross::{
     Area, Change, Discrete, Feed, InternalState, Measures, Ratings, Source, Transfer,
 };
-use jbus::rtu::UnitId;
+use jbus::rtu::{UnitId, UnitProblem};
 use link::{SerialSettings, SharedLine};
 
 use super::{
@@ -100,19 +100,24 @@ impl DeviceKind for Cross {
 
 /// Checks a JBUS unit number: 1–255 (JBUS allows numbers above Modbus's 247).
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
-    match address {
-        Some(a) if (i64::from(UnitId::MIN)..=i64::from(UnitId::JBUS_MAX)).contains(&a) => Ok(()),
-        Some(a) => Err(format!(
-            "JBUS unit number {a} is out of range: {} to {} (0 is broadcast, which the CROSS never answers)",
-            UnitId::MIN,
-            UnitId::JBUS_MAX
-        )),
-        None => Err(format!(
+    unit(address).map(drop)
+}
+
+/// The unit number the config gives, checked by [`jbus::rtu::check_unit`] and worded for
+/// this kind of device.
+fn unit(address: Option<i64>) -> Result<UnitId, String> {
+    jbus::rtu::check_unit(address).map_err(|problem| match problem {
+        UnitProblem::Missing => format!(
             "a CROSS needs its JBUS unit number, {} to {}",
             UnitId::MIN,
             UnitId::JBUS_MAX
-        )),
-    }
+        ),
+        UnitProblem::OutOfRange { number } => format!(
+            "JBUS unit number {number} is out of range: {} to {} (0 is broadcast, which the CROSS never answers)",
+            UnitId::MIN,
+            UnitId::JBUS_MAX
+        ),
+    })
 }
 
 /// What a point shows.
@@ -264,12 +269,7 @@ pub struct CrossDriver {
 impl CrossDriver {
     /// A driver for the CROSS `config` describes.
     pub fn new(config: &DriverConfig) -> Result<Self, String> {
-        check_address(config.address)?;
-        let unit = config
-            .address
-            .and_then(|a| u8::try_from(a).ok())
-            .and_then(|a| UnitId::jbus(a).ok())
-            .ok_or_else(|| "JBUS unit number out of range".to_owned())?;
+        let unit = unit(config.address)?;
         let defaults = ClientConfig::default();
         Ok(Self {
             unit,

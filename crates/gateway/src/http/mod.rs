@@ -214,75 +214,20 @@ fn without_token(uri: &Uri) -> Option<Uri> {
     path_and_query.parse().ok()
 }
 
-/// An error answer: a status and words.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ApiError {
-    /// The HTTP status to answer with.
-    pub status: StatusCode,
-    /// What was wrong.
-    pub message: String,
-}
+pub use kit::http::{ApiError, ApiResult};
 
-impl ApiError {
-    /// An error answered with `status`.
-    pub fn new(status: StatusCode, message: impl Into<String>) -> Self {
-        Self {
-            status,
-            message: message.into(),
-        }
+/// The error for a write body that is not the JSON a write takes (or is too large).
+pub(crate) fn body_error(rejection: JsonRejection) -> ApiError {
+    if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
+        return ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("the request body is larger than {BODY_LIMIT} bytes"),
+        );
     }
-
-    /// A 400: the request is malformed.
-    pub fn bad_request(message: impl Into<String>) -> Self {
-        Self::new(StatusCode::BAD_REQUEST, message)
-    }
-
-    /// A 404: what the request names does not exist.
-    pub fn not_found(message: impl Into<String>) -> Self {
-        Self::new(StatusCode::NOT_FOUND, message)
-    }
-}
-
-// The answer's shape and the query errors are kit's (shared with the historian); this
-// type stays the gateway's own while its body errors (`From<JsonRejection>`, which names
-// the write body) need a local type.
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
-        kit::http::ApiError::from(self).into_response()
-    }
-}
-
-impl From<QueryRejection> for ApiError {
-    fn from(rejection: QueryRejection) -> Self {
-        kit::http::ApiError::from(rejection).into()
-    }
-}
-
-impl From<kit::http::ApiError> for ApiError {
-    fn from(error: kit::http::ApiError) -> Self {
-        Self::new(error.status, error.message)
-    }
-}
-
-impl From<ApiError> for kit::http::ApiError {
-    fn from(error: ApiError) -> Self {
-        Self::new(error.status, error.message)
-    }
-}
-
-impl From<JsonRejection> for ApiError {
-    fn from(rejection: JsonRejection) -> Self {
-        if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
-            return Self::new(
-                StatusCode::PAYLOAD_TOO_LARGE,
-                format!("the request body is larger than {BODY_LIMIT} bytes"),
-            );
-        }
-        Self::bad_request(format!(
-            "bad request body: {}; send JSON like {{\"point\": \"air_temperature_setpoint\", \"value\": 350}}",
-            rejection.body_text()
-        ))
-    }
+    ApiError::bad_request(format!(
+        "bad request body: {}; send JSON like {{\"point\": \"air_temperature_setpoint\", \"value\": 350}}",
+        rejection.body_text()
+    ))
 }
 
 impl From<crate::store::StoreError> for ApiError {
@@ -294,9 +239,6 @@ impl From<crate::store::StoreError> for ApiError {
         Self::new(status, error.to_string())
     }
 }
-
-/// A handler's answer or its error.
-pub type ApiResult<T> = Result<T, ApiError>;
 
 async fn no_route(method: Method, uri: Uri) -> ApiError {
     ApiError::not_found(format!(

@@ -134,7 +134,7 @@ impl Guard {
 async fn read_body(request: Request) -> Result<Json<WriteBody>, ApiError> {
     match tokio::time::timeout(BODY_TIMEOUT, Json::<WriteBody>::from_request(request, &())).await {
         Ok(Ok(body)) => Ok(body),
-        Ok(Err(rejection)) => Err(rejection.into()),
+        Ok(Err(rejection)) => Err(super::body_error(rejection)),
         Err(_) => Err(ApiError::new(
             StatusCode::REQUEST_TIMEOUT,
             format!(

@@ -92,8 +92,8 @@ use writer::*;
 /// File name of the database inside the data directory.
 pub const DB_FILE: &str = "cellbus.db";
 
-/// Most raw samples one history query returns; ask with a `step` for longer ranges.
-pub const MAX_RAW_SAMPLES: usize = 50_000;
+/// Most raw samples one history query returns (kit's, shared with the historian).
+pub use kit::history::MAX_RAW_SAMPLES;
 
 /// Most pending rows kept while the disk refuses writes; past it the oldest samples go
 /// first, then the oldest events; audit rows are never dropped.

@@ -60,7 +60,7 @@ use std::time::Duration;
 use jbus::client::{Client, ClientConfig, ClientError, Framing};
 use jbus::data::{DataType, Format, TypedValue};
 use jbus::plan::{Item, Plan, PlanOptions, Split};
-use jbus::rtu::{ExceptionCode, UnitId};
+use jbus::rtu::{ExceptionCode, UnitId, UnitProblem};
 use jbus::slave::Table;
 use link::{SerialSettings, SharedLine};
 use tokio::time::Instant;
@@ -391,19 +391,24 @@ pub struct ModbusOptions {
 
 /// Checks a unit number: 1–255.
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
-    match address {
-        Some(a) if (i64::from(UnitId::MIN)..=i64::from(UnitId::JBUS_MAX)).contains(&a) => Ok(()),
-        Some(a) => Err(format!(
-            "Modbus unit number {a} is out of range: {} to {} (0 is broadcast, never answered)",
-            UnitId::MIN,
-            UnitId::JBUS_MAX
-        )),
-        None => Err(format!(
+    unit(address).map(drop)
+}
+
+/// The unit number the config gives, checked by [`jbus::rtu::check_unit`] and worded for
+/// this kind of device.
+fn unit(address: Option<i64>) -> Result<UnitId, String> {
+    jbus::rtu::check_unit(address).map_err(|problem| match problem {
+        UnitProblem::Missing => format!(
             "a Modbus device needs its unit number, {} to {}",
             UnitId::MIN,
             UnitId::JBUS_MAX
-        )),
-    }
+        ),
+        UnitProblem::OutOfRange { number } => format!(
+            "Modbus unit number {number} is out of range: {} to {} (0 is broadcast, never answered)",
+            UnitId::MIN,
+            UnitId::JBUS_MAX
+        ),
+    })
 }
 
 /// The plan's items for `registers`, in their order: one per register.
@@ -539,12 +544,7 @@ enum Part<'a> {
 impl ModbusDriver {
     /// A driver for the device `config` describes.
     pub fn new(config: &DriverConfig) -> Result<Self, String> {
-        check_address(config.address)?;
-        let unit = config
-            .address
-            .and_then(|a| u8::try_from(a).ok())
-            .and_then(|a| UnitId::jbus(a).ok())
-            .ok_or_else(|| "Modbus unit number out of range".to_owned())?;
+        let unit = unit(config.address)?;
         let settings = config.settings.get::<ModbusSettings>().ok_or_else(|| {
             "a modbus device needs its registers: add [[line.device.register]] tables with name and address, or registers_csv".to_owned()
         })?;
