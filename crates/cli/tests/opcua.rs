@@ -146,6 +146,7 @@ fn a_trusted_client_certificate_and_user_write_in_range_are_audited_with_the_cli
         "from 127.0.0.1:",
         "the write's event arrived on the device object",
         "the write's event arrived on the Server object",
+        "the write's event carries its kind and fields",
         "HistoryRead raw",
         "numValuesPerNode 2",
         "returnBounds",

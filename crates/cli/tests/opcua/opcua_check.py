@@ -17,8 +17,9 @@ Basic256Sha256 SignAndEncrypt and a client certificate (refused until the certif
 moved from the server's rejected folder to its trusted folder), logs in as `operator`,
 is refused an out-of-range write, writes a valid one, finds both in /api/audit with its
 own address (`from 127.0.0.1:PORT`), receives
-the write's event (BaseEventType: message, severity, source, time as in /api/events) on
-event subscriptions to the device's object and to the Server object, and compares
+the write's event (message, severity, source, time as in /api/events) on event
+subscriptions to the device's object (CellbusEventType: its Kind and Fields too) and to
+the Server object (BaseEventType), and compares
 HistoryRead raw (whole, in pages of numValuesPerNode 2 with continuation points, with
 returnBounds) and Average with /api/history.
 
@@ -161,10 +162,13 @@ class Events:
         self.seen.put_nowait(event)
 
 
-async def subscribe_events(client, node):
+async def subscribe_events(client, node, event_type=ua.ObjectIds.BaseEventType):
     handler = Events()
     sub = await client.create_subscription(100, handler)
-    await sub.subscribe_events(node, ua.ObjectIds.BaseEventType)
+    # Without asyncua's where clause (EventType InList [the type, its subtypes]): the
+    # server's filter (async-opcua 0.19) compares no NodeIds in InList, so that clause
+    # matches nothing; the select clauses alone pick the type's fields.
+    await sub.subscribe_events(node, event_type, where_clause_generation=False)
     return sub, handler
 
 
@@ -436,7 +440,11 @@ async def write(url, addr, data_dir, password):
         await target.write_value(ua.DataValue(ua.Variant(typed, ua.VariantType.Float)))
         ok(f"the Float {typed} was written to {pp['id']} (step 0.01)")
         device_node = await node.get_parent()
-        on_device = await subscribe_events(client, device_node)
+        # The device object with the gateway's own event type (its Kind and Fields found by
+        # browsing the type), the Server object with BaseEventType, as older clients do.
+        ns = await client.get_namespace_index("urn:cellbus:cell")
+        cell_event_type = client.get_node(ua.NodeId("CellbusEventType", ns))
+        on_device = await subscribe_events(client, device_node, cell_event_type)
         on_server = await subscribe_events(client, client.nodes.server)
         value = float(p["writable"]["min"])
         await node.write_value(ua.DataValue(ua.Variant(value, ua.VariantType.Double)))
@@ -446,7 +454,11 @@ async def write(url, addr, data_dir, password):
             event = await event_of(handler, d["id"], logged["message"])
             assert event.Severity == 200, event.Severity
             assert event.SourceNode == device_node.nodeid, (event.SourceNode, device_node)
-            assert event.EventType == ua.NodeId(ua.ObjectIds.BaseEventType), event.EventType
+            assert event.EventType == cell_event_type.nodeid, event.EventType
+            if where == "device object":
+                assert event.Kind == "write", event.Kind
+                assert json.loads(event.Fields) == logged["fields"], (event.Fields, logged)
+                ok(f"the write's event carries its kind and fields: {event.Fields}")
             t = int(event.Time.replace(tzinfo=timezone.utc).timestamp() * 1000 + 0.5)
             assert t == ms(logged["t"]), (event.Time, logged["t"])
             assert event.ReceiveTime >= event.Time, (event.ReceiveTime, event.Time)

@@ -543,10 +543,10 @@ async fn follow(
                 Ok(LiveMessage::Event(event)) => {
                     numbered += 1;
                     let id = space::event_id(started, numbered);
-                    let raised = space::base_event(ns, &event, id, Timestamp::now());
+                    let raised = space::cell_event(ns, &event, id, Timestamp::now());
                     subscriptions.notify_events(std::iter::once((
                         &raised as &dyn ::opcua::nodes::Event,
-                        &raised.source_node,
+                        &raised.base.source_node,
                     )));
                 }
                 Err(broadcast::error::RecvError::Lagged(missed)) => {

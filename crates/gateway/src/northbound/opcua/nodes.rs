@@ -7,7 +7,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use ::opcua::server::address_space::{
-    AccessLevel, AddressSpace, EventNotifier, NodeType, ObjectBuilder, VariableBuilder,
+    AccessLevel, AddressSpace, EventNotifier, NodeType, ObjectBuilder, ObjectTypeBuilder,
+    VariableBuilder,
 };
 use ::opcua::server::diagnostics::NamespaceMetadata;
 use ::opcua::server::node_manager::memory::{
@@ -116,7 +117,51 @@ fn build(
         }
     }
     build_gateway(space, ns, cell);
+    build_event_type(space, ns);
     points
+}
+
+/// `CellbusEventType`, the type of the gateway's events ([`space::CellEvent`]): a
+/// BaseEventType with `Kind` and `Fields`, so a client finds both by browsing the type and
+/// selects them in its event filter.
+fn build_event_type(space: &mut AddressSpace, ns: u16) {
+    let event_type = NodeId::new(ns, space::EVENT_TYPE);
+    ObjectTypeBuilder::new(
+        &event_type,
+        QualifiedName::new(ns, space::EVENT_TYPE),
+        space::EVENT_TYPE,
+    )
+    .description(
+        "An event of the cell: its kind as /api/events names it and its fields for programs \
+         (JSON)",
+    )
+    .is_abstract(false)
+    .subtype_of(ObjectTypeId::BaseEventType)
+    .insert(space);
+    for (name, words) in [
+        (
+            "Kind",
+            "The event's kind: write, device_event, state_changed, alarm_raised, …",
+        ),
+        (
+            "Fields",
+            "The event's facts for programs, a JSON object (the feeder that ran out, the \
+             value written, the state a transfer switch went to)",
+        ),
+    ] {
+        VariableBuilder::new(
+            &NodeId::new(ns, format!("{}.{name}", space::EVENT_TYPE)),
+            QualifiedName::new(ns, name),
+            name,
+        )
+        .description(words)
+        .data_type(DataTypeId::String)
+        .value_rank(-1)
+        .has_type_definition(VariableTypeId::PropertyType)
+        .has_modelling_rule(ObjectId::ModellingRule_Mandatory)
+        .property_of(event_type.clone())
+        .insert(space);
+    }
 }
 
 fn build_device(

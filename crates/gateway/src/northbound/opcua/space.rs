@@ -17,14 +17,17 @@
 //! The source timestamp is when the device was read; the server timestamp when the
 //! server took the change.
 //!
-//! The gateway's events are BaseEventType events on the device's object (the gateway
-//! object when they concern no device), with the severity of their kind
-//! ([`EventKind::severity`](crate::event::EventKind::severity), shared with the Sparkplug events).
+//! The gateway's events are `CellbusEventType` events ([`CellEvent`], a BaseEventType with
+//! two more properties: `Kind`, the event's kind as `/api/events` names it, and `Fields`,
+//! its facts for programs as a JSON object) on the device's object (the gateway object
+//! when they concern no device), with the severity of their kind
+//! ([`EventKind::severity`](crate::event::EventKind::severity), shared with the Sparkplug
+//! events). A client that subscribes to BaseEventType gets them too, without the two.
 
 use ::opcua::nodes::BaseEventType;
 use ::opcua::types::{
     ByteString, DataTypeId, DataValue, DateTime, EUInformation, EnumValueType, LocalizedText,
-    NodeId, ObjectTypeId, Range, StatusCode, UAString, Variant,
+    NodeId, Range, StatusCode, UAString, Variant,
 };
 
 use crate::cell::{DeviceStatus, DeviceSummary, PointView};
@@ -306,16 +309,55 @@ pub fn event_id(start: Timestamp, number: u64) -> ByteString {
     ByteString::from(bytes)
 }
 
-/// A gateway event as an OPC UA BaseEventType event: its source the device's object (the
-/// gateway object when it concerns no device), its time when it happened, its receive
-/// time `now`.
-pub fn base_event(ns: u16, event: &Event, id: ByteString, now: Timestamp) -> BaseEventType {
+/// The name (and string node id) of the gateway's event type.
+pub const EVENT_TYPE: &str = "CellbusEventType";
+
+pub use event_type::CellEvent;
+
+/// The event type's Rust side: async-opcua's derive writes its constructors, which carry
+/// no documentation.
+mod event_type {
+    #![allow(missing_docs)]
+
+    use ::opcua::nodes::BaseEventType;
+    use ::opcua::types::UAString;
+
+    /// A gateway event as OPC UA raises it: a BaseEventType with the event's kind and fields.
+    #[derive(Debug, ::opcua::Event)]
+    #[opcua(identifier = "s=CellbusEventType", namespace = "urn:cellbus:cell")]
+    pub struct CellEvent {
+        /// The BaseEventType fields.
+        pub base: BaseEventType,
+        /// The namespace of the event type (the cell's).
+        pub own_namespace_index: u16,
+        /// The event's kind (`write`, `device_event`, `state_changed`, …).
+        pub kind: UAString,
+        /// The event's fields, a JSON object as `/api/events` gives it.
+        pub fields: UAString,
+    }
+}
+
+/// A gateway event as OPC UA raises it ([`CellEvent`]): its source the device's object
+/// (the gateway object when it concerns no device), its time when it happened, its
+/// receive time `now`.
+pub fn cell_event(ns: u16, event: &Event, id: ByteString, now: Timestamp) -> CellEvent {
+    let fields = serde_json::to_string(&event.fields).unwrap_or_else(|_| "{}".to_owned());
+    CellEvent {
+        base: base_event(ns, event, id, now),
+        own_namespace_index: ns,
+        kind: UAString::from(event.kind.as_str()),
+        fields: UAString::from(fields),
+    }
+}
+
+/// The BaseEventType part of a gateway event.
+fn base_event(ns: u16, event: &Event, id: ByteString, now: Timestamp) -> BaseEventType {
     let (node, name) = match &event.device {
         Some(device) => (ids::device(ns, device.as_str()), device.as_str()),
         None => (ids::gateway(ns, None), GATEWAY_SOURCE),
     };
     let mut e = BaseEventType::new(
-        ObjectTypeId::BaseEventType,
+        NodeId::new(ns, EVENT_TYPE),
         id,
         LocalizedText::new("", &event.message),
         opc_time(event.t),
@@ -363,6 +405,7 @@ mod tests {
     use super::*;
     use crate::event::EventKind;
     use crate::point::DeviceId;
+    use ::opcua::types::ObjectTypeId;
 
     use crate::testing::air_temperature_view as view;
 
@@ -401,23 +444,55 @@ mod tests {
             device: Some(device.clone()),
             point: None,
             message: "cross1: source lost".into(),
-            fields: crate::event::Fields::new(),
+            fields: crate::event::fields([("value", serde_json::json!(2))]),
         };
         let id = event_id(Timestamp(5), 7);
-        let e = base_event(2, &event, id.clone(), Timestamp(2_000));
+        let raised = cell_event(2, &event, id.clone(), Timestamp(2_000));
+        let e = &raised.base;
         assert_eq!(e.event_id, id);
-        assert_eq!(e.event_type, NodeId::from(ObjectTypeId::BaseEventType));
+        assert_eq!(e.event_type, NodeId::new(2, EVENT_TYPE));
         assert_eq!(e.source_node, ids::device(2, "cross1"));
         assert_eq!(e.source_name, UAString::from("cross1"));
         assert_eq!(e.message, LocalizedText::new("", "cross1: source lost"));
         assert_eq!(e.severity, 700);
         assert_eq!(gateway_time(&e.time), Timestamp(1_000));
         assert_eq!(gateway_time(&e.receive_time), Timestamp(2_000));
+        assert_eq!(raised.kind, UAString::from("alarm_raised"));
+        assert_eq!(raised.fields, UAString::from(r#"{"value":2}"#));
         let started = Event::of_gateway(EventKind::GatewayStarted, "started".into());
-        let e = base_event(2, &started, event_id(Timestamp(5), 8), Timestamp(2_000));
-        assert_eq!(e.source_node, ids::gateway(2, None));
-        assert_eq!(e.source_name, UAString::from(GATEWAY_SOURCE));
-        assert_eq!(e.severity, 200);
+        let raised = cell_event(2, &started, event_id(Timestamp(5), 8), Timestamp(2_000));
+        assert_eq!(raised.base.source_node, ids::gateway(2, None));
+        assert_eq!(raised.base.source_name, UAString::from(GATEWAY_SOURCE));
+        assert_eq!(raised.base.severity, 200);
+        assert_eq!(raised.fields, UAString::from("{}"));
+    }
+
+    #[test]
+    fn a_client_selects_the_kind_and_the_fields_by_their_browse_names() {
+        use ::opcua::nodes::Event as _;
+        use ::opcua::types::{AttributeId, NumericRange, QualifiedName};
+        let event = Event::of_gateway(EventKind::GatewayStarted, "started".into());
+        let raised = cell_event(2, &event, event_id(Timestamp(5), 1), Timestamp(6));
+        // Kind and Fields are in the cell's namespace, BaseEventType's own fields in 0.
+        let select = |type_id: NodeId, ns: u16, name: &str| {
+            raised.get_field(
+                &type_id,
+                AttributeId::Value,
+                &NumericRange::None,
+                &[QualifiedName::new(ns, name)],
+            )
+        };
+        let ours = NodeId::new(2, EVENT_TYPE);
+        assert_eq!(
+            select(ours.clone(), 2, "Kind"),
+            Variant::from("gateway_started")
+        );
+        assert_eq!(select(ours.clone(), 2, "Fields"), Variant::from("{}"));
+        assert_eq!(
+            select(ObjectTypeId::BaseEventType.into(), 0, "Message"),
+            Variant::from(LocalizedText::new("", "started"))
+        );
+        assert_eq!(select(ours, 0, "Severity"), Variant::from(200_u16));
     }
 
     #[test]
