@@ -1440,8 +1440,9 @@ impl Counters {
                 received: counter.counts(reset)?,
                 client: ProcessUse::of(&counter.pid().to_string(), ticks)?,
                 t_ms: gateway::time::Timestamp::now().0,
-                monitored_items: cell.opcua().map_or(0, |o| o.monitored_items),
-                connections: cell.opcua().map_or(0, |o| o.connections),
+                monitored_items: gateway::northbound::opcua::state(cell)
+                    .map_or(0, |o| o.monitored_items),
+                connections: gateway::northbound::opcua::state(cell).map_or(0, |o| o.connections),
             }),
             None => None,
         };
@@ -1449,7 +1450,10 @@ impl Counters {
         let stats = cell.store().stats();
         let mqtt = match mqtt {
             Some(side) => Some(MqttCounters {
-                published: metrics.mqtt_published.get(),
+                published: gateway::northbound::mqtt::status::status(cell)
+                    .metrics
+                    .published
+                    .get(),
                 received: side.counter.counts()?,
                 broker: match side.broker.pid() {
                     Some(pid) => ProcessUse::of(&pid.to_string(), ticks)?,
@@ -1818,7 +1822,10 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
             None => None,
         };
         tokio::time::sleep(args.warmup).await;
-        let published = cell.metrics().mqtt_published.clone();
+        let published = gateway::northbound::mqtt::status::status(&cell)
+            .metrics
+            .published
+            .clone();
         let before = Counters::take(
             &cell,
             pid,

@@ -372,8 +372,9 @@ fn run(args: &Args) -> anyhow::Result<Report> {
         .block_on(async { tokio::time::timeout(Duration::from_secs(10), task).await })
         .context("the MQTT task did not stop in 10 s")?
         .context("the MQTT task failed")?;
-    let forwarded = metrics.mqtt_forwarded.get();
-    let published_total = metrics.mqtt_published.get();
+    let mqtt_metrics = &gateway::northbound::mqtt::status::status(&cell).metrics;
+    let forwarded = mqtt_metrics.forwarded.get();
+    let published_total = mqtt_metrics.published.get();
     let mut totals = counter.counts()?;
     for _ in 0..50 {
         std::thread::sleep(Duration::from_millis(100));

@@ -36,77 +36,22 @@ pub struct Cell {
     live: broadcast::Sender<LiveMessage>,
     store: StoreHandle,
     metrics: Arc<Metrics>,
-    mqtt: RwLock<Option<MqttLink>>,
-    opcua: RwLock<Option<Arc<OpcuaProbe>>>,
+    interfaces: RwLock<Vec<(&'static str, Arc<dyn InterfaceStatus>)>>,
 }
 
-/// The northbound MQTT connection as `/healthz` shows it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum MqttLink {
-    /// Connected to the broker.
-    Connected,
-    /// Not connected, and why.
-    Disconnected(String),
-}
+/// What an interface (MQTT, OPC UA) shows of itself: its state under its name in
+/// `/healthz` (the web page's badges read it), and its gauges brought up to date before
+/// `/metrics` is read. The interface registers it when it starts
+/// ([`Cell::set_interface`]); the core reads it without knowing the interface.
+pub trait InterfaceStatus: Send + Sync + std::fmt::Debug {
+    /// Its state as `/healthz` shows it.
+    fn health(&self) -> serde_json::Value;
 
-impl std::fmt::Display for MqttLink {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            MqttLink::Connected => f.write_str("connected"),
-            MqttLink::Disconnected(why) => write!(f, "disconnected: {why}"),
-        }
-    }
-}
+    /// Brings the interface's gauges up to date (before a scrape of `/metrics`).
+    fn before_scrape(&self) {}
 
-/// The OPC UA server as `/healthz` and `/metrics` show it.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-pub struct OpcuaState {
-    /// The endpoint URL clients use.
-    pub endpoint: String,
-    /// Open TCP connections.
-    pub connections: u64,
-    /// Sessions (created, activated or not).
-    pub sessions: u64,
-    /// Subscriptions.
-    pub subscriptions: u64,
-    /// Monitored items (of every node: the cell's and the server's own).
-    pub monitored_items: u64,
-    /// What the server refused or closed to protect itself, since it started.
-    pub refused: OpcuaRefused,
-}
-
-/// Sessions and monitored items the OPC UA server refused or closed since it started.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
-pub struct OpcuaRefused {
-    /// Sessions closed because they were not activated within `activation_timeout`.
-    pub sessions_not_activated: u64,
-    /// Sessions closed because their client left before activating them.
-    pub sessions_abandoned: u64,
-    /// Sessions refused because their IP address had `sessions_per_address` already.
-    pub sessions_per_address: u64,
-    /// Monitored items refused (`Bad_TooManyMonitoredItems`) at `max_monitored_items`.
-    pub monitored_items: u64,
-}
-
-/// Reads the OPC UA server's state when asked (the server registers one at start).
-pub struct OpcuaProbe(Box<dyn Fn() -> OpcuaState + Send + Sync>);
-
-impl OpcuaProbe {
-    /// A probe that calls `read`.
-    pub fn new(read: impl Fn() -> OpcuaState + Send + Sync + 'static) -> Self {
-        Self(Box::new(read))
-    }
-
-    /// The state now.
-    pub fn read(&self) -> OpcuaState {
-        (self.0)()
-    }
-}
-
-impl std::fmt::Debug for OpcuaProbe {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_tuple("OpcuaProbe").field(&self.read()).finish()
-    }
+    /// The status as `Any`, for the interface to take back its own type.
+    fn into_any(self: Arc<Self>) -> Arc<dyn std::any::Any + Send + Sync>;
 }
 
 /// One device: what it is and its live state.
@@ -599,8 +544,7 @@ impl Cell {
             live,
             store,
             metrics,
-            mqtt: RwLock::new(None),
-            opcua: RwLock::new(None),
+            interfaces: RwLock::new(Vec::new()),
         });
         let tasks = plans
             .into_iter()
@@ -673,32 +617,48 @@ impl Cell {
             .collect()
     }
 
-    /// The MQTT connection's state; `None` when no broker is configured.
-    pub fn mqtt(&self) -> Option<MqttLink> {
-        self.mqtt
+    /// The status the interface `name` registered, if it runs.
+    pub fn interface(&self, name: &str) -> Option<Arc<dyn InterfaceStatus>> {
+        self.interfaces
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, status)| Arc::clone(status))
+    }
+
+    /// The running interfaces' statuses, in the order they registered.
+    pub fn interfaces(&self) -> Vec<(&'static str, Arc<dyn InterfaceStatus>)> {
+        self.interfaces
             .read()
             .unwrap_or_else(PoisonError::into_inner)
             .clone()
     }
 
-    /// Records the MQTT connection's state (the northbound task does).
-    pub fn set_mqtt(&self, link: MqttLink) {
-        *self.mqtt.write().unwrap_or_else(PoisonError::into_inner) = Some(link);
-    }
-
-    /// The OPC UA server's state now; `None` when it does not serve OPC UA.
-    pub fn opcua(&self) -> Option<OpcuaState> {
-        let probe = self
-            .opcua
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone();
-        probe.map(|p| p.read())
-    }
-
-    /// Registers how to read the OPC UA server's state (the server does at start).
-    pub fn set_opcua(&self, probe: OpcuaProbe) {
-        *self.opcua.write().unwrap_or_else(PoisonError::into_inner) = Some(Arc::new(probe));
+    /// Registers the status of the interface `name` (an interface does when it starts),
+    /// replacing one it registered before; returns the one registered, which stays when
+    /// `name` had one already and `replace` is false.
+    pub fn set_interface(
+        &self,
+        name: &'static str,
+        status: Arc<dyn InterfaceStatus>,
+        replace: bool,
+    ) -> Arc<dyn InterfaceStatus> {
+        let mut interfaces = self
+            .interfaces
+            .write()
+            .unwrap_or_else(PoisonError::into_inner);
+        match interfaces.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, existing)) if !replace => Arc::clone(existing),
+            Some((_, existing)) => {
+                *existing = Arc::clone(&status);
+                status
+            }
+            None => {
+                interfaces.push((name, Arc::clone(&status)));
+                status
+            }
+        }
     }
 
     /// Follows live changes.

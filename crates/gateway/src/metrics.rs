@@ -72,19 +72,12 @@ pub struct WriteLabels {
     pub result: String,
 }
 
-/// Labels of the OPC UA sessions refused.
-#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
-pub struct OpcuaRefusalLabels {
-    /// `not_activated`, `abandoned` or `per_address`.
-    pub reason: &'static str,
-}
-
 type HistogramFamily = Family<LineLabels, Histogram, fn() -> Histogram>;
 
 /// Every metric of the gateway.
 #[derive(Debug)]
 pub struct Metrics {
-    registry: Registry,
+    registry: Mutex<Registry>,
     /// Polls by result.
     pub polls: Family<PollLabels, Counter>,
     /// Failed requests by kind.
@@ -114,28 +107,6 @@ pub struct Metrics {
     pub writes: Family<WriteLabels, Counter>,
     /// Open event streams.
     pub sse_clients: Gauge,
-    /// 1 while the MQTT connection is up (0 when down or not configured).
-    pub mqtt_connected: Gauge,
-    /// MQTT messages handed to the client (births, data, deaths).
-    pub mqtt_published: Counter,
-    /// MQTT connections made after the first.
-    pub mqtt_reconnects: Counter,
-    /// Stored changes sent after an outage (Sparkplug historical metrics, JSON backlog).
-    pub mqtt_forwarded: Counter,
-    /// Primary host STATE messages refused: dated too far after this gateway's clock.
-    pub mqtt_state_refused: Counter,
-    /// Primary host `offline` STATEs the host contradicted within the grace (forged).
-    pub mqtt_offline_contradicted: Counter,
-    /// MQTT commands refused whole before any write reached a device.
-    pub mqtt_commands_refused: Counter,
-    /// Foreign messages on the gateway's own JSON topics, answered with its own state.
-    pub mqtt_foreign_reasserted: Counter,
-    opcua_connections: Gauge,
-    opcua_sessions: Gauge,
-    opcua_subscriptions: Gauge,
-    opcua_monitored_items: Gauge,
-    opcua_sessions_refused: Family<OpcuaRefusalLabels, Counter>,
-    opcua_monitored_items_refused: Counter,
     history_rows: Counter,
     history_commit_errors: Counter,
     history_rows_dropped: Counter,
@@ -206,24 +177,10 @@ impl Metrics {
         let events = Counter::default();
         let writes = Family::<WriteLabels, Counter>::default();
         let sse_clients = Gauge::default();
-        let mqtt_connected = Gauge::default();
-        let mqtt_published = Counter::default();
-        let mqtt_reconnects = Counter::default();
-        let mqtt_forwarded = Counter::default();
-        let mqtt_state_refused = Counter::default();
-        let mqtt_offline_contradicted = Counter::default();
-        let mqtt_commands_refused = Counter::default();
-        let mqtt_foreign_reasserted = Counter::default();
         let history_rows = Counter::default();
         let history_commit_errors = Counter::default();
         let history_rows_dropped = Counter::default();
         let history_pending_rows = Gauge::default();
-        let opcua_connections = Gauge::default();
-        let opcua_sessions = Gauge::default();
-        let opcua_subscriptions = Gauge::default();
-        let opcua_monitored_items = Gauge::default();
-        let opcua_sessions_refused = Family::<OpcuaRefusalLabels, Counter>::default();
-        let opcua_monitored_items_refused = Counter::default();
         registry.register("polls", "Polls of a device's point group", polls.clone());
         registry.register(
             "errors",
@@ -270,75 +227,6 @@ impl Metrics {
         registry.register("events", "Events emitted", events.clone());
         registry.register("writes", "Write attempts by result", writes.clone());
         registry.register(
-            "mqtt_connected",
-            "1 while the MQTT connection to the broker is up",
-            mqtt_connected.clone(),
-        );
-        registry.register(
-            "mqtt_published",
-            "MQTT messages handed to the client (Sparkplug births, data, deaths)",
-            mqtt_published.clone(),
-        );
-        registry.register(
-            "mqtt_reconnects",
-            "MQTT connections made after the first",
-            mqtt_reconnects.clone(),
-        );
-        registry.register(
-            "mqtt_forwarded",
-            "Stored changes sent to the broker after an outage (store and forward)",
-            mqtt_forwarded.clone(),
-        );
-        registry.register(
-            "mqtt_state_refused",
-            "Primary host STATE messages refused because they are dated too far after this \
-             gateway's clock",
-            mqtt_state_refused.clone(),
-        );
-        registry.register(
-            "mqtt_offline_contradicted",
-            "Primary host offline STATEs that the host contradicted within the grace \
-             (another client published them)",
-            mqtt_offline_contradicted.clone(),
-        );
-        registry.register(
-            "mqtt_commands_refused",
-            "MQTT commands refused whole before any write reached a device",
-            mqtt_commands_refused.clone(),
-        );
-        registry.register(
-            "mqtt_foreign_reasserted",
-            "Messages another client published on this gateway's JSON topics, answered by \
-             publishing the gateway's own state again",
-            mqtt_foreign_reasserted.clone(),
-        );
-        registry.register(
-            "opcua_connections",
-            "Open OPC UA TCP connections",
-            opcua_connections.clone(),
-        );
-        registry.register("opcua_sessions", "OPC UA sessions", opcua_sessions.clone());
-        registry.register(
-            "opcua_subscriptions",
-            "OPC UA subscriptions",
-            opcua_subscriptions.clone(),
-        );
-        registry.register(
-            "opcua_monitored_items",
-            "OPC UA monitored items (every node: the cell's and the server's own)",
-            opcua_monitored_items.clone(),
-        );
-        registry.register(
-            "opcua_sessions_refused",
-            "OPC UA sessions the gateway closed or refused, by reason (not_activated: not activated within activation_timeout; abandoned: the client left before activating; per_address: over sessions_per_address)",
-            opcua_sessions_refused.clone(),
-        );
-        registry.register(
-            "opcua_monitored_items_refused",
-            "OPC UA monitored items refused (Bad_TooManyMonitoredItems) at max_monitored_items",
-            opcua_monitored_items_refused.clone(),
-        );
-        registry.register(
             "sse_clients",
             "Open server-sent event streams",
             sse_clients.clone(),
@@ -364,7 +252,7 @@ impl Metrics {
             history_pending_rows.clone(),
         );
         Self {
-            registry,
+            registry: Mutex::new(registry),
             polls,
             errors,
             timeouts,
@@ -378,21 +266,7 @@ impl Metrics {
             value_changes,
             events,
             writes,
-            mqtt_connected,
-            mqtt_published,
-            mqtt_reconnects,
-            mqtt_forwarded,
-            mqtt_state_refused,
-            mqtt_offline_contradicted,
-            mqtt_commands_refused,
-            mqtt_foreign_reasserted,
             sse_clients,
-            opcua_connections,
-            opcua_sessions,
-            opcua_subscriptions,
-            opcua_monitored_items,
-            opcua_sessions_refused,
-            opcua_monitored_items_refused,
             history_rows,
             history_commit_errors,
             history_rows_dropped,
@@ -401,27 +275,14 @@ impl Metrics {
         }
     }
 
-    /// Sets the OPC UA gauges from the server's state (before a scrape).
-    pub fn set_opcua(&self, state: &crate::cell::OpcuaState) {
-        let gauge = |n: u64| i64::try_from(n).unwrap_or(i64::MAX);
-        self.opcua_connections.set(gauge(state.connections));
-        self.opcua_sessions.set(gauge(state.sessions));
-        self.opcua_subscriptions.set(gauge(state.subscriptions));
-        self.opcua_monitored_items.set(gauge(state.monitored_items));
-        let refused = &state.refused;
-        for (reason, total) in [
-            ("not_activated", refused.sessions_not_activated),
-            ("abandoned", refused.sessions_abandoned),
-            ("per_address", refused.sessions_per_address),
-        ] {
-            catch_up(
-                &self
-                    .opcua_sessions_refused
-                    .get_or_create(&OpcuaRefusalLabels { reason }),
-                total,
-            );
-        }
-        catch_up(&self.opcua_monitored_items_refused, refused.monitored_items);
+    /// Registers an interface's metrics (named `cellbus_…` like the rest), when it starts.
+    pub fn register(&self, register: impl FnOnce(&mut Registry)) {
+        register(
+            &mut self
+                .registry
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        );
     }
 
     /// The metrics in Prometheus text format, with the history counters brought up to date.
@@ -446,14 +307,18 @@ impl Metrics {
         self.history_pending_rows
             .set(i64::try_from(store.rows_waiting()).unwrap_or(i64::MAX));
         let mut text = String::new();
-        prometheus_client::encoding::text::encode(&mut text, &self.registry)
+        let registry = self
+            .registry
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        prometheus_client::encoding::text::encode(&mut text, &registry)
             .expect("writing to a String cannot fail");
         text
     }
 }
 
 /// Raises a counter to `total` (counters only go up).
-fn catch_up(counter: &Counter, total: u64) {
+pub fn catch_up(counter: &Counter, total: u64) {
     let seen = counter.get();
     if total > seen {
         counter.inc_by(total - seen);

@@ -6,7 +6,7 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use gateway::ServeOptions;
-use gateway::cell::MqttLink;
+use gateway::northbound::mqtt::MqttLink;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 
 mod running;
@@ -195,7 +195,13 @@ async fn after_a_broker_outage_the_gateway_reconnects_and_births_again_with_the_
     gateway
         .wait_for_link("reconnected", |l| l == &Some(MqttLink::Connected))
         .await;
-    assert!(gateway.cell.metrics().mqtt_reconnects.get() >= 1);
+    assert!(
+        gateway::northbound::mqtt::status::status(&gateway.cell)
+            .metrics
+            .reconnects
+            .get()
+            >= 1
+    );
     gateway.stop().await;
 }
 

@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use gateway::ServeOptions;
-use gateway::cell::MqttLink;
+use gateway::northbound::mqtt::MqttLink;
 use rcgen::{
     BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose, IsCa,
     KeyPair, KeyUsagePurpose,
@@ -146,7 +146,7 @@ async fn refusal(gateway: &Running) -> String {
             |l| matches!(l, Some(MqttLink::Disconnected(why)) if why != "not connected yet"),
         )
         .await;
-    match gateway.cell.mqtt() {
+    match gateway::northbound::mqtt::link(&gateway.cell) {
         Some(MqttLink::Disconnected(why)) => why,
         other => panic!("not a refusal: {other:?}"),
     }

@@ -274,7 +274,7 @@ async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
         .load(std::sync::atomic::Ordering::Relaxed);
     let history = store.health(Timestamp::now());
     let (last_error_at, last_error) = history.last_fault.clone().unzip();
-    Json(json!({
+    let mut health = json!({
         "status": if history.degraded() { "degraded" } else { "ok" },
         "started": s.started,
         "devices": devices,
@@ -289,14 +289,19 @@ async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
         "history_last_error": last_error,
         "history_last_error_at": last_error_at,
         "writes_enabled": s.writes.enabled,
-        "mqtt": s.cell.mqtt().map(|link| link.to_string()),
-        "opcua": s.cell.opcua(),
-    }))
+    });
+    // Each running interface's state under its name (`mqtt`, `opcua`).
+    if let Some(object) = health.as_object_mut() {
+        for (name, status) in s.cell.interfaces() {
+            object.insert(name.to_owned(), status.health());
+        }
+    }
+    Json(health)
 }
 
 async fn metrics(State(s): State<AppState>) -> Response {
-    if let Some(opcua) = s.cell.opcua() {
-        s.cell.metrics().set_opcua(&opcua);
+    for (_, status) in s.cell.interfaces() {
+        status.before_scrape();
     }
     let text = s.cell.metrics().encode(s.cell.store().stats());
     (

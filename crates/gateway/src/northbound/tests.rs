@@ -582,21 +582,18 @@ async fn forged_host_states_cannot_latch_the_node_offline() {
         .next_where("the NBIRTH", LIMIT, |m| m.kind() == "NBIRTH")
         .await;
     let bd_seq = birth.bd_seq().unwrap();
-    let metrics = rig.cell.metrics();
+    let metrics = &super::mqtt::status::status(&rig.cell).metrics;
 
     // Any client's offline dated now, at once contradicted by the host's own session.
     sub.publish(state_topic, host_state(false)).await;
     sub.publish_retained(state_topic, host_state_at(true, session))
         .await;
-    until("contradicted", || {
-        metrics.mqtt_offline_contradicted.get() == 1
-    })
-    .await;
+    until("contradicted", || metrics.offline_contradicted.get() == 1).await;
 
     // An offline dated in the year 9999, retained: refused and counted.
     sub.publish_retained(state_topic, host_state_at(false, 253_402_300_799_000))
         .await;
-    until("refused", || metrics.mqtt_state_refused.get() == 1).await;
+    until("refused", || metrics.state_refused.get() == 1).await;
     // The session goes on: a rebirth is an NBIRTH with the same bdSeq, no NDEATH before it.
     sub.publish("spBv1.0/rig/NCMD/cell", testkit::rebirth_command())
         .await;
@@ -624,7 +621,7 @@ async fn forged_host_states_cannot_latch_the_node_offline() {
     // host's own session, published again though older than the offline that ended the
     // last connection: births follow.
     until("the retained forgery refused again", || {
-        metrics.mqtt_state_refused.get() == 2
+        metrics.state_refused.get() == 2
     })
     .await;
     sub.publish_retained(state_topic, host_state_at(true, session))
@@ -672,15 +669,12 @@ async fn a_dcmd_is_carried_out_whole_or_refused_whole_and_refusals_do_not_fill_t
         .await;
     let (name, old, target) = writable_number(&rig);
     let topic = "spBv1.0/rig/DCMD/cell/jbc1";
-    let metrics = rig.cell.metrics();
+    let metrics = &super::mqtt::status::status(&rig.cell).metrics;
 
     // A point named twice, and more metrics than max_command_metrics: each refused whole.
     sub.publish(topic, dcmd(&[(&name, target), (&name, target)]))
         .await;
-    until("the first refusal", || {
-        metrics.mqtt_commands_refused.get() == 1
-    })
-    .await;
+    until("the first refusal", || metrics.commands_refused.get() == 1).await;
     let many: Vec<(&str, f64)> = (0..100).map(|_| (name.as_str(), target)).collect();
     sub.publish(topic, dcmd(&many)).await;
     // 200 commands that are not Sparkplug at all, from a client that reads nothing.
@@ -689,7 +683,7 @@ async fn a_dcmd_is_carried_out_whole_or_refused_whole_and_refusals_do_not_fill_t
         rogue.publish(topic, b"garbage".to_vec()).await;
     }
     until("every refusal counted", || {
-        metrics.mqtt_commands_refused.get() == 202
+        metrics.commands_refused.get() == 202
     })
     .await;
     // Then a good one: carried out, with its full rows.
@@ -798,7 +792,13 @@ async fn json_mode_answers_another_clients_retained_status_and_point_values_with
     }
     // Both counted (on a loaded machine the station may also time out and come back,
     // and an echo of the gateway's own older status is answered too: harmless).
-    assert!(rig.cell.metrics().mqtt_foreign_reasserted.get() >= 2);
+    assert!(
+        super::mqtt::status::status(&rig.cell)
+            .metrics
+            .foreign_reasserted
+            .get()
+            >= 2
+    );
     // What a new subscriber finds retained is the truth.
     let (_, mut fresh) = plain_client(&broker, "plant/cell/status").await;
     next_on(&mut fresh, "plant/cell/status", "online").await;

@@ -7,7 +7,8 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use gateway::cell::{Cell, MqttLink};
+use gateway::cell::Cell;
+use gateway::northbound::mqtt::MqttLink;
 use gateway::{Gateway, ServeOptions};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::oneshot;
@@ -56,11 +57,11 @@ impl Running {
     /// Waits (bounded polling) until the MQTT state is `wanted`.
     pub async fn wait_for_link(&self, what: &str, wanted: impl Fn(&Option<MqttLink>) -> bool) {
         let deadline = Instant::now() + LIMIT;
-        while !wanted(&self.cell.mqtt()) {
+        while !wanted(&gateway::northbound::mqtt::link(&self.cell)) {
             assert!(
                 Instant::now() < deadline,
                 "MQTT never {what}: {:?}",
-                self.cell.mqtt()
+                gateway::northbound::mqtt::link(&self.cell)
             );
             tokio::time::sleep(Duration::from_millis(20)).await;
         }

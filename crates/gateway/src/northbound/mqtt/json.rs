@@ -32,6 +32,7 @@ use serde_json::json;
 use tokio::sync::broadcast;
 
 use super::forward::Backlog;
+use super::status;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
 use crate::cell::{Cell, DeviceStatus, LiveMessage};
 use crate::point::{PointId, Quality, Value};
@@ -249,7 +250,7 @@ impl Publisher {
         if payload == truth.payload.as_slice() {
             return Ok(());
         }
-        self.cell.metrics().mqtt_foreign_reasserted.inc();
+        status::status(&self.cell).metrics.foreign_reasserted.inc();
         if let Some(count) = self.foreign.count(tokio::time::Instant::now()) {
             tracing::warn!(
                 "MQTT: {count} message(s) on this gateway's topics said something else than \
@@ -316,7 +317,7 @@ impl Publisher {
                 );
                 conn.publish(message).await?;
             }
-            self.cell.metrics().mqtt_forwarded.inc_by(sent);
+            status::status(&self.cell).metrics.forwarded.inc_by(sent);
         }
     }
 

@@ -21,6 +21,7 @@ pub mod forward;
 pub mod json;
 pub mod primary;
 pub mod sparkplug;
+pub mod status;
 pub mod tls;
 
 use std::path::PathBuf;
@@ -38,11 +39,12 @@ use tokio::task::JoinHandle;
 use self::config::{MqttConfig, MqttMode};
 use self::forward::{Delivery, FORWARDED_KEY};
 use super::{BoxStart, Northbound, Running, Start};
-use crate::cell::{Cell, LiveMessage, MqttLink};
+use crate::cell::{Cell, LiveMessage};
 use crate::config::{CellConfig, TableReader, default_edge_node_id};
 use crate::event::{Event, EventKind};
 use crate::options::{OptionError, ServeOptions};
 use crate::time::Timestamp;
+pub use status::{MqttLink, MqttMetrics, MqttStatus, link};
 
 /// First wait after a lost or refused connection; it doubles up to [`RETRY_CAP`].
 pub const RETRY_FIRST: Duration = Duration::from_millis(500);
@@ -84,10 +86,12 @@ pub fn start(
         Some(files) => tls::transport(&tls::client_config(files).context("MQTT TLS")?),
         None => Transport::Tcp,
     };
-    cell.set_mqtt(MqttLink::Disconnected("not connected yet".to_owned()));
+    let status = status::status(&cell);
+    status.set_link(MqttLink::Disconnected("not connected yet".to_owned()));
     let mode = config.mode;
     let link = Link {
         cell,
+        status,
         config,
         password,
         data_dir,
@@ -108,6 +112,8 @@ pub fn start(
 /// What the gateway needs to connect, shared by the modes.
 pub struct Link {
     cell: Arc<Cell>,
+    /// The link's state and the metrics, as `/healthz` and `/metrics` show them.
+    status: Arc<MqttStatus>,
     config: MqttConfig,
     password: Option<String>,
     data_dir: PathBuf,
@@ -270,7 +276,7 @@ impl Link {
                         tracing::warn!("MQTT: {why}");
                         self.went_down(connected, why.clone());
                     }
-                    self.cell.set_mqtt(MqttLink::Disconnected(why));
+                    self.status.set_link(MqttLink::Disconnected(why));
                     was_connected = connected;
                 }
             }
@@ -283,8 +289,8 @@ impl Link {
     }
 
     fn went_down(&self, connected: bool, why: String) {
-        self.cell.metrics().mqtt_connected.set(0);
-        self.cell.set_mqtt(MqttLink::Disconnected(why.clone()));
+        self.status.metrics.connected.set(0);
+        self.status.set_link(MqttLink::Disconnected(why.clone()));
         let what = if connected {
             "MQTT connection ended"
         } else {
@@ -408,7 +414,7 @@ impl Connection<'_> {
                 Some(Pumped::Event(MqttEvent::Incoming(Packet::ConnAck(_)))) => {
                     *self.connections += 1;
                     if *self.connections > 1 {
-                        self.link.cell.metrics().mqtt_reconnects.inc();
+                        self.link.status.metrics.reconnects.inc();
                     }
                     return Ok(Step::Connected);
                 }
@@ -445,7 +451,7 @@ impl Connection<'_> {
             .publish(message.topic, message.qos, message.retain, message.payload)
             .await
             .map_err(|e| format!("cannot publish {topic}: {e}"))?;
-        self.link.cell.metrics().mqtt_published.inc();
+        self.link.status.metrics.published.inc();
         Ok(())
     }
 
@@ -487,8 +493,8 @@ impl Connection<'_> {
     pub fn serving(&mut self, words: String) {
         self.connected = true;
         let cell = &self.link.cell;
-        cell.metrics().mqtt_connected.set(1);
-        cell.set_mqtt(MqttLink::Connected);
+        self.link.status.metrics.connected.set(1);
+        self.link.status.set_link(MqttLink::Connected);
         cell.emit(Event::of_gateway(EventKind::MqttConnected, words));
     }
 

@@ -39,6 +39,7 @@ use tokio::sync::{broadcast, mpsc};
 
 use super::forward::Backlog;
 use super::primary::{OFFLINE_GRACE, PrimaryHost, STATE_SKEW_MS, Verdict};
+use super::status;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
 use crate::cell::{Cell, CheckedWrite, DeviceStatus, DeviceSummary, LiveMessage};
 use crate::driver::WriteError;
@@ -434,7 +435,7 @@ impl Node {
                 .await?;
         }
         if sent > 0 {
-            self.cell.metrics().mqtt_forwarded.inc_by(sent);
+            status::status(&self.cell).metrics.forwarded.inc_by(sent);
         }
         Ok(())
     }
@@ -726,7 +727,10 @@ impl Node {
                 Ok(())
             }
             (Verdict::Contradicted, _) => {
-                self.cell.metrics().mqtt_offline_contradicted.inc();
+                status::status(&self.cell)
+                    .metrics
+                    .offline_contradicted
+                    .inc();
                 tracing::warn!(
                     "MQTT: an offline STATE on {topic} was contradicted by the host within {}                      s: another client of the broker published it; ignored (the broker's                      ACLs can keep it from happening, see the README)",
                     OFFLINE_GRACE.as_secs()
@@ -747,7 +751,7 @@ impl Node {
                 Ok(())
             }
             (Verdict::FromTheFuture { ahead_ms }, _) => {
-                self.cell.metrics().mqtt_state_refused.inc();
+                status::status(&self.cell).metrics.state_refused.inc();
                 if let Some(count) = self.state_refused.count(tokio::time::Instant::now()) {
                     tracing::warn!(
                         "MQTT: refused {count} STATE message(s) on {topic} since the last                          report; the latest is dated {:.0} s after this gateway's clock (at                          most {} s are taken): check both clocks (NTP), or another client                          of the broker is publishing on the host's topic",
@@ -931,7 +935,7 @@ impl Node {
             self.refuse(topic, &device, "(refused command)");
             return;
         }
-        self.cell.metrics().mqtt_commands_refused.inc();
+        status::status(&self.cell).metrics.commands_refused.inc();
         let Some(count) = self.refused_rows.count(topic, tokio::time::Instant::now()) else {
             return;
         };

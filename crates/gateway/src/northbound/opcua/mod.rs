@@ -35,6 +35,7 @@ pub mod items;
 pub mod nodes;
 pub mod peers;
 pub mod space;
+pub mod status;
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -61,11 +62,12 @@ use self::nodes::CellManager;
 use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
 use self::space::ids;
 use super::{BoxStart, Northbound, Running, Start};
-use crate::cell::{Cell, LiveMessage, OpcuaProbe, OpcuaRefused, OpcuaState};
+use crate::cell::{Cell, LiveMessage};
 use crate::config::{CellConfig, TableReader};
 use crate::http::WritePolicy;
 use crate::options::ServeOptions;
 use crate::time::Timestamp;
+pub use status::{OpcuaProbe, OpcuaRefused, OpcuaState, state};
 
 /// How often the gateway object's history row count is refreshed.
 const GATEWAY_TICK: Duration = Duration::from_secs(10);
@@ -170,12 +172,10 @@ pub async fn start(
         .map_err(|e| anyhow::anyhow!("the OPC UA server's configuration is refused: {e}"))?;
     let manager =
         cell_manager(&handle).context("the OPC UA server has no node manager for the cell")?;
-    cell.set_opcua(probe(
-        url.clone(),
-        handle.clone(),
-        items,
-        Arc::clone(&peers),
-    ));
+    status::register(
+        &cell,
+        probe(url.clone(), handle.clone(), items, Arc::clone(&peers)),
+    );
     let ns = manager.inner().namespace();
     let live = cell.subscribe();
     let follow = tokio::spawn(follow(
