@@ -39,6 +39,21 @@ pub struct Cell {
     interfaces: RwLock<Vec<(&'static str, Arc<dyn InterfaceStatus>)>>,
 }
 
+/// The status of an interface the gateway has but that does not run (not configured):
+/// `null` under its name in `/healthz`, until the interface registers its own.
+#[derive(Debug)]
+pub struct NotRunning;
+
+impl InterfaceStatus for NotRunning {
+    fn health(&self) -> serde_json::Value {
+        serde_json::Value::Null
+    }
+
+    fn into_any(self: Arc<Self>) -> Arc<dyn std::any::Any + Send + Sync> {
+        self
+    }
+}
+
 /// What an interface (MQTT, OPC UA) shows of itself: its state under its name in
 /// `/healthz` (the web page's badges read it), and its gauges brought up to date before
 /// `/metrics` is read. The interface registers it when it starts

@@ -10,7 +10,7 @@ use std::time::Duration;
 use anyhow::Context;
 use tokio::sync::watch;
 
-use crate::cell::Cell;
+use crate::cell::{Cell, NotRunning};
 use crate::config::{CellConfig, SAME_TOKENS, check_config, token_fault};
 use crate::demo::DemoCell;
 use crate::event::{Event, EventKind};
@@ -168,6 +168,10 @@ impl Gateway {
         report_history_off(&cell, options.data_dir.clone());
         let (stop, stopped) = watch::channel(false);
         let pollers = Pollers::start(tasks, stopped.clone())?;
+        // Every interface this gateway has shows in `/healthz`: `null` until it runs.
+        for interface in &registry.interfaces {
+            cell.set_interface(interface.name(), Arc::new(NotRunning), false);
+        }
         let mut interfaces = Vec::new();
         for interface in &registry.interfaces {
             let start = Start {

@@ -130,6 +130,12 @@ async fn serve_without_a_config_runs_a_live_demo_cell_and_stops_cleanly() {
     assert_eq!(status, "HTTP/1.1 200 OK");
     assert_eq!(health["devices_up"], DEMO.len());
     assert!(health["opcua"].is_null(), "no OPC UA server: {health}");
+    for interface in ["mqtt", "opcua"] {
+        assert!(
+            health.as_object().unwrap().contains_key(interface),
+            "an interface that does not run is null, not left out: {health}"
+        );
+    }
 
     serving.stop().await.unwrap();
 

@@ -35,7 +35,7 @@ use jbus::rtu::{UnitId, UnitProblem};
 use link::{SerialSettings, SharedLine};
 
 use super::{
-    BoxFuture, DeviceError, DeviceEvent, DeviceKind, Driver, DriverConfig, ErrorKind, Kind,
+    BoxFuture, Described, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, Kind,
     PollGroup, Reading, WriteError, point_ids,
 };
 use crate::event::EventKind;
@@ -62,41 +62,18 @@ const GROUPS: [(&str, Duration); 2] = [
 ];
 
 /// The Chloride CROSS static transfer switch, JBUS (Modbus RTU) units 1–255.
-#[derive(Debug)]
-pub struct Cross;
+pub const KIND: Kind = Kind::new(&KIND_FACTS);
 
-/// The kind's handle, as the config and the line tasks hold it.
-pub const KIND: Kind = Kind::new(&Cross);
-
-impl DeviceKind for Cross {
-    fn name(&self) -> &'static str {
-        "cross"
-    }
-
-    fn default_serial(&self) -> SerialSettings {
-        DEFAULT_SERIAL
-    }
-
-    fn default_address(&self) -> Option<i64> {
-        Some(DEFAULT_UNIT)
-    }
-
-    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
-        check_address(address)
-    }
-
-    fn groups(&self) -> &'static [(&'static str, Duration)] {
-        &GROUPS
-    }
-
-    fn speaks_modbus(&self) -> bool {
-        true
-    }
-
-    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
-        Ok(Box::new(CrossDriver::new(config)?))
-    }
-}
+/// What the config and the line tasks need to know of the kind.
+const KIND_FACTS: Described = Described {
+    name: "cross",
+    serial: DEFAULT_SERIAL,
+    address: Some(DEFAULT_UNIT),
+    check_address,
+    groups: &GROUPS,
+    speaks_modbus: true,
+    build: |config| Ok(Box::new(CrossDriver::new(config)?)),
+};
 
 /// Checks a JBUS unit number: 1–255 (JBUS allows numbers above Modbus's 247).
 pub fn check_address(address: Option<i64>) -> Result<(), String> {

@@ -39,7 +39,7 @@ use jbc::frame::{Address, Route};
 use link::{SerialSettings, SharedLine};
 
 use super::{
-    BoxFuture, DeviceError, DeviceKind, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
+    BoxFuture, Described, DeviceError, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
     WriteError, enum_states, point_ids,
 };
 use crate::point::{
@@ -65,37 +65,18 @@ use Meaning::{OnOff, Quantity};
 const PORT: Port = Port::One;
 
 /// The JBC JTSE hot-air station, RS-232 (the station–robot protocol).
-#[derive(Debug)]
-pub struct Jbc;
+pub const KIND: Kind = Kind::new(&KIND_FACTS);
 
-/// The kind's handle, as the config and the line tasks hold it.
-pub const KIND: Kind = Kind::new(&Jbc);
-
-impl DeviceKind for Jbc {
-    fn name(&self) -> &'static str {
-        "jbc"
-    }
-
-    fn default_serial(&self) -> SerialSettings {
-        DEFAULT_SERIAL
-    }
-
-    fn default_address(&self) -> Option<i64> {
-        Some(DEFAULT_ADDRESS)
-    }
-
-    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
-        check_address(address)
-    }
-
-    fn groups(&self) -> &'static [(&'static str, Duration)] {
-        &GROUPS
-    }
-
-    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
-        Ok(Box::new(JbcDriver::new(config)?))
-    }
-}
+/// What the config and the line tasks need to know of the kind.
+const KIND_FACTS: Described = Described {
+    name: "jbc",
+    serial: DEFAULT_SERIAL,
+    address: Some(DEFAULT_ADDRESS),
+    check_address,
+    groups: &GROUPS,
+    speaks_modbus: false,
+    build: |config| Ok(Box::new(JbcDriver::new(config)?)),
+};
 
 /// Checks a station address: 0–99, or `None` for the form without addresses.
 pub fn check_address(address: Option<i64>) -> Result<(), String> {

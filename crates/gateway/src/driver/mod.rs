@@ -402,6 +402,56 @@ pub trait DeviceKind: Send + Sync + 'static {
     fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String>;
 }
 
+/// A device kind told by its facts alone, as most are: a kind with keys of its own or
+/// more to say (Modbus, Panasonic) implements [`DeviceKind`] itself.
+#[derive(Debug)]
+pub struct Described {
+    /// Its name in the config.
+    pub name: &'static str,
+    /// Serial settings a line URL leaves out.
+    pub serial: SerialSettings,
+    /// The address a device has when the config names none.
+    pub address: Option<i64>,
+    /// Checks a device address.
+    pub check_address: fn(Option<i64>) -> Result<(), String>,
+    /// The poll groups with their default periods.
+    pub groups: &'static [(&'static str, Duration)],
+    /// Whether it speaks Modbus ([`DeviceKind::speaks_modbus`]).
+    pub speaks_modbus: bool,
+    /// The driver for a device.
+    pub build: fn(&DriverConfig) -> Result<Box<dyn Driver>, String>,
+}
+
+impl DeviceKind for Described {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn default_serial(&self) -> SerialSettings {
+        self.serial
+    }
+
+    fn default_address(&self) -> Option<i64> {
+        self.address
+    }
+
+    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
+        (self.check_address)(address)
+    }
+
+    fn groups(&self) -> &'static [(&'static str, Duration)] {
+        self.groups
+    }
+
+    fn speaks_modbus(&self) -> bool {
+        self.speaks_modbus
+    }
+
+    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
+        (self.build)(config)
+    }
+}
+
 /// What a kind knows of the device whose keys it reads.
 #[derive(Debug, Clone)]
 pub struct DeviceContext {

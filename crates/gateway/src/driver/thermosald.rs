@@ -64,7 +64,7 @@ use thermosald::tables::{self, Item, Table, machine, runtime, service, settings}
 use thermosald::{Address, RawValue, Read, Target};
 
 use super::{
-    BoxFuture, DeviceError, DeviceKind, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
+    BoxFuture, Described, DeviceError, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
     WriteError, enum_states, point_ids,
 };
 use crate::point::{
@@ -99,37 +99,18 @@ const GROUPS: [(&str, Duration); 4] = [
 ];
 
 /// Thermosald ISC impulse-sealer regulators, addresses 0–7 on one RS-485 line.
-#[derive(Debug)]
-pub struct Thermosald;
+pub const KIND: Kind = Kind::new(&KIND_FACTS);
 
-/// The kind's handle, as the config and the line tasks hold it.
-pub const KIND: Kind = Kind::new(&Thermosald);
-
-impl DeviceKind for Thermosald {
-    fn name(&self) -> &'static str {
-        "thermosald"
-    }
-
-    fn default_serial(&self) -> SerialSettings {
-        DEFAULT_SERIAL
-    }
-
-    fn default_address(&self) -> Option<i64> {
-        Some(DEFAULT_ADDRESS)
-    }
-
-    fn check_address(&self, address: Option<i64>) -> Result<(), String> {
-        check_address(address)
-    }
-
-    fn groups(&self) -> &'static [(&'static str, Duration)] {
-        &GROUPS
-    }
-
-    fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
-        Ok(Box::new(ThermosaldDriver::new(config)?))
-    }
-}
+/// What the config and the line tasks need to know of the kind.
+const KIND_FACTS: Described = Described {
+    name: "thermosald",
+    serial: DEFAULT_SERIAL,
+    address: Some(DEFAULT_ADDRESS),
+    check_address,
+    groups: &GROUPS,
+    speaks_modbus: false,
+    build: |config| Ok(Box::new(ThermosaldDriver::new(config)?)),
+};
 
 /// Checks a regulator address: 0–7.
 pub fn check_address(address: Option<i64>) -> Result<(), String> {

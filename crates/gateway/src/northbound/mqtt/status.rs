@@ -142,17 +142,11 @@ pub fn status(cell: &Cell) -> Arc<MqttStatus> {
         link: RwLock::new(MqttLink::Disconnected("not connected yet".to_owned())),
         metrics: MqttMetrics::default(),
     });
-    let registered = cell.set_interface(NAME, Arc::clone(&status) as _, false);
-    match registered.into_any().downcast::<MqttStatus>() {
-        Ok(registered) if Arc::ptr_eq(&registered, &status) => {
-            cell.metrics()
-                .register(|registry| status.metrics.register(registry));
-            status
-        }
-        Ok(registered) => registered,
-        // Another kind of status under the name: this one stays the interface's own.
-        Err(_) => status,
-    }
+    // Replaces the `null` of an interface not running yet.
+    cell.set_interface(NAME, Arc::clone(&status) as _, true);
+    cell.metrics()
+        .register(|registry| status.metrics.register(registry));
+    status
 }
 
 /// The cell's MQTT status, if the interface has started.

@@ -163,7 +163,9 @@ impl InterfaceStatus for OpcuaStatus {
 
 /// Registers the server's status (and, the first time, its metrics) with the cell.
 pub fn register(cell: &Cell, probe: OpcuaProbe) {
-    let first = cell.interface(NAME).is_none();
+    let first = cell
+        .interface(NAME)
+        .is_none_or(|s| s.into_any().downcast::<OpcuaStatus>().is_err());
     let status = Arc::new(OpcuaStatus {
         probe,
         metrics: OpcuaMetrics::default(),
