@@ -1,5 +1,7 @@
 //! `cellbus serve` and `cellbus config …`: the gateway, and its configuration file.
 
+use gateway::northbound::mqtt::MqttFlags;
+use gateway::northbound::opcua::OpcuaFlags;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -136,11 +138,14 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
         allow_writes: args.allow_writes,
         token: args.token,
         read_token: args.read_token,
-        mqtt: args.mqtt,
-        mqtt_mode: args.mqtt_mode,
-        mqtt_node: args.mqtt_node,
-        mqtt_primary_host: args.mqtt_primary_host,
-        opcua: args.opcua,
+        flags: gateway::options::Flags::default()
+            .with(MqttFlags {
+                broker: args.mqtt,
+                mode: args.mqtt_mode,
+                node: args.mqtt_node,
+                primary_host: args.mqtt_primary_host,
+            })
+            .with(OpcuaFlags { listen: args.opcua }),
     };
     gateway::serve(options, shutdown_signal()).await?;
     Ok(ExitCode::SUCCESS)

@@ -1783,11 +1783,17 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         listen: "127.0.0.1:0".parse().expect("a valid socket address"),
         config: Some(config),
         data_dir: data_dir.clone(),
-        mqtt: mqtt.as_ref().map(|m| m.broker.url()),
-        mqtt_node: mqtt.as_ref().map(|_| "loadbench".to_owned()),
-        opcua: args
-            .opcua
-            .then(|| "127.0.0.1:0".parse().expect("a valid socket address")),
+        flags: gateway::options::Flags::default()
+            .with(gateway::northbound::mqtt::MqttFlags {
+                broker: mqtt.as_ref().map(|m| m.broker.url()),
+                node: mqtt.as_ref().map(|_| "loadbench".to_owned()),
+                ..Default::default()
+            })
+            .with(gateway::northbound::opcua::OpcuaFlags {
+                listen: args
+                    .opcua
+                    .then(|| "127.0.0.1:0".parse().expect("a valid socket address")),
+            }),
         ..ServeOptions::default()
     };
     // The same runtime as `cellbus serve`: multi-threaded, one worker per core.

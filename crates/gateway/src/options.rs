@@ -5,7 +5,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use crate::northbound::mqtt::config::MqttMode;
+use crate::config::Settings;
 
 /// Address the gateway listens on by default: loopback only.
 pub const DEFAULT_LISTEN: SocketAddr =
@@ -27,7 +27,7 @@ pub const DEFAULT_RETAIN_AUDIT: Duration = Duration::from_secs(365 * 24 * 3600);
 pub struct OptionError(pub String);
 
 /// What `cellbus serve` was asked for.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ServeOptions {
     /// Where to listen (default 127.0.0.1:8080; port 0 for any free port).
     pub listen: SocketAddr,
@@ -46,20 +46,9 @@ pub struct ServeOptions {
     /// The read token every API route then needs; else `CELLBUS_READ_TOKEN`, else the
     /// config's `read_token`; none: reading is open.
     pub read_token: Option<String>,
-    /// `--mqtt mqtt://HOST:PORT` (or `mqtts://HOST:PORT`, TLS): publish the cell as a
-    /// Sparkplug B edge node to this broker (the demo cell as group `cellbus`, edge node
-    /// `demo`); with a config, it replaces the `[mqtt]` table's broker (keeping its TLS
-    /// files for `mqtts://`; without a table, TLS trusts the system's roots).
-    pub mqtt: Option<String>,
-    /// `--mqtt-mode`: Sparkplug B or JSON, overriding the `[mqtt]` table's `mode`.
-    pub mqtt_mode: Option<MqttMode>,
-    /// `--mqtt-node`: the Sparkplug edge node id, overriding the `[mqtt]` table's.
-    pub mqtt_node: Option<String>,
-    /// `--mqtt-primary-host`: the Sparkplug primary host whose STATE gates the births.
-    pub mqtt_primary_host: Option<String>,
-    /// `--opcua IP:PORT`: serve the cell over OPC UA there (port 0: any free port); with
-    /// a config, it replaces the `[opcua]` table's endpoint.
-    pub opcua: Option<SocketAddr>,
+    /// What the command line says to the interfaces (`--mqtt …`, `--opcua …`): each
+    /// interface's own type, which it takes back with [`Flags::get`].
+    pub flags: Flags,
 }
 
 impl Default for ServeOptions {
@@ -73,11 +62,27 @@ impl Default for ServeOptions {
             allow_writes: false,
             token: None,
             read_token: None,
-            mqtt: None,
-            mqtt_mode: None,
-            mqtt_node: None,
-            mqtt_primary_host: None,
-            opcua: None,
+            flags: Flags::default(),
         }
+    }
+}
+
+/// The interfaces' command-line flags, one value of each interface's own type.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Flags(Vec<Settings>);
+
+impl Flags {
+    /// With `flags` (an interface's own type).
+    pub fn with<T: std::any::Any + std::fmt::Debug + PartialEq + Send + Sync>(
+        mut self,
+        flags: T,
+    ) -> Self {
+        self.0.push(Settings::new(flags));
+        self
+    }
+
+    /// The flags of type `T`, if given.
+    pub fn get<T: std::any::Any>(&self) -> Option<&T> {
+        self.0.iter().find_map(Settings::get)
     }
 }

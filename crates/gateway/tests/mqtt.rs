@@ -1,6 +1,8 @@
 //! The cell on MQTT, against a real mosquitto: the demo cell's Sparkplug B births, data,
 //! rebirth, death and reconnection, as an independent subscriber sees them.
 
+use gateway::northbound::mqtt::MqttFlags;
+use gateway::options::Flags;
 use std::collections::{BTreeMap, BTreeSet};
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
@@ -19,7 +21,10 @@ const DEVICES: &str = "spBv1.0/cellbus/+/demo/#";
 async fn start(broker: &Mosquitto, dir: &std::path::Path) -> Running {
     Running::start(ServeOptions {
         data_dir: dir.join("data"),
-        mqtt: Some(broker.url()),
+        flags: Flags::default().with(MqttFlags {
+            broker: Some(broker.url()),
+            ..MqttFlags::default()
+        }),
         ..ServeOptions::default()
     })
     .await
@@ -243,7 +248,10 @@ async fn an_unreachable_broker_shows_in_healthz_and_events_and_nothing_else_stop
     let dir = tempfile::tempdir().unwrap();
     let gateway = Running::start(ServeOptions {
         data_dir: dir.path().join("data"),
-        mqtt: Some(format!("mqtt://127.0.0.1:{port}")),
+        flags: Flags::default().with(MqttFlags {
+            broker: Some(format!("mqtt://127.0.0.1:{port}")),
+            ..MqttFlags::default()
+        }),
         ..ServeOptions::default()
     })
     .await;

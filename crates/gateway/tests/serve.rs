@@ -191,7 +191,9 @@ async fn wait_for_opcua_connections(addr: SocketAddr, want: u64) -> serde_json::
 async fn healthz_and_metrics_show_the_opcua_server_and_its_open_connections() {
     let dir = tempfile::tempdir().unwrap();
     let gateway = Gateway::start(ServeOptions {
-        opcua: Some("127.0.0.1:0".parse().unwrap()),
+        flags: gateway::options::Flags::default().with(gateway::northbound::opcua::OpcuaFlags {
+            listen: Some("127.0.0.1:0".parse().unwrap()),
+        }),
         ..options(dir.path())
     })
     .await

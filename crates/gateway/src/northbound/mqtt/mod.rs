@@ -588,6 +588,22 @@ fn first_wait(retry: Duration, connected: bool, lasted: Duration) -> Duration {
     }
 }
 
+/// What the command line says to the MQTT interface (in [`ServeOptions::flags`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MqttFlags {
+    /// `--mqtt mqtt://HOST:PORT` (or `mqtts://HOST:PORT`, TLS): publish the cell as a
+    /// Sparkplug B edge node to this broker (the demo cell as group `cellbus`, edge node
+    /// `demo`); with a config, it replaces the `[mqtt]` table's broker (keeping its TLS
+    /// files for `mqtts://`; without a table, TLS trusts the system's roots).
+    pub broker: Option<String>,
+    /// `--mqtt-mode`: Sparkplug B or JSON, overriding the `[mqtt]` table's `mode`.
+    pub mode: Option<MqttMode>,
+    /// `--mqtt-node`: the Sparkplug edge node id, overriding the `[mqtt]` table's.
+    pub node: Option<String>,
+    /// `--mqtt-primary-host`: the Sparkplug primary host whose STATE gates the births.
+    pub primary_host: Option<String>,
+}
+
 /// The MQTT interface: the cell on a broker, as a Sparkplug B edge node or plain JSON.
 #[derive(Debug)]
 pub struct Mqtt;
@@ -633,12 +649,11 @@ fn mqtt_config(
     cell_config: &CellConfig,
     demo: bool,
 ) -> anyhow::Result<Option<MqttConfig>> {
-    let mut mqtt = match (&options.mqtt, cell_config.interface::<MqttConfig>("mqtt")) {
+    let none = MqttFlags::default();
+    let flags = options.flags.get::<MqttFlags>().unwrap_or(&none);
+    let mut mqtt = match (&flags.broker, cell_config.interface::<MqttConfig>("mqtt")) {
         (None, None) => {
-            if options.mqtt_mode.is_some()
-                || options.mqtt_node.is_some()
-                || options.mqtt_primary_host.is_some()
-            {
+            if flags.mode.is_some() || flags.node.is_some() || flags.primary_host.is_some() {
                 return Err(OptionError(
                     "--mqtt-mode, --mqtt-node and --mqtt-primary-host need a broker: give \
                      --mqtt URL or an [mqtt] table in the configuration"
@@ -661,7 +676,7 @@ fn mqtt_config(
             }
         }
         (Some(url), None) => {
-            let node = match &options.mqtt_node {
+            let node = match &flags.node {
                 Some(node) => node.clone(),
                 None if demo => DEMO_EDGE_NODE.to_owned(),
                 None => default_edge_node_id(),
@@ -669,10 +684,10 @@ fn mqtt_config(
             MqttConfig::for_broker(url, &node).map_err(|m| OptionError(format!("--mqtt: {m}")))?
         }
     };
-    if let Some(mode) = options.mqtt_mode {
+    if let Some(mode) = flags.mode {
         mqtt.mode = mode;
     }
-    if let Some(node) = &options.mqtt_node {
+    if let Some(node) = &flags.node {
         ::sparkplug::Id::new(node.as_str())
             .map_err(|e| OptionError(format!("--mqtt-node {node:?}: {e}")))?;
         if mqtt.prefix == format!("cellbus/{}", mqtt.edge_node_id) {
@@ -683,7 +698,7 @@ fn mqtt_config(
         }
         mqtt.edge_node_id.clone_from(node);
     }
-    if let Some(host) = &options.mqtt_primary_host {
+    if let Some(host) = &flags.primary_host {
         ::sparkplug::Id::new(host.as_str())
             .map_err(|e| OptionError(format!("--mqtt-primary-host {host:?}: {e}")))?;
         mqtt.primary_host = Some(host.clone());

@@ -629,6 +629,14 @@ fn set_values(
     }
 }
 
+/// What the command line says to the OPC UA interface (in [`ServeOptions::flags`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct OpcuaFlags {
+    /// `--opcua IP:PORT`: serve the cell over OPC UA there (port 0: any free port); with
+    /// a config, it replaces the `[opcua]` table's endpoint.
+    pub listen: Option<SocketAddr>,
+}
+
 /// The OPC UA interface: the cell as an OPC UA server.
 #[derive(Debug)]
 pub struct Opcua;
@@ -674,7 +682,8 @@ fn opcua_config(
     demo: bool,
     writes: &WritePolicy,
 ) -> anyhow::Result<Option<(OpcuaConfig, Options)>> {
-    let table = match (options.opcua, config.interface::<OpcuaConfig>("opcua")) {
+    let listen = options.flags.get::<OpcuaFlags>().and_then(|f| f.listen);
+    let table = match (listen, config.interface::<OpcuaConfig>("opcua")) {
         (None, None) => return Ok(None),
         (None, Some(table)) => table.clone(),
         (Some(addr), Some(table)) => OpcuaConfig {
