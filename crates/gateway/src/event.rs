@@ -46,10 +46,12 @@ pub enum EventKind {
     HistoryRecovered,
     /// A damaged history file was moved aside at start and a new one started.
     HistoryReset,
-    /// The gateway's MQTT connection to its broker came up (births follow).
-    MqttConnected,
-    /// The gateway's MQTT connection to its broker was lost or refused.
-    MqttDisconnected,
+    /// An interface's link came up (MQTT: connected to the broker, births follow); its
+    /// `interface` field names it.
+    InterfaceUp,
+    /// An interface's link was lost or refused (MQTT: the broker); its `interface` field
+    /// names it.
+    InterfaceDown,
 }
 
 impl EventKind {
@@ -70,8 +72,8 @@ impl EventKind {
         EventKind::HistoryFailed,
         EventKind::HistoryRecovered,
         EventKind::HistoryReset,
-        EventKind::MqttConnected,
-        EventKind::MqttDisconnected,
+        EventKind::InterfaceUp,
+        EventKind::InterfaceDown,
     ];
 
     /// The name stored and printed (`device_down`).
@@ -92,8 +94,8 @@ impl EventKind {
             EventKind::HistoryFailed => "history_failed",
             EventKind::HistoryRecovered => "history_recovered",
             EventKind::HistoryReset => "history_reset",
-            EventKind::MqttConnected => "mqtt_connected",
-            EventKind::MqttDisconnected => "mqtt_disconnected",
+            EventKind::InterfaceUp => "interface_up",
+            EventKind::InterfaceDown => "interface_down",
         }
     }
 
@@ -104,10 +106,10 @@ impl EventKind {
     /// |---|---|
     /// | alarm_raised, device_down, line_down, history_failed | 700 |
     /// | history_reset | 600 |
-    /// | state_changed (a transfer, a machine's state), line_reopened, mqtt_disconnected | 500 |
+    /// | state_changed (a transfer, a machine's state), line_reopened, interface_down | 500 |
     /// | device_event (an R message) | 400 |
     /// | alarm_cleared, device_up, line_up, history_recovered | 300 |
-    /// | write, gateway_started, gateway_stopped, mqtt_connected | 200 |
+    /// | write, gateway_started, gateway_stopped, interface_up | 200 |
     pub fn severity(self) -> u16 {
         match self {
             EventKind::AlarmRaised
@@ -115,7 +117,7 @@ impl EventKind {
             | EventKind::LineDown
             | EventKind::HistoryFailed => 700,
             EventKind::HistoryReset => 600,
-            EventKind::StateChanged | EventKind::LineReopened | EventKind::MqttDisconnected => 500,
+            EventKind::StateChanged | EventKind::LineReopened | EventKind::InterfaceDown => 500,
             EventKind::DeviceEvent => 400,
             EventKind::AlarmCleared
             | EventKind::DeviceUp
@@ -124,7 +126,7 @@ impl EventKind {
             EventKind::Write
             | EventKind::GatewayStarted
             | EventKind::GatewayStopped
-            | EventKind::MqttConnected => 200,
+            | EventKind::InterfaceUp => 200,
         }
     }
 

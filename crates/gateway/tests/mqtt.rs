@@ -268,13 +268,15 @@ async fn an_unreachable_broker_shows_in_healthz_and_events_and_nothing_else_stop
     // The event is committed to the history within a batch: bounded polling.
     let deadline = Instant::now() + LIMIT;
     loop {
-        let events = get(addr, "/api/events?kind=mqtt_disconnected").await;
-        if events.contains("cannot connect to the MQTT broker") {
+        let events = get(addr, "/api/events?kind=interface_down").await;
+        if events.contains("cannot connect to the MQTT broker")
+            && events.contains(r#""interface":"mqtt""#)
+        {
             break;
         }
         assert!(
             Instant::now() < deadline,
-            "no mqtt_disconnected event: {events}"
+            "no interface_down event: {events}"
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }

@@ -477,7 +477,7 @@ async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes
     let node = Node::start(&rig, config, false);
 
     // Connected, but silent until the host says it is online.
-    next_event(&mut live, crate::event::EventKind::MqttConnected).await;
+    next_event(&mut live, crate::event::EventKind::InterfaceUp).await;
     let online_at = now_ms();
     sub.publish_retained("spBv1.0/STATE/scada", host_state(true))
         .await;
@@ -507,7 +507,7 @@ async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes
     assert_eq!(death.bd_seq(), Some(bd_seq));
     let offline_at = now_ms();
     // The node is connected again (a new session), still silent: wait for some readings.
-    next_event(&mut live, crate::event::EventKind::MqttConnected).await;
+    next_event(&mut live, crate::event::EventKind::InterfaceUp).await;
     // Changes while it is away: the station stops answering (its points go bad) and
     // answers again.
     rig.plugged[0].store(false, Ordering::SeqCst);

@@ -564,7 +564,7 @@ async function refreshMqtt() {
 }
 
 function addEvent(event, atTop = true) {
-  if (atTop && event.kind && event.kind.startsWith('mqtt_')) refreshMqtt();
+  if (atTop && event.kind && event.kind.startsWith('interface_')) refreshMqtt();
   const list = document.getElementById('events');
   const item = el('li');
   item.dataset.kind = event.kind;

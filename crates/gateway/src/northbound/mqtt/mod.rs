@@ -296,8 +296,8 @@ impl Link {
         } else {
             "cannot connect to the MQTT broker"
         };
-        self.cell.emit(Event::of_gateway(
-            EventKind::MqttDisconnected,
+        self.cell.emit(link_event(
+            EventKind::InterfaceDown,
             format!(
                 "{what} ({}:{}): {why}; retrying",
                 self.config.host, self.config.port
@@ -495,7 +495,7 @@ impl Connection<'_> {
         let cell = &self.link.cell;
         self.link.status.metrics.connected.set(1);
         self.link.status.set_link(MqttLink::Connected);
-        cell.emit(Event::of_gateway(EventKind::MqttConnected, words));
+        cell.emit(link_event(EventKind::InterfaceUp, words));
     }
 
     /// Publishes `will`, disconnects, and waits (bounded) until everything is written; a
@@ -586,6 +586,14 @@ fn first_wait(retry: Duration, connected: bool, lasted: Duration) -> Duration {
     } else {
         retry
     }
+}
+
+/// An event about the link to the broker (`interface_up`, `interface_down`), its
+/// `interface` field `mqtt`.
+fn link_event(kind: EventKind, message: String) -> Event {
+    let mut event = Event::of_gateway(kind, message);
+    event.fields = crate::event::fields([("interface", serde_json::json!(status::NAME))]);
+    event
 }
 
 /// What the command line says to the MQTT interface (in [`ServeOptions::flags`]).
