@@ -1,0 +1,218 @@
+use std::collections::HashSet;
+
+use super::*;
+use crate::point::DeviceId;
+use panasonic::server::TwinServer;
+use panasonic::status::StopMode;
+use panasonic::{Machine, MachineConfig};
+
+async fn rig() -> (PanasonicDriver, panasonic::server::RunningTwin) {
+    let any: std::net::SocketAddr = "127.0.0.1:0".parse().unwrap();
+    let twin = TwinServer::bind(any, any, Machine::new(MachineConfig::default()).unwrap())
+        .await
+        .unwrap()
+        .spawn()
+        .unwrap();
+    let driver = PanasonicDriver::new(&DriverConfig {
+        id: DeviceId::new("placer1").unwrap(),
+        protocol: super::KIND,
+        address: None,
+        timeout: None,
+        retries: None,
+        settings: crate::config::Settings::new(Keys {
+            event_port: Some(twin.event_addr().port()),
+        }),
+        endpoint: Some(Endpoint::Tcp {
+            host: "127.0.0.1".into(),
+            port: twin.command_addr().port(),
+            line: None,
+            framing: link::TcpFraming::Raw,
+        }),
+    })
+    .unwrap();
+    (driver, twin)
+}
+
+fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
+    readings
+        .iter()
+        .find(|r| r.point.name() == name)
+        .unwrap_or_else(|| panic!("no reading for {name}"))
+        .value
+        .clone()
+}
+
+#[tokio::test]
+async fn a_port_2_notice_keeps_the_time_it_arrived_not_the_time_it_is_collected() {
+    let (mut driver, _twin) = rig().await;
+    let (tx, rx) = mpsc::unbounded_channel();
+    driver.notices = Some(rx);
+    let arrived = Timestamp(1_700_000_000_000);
+    let notice = Notice::Unreadable {
+        message: "R9XX".into(),
+        reason: "not an R message of the manual".into(),
+    };
+    tx.send((arrived, notice)).unwrap();
+    driver.drain_notices();
+    let events = driver.take_events();
+    assert_eq!(events.len(), 1, "{events:?}");
+    assert_eq!(events[0].at, Some(arrived));
+    assert_eq!(events[0].kind, EventKind::DeviceEvent);
+}
+
+/// Polls `live` and waits for the next Port 2 notice until `done` holds for the
+/// collected events (real sockets: bounded generously, no sleeps).
+async fn events_until(
+    driver: &mut PanasonicDriver,
+    done: impl Fn(&[DeviceEvent]) -> bool,
+) -> Vec<DeviceEvent> {
+    let mut events = Vec::new();
+    for _ in 0..50 {
+        driver.poll(LIVE).await.unwrap();
+        events.extend(driver.take_events());
+        if done(&events) {
+            return events;
+        }
+        let rx = driver.notices.as_mut().expect("connected by the poll");
+        let notice = tokio::time::timeout(Duration::from_secs(20), rx.recv())
+            .await
+            .expect("a notice within 20 s")
+            .expect("the client runs");
+        driver.record_notice(&notice.1, notice.0);
+    }
+    panic!("not seen in time: {events:?}");
+}
+
+#[test]
+fn every_point_has_a_unique_id_and_none_is_writable() {
+    let driver = PanasonicDriver::new(&DriverConfig {
+        id: DeviceId::new("placer1").unwrap(),
+        protocol: super::KIND,
+        address: None,
+        timeout: None,
+        retries: None,
+        endpoint: None,
+        settings: Default::default(),
+    })
+    .unwrap();
+    let points = driver.points();
+    let ids: HashSet<_> = points.iter().map(|p| &p.id).collect();
+    assert_eq!(ids.len(), points.len());
+    assert!(points.iter().all(|p| p.writable.is_none()));
+    let state = &points[0];
+    assert_eq!(state.label(&Value::Number(2.0)), Some("error stop"));
+    assert!(state.is_alarm(&Value::Number(2.0)));
+    assert!(!state.is_alarm(&Value::Number(0.0)));
+    assert!(check_address(Some(1)).unwrap_err().contains("no address"));
+}
+
+#[tokio::test]
+async fn status_program_and_production_data_are_read_from_the_twin() {
+    let (mut driver, _twin) = rig().await;
+    let live = driver.poll(LIVE).await.unwrap();
+    assert_eq!(value(&live, "state"), Ok(Value::Number(1.0)), "ready");
+    assert_eq!(value(&live, "mode"), Ok(Value::Number(0.0)), "online");
+    let program = driver.poll(PROGRAM).await.unwrap();
+    assert!(matches!(value(&program, "program"), Ok(Value::Text(t)) if !t.is_empty()));
+    let production = driver.poll(PRODUCTION).await.unwrap();
+    assert_eq!(production.len(), COUNTERS.len() + RATES.len());
+    assert!(production.iter().all(|r| r.value.is_ok()), "{production:?}");
+}
+
+#[tokio::test]
+async fn r_messages_and_run_state_changes_become_events() {
+    let (mut driver, twin) = rig().await;
+    driver.poll(LIVE).await.unwrap();
+    twin.control()
+        .operator_start(Some(StopMode::Continuous))
+        .unwrap();
+    let events = events_until(&mut driver, |events| {
+        events.iter().any(|e| e.kind == EventKind::StateChanged)
+            && events.iter().any(|e| e.message.contains("R1ST"))
+    })
+    .await;
+    let change = events
+        .iter()
+        .find(|e| e.kind == EventKind::StateChanged)
+        .unwrap();
+    assert_eq!(change.message, "machine went from ready to run");
+    assert_eq!(change.point, Some("state"));
+    assert_eq!(
+        serde_json::Value::Object(change.fields.clone()),
+        serde_json::json!({"from": "ready", "to": "run"})
+    );
+    twin.control().force_error(3).unwrap();
+    let events = events_until(&mut driver, |events| {
+        events
+            .iter()
+            .any(|e| e.message == "machine went from run to error stop")
+    })
+    .await;
+    let error = events
+        .iter()
+        .find(|e| e.kind == EventKind::DeviceEvent && e.message.starts_with("R message R2E"))
+        .unwrap_or_else(|| panic!("no R2E event: {events:?}"));
+    // The error's facts, for programs: no need to parse the words.
+    let fields = serde_json::Value::Object(error.fields.clone());
+    assert_eq!(fields["event"], "parts_exhausted", "{fields}");
+    assert_eq!(fields["error_code"], 3, "{fields}");
+    assert!(fields["feeder"].is_u64(), "{fields}");
+}
+
+#[test]
+fn r_messages_become_facts_with_their_numbers() {
+    use panasonic::event::{BoardTime, ErrorInfo};
+    let of = |event: &Event| serde_json::Value::Object(event_fields(event));
+    assert_eq!(
+        of(&Event::BoardFinished {
+            time: Some(BoardTime::new(42).unwrap())
+        }),
+        serde_json::json!({"event": "board_finished", "board_time_s": 42})
+    );
+    assert_eq!(
+        of(&Event::BoardFinished { time: None }),
+        serde_json::json!({"event": "board_finished"}),
+        "a time the machine did not give is left out"
+    );
+    assert_eq!(
+        of(&Event::Error(ErrorInfo::new(3, 87, 7, 7).unwrap())),
+        serde_json::json!({
+            "event": "parts_exhausted", "error_code": 3, "step": 87, "nozzle": 7, "feeder": 7
+        })
+    );
+    assert_eq!(
+        of(&Event::Error(ErrorInfo::new(12, 1, 2, 3).unwrap()))["event"],
+        "error_stop"
+    );
+    assert_eq!(
+        of(&Event::RecoveryOk),
+        serde_json::json!({"event": "recovery_succeeded"})
+    );
+}
+
+#[tokio::test]
+async fn a_machine_that_is_not_there_is_a_timeout_naming_its_port() {
+    let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = closed.local_addr().unwrap().port();
+    drop(closed);
+    let mut driver = PanasonicDriver::new(&DriverConfig {
+        id: DeviceId::new("placer1").unwrap(),
+        protocol: super::KIND,
+        address: None,
+        timeout: Some(Duration::from_secs(2)),
+        retries: None,
+        settings: crate::config::Settings::new(Keys {
+            event_port: Some(port),
+        }),
+        endpoint: Some(Endpoint::Tcp {
+            host: "127.0.0.1".into(),
+            port,
+            line: None,
+            framing: link::TcpFraming::Raw,
+        }),
+    })
+    .unwrap();
+    let err = driver.poll(LIVE).await.unwrap_err();
+    assert_eq!(err.kind, ErrorKind::Timeout, "{err}");
+    assert!(err.message.contains("Port 2"), "{err}");
+}
