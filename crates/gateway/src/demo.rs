@@ -26,7 +26,6 @@
 //!
 //! Adding a device is one `start_*` function and one line in [`DemoCell::start`].
 
-use std::collections::BTreeMap;
 use std::time::Duration;
 
 use jbc::client::{Client, ClientConfig};
@@ -73,13 +72,7 @@ impl DemoCell {
     /// Starts every simulated device and its operator.
     pub async fn start() -> std::io::Result<Self> {
         let mut demo = DemoCell {
-            config: CellConfig {
-                source: None,
-                interfaces: Default::default(),
-                token: None,
-                read_token: None,
-                lines: Vec::new(),
-            },
+            config: CellConfig::default(),
             stations: Vec::new(),
             regulators: Vec::new(),
             crosses: Vec::new(),
@@ -134,21 +127,11 @@ fn device_id(id: &str) -> std::io::Result<DeviceId> {
 }
 
 fn device(id: DeviceId, protocol: Kind, address: i64, name: &str) -> DeviceConfig {
-    DeviceConfig {
-        driver: DriverConfig {
-            id,
-            protocol,
-            address: Some(address),
-            timeout: None,
-            retries: None,
-            endpoint: None,
-            settings: Default::default(),
-        },
-        name: name.to_owned(),
-        period: None,
-        groups: BTreeMap::new(),
-        deadband: None,
-    }
+    let driver = DriverConfig {
+        address: Some(address),
+        ..DriverConfig::new(id, protocol)
+    };
+    DeviceConfig::new(driver, name)
 }
 
 /// A JTSE at address 01 on its own RS-232 line (19200 8E1), with an operator.

@@ -160,6 +160,16 @@ impl Metrics {
             .map_or(0, |c| c.get())
     }
 
+    /// Write attempts with `result` so far (0 before the first), without creating the
+    /// counter.
+    pub fn writes_of(&self, result: &str) -> u64 {
+        self.writes
+            .get(&WriteLabels {
+                result: result.to_owned(),
+            })
+            .map_or(0, |c| c.get())
+    }
+
     /// Registers every metric.
     pub fn new() -> Self {
         let mut registry = Registry::with_prefix("cellbus");

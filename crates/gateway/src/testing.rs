@@ -1,7 +1,6 @@
 //! Test rigs shared by the unit tests: JBC station models on an in-memory line, polled by
 //! a real line task and recorded in a real (temporary) store.
 
-use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
@@ -75,21 +74,11 @@ pub struct Rig {
 }
 
 pub fn device(id: &str, address: i64) -> DeviceConfig {
-    DeviceConfig {
-        driver: DriverConfig {
-            id: DeviceId::new(id).unwrap(),
-            protocol: crate::driver::jbc::KIND,
-            address: Some(address),
-            timeout: None,
-            retries: None,
-            endpoint: None,
-            settings: Default::default(),
-        },
-        name: format!("Station {id}"),
-        period: None,
-        groups: BTreeMap::new(),
-        deadband: None,
-    }
+    let driver = DriverConfig {
+        address: Some(address),
+        ..DriverConfig::new(DeviceId::new(id).unwrap(), crate::driver::jbc::KIND)
+    };
+    DeviceConfig::new(driver, format!("Station {id}"))
 }
 
 /// `count` stations at addresses 1, 2, … on one line, polled by a running line task.
@@ -153,10 +142,6 @@ pub fn rig(count: u8) -> Rig {
         })
     };
     let config = CellConfig {
-        source: None,
-        interfaces: Default::default(),
-        token: None,
-        read_token: None,
         lines: vec![LineConfig {
             reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
             name: "bench".into(),
@@ -166,6 +151,7 @@ pub fn rig(count: u8) -> Rig {
                 .map(|a| device(&format!("jbc{a}"), i64::from(a)))
                 .collect(),
         }],
+        ..CellConfig::default()
     };
     let metrics = Arc::new(Metrics::new());
     let (cell, mut tasks) =
@@ -209,4 +195,18 @@ pub fn air_temperature_view(
         alarm: false,
         period_ms: 1000,
     }
+}
+
+/// The value (or the failure) a poll read for the point `name`; panics when the poll read
+/// no such point.
+pub fn reading(
+    readings: &[crate::driver::Reading],
+    name: &str,
+) -> Result<crate::point::Value, crate::driver::DeviceError> {
+    readings
+        .iter()
+        .find(|r| r.point.name() == name)
+        .unwrap_or_else(|| panic!("no reading for {name}"))
+        .value
+        .clone()
 }

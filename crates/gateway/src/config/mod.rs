@@ -76,8 +76,8 @@ pub const DEFAULT_REOPEN_AFTER_TIMEOUTS: u32 = 3;
 /// Largest `reopen_after_timeouts` accepted.
 pub const MAX_REOPEN_AFTER_TIMEOUTS: u32 = 1000;
 
-/// A checked configuration.
-#[derive(Debug, Clone, PartialEq)]
+/// A checked configuration (the default: no file, no lines).
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct CellConfig {
     /// The file it came from, if any (the demo cell has none).
     pub source: Option<PathBuf>,
@@ -198,6 +198,20 @@ pub struct DeviceConfig {
     /// Deadband of its numeric points that name none of their own (`deadband` or
     /// `deadband_percent` in the device table).
     pub deadband: Option<Deadband>,
+}
+
+impl DeviceConfig {
+    /// The device `driver` describes, called `name`, polled at its groups' default periods,
+    /// without a deadband.
+    pub fn new(driver: DriverConfig, name: impl Into<String>) -> Self {
+        Self {
+            driver,
+            name: name.into(),
+            period: None,
+            groups: BTreeMap::new(),
+            deadband: None,
+        }
+    }
 }
 
 /// What is wrong with `token` as a bearer token, if anything: clients send it in an HTTP

@@ -581,14 +581,7 @@ async fn writes_need_the_switch_and_the_token_and_every_attempt_is_audited() {
         9,
         "an authorised write to an unknown device is audited too"
     );
-    let unauthorised = rig
-        .cell
-        .metrics()
-        .writes
-        .get_or_create(&crate::metrics::WriteLabels {
-            result: "unauthorised".into(),
-        })
-        .get();
+    let unauthorised = rig.cell.metrics().writes_of("unauthorised");
     assert_eq!(unauthorised, 3, "writes off, no token, wrong token");
     let (_, events) = get(&on, "/api/events?kind=write").await;
     assert_eq!(events["events"].as_array().unwrap().len(), 2);

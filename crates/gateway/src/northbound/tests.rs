@@ -272,14 +272,7 @@ async fn a_dcmd_write_is_refused_without_allow_writes_and_nothing_is_stored() {
         vec![],
         "nothing stored"
     );
-    let refused = rig
-        .cell
-        .metrics()
-        .writes
-        .get_or_create(&crate::metrics::WriteLabels {
-            result: "unauthorised".into(),
-        })
-        .get();
+    let refused = rig.cell.metrics().writes_of("unauthorised");
     assert_eq!(refused, 1, "counted");
 
     node.stop().await;

@@ -2,7 +2,6 @@
 //! lines, with tokio's clock paused: three regulators share one line, a CROSS has its own,
 //! and what they do becomes values and events.
 
-use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -35,21 +34,11 @@ struct Rig {
 }
 
 fn device(id: &str, protocol: Kind, address: i64) -> DeviceConfig {
-    DeviceConfig {
-        driver: DriverConfig {
-            id: DeviceId::new(id).unwrap(),
-            protocol,
-            address: Some(address),
-            timeout: None,
-            retries: None,
-            endpoint: None,
-            settings: Default::default(),
-        },
-        name: format!("Device {id}"),
-        period: None,
-        groups: BTreeMap::new(),
-        deadband: None,
-    }
+    let driver = DriverConfig {
+        address: Some(address),
+        ..DriverConfig::new(DeviceId::new(id).unwrap(), protocol)
+    };
+    DeviceConfig::new(driver, format!("Device {id}"))
 }
 
 fn opener<M>(model: SharedModel<M>, settings: link::SerialSettings) -> Opener
@@ -102,10 +91,6 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
     let sealing = crate::driver::thermosald::DEFAULT_SERIAL;
     let jbus_line = crate::driver::cross::DEFAULT_SERIAL;
     let config = CellConfig {
-        source: None,
-        interfaces: Default::default(),
-        token: None,
-        read_token: None,
         lines: vec![
             LineConfig {
                 reopen_after_timeouts: crate::config::DEFAULT_REOPEN_AFTER_TIMEOUTS,
@@ -122,6 +107,7 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
                 devices: vec![device("cross1", crate::driver::cross::KIND, 1)],
             },
         ],
+        ..CellConfig::default()
     };
     let (cell, tasks) = Cell::with_openers(
         &config,

@@ -560,10 +560,6 @@ fn cell_with(deadband: Option<Deadband>) -> (Arc<Cell>, crate::store::Store, tem
     let mut device = crate::testing::device("jbc1", 1);
     device.deadband = deadband;
     let config = crate::config::CellConfig {
-        source: None,
-        interfaces: Default::default(),
-        token: None,
-        read_token: None,
         lines: vec![crate::config::LineConfig {
             reopen_after_timeouts: 3,
             name: "bench".into(),
@@ -574,6 +570,7 @@ fn cell_with(deadband: Option<Deadband>) -> (Arc<Cell>, crate::store::Store, tem
             .unwrap(),
             devices: vec![device],
         }],
+        ..crate::config::CellConfig::default()
     };
     let opener: Opener = Arc::new(|| Box::pin(async { Err("never opened".to_owned()) }));
     let (cell, _tasks) = Cell::with_openers(

@@ -369,13 +369,7 @@ type MakeBus = Arc<dyn Fn() -> Bus + Send + Sync>;
 impl CellSet {
     async fn build(options: &SoakOptions, control: &LineControl) -> Result<Self, SoakError> {
         let mut set = CellSet {
-            config: CellConfig {
-                source: None,
-                interfaces: Default::default(),
-                token: None,
-                read_token: None,
-                lines: Vec::new(),
-            },
+            config: CellConfig::default(),
             openers: HashMap::new(),
             _proxies: Vec::new(),
             _servers: Vec::new(),
@@ -547,20 +541,17 @@ impl CellSet {
 }
 
 fn device(id: &str, protocol: Kind, address: i64, options: &SoakOptions) -> DeviceConfig {
-    DeviceConfig {
-        driver: DriverConfig {
-            id: DeviceId::new(id).expect("the soak's ids are valid"),
+    let driver = DriverConfig {
+        address: Some(address),
+        timeout: Some(options.timeout),
+        ..DriverConfig::new(
+            DeviceId::new(id).expect("the soak's ids are valid"),
             protocol,
-            address: Some(address),
-            timeout: Some(options.timeout),
-            retries: None,
-            endpoint: None,
-            settings: Default::default(),
-        },
-        name: id.to_owned(),
+        )
+    };
+    DeviceConfig {
         period: Some(options.period),
-        groups: BTreeMap::new(),
-        deadband: None,
+        ..DeviceConfig::new(driver, id)
     }
 }
 

@@ -2,6 +2,7 @@ use std::collections::HashSet;
 
 use super::*;
 use crate::point::DeviceId;
+use crate::testing::reading as value;
 use jbus::cross::device::CrossTwin;
 use wire::device::SharedModel;
 
@@ -28,15 +29,6 @@ fn rig(unit: i64) -> (CrossDriver, SharedModel<CrossTwin>) {
         Some(DEFAULT_SERIAL),
     )));
     (driver, twin)
-}
-
-fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
-    readings
-        .iter()
-        .find(|r| r.point.name() == name)
-        .unwrap_or_else(|| panic!("no reading for {name}"))
-        .value
-        .clone()
 }
 
 fn number(readings: &[Reading], name: &str) -> f64 {

@@ -1,5 +1,6 @@
 use super::*;
 use crate::driver::ErrorKind;
+use crate::testing::reading as value;
 use jbc::device::{Station, StationConfig};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -25,15 +26,6 @@ fn rig(station: StationConfig, address: Option<i64>) -> (JbcDriver, SharedModel<
     let mut driver = JbcDriver::new(&config(address)).unwrap();
     driver.attach(SharedLine::new(link::Line::from_stream(a, "test", None)));
     (driver, model)
-}
-
-fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
-    readings
-        .iter()
-        .find(|r| r.point.name() == name)
-        .unwrap_or_else(|| panic!("no reading for {name}"))
-        .value
-        .clone()
 }
 
 /// A station whose answers to one code can be damaged past the block check: bit

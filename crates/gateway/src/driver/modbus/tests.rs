@@ -1,4 +1,5 @@
 use super::*;
+use crate::testing::reading as value;
 use jbus::data::Order;
 use jbus::slave::{Slave, SlaveMap};
 use wire::device::SharedModel;
@@ -74,15 +75,6 @@ fn rig_with(
 
 fn rig() -> (ModbusDriver, SharedModel<Slave>) {
     rig_with(MAP, registers(), ModbusOptions::default())
-}
-
-fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
-    readings
-        .iter()
-        .find(|r| r.point.name() == name)
-        .unwrap()
-        .value
-        .clone()
 }
 
 fn spans(driver: &ModbusDriver) -> Vec<(Table, u16, u16)> {

@@ -2,6 +2,7 @@ use std::collections::HashSet;
 
 use super::*;
 use crate::point::DeviceId;
+use crate::testing::reading as value;
 use panasonic::server::TwinServer;
 use panasonic::status::StopMode;
 use panasonic::{Machine, MachineConfig};
@@ -31,15 +32,6 @@ async fn rig() -> (PanasonicDriver, panasonic::server::RunningTwin) {
     })
     .unwrap();
     (driver, twin)
-}
-
-fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
-    readings
-        .iter()
-        .find(|r| r.point.name() == name)
-        .unwrap_or_else(|| panic!("no reading for {name}"))
-        .value
-        .clone()
 }
 
 #[tokio::test]

@@ -3,6 +3,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use super::*;
+use crate::testing::reading as value;
 use thermosald::device::RegulatorBus;
 use wire::Transmit;
 use wire::device::{Device, FaultInjector, ModelLine, SharedModel};
@@ -40,15 +41,6 @@ fn rig(addresses: &[u8]) -> (Vec<ThermosaldDriver>, SharedModel<RegulatorBus>) {
         })
         .collect();
     (drivers, model)
-}
-
-fn value(readings: &[Reading], name: &str) -> Result<Value, DeviceError> {
-    readings
-        .iter()
-        .find(|r| r.point.name() == name)
-        .unwrap_or_else(|| panic!("no reading for {name}"))
-        .value
-        .clone()
 }
 
 /// The reading of a point, if the poll gave one (a value whose two reads disagreed
