@@ -13,6 +13,7 @@ use jbus::rtu::{ReadBitCount, ReadRegisterCount};
 use serde::Deserialize;
 use toml::Spanned;
 
+use super::register_csv::{RawRegister, RawWritable};
 use super::{ModbusOptions, RegisterConfig, RegisterList, RegisterTable};
 use crate::config::table::{read_bounded_text, read_text};
 use crate::config::{ConfigError, Scratch, Settings, Table, check_deadband, duration};
@@ -495,40 +496,6 @@ fn check_writable(
             }
         }
     }
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RawRegister {
-    pub(super) name: Spanned<String>,
-    pub(super) title: Option<String>,
-    pub(super) table: Option<Spanned<String>>,
-    pub(super) address: Spanned<i64>,
-    #[serde(rename = "type")]
-    pub(super) data_type: Option<Spanned<String>>,
-    pub(super) order: Option<Spanned<String>>,
-    pub(super) scale: Option<Spanned<f64>>,
-    pub(super) offset: Option<Spanned<f64>>,
-    pub(super) unit: Option<String>,
-    pub(super) signed: Option<Spanned<bool>>,
-    pub(super) writable: Option<Spanned<RawWritable>>,
-    pub(super) deadband: Option<Spanned<f64>>,
-    pub(super) deadband_percent: Option<Spanned<f64>>,
-}
-
-/// `writable = true`, or `writable = { min = …, max = … }`.
-#[derive(Debug, Deserialize)]
-#[serde(untagged)]
-pub(super) enum RawWritable {
-    Flag(bool),
-    Range(RawRange),
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RawRange {
-    pub(super) min: f64,
-    pub(super) max: f64,
 }
 
 /// Where `[[line.device.register]]` tables given to another kind are shown: the first

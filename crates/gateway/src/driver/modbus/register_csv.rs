@@ -21,7 +21,8 @@ use std::path::{Path, PathBuf};
 use jbus::data::{DataType, Order};
 use toml::Spanned;
 
-use super::config::{RawRange, RawRegister, RawWritable};
+use serde::Deserialize;
+
 use crate::config::ConfigError;
 use crate::driver::modbus::{RegisterConfig, RegisterTable};
 use crate::point::Deadband;
@@ -300,4 +301,40 @@ pub fn to_toml(registers: &[RegisterConfig]) -> String {
 /// A float as TOML writes it (`1.0`, not `1`, so it reads back as a float).
 fn float(value: f64) -> String {
     toml::Value::Float(value).to_string()
+}
+
+/// One register as a `[[line.device.register]]` table or a row of the CSV gives it,
+/// before its checks (`super::config`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawRegister {
+    pub(super) name: Spanned<String>,
+    pub(super) title: Option<String>,
+    pub(super) table: Option<Spanned<String>>,
+    pub(super) address: Spanned<i64>,
+    #[serde(rename = "type")]
+    pub(super) data_type: Option<Spanned<String>>,
+    pub(super) order: Option<Spanned<String>>,
+    pub(super) scale: Option<Spanned<f64>>,
+    pub(super) offset: Option<Spanned<f64>>,
+    pub(super) unit: Option<String>,
+    pub(super) signed: Option<Spanned<bool>>,
+    pub(super) writable: Option<Spanned<RawWritable>>,
+    pub(super) deadband: Option<Spanned<f64>>,
+    pub(super) deadband_percent: Option<Spanned<f64>>,
+}
+
+/// `writable = true`, or `writable = { min = …, max = … }`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub(super) enum RawWritable {
+    Flag(bool),
+    Range(RawRange),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawRange {
+    pub(super) min: f64,
+    pub(super) max: f64,
 }
