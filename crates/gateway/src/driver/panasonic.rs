@@ -9,7 +9,7 @@
 //! [`Client`] instead of talking over the line the scheduler attaches: the line's
 //! endpoint (`tcp://host:49152`) names Port 1, the device's `event_port` Port 2 (49153 by
 //! default), and the line task opens nothing for such a line
-//! ([`super::Protocol::owns_connections`]). Everything else is the scheduler's as for any
+//! ([`super::DeviceKind::owns_connections`]). Everything else is the scheduler's as for any
 //! device: the poll groups at their periods, backoff of a silent machine, quality, history,
 //! metrics.
 //!
