@@ -15,21 +15,19 @@
 //! id = "jbc1"                           # unique in the cell; used in URLs and point ids
 //! name = "Rework station 1"             # words for people (default: the id)
 //! protocol = "jbc"
-//! address = 1                           # JBC: 0-99, or "none" for the form without addresses;
-//!                                       # thermosald: 0-7; cross: JBUS unit 1-255
-//! timeout = "500ms"                     # per reply (protocol default if left out)
-//! retries = 2                           # after a failed attempt (protocol default)
+//! address = 1                           # what the kind accepts (its check_address)
+//! timeout = "500ms"                     # per reply (the kind's default if left out)
+//! retries = 2                           # after a failed attempt (the kind's default)
 //! period = "2s"                         # for every poll group not listed in [poll]
 //! poll = { live = "1s", info = "5m" }   # per poll group
-//! event_port = 49153                    # panasonic only: Port 2 (the endpoint names Port 1)
-//!
-//! [[line.device.register]]              # modbus only: one table per register
-//! name = "supply_temperature"           # see `driver::modbus` for every field
-//! address = 0x10
+//! deadband = 0.5                        # or deadband_percent: numeric points' default
 //! ```
 //!
+//! A kind's own keys (a Modbus device's registers, a Panasonic machine's `event_port`) are
+//! described in its module under `driver`, an interface's table under `northbound`.
+//!
 //! The interfaces' tables (`[mqtt]`, `[opcua]`) and the keys only one device kind takes
-//! (a Modbus device's registers) are read by their owners, beside their code, through
+//! are read by their owners, beside their code, through
 //! [`Plugins`]: this module names no protocol and no interface, and builds no driver.
 //! Their common ground (errors, [`Table`], [`Settings`]) is [`table`].
 //!
@@ -231,16 +229,6 @@ pub fn token_fault(token: &str) -> Option<String> {
 pub const SAME_TOKENS: &str = "the read token is the write token, so everyone who may \
      read could also write; give readers a token of their own, or no read token";
 
-/// This machine's host name as a Sparkplug id, else `cellbus`.
-pub fn default_edge_node_id() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .ok()
-        .or_else(|| std::env::var("HOSTNAME").ok())
-        .map(|h| h.trim().to_owned())
-        .filter(|h| sparkplug::Id::new(h.as_str()).is_ok())
-        .unwrap_or_else(|| "cellbus".to_owned())
-}
-
 /// Device ids the gateway's own objects use: the OPC UA node ids of the `Cell` folder and
 /// the `Gateway` object, and the source of the gateway's own events.
 pub const RESERVED_DEVICE_IDS: [&str; 2] = ["cell", "gateway"];
@@ -273,10 +261,17 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
     let at = |span: Range<usize>, message: String| locate(text, path, span, message);
     let toml_error =
         |e: toml::de::Error| at(e.span().unwrap_or(0..0), plain_toml_message(e.message()));
-    let raw: RawConfig = toml::from_str(text).map_err(toml_error)?;
-    // The same text as toml's own tree, with every key's place: the tables the cell does not
-    // read itself go to their owners (an interface, a device kind) from here.
-    let mut tree = DeTable::parse(text).map_err(toml_error)?.into_inner();
+    // Parsed once into toml's own tree, every key with its place: the cell's keys are read
+    // from it into its serde types; the tables the cell does not read itself go to their
+    // owners (an interface, a device kind) from here.
+    let document = DeTable::parse(text).map_err(toml_error)?;
+    let whole = document.span();
+    let mut tree = document.into_inner();
+    let raw = RawConfig::deserialize(toml::de::Deserializer::from(Spanned::new(
+        whole,
+        tree.clone(),
+    )))
+    .map_err(toml_error)?;
     let mut interface_tables = Vec::new();
     for (key, value) in std::mem::take(&mut tree) {
         if CELL_KEYS.contains(&key.get_ref().as_ref()) {

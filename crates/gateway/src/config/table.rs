@@ -280,22 +280,9 @@ impl<'a> Table<'a> {
         locate(self.text, self.path, span, message)
     }
 
-    /// Where the table starts: for errors about the table as a whole.
-    pub fn span(&self) -> Range<usize> {
-        self.value.span()
-    }
-
     /// The file the table is in (files it names are relative to its directory).
     pub fn path(&self) -> &Path {
         self.path
-    }
-
-    /// Whether the table has no keys.
-    pub fn is_empty(&self) -> bool {
-        match self.value.get_ref() {
-            DeValue::Table(table) => table.is_empty(),
-            _ => false,
-        }
     }
 }
 
@@ -330,11 +317,6 @@ impl Settings {
     /// The value, if it is a `T`.
     pub fn get<T: Any>(&self) -> Option<&T> {
         self.0.as_deref().and_then(|s| s.as_any().downcast_ref())
-    }
-
-    /// Whether it holds nothing.
-    pub fn is_empty(&self) -> bool {
-        self.0.is_none()
     }
 }
 

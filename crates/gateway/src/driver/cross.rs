@@ -31,7 +31,7 @@ use jbus::cross::points::{self, Amount, Phase, Quantity};
 use jbus::cross::{
     Area, Change, Discrete, Feed, InternalState, Measures, Ratings, Source, Transfer,
 };
-use jbus::rtu::{UnitId, UnitProblem};
+use jbus::rtu::UnitId;
 use link::{SerialSettings, SharedLine};
 
 use super::{
@@ -83,18 +83,12 @@ pub fn check_address(address: Option<i64>) -> Result<(), String> {
 /// The unit number the config gives, checked by [`jbus::rtu::check_unit`] and worded for
 /// this kind of device.
 fn unit(address: Option<i64>) -> Result<UnitId, String> {
-    jbus::rtu::check_unit(address).map_err(|problem| match problem {
-        UnitProblem::Missing => format!(
-            "a CROSS needs its JBUS unit number, {} to {}",
-            UnitId::MIN,
-            UnitId::JBUS_MAX
-        ),
-        UnitProblem::OutOfRange { number } => format!(
-            "JBUS unit number {number} is out of range: {} to {} (0 is broadcast, which the CROSS never answers)",
-            UnitId::MIN,
-            UnitId::JBUS_MAX
-        ),
-    })
+    super::jbus_unit(
+        address,
+        "a CROSS",
+        "JBUS unit number",
+        "which the CROSS never answers",
+    )
 }
 
 /// What a point shows.

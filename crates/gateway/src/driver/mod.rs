@@ -374,13 +374,7 @@ pub trait DeviceKind: Send + Sync + 'static {
         value: &toml::Spanned<toml::de::DeValue<'_>>,
         other: &str,
     ) -> (std::ops::Range<usize>, String) {
-        (
-            value.span(),
-            format!(
-                "{key} is for {} devices only, not {other} devices",
-                self.name()
-            ),
-        )
+        foreign_key(self.name(), key, value, other)
     }
 
     /// Checks what depends on the whole device once its keys are read (a Modbus read
@@ -450,6 +444,44 @@ impl DeviceKind for Described {
     fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
         (self.build)(config)
     }
+}
+
+/// The default of [`DeviceKind::foreign_key`]: `key`, one of `kind`'s own, on a device of
+/// the kind `other`, shown at its value.
+pub fn foreign_key(
+    kind: &str,
+    key: &str,
+    value: &toml::Spanned<toml::de::DeValue<'_>>,
+    other: &str,
+) -> (std::ops::Range<usize>, String) {
+    (
+        value.span(),
+        format!("{key} is for {kind} devices only, not {other} devices"),
+    )
+}
+
+/// A JBUS (Modbus) unit number from the config, checked by [`jbus::rtu::check_unit`] into
+/// its typed form; the words name the device (`a CROSS`), what its number is called
+/// (`JBUS unit number`) and who never answers broadcast (`which the CROSS never answers`).
+pub fn jbus_unit(
+    address: Option<i64>,
+    device: &str,
+    number_name: &str,
+    silent: &str,
+) -> Result<jbus::rtu::UnitId, String> {
+    use jbus::rtu::{UnitId, UnitProblem};
+    jbus::rtu::check_unit(address).map_err(|problem| match problem {
+        UnitProblem::Missing => format!(
+            "{device} needs its {number_name}, {} to {}",
+            UnitId::MIN,
+            UnitId::JBUS_MAX
+        ),
+        UnitProblem::OutOfRange { number } => format!(
+            "{number_name} {number} is out of range: {} to {} (0 is broadcast, {silent})",
+            UnitId::MIN,
+            UnitId::JBUS_MAX
+        ),
+    })
 }
 
 /// What a kind knows of the device whose keys it reads.

@@ -46,6 +46,17 @@ use crate::cell::{DeviceView, PointDetail, PointView};
 use crate::point::{PointKind, Quality, Value};
 use crate::time::Timestamp;
 
+/// This machine's host name as an id (a Sparkplug id: no `/`, `+`, `#`), else `cellbus`:
+/// the MQTT edge node's default id and the OPC UA application URI's host part.
+pub fn default_edge_node_id() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map(|h| h.trim().to_owned())
+        .filter(|h| sparkplug::Id::new(h.as_str()).is_ok())
+        .unwrap_or_else(|| "cellbus".to_owned())
+}
+
 /// An interface that serves the cell to other systems: what `serve` asks of each. It is
 /// listed once in [`crate::plugins`]; `serve` starts every one the config or the options
 /// ask for and stops them in turn. It reads only the cell's change stream and writes only

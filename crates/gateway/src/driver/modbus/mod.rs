@@ -60,7 +60,7 @@ use std::time::Duration;
 use jbus::client::{Client, ClientConfig, ClientError, Framing};
 use jbus::data::{DataType, Format, TypedValue};
 use jbus::plan::{Item, Plan, PlanOptions, Split};
-use jbus::rtu::{ExceptionCode, UnitId, UnitProblem};
+use jbus::rtu::{ExceptionCode, UnitId};
 use jbus::slave::Table;
 use link::{SerialSettings, SharedLine};
 use tokio::time::Instant;
@@ -143,10 +143,7 @@ impl DeviceKind for Modbus {
                 ),
             );
         }
-        (
-            value.span(),
-            format!("{key} is for modbus devices only, not {other} devices"),
-        )
+        super::foreign_key(self.name(), key, value, other)
     }
 
     fn check(&self, config: &DriverConfig) -> Result<(), String> {
@@ -397,18 +394,12 @@ pub fn check_address(address: Option<i64>) -> Result<(), String> {
 /// The unit number the config gives, checked by [`jbus::rtu::check_unit`] and worded for
 /// this kind of device.
 fn unit(address: Option<i64>) -> Result<UnitId, String> {
-    jbus::rtu::check_unit(address).map_err(|problem| match problem {
-        UnitProblem::Missing => format!(
-            "a Modbus device needs its unit number, {} to {}",
-            UnitId::MIN,
-            UnitId::JBUS_MAX
-        ),
-        UnitProblem::OutOfRange { number } => format!(
-            "Modbus unit number {number} is out of range: {} to {} (0 is broadcast, never answered)",
-            UnitId::MIN,
-            UnitId::JBUS_MAX
-        ),
-    })
+    super::jbus_unit(
+        address,
+        "a Modbus device",
+        "Modbus unit number",
+        "never answered",
+    )
 }
 
 /// The plan's items for `registers`, in their order: one per register.

@@ -17,9 +17,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::config::{
-    ConfigError, Settings, Table, TableReader, bounded, default_edge_node_id, duration,
-};
+use crate::config::{ConfigError, Settings, Table, TableReader, bounded, duration};
 pub use kit::mqtt::{Broker, MqttClientCert, MqttTls, parse_broker};
 
 /// The `[mqtt]` table's reader.
@@ -161,8 +159,8 @@ fn check_mqtt(
     let tls = check_mqtt_tls(&raw, tls, path, at)?;
     let group_id =
         id_opt(&raw.group_id, "group_id", at)?.unwrap_or_else(|| DEFAULT_MQTT_GROUP.to_owned());
-    let edge_node_id =
-        id_opt(&raw.edge_node_id, "edge_node_id", at)?.unwrap_or_else(default_edge_node_id);
+    let edge_node_id = id_opt(&raw.edge_node_id, "edge_node_id", at)?
+        .unwrap_or_else(crate::northbound::default_edge_node_id);
     let client_id = match raw.client_id {
         Some(c) if c.get_ref().trim().is_empty() => {
             return Err(at(

@@ -40,7 +40,7 @@ use self::config::{MqttConfig, MqttMode};
 use self::forward::{Delivery, FORWARDED_KEY};
 use super::{BoxStart, Northbound, Running, Start};
 use crate::cell::{Cell, LiveMessage};
-use crate::config::{CellConfig, TableReader, default_edge_node_id};
+use crate::config::{CellConfig, TableReader};
 use crate::event::{Event, EventKind};
 use crate::options::{OptionError, ServeOptions};
 use crate::time::Timestamp;
@@ -687,7 +687,7 @@ fn mqtt_config(
             let node = match &flags.node {
                 Some(node) => node.clone(),
                 None if demo => DEMO_EDGE_NODE.to_owned(),
-                None => default_edge_node_id(),
+                None => crate::northbound::default_edge_node_id(),
             };
             MqttConfig::for_broker(url, &node).map_err(|m| OptionError(format!("--mqtt: {m}")))?
         }

@@ -10,9 +10,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::config::{
-    ConfigError, Settings, Table, TableReader, bounded, default_edge_node_id, duration,
-};
+use crate::config::{ConfigError, Settings, Table, TableReader, bounded, duration};
 
 /// The `[opcua]` table's reader.
 #[derive(Debug)]
@@ -258,7 +256,10 @@ fn url_host(host: &str) -> String {
 
 /// `urn:cellbus:<host name>:<application name>`.
 fn default_application_uri(application_name: &str) -> String {
-    format!("urn:{}:{application_name}", default_edge_node_id())
+    format!(
+        "urn:{}:{application_name}",
+        crate::northbound::default_edge_node_id()
+    )
 }
 
 fn check_opcua(
