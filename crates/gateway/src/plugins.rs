@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use crate::config::{self, CellConfig, ConfigError, Plugins};
+use crate::demo::DemoStart;
 use crate::driver::{cross, jbc, modbus, panasonic, thermosald};
 use crate::northbound::{self, Northbound};
 
@@ -16,6 +17,9 @@ pub struct Registry {
     pub config: Plugins,
     /// The interfaces, started in this order when configured.
     pub interfaces: Vec<&'static dyn Northbound>,
+    /// The kinds' parts of the demo cell `serve` starts without a configuration, in this
+    /// order.
+    pub demos: Vec<DemoStart>,
 }
 
 /// The gateway's own device kinds and interfaces.
@@ -31,7 +35,17 @@ pub fn builtin() -> Registry {
     for interface in &interfaces {
         config = config.with_table(interface.table());
     }
-    Registry { config, interfaces }
+    let demos: Vec<DemoStart> = vec![
+        jbc::demo::start,
+        thermosald::demo::start,
+        cross::demo::start,
+        panasonic::demo::start,
+    ];
+    Registry {
+        config,
+        interfaces,
+        demos,
+    }
 }
 
 /// Reads and checks the configuration at `path` with the gateway's own kinds and

@@ -123,7 +123,7 @@ impl Gateway {
                 (config, None)
             }
             None => {
-                let demo = DemoCell::start()
+                let demo = DemoCell::start(&registry.demos)
                     .await
                     .context("cannot start the demo cell's simulators on 127.0.0.1")?;
                 (demo.config.clone(), Some(demo))

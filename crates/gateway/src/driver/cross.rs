@@ -23,6 +23,8 @@
 //! The CROSS is read-only over JBUS (it answers function 3 only): no point is writable.
 //! The mimic diagram area is not shown; the state words say the same in words.
 
+pub mod demo;
+
 use std::sync::LazyLock;
 use std::time::Duration;
 

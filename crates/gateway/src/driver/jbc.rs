@@ -28,6 +28,8 @@
 //! - The live measurements change between two reads and are only range-checked: the
 //!   README states the residual risk.
 
+pub mod demo;
+
 use std::ops::RangeInclusive;
 use std::sync::{Arc, LazyLock};
 use std::time::Duration;

@@ -28,6 +28,8 @@
 //! Nothing is writable: C5 start and reset are commands, not values, and the gateway writes
 //! values only.
 
+pub mod demo;
+
 use std::sync::Arc;
 use std::time::Duration;
 

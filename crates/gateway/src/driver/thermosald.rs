@@ -53,6 +53,8 @@
 //! one of them is accepted (a damaged digit would have to land exactly on it), and any
 //! other value is confirmed anew.
 
+pub mod demo;
+
 use std::collections::BTreeMap;
 use std::time::Duration;
 
