@@ -314,8 +314,8 @@ fn run(args: &Args) -> anyhow::Result<Report> {
     let store = Store::open(&data_dir, StoreOptions::default())?;
     let metrics = Arc::new(Metrics::new());
     // The line tasks are dropped, never run: nothing is polled.
-    let (cell, _tasks) =
-        Cell::new(&config, store.handle(), Arc::clone(&metrics)).map_err(anyhow::Error::msg)?;
+    let (cell, _tasks) = gateway::scheduler::build(&config, store.handle(), Arc::clone(&metrics))
+        .map_err(anyhow::Error::msg)?;
     let stored = store_backlog(&cell, &store, &data_dir, args, &runtime)?;
 
     let broker = testkit::Mosquitto::start();

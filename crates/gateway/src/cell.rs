@@ -18,7 +18,6 @@ use crate::driver::{DeviceError, Driver, Kind, PollGroup, WriteError};
 use crate::event::{Event, EventKind};
 use crate::metrics::Metrics;
 use crate::point::{Deadband, DeviceId, PointId, PointKind, PointSpec, Quality, Value, Words};
-use crate::scheduler::{LineTask, Opener};
 use crate::store::StoreHandle;
 use crate::time::{Timestamp, duration_millis};
 
@@ -432,53 +431,34 @@ impl CheckedWrite {
     }
 }
 
-/// Opens a configured line: by its endpoint URL, or, for a protocol whose client keeps
-/// its own connections ([`DeviceKind::owns_connections`](crate::driver::DeviceKind::owns_connections)), not at all: the line task then
-/// gets a line that carries nothing and only schedules the device's polls.
-pub fn line_opener(line: &crate::config::LineConfig) -> Opener {
-    if !owns_connections(line) {
-        return endpoint_opener(line.endpoint.clone());
+/// One line of a new cell, for its poll task ([`LineTask`](crate::scheduler::LineTask)):
+/// the line's entry, its devices with their drivers, and the queue of writes for them.
+pub struct LinePlan {
+    /// The line as the cell shows it.
+    pub(crate) entry: Arc<LineEntry>,
+    /// Its devices, in the config's order, each with its driver.
+    pub(crate) devices: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)>,
+    /// The writes [`Cell::write_checked`] queues for the line's devices.
+    pub(crate) writes: mpsc::Receiver<WriteRequest>,
+}
+
+impl std::fmt::Debug for LinePlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LinePlan")
+            .field("line", &self.entry.name)
+            .field("devices", &self.devices.len())
+            .finish()
     }
-    let name = line.endpoint.to_string();
-    Arc::new(move || {
-        let line = link::Line::from_stream(tokio::io::empty(), name.clone(), None);
-        Box::pin(async move { Ok(line) })
-    })
-}
-
-/// Whether the line's device keeps its own connections (the line itself carries nothing).
-fn owns_connections(line: &crate::config::LineConfig) -> bool {
-    line.devices
-        .first()
-        .is_some_and(|d| d.driver.protocol.owns_connections().is_some())
-}
-
-/// Opens lines by their endpoint URL.
-pub fn endpoint_opener(endpoint: link::Endpoint) -> Opener {
-    Arc::new(move || {
-        let endpoint = endpoint.clone();
-        Box::pin(async move { link::Line::open(&endpoint).await.map_err(|e| e.to_string()) })
-    })
 }
 
 impl Cell {
-    /// The cell `config` describes, with one task per line to run; lines are opened by
-    /// their endpoints.
+    /// The cell `config` describes, with one [`LinePlan`] per line (in the config's order)
+    /// for the scheduler to run (`scheduler::build` does both).
     pub fn new(
         config: &CellConfig,
         store: StoreHandle,
         metrics: Arc<Metrics>,
-    ) -> Result<(Arc<Cell>, Vec<LineTask>), String> {
-        Self::with_openers(config, store, metrics, line_opener)
-    }
-
-    /// Like [`Cell::new`], with the lines opened by `opener` (tests use in-memory lines).
-    pub fn with_openers(
-        config: &CellConfig,
-        store: StoreHandle,
-        metrics: Arc<Metrics>,
-        opener: impl Fn(&crate::config::LineConfig) -> Opener,
-    ) -> Result<(Arc<Cell>, Vec<LineTask>), String> {
+    ) -> Result<(Arc<Cell>, Vec<LinePlan>), String> {
         let (live, _) = broadcast::channel(LIVE_CAPACITY);
         let now = Timestamp::now();
         let mut devices = BTreeMap::new();
@@ -543,7 +523,7 @@ impl Cell {
                 name: line.name.clone(),
                 endpoint: line.endpoint.to_string(),
                 devices: slots.iter().map(|(d, _)| d.id.clone()).collect(),
-                reopen_after_timeouts: if owns_connections(line) {
+                reopen_after_timeouts: if line.owns_connections() {
                     0
                 } else {
                     line.reopen_after_timeouts
@@ -551,7 +531,11 @@ impl Cell {
                 state: RwLock::new(LineState::default()),
             });
             lines.push(Arc::clone(&entry));
-            plans.push((entry, opener(line), slots, writes_rx));
+            plans.push(LinePlan {
+                entry,
+                devices: slots,
+                writes: writes_rx,
+            });
         }
         let cell = Arc::new(Cell {
             devices,
@@ -561,13 +545,7 @@ impl Cell {
             metrics,
             interfaces: RwLock::new(Vec::new()),
         });
-        let tasks = plans
-            .into_iter()
-            .map(|(entry, opener, slots, writes)| {
-                LineTask::new(Arc::clone(&cell), entry, opener, slots, writes)
-            })
-            .collect();
-        Ok((cell, tasks))
+        Ok((cell, plans))
     }
 
     /// The history.

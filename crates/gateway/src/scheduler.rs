@@ -46,12 +46,15 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 use wire::backoff::Backoff;
 
-use crate::cell::{Cell, DeviceEntry, DeviceStatus, LineEntry, LiveMessage, WriteRequest};
+use crate::cell::{
+    Cell, DeviceEntry, DeviceStatus, LineEntry, LinePlan, LiveMessage, WriteRequest,
+};
+use crate::config::{CellConfig, LineConfig};
 use crate::driver::{BoxFuture, DeviceError, DeviceEvent, Driver, ErrorKind, Reading, WriteError};
 use crate::event::{Event, EventKind};
-use crate::metrics::{DeviceLabels, ErrorLabels, LineLabels, PollLabels, PollResult};
+use crate::metrics::{DeviceLabels, ErrorLabels, LineLabels, Metrics, PollLabels, PollResult};
 use crate::point::{Deadband, Quality, Value};
-use crate::store::Sample;
+use crate::store::{Sample, StoreHandle};
 use crate::time::Timestamp;
 
 /// First wait before a device that stopped answering is tried again.
@@ -74,6 +77,55 @@ pub const STALE_SWEEP: Duration = Duration::from_secs(1);
 
 /// Opens a line (again): by endpoint in production, in memory in tests.
 pub type Opener = Arc<dyn Fn() -> BoxFuture<'static, Result<Line, String>> + Send + Sync>;
+
+/// The cell `config` describes, with one poll task per line; lines are opened by their
+/// endpoints.
+pub fn build(
+    config: &CellConfig,
+    store: StoreHandle,
+    metrics: Arc<Metrics>,
+) -> Result<(Arc<Cell>, Vec<LineTask>), String> {
+    build_with_openers(config, store, metrics, line_opener)
+}
+
+/// Like [`build`], with the lines opened by `opener` (tests use in-memory lines).
+pub fn build_with_openers(
+    config: &CellConfig,
+    store: StoreHandle,
+    metrics: Arc<Metrics>,
+    opener: impl Fn(&LineConfig) -> Opener,
+) -> Result<(Arc<Cell>, Vec<LineTask>), String> {
+    let (cell, plans) = Cell::new(config, store, metrics)?;
+    let tasks = config
+        .lines
+        .iter()
+        .zip(plans)
+        .map(|(line, plan)| LineTask::new(Arc::clone(&cell), plan, opener(line)))
+        .collect();
+    Ok((cell, tasks))
+}
+
+/// Opens a configured line: by its endpoint URL, or, for a protocol whose client keeps
+/// its own connections ([`DeviceKind::owns_connections`](crate::driver::DeviceKind::owns_connections)), not at all: the line task then
+/// gets a line that carries nothing and only schedules the device's polls.
+pub fn line_opener(line: &LineConfig) -> Opener {
+    if !line.owns_connections() {
+        return endpoint_opener(line.endpoint.clone());
+    }
+    let name = line.endpoint.to_string();
+    Arc::new(move || {
+        let line = link::Line::from_stream(tokio::io::empty(), name.clone(), None);
+        Box::pin(async move { Ok(line) })
+    })
+}
+
+/// Opens lines by their endpoint URL.
+pub fn endpoint_opener(endpoint: link::Endpoint) -> Opener {
+    Arc::new(move || {
+        let endpoint = endpoint.clone();
+        Box::pin(async move { link::Line::open(&endpoint).await.map_err(|e| e.to_string()) })
+    })
+}
 
 /// The poll task of one line.
 pub struct LineTask {
@@ -197,13 +249,12 @@ enum Lost {
 }
 
 impl LineTask {
-    pub(crate) fn new(
-        cell: Arc<Cell>,
-        line: Arc<LineEntry>,
-        opener: Opener,
-        devices: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)>,
-        writes: mpsc::Receiver<WriteRequest>,
-    ) -> Self {
+    pub(crate) fn new(cell: Arc<Cell>, plan: LinePlan, opener: Opener) -> Self {
+        let LinePlan {
+            entry: line,
+            devices,
+            writes,
+        } = plan;
         let shared = Arc::clone(&cell);
         let metrics = shared.metrics();
         let now = Instant::now();

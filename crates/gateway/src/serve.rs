@@ -146,8 +146,8 @@ impl Gateway {
             tracing::warn!("{warning}");
         }
         let metrics = Arc::new(Metrics::new());
-        let (cell, tasks) =
-            Cell::new(&config, store.handle(), metrics).map_err(anyhow::Error::msg)?;
+        let (cell, tasks) = crate::scheduler::build(&config, store.handle(), metrics)
+            .map_err(anyhow::Error::msg)?;
         cell.emit(Event::of_gateway(
             EventKind::GatewayStarted,
             format!(

@@ -155,7 +155,10 @@ pub fn rig(count: u8) -> Rig {
     };
     let metrics = Arc::new(Metrics::new());
     let (cell, mut tasks) =
-        Cell::with_openers(&config, store.handle(), metrics, |_| Arc::clone(&opener)).unwrap();
+        crate::scheduler::build_with_openers(&config, store.handle(), metrics, |_| {
+            Arc::clone(&opener)
+        })
+        .unwrap();
     let (shutdown, stop) = watch::channel(false);
     let task = tokio::spawn(tasks.remove(0).run(stop));
     Rig {

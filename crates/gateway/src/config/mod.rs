@@ -182,6 +182,17 @@ pub struct LineConfig {
     pub reopen_after_timeouts: u32,
 }
 
+impl LineConfig {
+    /// Whether the line's device keeps its own connections
+    /// ([`DeviceKind::owns_connections`](crate::driver::DeviceKind::owns_connections)): the
+    /// line itself then carries nothing.
+    pub fn owns_connections(&self) -> bool {
+        self.devices
+            .first()
+            .is_some_and(|d| d.driver.protocol.owns_connections().is_some())
+    }
+}
+
 /// One device on a line.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DeviceConfig {

@@ -1203,13 +1203,10 @@ fn example_cell_with_every_kind_of_state(
         &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml"),
     )
     .unwrap();
-    let never: crate::scheduler::Opener =
-        Arc::new(|| Box::pin(async { Err("not opened in this test".to_owned()) }));
-    let (cell, _tasks) = Cell::with_openers(
+    let (cell, _lines) = Cell::new(
         &config,
         store.handle(),
         Arc::new(crate::metrics::Metrics::new()),
-        |_| Arc::clone(&never),
     )
     .unwrap();
     let numbers = [

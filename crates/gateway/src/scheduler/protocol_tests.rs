@@ -109,7 +109,7 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
         ],
         ..CellConfig::default()
     };
-    let (cell, tasks) = Cell::with_openers(
+    let (cell, tasks) = crate::scheduler::build_with_openers(
         &config,
         store.handle(),
         Arc::new(Metrics::new()),
@@ -347,7 +347,8 @@ async fn panasonic_rig() -> (
         twin.event_addr().port()
     );
     let config = crate::plugins::parse_config(&text, std::path::Path::new("cell.toml")).unwrap();
-    let (cell, tasks) = Cell::new(&config, store.handle(), Arc::new(Metrics::new())).unwrap();
+    let (cell, tasks) =
+        crate::scheduler::build(&config, store.handle(), Arc::new(Metrics::new())).unwrap();
     let live = cell.subscribe();
     let (shutdown, stop) = watch::channel(false);
     for task in tasks {

@@ -572,12 +572,10 @@ fn cell_with(deadband: Option<Deadband>) -> (Arc<Cell>, crate::store::Store, tem
         }],
         ..crate::config::CellConfig::default()
     };
-    let opener: Opener = Arc::new(|| Box::pin(async { Err("never opened".to_owned()) }));
-    let (cell, _tasks) = Cell::with_openers(
+    let (cell, _lines) = Cell::new(
         &config,
         store.handle(),
         Arc::new(crate::metrics::Metrics::new()),
-        |_| Arc::clone(&opener),
     )
     .unwrap();
     (cell, store, dir)

@@ -218,7 +218,7 @@ pub async fn run(options: SoakOptions) -> Result<SoakReport, SoakError> {
     control.set_noisy(false);
     let cell_set = CellSet::build(&options, &control).await?;
     let metrics = Arc::new(Metrics::new());
-    let (cell, tasks) = Cell::with_openers(
+    let (cell, tasks) = gateway::scheduler::build_with_openers(
         &cell_set.config,
         store.handle(),
         Arc::clone(&metrics),
@@ -525,7 +525,7 @@ impl CellSet {
                     NoisyProxy::start_with(upstream, options.noise, seed, control.clone()).await?;
                 let endpoint = Endpoint::parse(&format!("tcp://{}", proxy.addr()), serial)?;
                 self._proxies.push(proxy);
-                let opener = gateway::cell::endpoint_opener(endpoint.clone());
+                let opener = gateway::scheduler::endpoint_opener(endpoint.clone());
                 (endpoint, opener)
             }
         };
