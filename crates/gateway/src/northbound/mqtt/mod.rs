@@ -19,6 +19,7 @@
 pub mod config;
 pub mod forward;
 pub mod json;
+pub mod mapping;
 pub mod primary;
 pub mod sparkplug;
 pub mod status;

@@ -38,13 +38,13 @@ use sparkplug::{
 use tokio::sync::{broadcast, mpsc};
 
 use super::forward::Backlog;
+use super::mapping::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
 use super::primary::{OFFLINE_GRACE, PrimaryHost, STATE_SKEW_MS, Verdict};
 use super::status;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
 use crate::cell::{Cell, CheckedWrite, DeviceStatus, DeviceSummary, LiveMessage};
 use crate::driver::WriteError;
 use crate::event::Event;
-use crate::northbound::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
 use crate::point::{DeviceId, PointId, Value};
 use crate::time::{Timestamp, duration_millis};
 use crate::write::{Attempt, LOG_EVERY, LogThrottle, RowThrottle, Unauthorised};
