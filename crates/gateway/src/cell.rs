@@ -17,7 +17,9 @@ use crate::config::CellConfig;
 use crate::driver::{DeviceError, Driver, Kind, PollGroup, WriteError};
 use crate::event::{Event, EventKind};
 use crate::metrics::Metrics;
-use crate::point::{Deadband, DeviceId, PointId, PointKind, PointSpec, Quality, Value, Words};
+use crate::point::{
+    Checked, Deadband, DeviceId, PointId, PointKind, PointSpec, Quality, Value, Words,
+};
 use crate::store::StoreHandle;
 use crate::time::{Timestamp, duration_millis};
 
@@ -372,7 +374,7 @@ pub struct LineView {
 pub(crate) struct WriteRequest {
     pub device: DeviceId,
     pub point: usize,
-    pub value: Value,
+    pub value: Checked,
     pub reply: oneshot::Sender<Result<(), WriteError>>,
 }
 
@@ -392,7 +394,7 @@ pub struct WriteOutcome {
 pub struct CheckedWrite {
     device: Arc<DeviceEntry>,
     index: usize,
-    value: Value,
+    value: Checked,
 }
 
 impl CheckedWrite {
@@ -408,7 +410,7 @@ impl CheckedWrite {
 
     /// The value as it will be sent.
     pub fn value(&self) -> &Value {
-        &self.value
+        self.value.value()
     }
 
     /// The device's line.
@@ -716,7 +718,7 @@ impl Cell {
         answer.await.map_err(|_| not_running())??;
         Ok(WriteOutcome {
             old,
-            new: write.value.clone(),
+            new: write.value.value().clone(),
         })
     }
 

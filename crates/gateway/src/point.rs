@@ -307,6 +307,29 @@ impl Serialize for PointSpec {
     }
 }
 
+/// A value to write that passed its point's [`PointSpec::check_write`]: writable, of the
+/// point's type, within its range, an enumeration as its state's number. Only
+/// `check_write` makes one, so a driver is never handed a value nobody checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Checked(Value);
+
+impl Checked {
+    /// The value as it will be sent.
+    pub fn value(&self) -> &Value {
+        &self.0
+    }
+
+    /// The value as a number (numeric and enumerated points always have one).
+    pub fn as_number(&self) -> Option<f64> {
+        self.0.as_number()
+    }
+
+    /// The value, unwrapped.
+    pub fn into_value(self) -> Value {
+        self.0
+    }
+}
+
 /// A value refused before it reached the line.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -410,7 +433,11 @@ impl PointSpec {
 
     /// Checks a value to write and returns it as the driver takes it: enumeration labels
     /// become their numbers. Nothing that fails here reaches a line.
-    pub fn check_write(&self, value: &Value) -> Result<Value, ValueError> {
+    pub fn check_write(&self, value: &Value) -> Result<Checked, ValueError> {
+        self.check_value(value).map(Checked)
+    }
+
+    fn check_value(&self, value: &Value) -> Result<Value, ValueError> {
         let Some(range) = self.writable else {
             return Err(ValueError::ReadOnly {
                 point: self.id.clone(),

@@ -213,3 +213,29 @@ pub fn reading(
         .value
         .clone()
 }
+
+/// A driver's write as the gateway makes it: the value checked against the point's spec
+/// first ([`PointSpec::check_write`](crate::point::PointSpec::check_write)), then handed to
+/// the driver. Drivers' tests write through it.
+pub trait CheckThenWrite {
+    /// Checks `value` against `point` and, if it passes, writes it.
+    fn check_then_write<'a>(
+        &'a mut self,
+        point: &'a crate::point::PointSpec,
+        value: &crate::point::Value,
+    ) -> crate::driver::BoxFuture<'a, Result<(), crate::driver::WriteError>>;
+}
+
+impl<D: crate::driver::Driver + ?Sized> CheckThenWrite for D {
+    fn check_then_write<'a>(
+        &'a mut self,
+        point: &'a crate::point::PointSpec,
+        value: &crate::point::Value,
+    ) -> crate::driver::BoxFuture<'a, Result<(), crate::driver::WriteError>> {
+        let checked = point.check_write(value);
+        Box::pin(async move {
+            let checked = checked?;
+            self.write(point, &checked).await
+        })
+    }
+}

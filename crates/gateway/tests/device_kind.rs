@@ -13,7 +13,7 @@ use gateway::driver::{
     BoxFuture, DeviceContext, DeviceError, DeviceKind, Driver, DriverConfig, Kind, PollGroup,
     Reading, WriteError,
 };
-use gateway::point::{PointDescription, PointId, PointKind, PointSpec, Value};
+use gateway::point::{Checked, PointDescription, PointId, PointKind, PointSpec, Value};
 use gateway::{Gateway, ServeOptions};
 use link::{SerialSettings, SharedLine};
 use running::get_response;
@@ -132,7 +132,7 @@ impl Driver for CounterDriver {
     fn write<'a>(
         &'a mut self,
         _point: &'a PointSpec,
-        _value: &'a Value,
+        _value: &'a Checked,
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(async { Ok(()) })
     }

@@ -41,7 +41,9 @@ use super::{
     PollGroup, Reading, WriteError, point_ids,
 };
 use crate::event::EventKind;
-use crate::point::{AlarmRule, EnumState, PointDescription, PointId, PointKind, PointSpec, Value};
+use crate::point::{
+    AlarmRule, Checked, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
+};
 
 /// A CROSS line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);
@@ -469,7 +471,7 @@ impl Driver for CrossDriver {
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,
-        _value: &'a Value,
+        _value: &'a Checked,
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(async move {
             Err(WriteError::Invalid(crate::point::ValueError::ReadOnly {

@@ -45,8 +45,8 @@ use super::{
     WriteError, enum_states, point_ids,
 };
 use crate::point::{
-    AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
-    WriteRange,
+    AlarmRule, Checked, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value,
+    ValueError, WriteRange,
 };
 
 /// A JTSE's line when the URL says nothing: 19200 baud, 8E1 (the manual's example).
@@ -754,15 +754,14 @@ impl JbcDriver {
         }
     }
 
-    async fn write_point(&mut self, point: &PointSpec, value: &Value) -> Result<(), WriteError> {
+    async fn write_point(&mut self, point: &PointSpec, value: &Checked) -> Result<(), WriteError> {
         let def = POINTS
             .iter()
             .find(|d| d.name == point.id.name())
             .ok_or_else(|| WriteError::UnknownPoint {
                 point: point.id.clone(),
             })?;
-        let checked = point.check_write(value)?;
-        let number = checked
+        let number = value
             .as_number()
             .expect("check_write gives numbers for numeric and enumerated points");
         // Whole and within the JTSE's range (check_write), so it fits an i32.
@@ -825,7 +824,7 @@ impl Driver for JbcDriver {
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,
-        value: &'a Value,
+        value: &'a Checked,
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(self.write_point(point, value))
     }

@@ -38,7 +38,7 @@ use wire::{Failure, FailureKind};
 
 use crate::config::table::{ConfigError, Scratch, Settings, Table};
 use crate::event::EventKind;
-use crate::point::{DeviceId, PointId, PointSpec, Value, ValueError};
+use crate::point::{Checked, DeviceId, PointId, PointSpec, Value, ValueError};
 
 pub mod cross;
 pub mod jbc;
@@ -64,13 +64,13 @@ pub trait Driver: Send {
     /// then backed off); a point the device refused comes back as a failed reading.
     fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>>;
 
-    /// Writes `value` to `point`. The caller has checked `value` against the point's
-    /// spec ([`PointSpec::check_write`]); the driver checks what depends on the device's
+    /// Writes `value` to `point`. `value` passed the point's spec
+    /// ([`PointSpec::check_write`]); the driver checks only what depends on the device's
     /// state (limits it read) before the wire.
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,
-        value: &'a Value,
+        value: &'a Checked,
     ) -> BoxFuture<'a, Result<(), WriteError>>;
 
     /// Events the device caused since the last call: state transitions the driver saw

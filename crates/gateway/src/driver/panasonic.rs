@@ -48,7 +48,8 @@ use super::{
 };
 use crate::event::{EventKind, Fields, fields};
 use crate::point::{
-    AlarmRule, EnumState, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
+    AlarmRule, Checked, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
+    ValueError,
 };
 use crate::time::Timestamp;
 
@@ -609,7 +610,7 @@ impl Driver for PanasonicDriver {
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,
-        _value: &'a Value,
+        _value: &'a Checked,
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(async move {
             Err(WriteError::Invalid(ValueError::ReadOnly {

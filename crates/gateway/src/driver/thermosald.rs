@@ -70,8 +70,8 @@ use super::{
     WriteError, enum_states, point_ids,
 };
 use crate::point::{
-    AlarmRule, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, ValueError,
-    WriteRange,
+    AlarmRule, Checked, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value,
+    ValueError, WriteRange,
 };
 
 /// A Thermosald line when the URL says nothing: 9600 baud, 8N1 (the spec's).
@@ -498,15 +498,14 @@ impl ThermosaldDriver {
         Ok(first.value())
     }
 
-    async fn write_point(&mut self, point: &PointSpec, value: &Value) -> Result<(), WriteError> {
+    async fn write_point(&mut self, point: &PointSpec, value: &Checked) -> Result<(), WriteError> {
         let def = POINTS
             .iter()
             .find(|d| d.name == point.id.name())
             .ok_or_else(|| WriteError::UnknownPoint {
                 point: point.id.clone(),
             })?;
-        let checked = point.check_write(value)?;
-        let number = checked
+        let number = value
             .as_number()
             .expect("check_write gives numbers for numeric and enumerated points");
         let item = def.item();
@@ -577,7 +576,7 @@ impl Driver for ThermosaldDriver {
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,
-        value: &'a Value,
+        value: &'a Checked,
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(self.write_point(point, value))
     }

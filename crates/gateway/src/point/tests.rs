@@ -77,11 +77,13 @@ fn point_ids_split_into_device_and_point() {
 fn writes_inside_the_range_pass_and_outside_are_refused_with_the_facts() {
     let spec = setpoint();
     assert_eq!(
-        spec.check_write(&Value::Number(350.0)),
+        spec.check_write(&Value::Number(350.0))
+            .map(Checked::into_value),
         Ok(Value::Number(350.0))
     );
     assert_eq!(
-        spec.check_write(&Value::Text("400".into())),
+        spec.check_write(&Value::Text("400".into()))
+            .map(Checked::into_value),
         Ok(Value::Number(400.0))
     );
     let err = spec.check_write(&Value::Number(900.0)).unwrap_err();
@@ -113,7 +115,8 @@ fn values_between_the_devices_steps_are_refused() {
         step: Some(0.1),
     });
     assert_eq!(
-        spec.check_write(&Value::Number(12.3)),
+        spec.check_write(&Value::Number(12.3))
+            .map(Checked::into_value),
         Ok(Value::Number(12.3))
     );
     let err = spec.check_write(&Value::Number(12.34)).unwrap_err();
@@ -128,11 +131,13 @@ fn values_between_the_devices_steps_are_refused() {
 fn enumerations_accept_labels_and_numbers_and_list_their_states_when_refusing() {
     let spec = tool_on();
     assert_eq!(
-        spec.check_write(&Value::Text("ON".into())),
+        spec.check_write(&Value::Text("ON".into()))
+            .map(Checked::into_value),
         Ok(Value::Number(1.0))
     );
     assert_eq!(
-        spec.check_write(&Value::Number(0.0)),
+        spec.check_write(&Value::Number(0.0))
+            .map(Checked::into_value),
         Ok(Value::Number(0.0))
     );
     let err = spec.check_write(&Value::Number(2.0)).unwrap_err();

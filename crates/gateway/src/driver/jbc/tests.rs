@@ -1,5 +1,6 @@
 use super::*;
 use crate::driver::ErrorKind;
+use crate::testing::CheckThenWrite;
 use crate::testing::reading as value;
 use jbc::device::{Station, StationConfig};
 use std::sync::Arc;
@@ -311,11 +312,11 @@ async fn turning_the_tool_on_heats_the_air_toward_the_set_point() {
     let points = driver.points();
     let spec = |name: &str| points.iter().find(|p| p.id.name() == name).unwrap().clone();
     driver
-        .write(&spec("air_temperature_setpoint"), &Value::Number(300.0))
+        .check_then_write(&spec("air_temperature_setpoint"), &Value::Number(300.0))
         .await
         .unwrap();
     driver
-        .write(&spec("tool_on"), &Value::Text("on".into()))
+        .check_then_write(&spec("tool_on"), &Value::Text("on".into()))
         .await
         .unwrap();
     assert!(model.lock().port_status().tool_on);
@@ -338,13 +339,13 @@ async fn a_set_point_outside_the_stations_own_limits_never_reaches_the_wire() {
     let points = driver.points();
     let spec = |name: &str| points.iter().find(|p| p.id.name() == name).unwrap().clone();
     driver
-        .write(&spec("max_air_temperature"), &Value::Number(300.0))
+        .check_then_write(&spec("max_air_temperature"), &Value::Number(300.0))
         .await
         .unwrap();
     driver.poll(SETTINGS).await.unwrap();
     let before = model.lock().settings().air_temp;
     let err = driver
-        .write(&spec("air_temperature_setpoint"), &Value::Number(400.0))
+        .check_then_write(&spec("air_temperature_setpoint"), &Value::Number(400.0))
         .await
         .unwrap_err();
     assert!(
@@ -355,7 +356,7 @@ async fn a_set_point_outside_the_stations_own_limits_never_reaches_the_wire() {
     assert_eq!(model.lock().settings().air_temp, before);
     // The JTSE's own range is checked even before any limits were read.
     let err = driver
-        .write(&spec("air_flow_setpoint"), &Value::Number(5.0))
+        .check_then_write(&spec("air_flow_setpoint"), &Value::Number(5.0))
         .await
         .unwrap_err();
     assert!(matches!(err, WriteError::Invalid(_)), "{err}");
@@ -373,7 +374,10 @@ async fn a_station_polled_in_every_group_confirms_its_codes_in_the_list_made_for
         .into_iter()
         .find(|p| p.id.name() == "air_temperature_setpoint")
         .unwrap();
-    driver.write(&spec, &Value::Number(300.0)).await.unwrap();
+    driver
+        .check_then_write(&spec, &Value::Number(300.0))
+        .await
+        .unwrap();
     assert_eq!(driver.confirmed.0.len(), *CONFIRMABLE_CODES);
     assert_eq!(driver.confirmed.0.capacity(), made, "never grown");
 }

@@ -72,7 +72,7 @@ use super::{
 };
 use crate::config::{ConfigError, Scratch, Settings};
 use crate::point::{
-    Deadband, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, WriteRange,
+    Checked, Deadband, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value, WriteRange,
 };
 
 pub mod config;
@@ -693,7 +693,7 @@ impl ModbusDriver {
         })
     }
 
-    async fn write_point(&mut self, point: &PointSpec, value: &Value) -> Result<(), WriteError> {
+    async fn write_point(&mut self, point: &PointSpec, value: &Checked) -> Result<(), WriteError> {
         let register = self
             .registers
             .iter()
@@ -702,10 +702,9 @@ impl ModbusDriver {
             .ok_or_else(|| WriteError::UnknownPoint {
                 point: point.id.clone(),
             })?;
-        let checked = point.check_write(value)?;
-        let number = checked
+        let number = value
             .as_number()
-            .expect("check_write gives numbers for numeric and enumeration points");
+            .expect("check_write gives numbers for numeric and enumerated points");
         let out_of_range = || {
             let (min, max) = register.representable();
             WriteError::Invalid(crate::point::ValueError::OutOfRange {
@@ -782,7 +781,7 @@ impl Driver for ModbusDriver {
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,
-        value: &'a Value,
+        value: &'a Checked,
     ) -> BoxFuture<'a, Result<(), WriteError>> {
         Box::pin(self.write_point(point, value))
     }

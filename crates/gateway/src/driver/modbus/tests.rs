@@ -1,4 +1,5 @@
 use super::*;
+use crate::testing::CheckThenWrite;
 use crate::testing::reading as value;
 use jbus::data::Order;
 use jbus::slave::{Slave, SlaveMap};
@@ -378,7 +379,7 @@ async fn a_float_is_written_with_function_16_and_a_coil_with_function_5() {
     let points = driver.points();
     let point = |name: &str| points.iter().find(|p| p.id.name() == name).unwrap();
     driver
-        .write(point("limit"), &Value::Number(42.25))
+        .check_then_write(point("limit"), &Value::Number(42.25))
         .await
         .unwrap();
     let words = {
@@ -393,18 +394,18 @@ async fn a_float_is_written_with_function_16_and_a_coil_with_function_5() {
         Ok(TypedValue::Float(42.25))
     );
     driver
-        .write(point("pump"), &Value::Text("off".into()))
+        .check_then_write(point("pump"), &Value::Text("off".into()))
         .await
         .unwrap();
     assert_eq!(slave.lock().get(Table::Coils, 3), Some(0));
     let err = driver
-        .write(point("voltage"), &Value::Number(1.0))
+        .check_then_write(point("voltage"), &Value::Number(1.0))
         .await
         .unwrap_err();
     assert!(matches!(err, WriteError::Invalid(_)), "{err}");
     // Within the range, but a float32 would hold 0: refused with that reason.
     let err = driver
-        .write(point("limit"), &Value::Number(1e-50))
+        .check_then_write(point("limit"), &Value::Number(1e-50))
         .await
         .unwrap_err();
     assert!(
@@ -422,20 +423,28 @@ async fn a_write_is_checked_against_range_and_step_then_sent_as_the_register_wor
     let points = driver.points();
     let setpoint = points.iter().find(|p| p.id.name() == "setpoint").unwrap();
     let err = driver
-        .write(setpoint, &Value::Number(31.0))
+        .check_then_write(setpoint, &Value::Number(31.0))
         .await
         .unwrap_err();
     assert!(matches!(err, WriteError::Invalid(_)), "{err}");
     let err = driver
-        .write(setpoint, &Value::Number(22.25))
+        .check_then_write(setpoint, &Value::Number(22.25))
         .await
         .unwrap_err();
     assert!(err.to_string().contains("multiple of 0.1"), "{err}");
     assert_eq!(slave.lock().get(Table::HoldingRegisters, 0), Some(215));
-    driver.write(setpoint, &Value::Number(22.5)).await.unwrap();
+    driver
+        .check_then_write(setpoint, &Value::Number(22.5))
+        .await
+        .unwrap();
     assert_eq!(slave.lock().get(Table::HoldingRegisters, 0), Some(225));
     let mode = points.iter().find(|p| p.id.name() == "mode").unwrap();
-    assert!(driver.write(mode, &Value::Number(1.0)).await.is_err());
+    assert!(
+        driver
+            .check_then_write(mode, &Value::Number(1.0))
+            .await
+            .is_err()
+    );
 }
 
 #[tokio::test(start_paused = true)]

@@ -1,3 +1,4 @@
+use crate::testing::CheckThenWrite;
 use std::collections::HashSet;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -134,9 +135,15 @@ async fn a_set_point_write_reaches_the_regulator_and_reads_back() {
     let (mut drivers, _model) = rig(&[0]);
     let driver = &mut drivers[0];
     let sealing = spec(driver, "sealing_temperature");
-    driver.write(&sealing, &Value::Number(150.0)).await.unwrap();
+    driver
+        .check_then_write(&sealing, &Value::Number(150.0))
+        .await
+        .unwrap();
     let kint = spec(driver, "kint_gain");
-    driver.write(&kint, &Value::Number(12.5)).await.unwrap();
+    driver
+        .check_then_write(&kint, &Value::Number(12.5))
+        .await
+        .unwrap();
     let settings = driver.poll(SETTINGS).await.unwrap();
     assert_eq!(
         value(&settings, "sealing_temperature"),
@@ -155,7 +162,7 @@ async fn writes_out_of_range_between_steps_or_above_the_working_limit_never_reac
         .table(Table::Settings, tokio::time::Instant::now().into_std());
     let sealing = spec(driver, "sealing_temperature");
     let err = driver
-        .write(&sealing, &Value::Number(1000.0))
+        .check_then_write(&sealing, &Value::Number(1000.0))
         .await
         .unwrap_err();
     assert!(
@@ -166,7 +173,7 @@ async fn writes_out_of_range_between_steps_or_above_the_working_limit_never_reac
         .max_working()
         .expect("confirmed by the settings poll");
     let err = driver
-        .write(&sealing, &Value::Number(max + 1.0))
+        .check_then_write(&sealing, &Value::Number(max + 1.0))
         .await
         .unwrap_err();
     assert!(
@@ -175,7 +182,7 @@ async fn writes_out_of_range_between_steps_or_above_the_working_limit_never_reac
     );
     let kint = spec(driver, "kint_gain");
     let err = driver
-        .write(&kint, &Value::Number(12.55))
+        .check_then_write(&kint, &Value::Number(12.55))
         .await
         .unwrap_err();
     assert!(
@@ -184,7 +191,7 @@ async fn writes_out_of_range_between_steps_or_above_the_working_limit_never_reac
     );
     let address = spec(driver, "address");
     let err = driver
-        .write(&address, &Value::Number(3.0))
+        .check_then_write(&address, &Value::Number(3.0))
         .await
         .unwrap_err();
     assert!(
@@ -392,7 +399,7 @@ async fn a_corrupted_setting_is_not_recorded_until_a_second_read_confirms_it() {
     let sealing = spec(&bench.driver, "sealing_temperature");
     let err = bench
         .driver
-        .write(&sealing, &Value::Number(300.0))
+        .check_then_write(&sealing, &Value::Number(300.0))
         .await
         .unwrap_err();
     assert!(
@@ -497,7 +504,7 @@ async fn a_real_change_is_recorded_after_one_confirming_read_and_limits_the_writ
     let sealing = spec(&bench.driver, "sealing_temperature");
     let err = bench
         .driver
-        .write(&sealing, &Value::Number(220.0))
+        .check_then_write(&sealing, &Value::Number(220.0))
         .await
         .unwrap_err();
     assert!(
@@ -507,7 +514,7 @@ async fn a_real_change_is_recorded_after_one_confirming_read_and_limits_the_writ
     // A write the regulator echoed is confirmed by its echo: no second read follows.
     bench
         .driver
-        .write(&sealing, &Value::Number(190.0))
+        .check_then_write(&sealing, &Value::Number(190.0))
         .await
         .unwrap();
     let (readings, questions) = bench.poll_counted(SETTINGS).await;
