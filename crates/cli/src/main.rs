@@ -35,6 +35,13 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// How much cellbus logs on stderr: error, warn, info, debug or trace. Default: info for
+    /// `serve` and `historian` (devices and lines going down and coming back, the first
+    /// round's summary), warn for the others; debug shows protocol detail. RUST_LOG (e.g.
+    /// `RUST_LOG=gateway::scheduler=debug,rumqttc=info`) sets it per module, libraries
+    /// included; this option wins over it.
+    #[arg(long, global = true, value_name = "LEVEL")]
+    log_level: Option<tracing::level_filters::LevelFilter>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -83,7 +90,8 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    init_logging();
+    let service = matches!(cli.command, Command::Serve(_) | Command::Historian(_));
+    init_logging(cli.log_level, service);
     if matches!(cli.command, Command::Serve(_) | Command::Demo(_)) {
         // The gateway's malloc, set before the runtime starts its threads.
         gateway::tune_malloc();
@@ -126,12 +134,49 @@ fn main() -> ExitCode {
     }
 }
 
-/// Logs go to stderr, so stdout stays for results; `RUST_LOG=debug` shows protocol detail.
-fn init_logging() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+/// cellbus's own crates, which `--log-level` sets (libraries stay at warn).
+const OWN_CRATES: [&str; 12] = [
+    "cellbus",
+    "cellbus_opcua",
+    "gateway",
+    "historian",
+    "kit",
+    "link",
+    "jbc",
+    "jbus",
+    "thermosald",
+    "panasonic",
+    "sparkplug",
+    "wire",
+];
+
+/// Logs go to stderr, so stdout stays for results; colour only on a terminal (and not with
+/// NO_COLOR set), so a journal or a file gets plain lines.
+fn init_logging(level: Option<tracing::level_filters::LevelFilter>, service: bool) {
+    let own = |level: tracing::level_filters::LevelFilter| {
+        let mut filter = tracing_subscriber::EnvFilter::new("warn");
+        for name in OWN_CRATES {
+            if let Ok(directive) = format!("{name}={level}").parse() {
+                filter = filter.add_directive(directive);
+            }
+        }
+        filter
+    };
+    let filter = match level {
+        Some(level) => own(level),
+        None => tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+            own(if service {
+                tracing::level_filters::LevelFilter::INFO
+            } else {
+                tracing::level_filters::LevelFilter::WARN
+            })
+        }),
+    };
+    let colour = std::io::IsTerminal::is_terminal(&std::io::stderr())
+        && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty());
     tracing_subscriber::fmt()
         .with_env_filter(filter)
+        .with_ansi(colour)
         .with_writer(std::io::stderr)
         .init();
 }

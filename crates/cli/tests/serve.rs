@@ -272,3 +272,74 @@ fn config_check_points_at_the_bad_line() {
     assert_stderr_has(&out, &format!("cell.toml:{bad_line}:"));
     assert_stderr_has(&out, "bogus");
 }
+
+#[test]
+fn serve_says_at_the_default_level_which_devices_answer_and_what_to_check_in_plain_lines() {
+    let sim = common::Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("ttyUSB9");
+    let path = dir.path().join("cell.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "[[line]]\nname = \"bench\"\nendpoint = \"{}\"\n\
+             [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n\n\
+             [[line]]\nname = \"unplugged\"\nendpoint = \"serial://{}\"\n\
+             [[line.device]]\nid = \"jbc2\"\nprotocol = \"jbc\"\n",
+            sim.endpoint,
+            missing.display()
+        ),
+    )
+    .unwrap();
+    let mut serve = common::cellbus()
+        .args(["serve", "--listen", "127.0.0.1:0", "--config"])
+        .arg(&path)
+        .arg("--data")
+        .arg(dir.path().join("data"))
+        .env_remove("RUST_LOG")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("cellbus runs");
+    let stderr = serve.stderr.take().expect("piped");
+    let (lines, seen) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufRead::lines(std::io::BufReader::new(stderr)) {
+            let Ok(line) = line else { break };
+            if lines.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut log = Vec::new();
+    let summary = loop {
+        // Generous: the summary comes after the first round, at most a minute in.
+        match seen.recv_timeout(std::time::Duration::from_secs(120)) {
+            Ok(line) if line.contains("devices answer") => break line,
+            Ok(line) => log.push(line),
+            Err(e) => panic!("no first-round summary ({e}); stderr so far: {log:#?}"),
+        }
+    };
+    serve.kill().unwrap();
+    serve.wait().unwrap();
+    log.push(summary.clone());
+    assert!(
+        summary.contains("WARN")
+            && summary
+                .contains("1 of 2 devices answer (jbc1); not answering: jbc2 on line unplugged"),
+        "{summary}"
+    );
+    assert!(
+        summary.contains("ttyUSB9"),
+        "the reason names the port: {summary}"
+    );
+    assert!(
+        log.iter()
+            .any(|l| l.contains("WARN") && l.contains("line unplugged is down")),
+        "the line going down is a warning: {log:#?}"
+    );
+    assert!(
+        log.iter().all(|l| !l.contains('\u{1b}')),
+        "no colour codes on a pipe: {log:#?}"
+    );
+}

@@ -38,6 +38,7 @@ pub struct Cell {
     store: StoreHandle,
     metrics: Arc<Metrics>,
     interfaces: RwLock<Vec<(&'static str, Arc<dyn InterfaceStatus>)>>,
+    log_throttle: std::sync::Mutex<crate::oplog::Throttle>,
 }
 
 /// The status of an interface the gateway has but that does not run (not configured):
@@ -546,6 +547,7 @@ impl Cell {
             store,
             metrics,
             interfaces: RwLock::new(Vec::new()),
+            log_throttle: std::sync::Mutex::default(),
         });
         Ok((cell, plans))
     }
@@ -664,7 +666,7 @@ impl Cell {
     /// Records an event and tells the event-stream clients.
     pub fn emit(&self, event: Event) {
         self.metrics.events.inc();
-        tracing::info!(kind = event.kind.as_str(), "{}", event.message);
+        crate::oplog::log(&self.log_throttle, &event);
         self.store.event(event.clone());
         self.publish(LiveMessage::Event(Box::new(event)));
     }

@@ -42,6 +42,7 @@ pub mod fuzzing;
 pub mod http;
 pub mod metrics;
 pub mod northbound;
+pub mod oplog;
 pub mod options;
 pub mod plugins;
 pub mod point;

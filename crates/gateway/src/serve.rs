@@ -10,7 +10,7 @@ use std::time::Duration;
 use anyhow::Context;
 use tokio::sync::watch;
 
-use crate::cell::{Cell, NotRunning};
+use crate::cell::{Cell, DeviceStatus, NotRunning};
 use crate::config::{CellConfig, SAME_TOKENS, check_config, token_fault};
 use crate::demo::DemoCell;
 use crate::event::{Event, EventKind};
@@ -168,6 +168,7 @@ impl Gateway {
         report_history_off(&cell, options.data_dir.clone());
         let (stop, stopped) = watch::channel(false);
         let pollers = Pollers::start(tasks, stopped.clone())?;
+        tokio::spawn(first_round(Arc::clone(&cell)));
         // Every interface this gateway has shows in `/healthz`: `null` until it runs.
         for interface in &registry.interfaces {
             cell.set_interface(interface.name(), Arc::new(NotRunning), false);
@@ -332,6 +333,76 @@ impl Pollers {
 }
 
 /// Once the history has opened (or failed to), emits a `history_failed` event if it is off,
+/// The first round's summary is logged at the latest this long after the start, naming the
+/// devices that have not answered yet.
+pub const FIRST_ROUND_LIMIT: Duration = Duration::from_secs(60);
+
+/// Waits for the first round of polls and logs which devices answer (at the latest after
+/// [`FIRST_ROUND_LIMIT`]).
+async fn first_round(cell: Arc<Cell>) {
+    let mut live = cell.subscribe();
+    let deadline = tokio::time::Instant::now() + FIRST_ROUND_LIMIT;
+    while undecided(&cell) > 0 {
+        match tokio::time::timeout_at(deadline, live.recv()).await {
+            Ok(Ok(_) | Err(tokio::sync::broadcast::error::RecvError::Lagged(_))) => {}
+            Ok(Err(tokio::sync::broadcast::error::RecvError::Closed)) | Err(_) => break,
+        }
+    }
+    let (level, line) = first_round_line(&cell);
+    if level == tracing::Level::WARN {
+        tracing::warn!("{line}");
+    } else {
+        tracing::info!("{line}");
+    }
+}
+
+fn undecided(cell: &Cell) -> usize {
+    cell.device_entries()
+        .filter(|d| d.summary().status == DeviceStatus::Connecting)
+        .count()
+}
+
+/// The first round's line, and its level (a warning when a device does not answer).
+pub fn first_round_line(cell: &Cell) -> (tracing::Level, String) {
+    let mut up = Vec::new();
+    let mut not = Vec::new();
+    for device in cell.device_entries() {
+        let summary = device.summary();
+        match (summary.status, &summary.error) {
+            (DeviceStatus::Up, _) => up.push(device.id.to_string()),
+            (_, Some(error)) => not.push(format!(
+                "{} on line {}: {}",
+                device.id,
+                device.line,
+                crate::oplog::describe(error)
+            )),
+            (_, None) => not.push(format!(
+                "{} on line {}: no answer yet after {} s",
+                device.id,
+                device.line,
+                FIRST_ROUND_LIMIT.as_secs()
+            )),
+        }
+    }
+    let total = up.len() + not.len();
+    if not.is_empty() {
+        return (tracing::Level::INFO, format!("all {total} devices answer"));
+    }
+    let answering = if up.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", up.join(", "))
+    };
+    (
+        tracing::Level::WARN,
+        format!(
+            "{} of {total} devices answer{answering}; not answering: {}",
+            up.len(),
+            not.join("; ")
+        ),
+    )
+}
+
 /// so the event stream and the log say so; polling does not wait for it.
 fn report_history_off(cell: &Arc<Cell>, data_dir: PathBuf) {
     let cell = Arc::clone(cell);

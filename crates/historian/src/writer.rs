@@ -421,8 +421,8 @@ impl Writer {
     }
 }
 
-/// The state turns failing (the historian goes offline) for `why`; logged once, with
-/// what the writer does meanwhile.
+/// The state turns failing (the historian goes offline) for `why`; logged once per reason
+/// (the first failure at start too), with what the writer does meanwhile.
 fn mark_failing(
     state: &watch::Sender<DbState>,
     health: &Health,
@@ -433,7 +433,7 @@ fn mark_failing(
     metrics.database_ok.set(0);
     health.set_database(Some(why.to_owned()));
     state.send_if_modified(|s| {
-        let changed = *s == DbState::Ok;
+        let changed = !matches!(&*s, DbState::Failing(old) if old == why);
         if changed {
             tracing::warn!("historian: {why}; {meanwhile}, offline meanwhile");
         }
