@@ -64,6 +64,12 @@ pub trait InterfaceStatus: Send + Sync + std::fmt::Debug {
     /// Its state as `/healthz` shows it.
     fn health(&self) -> serde_json::Value;
 
+    /// Why the interface cannot do its job now (its link is down), for `/healthz`'s
+    /// `degraded`; `None` when it works.
+    fn problem(&self) -> Option<String> {
+        None
+    }
+
     /// Brings the interface's gauges up to date (before a scrape of `/metrics`).
     fn before_scrape(&self) {}
 

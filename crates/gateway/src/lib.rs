@@ -39,6 +39,7 @@ pub mod demo;
 pub mod driver;
 pub mod event;
 pub mod fuzzing;
+pub mod health;
 pub mod http;
 pub mod metrics;
 pub mod northbound;

@@ -341,8 +341,8 @@ async fn an_unusable_data_directory_leaves_live_values_served_and_reports_the_fa
     wait_for_live_value(addr).await;
 
     let (status, health) = get(addr, "/healthz").await;
-    assert_eq!(status, "HTTP/1.1 200 OK");
-    assert_eq!(health["status"], "degraded", "{health}");
+    assert_eq!(status, "HTTP/1.1 503 Service Unavailable");
+    assert_eq!(health["status"], "failing", "{health}");
     let history = health["history"].as_str().unwrap();
     assert!(history.starts_with("off: "), "{health}");
     assert!(history.contains(&data.display().to_string()), "{health}");

@@ -257,7 +257,7 @@ async fn wrong_method(method: Method, uri: Uri) -> ApiError {
     )
 }
 
-async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
+async fn healthz(State(s): State<AppState>) -> Response {
     // Each device's status alone: building every device's view (all its points) here made
     // a health check with 1,000 devices take 16 ms.
     let devices = s.listing.len();
@@ -274,8 +274,13 @@ async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
         .load(std::sync::atomic::Ordering::Relaxed);
     let history = store.health(Timestamp::now());
     let (last_error_at, last_error) = history.last_fault.clone().unzip();
+    let judged = crate::health::judge(&crate::health::Facts::of(
+        &s.cell,
+        history.history.clone(),
+    ));
     let mut health = json!({
-        "status": if history.degraded() { "degraded" } else { "ok" },
+        "status": judged.status,
+        "reasons": judged.reasons,
         "started": s.started,
         "devices": devices,
         "devices_up": up,
@@ -296,7 +301,12 @@ async fn healthz(State(s): State<AppState>) -> Json<serde_json::Value> {
             object.insert(name.to_owned(), status.health());
         }
     }
-    Json(health)
+    let code = if judged.status == crate::health::Status::Failing {
+        StatusCode::SERVICE_UNAVAILABLE
+    } else {
+        StatusCode::OK
+    };
+    (code, Json(health)).into_response()
 }
 
 async fn metrics(State(s): State<AppState>) -> Response {

@@ -316,7 +316,7 @@ pub enum HistoryState {
 }
 
 impl StoreHealth {
-    /// Whether `/healthz` should say `degraded`.
+    /// Whether the history has a problem (`/healthz` then says `failing`).
     pub fn degraded(&self) -> bool {
         matches!(
             self.history,

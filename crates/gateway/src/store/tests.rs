@@ -960,8 +960,15 @@ async fn a_full_disk_leaves_live_values_served_and_healthz_reporting_the_fault()
     assert_eq!(status, StatusCode::OK);
     assert_eq!(devices["devices"][0]["status"], "up", "{devices}");
     let (status, health) = get("/healthz").await;
-    assert_eq!(status, StatusCode::OK);
-    assert_eq!(health["status"], "degraded", "{health}");
+    assert_eq!(status, StatusCode::SERVICE_UNAVAILABLE);
+    assert_eq!(health["status"], "failing", "{health}");
+    assert!(
+        health["reasons"][0]
+            .as_str()
+            .unwrap()
+            .starts_with("the history cannot be written: "),
+        "{health}"
+    );
     let history = health["history"].as_str().unwrap();
     assert!(
         history.starts_with("failing: ") && history.contains("full"),

@@ -537,7 +537,8 @@ function setUpToolbar() {
 async function refreshMqtt() {
   try {
     const response = await api('/healthz');
-    if (!response.ok) return;
+    // 503 is a failing gateway's health, still to be read.
+    if (!response.ok && response.status !== 503) return;
     const health = await response.json();
     const link = health.mqtt;
     const badge = document.getElementById('mqtt');

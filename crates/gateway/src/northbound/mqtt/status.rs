@@ -127,6 +127,13 @@ impl InterfaceStatus for MqttStatus {
         serde_json::Value::String(self.link().to_string())
     }
 
+    fn problem(&self) -> Option<String> {
+        match self.link() {
+            MqttLink::Connected => None,
+            MqttLink::Disconnected(why) => Some(format!("not connected to the broker: {why}")),
+        }
+    }
+
     fn into_any(self: Arc<Self>) -> Arc<dyn std::any::Any + Send + Sync> {
         self
     }

@@ -1,0 +1,226 @@
+//! The gateway's health as `/healthz` says it: `ok`, `degraded` or `failing`, with the
+//! reasons.
+//!
+//! - `failing` (HTTP 503): the history cannot be written (off since the start, or commits
+//!   failing), or no device answers (at least one has failed and none is up).
+//! - `degraded` (HTTP 200): something is wrong but the gateway does its job for the rest:
+//!   a device down, a line not open, an interface's link down (the MQTT broker).
+//! - `ok` (HTTP 200): none of these. Devices not polled yet (the first seconds) are not a
+//!   problem.
+//!
+//! Each reason is one line in words, naming the device, line or interface and why.
+
+use serde::Serialize;
+
+use crate::cell::{Cell, DeviceStatus};
+use crate::store::HistoryState;
+
+/// The overall state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// Everything works.
+    Ok,
+    /// Something is wrong; the rest works.
+    Degraded,
+    /// The gateway cannot do its job: no device answers or the history cannot be written.
+    Failing,
+}
+
+/// The gateway's health: its state and why.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Health {
+    /// The overall state.
+    pub status: Status,
+    /// Why it is not `ok`, most serious first.
+    pub reasons: Vec<String>,
+}
+
+/// What the judgement reads, gathered from the cell (or made up by a test).
+#[derive(Debug, Clone, Default)]
+pub struct Facts {
+    /// Every device: its id, its status and, when down, why.
+    pub devices: Vec<(String, DeviceStatus, Option<String>)>,
+    /// Every line that failed or could not be opened: its name and why (a line still
+    /// opening is not one).
+    pub lines_closed: Vec<(String, String)>,
+    /// The history's state.
+    pub history: Option<HistoryState>,
+    /// Each interface whose link is down: its name and why.
+    pub interfaces_down: Vec<(String, String)>,
+}
+
+impl Facts {
+    /// Reads the cell's devices, lines and interfaces, and the history's state.
+    pub fn of(cell: &Cell, history: HistoryState) -> Self {
+        let devices = cell
+            .device_entries()
+            .map(|d| {
+                let summary = d.summary();
+                let why = summary.error.as_ref().map(crate::oplog::describe);
+                (d.id.to_string(), summary.status, why)
+            })
+            .collect();
+        let lines_closed = cell
+            .lines()
+            .iter()
+            .filter(|l| !l.state.open)
+            .filter_map(|l| Some((l.name.clone(), l.state.error.clone()?)))
+            .collect();
+        let interfaces_down = cell
+            .interfaces()
+            .into_iter()
+            .filter_map(|(name, status)| Some((name.to_owned(), status.problem()?)))
+            .collect();
+        Facts {
+            devices,
+            lines_closed,
+            history: Some(history),
+            interfaces_down,
+        }
+    }
+}
+
+/// Judges the facts.
+pub fn judge(facts: &Facts) -> Health {
+    let mut failing = Vec::new();
+    let mut degraded = Vec::new();
+    match &facts.history {
+        Some(HistoryState::Off(why)) => {
+            failing.push(format!("the history is off, nothing is recorded: {why}"))
+        }
+        Some(HistoryState::Failing(why)) => {
+            failing.push(format!("the history cannot be written: {why}"))
+        }
+        Some(HistoryState::Ok | HistoryState::Opening) | None => {}
+    }
+    let up = facts
+        .devices
+        .iter()
+        .filter(|(_, status, _)| *status == DeviceStatus::Up)
+        .count();
+    let down: Vec<_> = facts
+        .devices
+        .iter()
+        .filter(|(_, status, _)| *status == DeviceStatus::Down)
+        .collect();
+    if up == 0 && !down.is_empty() {
+        failing.push(format!(
+            "no device answers ({} of {} have failed)",
+            down.len(),
+            facts.devices.len()
+        ));
+    }
+    for (id, _, why) in &down {
+        degraded.push(match why {
+            Some(why) => format!("device {id} is down: {why}"),
+            None => format!("device {id} is down"),
+        });
+    }
+    for (name, why) in &facts.lines_closed {
+        degraded.push(format!("line {name} is not open: {why}"));
+    }
+    for (name, why) in &facts.interfaces_down {
+        degraded.push(format!("{name}: {why}"));
+    }
+    let status = if !failing.is_empty() {
+        Status::Failing
+    } else if !degraded.is_empty() {
+        Status::Degraded
+    } else {
+        Status::Ok
+    };
+    failing.append(&mut degraded);
+    Health {
+        status,
+        reasons: failing,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn device(id: &str, status: DeviceStatus) -> (String, DeviceStatus, Option<String>) {
+        let why = (status == DeviceStatus::Down).then(|| "no answer in 500 ms".to_owned());
+        (id.to_owned(), status, why)
+    }
+
+    #[test]
+    fn a_cell_whose_devices_answer_with_its_history_written_is_ok() {
+        let facts = Facts {
+            devices: vec![
+                device("jbc1", DeviceStatus::Up),
+                device("jbc2", DeviceStatus::Connecting),
+            ],
+            history: Some(HistoryState::Ok),
+            ..Facts::default()
+        };
+        assert_eq!(
+            judge(&facts),
+            Health {
+                status: Status::Ok,
+                reasons: vec![]
+            }
+        );
+    }
+
+    #[test]
+    fn some_devices_down_a_line_closed_or_a_link_lost_is_degraded_with_each_reason() {
+        let facts = Facts {
+            devices: vec![
+                device("jbc1", DeviceStatus::Up),
+                device("jbc2", DeviceStatus::Down),
+            ],
+            lines_closed: vec![("bench".into(), "no such port".into())],
+            history: Some(HistoryState::Ok),
+            interfaces_down: vec![("mqtt".into(), "broker link down: refused".into())],
+        };
+        let health = judge(&facts);
+        assert_eq!(health.status, Status::Degraded);
+        assert_eq!(
+            health.reasons,
+            [
+                "device jbc2 is down: no answer in 500 ms",
+                "line bench is not open: no such port",
+                "mqtt: broker link down: refused",
+            ]
+        );
+    }
+
+    #[test]
+    fn no_device_answering_or_a_history_that_cannot_be_written_is_failing() {
+        let none_answers = Facts {
+            devices: vec![
+                device("jbc1", DeviceStatus::Down),
+                device("jbc2", DeviceStatus::Connecting),
+            ],
+            history: Some(HistoryState::Ok),
+            ..Facts::default()
+        };
+        let health = judge(&none_answers);
+        assert_eq!(health.status, Status::Failing);
+        assert_eq!(health.reasons[0], "no device answers (1 of 2 have failed)");
+        let full_disk = Facts {
+            devices: vec![device("jbc1", DeviceStatus::Up)],
+            history: Some(HistoryState::Failing("database or disk is full".into())),
+            ..Facts::default()
+        };
+        let health = judge(&full_disk);
+        assert_eq!(health.status, Status::Failing);
+        assert_eq!(
+            health.reasons,
+            ["the history cannot be written: database or disk is full"]
+        );
+    }
+
+    #[test]
+    fn devices_not_polled_yet_are_not_a_problem() {
+        let starting = Facts {
+            devices: vec![device("jbc1", DeviceStatus::Connecting)],
+            history: Some(HistoryState::Opening),
+            ..Facts::default()
+        };
+        assert_eq!(judge(&starting).status, Status::Ok);
+    }
+}
