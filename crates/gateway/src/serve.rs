@@ -23,6 +23,7 @@ pub use crate::options::{
 };
 use crate::plugins::Registry;
 use crate::scheduler::LineTask;
+use crate::store::lock::{DataLock, LockError};
 use crate::store::{HistoryState, Store, StoreOptions};
 use crate::time::Timestamp;
 
@@ -97,6 +98,7 @@ pub struct Gateway {
     pollers: Pollers,
     interfaces: Vec<Running>,
     _demo: Option<DemoCell>,
+    _lock: Option<DataLock>,
 }
 
 impl Gateway {
@@ -130,6 +132,16 @@ impl Gateway {
             }
         };
         let writes = write_policy(&options, &config)?;
+        let who = match &options.config {
+            Some(path) => format!("cellbus serve --config {}", path.display()),
+            None => "cellbus serve (the demo cell)".to_owned(),
+        };
+        // A directory that cannot be used turns the history off (the store says why).
+        let lock = match DataLock::take(&options.data_dir, &who) {
+            Ok(lock) => Some(lock),
+            Err(held @ LockError::Held { .. }) => return Err(OptionError(held.to_string()).into()),
+            Err(LockError::Unusable { .. }) => None,
+        };
         let store = Store::start(
             &options.data_dir,
             StoreOptions {
@@ -197,6 +209,7 @@ impl Gateway {
             pollers,
             interfaces,
             _demo: demo,
+            _lock: lock,
         })
     }
 
@@ -229,6 +242,8 @@ impl Gateway {
             pollers,
             interfaces,
             _demo,
+            // Held until the history is committed and the gateway has stopped.
+            _lock,
             ..
         } = self;
         let app = http::router(Arc::clone(&cell), writes, stop.subscribe());

@@ -274,10 +274,7 @@ async fn healthz(State(s): State<AppState>) -> Response {
         .load(std::sync::atomic::Ordering::Relaxed);
     let history = store.health(Timestamp::now());
     let (last_error_at, last_error) = history.last_fault.clone().unzip();
-    let judged = crate::health::judge(&crate::health::Facts::of(
-        &s.cell,
-        history.history.clone(),
-    ));
+    let judged = crate::health::judge(&crate::health::Facts::of(&s.cell, history.history.clone()));
     let mut health = json!({
         "status": judged.status,
         "reasons": judged.reasons,

@@ -68,6 +68,7 @@ use crate::time::Timestamp;
 mod changes;
 mod fault;
 mod inbox;
+pub mod lock;
 mod open;
 mod query;
 mod records;
