@@ -939,7 +939,7 @@ impl CrossOperator {
         self.failed = fail;
         let mut twin = model.lock();
         if fail {
-            let fault = if round % 2 == 0 {
+            let fault = if round.is_multiple_of(2) {
                 SourceFault::Outage
             } else {
                 SourceFault::Undervoltage
@@ -1038,7 +1038,7 @@ impl JbcOperator {
             _ => None,
         };
         let suction = (70..75).contains(&s);
-        let fault = round % 3 == 0 && (85..90).contains(&s);
+        let fault = round.is_multiple_of(3) && (85..90).contains(&s);
         let mut station = model.lock();
         station.advance(now);
         if heat != self.heat {

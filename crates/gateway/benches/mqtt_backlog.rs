@@ -252,7 +252,7 @@ fn store_backlog(
                 quality: Quality::Good,
             });
             written += 1;
-            if written % 50_000 == 0 {
+            if written.is_multiple_of(50_000) {
                 // Commit as it goes: the writer queues at most MAX_PENDING_ROWS.
                 runtime.block_on(handle.flush())?;
             }

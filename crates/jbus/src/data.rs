@@ -948,10 +948,11 @@ fn parse_number(text: &str) -> Option<TypedValue> {
         let magnitude = u64::from_str_radix(hex, 16).ok()?;
         return Some(signed(negative, magnitude));
     }
-    if !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()) {
-        if let Ok(magnitude) = digits.parse::<u64>() {
-            return Some(signed(negative, magnitude));
-        }
+    if !digits.is_empty()
+        && digits.bytes().all(|b| b.is_ascii_digit())
+        && let Ok(magnitude) = digits.parse::<u64>()
+    {
+        return Some(signed(negative, magnitude));
     }
     // "inf" and "nan" parse as floats but are not numbers a register can be told.
     let float: f64 = text.parse().ok()?;

@@ -174,12 +174,12 @@ impl ErrorInfo {
         check('Z', feeder.into(), 999)?;
         check('M', m.into(), 9)?;
         check('T', t.into(), 999)?;
-        if let Some(detail) = detail {
-            if detail.len() != DETAIL_LEN || !detail.bytes().all(|b| b.is_ascii_graphic()) {
-                return Err(ErrorInfoError::Detail {
-                    detail: detail.to_owned(),
-                });
-            }
+        if let Some(detail) = detail
+            && (detail.len() != DETAIL_LEN || !detail.bytes().all(|b| b.is_ascii_graphic()))
+        {
+            return Err(ErrorInfoError::Detail {
+                detail: detail.to_owned(),
+            });
         }
         Ok(ErrorInfo {
             code,

@@ -130,10 +130,10 @@ pub enum Value {
 impl Value {
     /// Types a value by its key and look.
     pub fn parse(key: &str, text: &[u8]) -> Value {
-        if key.ends_with("_RATE") {
-            if let Some(rate) = Rate::parse(text) {
-                return Value::Rate(rate);
-            }
+        if key.ends_with("_RATE")
+            && let Some(rate) = Rate::parse(text)
+        {
+            return Value::Rate(rate);
         }
         match wire::ascii::parse_unsigned(text) {
             Some(count) => Value::Count(count),

@@ -524,13 +524,12 @@ impl ProgramText {
         for line in lines(&self.0) {
             if line.first() == Some(&b'%') {
                 in_header = line == HEADER_SECTION.as_bytes();
-            } else if in_header {
-                if let Some(value) = line
+            } else if in_header
+                && let Some(value) = line
                     .strip_prefix(key.as_bytes())
                     .and_then(|rest| rest.strip_prefix(b"="))
-                {
-                    return Some(String::from_utf8_lossy(value).into_owned());
-                }
+            {
+                return Some(String::from_utf8_lossy(value).into_owned());
             }
         }
         None

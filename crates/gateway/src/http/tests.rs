@@ -1243,7 +1243,9 @@ fn example_cell_with_every_kind_of_state(
                 let value = match (&spec.kind, n % 5) {
                     (_, 0) => None,
                     (PointKind::Text, _) => Some(Value::Text(texts[n % texts.len()].to_owned())),
-                    (PointKind::Enum { states }, _) if n % 2 == 0 && !states.is_empty() => {
+                    (PointKind::Enum { states }, _)
+                        if n.is_multiple_of(2) && !states.is_empty() =>
+                    {
                         Some(Value::Number(states[n % states.len()].value as f64))
                     }
                     _ => Some(Value::Number(numbers[n % numbers.len()])),
@@ -1257,8 +1259,10 @@ fn example_cell_with_every_kind_of_state(
                     Some(Quality::Bad),
                     Some(Quality::Stale),
                 ][n % 4];
-                point.error = (n % 3 == 0).then(|| Arc::new(texts[n % texts.len()].to_owned()));
-                point.alarm = n % 7 == 0;
+                point.error = n
+                    .is_multiple_of(3)
+                    .then(|| Arc::new(texts[n % texts.len()].to_owned()));
+                point.alarm = n.is_multiple_of(7);
                 point
             })
             .collect();
@@ -1270,10 +1274,14 @@ fn example_cell_with_every_kind_of_state(
                 DeviceStatus::Connecting,
             ][n % 3],
             since: NOW.minus(Duration::from_secs(n as u64)),
-            error: (n % 2 == 0).then(|| DeviceError::new(ErrorKind::Timeout, "no \"answer\"\n")),
+            error: n
+                .is_multiple_of(2)
+                .then(|| DeviceError::new(ErrorKind::Timeout, "no \"answer\"\n")),
             last_ok: times[n % times.len()],
             failures: n as u32,
-            next_try_at: (n % 2 == 0).then(|| NOW.plus(Duration::from_millis(1500))),
+            next_try_at: n
+                .is_multiple_of(2)
+                .then(|| NOW.plus(Duration::from_millis(1500))),
             points,
         };
     }

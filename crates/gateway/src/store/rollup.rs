@@ -150,7 +150,7 @@ impl ExactSum {
 
     /// Reads [`ExactSum::to_bytes`]' form; `None` if the length is not a multiple of 8.
     pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
-        if bytes.len() % 8 != 0 {
+        if !bytes.len().is_multiple_of(8) {
             return None;
         }
         let mut sum = ExactSum::default();

@@ -79,9 +79,9 @@ pub(super) async fn run_keep_alive(
 
 /// Feeds an `R1HB` to the keep-alive schedule.
 pub(super) fn take_echo(schedule: &mut KeepAlive, notice: &Notice) {
-    if let Notice::Event(Event::Heartbeat { id }) = notice {
-        if !schedule.port2_echo(id) {
-            tracing::debug!(%id, "an R1HB that answers no open keep-alive");
-        }
+    if let Notice::Event(Event::Heartbeat { id }) = notice
+        && !schedule.port2_echo(id)
+    {
+        tracing::debug!(%id, "an R1HB that answers no open keep-alive");
     }
 }

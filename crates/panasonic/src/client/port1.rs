@@ -113,10 +113,10 @@ impl Port1 {
                         return Ok(outcome);
                     }
                     Next::Failed { send, error } => {
-                        if let Some(last) = send {
-                            if let Err(error) = line.send(&last.to_bytes()).await {
-                                tracing::debug!(%error, "cannot send the closing message");
-                            }
+                        if let Some(last) = send
+                            && let Err(error) = line.send(&last.to_bytes()).await
+                        {
+                            tracing::debug!(%error, "cannot send the closing message");
                         }
                         return Err(match error {
                             ConversationError::Refused(refusal) => Failure::Refused(refusal),

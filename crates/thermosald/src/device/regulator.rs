@@ -423,10 +423,10 @@ impl Regulator {
                 motion.after(self.temperature, end - t, self.ambient(), self.tau())
             };
             self.clock = end;
-            if let Some((at, event)) = control.event {
-                if at == end {
-                    self.on_event(event, end);
-                }
+            if let Some((at, event)) = control.event
+                && at == end
+            {
+                self.on_event(event, end);
             }
         }
     }
