@@ -343,3 +343,19 @@ fn serve_says_at_the_default_level_which_devices_answer_and_what_to_check_in_pla
         "no colour codes on a pipe: {log:#?}"
     );
 }
+
+#[test]
+fn a_second_gateway_on_the_same_data_directory_refuses_to_start_naming_the_first() {
+    let data = tempfile::tempdir().unwrap();
+    let _first = Gateway::start(data.path());
+    let out = run(&[
+        "serve",
+        "--listen",
+        "127.0.0.1:0",
+        "--data",
+        data.path().to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert_stderr_has(&out, "is in use by another cellbus (pid ");
+    assert_stderr_has(&out, "cellbus serve (the demo cell)");
+}
