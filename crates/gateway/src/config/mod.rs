@@ -283,6 +283,10 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
         tree.clone(),
     )))
     .map_err(toml_error)?;
+    // Every mistake of the file in one run: each line, device, token and interface table
+    // is checked on its own, and what one gets wrong does not hide the next (a device's
+    // own checks stop at its first mistake).
+    let mut errors = Vec::new();
     let mut interface_tables = Vec::new();
     for (key, value) in std::mem::take(&mut tree) {
         if CELL_KEYS.contains(&key.get_ref().as_ref()) {
@@ -296,202 +300,68 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
                     .into_iter()
                     .chain(plugins.tables.iter().map(|t| t.table()))
                     .collect();
-                return Err(at(key.span(), unknown_field(key.get_ref(), &expected)));
+                errors.push(at(key.span(), unknown_field(key.get_ref(), &expected)));
             }
         }
     }
-    let mut device_tables = device_tables(tree, plugins, &at)?;
+    let mut device_tables = device_tables(tree, plugins, &at, &mut errors);
     if raw.line.is_empty() {
-        return Err(at(
+        errors.push(at(
             0..0,
             "no [[line]]: a cell needs at least one line with a device on it (see `cellbus config example`)"
                 .into(),
         ));
     }
     let mut lines = Vec::new();
-    let mut line_names = HashSet::new();
-    // The serial port each line holds, with the line's name: one port carries one line.
-    let mut ports: HashMap<String, String> = HashMap::new();
-    let mut device_ids = HashSet::new();
-    let mut scratch = Scratch::default();
+    let mut seen = Seen::default();
     for line in raw.line {
-        let name = line.name.get_ref();
-        DeviceId::new(name).map_err(|e| {
-            at(
-                line.name.span(),
-                format!("line name {name:?} is not valid: {}", e.rule),
-            )
-        })?;
-        if !line_names.insert(name.clone()) {
-            return Err(at(
-                line.name.span(),
-                format!("line name {name:?} is used twice"),
-            ));
+        let count = line.device.len();
+        let own: Vec<_> = device_tables.by_ref().take(count).collect();
+        if let Some(line) = check_line(
+            line,
+            own,
+            (text, path),
+            plugins,
+            &mut seen,
+            &at,
+            &mut errors,
+        ) {
+            lines.push(line);
         }
-        let Some(first) = line.device.first() else {
-            return Err(at(
-                line.name.span(),
-                format!("line {name:?} has no devices; add a [[line.device]] under it"),
-            ));
-        };
-        let protocol = plugins
-            .protocol_of(&first.protocol)
-            .map_err(|m| at(first.protocol.span(), m))?;
-        let endpoint = Endpoint::parse(line.endpoint.get_ref(), protocol.default_serial())
-            .map_err(|e| at(line.endpoint.span(), e.to_string()))?;
-        if let Endpoint::Tcp { port: 0, .. } = endpoint {
-            return Err(at(
-                line.endpoint.span(),
-                "port 0 is not a port a device listens on; give the serial server's or the device's port".into(),
-            ));
-        }
-        if let Endpoint::Serial { path, .. } = &endpoint
-            && let Some(first) = ports.insert(path.clone(), name.clone())
-        {
-            return Err(at(
-                line.endpoint.span(),
-                format!(
-                    "line {name:?} is on serial port {path}, as line {first:?} is: two lines on \
-                     one port would interleave their requests; put the devices of both on one line"
-                ),
-            ));
-        }
-        if endpoint.is_mbap() && !protocol.speaks_modbus() {
-            // The generic Modbus kind (it plans its reads) first, then the devices that
-            // speak Modbus with a map of their own.
-            let mut modbus: Vec<Kind> = plugins
-                .kinds
-                .iter()
-                .copied()
-                .filter(|k| k.speaks_modbus())
-                .collect();
-            modbus.sort_by_key(|k| !k.plans_reads());
-            let modbus: Vec<&str> = modbus.iter().map(|k| k.name()).collect();
-            return Err(at(
-                line.endpoint.span(),
-                format!(
-                    "modbus-tcp:// is for Modbus devices ({}); a {protocol} line is serial:// or tcp://",
-                    modbus.join(", ")
-                ),
-            ));
-        }
-        if let Some(how) = protocol.owns_connections()
-            && !matches!(endpoint, Endpoint::Tcp { .. })
-        {
-            return Err(at(
-                line.endpoint.span(),
-                format!("a {protocol} machine is reached over TCP: write {how}"),
-            ));
-        }
-        let mut devices = Vec::new();
-        let mut addresses = HashSet::new();
-        for device in line.device {
-            let own = device_tables.next().unwrap_or_default();
-            let this = plugins
-                .protocol_of(&device.protocol)
-                .map_err(|m| at(device.protocol.span(), m))?;
-            if this != protocol && !(this.speaks_modbus() && protocol.speaks_modbus()) {
-                return Err(at(
-                    device.protocol.span(),
-                    format!(
-                        "line {name:?} carries {protocol} devices; a {this} device needs a line of its own"
-                    ),
-                ));
-            }
-            let id_span = device.id.span();
-            let address_span = device
-                .address
-                .as_ref()
-                .map_or(id_span.clone(), Spanned::span);
-            let device = check_device(
-                device,
-                this,
-                &endpoint,
-                (text, path),
-                own,
-                plugins,
-                &mut scratch,
-                &at,
-            )?;
-            if let Some(address) = device.driver.address
-                && !addresses.insert(address)
-            {
-                return Err(at(
-                    address_span,
-                    format!(
-                        "address {address} is used twice on line {name:?}: both devices would answer the same requests"
-                    ),
-                ));
-            }
-            if !device_ids.insert(device.driver.id.clone()) {
-                return Err(at(
-                    id_span,
-                    format!("device id {:?} is used twice", device.driver.id.as_str()),
-                ));
-            }
-            devices.push(device);
-        }
-        if protocol.owns_connections().is_some()
-            && let Some(second) = devices.get(1)
-        {
-            return Err(at(
-                line.name.span(),
-                format!(
-                    "line {name:?} has {} {protocol} machines: each machine is its own TCP server and needs a [[line]] of its own (device {:?})",
-                    devices.len(),
-                    second.driver.id.as_str()
-                ),
-            ));
-        }
-        let reopen_after_timeouts = match &line.reopen_after_timeouts {
-            None => DEFAULT_REOPEN_AFTER_TIMEOUTS,
-            Some(k) => u32::try_from(*k.get_ref())
-                .ok()
-                .filter(|k| *k <= MAX_REOPEN_AFTER_TIMEOUTS)
-                .ok_or_else(|| {
-                    at(
-                        k.span(),
-                        format!(
-                            "reopen_after_timeouts {} is out of range: 0 (never) to {MAX_REOPEN_AFTER_TIMEOUTS}",
-                            k.get_ref()
-                        ),
-                    )
-                })?,
-        };
-        lines.push(LineConfig {
-            name: name.clone(),
-            endpoint,
-            devices,
-            reopen_after_timeouts,
-        });
     }
     for (key, token) in [("token", &raw.token), ("read_token", &raw.read_token)] {
         if let Some(token) = token
             && token.get_ref().trim().is_empty()
         {
-            return Err(at(
+            errors.push(at(
                 token.span(),
                 format!("{key} is empty; remove it or set a secret"),
             ));
-        }
-        if let Some(token) = token
+        } else if let Some(token) = token
             && let Some(fault) = token_fault(token.get_ref().trim())
         {
-            return Err(at(token.span(), format!("{key} cannot be used: {fault}")));
+            errors.push(at(token.span(), format!("{key} cannot be used: {fault}")));
         }
     }
     if let (Some(token), Some(read_token)) = (&raw.token, &raw.read_token)
         && token.get_ref().trim() == read_token.get_ref().trim()
     {
-        return Err(at(
+        errors.push(at(
             read_token.span(),
             format!("read_token cannot be used: {SAME_TOKENS}"),
         ));
     }
     let mut interfaces = BTreeMap::new();
     for (reader, value) in interface_tables {
-        let settings = reader.read(&Table::new(text, path, value))?;
-        interfaces.insert(reader.table(), settings);
+        match reader.read(&Table::new(text, path, value)) {
+            Ok(settings) => {
+                interfaces.insert(reader.table(), settings);
+            }
+            Err(e) => errors.push(e),
+        }
+    }
+    if let Some(error) = ConfigError::all(errors) {
+        return Err(error);
     }
     Ok(CellConfig {
         source: Some(path.to_owned()),
@@ -499,6 +369,214 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
         read_token: raw.read_token.map(Spanned::into_inner),
         lines,
         interfaces,
+    })
+}
+
+/// What the lines checked so far hold: names, serial ports and device ids are each the
+/// file's once.
+#[derive(Default)]
+struct Seen {
+    line_names: HashSet<String>,
+    /// The serial port each line holds, with the line's name: one port carries one line.
+    ports: HashMap<String, String>,
+    device_ids: HashSet<String>,
+    scratch: Scratch,
+}
+
+/// One line and its devices (`own`: each device's place and kind keys); its mistakes go to
+/// `errors`. `None` when the line itself is wrong (its devices are then not checked: their
+/// defaults depend on it); a wrong device is left out and the others checked.
+fn check_line(
+    line: RawLine,
+    own: Vec<(Range<usize>, DeTable<'_>)>,
+    (text, path): (&str, &Path),
+    plugins: &Plugins,
+    seen: &mut Seen,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+    errors: &mut Vec<ConfigError>,
+) -> Option<LineConfig> {
+    let fail = |errors: &mut Vec<ConfigError>, span: Range<usize>, message: String| {
+        errors.push(at(span, message));
+        None
+    };
+    let name = line.name.get_ref();
+    if let Err(e) = DeviceId::new(name) {
+        return fail(
+            errors,
+            line.name.span(),
+            format!("line name {name:?} is not valid: {}", e.rule),
+        );
+    }
+    if !seen.line_names.insert(name.clone()) {
+        return fail(
+            errors,
+            line.name.span(),
+            format!("line name {name:?} is used twice"),
+        );
+    }
+    let Some(first) = line.device.first() else {
+        return fail(
+            errors,
+            line.name.span(),
+            format!("line {name:?} has no devices; add a [[line.device]] under it"),
+        );
+    };
+    let protocol = match plugins.protocol_of(&first.protocol) {
+        Ok(protocol) => protocol,
+        Err(m) => return fail(errors, first.protocol.span(), m),
+    };
+    let endpoint = match Endpoint::parse(line.endpoint.get_ref(), protocol.default_serial()) {
+        Ok(endpoint) => endpoint,
+        Err(e) => return fail(errors, line.endpoint.span(), e.to_string()),
+    };
+    if let Endpoint::Tcp { port: 0, .. } = endpoint {
+        return fail(
+            errors,
+            line.endpoint.span(),
+            "port 0 is not a port a device listens on; give the serial server's or the device's port".into(),
+        );
+    }
+    if let Endpoint::Serial { path, .. } = &endpoint
+        && let Some(first) = seen.ports.insert(path.clone(), name.clone())
+    {
+        return fail(
+            errors,
+            line.endpoint.span(),
+            format!(
+                "line {name:?} is on serial port {path}, as line {first:?} is: two lines on \
+                 one port would interleave their requests; put the devices of both on one line"
+            ),
+        );
+    }
+    if endpoint.is_mbap() && !protocol.speaks_modbus() {
+        // The generic Modbus kind (it plans its reads) first, then the devices that
+        // speak Modbus with a map of their own.
+        let mut modbus: Vec<Kind> = plugins
+            .kinds
+            .iter()
+            .copied()
+            .filter(|k| k.speaks_modbus())
+            .collect();
+        modbus.sort_by_key(|k| !k.plans_reads());
+        let modbus: Vec<&str> = modbus.iter().map(|k| k.name()).collect();
+        return fail(
+            errors,
+            line.endpoint.span(),
+            format!(
+                "modbus-tcp:// is for Modbus devices ({}); a {protocol} line is serial:// or tcp://",
+                modbus.join(", ")
+            ),
+        );
+    }
+    if let Some(how) = protocol.owns_connections()
+        && !matches!(endpoint, Endpoint::Tcp { .. })
+    {
+        return fail(
+            errors,
+            line.endpoint.span(),
+            format!("a {protocol} machine is reached over TCP: write {how}"),
+        );
+    }
+    let reopen_after_timeouts = match &line.reopen_after_timeouts {
+        None => DEFAULT_REOPEN_AFTER_TIMEOUTS,
+        Some(k) => match u32::try_from(*k.get_ref())
+            .ok()
+            .filter(|k| *k <= MAX_REOPEN_AFTER_TIMEOUTS)
+        {
+            Some(k) => k,
+            None => {
+                return fail(
+                    errors,
+                    k.span(),
+                    format!(
+                        "reopen_after_timeouts {} is out of range: 0 (never) to {MAX_REOPEN_AFTER_TIMEOUTS}",
+                        k.get_ref()
+                    ),
+                );
+            }
+        },
+    };
+    let device_count = line.device.len();
+    let mut devices = Vec::new();
+    let mut addresses = HashSet::new();
+    let mut own = own.into_iter();
+    for device in line.device {
+        let own = own.next().unwrap_or_default();
+        let this = match plugins.protocol_of(&device.protocol) {
+            Ok(this) => this,
+            Err(m) => {
+                errors.push(at(device.protocol.span(), m));
+                continue;
+            }
+        };
+        if this != protocol && !(this.speaks_modbus() && protocol.speaks_modbus()) {
+            errors.push(at(
+                device.protocol.span(),
+                format!(
+                    "line {name:?} carries {protocol} devices; a {this} device needs a line of its own"
+                ),
+            ));
+            continue;
+        }
+        let id_span = device.id.span();
+        // Counted before the device's own checks, so a wrong device's id is still taken.
+        if !seen.device_ids.insert(device.id.get_ref().clone()) {
+            errors.push(at(
+                id_span,
+                format!("device id {:?} is used twice", device.id.get_ref()),
+            ));
+            continue;
+        }
+        let address_span = device
+            .address
+            .as_ref()
+            .map_or(id_span.clone(), Spanned::span);
+        let device = match check_device(
+            device,
+            this,
+            &endpoint,
+            (text, path),
+            own,
+            plugins,
+            &mut seen.scratch,
+            at,
+        ) {
+            Ok(device) => device,
+            Err(e) => {
+                errors.push(e);
+                continue;
+            }
+        };
+        if let Some(address) = device.driver.address
+            && !addresses.insert(address)
+        {
+            errors.push(at(
+                address_span,
+                format!(
+                    "address {address} is used twice on line {name:?}: both devices would answer the same requests"
+                ),
+            ));
+            continue;
+        }
+        devices.push(device);
+    }
+    if protocol.owns_connections().is_some() && device_count > 1 {
+        let second = devices.get(1).map_or(String::new(), |d| {
+            format!(" (device {:?})", d.driver.id.as_str())
+        });
+        return fail(
+            errors,
+            line.name.span(),
+            format!(
+                "line {name:?} has {device_count} {protocol} machines: each machine is its own TCP server and needs a [[line]] of its own{second}"
+            ),
+        );
+    }
+    Some(LineConfig {
+        name: name.clone(),
+        endpoint,
+        devices,
+        reopen_after_timeouts,
     })
 }
 
@@ -518,7 +596,8 @@ fn device_tables<'a>(
     tree: DeTable<'a>,
     plugins: &Plugins,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
-) -> Result<std::vec::IntoIter<(Range<usize>, DeTable<'a>)>, ConfigError> {
+    errors: &mut Vec<ConfigError>,
+) -> std::vec::IntoIter<(Range<usize>, DeTable<'a>)> {
     let mut found = Vec::new();
     let tables = |value: Spanned<DeValue<'a>>| -> Vec<Spanned<DeValue<'a>>> {
         match value.into_inner() {
@@ -556,7 +635,8 @@ fn device_tables<'a>(
                                     expected.push(key);
                                 }
                             }
-                            return Err(at(key.span(), unknown_field(name, &expected)));
+                            errors.push(at(key.span(), unknown_field(name, &expected)));
+                            continue;
                         }
                         own.insert(key, value);
                     }
@@ -565,7 +645,7 @@ fn device_tables<'a>(
             }
         }
     }
-    Ok(found.into_iter())
+    found.into_iter()
 }
 
 /// One device: the keys every device has, checked here, and its kind's own keys (`own`,

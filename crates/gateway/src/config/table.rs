@@ -60,12 +60,42 @@ pub enum ConfigError {
         /// What is wrong, naming the column.
         message: String,
     },
+    /// More than one mistake, in the order of the file.
+    #[error("{}", self.describe())]
+    Several(Vec<ConfigError>),
 }
 
 impl ConfigError {
+    /// `errors` as one error: `None` for none, the error itself for one, [`Several`]
+    /// (sorted by line and column) for more.
+    ///
+    /// [`Several`]: ConfigError::Several
+    pub fn all(mut errors: Vec<ConfigError>) -> Option<ConfigError> {
+        match errors.len() {
+            0 => None,
+            1 => errors.pop(),
+            _ => {
+                errors.sort_by_key(|e| e.position().unwrap_or((0, 0)));
+                Some(ConfigError::Several(errors))
+            }
+        }
+    }
+
+    /// Each mistake (one, or each of [`ConfigError::Several`]).
+    pub fn each(&self) -> &[ConfigError] {
+        match self {
+            ConfigError::Several(errors) => errors,
+            one => std::slice::from_ref(one),
+        }
+    }
+
     fn describe(&self) -> String {
         match self {
             ConfigError::Read { .. } | ConfigError::Csv { .. } => self.to_string(),
+            ConfigError::Several(errors) => {
+                let each: Vec<String> = errors.iter().map(ToString::to_string).collect();
+                format!("{} mistakes:\n{}", errors.len(), each.join("\n"))
+            }
             ConfigError::Invalid {
                 path,
                 line,
@@ -89,6 +119,7 @@ impl ConfigError {
     pub fn position(&self) -> Option<(usize, usize)> {
         match self {
             ConfigError::Invalid { line, column, .. } => Some((*line, *column)),
+            ConfigError::Several(errors) => errors.first().and_then(ConfigError::position),
             ConfigError::Read { .. } | ConfigError::Csv { .. } => None,
         }
     }

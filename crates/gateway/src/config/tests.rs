@@ -1364,3 +1364,30 @@ fn an_error_on_the_token_line_does_not_show_the_token() {
     assert!(shown.contains("token = \"(hidden)\""), "{shown}");
     assert_eq!(hide_secret("name = \"rework\""), "name = \"rework\"");
 }
+
+#[test]
+fn every_mistake_of_a_file_is_reported_in_one_run_in_the_order_of_the_file() {
+    let text = "[[line]]\nname = \"a\"\nendpoint = \"serial:///dev/ttyUSB0\"\n\
+                [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\naddress = 100\n\
+                [[line.device]]\nid = \"jbc2\"\nprotocol = \"jbc\"\nbogus = 1\n\
+                [[line]]\nname = \"b\"\nendpoint = \"serial:///dev/ttyUSB1\"\n\
+                [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n\
+                [mqtt]\nbroker = \"ftp://x\"\n";
+    let error = parse(text).unwrap_err();
+    let positions: Vec<usize> = error
+        .each()
+        .iter()
+        .map(|e| e.position().unwrap().0)
+        .collect();
+    assert_eq!(positions, [7, 11, 16, 19], "{error}");
+    let words = error.to_string();
+    assert!(words.starts_with("4 mistakes:\ncell.toml:7:"), "{words}");
+    assert!(
+        words.contains("cell.toml:11:1: unknown field `bogus`"),
+        "{words}"
+    );
+    assert!(
+        words.contains("device id \"jbc1\" is used twice"),
+        "{words}"
+    );
+}
