@@ -170,20 +170,38 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         ConfigCommand::Check { file } => {
-            let cell = gateway::check_config(&file).map_err(usage)?;
+            let plugins = gateway::plugins::builtin().config;
+            let cell = gateway::config::check_config(&file, &plugins).map_err(usage)?;
             let devices: usize = cell.lines.iter().map(|line| line.devices.len()).sum();
+            let interfaces = plugins.interfaces_of(&cell);
             output::line(format!(
-                "{}: ok, {} lines, {devices} devices",
+                "{}: ok, {} lines, {devices} devices, {}",
                 file.display(),
-                cell.lines.len()
+                cell.lines.len(),
+                match interfaces.len() {
+                    0 => "no interfaces beyond HTTP".to_owned(),
+                    1 => "1 interface".to_owned(),
+                    n => format!("{n} interfaces"),
+                }
             ))?;
             for line in &cell.lines {
                 output::line(format!("  line {} on {}", line.name, line.endpoint))?;
                 for device in &line.devices {
-                    output::line(format!("    {}", device.name))?;
+                    let driver = &device.driver;
+                    let address = match driver.address {
+                        Some(address) => format!(", address {address}"),
+                        None => String::new(),
+                    };
+                    output::line(format!(
+                        "    {} ({}{address}): {}",
+                        driver.id, driver.protocol, device.name
+                    ))?;
                 }
             }
-            for warning in cell.warnings() {
+            for (table, words) in interfaces {
+                output::line(format!("  [{table}] {words}"))?;
+            }
+            for warning in cell.warnings().into_iter().chain(cell.absent_ports()) {
                 output::line(format!("warning: {warning}"))?;
             }
             Ok(ExitCode::SUCCESS)

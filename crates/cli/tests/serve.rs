@@ -359,3 +359,73 @@ fn a_second_gateway_on_the_same_data_directory_refuses_to_start_naming_the_first
     assert_stderr_has(&out, "is in use by another cellbus (pid ");
     assert_stderr_has(&out, "cellbus serve (the demo cell)");
 }
+
+#[test]
+fn config_check_and_serve_refuse_a_password_variable_that_is_not_set_naming_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cell.toml");
+    std::fs::write(
+        &path,
+        "[[line]]\nname = \"rework\"\nendpoint = \"tcp://127.0.0.1:9\"\n\
+         [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n\
+         [mqtt]\nbroker = \"mqtt://127.0.0.1:1883\"\nusername = \"gw\"\n\
+         password_env = \"CELLBUS_TEST_NEVER_SET\"\n",
+    )
+    .unwrap();
+    let check = common::cellbus()
+        .args(["config", "check"])
+        .arg(&path)
+        .env_remove("CELLBUS_TEST_NEVER_SET")
+        .output()
+        .unwrap();
+    assert_eq!(check.status.code(), Some(2), "{}", stderr(&check));
+    assert_stderr_has(&check, "cell.toml:10:");
+    assert_stderr_has(
+        &check,
+        "[mqtt] password_env names the environment variable CELLBUS_TEST_NEVER_SET, which is not set here",
+    );
+    let data = tempfile::tempdir().unwrap();
+    let serve = common::cellbus()
+        .args(["serve", "--listen", "127.0.0.1:0", "--config"])
+        .arg(&path)
+        .arg("--data")
+        .arg(data.path())
+        .env_remove("CELLBUS_TEST_NEVER_SET")
+        .output()
+        .unwrap();
+    assert_eq!(serve.status.code(), Some(2), "{}", stderr(&serve));
+    assert_stderr_has(&serve, "CELLBUS_TEST_NEVER_SET, which is not set here");
+
+    let set = common::cellbus()
+        .args(["config", "check"])
+        .arg(&path)
+        .env("CELLBUS_TEST_NEVER_SET", "secret")
+        .output()
+        .unwrap();
+    assert!(set.status.success(), "{}", stderr(&set));
+    assert_stdout_has(&set, "1 lines, 1 devices, 1 interface");
+    assert_stdout_has(&set, "    jbc1 (jbc, address 1): jbc1");
+    assert_stdout_has(
+        &set,
+        "  [mqtt] Sparkplug B to mqtt://127.0.0.1:1883 as cellbus/",
+    );
+}
+
+#[test]
+fn config_check_reports_every_mistake_of_a_file_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cell.toml");
+    std::fs::write(
+        &path,
+        "[[line]]\nname = \"a\"\nendpoint = \"tcp://127.0.0.1:9\"\n\
+         [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\naddress = 100\n\
+         [[line]]\nname = \"b\"\nendpoint = \"tcp://127.0.0.1:10\"\n\
+         [[line.device]]\nid = \"sealer9\"\nprotocol = \"thermosald\"\naddress = 9\n",
+    )
+    .unwrap();
+    let out = run(&["config", "check", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert_stderr_has(&out, "2 mistakes:");
+    assert_stderr_has(&out, "cell.toml:7:");
+    assert_stderr_has(&out, "cell.toml:14:");
+}

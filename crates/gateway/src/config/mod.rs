@@ -104,6 +104,19 @@ pub trait TableReader: Sync {
 
     /// Reads and checks the table.
     fn read(&self, table: &Table<'_>) -> Result<Settings, ConfigError>;
+
+    /// The environment variables what it read names and `serve` will read (a password's
+    /// `password_env`), each with its key: [`check_config`] refuses a file whose variables
+    /// are not set where it runs.
+    fn environment(&self, _settings: &Settings) -> Vec<(&'static str, String)> {
+        Vec::new()
+    }
+
+    /// What it read, in a few words for `cellbus config check`'s summary
+    /// (`sparkplug to mqtt://broker:1883 as cellbus/line1`).
+    fn summary(&self, _settings: &Settings) -> String {
+        String::new()
+    }
 }
 
 /// What a file may name: the device kinds (`protocol = "…"`) and the interfaces' tables.
@@ -149,6 +162,22 @@ impl Plugins {
                     .join(", ")
             )
         })
+    }
+
+    /// Each interface table of `config`, with what it says in a few words
+    /// ([`TableReader::summary`]), in table order.
+    pub fn interfaces_of(&self, config: &CellConfig) -> Vec<(&'static str, String)> {
+        config
+            .interfaces
+            .iter()
+            .map(|(table, settings)| {
+                let words = self
+                    .reader(table)
+                    .map(|r| r.summary(settings))
+                    .unwrap_or_default();
+                (*table, words)
+            })
+            .collect()
     }
 
     fn reader(&self, table: &str) -> Option<&'static dyn TableReader> {
@@ -246,8 +275,42 @@ pub const RESERVED_DEVICE_IDS: [&str; 2] = ["cell", "gateway"];
 
 /// Reads and checks the configuration at `path`, whose device kinds and interface tables
 /// are those of `plugins`.
+///
+/// Beyond [`parse_config`], it checks what `serve` will need from where it runs: every
+/// environment variable the file names is set (`config check` then means `serve` will
+/// start, when both run with the same environment, as a service unit's `ExecStartPre`
+/// does).
 pub fn check_config(path: &Path, plugins: &Plugins) -> Result<CellConfig, ConfigError> {
-    parse_config(&read_text(path)?, path, plugins)
+    let text = read_text(path)?;
+    let config = parse_config(&text, path, plugins)?;
+    let mut errors = Vec::new();
+    for (table, settings) in &config.interfaces {
+        let Some(reader) = plugins.reader(table) else {
+            continue;
+        };
+        for (key, var) in reader.environment(settings) {
+            if std::env::var_os(&var).is_some_and(|v| !v.is_empty()) {
+                continue;
+            }
+            // Where the file names it: the variable's name, quoted, else the table.
+            let span = text
+                .find(&format!("\"{var}\""))
+                .or_else(|| text.find(&format!("[{table}")))
+                .map_or(0..0, |at| at..at + var.len());
+            errors.push(locate(
+                &text,
+                path,
+                span,
+                format!(
+                    "{key} names the environment variable {var}, which is not set here; `cellbus serve` reads it at start: set it (a service unit's EnvironmentFile), or remove {key}"
+                ),
+            ));
+        }
+    }
+    match ConfigError::all(errors) {
+        Some(error) => Err(error),
+        None => Ok(config),
+    }
 }
 
 /// The keys of the file's top level that are the cell's own.
@@ -843,6 +906,24 @@ impl CellConfig {
         kinds
             .into_iter()
             .flat_map(|(kind, devices)| kind.warnings(&devices))
+            .collect()
+    }
+}
+
+impl CellConfig {
+    /// The serial ports the file names that are not there now, one sentence each: an
+    /// adapter unplugged, or a path mistyped. `serve` starts anyway and keeps trying to
+    /// open them, so `cellbus config check` warns (a USB adapter may be plugged in later).
+    pub fn absent_ports(&self) -> Vec<String> {
+        self.lines
+            .iter()
+            .filter_map(|line| match &line.endpoint {
+                Endpoint::Serial { path, .. } if !Path::new(path).exists() => Some(format!(
+                    "line {}: serial port {path} is not there now (`ls /dev/serial/by-id` lists the adapters plugged in); `cellbus serve` will keep trying to open it",
+                    line.name
+                )),
+                _ => None,
+            })
             .collect()
     }
 }

@@ -33,6 +33,32 @@ impl TableReader for MqttTable {
         let raw: RawMqtt = table.read()?;
         check_mqtt(raw, table.path(), &|span, message| table.at(span, message)).map(Settings::new)
     }
+
+    fn environment(&self, settings: &Settings) -> Vec<(&'static str, String)> {
+        settings
+            .get::<MqttConfig>()
+            .and_then(|mqtt| mqtt.password_env.clone())
+            .map(|var| ("[mqtt] password_env", var))
+            .into_iter()
+            .collect()
+    }
+
+    fn summary(&self, settings: &Settings) -> String {
+        let Some(mqtt) = settings.get::<MqttConfig>() else {
+            return String::new();
+        };
+        let scheme = if mqtt.tls.is_some() { "mqtts" } else { "mqtt" };
+        match mqtt.mode {
+            MqttMode::Sparkplug => format!(
+                "Sparkplug B to {scheme}://{}:{} as {}/{}",
+                mqtt.host, mqtt.port, mqtt.group_id, mqtt.edge_node_id
+            ),
+            MqttMode::Json => format!(
+                "JSON to {scheme}://{}:{} under {}",
+                mqtt.host, mqtt.port, mqtt.prefix
+            ),
+        }
+    }
 }
 
 /// Default keep-alive of the MQTT connection.
