@@ -2,13 +2,15 @@
 //! decoding into words and JSON is `sparkplug::describe`; this module connects,
 //! subscribes and prints.
 
+use std::collections::HashMap;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{Context as _, anyhow};
 use clap::{Args, Subcommand};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS, SubscribeFilter, SubscribeReasonCode};
-use sparkplug::Describer;
+use sparkplug::node::rebirth_request;
+use sparkplug::{Describer, Description, Id, MessageKind, Timestamp};
 
 use crate::output::{self, usage};
 
@@ -20,6 +22,11 @@ pub enum MqttCommand {
     /// Subscribe and print every message as it arrives: Sparkplug B payloads decoded into
     /// metrics (data messages' aliases named from the births seen by this run), STATE as
     /// its JSON, anything else as text (hex if it is not UTF-8).
+    ///
+    /// Births are not retained: started after a node was born, this sees its data by alias
+    /// only (`alias 52: double_value 25.0`) until the node's next birth. Start it first, or
+    /// give --rebirth to ask each such node for its births (an NCMD Node Control/Rebirth,
+    /// which a cellbus gateway answers).
     ///
     /// Exit codes: 0 after --count messages, 1 when the broker cannot be reached or goes
     /// away or --timeout passes without a message, 2 bad arguments.
@@ -58,6 +65,11 @@ pub struct SubArgs {
     /// The environment variable that holds the password (never the password itself).
     #[arg(long, value_name = "VAR", requires = "username")]
     password_env: Option<String>,
+    /// When a node's data names a metric by an alias whose birth this run has not seen, ask
+    /// the node for a rebirth (NCMD `Node Control/Rebirth`; at most once a minute per node).
+    /// Needs a broker account that may publish NCMD.
+    #[arg(long)]
+    rebirth: bool,
     /// MQTT topic filters, subscribed with QoS 1.
     #[arg(value_name = "TOPIC", default_value = "spBv1.0/#")]
     topics: Vec<String>,
@@ -128,6 +140,7 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
         .collect();
 
     let mut describer = Describer::new();
+    let mut unborn = Unborn::default();
     let mut connected = false;
     let mut received = 0u64;
     let mut deadline = args
@@ -181,6 +194,9 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
             }
             Ok(Event::Incoming(Packet::Publish(p))) => {
                 let description = describer.describe(&p.topic, &p.payload);
+                if let Some(node) = unborn_node(&description) {
+                    unborn.meet(node, args.rebirth, &client).await;
+                }
                 if args.json {
                     output::line(description.to_json())?;
                 } else {
@@ -205,6 +221,73 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
                 return Err(anyhow!("lost the connection to broker {broker}: {e}"));
             }
             Err(e) => return Err(anyhow!("cannot connect to broker {broker}: {e}")),
+        }
+    }
+}
+
+/// The node (group, edge node) of a data message that names a metric by an alias whose
+/// birth was not seen.
+fn unborn_node(description: &Description) -> Option<(String, String)> {
+    let Description::Sparkplug(message) = description else {
+        return None;
+    };
+    let by_alias_only = message
+        .metrics
+        .iter()
+        .any(|m| m.name.is_none() && m.alias.is_some());
+    (message.kind == MessageKind::Data && by_alias_only)
+        .then(|| (message.group.clone(), message.edge_node.clone()))
+}
+
+/// The nodes met with unborn aliases: told once each, or asked for a rebirth at most once
+/// a minute each.
+#[derive(Debug, Default)]
+struct Unborn {
+    met: HashMap<(String, String), tokio::time::Instant>,
+}
+
+/// How often one node is asked for a rebirth at the most.
+const REBIRTH_EVERY: Duration = Duration::from_secs(60);
+
+impl Unborn {
+    async fn meet(&mut self, (group, node): (String, String), rebirth: bool, client: &AsyncClient) {
+        let now = tokio::time::Instant::now();
+        let key = (group.clone(), node.clone());
+        match self.met.get(&key) {
+            Some(_) if !rebirth => return,
+            Some(at) if now.duration_since(*at) < REBIRTH_EVERY => return,
+            _ => {}
+        }
+        self.met.insert(key, now);
+        if !rebirth {
+            eprintln!(
+                "cellbus: node {group}/{node} names metrics by alias and its birth was not seen \
+                 (births are not retained): start `cellbus mqtt sub` before the node, or add \
+                 --rebirth to ask it for one"
+            );
+            return;
+        }
+        let (Ok(group_id), Ok(node_id)) = (Id::new(&group), Id::new(&node)) else {
+            return;
+        };
+        let millis = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_millis()).unwrap_or(u64::MAX));
+        let request = rebirth_request(&group_id, &node_id, Timestamp::from_millis(millis));
+        match client
+            .publish(
+                request.topic.to_string(),
+                QoS::AtMostOnce,
+                false,
+                request.payload,
+            )
+            .await
+        {
+            Ok(()) => eprintln!(
+                "cellbus: node {group}/{node}'s birth was not seen: asked it for a rebirth ({})",
+                request.topic
+            ),
+            Err(e) => eprintln!("cellbus: cannot ask node {group}/{node} for a rebirth: {e}"),
         }
     }
 }

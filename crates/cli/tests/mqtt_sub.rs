@@ -389,3 +389,46 @@ async fn json_mode_keeps_a_retained_message_per_point_and_the_will_says_offline(
         }
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sub_started_after_the_births_says_so_and_with_rebirth_asks_the_node_and_names_its_metrics()
+{
+    let broker = Mosquitto::start();
+    let mut node = Subscriber::start(broker.port(), "spBv1.0/cellbus/+/demo").await;
+    let data = tempfile::tempdir().unwrap();
+    let _gateway = Gateway::start_with(data.path(), &["--mqtt", &broker.url()]);
+    node.next_where("the demo's NBIRTH", LIMIT, |m| m.kind() == "NBIRTH")
+        .await;
+
+    // Born before it subscribed: data by alias only, and a word on what to do.
+    let late = Sub::start(&["--broker", &broker.url(), "spBv1.0/cellbus/#"]);
+    let advice = late.stderr.recv_timeout(LIMIT).expect("advice on stderr");
+    assert!(
+        advice.contains("node cellbus/demo names metrics by alias and its birth was not seen")
+            && advice.contains("--rebirth"),
+        "{advice}"
+    );
+    drop(late);
+
+    let asking = Sub::start(&["--broker", &broker.url(), "--rebirth", "spBv1.0/cellbus/#"]);
+    let asked = asking.stderr.recv_timeout(LIMIT).expect("a word on stderr");
+    assert!(
+        asked.contains("asked it for a rebirth (spBv1.0/cellbus/NCMD/demo)"),
+        "{asked}"
+    );
+    let mut born = false;
+    loop {
+        let line = asking.line();
+        if line.starts_with("spBv1.0/cellbus/NBIRTH/demo ") {
+            born = true;
+        }
+        if born && line.starts_with("spBv1.0/cellbus/DDATA/") {
+            let metric = asking.line();
+            assert!(
+                metric.contains(" (alias ") && !metric.trim_start().starts_with("alias "),
+                "after the rebirth, data is named: {metric}"
+            );
+            break;
+        }
+    }
+}
