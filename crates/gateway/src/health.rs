@@ -57,7 +57,10 @@ impl Facts {
             .device_entries()
             .map(|d| {
                 let summary = d.summary();
-                let why = summary.error.as_ref().map(crate::oplog::describe);
+                let why = summary
+                    .error
+                    .as_ref()
+                    .map(|e| crate::oplog::describe(e, d.protocol.hint(e.kind)));
                 (d.id.to_string(), summary.status, why)
             })
             .collect();

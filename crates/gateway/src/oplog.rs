@@ -6,7 +6,9 @@
 //! a device or a line going down, the history failing and an interface's link lost are
 //! warnings; coming back, the start and the stop are info; alarms, state changes, device
 //! events and writes are debug (they are data: the page, `/api/events` and the interfaces
-//! carry them). A device or line that keeps going down and up is logged at most
+//! carry them). A device going down is told with what to check (its kind's
+//! [`DeviceKind::hint`](crate::driver::DeviceKind::hint), in the event's `hint` field). A
+//! device or line that keeps going down and up is logged at most
 //! [`BURST`] times in [`WINDOW`], then once more to say it goes on ([`Throttle`]).
 //!
 //! After the first round of polls, `serve` logs one line saying which devices answer and,
@@ -18,7 +20,7 @@ use std::time::{Duration, Instant};
 
 use tracing::Level;
 
-use crate::driver::{DeviceError, ErrorKind};
+use crate::driver::DeviceError;
 use crate::event::{Event, EventKind};
 
 /// How many up/down lines one device or line may log in a [`WINDOW`].
@@ -50,26 +52,10 @@ pub fn level_of(kind: EventKind) -> Level {
     }
 }
 
-/// What to check when a device fails this way (the line's own errors carry their hints).
-pub fn hint(kind: ErrorKind) -> Option<&'static str> {
-    match kind {
-        ErrorKind::Timeout => Some(
-            "check that it is powered and cabled, the line's baud rate and framing, and the device's `address` in the config",
-        ),
-        ErrorKind::Decode => Some(
-            "check the line's baud rate and framing, and that no other device answers at the same address",
-        ),
-        ErrorKind::Line => Some("check the wiring (RS-485: A/B swapped, termination)"),
-        ErrorKind::Refused => Some(
-            "the device answered but refused the request: check the `address` and that it is the configured protocol",
-        ),
-        ErrorKind::Usage | ErrorKind::Disconnected => None,
-    }
-}
-
-/// A device's failure in words, with what to check.
-pub fn describe(error: &DeviceError) -> String {
-    match hint(error.kind) {
+/// A device's failure in words, with what to check (`hint`: its kind's
+/// [`DeviceKind::hint`](crate::driver::DeviceKind::hint)).
+pub fn describe(error: &DeviceError, hint: Option<&str>) -> String {
+    match hint {
         Some(hint) => format!("{} ({}; {hint})", error.message, error.kind),
         None => format!("{} ({})", error.message, error.kind),
     }
@@ -144,12 +130,7 @@ pub fn log(throttle: &Mutex<Throttle>, event: &Event) {
     };
     let mut message = event.message.clone();
     if event.kind == EventKind::DeviceDown
-        && let Some(hint) = event
-            .fields
-            .get("error_kind")
-            .and_then(|k| k.as_str())
-            .and_then(|k| ErrorKind::ALL.into_iter().find(|e| e.as_str() == k))
-            .and_then(hint)
+        && let Some(hint) = event.fields.get("hint").and_then(|h| h.as_str())
     {
         message = format!("{message}; {hint}");
     }
@@ -173,7 +154,19 @@ pub fn log(throttle: &Mutex<Throttle>, event: &Event) {
         }
     }
     let kind = event.kind.as_str();
-    match level_of(event.kind) {
+    // A device's own link going down or up (a Panasonic machine's Port 2): told like a
+    // device's.
+    let link = event
+        .fields
+        .get("link")
+        .and(event.fields.get("state"))
+        .and_then(|state| state.as_str());
+    let level = match (event.kind, link) {
+        (EventKind::DeviceEvent, Some("down")) => Level::WARN,
+        (EventKind::DeviceEvent, Some("up")) => Level::INFO,
+        _ => level_of(event.kind),
+    };
+    match level {
         Level::WARN => tracing::warn!(kind, "{message}"),
         Level::INFO => tracing::info!(kind, "{message}"),
         _ => tracing::debug!(kind, "{message}"),
@@ -183,6 +176,7 @@ pub fn log(throttle: &Mutex<Throttle>, event: &Event) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::driver::ErrorKind;
 
     #[test]
     fn a_flapping_device_logs_a_burst_then_says_it_goes_on_then_is_quiet_until_the_window_ends() {
@@ -224,7 +218,7 @@ mod tests {
     #[test]
     fn a_timeout_is_described_with_what_to_check() {
         let error = DeviceError::new(ErrorKind::Timeout, "no answer in 300 ms");
-        let text = describe(&error);
+        let text = describe(&error, error.kind.hint());
         assert!(
             text.starts_with("no answer in 300 ms (timeout; check"),
             "{text}"

@@ -996,6 +996,14 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
     }
     cell.publish(LiveMessage::Device(Box::new(entry.summary())));
     if went_down {
+        let mut fields = crate::event::fields([
+            ("error_kind", serde_json::json!(error.kind.as_str())),
+            ("error", serde_json::json!(error.message)),
+            ("retry_s", serde_json::json!(retry.as_secs())),
+        ]);
+        if let Some(hint) = entry.protocol.hint(error.kind) {
+            fields.insert("hint".to_owned(), serde_json::json!(hint));
+        }
         cell.emit(Event {
             t: now,
             kind: EventKind::DeviceDown,
@@ -1010,11 +1018,7 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
                 error.message,
                 retry.as_secs()
             ),
-            fields: crate::event::fields([
-                ("error_kind", serde_json::json!(error.kind.as_str())),
-                ("error", serde_json::json!(error.message)),
-                ("retry_s", serde_json::json!(retry.as_secs())),
-            ]),
+            fields,
         });
     }
 }

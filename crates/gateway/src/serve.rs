@@ -389,7 +389,7 @@ pub fn first_round_line(cell: &Cell) -> (tracing::Level, String) {
                 "{} on line {}: {}",
                 device.id,
                 device.line,
-                crate::oplog::describe(error)
+                crate::oplog::describe(error, device.protocol.hint(error.kind))
             )),
             (_, None) => not.push(format!(
                 "{} on line {}: no answer yet after {} s",

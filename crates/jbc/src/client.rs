@@ -221,7 +221,15 @@ impl Matcher for Reply {
                 }),
                 Match::NotOurs => {
                     tracing::debug!(?reply, "skipping a frame that does not answer the request");
-                    Verdict::Skip
+                    // A station other than the one asked: likely a wrong `address`.
+                    match reply.route {
+                        Some(route)
+                            if self.route.is_some_and(|asked| asked.target != route.source) =>
+                        {
+                            Verdict::SkipFrom(format!("station {}", route.source))
+                        }
+                        _ => Verdict::Skip,
+                    }
                 }
             },
             // Noise between frames: the answer may still come.

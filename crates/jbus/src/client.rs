@@ -551,6 +551,10 @@ impl TcpAnswering {
                 unit = frame.adu.unit,
                 "dropping a Modbus TCP frame of another transaction or unit"
             );
+            // Our transaction answered by another unit: likely a wrong unit number.
+            if frame.transaction == self.transaction {
+                return Verdict::SkipFrom(format!("unit {}", frame.adu.unit));
+            }
             return Verdict::Skip;
         }
         verdict(&self.request, &frame.adu)

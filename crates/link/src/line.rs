@@ -163,7 +163,7 @@ impl Line {
                 let stream = connected.map_err(|source| {
                     let hint = match source.kind() {
                         io::ErrorKind::ConnectionRefused => {
-                            "; is the serial server or simulator running, and is the port right?"
+                            "; is the device (or its serial server, or the simulator) running, and is the port right?"
                         }
                         io::ErrorKind::TimedOut => {
                             "; is the host on, and does a firewall drop the connection?"
@@ -512,7 +512,7 @@ mod tests {
         let err = Line::open(&endpoint).await.unwrap_err().to_string();
         assert!(err.contains(&format!("127.0.0.1:{port}")), "{err}");
         assert!(
-            err.contains("is the serial server or simulator running"),
+            err.contains("is the device (or its serial server, or the simulator) running"),
             "{err}"
         );
     }

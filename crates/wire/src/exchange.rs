@@ -53,6 +53,9 @@ pub enum Trouble<D, M> {
     Others {
         /// How many such frames came.
         frames: usize,
+        /// Who sent the last one, where the protocol can tell (`station 01`, `unit 3`):
+        /// a device answering at another address than the one configured.
+        from: Option<String>,
     },
     /// A damaged frame came.
     Damaged(D),
@@ -85,14 +88,22 @@ impl<D: fmt::Display, M: fmt::Display> fmt::Display for Trouble<D, M> {
             Trouble::Noise { bytes } => {
                 write!(f, "no reply, only {} of line noise", Bytes(*bytes))
             }
-            Trouble::Others { frames: 1 } => {
-                f.write_str("no reply, only a frame that answers something else")
+            Trouble::Others { frames: 1, from } => {
+                f.write_str("no reply, only a frame that answers something else")?;
+                match from {
+                    Some(from) => write!(f, ", from {from}"),
+                    None => Ok(()),
+                }
             }
-            Trouble::Others { frames } => {
+            Trouble::Others { frames, from } => {
                 write!(
                     f,
                     "no reply, only {frames} frames that answer something else"
-                )
+                )?;
+                match from {
+                    Some(from) => write!(f, ", the last from {from}"),
+                    None => Ok(()),
+                }
             }
             Trouble::Damaged(damage) => write!(f, "damaged reply: {damage}"),
             Trouble::Incomplete { bytes } => {
@@ -339,6 +350,10 @@ pub enum Verdict<A, R, T> {
     /// A whole frame that is not the answer (another device's, our own echo): keep
     /// listening. The line was busy with it.
     Skip,
+    /// [`Verdict::Skip`] for a frame whose sender the protocol can name (`station 01`,
+    /// `unit 3`): if nothing better comes, the trouble names it, since a device that
+    /// answers at another address than the one asked usually means a wrong address.
+    SkipFrom(String),
     /// Bytes that make no frame: keep listening.
     Noise,
 }
@@ -520,6 +535,8 @@ struct Waiting<T> {
     skipped: Option<Instant>,
     /// Frames skipped ([`Verdict::Skip`]) in this attempt.
     others: usize,
+    /// Who sent the last frame skipped, if the protocol named it ([`Verdict::SkipFrom`]).
+    others_from: Option<String>,
     /// Bytes dropped as noise ([`Verdict::Noise`]) in this attempt.
     noise: usize,
 }
@@ -589,6 +606,7 @@ impl<M: Matcher> Exchange<M> {
                 trouble: None,
                 skipped: None,
                 others: 0,
+                others_from: None,
                 noise: 0,
             });
         }
@@ -740,6 +758,12 @@ impl<M: Matcher> Exchange<M> {
                 waiting.others += 1;
                 return false;
             }
+            Verdict::SkipFrom(sender) => {
+                waiting.skipped = Some(now);
+                waiting.others += 1;
+                waiting.others_from = Some(sender);
+                return false;
+            }
             Verdict::Noise => {
                 waiting.noise += bytes;
                 return false;
@@ -751,19 +775,20 @@ impl<M: Matcher> Exchange<M> {
     /// Ends the attempt with `trouble` (else the trouble noted, else silence): retries
     /// while attempts remain.
     fn end_attempt(&mut self, trouble: Option<TroubleOf<M>>, ending: Ending, now: Instant) {
-        let (noted, others, noise) = match &mut self.state {
+        let (noted, others, from, noise) = match &mut self.state {
             State::Waiting(waiting) => (
                 waiting.trouble.take().map(|(t, _)| t),
                 waiting.others,
+                waiting.others_from.take(),
                 waiting.noise,
             ),
-            _ => (None, 0, 0),
+            _ => (None, 0, None, 0),
         };
         // No answer: say what came instead, frames for something else before noise.
         let nothing = match (others, noise) {
             (0, 0) => Trouble::Silence,
             (0, bytes) => Trouble::Noise { bytes },
-            (frames, _) => Trouble::Others { frames },
+            (frames, _) => Trouble::Others { frames, from },
         };
         let last = trouble.or(noted).unwrap_or(nothing);
         if self.attempt < self.policy.attempts {

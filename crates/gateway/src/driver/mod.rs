@@ -214,6 +214,24 @@ impl ErrorKind {
         ErrorKind::Disconnected,
     ];
 
+    /// What to check when a device fails this way, whatever its kind (a line's own errors
+    /// carry their hints).
+    pub fn hint(self) -> Option<&'static str> {
+        match self {
+            ErrorKind::Timeout => Some(
+                "check that it is powered and cabled, the line's baud rate and framing, and the device's `address` in the config",
+            ),
+            ErrorKind::Decode => Some(
+                "check the line's baud rate and framing, and that no other device answers at the same address",
+            ),
+            ErrorKind::Line => Some("check the wiring (RS-485: A/B swapped, termination)"),
+            ErrorKind::Refused => Some(
+                "the device answered but refused the request: check the `address` and that it is the configured protocol",
+            ),
+            ErrorKind::Usage | ErrorKind::Disconnected => None,
+        }
+    }
+
     /// The label (`timeout`).
     pub fn as_str(self) -> &'static str {
         match self {
@@ -334,6 +352,18 @@ pub trait DeviceKind: Send + Sync + 'static {
     /// [`DriverConfig::endpoint`].
     fn owns_connections(&self) -> Option<&'static str> {
         None
+    }
+
+    /// What to check when one of its devices fails this way, for the log, `/healthz` and
+    /// the event's `hint` field. By default [`ErrorKind::hint`], with the unit number and
+    /// `cellbus modbus scan` for a Modbus kind that times out.
+    fn hint(&self, error: ErrorKind) -> Option<&'static str> {
+        match error {
+            ErrorKind::Timeout if self.speaks_modbus() => Some(
+                "check the unit number (`address`; `cellbus modbus scan` lists the units that answer), that it is powered and cabled, and the line's baud rate and framing",
+            ),
+            _ => error.hint(),
+        }
     }
 
     /// Whether it speaks Modbus: it may sit on a `modbus-tcp://` line and share a line

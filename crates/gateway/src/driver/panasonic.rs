@@ -39,6 +39,7 @@ use panasonic::command::{ProductionRequest, ProductionScope};
 use panasonic::event::Event;
 use panasonic::production::{Counter, RateKind};
 use panasonic::status::{ControlMode, RunState};
+use panasonic::{DEFAULT_EVENT_PORT, Port};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
@@ -238,6 +239,8 @@ pub struct PanasonicDriver {
     forward: Option<JoinHandle<()>>,
     state: Option<RunState>,
     events: Vec<DeviceEvent>,
+    /// Port 2 (R messages) cannot be reached: told once, until it connects.
+    port2_down: bool,
 }
 
 impl Drop for PanasonicDriver {
@@ -285,6 +288,7 @@ impl PanasonicDriver {
             forward: None,
             state: None,
             events: Vec::new(),
+            port2_down: false,
         })
     }
 
@@ -462,9 +466,43 @@ impl PanasonicDriver {
     }
 
     /// Turns a Port 2 notice into an event, unless it is routine (keep-alive echoes,
-    /// connections made, reconnection attempts: the device's status shows those).
+    /// Port 1's connections: the device's status shows those). Port 2 that cannot be
+    /// reached is the events link's own trouble, told once (with `link: "events"` and
+    /// `state: "down"`), and again when it connects (`state: "up"`); the machine's
+    /// commands and points go on meanwhile.
     fn record_notice(&mut self, notice: &Notice, at: Timestamp) {
         let (message, fields) = match notice {
+            Notice::ConnectFailed {
+                port: Port::Event,
+                endpoint,
+                reason,
+                ..
+            } if !self.port2_down => {
+                self.port2_down = true;
+                (
+                    format!(
+                        "Port 2 (R messages) at {endpoint} cannot be reached: {reason}; the machine's commands go on, its R messages are missed until Port 2 connects: check `event_port` (the machine's default is {DEFAULT_EVENT_PORT}) and that the machine's host communication is on"
+                    ),
+                    fields([
+                        ("link", serde_json::json!("events")),
+                        ("state", serde_json::json!("down")),
+                        ("error", serde_json::json!(reason)),
+                    ]),
+                )
+            }
+            Notice::Connected {
+                port: Port::Event,
+                endpoint,
+            } if self.port2_down => {
+                self.port2_down = false;
+                (
+                    format!("Port 2 (R messages) at {endpoint} connected: R messages flow again"),
+                    fields([
+                        ("link", serde_json::json!("events")),
+                        ("state", serde_json::json!("up")),
+                    ]),
+                )
+            }
             Notice::Event(Event::Heartbeat { .. })
             | Notice::Connected { .. }
             | Notice::ConnectFailed { .. } => return,

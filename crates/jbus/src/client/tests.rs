@@ -685,7 +685,10 @@ async fn only_responses_of_another_transaction_are_no_answer() {
             err,
             ClientError::NoAnswer {
                 attempts: 3,
-                last: Trouble::Others { frames: 1 },
+                last: Trouble::Others {
+                    frames: 1,
+                    from: None
+                },
                 ..
             }
         ),

@@ -419,8 +419,9 @@ impl Drop for Client {
 
 impl Client {
     /// Connects: Port 2 at once when `config.event_port` is set, Port 1 at once when the
-    /// keep-alive runs (otherwise on the first command). Fails when a port it opens at once
-    /// cannot be reached; later losses are repaired in the background.
+    /// keep-alive runs (otherwise on the first command). Fails when Port 1 cannot be
+    /// reached; Port 2 that cannot is told (a [`Notice::ConnectFailed`]) and tried again in
+    /// the background, as later losses of either port are, while the commands go on.
     pub async fn connect(config: ClientConfig) -> Result<(Client, Events), ClientError> {
         let schedule = match config.keep_alive {
             Some(mut keep_alive) => {
@@ -445,11 +446,26 @@ impl Client {
         };
         let events = Events { receiver };
         if let Some(endpoint) = client.inner.event.clone() {
-            let line = client.inner.open(&endpoint, Port::Event).await?;
-            client.inner.notify(Notice::Connected {
-                port: Port::Event,
-                endpoint: endpoint.to_string(),
-            });
+            // Port 2 refused is its own trouble: the commands on Port 1 go on, and Port 2
+            // is tried again in the background (each failure a `ConnectFailed` notice).
+            let line = match client.inner.open(&endpoint, Port::Event).await {
+                Ok(line) => {
+                    client.inner.notify(Notice::Connected {
+                        port: Port::Event,
+                        endpoint: endpoint.to_string(),
+                    });
+                    Some(line)
+                }
+                Err(error) => {
+                    client.inner.notify(Notice::ConnectFailed {
+                        port: Port::Event,
+                        endpoint: endpoint.to_string(),
+                        reason: error.to_string(),
+                        retry_in: client.inner.config.backoff.timer().peek(),
+                    });
+                    None
+                }
+            };
             let task = run_port2(Arc::clone(&client.inner), endpoint, line);
             client.tasks.push(tokio::spawn(task));
         }

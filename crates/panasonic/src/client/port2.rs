@@ -41,11 +41,12 @@ impl Inner {
     }
 }
 
-/// Reads Port 2 for the life of the client, reconnecting with backoff.
-pub(super) async fn run_port2(inner: Arc<Inner>, endpoint: Endpoint, first: Line) {
+/// Reads Port 2 for the life of the client, reconnecting with backoff (connecting first,
+/// when the client could not at its start: `first` is `None`).
+pub(super) async fn run_port2(inner: Arc<Inner>, endpoint: Endpoint, first: Option<Line>) {
     let mut backoff = inner.config.backoff.timer();
     let mut dead = inner.port2_dead.subscribe();
-    let mut line = Some(first);
+    let mut line = first;
     loop {
         let current = match line.take() {
             Some(current) => current,

@@ -153,7 +153,16 @@ fn input_that_keeps_coming_ends_the_attempt_at_its_deadline() {
     let t1 = t0 + TIMEOUT;
     send(&mut ex, t1);
     ex.handle_input(b"other device\n", t1 + TIMEOUT + Duration::from_millis(3));
-    assert_eq!(ex.poll_outcome(), gave_up(2, Trouble::Others { frames: 1 }));
+    assert_eq!(
+        ex.poll_outcome(),
+        gave_up(
+            2,
+            Trouble::Others {
+                frames: 1,
+                from: None
+            }
+        )
+    );
 }
 
 #[test]
@@ -193,9 +202,12 @@ fn a_timeout_after_line_noise_says_how_many_bytes_of_noise_came() {
 fn a_timeout_after_frames_for_something_else_says_how_many_came() {
     assert_eq!(
         trouble_after_a_timeout(b"other\nnoise\nother\n"),
-        Trouble::Others { frames: 2 }
+        Trouble::Others {
+            frames: 2,
+            from: None
+        }
     );
-    let words = |frames| Trouble::<String, String>::Others { frames }.to_string();
+    let words = |frames| Trouble::<String, String>::Others { frames, from: None }.to_string();
     assert_eq!(
         words(2),
         "no reply, only 2 frames that answer something else"

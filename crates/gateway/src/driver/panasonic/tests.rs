@@ -14,14 +14,20 @@ async fn rig() -> (PanasonicDriver, panasonic::server::RunningTwin) {
         .unwrap()
         .spawn()
         .unwrap();
-    let driver = PanasonicDriver::new(&DriverConfig {
+    let event_port = twin.event_addr().port();
+    (driver_for(&twin, event_port), twin)
+}
+
+/// A driver for `twin`'s Port 1, with `event_port` as its Port 2.
+fn driver_for(twin: &panasonic::server::RunningTwin, event_port: u16) -> PanasonicDriver {
+    PanasonicDriver::new(&DriverConfig {
         id: DeviceId::new("placer1").unwrap(),
         protocol: super::KIND,
         address: None,
         timeout: None,
         retries: None,
         settings: crate::config::Settings::new(Keys {
-            event_port: Some(twin.event_addr().port()),
+            event_port: Some(event_port),
         }),
         endpoint: Some(Endpoint::Tcp {
             host: "127.0.0.1".into(),
@@ -30,8 +36,41 @@ async fn rig() -> (PanasonicDriver, panasonic::server::RunningTwin) {
             framing: link::TcpFraming::Raw,
         }),
     })
-    .unwrap();
-    (driver, twin)
+    .unwrap()
+}
+
+#[tokio::test]
+async fn a_refused_event_port_leaves_the_commands_points_and_is_told_once_as_the_events_link() {
+    let any: std::net::SocketAddr = "127.0.0.1:0".parse().unwrap();
+    let twin = TwinServer::bind(any, any, Machine::new(MachineConfig::default()).unwrap())
+        .await
+        .unwrap()
+        .spawn()
+        .unwrap();
+    // A port nothing listens on: bound, then closed.
+    let closed = std::net::TcpListener::bind(any).unwrap();
+    let wrong = closed.local_addr().unwrap().port();
+    drop(closed);
+    let mut driver = driver_for(&twin, wrong);
+    let readings = driver.poll(LIVE).await.expect("Port 1 answers");
+    assert!(readings.iter().all(|r| r.value.is_ok()), "{readings:?}");
+    let events = events_until(&mut driver, |events| {
+        events.iter().any(|e| e.fields.get("link").is_some())
+    })
+    .await;
+    let told: Vec<_> = events
+        .iter()
+        .filter(|e| e.fields.get("link").is_some())
+        .collect();
+    assert_eq!(told.len(), 1, "{events:?}");
+    assert_eq!(told[0].fields["state"], "down");
+    assert!(
+        told[0].message.contains(&format!(":{wrong}"))
+            && told[0].message.contains("the machine's commands go on")
+            && told[0].message.contains("check `event_port`"),
+        "{}",
+        told[0].message
+    );
 }
 
 #[tokio::test]
@@ -206,5 +245,7 @@ async fn a_machine_that_is_not_there_is_a_timeout_naming_its_port() {
     .unwrap();
     let err = driver.poll(LIVE).await.unwrap_err();
     assert_eq!(err.kind, ErrorKind::Timeout, "{err}");
-    assert!(err.message.contains("Port 2"), "{err}");
+    // Port 2 refused alone would leave the commands going: the machine is down because
+    // Port 1 is.
+    assert!(err.message.contains("Port 1 (commands)"), "{err}");
 }
