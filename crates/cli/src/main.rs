@@ -165,11 +165,13 @@ fn init_logging(level: Option<tracing::level_filters::LevelFilter>, service: boo
     let filter = match level {
         Some(level) => own(level),
         None => tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
-            own(if service {
-                tracing::level_filters::LevelFilter::INFO
+            if service {
+                // The demo cell's simulators connecting and disconnecting is not news.
+                let quiet = "link::serve=warn".parse().expect("a valid directive");
+                own(tracing::level_filters::LevelFilter::INFO).add_directive(quiet)
             } else {
-                tracing::level_filters::LevelFilter::WARN
-            })
+                own(tracing::level_filters::LevelFilter::WARN)
+            }
         }),
     };
     let colour = std::io::IsTerminal::is_terminal(&std::io::stderr())

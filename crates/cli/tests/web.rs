@@ -200,5 +200,25 @@ fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Va
     assert!(!seen["devices"].as_array().unwrap().is_empty());
     assert_ne!(seen["change"]["before"], seen["change"]["after"]);
     assert!(screenshot.exists());
+    let summary = seen["summary"].as_str().unwrap();
+    assert!(
+        summary.contains(&format!(
+            " of {} devices up",
+            seen["devices"].as_array().unwrap().len()
+        )),
+        "the header counts the devices up: {summary}"
+    );
+    for (unit, decimals) in seen["formats"].as_object().unwrap() {
+        assert_eq!(
+            decimals.as_array().unwrap().len(),
+            1,
+            "one number format for {unit}: {seen}"
+        );
+    }
+    assert!(
+        seen["phone"]["overflow"].as_i64().unwrap() <= 0,
+        "nothing wider than a 360 px phone: {}",
+        seen["phone"]
+    );
     seen
 }

@@ -792,6 +792,16 @@ impl DeviceEntry {
             .map_or(Duration::from_secs(1), |g| g.period)
     }
 
+    /// The device in words for messages: `Rework station 1 (jbc1)`, or its id alone when
+    /// it has no name of its own.
+    pub fn label(&self) -> String {
+        if self.name == self.id.as_str() {
+            self.name.clone()
+        } else {
+            format!("{} ({})", self.name, self.id)
+        }
+    }
+
     /// The device's status without points.
     pub fn summary(&self) -> DeviceSummary {
         summary_of(&self.id, &self.read())

@@ -948,7 +948,7 @@ fn mark_up(cell: &Cell, entry: &DeviceEntry) {
             line: Some(entry.line.clone()),
             device: Some(entry.id.clone()),
             point: None,
-            message: format!("{} ({}) answers again", entry.name, entry.id),
+            message: format!("{} answers again", entry.label()),
             fields: crate::event::Fields::new(),
         });
     }
@@ -1011,9 +1011,8 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
             device: Some(entry.id.clone()),
             point: None,
             message: format!(
-                "{} ({}) is not answering ({}): {}; next try in {} s",
-                entry.name,
-                entry.id,
+                "{} is not answering ({}): {}; next try in {} s",
+                entry.label(),
                 error.kind,
                 error.message,
                 retry.as_secs()

@@ -68,8 +68,37 @@ try {
     return badge.hidden ? null : badge.textContent;
   });
   if (screenshot) await page.screenshot({ path: screenshot, fullPage: true });
+  // The header's word on the cell (from /healthz, which needs no token).
+  await page.waitForFunction(
+    () => /^\d+ of \d+ devices up/.test(document.getElementById('cell-summary').textContent),
+    null,
+    { timeout: 20000, polling: 100 },
+  );
+  const summary = await page.evaluate(() => document.getElementById('cell-summary').textContent);
+  // One number format per unit: every shown number of a unit has as many decimals.
+  const formats = await page.evaluate(() => {
+    const byUnit = {};
+    for (const tile of document.querySelectorAll('.point')) {
+      const unit = tile.querySelector('.unit')?.textContent;
+      const value = tile.querySelector('.value')?.textContent ?? '';
+      if (!unit || !/^-?\d+(\.\d+)?$/.test(value)) continue;
+      const decimals = value.includes('.') ? value.split('.')[1].length : 0;
+      (byUnit[unit] ||= new Set()).add(decimals);
+    }
+    return Object.fromEntries(Object.entries(byUnit).map(([u, d]) => [u, [...d]]));
+  });
+  // On a phone: nothing wider than the screen.
+  await page.setViewportSize({ width: 360, height: 780 });
+  const phone = await page.evaluate(() => ({
+    overflow: document.documentElement.scrollWidth - window.innerWidth,
+    widest: [...document.querySelectorAll('body *')]
+      .filter((el) => el.getBoundingClientRect().right > window.innerWidth + 1)
+      .slice(0, 5)
+      .map((el) => `${el.tagName.toLowerCase()}.${el.className}#${el.id}`),
+  }));
+  if (screenshot) await page.screenshot({ path: screenshot.replace(/\.png$/, '-phone.png'), fullPage: true });
   if (errors.length) throw new Error(`the page threw: ${errors.join('; ')}`);
-  console.log(JSON.stringify({ devices: ids, points: before.length, change, asked, mqtt }));
+  console.log(JSON.stringify({ devices: ids, points: before.length, change, asked, mqtt, summary, formats, phone }));
 } finally {
   await browser.close();
 }

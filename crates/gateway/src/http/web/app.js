@@ -49,8 +49,37 @@ function el(tag, className, text) {
 
 function formatNumber(value) {
   if (typeof value !== 'number') return String(value);
-  if (Number.isInteger(value)) return String(value);
-  return value.toFixed(Math.abs(value) < 10 ? 2 : 1);
+  return value.toFixed(decimalsFor(value));
+}
+
+/** The decimals a number needs: none when whole, two below 10, else one. */
+function decimalsFor(value) {
+  if (Number.isInteger(value)) return 0;
+  return Math.abs(value) < 10 ? 2 : 1;
+}
+
+/**
+ * One number format per unit (a point without a unit has its own): as many decimals as
+ * the most any value of that unit has needed so far, so "50 Hz" never stands beside
+ * "50.0 Hz". Returns whether the unit's decimals grew (its shown values are then redone).
+ */
+const unitDecimals = new Map();
+
+function formatKey(point) {
+  return point.unit ? `unit:${point.unit}` : `point:${point.id}`;
+}
+
+function widenFormat(point) {
+  if (typeof point.value !== 'number' || point.text) return false;
+  const key = formatKey(point);
+  const needed = decimalsFor(point.value);
+  if (needed <= (unitDecimals.get(key) ?? 0)) return false;
+  unitDecimals.set(key, needed);
+  return true;
+}
+
+function formatReading(point) {
+  return point.value.toFixed(unitDecimals.get(formatKey(point)) ?? 0);
 }
 
 function formatClock(ms) {
@@ -66,11 +95,18 @@ function judge(point) {
 function shownValue(point) {
   if (point.value === null || point.value === undefined) return '—';
   if (point.text) return point.text;
-  return formatNumber(point.value);
+  if (typeof point.value !== 'number') return String(point.value);
+  return formatReading(point);
 }
 
-function fastestPeriod(device) {
-  return Math.min(...device.groups.map((g) => g.period_ms));
+/**
+ * Whether a point is one of the device's live readings, shown large: those of the poll
+ * group its kind lists first (`live`), whatever the periods (a device polled every 2 s
+ * throughout keeps its settings below, under "Settings and counters").
+ */
+function isLive(device, point) {
+  const first = device.groups.length ? device.groups[0].name : undefined;
+  return first === undefined || point.group === first;
 }
 
 // ---- devices -------------------------------------------------------------------------
@@ -121,9 +157,8 @@ function renderDevice(device) {
   const address = device.address === null ? 'no address' : `address ${device.address}`;
   card.querySelector('.device-meta').textContent =
     `${device.id} · ${device.protocol.toUpperCase()} · line ${device.line} · ${address}`;
-  const fastest = fastestPeriod(device);
   for (const point of device.points) {
-    const primary = point.period_ms === fastest;
+    const primary = isLive(device, point);
     if (point.kind.type === 'numeric') {
       card.querySelector(primary ? '.tiles.primary' : '.tiles.secondary').append(renderTile(point));
     } else {
@@ -168,6 +203,7 @@ function updatePoint(view, live = true) {
   if (!node) return;
   node.dataset.quality = judge(point);
   node.dataset.alarm = String(Boolean(point.alarm));
+  if (widenFormat(point)) reformat(formatKey(point));
   node.querySelector('.value').textContent = shownValue(point);
   const when = point.t ? formatClock(Date.parse(point.t)) : 'never';
   node.title = point.error ? `${point.error} (${when})` : `${point.name}: read ${when}`;
@@ -177,6 +213,17 @@ function updatePoint(view, live = true) {
     series.push([t, point.quality === 'good' && typeof point.value === 'number' ? point.value : null]);
     state.series.set(view.id, withinWindow(series, Date.now()));
     state.dirty.add(view.id);
+  }
+}
+
+/** Shows again every value of a unit whose format widened. */
+function reformat(key) {
+  for (const device of state.devices.values()) {
+    for (const point of device.byId.values()) {
+      if (formatKey(point) !== key) continue;
+      const node = document.getElementById(`point-${point.id}`);
+      if (node) node.querySelector('.value').textContent = shownValue(point);
+    }
   }
 }
 
@@ -532,14 +579,15 @@ function setUpToolbar() {
   window.addEventListener('hashchange', follow);
 }
 
-// The MQTT link and the OPC UA server as /healthz says them (each hidden when the
-// gateway does not serve it).
-async function refreshMqtt() {
+// The cell's summary, the MQTT link and the OPC UA server as /healthz says them (the
+// interfaces hidden when the gateway does not serve them).
+async function refreshHealth() {
   try {
     const response = await api('/healthz');
     // 503 is a failing gateway's health, still to be read.
     if (!response.ok && response.status !== 503) return;
     const health = await response.json();
+    showCellSummary(health);
     const link = health.mqtt;
     const badge = document.getElementById('mqtt');
     badge.hidden = !link;
@@ -564,8 +612,34 @@ async function refreshMqtt() {
   }
 }
 
+/** /healthz again within half a second: many devices going down at once ask once. */
+let healthDue = null;
+
+function healthSoon() {
+  if (healthDue) return;
+  healthDue = setTimeout(() => {
+    healthDue = null;
+    refreshHealth();
+  }, 500);
+}
+
+/** The header's word on the whole cell: devices up, the lines not open, the health. */
+function showCellSummary(health) {
+  const summary = document.getElementById('cell-summary');
+  if (!summary || typeof health.devices !== 'number') return;
+  let words = `${health.devices_up} of ${health.devices} devices up`;
+  const reasons = health.reasons || [];
+  const closed = reasons
+    .filter((r) => r.startsWith('line '))
+    .map((r) => r.split(' ')[1]);
+  if (closed.length) words += ` · line${closed.length > 1 ? 's' : ''} ${closed.join(', ')} down`;
+  summary.textContent = words;
+  summary.dataset.state = health.status || 'ok';
+  summary.title = reasons.length ? reasons.join('\n') : 'All devices answer; the history is written.';
+}
+
 function addEvent(event, atTop = true) {
-  if (atTop && event.kind && event.kind.startsWith('interface_')) refreshMqtt();
+  if (atTop && event.kind && /^(interface_|device_|line_|history_)/.test(event.kind)) healthSoon();
   const list = document.getElementById('events');
   const item = el('li');
   item.dataset.kind = event.kind;
@@ -773,8 +847,8 @@ start();
 tick();
 setInterval(tick, 1000);
 setInterval(refreshLines, 5000);
-refreshMqtt();
-setInterval(refreshMqtt, 10000);
+refreshHealth();
+setInterval(refreshHealth, 10000);
 setInterval(scrollAllPlots, 2000);
 (function frame() {
   drawDirtyPlots();
