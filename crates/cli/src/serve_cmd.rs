@@ -174,18 +174,30 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
             let cell = gateway::config::check_config(&file, &plugins).map_err(usage)?;
             let devices: usize = cell.lines.iter().map(|line| line.devices.len()).sum();
             let interfaces = plugins.interfaces_of(&cell);
+            let count = |n: usize, what: &str| match n {
+                1 => format!("1 {what}"),
+                n => format!("{n} {what}s"),
+            };
             output::line(format!(
-                "{}: ok, {} lines, {devices} devices, {}",
+                "{}: ok, {}, {}, {}",
                 file.display(),
-                cell.lines.len(),
+                count(cell.lines.len(), "line"),
+                count(devices, "device"),
                 match interfaces.len() {
                     0 => "no interfaces beyond HTTP".to_owned(),
                     1 => "1 interface".to_owned(),
                     n => format!("{n} interfaces"),
                 }
             ))?;
+            let loads = gateway::load::line_loads(&cell);
             for line in &cell.lines {
-                output::line(format!("  line {} on {}", line.name, line.endpoint))?;
+                let load = match loads.iter().find(|l| l.line == line.name) {
+                    Some(load) => {
+                        format!(" (its polls need about {:.0} % of it)", load.share * 100.0)
+                    }
+                    None => String::new(),
+                };
+                output::line(format!("  line {} on {}{load}", line.name, line.endpoint))?;
                 for device in &line.devices {
                     let driver = &device.driver;
                     let address = match driver.address {
@@ -201,7 +213,13 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
             for (table, words) in interfaces {
                 output::line(format!("  [{table}] {words}"))?;
             }
-            for warning in cell.warnings().into_iter().chain(cell.absent_ports()) {
+            let overloaded = loads.iter().filter_map(gateway::load::LineLoad::warning);
+            for warning in cell
+                .warnings()
+                .into_iter()
+                .chain(cell.absent_ports())
+                .chain(overloaded)
+            {
                 output::line(format!("warning: {warning}"))?;
             }
             Ok(ExitCode::SUCCESS)

@@ -403,7 +403,7 @@ fn config_check_and_serve_refuse_a_password_variable_that_is_not_set_naming_its_
         .output()
         .unwrap();
     assert!(set.status.success(), "{}", stderr(&set));
-    assert_stdout_has(&set, "1 lines, 1 devices, 1 interface");
+    assert_stdout_has(&set, "1 line, 1 device, 1 interface");
     assert_stdout_has(&set, "    jbc1 (jbc, address 1): jbc1");
     assert_stdout_has(
         &set,

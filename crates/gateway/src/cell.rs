@@ -483,12 +483,7 @@ impl Cell {
                     .groups()
                     .into_iter()
                     .map(|g| PollGroup {
-                        period: device
-                            .groups
-                            .get(&g.name)
-                            .copied()
-                            .or(device.period)
-                            .unwrap_or(g.period),
+                        period: device.period_of(&g),
                         name: g.name,
                     })
                     .collect();

@@ -41,6 +41,7 @@ pub mod event;
 pub mod fuzzing;
 pub mod health;
 pub mod http;
+pub mod load;
 pub mod metrics;
 pub mod northbound;
 pub mod oplog;

@@ -119,7 +119,11 @@ impl Gateway {
         let (config, demo) = match &options.config {
             Some(path) => {
                 let config = check_config(path, &registry.config)?;
-                for warning in config.warnings() {
+                let overloaded = crate::load::line_loads(&config)
+                    .iter()
+                    .filter_map(crate::load::LineLoad::warning)
+                    .collect::<Vec<_>>();
+                for warning in config.warnings().into_iter().chain(overloaded) {
                     tracing::warn!("{}: {warning}", path.display());
                 }
                 (config, None)

@@ -928,6 +928,18 @@ impl CellConfig {
     }
 }
 
+impl DeviceConfig {
+    /// How often `group` (its driver's default period) is read: the config's period for it
+    /// by name, else the device's `period`, else the default.
+    pub fn period_of(&self, group: &crate::driver::PollGroup) -> Duration {
+        self.groups
+            .get(&group.name)
+            .copied()
+            .or(self.period)
+            .unwrap_or(group.period)
+    }
+}
+
 impl fmt::Display for LineConfig {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{} ({})", self.name, self.endpoint)

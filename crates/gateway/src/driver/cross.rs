@@ -468,6 +468,18 @@ impl Driver for CrossDriver {
         Box::pin(self.poll_group(group))
     }
 
+    fn poll_time(&self, group: &str, serial: SerialSettings) -> Option<Duration> {
+        let areas: &[Area] = match group {
+            LIVE => &[Area::InternalState, Area::Measures],
+            RATINGS => &[Area::Ratings],
+            _ => return None,
+        };
+        Some(super::rtu_reads_time(
+            serial,
+            areas.iter().map(|a| 2 * usize::from(a.words())),
+        ))
+    }
+
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,

@@ -821,6 +821,17 @@ impl Driver for JbcDriver {
         std::mem::take(&mut self.partial)
     }
 
+    fn poll_time(&self, group: &str, serial: SerialSettings) -> Option<Duration> {
+        let plan = PLANS.iter().find(|p| p.group == group)?;
+        // Each code read once (a confirmation's second read comes only on a change): the
+        // request and the answer with its data, on the wire.
+        let (request, answer) = match self.config.route {
+            Some(_) => (jbc::frame::LEN_ADDRESSED, jbc::frame::LEN_ADDRESSED_DATA),
+            None => (jbc::frame::LEN_SHORT, jbc::frame::LEN_SHORT_DATA),
+        };
+        Some(serial.time_for(plan.reads.len() * (request + answer)))
+    }
+
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,

@@ -102,6 +102,23 @@ pub trait Driver: Send {
     fn requests_per_poll(&self) -> Option<u64> {
         None
     }
+
+    /// The least time one poll of `group` holds a serial line of `serial`: its requests'
+    /// and answers' time on the wire and the waits the protocol requires, with no retry.
+    /// `cellbus config check` adds them up per line against the periods asked. `None`
+    /// where the driver cannot tell (the default).
+    fn poll_time(&self, group: &str, serial: SerialSettings) -> Option<Duration> {
+        let _ = (group, serial);
+        None
+    }
+}
+
+/// The least time Modbus RTU reads hold a serial line of `serial`, given each answer's
+/// data bytes: per read, 3.5 characters of silence, the 8-byte request, 3.5 again and the
+/// answer of 5 bytes and its data.
+pub fn rtu_reads_time(serial: SerialSettings, data: impl IntoIterator<Item = usize>) -> Duration {
+    let chars: usize = data.into_iter().map(|bytes| 7 + 8 + 5 + bytes).sum();
+    serial.time_for(chars)
 }
 
 /// Something a device did that is worth an entry in the event log.

@@ -573,6 +573,18 @@ impl Driver for ThermosaldDriver {
         Box::pin(self.poll_group(group))
     }
 
+    fn poll_time(&self, group: &str, serial: SerialSettings) -> Option<Duration> {
+        // One table read: the question, the regulator's 200 ms, the answer and the 40 ms
+        // release before the next question (the manual's timing).
+        let table = table_of(group)?;
+        let exchange =
+            thermosald::exchange::Exchange::new(self.config.target, Read::all(table).into())
+                .ok()?;
+        let timing =
+            thermosald::exchange::LineTiming::new(serial.baud, serial.bits_per_char()).ok()?;
+        Some(timing.poll_cycle(exchange.query().wire_len(), exchange.reply_len()))
+    }
+
     fn write<'a>(
         &'a mut self,
         point: &'a PointSpec,

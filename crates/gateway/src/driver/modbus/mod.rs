@@ -765,6 +765,24 @@ impl Driver for ModbusDriver {
         self.fresh_line = true;
     }
 
+    fn poll_time(&self, group: &str, serial: SerialSettings) -> Option<Duration> {
+        if group != LIVE {
+            return None;
+        }
+        let reads = self.plan.reads();
+        let data = reads.iter().map(|read| match read.table() {
+            jbus::slave::Table::Coils | jbus::slave::Table::DiscreteInputs => {
+                usize::from(read.count()).div_ceil(8)
+            }
+            jbus::slave::Table::HoldingRegisters | jbus::slave::Table::InputRegisters => {
+                2 * usize::from(read.count())
+            }
+        });
+        let pauses = self.options.delay_between_requests
+            * u32::try_from(reads.len().saturating_sub(1)).unwrap_or(u32::MAX);
+        Some(super::rtu_reads_time(serial, data) + pauses)
+    }
+
     fn poll<'a>(&'a mut self, group: &'a str) -> BoxFuture<'a, Result<Vec<Reading>, DeviceError>> {
         Box::pin(async move {
             if group == LIVE {
