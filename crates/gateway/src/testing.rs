@@ -210,3 +210,16 @@ pub fn reading(
         .value
         .clone()
 }
+
+/// The point `id` (`device.point`); panics when it is not one.
+pub fn point(id: &str) -> crate::point::PointId {
+    crate::point::PointId::parse(id).unwrap()
+}
+
+/// The current value of the point `id` in `cell`; panics when the cell has no such point.
+pub fn value(cell: &Cell, id: &str) -> Option<crate::point::Value> {
+    let id = point(id);
+    let device = cell.device_entry(id.device()).unwrap();
+    let index = device.point_index(id.name()).unwrap();
+    device.read().points[index].value.clone()
+}

@@ -14,24 +14,26 @@ async fn rig() -> (PanasonicDriver, panasonic::server::RunningTwin) {
         .unwrap()
         .spawn()
         .unwrap();
-    let driver = PanasonicDriver::new(&DriverConfig {
-        id: DeviceId::new("placer1").unwrap(),
-        protocol: super::KIND,
-        address: None,
-        timeout: None,
-        retries: None,
+    let driver = placer(twin.command_addr().port(), twin.event_addr().port(), None);
+    (driver, twin)
+}
+
+/// `placer1`, its machine's ports on this host, its reply timeout `timeout`.
+fn placer(command_port: u16, event_port: u16, timeout: Option<Duration>) -> PanasonicDriver {
+    PanasonicDriver::new(&DriverConfig {
+        timeout,
         settings: crate::config::Settings::new(Keys {
-            event_port: Some(twin.event_addr().port()),
+            event_port: Some(event_port),
         }),
         endpoint: Some(Endpoint::Tcp {
             host: "127.0.0.1".into(),
-            port: twin.command_addr().port(),
+            port: command_port,
             line: None,
             framing: link::TcpFraming::Raw,
         }),
+        ..DriverConfig::new(DeviceId::new("placer1").unwrap(), super::KIND)
     })
-    .unwrap();
-    (driver, twin)
+    .unwrap()
 }
 
 #[tokio::test]
@@ -77,15 +79,10 @@ async fn events_until(
 
 #[test]
 fn every_point_has_a_unique_id_and_none_is_writable() {
-    let driver = PanasonicDriver::new(&DriverConfig {
-        id: DeviceId::new("placer1").unwrap(),
-        protocol: super::KIND,
-        address: None,
-        timeout: None,
-        retries: None,
-        endpoint: None,
-        settings: Default::default(),
-    })
+    let driver = PanasonicDriver::new(&DriverConfig::new(
+        DeviceId::new("placer1").unwrap(),
+        super::KIND,
+    ))
     .unwrap();
     let points = driver.points();
     let ids: HashSet<_> = points.iter().map(|p| &p.id).collect();
@@ -187,23 +184,7 @@ async fn a_machine_that_is_not_there_is_a_timeout_naming_its_port() {
     let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = closed.local_addr().unwrap().port();
     drop(closed);
-    let mut driver = PanasonicDriver::new(&DriverConfig {
-        id: DeviceId::new("placer1").unwrap(),
-        protocol: super::KIND,
-        address: None,
-        timeout: Some(Duration::from_secs(2)),
-        retries: None,
-        settings: crate::config::Settings::new(Keys {
-            event_port: Some(port),
-        }),
-        endpoint: Some(Endpoint::Tcp {
-            host: "127.0.0.1".into(),
-            port,
-            line: None,
-            framing: link::TcpFraming::Raw,
-        }),
-    })
-    .unwrap();
+    let mut driver = placer(port, port, Some(Duration::from_secs(2)));
     let err = driver.poll(LIVE).await.unwrap_err();
     assert_eq!(err.kind, ErrorKind::Timeout, "{err}");
     assert!(err.message.contains("Port 2"), "{err}");
