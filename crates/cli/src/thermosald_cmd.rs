@@ -646,9 +646,10 @@ pub async fn sim(args: SimThermosaldArgs) -> anyhow::Result<ExitCode> {
     }
     let model = SharedModel::new(twin);
     let control = model.clone();
-    crate::sim::serve_then(
+    crate::sim::serve_with(
         &args.serve,
         THERMOSALD_LINE,
+        "tcp",
         move || model.line(),
         || crate::sim_control::thermosald(control),
     )
