@@ -262,7 +262,9 @@ async fn writes_outside_the_range_or_the_regulators_limit_are_refused_before_the
     let max = value(&rig.cell, "sealer0.max_working_temperature")
         .and_then(|v| v.as_number())
         .unwrap();
-    let refusals: [(&str, f64, fn(&WriteError) -> bool); 4] = [
+    // Each write: point, value and how it is refused.
+    type Refusal = fn(&WriteError) -> bool;
+    let refusals: [(&str, f64, Refusal); 4] = [
         ("sealer0.sealing_temperature", 1200.0, |e| {
             matches!(e, WriteError::Invalid(ValueError::OutOfRange { .. }))
         }),
