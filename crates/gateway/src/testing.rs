@@ -223,3 +223,14 @@ pub fn value(cell: &Cell, id: &str) -> Option<crate::point::Value> {
     let index = device.point_index(id.name()).unwrap();
     device.read().points[index].value.clone()
 }
+
+/// The cell of `config`, recording in `store`, its lines never opened: only what a test
+/// applies to it reaches it.
+pub fn unopened_cell(config: &CellConfig, store: &Store) -> Arc<Cell> {
+    let never: Opener =
+        Arc::new(|| Box::pin(async { Err("never opened in this test".to_owned()) }));
+    let metrics = Arc::new(Metrics::new());
+    let (cell, _tasks) =
+        Cell::with_openers(config, store.handle(), metrics, |_| Arc::clone(&never)).unwrap();
+    cell
+}

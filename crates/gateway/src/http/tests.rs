@@ -1203,15 +1203,7 @@ fn example_cell_with_every_kind_of_state(
         &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml"),
     )
     .unwrap();
-    let never: crate::scheduler::Opener =
-        Arc::new(|| Box::pin(async { Err("not opened in this test".to_owned()) }));
-    let (cell, _tasks) = Cell::with_openers(
-        &config,
-        store.handle(),
-        Arc::new(crate::metrics::Metrics::new()),
-        |_| Arc::clone(&never),
-    )
-    .unwrap();
+    let cell = crate::testing::unopened_cell(&config, &store);
     let numbers = [
         350.0,
         -0.0,

@@ -560,14 +560,7 @@ fn cell_with(deadband: Option<Deadband>) -> (Arc<Cell>, crate::store::Store, tem
         }],
         ..crate::config::CellConfig::default()
     };
-    let opener: Opener = Arc::new(|| Box::pin(async { Err("never opened".to_owned()) }));
-    let (cell, _tasks) = Cell::with_openers(
-        &config,
-        store.handle(),
-        Arc::new(crate::metrics::Metrics::new()),
-        |_| Arc::clone(&opener),
-    )
-    .unwrap();
+    let cell = crate::testing::unopened_cell(&config, &store);
     (cell, store, dir)
 }
 
