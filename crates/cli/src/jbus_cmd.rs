@@ -21,6 +21,7 @@ use serde_json::{Map, Value, json};
 use wire::device::SharedModel;
 
 use crate::output::{self, usage};
+use crate::rounds::Rounds;
 use crate::sim::{ServeArgs, serve};
 
 /// The CROSS's line defaults (also the defaults for any Modbus line): 9600 baud, 8 data
@@ -685,18 +686,12 @@ async fn watch(
     stop_after: Option<u64>,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    let mut ticker = tokio::time::interval(interval);
-    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let started = tokio::time::Instant::now();
+    let mut rounds = Rounds::every(interval);
     let mut last: Option<Discrete> = None;
     let mut lost = false;
     let mut seen = 0u64;
-    loop {
-        tokio::select! {
-            _ = ticker.tick() => {}
-            _ = tokio::signal::ctrl_c() => return Ok(ExitCode::SUCCESS),
-        }
-        let elapsed = started.elapsed();
+    while rounds.next().await {
+        let elapsed = rounds.elapsed();
         match jbus::cross::read(client, unit).await {
             Ok(state) => {
                 let now = Discrete::of(&state.internal);
@@ -739,6 +734,7 @@ async fn watch(
             return Ok(ExitCode::SUCCESS);
         }
     }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn print_watch(
