@@ -4,12 +4,5 @@
 include!("link.rs");
 
 fn main() {
-    println!("cargo:rerun-if-changed=link.rs");
-    let manifest =
-        std::path::PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
-    link_options(
-        "bins",
-        &manifest.join("code-order.txt"),
-        &manifest.join("../../Cargo.lock"),
-    );
+    link_crate("bins", ".");
 }

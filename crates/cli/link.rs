@@ -15,6 +15,20 @@
 //   are skipped, so a stale list costs memory, never a failed build; a release build warns
 //   when the list was made for another compiler or Cargo.lock.
 
+/// Prints the link options for the targets of `kind` (`bins` or `benches`) of the crate
+/// being built, from which `cli_dir` is crates/cli (where this file and code-order.txt
+/// are): `.` for the binary's crate, `../cli` for the gateway's benches.
+fn link_crate(kind: &str, cli_dir: &str) {
+    println!("cargo:rerun-if-changed={cli_dir}/link.rs");
+    let manifest =
+        std::path::PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
+    link_options(
+        kind,
+        &manifest.join(cli_dir).join("code-order.txt"),
+        &manifest.join("../../Cargo.lock"),
+    );
+}
+
 /// Prints the link options for the targets of `kind` (`bins` or `benches`); `lock` is the
 /// workspace's Cargo.lock.
 fn link_options(kind: &str, code_order: &std::path::Path, lock: &std::path::Path) {

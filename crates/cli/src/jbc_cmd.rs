@@ -12,6 +12,7 @@ use link::{Endpoint, Line, SerialSettings, SharedLine};
 use serde_json::{Map, json};
 
 use crate::output::{self, usage};
+use crate::rounds::Rounds;
 
 /// The station's line defaults: 19200 baud, 8 data bits, even parity, 1 stop bit.
 pub const JBC_LINE: SerialSettings = SerialSettings::new_8e1(19200);
@@ -210,24 +211,18 @@ async fn watch(client: &mut Client, interval: Duration, json: bool) -> anyhow::R
             "time", "air", "external", "power"
         ))?;
     }
-    let mut ticker = tokio::time::interval(interval);
-    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let started = tokio::time::Instant::now();
-    loop {
-        tokio::select! {
-            _ = ticker.tick() => {}
-            _ = tokio::signal::ctrl_c() => return Ok(ExitCode::SUCCESS),
-        }
+    let mut rounds = Rounds::every(interval);
+    while rounds.next().await {
         let mut readings = Vec::with_capacity(codes.len());
         for &code in &codes {
             readings.push(client.read(code).await.map_err(output::failure)?);
         }
-        let elapsed = format!("{:.1} s", started.elapsed().as_secs_f64());
+        let elapsed = format!("{:.1} s", rounds.elapsed().as_secs_f64());
         if json {
             let mut object = Map::new();
             object.insert(
                 "elapsed_ms".into(),
-                json!(started.elapsed().as_millis() as u64),
+                json!(rounds.elapsed().as_millis() as u64),
             );
             for (code, reading) in codes.iter().zip(&readings) {
                 object.insert(code.to_string(), reading_json(*code, reading));
@@ -244,6 +239,7 @@ async fn watch(client: &mut Client, interval: Duration, json: bool) -> anyhow::R
             ))?;
         }
     }
+    Ok(ExitCode::SUCCESS)
 }
 
 /// `{"code":"ST1","value":350,"unit":"°C"}`; enumerations add `"text"` with their meaning.

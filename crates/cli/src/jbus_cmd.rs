@@ -21,6 +21,7 @@ use serde_json::{Map, Value, json};
 use wire::device::SharedModel;
 
 use crate::output::{self, usage};
+use crate::rounds::Rounds;
 use crate::sim::{ServeArgs, serve};
 
 /// The CROSS's line defaults (also the defaults for any Modbus line): 9600 baud, 8 data
@@ -106,38 +107,14 @@ pub struct ModbusArgs {
 pub enum ModbusAction {
     /// Function 3: read COUNT values (1–125 registers in all) of holding registers from
     /// ADDR: plain registers, or values of --type.
-    ReadHolding {
-        #[arg(value_parser = parse_address)]
-        address: u16,
-        #[arg(value_parser = parse_address)]
-        count: u16,
-        #[command(flatten)]
-        typed: TypeArgs,
-    },
+    ReadHolding(TypedRead),
     /// Function 4: read COUNT values (1–125 registers in all) of input registers from
     /// ADDR: plain registers, or values of --type.
-    ReadInput {
-        #[arg(value_parser = parse_address)]
-        address: u16,
-        #[arg(value_parser = parse_address)]
-        count: u16,
-        #[command(flatten)]
-        typed: TypeArgs,
-    },
+    ReadInput(TypedRead),
     /// Function 1: read COUNT (1–2000) coils from ADDR.
-    ReadCoils {
-        #[arg(value_parser = parse_address)]
-        address: u16,
-        #[arg(value_parser = parse_address)]
-        count: u16,
-    },
+    ReadCoils(Read),
     /// Function 2: read COUNT (1–2000) discrete inputs from ADDR.
-    ReadDiscrete {
-        #[arg(value_parser = parse_address)]
-        address: u16,
-        #[arg(value_parser = parse_address)]
-        count: u16,
-    },
+    ReadDiscrete(Read),
     /// Function 6: write VALUE (0–65535, or -32768–-1 as two's complement) to the holding
     /// register at ADDR.
     WriteRegister {
@@ -180,6 +157,24 @@ pub enum ModbusAction {
     },
 }
 
+// ADDR and COUNT of a read (no doc comment: the action's own is its help).
+#[derive(Debug, Clone, Copy, Args)]
+pub struct Read {
+    #[arg(value_parser = parse_address)]
+    pub address: u16,
+    #[arg(value_parser = parse_address)]
+    pub count: u16,
+}
+
+// A read of registers: ADDR, COUNT and the values' type.
+#[derive(Debug, Clone, Copy, Args)]
+pub struct TypedRead {
+    #[command(flatten)]
+    pub read: Read,
+    #[command(flatten)]
+    pub typed: TypeArgs,
+}
+
 /// The type of each value a read or write of registers carries.
 #[derive(Debug, Clone, Copy, Args)]
 pub struct TypeArgs {
@@ -211,8 +206,8 @@ impl ModbusAction {
     /// The format of the values, for the actions that take --type.
     fn format(&self) -> Option<Format> {
         match self {
-            Self::ReadHolding { typed, .. }
-            | Self::ReadInput { typed, .. }
+            Self::ReadHolding(TypedRead { typed, .. })
+            | Self::ReadInput(TypedRead { typed, .. })
             | Self::WriteRegisters { typed, .. } => typed.format(),
             _ => None,
         }
@@ -297,16 +292,14 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
 fn modbus_request(action: &ModbusAction) -> anyhow::Result<Request> {
     let format = action.format();
     match action {
-        &ModbusAction::ReadHolding { address, count, .. } => {
-            Request::read_holding_registers(address, registers_for(count, format)?)
+        ModbusAction::ReadHolding(TypedRead { read, .. }) => {
+            Request::read_holding_registers(read.address, registers_for(read.count, format)?)
         }
-        &ModbusAction::ReadInput { address, count, .. } => {
-            Request::read_input_registers(address, registers_for(count, format)?)
+        ModbusAction::ReadInput(TypedRead { read, .. }) => {
+            Request::read_input_registers(read.address, registers_for(read.count, format)?)
         }
-        &ModbusAction::ReadCoils { address, count } => Request::read_coils(address, count),
-        &ModbusAction::ReadDiscrete { address, count } => {
-            Request::read_discrete_inputs(address, count)
-        }
+        ModbusAction::ReadCoils(read) => Request::read_coils(read.address, read.count),
+        ModbusAction::ReadDiscrete(read) => Request::read_discrete_inputs(read.address, read.count),
         &ModbusAction::WriteRegister { address, value } => {
             Ok(Request::write_single_register(address, value))
         }
@@ -693,18 +686,12 @@ async fn watch(
     stop_after: Option<u64>,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    let mut ticker = tokio::time::interval(interval);
-    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let started = tokio::time::Instant::now();
+    let mut rounds = Rounds::every(interval);
     let mut last: Option<Discrete> = None;
     let mut lost = false;
     let mut seen = 0u64;
-    loop {
-        tokio::select! {
-            _ = ticker.tick() => {}
-            _ = tokio::signal::ctrl_c() => return Ok(ExitCode::SUCCESS),
-        }
-        let elapsed = started.elapsed();
+    while rounds.next().await {
+        let elapsed = rounds.elapsed();
         match jbus::cross::read(client, unit).await {
             Ok(state) => {
                 let now = Discrete::of(&state.internal);
@@ -747,6 +734,7 @@ async fn watch(
             return Ok(ExitCode::SUCCESS);
         }
     }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn print_watch(
@@ -923,14 +911,14 @@ where
     match framing {
         SimFraming::Rtu => serve(serve_args, JBUS_LINE, make).await,
         SimFraming::Tcp => {
-            crate::sim::serve_as(serve_args, JBUS_LINE, "modbus-tcp", move || {
+            let mbap = move || {
                 let server = jbus::tcp::MbapServer::new(make());
                 match gateway_timeout {
                     Some(after) => server.answering_silence(after),
                     None => server,
                 }
-            })
-            .await
+            };
+            crate::sim::serve_with(serve_args, JBUS_LINE, "modbus-tcp", mbap, || ()).await
         }
     }
 }

@@ -12,6 +12,7 @@ mod jbus_cmd;
 mod mqtt_cmd;
 mod output;
 mod panasonic_cmd;
+mod rounds;
 mod serve_cmd;
 mod sim;
 mod sim_control;

@@ -104,40 +104,13 @@ where
     D: Device,
     F: Fn() -> D + Send + 'static,
 {
-    serve_then(args, framing, make, || ()).await
+    serve_with(args, framing, "tcp", make, || ()).await
 }
 
 /// Like [`serve`], printing `listening on SCHEME://IP:PORT` (`modbus-tcp` for a device
-/// that frames Modbus TCP itself).
-pub async fn serve_as<D, F>(
-    args: &ServeArgs,
-    framing: SerialSettings,
-    scheme: &str,
-    make: F,
-) -> anyhow::Result<ExitCode>
-where
-    D: Device,
-    F: Fn() -> D + Send + 'static,
-{
-    serve_scheme_then(args, framing, scheme, make, || ()).await
-}
-
-/// Like [`serve`], calling `listening` right after the `listening on …` line is out (to
+/// that frames Modbus TCP itself) and calling `listening` right after that line is out (to
 /// start a control channel whose answers must come after it).
-pub async fn serve_then<D, F>(
-    args: &ServeArgs,
-    framing: SerialSettings,
-    make: F,
-    listening: impl FnOnce(),
-) -> anyhow::Result<ExitCode>
-where
-    D: Device,
-    F: Fn() -> D + Send + 'static,
-{
-    serve_scheme_then(args, framing, "tcp", make, listening).await
-}
-
-async fn serve_scheme_then<D, F>(
+pub async fn serve_with<D, F>(
     args: &ServeArgs,
     framing: SerialSettings,
     scheme: &str,

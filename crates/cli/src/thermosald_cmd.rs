@@ -18,6 +18,7 @@ use thermosald::{Request, diagnostic};
 use wire::device::SharedModel;
 
 use crate::output::{self, usage};
+use crate::rounds::Rounds;
 use crate::sim::ServeArgs;
 
 /// The regulators' line: 9600 baud, 8 data bits, no parity, 1 stop bit (the spec's only
@@ -529,16 +530,13 @@ async fn watch(
             "time", "address", "temperature", "power"
         ))?;
     }
-    let mut ticker = tokio::time::interval(interval);
-    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let started = tokio::time::Instant::now();
+    let mut rounds = Rounds::every(interval);
     let mut failures = 0u64;
     let mut round = 0u64;
     while count.is_none_or(|count| round < count) {
         round += 1;
-        tokio::select! {
-            _ = ticker.tick() => {}
-            _ = tokio::signal::ctrl_c() => break,
+        if !rounds.next().await {
+            break;
         }
         for client in &mut clients {
             let address = match client.target() {
@@ -546,7 +544,7 @@ async fn watch(
                 Target::Assign => continue,
             };
             let values = client.read_table(Table::Runtime).await;
-            let elapsed = started.elapsed();
+            let elapsed = rounds.elapsed();
             let values = match values {
                 Ok(values) => values,
                 Err(e @ ClientError::Line { .. }) => return Err(e.into()),
@@ -646,9 +644,10 @@ pub async fn sim(args: SimThermosaldArgs) -> anyhow::Result<ExitCode> {
     }
     let model = SharedModel::new(twin);
     let control = model.clone();
-    crate::sim::serve_then(
+    crate::sim::serve_with(
         &args.serve,
         THERMOSALD_LINE,
+        "tcp",
         move || model.line(),
         || crate::sim_control::thermosald(control),
     )

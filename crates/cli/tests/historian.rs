@@ -17,11 +17,11 @@
 mod common;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use std::io::{BufRead, BufReader};
+use std::io::BufReader;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{Gateway, api_value, cellbus, http_get, now_ms, rfc3339, rfc3339_ms};
+use common::{Gateway, api_value, cellbus, http_get, line_after, now_ms, rfc3339, rfc3339_ms};
 use sparkplug::{BdSeq, DataType, EdgeNode, Id, MetricName, MetricSpec, MetricValue, Sample};
 use testkit::{Mosquitto, Postgres, Subscriber};
 
@@ -49,20 +49,12 @@ impl Historian {
             .spawn()
             .expect("cellbus runs");
         let mut out = BufReader::new(child.stdout.take().expect("piped"));
-        let mut first = String::new();
-        out.read_line(&mut first).expect("a first line");
         assert_eq!(
-            first.trim_end(),
-            format!("historian on {broker}"),
+            line_after(&mut out, "historian on "),
+            broker,
             "the first line"
         );
-        let mut second = String::new();
-        out.read_line(&mut second).expect("a second line");
-        let addr = second
-            .trim_end()
-            .strip_prefix("listening on http://")
-            .unwrap_or_else(|| panic!("second line is `listening on http://…`, got {second:?}"))
-            .to_owned();
+        let addr = line_after(&mut out, "listening on http://");
         Historian { child, addr }
     }
 

@@ -5,9 +5,7 @@ mod common;
 use common::{Sim, assert_stderr_has, assert_stdout_has, run, stderr, stdout};
 
 fn jbc(sim: &Sim, args: &[&str]) -> std::process::Output {
-    let mut all = vec!["jbc", "--endpoint", &sim.endpoint];
-    all.extend_from_slice(args);
-    run(&all)
+    sim.client("jbc", args)
 }
 
 #[test]
@@ -142,15 +140,9 @@ fn the_form_without_addresses_works_end_to_end() {
 
 #[test]
 fn the_client_recovers_through_injected_line_faults() {
-    let sim = Sim::start_faulty("jbc", "11");
     // Late replies are up to 2 s late: keep the timeout short so a late one costs one retry.
-    for _ in 0..5 {
-        let out = jbc(
-            &sim,
-            &["--timeout", "300ms", "--retries", "8", "read", "MAT"],
-        );
-        assert!(out.status.success(), "{}", stderr(&out));
-    }
+    let args = ["--timeout", "300ms", "--retries", "8", "read", "MAT"];
+    Sim::client_through_faults("jbc", "11", 5, &args);
 }
 
 #[test]

@@ -20,9 +20,7 @@ fn modbus(sim: &Sim, unit: &str, args: &[&str]) -> Output {
 }
 
 fn cross(sim: &Sim, args: &[&str]) -> Output {
-    let mut all = vec!["cross", "--endpoint", &sim.endpoint];
-    all.extend_from_slice(args);
-    run(&all)
+    sim.client("cross", args)
 }
 
 fn json_of(output: &Output) -> Value {
@@ -571,14 +569,9 @@ fn bad_arguments_exit_2_before_touching_the_line() {
 
 #[test]
 fn the_client_recovers_through_injected_line_faults() {
-    let sim = Sim::start_faulty("cross", "11");
     // Late replies are up to 2 s late: keep the timeout short so a late one costs one retry.
-    for _ in 0..3 {
-        let out = cross(
-            &sim,
-            &["--timeout", "300ms", "--retries", "8", "status", "--json"],
-        );
-        assert!(out.status.success(), "{}", stderr(&out));
+    let args = ["--timeout", "300ms", "--retries", "8", "status", "--json"];
+    for out in Sim::client_through_faults("cross", "11", 3, &args) {
         assert_eq!(json_of(&out)["source"], "S1");
     }
 }

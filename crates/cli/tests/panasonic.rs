@@ -3,10 +3,10 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
+use std::io::BufReader;
 use std::process::{ChildStdin, ChildStdout, Stdio};
 
-use common::{Sim, SimControl, assert_stderr_has, cellbus, run, stderr, stdout};
+use common::{Sim, SimControl, assert_stderr_has, cellbus, line_after, run, stderr, stdout};
 
 /// A running `cellbus sim panasonic`, killed when dropped.
 struct Machine {
@@ -57,13 +57,7 @@ impl Machine {
             .strip_prefix("tcp://")
             .unwrap_or_else(|| panic!("Port 1 is a tcp:// endpoint, got {}", sim.endpoint))
             .to_owned();
-        let mut events = String::new();
-        out.read_line(&mut events)
-            .expect("the simulator prints a line");
-        let events = events
-            .trim_end()
-            .strip_prefix("events on tcp://")
-            .unwrap_or_else(|| panic!("expected `events on tcp://…`, got {events:?}"));
+        let events = line_after(&mut out, "events on tcp://");
         let events_port = events.rsplit_once(':').expect("IP:PORT").1.to_owned();
         let stdin = control.then(|| sim.take_stdin());
         let machine = Machine {
@@ -370,12 +364,7 @@ fn events_running_before_a_remote_start_sees_r1st_arrive_live() {
         .expect("cellbus runs");
     // Its first notice (on stderr) says Port 2 is connected: then start the machine.
     let mut notices = BufReader::new(events.stderr.take().expect("piped"));
-    let mut first = String::new();
-    notices.read_line(&mut first).expect("a notice");
-    assert!(
-        first.starts_with("cellbus: Port 2 (events) connected to tcp://"),
-        "{first}"
-    );
+    line_after(&mut notices, "cellbus: Port 2 (events) connected to tcp://");
     ok(machine.run(&["start"]));
     let out = events
         .wait_with_output()

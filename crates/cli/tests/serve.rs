@@ -2,11 +2,21 @@
 
 mod common;
 
+use std::process::Output;
+
 use common::{Gateway, assert_stderr_has, assert_stdout_has, run, stderr, stdout};
 use testkit::{Mosquitto, Subscriber};
 
 /// MQTT waits: generous, for a loaded machine.
 const MQTT_LIMIT: std::time::Duration = std::time::Duration::from_secs(60);
+
+/// The bdSeq of the next NBIRTH `node` sees (`what` names it if none comes).
+async fn next_birth_bd_seq(node: &mut Subscriber, what: &str) -> u64 {
+    node.next_where(what, MQTT_LIMIT, |m| m.kind() == "NBIRTH")
+        .await
+        .bd_seq()
+        .expect("the NBIRTH has a bdSeq")
+}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn serve_mqtt_publishes_the_demo_and_a_killed_gateway_leaves_its_will_with_the_births_bd_seq()
@@ -16,12 +26,7 @@ async fn serve_mqtt_publishes_the_demo_and_a_killed_gateway_leaves_its_will_with
     let data = tempfile::tempdir().unwrap();
     let url = broker.url();
     let gateway = Gateway::start_with(data.path(), &["--mqtt", &url]);
-    let birth = node
-        .next_where("an NBIRTH from cellbus serve --mqtt", MQTT_LIMIT, |m| {
-            m.kind() == "NBIRTH"
-        })
-        .await;
-    let bd_seq = birth.bd_seq().expect("the NBIRTH has a bdSeq");
+    let bd_seq = next_birth_bd_seq(&mut node, "an NBIRTH from cellbus serve --mqtt").await;
 
     // kill -9: no DISCONNECT, so the broker publishes the Will.
     drop(gateway);
@@ -36,12 +41,7 @@ async fn serve_mqtt_publishes_the_demo_and_a_killed_gateway_leaves_its_will_with
 
     // The same data directory: bdSeq moves on.
     let _gateway = Gateway::start_with(data.path(), &["--mqtt", &url]);
-    let again = node
-        .next_where("an NBIRTH after the restart", MQTT_LIMIT, |m| {
-            m.kind() == "NBIRTH"
-        })
-        .await;
-    let next = again.bd_seq().expect("the NBIRTH has a bdSeq");
+    let next = next_birth_bd_seq(&mut node, "an NBIRTH after the restart").await;
     assert!(
         next > bd_seq,
         "bdSeq {next} after the restart, {bd_seq} before"
@@ -171,14 +171,19 @@ fn serve_refuses_a_token_no_client_could_send_and_writes_without_one_as_usage_er
     );
 }
 
-#[test]
-fn config_check_refuses_a_token_with_characters_a_header_cannot_carry() {
+/// `cellbus config check` of a cell.toml holding `text`.
+fn config_check(text: &[u8]) -> Output {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("cell.toml");
-    let mut text = String::from("token = \"secret here\"\n");
-    text.push_str(&String::from_utf8(run(&["config", "example"]).stdout).unwrap());
     std::fs::write(&path, text).unwrap();
-    let out = run(&["config", "check", path.to_str().unwrap()]);
+    run(&["config", "check", path.to_str().unwrap()])
+}
+
+#[test]
+fn config_check_refuses_a_token_with_characters_a_header_cannot_carry() {
+    let mut text = b"token = \"secret here\"\n".to_vec();
+    text.extend(run(&["config", "example"]).stdout);
+    let out = config_check(&text);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(
         stderr(&out).contains("cell.toml:1:")
@@ -190,12 +195,9 @@ fn config_check_refuses_a_token_with_characters_a_header_cannot_carry() {
 
 #[test]
 fn the_example_configuration_passes_its_own_check() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("cell.toml");
     let example = run(&["config", "example"]);
     assert!(example.status.success());
-    std::fs::write(&path, &example.stdout).unwrap();
-    let out = run(&["config", "check", path.to_str().unwrap()]);
+    let out = config_check(&example.stdout);
     assert!(out.status.success(), "{}", stderr(&out));
     assert_stdout_has(&out, ": ok,");
 }

@@ -16,9 +16,7 @@ use serde_json::{Value, json};
 
 /// `cellbus thermosald --endpoint SIM ARGS…`.
 fn thermosald(sim: &Sim, args: &[&str]) -> Output {
-    let mut all = vec!["thermosald", "--endpoint", &sim.endpoint];
-    all.extend_from_slice(args);
-    run(&all)
+    sim.client("thermosald", args)
 }
 
 fn sim(addresses: &str) -> Sim {
@@ -604,14 +602,8 @@ fn decode_annotates_text_and_hex_and_marks_damaged_messages() {
 
 #[test]
 fn the_client_recovers_through_injected_line_faults() {
-    let sim = Sim::start_faulty("thermosald", "7");
-    for _ in 0..4 {
-        let out = thermosald(
-            &sim,
-            &["--timeout", "400ms", "--retries", "8", "read", "runtime"],
-        );
-        assert_ok(&out);
-    }
+    let args = ["--timeout", "400ms", "--retries", "8", "read", "runtime"];
+    Sim::client_through_faults("thermosald", "7", 4, &args);
 }
 
 #[test]

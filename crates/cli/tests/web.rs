@@ -36,7 +36,7 @@ fn a_gateway_with_a_read_token_is_asked_for_it_once_and_then_shows_the_cell() {
 fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_is_shown() {
     const LINES: usize = 50;
     const PER_LINE: usize = 20;
-    let (web, chromium) = browser();
+    let browser = browser();
     let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
     let data = tempfile::tempdir().unwrap();
     // The script writes one setpoint, so that a value on the page changes.
@@ -78,11 +78,8 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
 
     let screenshot = data.path().join("page.png");
     let seen = what_the_page_saw(
-        Command::new("node")
-            .arg(web.join("big.mjs"))
-            .arg(format!("http://{}", gateway.addr))
-            .arg(&screenshot)
-            .env("CHROMIUM", &chromium)
+        browser
+            .script("big.mjs", &gateway, &screenshot)
             .env("TOKEN", TOKEN),
     );
     assert_eq!(seen["devices"], LINES * PER_LINE);
@@ -128,8 +125,26 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
     eprintln!("{seen}");
 }
 
-/// Where the browser test's script lives and the Chromium it drives, both checked.
-fn browser() -> (std::path::PathBuf, String) {
+/// Where the browser test's scripts live and the Chromium they drive.
+struct Browser {
+    web: std::path::PathBuf,
+    chromium: String,
+}
+
+impl Browser {
+    /// `node tests/web/SCRIPT http://GATEWAY SCREENSHOT`, driving this Chromium.
+    fn script(&self, script: &str, gateway: &Gateway, screenshot: &Path) -> Command {
+        let mut node = Command::new("node");
+        node.arg(self.web.join(script))
+            .arg(format!("http://{}", gateway.addr))
+            .arg(screenshot)
+            .env("CHROMIUM", &self.chromium);
+        node
+    }
+}
+
+/// Where the browser test's scripts live and the Chromium they drive, both checked.
+fn browser() -> Browser {
     let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/web");
     assert!(
         web.join("node_modules/playwright-core").is_dir(),
@@ -141,7 +156,7 @@ fn browser() -> (std::path::PathBuf, String) {
         Path::new(&chromium).exists(),
         "no Chromium at {chromium}: run scripts/test once, or `apt-get install chromium`"
     );
-    (web, chromium)
+    Browser { web, chromium }
 }
 
 /// Runs a page script (`node …`) that prints one JSON line: what it saw.
@@ -162,7 +177,7 @@ fn what_the_page_saw(node: &mut Command) -> serde_json::Value {
 /// `mqtt` if given), opens its page in Chromium and checks a card for every device and a
 /// value that changes; returns what the page saw.
 fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Value {
-    let (web, chromium) = browser();
+    let browser = browser();
     let data = tempfile::tempdir().unwrap();
     let mut args: Vec<&str> = read_token.map_or(vec![], |t| vec!["--read-token", t]);
     if let Some(url) = mqtt {
@@ -171,11 +186,8 @@ fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Va
     let gateway = Gateway::start_with(data.path(), &args);
     let screenshot = data.path().join("page.png");
     let seen = what_the_page_saw(
-        Command::new("node")
-            .arg(web.join("page.mjs"))
-            .arg(format!("http://{}", gateway.addr))
-            .arg(&screenshot)
-            .env("CHROMIUM", &chromium)
+        browser
+            .script("page.mjs", &gateway, &screenshot)
             .env("READ_TOKEN", read_token.unwrap_or(""))
             .env("MQTT", if mqtt.is_some() { "1" } else { "" }),
     );

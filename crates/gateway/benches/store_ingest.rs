@@ -15,7 +15,7 @@
 //! each minute of each point is rolled up. Runs `--runs` times (default 3) into the same
 //! file, so later runs write into a larger file.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use gateway::point::{Quality, Value};
 use gateway::store::{ChangeCursor, ChangeKey, Sample, StoreHandle, StoreOptions};
@@ -52,7 +52,7 @@ fn main() {
             .stats()
             .commits
             .load(std::sync::atomic::Ordering::Relaxed);
-        let cpu = process_cpu();
+        let cpu = testkit::process_cpu();
         let started = Instant::now();
         for i in 0..rows {
             t += 1;
@@ -65,7 +65,7 @@ fn main() {
         }
         runtime.block_on(handle.flush()).expect("commit");
         let took = started.elapsed();
-        let cpu = process_cpu().saturating_sub(cpu);
+        let cpu = testkit::process_cpu().saturating_sub(cpu);
         let commits = handle
             .stats()
             .commits
@@ -119,23 +119,4 @@ fn backlog_reads(handle: &StoreHandle, newest: i64, stored: usize) {
         page.len(),
         started.elapsed().as_secs_f64() * 1e3
     );
-}
-
-/// User + system CPU time of this process, from `/proc/self/stat` (zero elsewhere).
-fn process_cpu() -> Duration {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return Duration::ZERO;
-    };
-    // Fields after the command name (which may hold spaces) start after the last ')'.
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = |i: usize| {
-        fields
-            .get(i)
-            .and_then(|v| v.parse::<u64>().ok())
-            .unwrap_or(0)
-    };
-    // utime and stime are fields 14 and 15 of the whole line: 11 and 12 after the name.
-    let total = ticks(11) + ticks(12);
-    Duration::from_millis(total * 10)
 }

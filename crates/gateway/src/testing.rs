@@ -239,3 +239,24 @@ impl<D: crate::driver::Driver + ?Sized> CheckThenWrite for D {
         })
     }
 }
+
+/// The point `id` (`device.point`); panics when it is not one.
+pub fn point(id: &str) -> crate::point::PointId {
+    crate::point::PointId::parse(id).unwrap()
+}
+
+/// The current value of the point `id` in `cell`; panics when the cell has no such point.
+pub fn value(cell: &Cell, id: &str) -> Option<crate::point::Value> {
+    let id = point(id);
+    let device = cell.device_entry(id.device()).unwrap();
+    let index = device.point_index(id.name()).unwrap();
+    device.read().points[index].value.clone()
+}
+
+/// The cell of `config`, recording in `store`, its lines never opened: only what a test
+/// applies to it reaches it.
+pub fn unopened_cell(config: &CellConfig, store: &Store) -> Arc<Cell> {
+    let metrics = Arc::new(Metrics::new());
+    let (cell, _lines) = Cell::new(config, store.handle(), metrics).unwrap();
+    cell
+}

@@ -71,6 +71,20 @@ fn nbirth(m: &SparkplugMessage) -> bool {
     m.kind() == "NBIRTH"
 }
 
+/// Runs the demo cell on `dir` until `node` sees its NBIRTH (`what`), then stops it; the
+/// NBIRTH's bdSeq.
+async fn born_and_stopped(
+    broker: &Mosquitto,
+    dir: &std::path::Path,
+    node: &mut Subscriber,
+    what: &str,
+) -> u64 {
+    let gateway = start(broker, dir).await;
+    let birth = node.next_where(what, LIMIT, nbirth).await;
+    gateway.stop().await;
+    birth.bd_seq().expect("the NBIRTH has a bdSeq")
+}
+
 /// The DBIRTHs that follow an NBIRTH: one per device of `wanted`, by device.
 async fn dbirths(
     devices: &mut Subscriber,
@@ -216,25 +230,18 @@ async fn bd_seq_survives_a_restart_on_the_same_data_directory() {
     let (mut node, _devices) = subscribe(&broker).await;
     let dir = tempfile::tempdir().unwrap();
 
-    let gateway = start(&broker, dir.path()).await;
-    let first = node
-        .next_where("an NBIRTH", LIMIT, nbirth)
-        .await
-        .bd_seq()
-        .unwrap();
-    gateway.stop().await;
-
-    let gateway = start(&broker, dir.path()).await;
-    let second = node
-        .next_where("an NBIRTH after the restart", LIMIT, nbirth)
-        .await
-        .bd_seq()
-        .unwrap();
+    let first = born_and_stopped(&broker, dir.path(), &mut node, "an NBIRTH").await;
+    let second = born_and_stopped(
+        &broker,
+        dir.path(),
+        &mut node,
+        "an NBIRTH after the restart",
+    )
+    .await;
     assert!(
         second > first,
         "bdSeq {second} after a restart, {first} before"
     );
-    gateway.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

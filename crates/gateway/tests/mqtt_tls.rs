@@ -125,12 +125,13 @@ async fn start(dir: &Path, mqtt: &str) -> Running {
     .await
 }
 
-/// The gateway's CA, `cellbus test CA`, written to `dir` as `ca.pem`, what `ca_file`
-/// names.
-fn our_ca(dir: &Path) -> Ca {
+/// A temporary directory with the gateway's CA, `cellbus test CA`, written to it as
+/// `ca.pem`, what `ca_file` names.
+fn our_ca() -> (tempfile::TempDir, Ca) {
+    let dir = tempfile::tempdir().unwrap();
     let ca = Ca::new("cellbus test CA");
-    ca.write(dir, "ca");
-    ca
+    ca.write(dir.path(), "ca");
+    (dir, ca)
 }
 
 /// The next NBIRTH `node` sees (`what` names it if none comes).
@@ -176,8 +177,7 @@ async fn handshake_refusal(gateway: &Running, broker: &Mosquitto) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_gateway_publishes_its_births_over_mqtts_trusting_the_given_ca_file() {
-    let dir = tempfile::tempdir().unwrap();
-    let ca = our_ca(dir.path());
+    let (dir, ca) = our_ca();
     let (broker, _files) = broker(dir.path(), &ca, &ca, false);
     let mut node = Subscriber::start(broker.port(), NODE).await;
     let gateway = start_over_tls(dir.path(), &broker, "").await;
@@ -192,8 +192,7 @@ async fn the_gateway_publishes_its_births_over_mqtts_trusting_the_given_ca_file(
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_broker_the_ca_file_does_not_vouch_for_is_refused_clearly_and_the_gateway_keeps_trying() {
-    let dir = tempfile::tempdir().unwrap();
-    let ours = our_ca(dir.path());
+    let (dir, ours) = our_ca();
     let strangers = Ca::new("someone else's CA");
     let (mut broker, _files) = broker(dir.path(), &strangers, &strangers, false);
     let mut node = Subscriber::start(broker.port(), NODE).await;
@@ -212,8 +211,7 @@ async fn a_broker_the_ca_file_does_not_vouch_for_is_refused_clearly_and_the_gate
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_broker_that_wants_a_client_certificate_takes_the_gateways_client_cert() {
-    let dir = tempfile::tempdir().unwrap();
-    let ca = our_ca(dir.path());
+    let (dir, ca) = our_ca();
     ca.sign(
         dir.path(),
         "gateway",
@@ -235,8 +233,7 @@ async fn a_broker_that_wants_a_client_certificate_takes_the_gateways_client_cert
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_broker_that_wants_a_client_certificate_refuses_a_gateway_without_one_clearly() {
-    let dir = tempfile::tempdir().unwrap();
-    let ca = our_ca(dir.path());
+    let (dir, ca) = our_ca();
     let (broker, _files) = broker(dir.path(), &ca, &ca, true);
     let gateway = start_over_tls(dir.path(), &broker, "").await;
 

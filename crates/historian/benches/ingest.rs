@@ -140,7 +140,7 @@ async fn run(url: &str, config: Config, total: usize) -> Outcome {
     // first batch.
     let base = SystemTime::now() - Duration::from_secs(86_400);
     let per_writer = total / config.writers;
-    let cpu_before = process_cpu();
+    let cpu_before = testkit::process_cpu();
     let started = Instant::now();
     let mut tasks = Vec::new();
     for (writer, mut store) in stores.into_iter().enumerate() {
@@ -177,7 +177,7 @@ async fn run(url: &str, config: Config, total: usize) -> Outcome {
         latencies.extend(task.await.expect("a writer task"));
     }
     let elapsed = started.elapsed();
-    let client_cpu = process_cpu().saturating_sub(cpu_before);
+    let client_cpu = testkit::process_cpu().saturating_sub(cpu_before);
     latencies.sort();
     let at = |q: f64| latencies[((latencies.len() - 1) as f64 * q).round() as usize];
     Outcome {
@@ -214,23 +214,4 @@ fn sample(p: usize, t: SystemTime, i: usize) -> SampleRow {
         text: None,
         quality: Quality::Good,
     }
-}
-
-/// This process's CPU time (user + system) from `/proc/self/stat`, in clock ticks of
-/// 10 ms; zero where there is no `/proc`.
-fn process_cpu() -> Duration {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return Duration::ZERO;
-    };
-    // Fields after the command's closing parenthesis; utime and stime are the 14th and
-    // 15th of the line.
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = |i: usize| {
-        fields
-            .get(i)
-            .and_then(|f| f.parse::<u64>().ok())
-            .unwrap_or(0)
-    };
-    Duration::from_millis((ticks(11) + ticks(12)) * 10)
 }

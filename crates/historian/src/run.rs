@@ -248,19 +248,18 @@ mod database_tests {
     fn a_database_that_is_not_postgresql_is_refused_without_repeating_it() {
         assert!(check_database("postgres://cellbus@127.0.0.1:5432/plant").is_ok());
         assert!(check_database("host=127.0.0.1 user=cellbus").is_ok());
-        let mysql = check_database("mysql://u:secret@h/db")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            mysql.contains("mysql:// is not PostgreSQL") && !mysql.contains("secret"),
-            "{mysql}"
-        );
-        let port = check_database("postgres://u:secret@h:notaport/db")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            port.contains("not a PostgreSQL connection string") && !port.contains("secret"),
-            "{port}"
-        );
+        for (database, why) in [
+            ("mysql://u:secret@h/db", "mysql:// is not PostgreSQL"),
+            (
+                "postgres://u:secret@h:notaport/db",
+                "not a PostgreSQL connection string",
+            ),
+        ] {
+            let refusal = check_database(database).unwrap_err().to_string();
+            assert!(
+                refusal.contains(why) && !refusal.contains("secret"),
+                "{refusal}"
+            );
+        }
     }
 }

@@ -54,6 +54,16 @@ async fn get(state: &Arc<AppState>, path: &str) -> (StatusCode, serde_json::Valu
     (status, json)
 }
 
+/// The error of `path`, which must be refused as a bad request.
+async fn refusal(state: &Arc<AppState>, path: &str) -> String {
+    let (status, body) = get(state, path).await;
+    assert_eq!(status, StatusCode::BAD_REQUEST, "{path}: {body}");
+    body["error"]
+        .as_str()
+        .expect("an error in words")
+        .to_owned()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn point_ids_name_one_point_or_say_which_and_the_listings_are_bounded() {
     let pg = Postgres::start();
@@ -93,9 +103,7 @@ async fn point_ids_name_one_point_or_say_which_and_the_listings_are_bounded() {
         health: Arc::new(Health::new()),
     });
 
-    let (status, body) = get(&state, "/api/history?point=cell1/jbc1.air_temperature").await;
-    assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
-    let words = body["error"].as_str().unwrap();
+    let words = refusal(&state, "/api/history?point=cell1/jbc1.air_temperature").await;
     assert!(
         words.contains("names 2 points")
             && words.contains("\"north\"")
@@ -109,15 +117,8 @@ async fn point_ids_name_one_point_or_say_which_and_the_listings_are_bounded() {
         assert_eq!(status, StatusCode::OK, "{body}");
         assert_eq!(body["samples"][0]["value"], value, "{body}");
     }
-    let (status, body) = get(&state, "/api/history?point=cell1/meter.1.power").await;
-    assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
-    assert!(
-        body["error"]
-            .as_str()
-            .unwrap()
-            .contains("device id with a `.`"),
-        "{body}"
-    );
+    let words = refusal(&state, "/api/history?point=cell1/meter.1.power").await;
+    assert!(words.contains("device id with a `.`"), "{words}");
     let (status, body) = get(&state, "/api/history?point=cell1/meter.2.power&from=-1h").await;
     assert_eq!(status, StatusCode::OK, "{body}");
     assert_eq!(body["samples"][0]["value"], 4.0, "{body}");
@@ -152,12 +153,8 @@ async fn point_ids_name_one_point_or_say_which_and_the_listings_are_bounded() {
         (Some(0), Some(0))
     );
     for limit in ["0", "10001"] {
-        let (status, body) = get(&state, &format!("/api/points?limit={limit}")).await;
-        assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
-        assert!(
-            body["error"].as_str().unwrap().contains("1 to 10000"),
-            "{body}"
-        );
+        let words = refusal(&state, &format!("/api/points?limit={limit}")).await;
+        assert!(words.contains("1 to 10000"), "{words}");
     }
 
     // Events stop at 4 MiB, the newest first.
@@ -168,13 +165,6 @@ async fn point_ids_name_one_point_or_say_which_and_the_listings_are_bounded() {
     assert!(events[0]["message"].as_str().unwrap().starts_with('1'));
     assert_eq!(events[0]["group"], "north");
     assert_eq!(body["truncated"], true);
-    let (status, body) = get(&state, "/api/events?from=-1h&to=-2h").await;
-    assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
-    assert!(
-        body["error"]
-            .as_str()
-            .unwrap()
-            .contains("must not be after"),
-        "{body}"
-    );
+    let words = refusal(&state, "/api/events?from=-1h&to=-2h").await;
+    assert!(words.contains("must not be after"), "{words}");
 }

@@ -399,16 +399,9 @@ async fn raw_and_buckets_answer_what_was_written() {
         .push(sample("jbc2", "air_temperature", start, 999.0));
     store.write(&batch).await.expect("write");
 
+    let air = id(&store, "cell1/jbc1.air_temperature").await;
     let (from, to) = (at(start + 5_000), at(start + 65_000));
-    let raw = store
-        .raw(
-            id(&store, "cell1/jbc1.air_temperature").await,
-            from,
-            to,
-            1000,
-        )
-        .await
-        .expect("raw");
+    let raw = store.raw(air, from, to, 1000).await.expect("raw");
     let expected: Vec<StoredSample> = batch.samples[5..65]
         .iter()
         .map(|s| StoredSample {
@@ -419,15 +412,9 @@ async fn raw_and_buckets_answer_what_was_written() {
         })
         .collect();
     assert_eq!(raw, expected);
-    let limited = store
-        .raw(id(&store, "cell1/jbc1.air_temperature").await, from, to, 3)
-        .await
-        .expect("raw with a limit");
+    let limited = store.raw(air, from, to, 3).await.expect("raw with a limit");
     assert_eq!(limited, expected[..3]);
-    let before = store
-        .last_before(id(&store, "cell1/jbc1.air_temperature").await, from)
-        .await
-        .expect("before");
+    let before = store.last_before(air, from).await.expect("before");
     assert_eq!(before.map(|s| s.t), Some(at(start + 4_000)));
     let text = store
         .raw(id(&store, "cell1/jbc1.state").await, at(start), to, 10)
@@ -437,12 +424,7 @@ async fn raw_and_buckets_answer_what_was_written() {
 
     // 30 s buckets over the first two minutes: good numeric samples only.
     let buckets = store
-        .buckets(
-            id(&store, "cell1/jbc1.air_temperature").await,
-            at(start),
-            at(start + 120_000),
-            Duration::from_secs(30),
-        )
+        .buckets(air, at(start), at(start + 120_000), Duration::from_secs(30))
         .await
         .expect("buckets");
     let expected: Vec<Bucket> = (0..4u64)
@@ -595,29 +577,20 @@ async fn queries_with_times_beyond_the_calendar_answer_instead_of_panicking() {
     let (_pg, url) = database();
     let mut store = Store::connect(&url).await.expect("connect");
     store.write(&batch(MIDNIGHT_MS, 3)).await.expect("write");
+    let air = id(&store, "cell1/jbc1.air_temperature").await;
     let far = at(u64::MAX / 4);
     let raw = store
-        .raw(
-            id(&store, "cell1/jbc1.air_temperature").await,
-            UNIX_EPOCH,
-            far,
-            10,
-        )
+        .raw(air, UNIX_EPOCH, far, 10)
         .await
         .expect("raw up to the far future");
     assert_eq!(raw.len(), 3);
     let before = store
-        .last_before(id(&store, "cell1/jbc1.air_temperature").await, far)
+        .last_before(air, far)
         .await
         .expect("before the far future");
     assert_eq!(before.map(|s| s.t), Some(at(MIDNIGHT_MS + 2_000)));
     let buckets = store
-        .buckets(
-            id(&store, "cell1/jbc1.air_temperature").await,
-            UNIX_EPOCH,
-            far,
-            Duration::MAX,
-        )
+        .buckets(air, UNIX_EPOCH, far, Duration::MAX)
         .await
         .expect("one huge bucket");
     assert_eq!(buckets.iter().map(|b| b.count).sum::<u64>(), 3);

@@ -334,10 +334,7 @@ impl FromStr for RawCode {
 
 impl fmt::Display for RawCode {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        // Printable ASCII by construction, so every byte is one char.
-        self.0
-            .iter()
-            .try_for_each(|&b| write!(f, "{}", char::from(b)))
+        write_ascii(f, &self.0)
     }
 }
 
@@ -418,10 +415,16 @@ impl Data {
 impl fmt::Display for Data {
     /// The five characters as they are on the wire, blanks kept.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        self.0
-            .iter()
-            .try_for_each(|&b| write!(f, "{}", char::from(b)))
+        write_ascii(f, &self.0)
     }
+}
+
+/// Writes bytes that are printable ASCII (by construction: a code or a data field), each
+/// byte one char.
+fn write_ascii(f: &mut fmt::Formatter<'_>, bytes: &[u8]) -> fmt::Result {
+    bytes
+        .iter()
+        .try_for_each(|&b| write!(f, "{}", char::from(b)))
 }
 
 // ---------------------------------------------------------------------------------------

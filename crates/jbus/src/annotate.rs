@@ -208,21 +208,15 @@ fn function_text(byte: u8) -> String {
 
 fn request_details(request: &Request) -> String {
     match request {
-        Request::ReadCoils(r) | Request::ReadDiscreteInputs(r) => {
-            let what = if matches!(request, Request::ReadCoils(_)) {
-                "coils"
-            } else {
-                "discrete inputs"
-            };
-            range_text(what, r.address(), r.count().get())
+        Request::ReadCoils(r) => range_text("coils", r.address(), r.count().get()),
+        Request::ReadDiscreteInputs(r) => {
+            range_text("discrete inputs", r.address(), r.count().get())
         }
-        Request::ReadHoldingRegisters(r) | Request::ReadInputRegisters(r) => {
-            let what = if matches!(request, Request::ReadHoldingRegisters(_)) {
-                "holding registers"
-            } else {
-                "input registers"
-            };
-            range_text(what, r.address(), r.count().get())
+        Request::ReadHoldingRegisters(r) => {
+            range_text("holding registers", r.address(), r.count().get())
+        }
+        Request::ReadInputRegisters(r) => {
+            range_text("input registers", r.address(), r.count().get())
         }
         Request::WriteSingleCoil(_) | Request::WriteSingleRegister(_) => request.to_string(),
         Request::WriteMultipleCoils(w) => format!(

@@ -211,6 +211,16 @@ mod tests {
         KeepAlive::new(KeepAliveConfig::default(), now).expect("default config is valid")
     }
 
+    /// A keep-alive scheduled now that sent its first check one interval later: it, when
+    /// the check went out and its id.
+    fn first_check() -> (KeepAlive, Instant, KeepAliveId) {
+        let t0 = Instant::now();
+        let mut keep = schedule(t0);
+        let t1 = t0 + DEFAULT_INTERVAL;
+        let id = id_of(keep.poll_transmit(t1));
+        (keep, t1, id)
+    }
+
     fn id_of(command: Option<Command>) -> KeepAliveId {
         match command {
             Some(Command::KeepAlive(id)) => id,
@@ -244,10 +254,7 @@ mod tests {
 
     #[test]
     fn a_missing_echo_marks_port_2_dead_after_the_time_out() {
-        let t0 = Instant::now();
-        let mut keep = schedule(t0);
-        let t1 = t0 + DEFAULT_INTERVAL;
-        let id = id_of(keep.poll_transmit(t1));
+        let (mut keep, t1, id) = first_check();
         keep.port1_answered();
         assert_eq!(
             keep.poll_verdict(t1 + DEFAULT_REPLY_TIMEOUT - Duration::from_millis(1)),
@@ -265,10 +272,7 @@ mod tests {
 
     #[test]
     fn silence_on_both_ports_marks_both_dead_and_reset_starts_over() {
-        let t0 = Instant::now();
-        let mut keep = schedule(t0);
-        let t1 = t0 + DEFAULT_INTERVAL;
-        let id = id_of(keep.poll_transmit(t1));
+        let (mut keep, t1, id) = first_check();
         let late = t1 + DEFAULT_REPLY_TIMEOUT;
         assert_eq!(
             keep.poll_verdict(late),

@@ -338,26 +338,19 @@ mod tests {
             refusal("C0RPABC", Reply::NoSuchProgram).meaning(),
             "program \"ABC\" does not exist on the machine"
         );
-        assert!(
-            refusal("C5STCT", Reply::OPERATION_ERROR)
-                .meaning()
-                .contains("Remote mode")
-        );
-        assert!(
-            refusal("C0PABC", Reply::OPERATION_ERROR)
-                .meaning()
-                .contains("storage limits")
-        );
-        assert!(
-            refusal("C2HB00ABC123", Reply::OPERATION_ERROR)
-                .meaning()
-                .contains("port itself works")
-        );
-        assert!(
-            refusal("C3P", Reply::PROTOCOL_ERROR)
-                .meaning()
-                .contains("no product program is selected")
-        );
+        for (command, reply, words) in [
+            ("C5STCT", Reply::OPERATION_ERROR, "Remote mode"),
+            ("C0PABC", Reply::OPERATION_ERROR, "storage limits"),
+            ("C2HB00ABC123", Reply::OPERATION_ERROR, "port itself works"),
+            (
+                "C3P",
+                Reply::PROTOCOL_ERROR,
+                "no product program is selected",
+            ),
+        ] {
+            let meaning = refusal(command, reply).meaning();
+            assert!(meaning.contains(words), "{command}: {meaning}");
+        }
         assert!(
             refusal("C1M000", Reply::PROTOCOL_ERROR)
                 .to_string()

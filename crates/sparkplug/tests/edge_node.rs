@@ -41,6 +41,17 @@ fn running() -> EdgeNode {
     node
 }
 
+/// The live DDATA `node` sends for device `jbc`'s `air_temp` reading `sample` (at its
+/// own time), decoded.
+fn air_temp_data(node: &mut EdgeNode, sample: Sample) -> Payload {
+    let t = sample.timestamp;
+    let publish = node
+        .device_data(&id("jbc"), &[("air_temp", sample)], t, Delivery::Live)
+        .unwrap()
+        .expect("a changed value is sent");
+    decode(&publish)
+}
+
 fn alias_of(birth: &Payload, wanted: &str) -> u64 {
     by_name(birth, wanted).alias.expect("births give aliases")
 }
@@ -158,16 +169,8 @@ fn seq_counts_every_message_of_the_node_and_wraps_from_255_to_0() {
     let mut seqs = vec![];
     for i in 0..300 {
         let value = MetricValue::Int32(26 + i);
-        let publish = node
-            .device_data(
-                &jbc,
-                &[("air_temp", Sample::good(value, at(1)))],
-                at(1),
-                Delivery::Live,
-            )
-            .unwrap()
-            .expect("a changed value is sent");
-        seqs.push(decode(&publish).seq.unwrap());
+        let data = air_temp_data(&mut node, Sample::good(value, at(1)));
+        seqs.push(data.seq.unwrap());
     }
     assert_eq!(seqs[0], 2);
     assert_eq!(seqs[253], 255);
@@ -254,16 +257,8 @@ fn ddata_uses_aliases_only_and_only_changed_metrics() {
 #[test]
 fn a_stale_reading_goes_as_null_with_quality_500_never_as_the_last_value() {
     let mut node = running();
-    let publish = node
-        .device_data(
-            &id("jbc"),
-            &[("air_temp", Sample::stale(at(5)))],
-            at(5),
-            Delivery::Live,
-        )
-        .unwrap()
-        .unwrap();
-    let m = &decode(&publish).metrics[0];
+    let data = air_temp_data(&mut node, Sample::stale(at(5)));
+    let m = &data.metrics[0];
     assert_eq!(m.is_null, Some(true));
     assert_eq!(m.value, None);
     assert_eq!(Quality::of(m), Some(Quality::Stale));
@@ -274,28 +269,15 @@ fn a_stale_reading_goes_as_null_with_quality_500_never_as_the_last_value() {
 #[test]
 fn a_bad_reading_goes_as_null_with_quality_0_and_recovery_says_192() {
     let mut node = running();
-    let jbc = id("jbc");
-    let bad = node
-        .device_data(
-            &jbc,
-            &[("air_temp", Sample::bad(at(5)))],
-            at(5),
-            Delivery::Live,
-        )
-        .unwrap()
-        .unwrap();
-    let m = &decode(&bad).metrics[0];
+    let bad = air_temp_data(&mut node, Sample::bad(at(5)));
+    let m = &bad.metrics[0];
     assert_eq!(
         (m.is_null, Quality::of(m)),
         (Some(true), Some(Quality::Bad))
     );
 
-    let good = Sample::good(MetricValue::Int32(25), at(6));
-    let back = node
-        .device_data(&jbc, &[("air_temp", good)], at(6), Delivery::Live)
-        .unwrap()
-        .unwrap();
-    let m = &decode(&back).metrics[0];
+    let back = air_temp_data(&mut node, Sample::good(MetricValue::Int32(25), at(6)));
+    let m = &back.metrics[0];
     assert_eq!(m.value, Some(Value::IntValue(25)));
     assert_eq!(m.is_null, None);
     assert_eq!(Quality::of(m), Some(Quality::Good));

@@ -22,6 +22,7 @@
 //! - [`free_port`]: a loopback port nothing listens on, for a server a test starts or
 //!   for a connection that must be refused.
 //! - [`bench_seconds`]: how long a bench binary runs, short under `cargo test`.
+//! - [`process_cpu`]: the CPU time this process used, for benches that print it.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -67,4 +68,23 @@ pub fn free_port() -> u16 {
         .and_then(|l| l.local_addr())
         .expect("a free loopback port")
         .port()
+}
+
+/// User + system CPU time of this process so far, from `/proc/self/stat`, in clock ticks
+/// of 10 ms; zero where there is no `/proc`.
+pub fn process_cpu() -> std::time::Duration {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return std::time::Duration::ZERO;
+    };
+    // Fields after the command name (which may hold spaces) start after the last ')'.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    // utime and stime are fields 14 and 15 of the whole line: 11 and 12 after the name.
+    std::time::Duration::from_millis((ticks(11) + ticks(12)) * 10)
 }

@@ -202,6 +202,15 @@ async fn polls_follow_each_other_40_ms_after_each_answer_and_never_sooner() {
     b.assert_line_discipline();
 }
 
+/// Asserts that `polls` polls took `elapsed`, what the line allows (`expected`): tokio's
+/// timers tick in whole milliseconds, so up to 1 ms per poll on top.
+fn took_what_the_line_allows(elapsed: Duration, expected: Duration, polls: u64) {
+    assert!(
+        elapsed >= expected && elapsed <= expected + ms(polls),
+        "took {elapsed:?}, the line allows {expected:?}"
+    );
+}
+
 #[tokio::test(start_paused = true)]
 async fn on_a_paced_9600_baud_line_polls_run_at_the_theoretical_limit() {
     let b = Bench::paced(&[0]);
@@ -213,12 +222,7 @@ async fn on_a_paced_9600_baud_line_polls_run_at_the_theoretical_limit() {
     }
     // Each poll: 9-byte question, 200 ms, 30-byte answer, 40 ms release (none after the last).
     let expected = timing.poll_cycle(9, 30) * 4 - RELEASE_AFTER_ANSWER;
-    let elapsed = started.elapsed();
-    // tokio's timers tick in whole milliseconds: up to 1 ms per poll on top.
-    assert!(
-        elapsed >= expected && elapsed <= expected + ms(4),
-        "took {elapsed:?}, the line allows {expected:?}"
-    );
+    took_what_the_line_allows(started.elapsed(), expected, 4);
     assert_eq!(b.answered(), 4);
     b.assert_line_discipline();
 }
@@ -234,11 +238,7 @@ async fn every_client_on_a_shared_line_respects_the_windows_the_others_opened() 
     let started = Instant::now();
     tokio::join!(poll(b.client(0)), poll(b.client(1)), poll(b.client(2)));
     let expected = LineTiming::RS485_9600_8N1.poll_cycle(9, 30) * 9 - RELEASE_AFTER_ANSWER;
-    let elapsed = started.elapsed();
-    assert!(
-        elapsed >= expected && elapsed <= expected + ms(9),
-        "took {elapsed:?}, the line allows {expected:?}"
-    );
+    took_what_the_line_allows(started.elapsed(), expected, 9);
     assert_eq!(b.answered(), 9);
     b.assert_line_discipline();
 }

@@ -306,21 +306,20 @@ mod tests {
 
     #[test]
     fn a_missing_extra_or_bad_argument_is_refused_with_the_usage() {
-        assert_eq!(
-            parse::<Lamp>("dim").map_err(|e| e.to_string()),
-            Err("`dim` needs a percentage: dim N".to_owned())
-        );
-        assert_eq!(
-            parse::<Lamp>("on now").map_err(|e| e.to_string()),
-            Err("`on` does not take `now`: on".to_owned())
-        );
-        assert_eq!(
-            parse::<Lamp>("dim 101").map_err(|e| e.to_string()),
-            Err("a percentage `101` is not a number from 0 to 100".to_owned())
-        );
-        assert_eq!(
-            parse::<Lamp>("help off").map_err(|e| e.to_string()),
-            Err("unknown command `off`; `help` lists the commands".to_owned())
-        );
+        for (line, usage) in [
+            ("dim", "`dim` needs a percentage: dim N"),
+            ("on now", "`on` does not take `now`: on"),
+            (
+                "dim 101",
+                "a percentage `101` is not a number from 0 to 100",
+            ),
+            (
+                "help off",
+                "unknown command `off`; `help` lists the commands",
+            ),
+        ] {
+            let refusal = parse::<Lamp>(line).map_err(|e| e.to_string());
+            assert_eq!(refusal, Err(usage.to_owned()), "{line:?}");
+        }
     }
 }

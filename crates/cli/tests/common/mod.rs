@@ -35,6 +35,32 @@ impl Sim {
         ])
     }
 
+    /// Runs `cellbus DEVICE --endpoint ENDPOINT ARGS…`: the client of `device` against this
+    /// simulator.
+    pub fn client(&self, device: &str, args: &[&str]) -> Output {
+        let mut all = vec![device, "--endpoint", &self.endpoint];
+        all.extend_from_slice(args);
+        run(&all)
+    }
+
+    /// Runs the client of `device` with `args` `times` times against its simulator on a
+    /// faulty line ([`Sim::start_faulty`] with `seed`): every run must get through.
+    pub fn client_through_faults(
+        device: &str,
+        seed: &str,
+        times: usize,
+        args: &[&str],
+    ) -> Vec<Output> {
+        let sim = Sim::start_faulty(device, seed);
+        (0..times)
+            .map(|_| {
+                let out = sim.client(device, args);
+                assert!(out.status.success(), "{}", stderr(&out));
+                out
+            })
+            .collect()
+    }
+
     /// Starts `cellbus sim ARGS…` (stdin empty: no control channel) and waits for its
     /// `listening on …` line.
     pub fn start(args: &[&str]) -> Sim {
@@ -131,14 +157,19 @@ pub fn start_listening(
         .spawn()
         .unwrap_or_else(|e| panic!("{:?} runs: {e}", command.get_program()));
     let mut stdout = BufReader::new(child.stdout.take().expect("stdout is piped"));
-    let mut first = String::new();
-    stdout.read_line(&mut first).expect("a first line");
-    let address = first
-        .trim_end()
-        .strip_prefix(prefix)
-        .unwrap_or_else(|| panic!("first line is `{prefix}…`, got {first:?}"))
-        .to_owned();
+    let address = line_after(&mut stdout, prefix);
     (child, stdout, address)
+}
+
+/// The next line `from` gives, which must start with `prefix`: the rest of it, without the
+/// line's end.
+pub fn line_after(from: &mut impl BufRead, prefix: &str) -> String {
+    let mut line = String::new();
+    from.read_line(&mut line).expect("a line");
+    line.trim_end()
+        .strip_prefix(prefix)
+        .unwrap_or_else(|| panic!("expected a line `{prefix}…`, got {line:?}"))
+        .to_owned()
 }
 
 /// Starts `cellbus ARGS…` with no input and its stdout and stderr piped.

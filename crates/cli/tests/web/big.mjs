@@ -12,10 +12,9 @@
 // requests' bytes per refresh.
 // Usage: TOKEN=WRITE_TOKEN node big.mjs http://127.0.0.1:PORT screenshot.png
 // Prints one JSON line with what it saw and measured; exits non-zero with a reason otherwise.
-import { chromium } from 'playwright-core';
+import { launch, openPage } from './browser.mjs';
 
 const [base, screenshot] = process.argv.slice(2);
-const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
 const WINDOW_MS = 10000;
 
 const lines = (await (await fetch(`${base}/api/lines`)).json()).lines;
@@ -55,17 +54,10 @@ async function wholeStream(ms) {
   return { bytes, snapshot_bytes: snapshot, messages, seconds: (Date.now() - started) / 1000 };
 }
 
-const browser = await chromium.launch({
-  executablePath,
-  args: [
-    '--no-sandbox', '--disable-gpu', '--disable-dev-shm-usage', '--no-first-run',
-    '--disable-background-networking', '--disable-component-update', '--disable-sync',
-  ],
-});
+const browser = await launch();
 try {
-  const page = await browser.newPage({ viewport: { width: 1600, height: 1000 } });
   const errors = [];
-  page.on('pageerror', (e) => errors.push(String(e)));
+  const page = await openPage(browser, errors);
 
   // Every request the page makes, and the history queries in flight.
   const requests = [];
@@ -241,8 +233,7 @@ try {
 
   // 6. An address opens the same view, in a new tab.
   const seventh = lines[6];
-  const other = await browser.newPage({ viewport: { width: 1600, height: 1000 } });
-  other.on('pageerror', (e) => errors.push(String(e)));
+  const other = await openPage(browser, errors);
   await other.goto(`${base}/#line=${seventh.name}`);
   await other.waitForFunction(
     (expected) => {

@@ -5,28 +5,20 @@
 // here) before it shows anything.
 // With MQTT set, the gateway publishes to a broker: the page must show the MQTT link up.
 // Prints one JSON line with what it saw; exits non-zero with a reason otherwise.
-import { chromium } from 'playwright-core';
+import { launch, openPage } from './browser.mjs';
 
 const [base, screenshot] = process.argv.slice(2);
-const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
 
 const readToken = process.env.READ_TOKEN || '';
 const headers = readToken ? { Authorization: `Bearer ${readToken}` } : {};
 const api = await (await fetch(`${base}/api/devices`, { headers })).json();
 const ids = api.devices.map((d) => d.id);
 
-const browser = await chromium.launch({
-  executablePath,
-  args: [
-    '--no-sandbox', '--disable-gpu', '--disable-dev-shm-usage', '--no-first-run',
-    '--disable-background-networking', '--disable-component-update', '--disable-sync',
-  ],
-});
+const browser = await launch();
 try {
-  const page = await browser.newPage({ viewport: { width: 1600, height: 1000 } });
   const errors = [];
+  const page = await openPage(browser, errors);
   let asked = 0;
-  page.on('pageerror', (e) => errors.push(String(e)));
   page.on('dialog', async (dialog) => {
     asked += 1;
     await dialog.accept(readToken);

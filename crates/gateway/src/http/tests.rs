@@ -1203,12 +1203,7 @@ fn example_cell_with_every_kind_of_state(
         &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/cell.toml"),
     )
     .unwrap();
-    let (cell, _lines) = Cell::new(
-        &config,
-        store.handle(),
-        Arc::new(crate::metrics::Metrics::new()),
-    )
-    .unwrap();
+    let cell = crate::testing::unopened_cell(&config, &store);
     let numbers = [
         350.0,
         -0.0,

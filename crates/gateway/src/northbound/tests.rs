@@ -24,6 +24,27 @@ fn config(broker: &Mosquitto) -> MqttConfig {
     }
 }
 
+/// The next message of `kind` (`NBIRTH`) `sub` sees; `what` names it if none comes.
+async fn next_of_kind(sub: &mut Subscriber, kind: &str, what: &str) -> SparkplugMessage {
+    sub.next_where(what, LIMIT, |m| m.kind() == kind).await
+}
+
+/// A rig of `stations` JBC stations, a broker and a subscriber to every message of the
+/// rig's cell on it.
+async fn on_a_broker(stations: u8) -> (crate::testing::Rig, Mosquitto, Subscriber) {
+    let broker = Mosquitto::start();
+    let sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
+    (rig(stations), broker, sub)
+}
+
+/// The `[mqtt]` table of [`config`], taking commands.
+fn taking_commands(broker: &Mosquitto) -> MqttConfig {
+    MqttConfig {
+        commands: true,
+        ..config(broker)
+    }
+}
+
 /// The MQTT side of `rig`'s cell, running until [`Node::stop`].
 struct Node {
     task: tokio::task::JoinHandle<()>,
@@ -45,6 +66,18 @@ impl Node {
         Self { task, stop }
     }
 
+    /// Like [`Node::start`], returning once `sub` saw jbc1's first DDATA.
+    async fn start_until_data(
+        rig: &crate::testing::Rig,
+        config: MqttConfig,
+        allow_writes: bool,
+        sub: &mut Subscriber,
+    ) -> Self {
+        let node = Self::start(rig, config, allow_writes);
+        next_of_kind(sub, "DDATA", "a DDATA of jbc1").await;
+        node
+    }
+
     /// Stops it gracefully and waits (bounded) for the end.
     async fn stop(self) {
         self.stop.send(true).unwrap();
@@ -61,9 +94,7 @@ fn of_jbc2(m: &SparkplugMessage) -> bool {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answers() {
-    let broker = Mosquitto::start();
-    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
-    let rig = rig(2);
+    let (rig, broker, mut sub) = on_a_broker(2).await;
     let node = Node::start(&rig, config(&broker), false);
 
     // Born, then read: a DDATA with good values.
@@ -111,8 +142,7 @@ async fn a_silent_device_dies_with_null_readings_and_is_born_again_when_it_answe
     );
 
     node.stop().await;
-    sub.next_where("the NDEATH at the stop", LIMIT, |m| m.kind() == "NDEATH")
-        .await;
+    next_of_kind(&mut sub, "NDEATH", "the NDEATH at the stop").await;
 }
 
 /// A message as received, in its encoded form again, read by a Sparkplug host.
@@ -124,9 +154,7 @@ fn host_reads(host: &mut sparkplug::Host, m: &SparkplugMessage) -> sparkplug::Re
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_device_going_down_is_an_ndata_event_with_its_kind_severity_and_device() {
-    let broker = Mosquitto::start();
-    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
-    let rig = rig(2);
+    let (rig, broker, mut sub) = on_a_broker(2).await;
     let mut live = rig.cell.subscribe();
     let node = Node::start(&rig, config(&broker), false);
     let id = |s: &str| sparkplug::Id::new(s).unwrap();
@@ -134,9 +162,7 @@ async fn a_device_going_down_is_an_ndata_event_with_its_kind_severity_and_device
         sparkplug::Host::new(id("historian"), Some(id("rig")), sparkplug::Sharing::Alone);
 
     // The NBIRTH carries the event channel: a String metric `Event`.
-    let birth = sub
-        .next_where("the NBIRTH", LIMIT, |m| m.kind() == "NBIRTH")
-        .await;
+    let birth = next_of_kind(&mut sub, "NBIRTH", "the NBIRTH").await;
     let channel = birth
         .metric("Event")
         .expect("the NBIRTH has an Event metric");
@@ -212,46 +238,32 @@ fn writable_number(rig: &crate::testing::Rig) -> (String, f64, f64) {
         .expect("a JBC station has a writable number")
 }
 
+/// Where jbc1's commands go.
+const JBC1_DCMD: &str = "spBv1.0/rig/DCMD/cell/jbc1";
+
+/// A DCMD payload that sets the metric `name` to the double `value`.
+fn set_number(name: &str, value: f64) -> Vec<u8> {
+    testkit::command_payload(
+        name,
+        sparkplug::DataType::Double,
+        SpValue::DoubleValue(value),
+    )
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dcmd_write_is_refused_without_allow_writes_and_nothing_is_stored() {
-    let broker = Mosquitto::start();
-    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
-    let rig = rig(1);
+    let (rig, broker, mut sub) = on_a_broker(1).await;
     // The table asks for commands, but the gateway runs without --allow-writes.
-    let config = MqttConfig {
-        commands: true,
-        ..config(&broker)
-    };
-    let node = Node::start(&rig, config, false);
-    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
-        .await;
+    let node = Node::start_until_data(&rig, taking_commands(&broker), false, &mut sub).await;
     let (name, old, target) = writable_number(&rig);
 
-    sub.publish(
-        "spBv1.0/rig/DCMD/cell/jbc1",
-        testkit::command_payload(
-            &name,
-            sparkplug::DataType::Double,
-            SpValue::DoubleValue(target),
-        ),
-    )
-    .await;
+    sub.publish(JBC1_DCMD, set_number(&name, target)).await;
     // Commands are handled in order: once the rebirth asked after it is out, the DCMD was
     // handled, and the birth shows the value unchanged.
-    sub.publish(
-        "spBv1.0/rig/NCMD/cell",
-        testkit::command_payload(
-            "Node Control/Rebirth",
-            sparkplug::DataType::Boolean,
-            SpValue::BooleanValue(true),
-        ),
-    )
-    .await;
-    sub.next_where("the NBIRTH of the rebirth", LIMIT, |m| m.kind() == "NBIRTH")
+    sub.publish("spBv1.0/rig/NCMD/cell", testkit::rebirth_command())
         .await;
-    let birth = sub
-        .next_where("the DBIRTH of jbc1", LIMIT, |m| m.kind() == "DBIRTH")
-        .await;
+    next_of_kind(&mut sub, "NBIRTH", "the NBIRTH of the rebirth").await;
+    let birth = next_of_kind(&mut sub, "DBIRTH", "the DBIRTH of jbc1").await;
     assert_eq!(
         birth.metric(&name).and_then(|m| m.value.clone()),
         Some(SpValue::DoubleValue(old)),
@@ -280,50 +292,16 @@ async fn a_dcmd_write_is_refused_without_allow_writes_and_nothing_is_stored() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
-    let broker = Mosquitto::start();
-    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
-    let rig = rig(1);
+    let (rig, broker, mut sub) = on_a_broker(1).await;
     let mut live = rig.cell.subscribe();
-    let config = MqttConfig {
-        commands: true,
-        ..config(&broker)
-    };
-    let node = Node::start(&rig, config, true);
-    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
-        .await;
+    let node = Node::start_until_data(&rig, taking_commands(&broker), true, &mut sub).await;
     let (name, old, target) = writable_number(&rig);
 
     // Outside the point's range: refused before the wire, with one audit row.
-    sub.publish(
-        "spBv1.0/rig/DCMD/cell/jbc1",
-        testkit::command_payload(
-            &name,
-            sparkplug::DataType::Double,
-            SpValue::DoubleValue(1e9),
-        ),
-    )
-    .await;
-    sub.publish(
-        "spBv1.0/rig/DCMD/cell/jbc1",
-        testkit::command_payload(
-            &name,
-            sparkplug::DataType::Double,
-            SpValue::DoubleValue(target),
-        ),
-    )
-    .await;
+    sub.publish(JBC1_DCMD, set_number(&name, 1e9)).await;
+    sub.publish(JBC1_DCMD, set_number(&name, target)).await;
     // The write event is emitted when the device took the value.
-    tokio::time::timeout(LIMIT, async {
-        loop {
-            if let Ok(crate::cell::LiveMessage::Event(e)) = live.recv().await
-                && e.kind == crate::event::EventKind::Write
-            {
-                return e;
-            }
-        }
-    })
-    .await
-    .expect("the write event");
+    next_event(&mut live, crate::event::EventKind::Write).await;
     let audit = rig.cell.store().audit_log(None, 10).unwrap();
     let results: Vec<&str> = audit.iter().rev().map(|a| a.result.as_str()).collect();
     assert_eq!(
@@ -345,9 +323,7 @@ async fn a_dcmd_write_goes_through_the_audited_write_path_when_allowed() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_never() {
-    let broker = Mosquitto::start();
-    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
-    let rig = rig(1);
+    let (rig, broker, mut sub) = on_a_broker(1).await;
     let mut live = rig.cell.subscribe();
     let read = || {
         let device = rig.cell.device("jbc1").unwrap();
@@ -364,35 +340,22 @@ async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_n
     .await
     .expect("jbc1 read");
     let (name, old, _) = writable_number(&rig);
-    let topic = "spBv1.0/rig/DCMD/cell/jbc1";
-    let command = |value: f64| {
-        testkit::command_payload(
-            &name,
-            sparkplug::DataType::Double,
-            SpValue::DoubleValue(value),
-        )
-    };
     // A command kept by the broker from before the node's session: delivered as retained
     // when the node subscribes, and refused. It is 5 MiB (its payload's body), more than a
     // message the gateway publishes: a client that dropped the connection on it would get
     // it again at every reconnection and never stay connected.
     let stale = old + 7.0;
-    let mut large = <sparkplug::proto::Payload as prost::Message>::decode(&command(stale)[..])
-        .expect("a Sparkplug payload");
+    let mut large =
+        <sparkplug::proto::Payload as prost::Message>::decode(&set_number(&name, stale)[..])
+            .expect("a Sparkplug payload");
     large.body = Some(vec![0x55; 5 << 20]);
-    sub.publish_retained(topic, prost::Message::encode_to_vec(&large))
+    sub.publish_retained(JBC1_DCMD, prost::Message::encode_to_vec(&large))
         .await;
-    let config = MqttConfig {
-        commands: true,
-        ..config(&broker)
-    };
-    let node = Node::start(&rig, config, true);
-    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
-        .await;
+    let node = Node::start_until_data(&rig, taking_commands(&broker), true, &mut sub).await;
     // Five commands, one right after the other: carried out in that order.
     let values: Vec<f64> = (1..=5).map(|k| old + f64::from(k)).collect();
     for &value in &values {
-        sub.publish(topic, command(value)).await;
+        sub.publish(JBC1_DCMD, set_number(&name, value)).await;
     }
     // Each write's event comes once its audit rows are committed.
     let mut done = Vec::new();
@@ -459,9 +422,7 @@ fn now_ms() -> u64 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes_as_history() {
-    let broker = Mosquitto::start();
-    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
-    let rig = rig(1);
+    let (rig, broker, mut sub) = on_a_broker(1).await;
     let mut live = rig.cell.subscribe();
     let config = MqttConfig {
         primary_host: Some("scada".into()),
@@ -474,29 +435,19 @@ async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes
     let online_at = now_ms();
     sub.publish_retained("spBv1.0/STATE/scada", host_state(true))
         .await;
-    let birth = sub
-        .next_where("the NBIRTH once the host is online", LIMIT, |m| {
-            m.kind() == "NBIRTH"
-        })
-        .await;
+    let birth = next_of_kind(&mut sub, "NBIRTH", "the NBIRTH once the host is online").await;
     assert!(
         birth.payload.timestamp.unwrap() >= online_at,
         "no birth before the host was online"
     );
-    let dbirth = sub
-        .next_where("the DBIRTH of jbc1", LIMIT, |m| m.kind() == "DBIRTH")
-        .await;
+    let dbirth = next_of_kind(&mut sub, "DBIRTH", "the DBIRTH of jbc1").await;
     let bd_seq = birth.bd_seq().unwrap();
 
     // The host goes away: the node ends its session (NDEATH with the session's bdSeq) and
     // keeps reading the station meanwhile.
     sub.publish_retained("spBv1.0/STATE/scada", host_state(false))
         .await;
-    let death = sub
-        .next_where("the NDEATH when the host went offline", LIMIT, |m| {
-            m.kind() == "NDEATH"
-        })
-        .await;
+    let death = next_of_kind(&mut sub, "NDEATH", "the NDEATH when the host went offline").await;
     assert_eq!(death.bd_seq(), Some(bd_seq));
     let offline_at = now_ms();
     // The node is connected again (a new session), still silent: wait for some readings.
@@ -510,11 +461,7 @@ async fn with_a_primary_host_births_wait_for_it_and_what_it_missed_offline_comes
     let back_at = now_ms();
     sub.publish_retained("spBv1.0/STATE/scada", host_state(true))
         .await;
-    let again = sub
-        .next_where("the NBIRTH when the host is back", LIMIT, |m| {
-            m.kind() == "NBIRTH"
-        })
-        .await;
+    let again = next_of_kind(&mut sub, "NBIRTH", "the NBIRTH when the host is back").await;
     assert!(again.bd_seq().unwrap() > bd_seq);
     // What changed while the host was away comes as history, with its own read times.
     let history = sub
@@ -559,9 +506,7 @@ fn host_state_at(online: bool, timestamp: u64) -> Vec<u8> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn forged_host_states_cannot_latch_the_node_offline() {
-    let broker = Mosquitto::start();
-    let mut sub = Subscriber::start(broker.port(), "spBv1.0/rig/+/cell/#").await;
-    let rig = rig(1);
+    let (rig, broker, mut sub) = on_a_broker(1).await;
     let config = MqttConfig {
         primary_host: Some("scada".into()),
         ..config(&broker)
@@ -571,9 +516,7 @@ async fn forged_host_states_cannot_latch_the_node_offline() {
     let session = now_ms() - 60_000;
     sub.publish_retained(state_topic, host_state_at(true, session))
         .await;
-    let birth = sub
-        .next_where("the NBIRTH", LIMIT, |m| m.kind() == "NBIRTH")
-        .await;
+    let birth = next_of_kind(&mut sub, "NBIRTH", "the NBIRTH").await;
     let bd_seq = birth.bd_seq().unwrap();
     let metrics = &super::mqtt::status::status(&rig.cell).metrics;
 
@@ -600,9 +543,7 @@ async fn forged_host_states_cannot_latch_the_node_offline() {
 
     // An offline nobody contradicts: after the grace, an NDEATH that says why.
     sub.publish(state_topic, host_state(false)).await;
-    let death = sub
-        .next_where("the NDEATH", LIMIT, |m| m.kind() == "NDEATH")
-        .await;
+    let death = next_of_kind(&mut sub, "NDEATH", "the NDEATH").await;
     assert_eq!(death.bd_seq(), Some(bd_seq));
     assert_eq!(
         death
@@ -619,11 +560,7 @@ async fn forged_host_states_cannot_latch_the_node_offline() {
     .await;
     sub.publish_retained(state_topic, host_state_at(true, session))
         .await;
-    let reborn = sub
-        .next_where("the NBIRTH of the next session", LIMIT, |m| {
-            m.kind() == "NBIRTH"
-        })
-        .await;
+    let reborn = next_of_kind(&mut sub, "NBIRTH", "the NBIRTH of the next session").await;
     assert!(reborn.bd_seq().unwrap() > bd_seq);
     node.stop().await;
 }
@@ -653,13 +590,10 @@ async fn a_dcmd_is_carried_out_whole_or_refused_whole_and_refusals_do_not_fill_t
     let rig = rig(1);
     let mut live = rig.cell.subscribe();
     let config = MqttConfig {
-        commands: true,
         max_command_metrics: 8,
-        ..config(&broker)
+        ..taking_commands(&broker)
     };
-    let node = Node::start(&rig, config, true);
-    sub.next_where("a DDATA of jbc1", LIMIT, |m| m.kind() == "DDATA")
-        .await;
+    let node = Node::start_until_data(&rig, config, true, &mut sub).await;
     let (name, old, target) = writable_number(&rig);
     let topic = "spBv1.0/rig/DCMD/cell/jbc1";
     let metrics = &super::mqtt::status::status(&rig.cell).metrics;

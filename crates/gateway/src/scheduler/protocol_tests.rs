@@ -21,8 +21,9 @@ use crate::config::{CellConfig, DeviceConfig, LineConfig};
 use crate::driver::{DriverConfig, Kind};
 use crate::event::EventKind;
 use crate::metrics::Metrics;
-use crate::point::{DeviceId, PointId, ValueError};
+use crate::point::{DeviceId, ValueError};
 use crate::store::{EventFilter, Store, StoreOptions};
+use crate::testing::{point, value};
 
 struct Rig {
     cell: Arc<Cell>,
@@ -134,17 +135,6 @@ fn rig_with(regulator_faults: Option<(u64, f64)>) -> Rig {
         _store: store,
         _dir: dir,
     }
-}
-
-fn point(id: &str) -> PointId {
-    PointId::parse(id).unwrap()
-}
-
-fn value(cell: &Cell, id: &str) -> Option<Value> {
-    let id = point(id);
-    let device = cell.device_entry(id.device()).unwrap();
-    let index = device.point_index(id.name()).unwrap();
-    device.read().points[index].value.clone()
 }
 
 async fn events(cell: &Cell, device: &str) -> Vec<(String, String)> {
@@ -269,45 +259,33 @@ async fn writes_outside_the_range_or_the_regulators_limit_are_refused_before_the
     };
     let before = settings();
     let sealing = point("sealer0.sealing_temperature");
-    let err = rig
-        .cell
-        .write(&sealing, &Value::Number(1200.0))
-        .await
-        .unwrap_err();
-    assert!(
-        matches!(err, WriteError::Invalid(ValueError::OutOfRange { .. })),
-        "{err}"
-    );
     let max = value(&rig.cell, "sealer0.max_working_temperature")
         .and_then(|v| v.as_number())
         .unwrap();
-    let err = rig
-        .cell
-        .write(&sealing, &Value::Number(max + 1.0))
-        .await
-        .unwrap_err();
-    assert!(
-        err.to_string().contains("maximum working temperature"),
-        "{err}"
-    );
-    let err = rig
-        .cell
-        .write(&point("sealer0.kint_gain"), &Value::Number(1.25))
-        .await
-        .unwrap_err();
-    assert!(
-        matches!(err, WriteError::Invalid(ValueError::NotAStep { .. })),
-        "{err}"
-    );
-    let err = rig
-        .cell
-        .write(&point("cross1.load_power"), &Value::Number(1.0))
-        .await
-        .unwrap_err();
-    assert!(
-        matches!(err, WriteError::Invalid(ValueError::ReadOnly { .. })),
-        "{err}"
-    );
+    // Each write: point, value and how it is refused.
+    type Refusal = fn(&WriteError) -> bool;
+    let refusals: [(&str, f64, Refusal); 4] = [
+        ("sealer0.sealing_temperature", 1200.0, |e| {
+            matches!(e, WriteError::Invalid(ValueError::OutOfRange { .. }))
+        }),
+        ("sealer0.sealing_temperature", max + 1.0, |e| {
+            e.to_string().contains("maximum working temperature")
+        }),
+        ("sealer0.kint_gain", 1.25, |e| {
+            matches!(e, WriteError::Invalid(ValueError::NotAStep { .. }))
+        }),
+        ("cross1.load_power", 1.0, |e| {
+            matches!(e, WriteError::Invalid(ValueError::ReadOnly { .. }))
+        }),
+    ];
+    for (name, number, refusal) in refusals {
+        let err = rig
+            .cell
+            .write(&point(name), &Value::Number(number))
+            .await
+            .unwrap_err();
+        assert!(refusal(&err), "{name} = {number}: {err}");
+    }
     assert_eq!(settings(), before, "nothing reached the regulator");
 
     // A value in range goes out and is read back at once.

@@ -9,9 +9,9 @@ use jbc::code::ToolError;
 
 use super::*;
 use crate::cell::{Cell, DeviceStatus};
-use crate::point::PointId;
 use crate::store::{EventFilter, Series};
 use crate::testing::rig;
+use crate::testing::{point, value};
 
 fn polls(cell: &Cell, device: &str, result: PollResult) -> u64 {
     cell.metrics().poll_count("bench", device, result)
@@ -19,17 +19,6 @@ fn polls(cell: &Cell, device: &str, result: PollResult) -> u64 {
 
 fn status(cell: &Cell, device: &str) -> DeviceStatus {
     cell.device_entry(device).unwrap().read().status
-}
-
-fn point(id: &str) -> PointId {
-    PointId::parse(id).unwrap()
-}
-
-fn value(cell: &Cell, id: &str) -> Option<Value> {
-    let id = point(id);
-    let device = cell.device_entry(id.device()).unwrap();
-    let index = device.point_index(id.name()).unwrap();
-    device.read().points[index].value.clone()
 }
 
 /// Every sample of `id` the store holds, once what is queued is committed.
@@ -45,23 +34,31 @@ async fn recorded(cell: &Cell, id: &str) -> Vec<crate::store::HistorySample> {
     samples
 }
 
+/// The events of `cell` that `filter` picks, once what is queued is committed.
+async fn events(cell: &Cell, filter: EventFilter) -> Vec<crate::store::EventRecord> {
+    cell.store().flush().await.unwrap();
+    cell.store().events(&filter).unwrap()
+}
+
+/// The backoff after each of the first `failures` failed polls of a device polled every
+/// `period`, in seconds.
+fn backoff_seconds(failures: u32, period: Duration) -> Vec<u64> {
+    (1..=failures)
+        .map(|f| backoff_delay(f, period).as_secs())
+        .collect()
+}
+
 #[test]
 fn backoff_doubles_from_two_seconds_up_to_ten() {
     let second = Duration::from_secs(1);
-    let delays: Vec<u64> = (1..=6)
-        .map(|f| backoff_delay(f, second).as_secs())
-        .collect();
-    assert_eq!(delays, vec![2, 4, 8, 10, 10, 10]);
+    assert_eq!(backoff_seconds(6, second), vec![2, 4, 8, 10, 10, 10]);
     assert_eq!(backoff_delay(u32::MAX, second), BACKOFF_CAP);
 }
 
 #[test]
 fn a_device_polled_less_often_than_the_cap_is_backed_off_up_to_its_period() {
     let minute = Duration::from_secs(60);
-    let delays: Vec<u64> = (1..=7)
-        .map(|f| backoff_delay(f, minute).as_secs())
-        .collect();
-    assert_eq!(delays, vec![2, 4, 8, 16, 32, 60, 60]);
+    assert_eq!(backoff_seconds(7, minute), vec![2, 4, 8, 16, 32, 60, 60]);
 }
 
 #[tokio::test(start_paused = true)]
@@ -113,16 +110,15 @@ async fn a_silent_device_is_backed_off_while_its_neighbour_keeps_its_rate() {
         after - before
     );
 
-    rig.cell.store().flush().await.unwrap();
-    let events = rig
-        .cell
-        .store()
-        .events(&EventFilter {
+    let events = events(
+        &rig.cell,
+        EventFilter {
             device: Some("jbc2".into()),
             limit: 10,
             ..EventFilter::default()
-        })
-        .unwrap();
+        },
+    )
+    .await;
     let kinds: Vec<&str> = events.iter().map(|e| e.kind.as_str()).collect();
     assert_eq!(kinds, vec!["device_up", "device_down"]);
     assert!(
@@ -330,15 +326,14 @@ async fn a_hung_line_session_is_reopened_after_every_device_timed_out_three_time
         })
         .get();
     assert_eq!(reopens, 1);
-    rig.cell.store().flush().await.unwrap();
-    let events = rig
-        .cell
-        .store()
-        .events(&EventFilter {
+    let events = events(
+        &rig.cell,
+        EventFilter {
             limit: 50,
             ..EventFilter::default()
-        })
-        .unwrap();
+        },
+    )
+    .await;
     let reopened: Vec<&str> = events
         .iter()
         .filter(|e| e.kind == "line_reopened")
@@ -425,26 +420,19 @@ async fn a_line_closed_by_the_other_end_is_reopened_and_polling_resumes() {
     let errors = rig
         .cell
         .metrics()
-        .errors
-        .get_or_create(&crate::metrics::ErrorLabels {
-            line: "bench".into(),
-            device: "jbc1".into(),
-            kind: "disconnected".into(),
-        })
-        .get();
+        .error_count("bench", "jbc1", "disconnected");
     assert_eq!(errors, 1);
-    rig.cell.store().flush().await.unwrap();
-    let kinds: Vec<String> = rig
-        .cell
-        .store()
-        .events(&EventFilter {
+    let kinds: Vec<String> = events(
+        &rig.cell,
+        EventFilter {
             limit: 20,
             ..EventFilter::default()
-        })
-        .unwrap()
-        .into_iter()
-        .map(|e| e.kind)
-        .collect();
+        },
+    )
+    .await
+    .into_iter()
+    .map(|e| e.kind)
+    .collect();
     assert_eq!(
         kinds,
         vec![
@@ -572,12 +560,7 @@ fn cell_with(deadband: Option<Deadband>) -> (Arc<Cell>, crate::store::Store, tem
         }],
         ..crate::config::CellConfig::default()
     };
-    let (cell, _lines) = Cell::new(
-        &config,
-        store.handle(),
-        Arc::new(crate::metrics::Metrics::new()),
-    )
-    .unwrap();
+    let cell = crate::testing::unopened_cell(&config, &store);
     (cell, store, dir)
 }
 

@@ -464,22 +464,23 @@ impl StoreHandle {
     /// Commits everything queued before this call; returns the rows committed so far. While
     /// commits fail and wait for their retry, answers the last error at once.
     pub fn flush(&self) -> impl Future<Output = Result<u64, StoreError>> + use<> {
-        let (reply, answer) = tokio::sync::oneshot::channel();
-        let sent = self.tx.send(Command::Flush(reply));
-        async move {
-            sent.map_err(|_| StoreError::WriterGone)?;
-            answer
-                .await
-                .map_err(|_| StoreError::WriterGone)?
-                .map_err(StoreError::Commit)
-        }
+        self.ask(Command::Flush)
     }
 
     /// Deletes rows older than the retention before `now` (in chunks, new rows being
     /// committed between them); returns how many went.
     pub fn prune(&self, now: Timestamp) -> impl Future<Output = Result<u64, StoreError>> + use<> {
+        self.ask(move |reply| Command::Prune(now, reply))
+    }
+
+    /// Sends the writer the command `ask` makes of a reply channel; the future gives the
+    /// writer's answer.
+    fn ask<A>(&self, ask: A) -> impl Future<Output = Result<u64, StoreError>> + use<A>
+    where
+        A: FnOnce(tokio::sync::oneshot::Sender<Result<u64, String>>) -> Command,
+    {
         let (reply, answer) = tokio::sync::oneshot::channel();
-        let sent = self.tx.send(Command::Prune(now, reply));
+        let sent = self.tx.send(ask(reply));
         async move {
             sent.map_err(|_| StoreError::WriterGone)?;
             answer

@@ -14,6 +14,20 @@ use crate::time::{Timestamp, duration_millis};
 use super::rollup::{Aggregate, MINUTE_MS, Marks, aggregate_at, minute_of, next_minute};
 use super::*;
 
+/// A page of a point's changes oldest first, `from` included: point, from (or the last
+/// page's time, if later), to, the last page's time and row, limit.
+const OLDEST_FIRST_PAGE: &str = "SELECT t, value, text, quality, rowid FROM samples \
+     WHERE point = ?1 AND t >= ?2 AND t < ?3 \
+     AND (t > ?4 OR (t = ?4 AND rowid > ?5)) \
+     ORDER BY t, rowid LIMIT ?6";
+
+/// A page of a point's changes newest first, `to` included: point, from, to (or the last
+/// page's time, if earlier), the last page's time and row, limit.
+const NEWEST_FIRST_PAGE: &str = "SELECT t, value, text, quality, rowid FROM samples \
+     WHERE point = ?1 AND t > ?2 AND t <= ?3 \
+     AND (t < ?4 OR (t = ?4 AND rowid < ?5)) \
+     ORDER BY t DESC, rowid DESC LIMIT ?6";
+
 impl StoreHandle {
     /// Stored changes of `point` in `[from, to)`, raw or in buckets of `step`.
     ///
@@ -127,41 +141,23 @@ impl StoreHandle {
                 };
                 Ok((cursor, sample))
             };
-            let rows = match order {
-                PageOrder::OldestFirst => {
-                    let after = after.unwrap_or(SampleCursor {
-                        t: Timestamp(i64::MIN),
-                        row: i64::MIN,
-                    });
-                    let mut stmt = conn.prepare_cached(
-                        "SELECT t, value, text, quality, rowid FROM samples \
-                         WHERE point = ?1 AND t >= ?2 AND t < ?3 \
-                         AND (t > ?4 OR (t = ?4 AND rowid > ?5)) \
-                         ORDER BY t, rowid LIMIT ?6",
-                    )?;
-                    let lowest = from.0.max(after.t.0);
-                    stmt.query_map(params![id, lowest, to.0, after.t.0, after.row, limit], read)?
-                        .collect::<Result<Vec<_>, _>>()?
-                }
-                PageOrder::NewestFirst => {
-                    let after = after.unwrap_or(SampleCursor {
-                        t: Timestamp(i64::MAX),
-                        row: i64::MAX,
-                    });
-                    let mut stmt = conn.prepare_cached(
-                        "SELECT t, value, text, quality, rowid FROM samples \
-                         WHERE point = ?1 AND t > ?2 AND t <= ?3 \
-                         AND (t < ?4 OR (t = ?4 AND rowid < ?5)) \
-                         ORDER BY t DESC, rowid DESC LIMIT ?6",
-                    )?;
-                    let highest = to.0.min(after.t.0);
-                    stmt.query_map(
-                        params![id, from.0, highest, after.t.0, after.row, limit],
-                        read,
-                    )?
-                    .collect::<Result<Vec<_>, _>>()?
-                }
+            // Before the first page, the cursor stands before every change, in `order`.
+            let edge = match order {
+                PageOrder::OldestFirst => i64::MIN,
+                PageOrder::NewestFirst => i64::MAX,
             };
+            let after = after.unwrap_or(SampleCursor {
+                t: Timestamp(edge),
+                row: edge,
+            });
+            let (sql, low, high) = match order {
+                PageOrder::OldestFirst => (OLDEST_FIRST_PAGE, from.0.max(after.t.0), to.0),
+                PageOrder::NewestFirst => (NEWEST_FIRST_PAGE, from.0, to.0.min(after.t.0)),
+            };
+            let rows = conn
+                .prepare_cached(sql)?
+                .query_map(params![id, low, high, after.t.0, after.row, limit], read)?
+                .collect::<Result<Vec<_>, _>>()?;
             Ok(rows)
         })
     }

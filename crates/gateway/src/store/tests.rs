@@ -18,11 +18,21 @@ fn sample(p: &str, t: i64, v: f64) -> Sample {
     }
 }
 
+/// Bad if `bad`, else good.
+fn good_unless(bad: bool) -> Quality {
+    if bad { Quality::Bad } else { Quality::Good }
+}
+
 /// A store with the default options in a fresh temporary directory (removed when
 /// dropped).
 fn temp_store() -> (tempfile::TempDir, Store) {
+    temp_store_with(StoreOptions::default())
+}
+
+/// Like [`temp_store`], with `options`.
+fn temp_store_with(options: StoreOptions) -> (tempfile::TempDir, Store) {
     let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+    let store = Store::open(dir.path(), options).unwrap();
     (dir, store)
 }
 
@@ -91,13 +101,7 @@ async fn a_batch_larger_than_one_multi_row_insert_keeps_every_value_and_quality_
         1 => Some(Value::Text(format!("text {t}"))),
         _ => None,
     };
-    let quality = |t: i64| {
-        if t % 3 == 2 {
-            Quality::Bad
-        } else {
-            Quality::Good
-        }
-    };
+    let quality = |t: i64| good_unless(t % 3 == 2);
     for t in 0..count {
         h.sample(Sample {
             point: point(if t % 2 == 0 { "a.mixed" } else { "b.mixed" }),
@@ -129,13 +133,7 @@ async fn a_batch_keeps_each_points_samples_in_the_order_they_came_even_at_one_ti
     let h = store.handle();
     let names = ["c.level", "a.level", "b.level"];
     let count = writer::INSERT_ROWS * 3 + 5;
-    let quality = |i: usize| {
-        if i % 4 == 3 {
-            Quality::Bad
-        } else {
-            Quality::Good
-        }
-    };
+    let quality = |i: usize| good_unless(i % 4 == 3);
     for i in 0..count {
         h.sample(Sample {
             point: point(names[i % 3]),
@@ -231,13 +229,11 @@ async fn a_step_gives_average_min_and_max_per_bucket_of_good_values() {
 
 #[tokio::test]
 async fn rows_are_committed_in_batches_without_a_flush() {
-    let dir = tempfile::tempdir().unwrap();
-    let options = StoreOptions {
+    let (_dir, store) = temp_store_with(StoreOptions {
         batch_rows: 10,
         batch_delay: Duration::from_secs(3600),
         ..StoreOptions::default()
-    };
-    let store = Store::open(dir.path(), options).unwrap();
+    });
     let h = store.handle();
     for t in 0..25 {
         h.sample(sample("a.temp", t, t as f64));
@@ -255,12 +251,10 @@ async fn rows_are_committed_in_batches_without_a_flush() {
 
 #[tokio::test]
 async fn closing_the_store_commits_what_is_queued() {
-    let dir = tempfile::tempdir().unwrap();
-    let options = StoreOptions {
+    let (dir, store) = temp_store_with(StoreOptions {
         batch_delay: Duration::from_secs(3600),
         ..StoreOptions::default()
-    };
-    let store = Store::open(dir.path(), options).unwrap();
+    });
     let h = store.handle();
     for t in 0..7 {
         h.sample(sample("a.temp", t, 1.0));
@@ -276,12 +270,10 @@ async fn closing_the_store_commits_what_is_queued() {
 
 #[tokio::test]
 async fn retention_deletes_samples_and_events_older_than_the_limit_and_keeps_audit() {
-    let dir = tempfile::tempdir().unwrap();
-    let options = StoreOptions {
+    let (_dir, store) = temp_store_with(StoreOptions {
         retain: Duration::from_secs(10),
         ..StoreOptions::default()
-    };
-    let store = Store::open(dir.path(), options).unwrap();
+    });
     let h = store.handle();
     for t in [1_000, 5_000, 15_000, 25_000] {
         h.sample(sample("a.temp", t, 1.0));
@@ -794,13 +786,11 @@ async fn an_unusable_data_directory_turns_the_history_off_and_rows_are_counted_a
 
 #[tokio::test]
 async fn retention_deletes_in_chunks_and_commits_new_rows_between_them() {
-    let dir = tempfile::tempdir().unwrap();
-    let options = StoreOptions {
+    let (_dir, store) = temp_store_with(StoreOptions {
         retain: Duration::from_secs(10),
         prune_chunk_rows: 100,
         ..StoreOptions::default()
-    };
-    let store = Store::open(dir.path(), options).unwrap();
+    });
     let h = store.handle();
     fill(&h, "a.temp", 0, 10_000);
     h.flush().await.unwrap();
@@ -823,13 +813,11 @@ async fn retention_deletes_in_chunks_and_commits_new_rows_between_them() {
 
 #[tokio::test]
 async fn audit_rows_have_their_own_longer_retention() {
-    let dir = tempfile::tempdir().unwrap();
-    let options = StoreOptions {
+    let (_dir, store) = temp_store_with(StoreOptions {
         retain: Duration::from_secs(10),
         retain_audit: Duration::from_secs(100),
         ..StoreOptions::default()
-    };
-    let store = Store::open(dir.path(), options).unwrap();
+    });
     let h = store.handle();
     for t in [1_000, 50_000, 150_000] {
         h.audit(audit(t, &format!("at {t}")));
@@ -861,12 +849,10 @@ async fn audit_rows_have_their_own_longer_retention() {
 
 #[tokio::test]
 async fn a_new_file_vacuums_incrementally_and_shrinks_with_its_wal_after_a_prune() {
-    let dir = tempfile::tempdir().unwrap();
-    let options = StoreOptions {
+    let (dir, store) = temp_store_with(StoreOptions {
         retain: Duration::from_secs(10),
         ..StoreOptions::default()
-    };
-    let store = Store::open(dir.path(), options).unwrap();
+    });
     let h = store.handle();
     let rows = 100_000;
     fill(&h, "a.temp", 0, rows);
@@ -1444,13 +1430,11 @@ async fn a_late_sample_joins_its_closed_minute_and_a_restart_rebuilds_the_open_o
 
 #[tokio::test]
 async fn retention_prunes_the_rollups_with_the_samples_and_answers_stay_equal() {
-    let dir = tempfile::tempdir().unwrap();
-    let options = StoreOptions {
+    let (dir, store) = temp_store_with(StoreOptions {
         retain: Duration::from_secs(5 * 60),
         prune_chunk_rows: 7,
         ..StoreOptions::default()
-    };
-    let store = Store::open(dir.path(), options).unwrap();
+    });
     let h = store.handle();
     let end = 12 * 60_000;
     for t in (0..end).step_by(2_000) {

@@ -644,24 +644,14 @@ impl PruneJob {
                 0
             }
             Stage::Events => {
-                let n = conn
-                    .prepare_cached(
-                        "DELETE FROM events WHERE id IN \
-                         (SELECT id FROM events WHERE t < ?1 LIMIT ?2)",
-                    )?
-                    .execute(params![self.cutoff, limit])?;
+                let n = delete_before(conn, "events", self.cutoff, limit)?;
                 if n < chunk {
                     self.stage = Stage::Audit;
                 }
                 n
             }
             Stage::Audit => {
-                let n = conn
-                    .prepare_cached(
-                        "DELETE FROM audit WHERE id IN \
-                         (SELECT id FROM audit WHERE t < ?1 LIMIT ?2)",
-                    )?
-                    .execute(params![self.audit_cutoff, limit])?;
+                let n = delete_before(conn, "audit", self.audit_cutoff, limit)?;
                 if n < chunk {
                     self.stage = if self.deleted + n as u64 > 0 {
                         Stage::Vacuum
@@ -701,6 +691,20 @@ impl PruneJob {
         self.deleted += n;
         Ok(n)
     }
+}
+
+/// Deletes up to `limit` rows of `table` (`events` or `audit`, both keyed by `id`) older
+/// than `cutoff`; returns how many went.
+fn delete_before(
+    conn: &Connection,
+    table: &str,
+    cutoff: i64,
+    limit: i64,
+) -> rusqlite::Result<usize> {
+    conn.prepare_cached(&format!(
+        "DELETE FROM {table} WHERE id IN (SELECT id FROM {table} WHERE t < ?1 LIMIT ?2)"
+    ))?
+    .execute(params![cutoff, limit])
 }
 
 /// Writes rows in one transaction, with the rollups they change; returns how many

@@ -457,16 +457,8 @@ impl<'a> Accepted<'a> {
         });
         let mut samples = Vec::with_capacity(batch.samples.len());
         for s in &batch.samples {
-            let verdict = if [&s.group, &s.node, &s.device, &s.point]
-                .iter()
-                .any(|t| has_nul(t))
-                || has_nul_opt(&s.text)
-            {
-                Err(RefusalReason::NulCharacter)
-            } else {
-                check_time(s.t, now, max_age)
-            };
-            match verdict {
+            let texts = [&s.group, &s.node, &s.device, &s.point];
+            match verdict(&texts, &[&s.text], s.t, now, max_age) {
                 Ok(()) => samples.push(s),
                 Err(reason) => {
                     written.refused_samples += 1;
@@ -479,13 +471,7 @@ impl<'a> Accepted<'a> {
         for e in &batch.events {
             let texts = [&e.group, &e.node, &e.kind, &e.message];
             let optional = [&e.device, &e.point, &e.line];
-            let verdict =
-                if texts.iter().any(|t| has_nul(t)) || optional.iter().any(|t| has_nul_opt(t)) {
-                    Err(RefusalReason::NulCharacter)
-                } else {
-                    check_time(e.t, now, max_age)
-                };
-            match verdict {
+            match verdict(&texts, &optional, e.t, now, max_age) {
                 Ok(()) => events.push(e),
                 Err(reason) => {
                     written.refused_events += 1;
@@ -727,6 +713,22 @@ fn display_point(node: &str, device: &str, point: &str) -> String {
         format!("{node}/{point}")
     } else {
         format!("{node}/{device}.{point}")
+    }
+}
+
+/// Whether a row with `texts` and `optional` texts, read at `t`, can be stored: no NUL
+/// character (PostgreSQL's text cannot hold one), and a time [`check_time`] takes.
+fn verdict(
+    texts: &[&String],
+    optional: &[&Option<String>],
+    t: SystemTime,
+    now: SystemTime,
+    max_age: Option<Duration>,
+) -> Result<(), RefusalReason> {
+    if texts.iter().any(|t| has_nul(t)) || optional.iter().any(|t| has_nul_opt(t)) {
+        Err(RefusalReason::NulCharacter)
+    } else {
+        check_time(t, now, max_age)
     }
 }
 

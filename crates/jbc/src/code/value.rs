@@ -168,42 +168,29 @@ pub fn interpret(code: Code, data: &Data) -> Result<Reading, InterpretError> {
             unit,
         });
     }
+    // A value of one of the spec's tables: `known` says which values it has.
+    let in_table = |reading: fn(i32) -> Option<Reading>, known| {
+        let n = number()?;
+        reading(n).ok_or_else(|| unknown(n, known))
+    };
     match code {
-        Code::ConnectedTool(_) => {
-            let n = number()?;
-            Tool::from_number(n)
-                .map(Reading::Tool)
-                .ok_or_else(|| unknown(n, "0 to 2"))
-        }
-        Code::PortError(_) => {
-            let n = number()?;
-            ToolError::from_code(n)
-                .map(Reading::ToolError)
-                .ok_or_else(|| unknown(n, "0 to 10"))
-        }
-        Code::StationError => {
-            let n = number()?;
-            StationError::from_code(n)
-                .map(Reading::StationError)
-                .ok_or_else(|| unknown(n, "0 to 6"))
-        }
-        Code::PortStatus(_) => {
-            let n = number()?;
-            PortStatus::from_number(n)
-                .map(Reading::PortStatus)
-                .ok_or_else(|| {
-                    unknown(
-                        n,
-                        "digits 0/1 for tool (units), cooling (tens), suction (hundreds)",
-                    )
-                })
-        }
-        Code::WorkMode(_) => {
-            let n = number()?;
-            WorkMode::from_number(n)
-                .map(Reading::WorkMode)
-                .ok_or_else(|| unknown(n, "0 or 1"))
-        }
+        Code::ConnectedTool(_) => in_table(|n| Tool::from_number(n).map(Reading::Tool), "0 to 2"),
+        Code::PortError(_) => in_table(
+            |n| ToolError::from_code(n).map(Reading::ToolError),
+            "0 to 10",
+        ),
+        Code::StationError => in_table(
+            |n| StationError::from_code(n).map(Reading::StationError),
+            "0 to 6",
+        ),
+        Code::PortStatus(_) => in_table(
+            |n| PortStatus::from_number(n).map(Reading::PortStatus),
+            "digits 0/1 for tool (units), cooling (tens), suction (hundreds)",
+        ),
+        Code::WorkMode(_) => in_table(
+            |n| WorkMode::from_number(n).map(Reading::WorkMode),
+            "0 or 1",
+        ),
         _ => Err(InterpretError::NoReading { code }),
     }
 }

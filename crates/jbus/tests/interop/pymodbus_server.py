@@ -24,6 +24,8 @@ from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from serving import serve
+
 UNIT = 1
 REFUSALS = {
     500: ExcCodes.ILLEGAL_VALUE,
@@ -57,10 +59,7 @@ async def main():
         action=refuse,
     )
     server = ModbusTcpServer(device, framer=FramerType.RTU, address=("127.0.0.1", 0))
-    await server.serve_forever(background=True)
-    port = server.transport.sockets[0].getsockname()[1]
-    print(f"listening on tcp://127.0.0.1:{port}", flush=True)
-    await server.serving
+    await serve(server, "tcp")
 
 
 if __name__ == "__main__":

@@ -19,6 +19,8 @@ from pymodbus.datastore import (
 )
 from pymodbus.server import ModbusTcpServer
 
+from serving import serve
+
 # Typed values from holding register 100 on: float32 in word order CDAB (least significant
 # word first), then int32 in ABCD (big-endian), then 12 free registers for typed writes.
 TYPED_FLOATS_CDAB = [229.7, -1.5]
@@ -54,10 +56,7 @@ def device(step):
 async def main():
     context = ModbusServerContext(devices={1: device(10), 2: device(20)}, single=False)
     server = ModbusTcpServer(context, address=("127.0.0.1", 0))
-    await server.serve_forever(background=True)
-    port = server.transport.sockets[0].getsockname()[1]
-    print(f"listening on modbus-tcp://127.0.0.1:{port}", flush=True)
-    await server.serving
+    await serve(server, "modbus-tcp")
 
 
 if __name__ == "__main__":

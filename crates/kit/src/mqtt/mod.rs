@@ -106,22 +106,14 @@ mod tests {
             port,
             tls,
         };
-        assert_eq!(
-            parse_broker("mqtt://broker.local"),
-            Ok(broker("broker.local", 1883, false))
-        );
-        assert_eq!(
-            parse_broker(" mqtts://broker.local "),
-            Ok(broker("broker.local", 8883, true))
-        );
-        assert_eq!(
-            parse_broker("mqtts://b:18883"),
-            Ok(broker("b", 18883, true))
-        );
-        assert_eq!(
-            parse_broker("mqtt://[::1]:1884"),
-            Ok(broker("::1", 1884, false))
-        );
+        for (url, host, port, tls) in [
+            ("mqtt://broker.local", "broker.local", 1883, false),
+            (" mqtts://broker.local ", "broker.local", 8883, true),
+            ("mqtts://b:18883", "b", 18883, true),
+            ("mqtt://[::1]:1884", "::1", 1884, false),
+        ] {
+            assert_eq!(parse_broker(url), Ok(broker(host, port, tls)), "{url:?}");
+        }
     }
 
     #[test]

@@ -27,13 +27,18 @@ fn d1_001_reply_bytes() -> Vec<u8> {
     bytes
 }
 
+/// Asserts that `bytes` are `message` on the wire: what it encodes to and what decodes to
+/// it, whole.
+fn is_the_wire_form_of(message: Message, bytes: &[u8]) {
+    assert_eq!(message.to_bytes(), bytes);
+    assert_eq!(MessageCodec.decode(bytes), Ok(Some((message, bytes.len()))));
+}
+
 #[test]
 fn c2st_request_is_263_bytes_exactly_as_in_the_fact_sheet() {
     let bytes = c2st_request_bytes();
     assert_eq!(bytes.len(), 263);
-    let message = Message::new("C2ST").expect("valid command");
-    assert_eq!(message.to_bytes(), bytes);
-    assert_eq!(MessageCodec.decode(&bytes), Ok(Some((message, 263))));
+    is_the_wire_form_of(Message::new("C2ST").expect("valid command"), &bytes);
 }
 
 #[test]
@@ -41,8 +46,7 @@ fn d1_reply_001_is_266_bytes_exactly_as_in_the_fact_sheet() {
     let bytes = d1_001_reply_bytes();
     assert_eq!(bytes.len(), 266);
     let message = Message::with_data("D1", b"001".to_vec()).expect("valid reply");
-    assert_eq!(message.to_bytes(), bytes);
-    assert_eq!(MessageCodec.decode(&bytes), Ok(Some((message, 266))));
+    is_the_wire_form_of(message, &bytes);
 }
 
 #[test]
@@ -64,8 +68,7 @@ fn d1_reply_of_the_c3_example_carries_16_bytes_pabc_padded() {
     bytes.extend([0x00; 3]);
     assert_eq!(bytes.len(), 279);
     let message = Message::with_data("D1", b"PABC            ".to_vec()).expect("valid");
-    assert_eq!(message.to_bytes(), bytes);
-    assert_eq!(MessageCodec.decode(&bytes), Ok(Some((message, 279))));
+    is_the_wire_form_of(message, &bytes);
 }
 
 #[test]

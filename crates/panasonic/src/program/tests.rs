@@ -171,14 +171,17 @@ fn condition_data_reads_the_manual_example_line() {
         ConditionData::parse(b"%HEADER\r\n*\r\n"),
         Err(ConditionDataError::Missing)
     );
-    assert!(matches!(
-        ConditionData::parse(b"&CONDITIONDATA1\r\n1010001,1,2,0,0\r\n*\r\n"),
-        Err(ConditionDataError::BadLine { .. })
-    ));
-    assert!(matches!(
-        ConditionData::parse(b"&CONDITIONDATA1\r\n1010002,1,1,0,0\r\n*\r\n"),
-        Err(ConditionDataError::BadLine { .. })
-    ));
+    let bad_lines = [
+        b"&CONDITIONDATA1\r\n1010001,1,2,0,0\r\n*\r\n".as_slice(),
+        b"&CONDITIONDATA1\r\n1010002,1,1,0,0\r\n*\r\n",
+    ]
+    .map(ConditionData::parse);
+    assert!(
+        bad_lines
+            .iter()
+            .all(|e| matches!(e, Err(ConditionDataError::BadLine { .. }))),
+        "{bad_lines:?}"
+    );
 }
 
 proptest! {

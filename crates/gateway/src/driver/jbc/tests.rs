@@ -306,17 +306,27 @@ async fn the_form_without_addresses_works_too() {
     assert!(readings.iter().all(|r| r.value.is_ok()), "{readings:?}");
 }
 
+/// `driver`'s point `name`.
+fn spec(driver: &JbcDriver, name: &str) -> PointSpec {
+    driver
+        .points()
+        .into_iter()
+        .find(|p| p.id.name() == name)
+        .expect("a point of the station")
+}
+
 #[tokio::test(start_paused = true)]
 async fn turning_the_tool_on_heats_the_air_toward_the_set_point() {
     let (mut driver, model) = rig(StationConfig::default(), Some(1));
-    let points = driver.points();
-    let spec = |name: &str| points.iter().find(|p| p.id.name() == name).unwrap().clone();
     driver
-        .check_then_write(&spec("air_temperature_setpoint"), &Value::Number(300.0))
+        .check_then_write(
+            &spec(&driver, "air_temperature_setpoint"),
+            &Value::Number(300.0),
+        )
         .await
         .unwrap();
     driver
-        .check_then_write(&spec("tool_on"), &Value::Text("on".into()))
+        .check_then_write(&spec(&driver, "tool_on"), &Value::Text("on".into()))
         .await
         .unwrap();
     assert!(model.lock().port_status().tool_on);
@@ -336,16 +346,17 @@ async fn turning_the_tool_on_heats_the_air_toward_the_set_point() {
 #[tokio::test(start_paused = true)]
 async fn a_set_point_outside_the_stations_own_limits_never_reaches_the_wire() {
     let (mut driver, model) = rig(StationConfig::default(), Some(1));
-    let points = driver.points();
-    let spec = |name: &str| points.iter().find(|p| p.id.name() == name).unwrap().clone();
     driver
-        .check_then_write(&spec("max_air_temperature"), &Value::Number(300.0))
+        .check_then_write(&spec(&driver, "max_air_temperature"), &Value::Number(300.0))
         .await
         .unwrap();
     driver.poll(SETTINGS).await.unwrap();
     let before = model.lock().settings().air_temp;
     let err = driver
-        .check_then_write(&spec("air_temperature_setpoint"), &Value::Number(400.0))
+        .check_then_write(
+            &spec(&driver, "air_temperature_setpoint"),
+            &Value::Number(400.0),
+        )
         .await
         .unwrap_err();
     assert!(
@@ -356,7 +367,7 @@ async fn a_set_point_outside_the_stations_own_limits_never_reaches_the_wire() {
     assert_eq!(model.lock().settings().air_temp, before);
     // The JTSE's own range is checked even before any limits were read.
     let err = driver
-        .check_then_write(&spec("air_flow_setpoint"), &Value::Number(5.0))
+        .check_then_write(&spec(&driver, "air_flow_setpoint"), &Value::Number(5.0))
         .await
         .unwrap_err();
     assert!(matches!(err, WriteError::Invalid(_)), "{err}");
@@ -369,13 +380,9 @@ async fn a_station_polled_in_every_group_confirms_its_codes_in_the_list_made_for
     for group in driver.groups() {
         driver.poll(&group.name).await.unwrap();
     }
-    let spec = driver
-        .points()
-        .into_iter()
-        .find(|p| p.id.name() == "air_temperature_setpoint")
-        .unwrap();
+    let setpoint = spec(&driver, "air_temperature_setpoint");
     driver
-        .check_then_write(&spec, &Value::Number(300.0))
+        .check_then_write(&setpoint, &Value::Number(300.0))
         .await
         .unwrap();
     assert_eq!(driver.confirmed.0.len(), *CONFIRMABLE_CODES);

@@ -87,57 +87,42 @@ fn check_modbus_options(
 ) -> Result<ModbusOptions, ConfigError> {
     let mut options = ModbusOptions::default();
     if let Some(n) = &raw.max_registers_per_request {
-        options.plan.max_registers = u16::try_from(*n.get_ref())
-            .ok()
-            .and_then(|n| ReadRegisterCount::new(n).ok())
-            .ok_or_else(|| {
-                at(
-                    n.span(),
-                    format!(
-                        "max_registers_per_request {} is out of range: 1 to {}",
-                        n.get_ref(),
-                        ReadRegisterCount::MAX
-                    ),
-                )
-            })?;
+        options.plan.max_registers =
+            request_size(n, "max_registers_per_request", ReadRegisterCount::MAX, at)?;
     }
     if let Some(n) = &raw.max_bits_per_request {
-        options.plan.max_bits = u16::try_from(*n.get_ref())
-            .ok()
-            .and_then(|n| ReadBitCount::new(n).ok())
-            .ok_or_else(|| {
-                at(
-                    n.span(),
-                    format!(
-                        "max_bits_per_request {} is out of range: 1 to {}",
-                        n.get_ref(),
-                        ReadBitCount::MAX
-                    ),
-                )
-            })?;
+        options.plan.max_bits = request_size(n, "max_bits_per_request", ReadBitCount::MAX, at)?;
     }
     if let Some(one) = &raw.one_request_per_register {
         options.plan.one_request_per_item = *one.get_ref();
     }
+    let pacing = |d, key| duration(d, Duration::ZERO, MAX_PACING_DELAY, key, at);
     if let Some(d) = &raw.delay_between_requests {
-        options.delay_between_requests = duration(
-            d,
-            Duration::ZERO,
-            MAX_PACING_DELAY,
-            "delay_between_requests",
-            at,
-        )?;
+        options.delay_between_requests = pacing(d, "delay_between_requests")?;
     }
     if let Some(d) = &raw.delay_after_connect {
-        options.delay_after_connect = duration(
-            d,
-            Duration::ZERO,
-            MAX_PACING_DELAY,
-            "delay_after_connect",
-            at,
-        )?;
+        options.delay_after_connect = pacing(d, "delay_after_connect")?;
     }
     Ok(options)
+}
+
+/// The most registers or bits one request asks for, as the device's `key` sets it: refused
+/// outside 1 to `max`, what the count `C` allows.
+fn request_size<C: TryFrom<u16>>(
+    n: &Spanned<i64>,
+    key: &str,
+    max: u16,
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<C, ConfigError> {
+    u16::try_from(*n.get_ref())
+        .ok()
+        .and_then(|n| C::try_from(n).ok())
+        .ok_or_else(|| {
+            at(
+                n.span(),
+                format!("{key} {} is out of range: 1 to {max}", n.get_ref()),
+            )
+        })
 }
 
 /// The register lists read from `registers_csv` files so far, by file and the device's

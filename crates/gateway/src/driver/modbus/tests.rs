@@ -74,6 +74,24 @@ fn rig_with(
     (driver, slave)
 }
 
+/// The options of `one_request_per_register = true`.
+fn one_request_per_register() -> ModbusOptions {
+    ModbusOptions {
+        plan: PlanOptions {
+            one_request_per_item: true,
+            ..PlanOptions::default()
+        },
+        ..ModbusOptions::default()
+    }
+}
+
+/// How long `driver` takes to poll its one group.
+async fn timed_poll(driver: &mut ModbusDriver) -> Duration {
+    let started = Instant::now();
+    driver.poll(LIVE).await.unwrap();
+    started.elapsed()
+}
+
 fn rig() -> (ModbusDriver, SharedModel<Slave>) {
     rig_with(MAP, registers(), ModbusOptions::default())
 }
@@ -101,13 +119,7 @@ async fn registers_close_together_in_one_table_are_planned_into_one_read() {
 
 #[tokio::test(start_paused = true)]
 async fn one_request_per_register_reads_every_register_alone() {
-    let options = ModbusOptions {
-        plan: PlanOptions {
-            one_request_per_item: true,
-            ..PlanOptions::default()
-        },
-        ..ModbusOptions::default()
-    };
+    let options = one_request_per_register();
     let (mut driver, _slave) = rig_with(MAP, registers(), options);
     assert_eq!(driver.plan().reads().len(), 4);
     let live = driver.poll(LIVE).await.unwrap();
@@ -165,13 +177,7 @@ async fn devices_of_one_register_list_share_its_plan_until_one_splits_a_read() {
         ],
         "the other device keeps the plan as made"
     );
-    let alone = ModbusOptions {
-        plan: PlanOptions {
-            one_request_per_item: true,
-            ..PlanOptions::default()
-        },
-        ..ModbusOptions::default()
-    };
+    let alone = one_request_per_register();
     let (third, _third) = rig_with(MAP, list, alone);
     assert_eq!(third.plan().reads().len(), 4, "other options, another plan");
 }
@@ -450,25 +456,18 @@ async fn a_write_is_checked_against_range_and_step_then_sent_as_the_register_wor
 #[tokio::test(start_paused = true)]
 async fn requests_are_paced_after_the_line_is_attached_and_between_each_other() {
     let options = ModbusOptions {
-        plan: PlanOptions {
-            one_request_per_item: true,
-            ..PlanOptions::default()
-        },
         delay_between_requests: Duration::from_millis(50),
         delay_after_connect: Duration::from_secs(2),
+        ..one_request_per_register()
     };
     let (mut driver, _slave) = rig_with(MAP, registers(), options);
-    let started = Instant::now();
-    driver.poll(LIVE).await.unwrap();
-    let first = started.elapsed();
+    let first = timed_poll(&mut driver).await;
     // 2 s after the attach, then 3 gaps of 50 ms between the 4 requests.
     assert!(
         first >= Duration::from_millis(2150) && first < Duration::from_millis(2500),
         "{first:?}"
     );
-    let started = Instant::now();
-    driver.poll(LIVE).await.unwrap();
-    let second = started.elapsed();
+    let second = timed_poll(&mut driver).await;
     assert!(
         second >= Duration::from_millis(150) && second < Duration::from_millis(500),
         "{second:?}"

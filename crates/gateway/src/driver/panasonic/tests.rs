@@ -14,27 +14,24 @@ async fn rig() -> (PanasonicDriver, panasonic::server::RunningTwin) {
         .unwrap()
         .spawn()
         .unwrap();
-    let event_port = twin.event_addr().port();
-    (driver_for(&twin, event_port), twin)
+    let driver = placer(twin.command_addr().port(), twin.event_addr().port(), None);
+    (driver, twin)
 }
 
-/// A driver for `twin`'s Port 1, with `event_port` as its Port 2.
-fn driver_for(twin: &panasonic::server::RunningTwin, event_port: u16) -> PanasonicDriver {
+/// `placer1`, its machine's ports on this host, its reply timeout `timeout`.
+fn placer(command_port: u16, event_port: u16, timeout: Option<Duration>) -> PanasonicDriver {
     PanasonicDriver::new(&DriverConfig {
-        id: DeviceId::new("placer1").unwrap(),
-        protocol: super::KIND,
-        address: None,
-        timeout: None,
-        retries: None,
+        timeout,
         settings: crate::config::Settings::new(Keys {
             event_port: Some(event_port),
         }),
         endpoint: Some(Endpoint::Tcp {
             host: "127.0.0.1".into(),
-            port: twin.command_addr().port(),
+            port: command_port,
             line: None,
             framing: link::TcpFraming::Raw,
         }),
+        ..DriverConfig::new(DeviceId::new("placer1").unwrap(), super::KIND)
     })
     .unwrap()
 }
@@ -51,7 +48,7 @@ async fn a_refused_event_port_leaves_the_commands_points_and_is_told_once_as_the
     let closed = std::net::TcpListener::bind(any).unwrap();
     let wrong = closed.local_addr().unwrap().port();
     drop(closed);
-    let mut driver = driver_for(&twin, wrong);
+    let mut driver = placer(twin.command_addr().port(), wrong, None);
     let readings = driver.poll(LIVE).await.expect("Port 1 answers");
     assert!(readings.iter().all(|r| r.value.is_ok()), "{readings:?}");
     let events = events_until(&mut driver, |events| {
@@ -116,15 +113,10 @@ async fn events_until(
 
 #[test]
 fn every_point_has_a_unique_id_and_none_is_writable() {
-    let driver = PanasonicDriver::new(&DriverConfig {
-        id: DeviceId::new("placer1").unwrap(),
-        protocol: super::KIND,
-        address: None,
-        timeout: None,
-        retries: None,
-        endpoint: None,
-        settings: Default::default(),
-    })
+    let driver = PanasonicDriver::new(&DriverConfig::new(
+        DeviceId::new("placer1").unwrap(),
+        super::KIND,
+    ))
     .unwrap();
     let points = driver.points();
     let ids: HashSet<_> = points.iter().map(|p| &p.id).collect();
@@ -226,23 +218,7 @@ async fn a_machine_that_is_not_there_is_a_timeout_naming_its_port() {
     let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = closed.local_addr().unwrap().port();
     drop(closed);
-    let mut driver = PanasonicDriver::new(&DriverConfig {
-        id: DeviceId::new("placer1").unwrap(),
-        protocol: super::KIND,
-        address: None,
-        timeout: Some(Duration::from_secs(2)),
-        retries: None,
-        settings: crate::config::Settings::new(Keys {
-            event_port: Some(port),
-        }),
-        endpoint: Some(Endpoint::Tcp {
-            host: "127.0.0.1".into(),
-            port,
-            line: None,
-            framing: link::TcpFraming::Raw,
-        }),
-    })
-    .unwrap();
+    let mut driver = placer(port, port, Some(Duration::from_secs(2)));
     let err = driver.poll(LIVE).await.unwrap_err();
     assert_eq!(err.kind, ErrorKind::Timeout, "{err}");
     // Port 2 refused alone would leave the commands going: the machine is down because

@@ -4,6 +4,11 @@ fn problem(text: &str) -> MapError {
     SlaveMap::parse(text).expect_err("a bad map")
 }
 
+/// Asserts that the map `text` is refused with `message`.
+fn says(text: &str, message: &str) {
+    assert_eq!(problem(text).to_string(), message, "{text:?}");
+}
+
 #[test]
 fn map_defines_each_table_and_the_unit() {
     let map = SlaveMap::parse(
@@ -56,9 +61,9 @@ fn map_errors_name_the_line_and_the_problem() {
             }
         }
     );
-    assert_eq!(
-        problem("holding 0 = 1 2\nholding 1 = 5").to_string(),
-        "line 2: holding registers address 1 (0x0001) was already defined on line 1"
+    says(
+        "holding 0 = 1 2\nholding 1 = 5",
+        "line 2: holding registers address 1 (0x0001) was already defined on line 1",
     );
     assert_eq!(
         problem("coil 0 = 1 2").problem,
@@ -90,13 +95,13 @@ fn map_errors_name_the_line_and_the_problem() {
         problem("holding 5..=4").problem,
         MapProblem::EmptyRange { first: 5, last: 4 }
     );
-    assert_eq!(
-        problem("holding 5 1 2").to_string(),
-        "line 1: expected `=` and values, or a range `FIRST..=LAST`, found `1`"
+    says(
+        "holding 5 1 2",
+        "line 1: expected `=` and values, or a range `FIRST..=LAST`, found `1`",
     );
-    assert_eq!(
-        problem("holding 5 =").to_string(),
-        "line 1: expected values after `=`, found end of line"
+    says(
+        "holding 5 =",
+        "line 1: expected values after `=`, found end of line",
     );
     assert!(matches!(problem("unit 0").problem, MapProblem::UnitId(_)));
     assert_eq!(
@@ -146,9 +151,9 @@ fn typed_values_fill_their_registers_in_their_order() {
 
 #[test]
 fn typed_values_that_do_not_fit_are_refused_naming_value_and_type() {
-    assert_eq!(
-        problem("holding 0 int16 = 40000").to_string(),
-        "line 1: 40000 does not fit int16 (-32768 to 32767)"
+    says(
+        "holding 0 int16 = 40000",
+        "line 1: 40000 does not fit int16 (-32768 to 32767)",
     );
     assert!(
         problem("holding 0 flaot32 = 1")
@@ -173,13 +178,13 @@ fn typed_values_that_do_not_fit_are_refused_naming_value_and_type() {
             .to_string()
             .contains("holds at most 2")
     );
-    assert_eq!(
-        problem("holding 0 float32 CDAB").to_string(),
-        "line 1: expected `=` and values, found end of line"
+    says(
+        "holding 0 float32 CDAB",
+        "line 1: expected `=` and values, found end of line",
     );
-    assert_eq!(
-        problem("holding 0 float32 =").to_string(),
-        "line 1: expected values after `=`, found end of line"
+    says(
+        "holding 0 float32 =",
+        "line 1: expected values after `=`, found end of line",
     );
     assert_eq!(
         problem("holding 0 = 1\nholding 0xFFFF float32 = 1").problem,
