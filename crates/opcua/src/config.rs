@@ -10,7 +10,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::config::{ConfigError, Settings, Table, TableReader, bounded, duration};
+use gateway::config::{ConfigError, Settings, Table, TableReader, bounded, duration};
 
 /// The `[opcua]` table's reader.
 #[derive(Debug)]
@@ -258,7 +258,7 @@ fn url_host(host: &str) -> String {
 fn default_application_uri(application_name: &str) -> String {
     format!(
         "urn:{}:{application_name}",
-        crate::northbound::default_edge_node_id()
+        gateway::northbound::default_edge_node_id()
     )
 }
 
@@ -441,11 +441,16 @@ mod tests {
     use std::path::Path;
 
     use super::*;
-    use crate::EXAMPLE_CONFIG;
-    use crate::plugins::parse_config;
+    use gateway::EXAMPLE_CONFIG;
 
     const LINE: &str = "[[line]]\nname = \"l\"\nendpoint = \"tcp://127.0.0.1:1\"\n\
                         [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\naddress = 1\n";
+
+    /// Checks `text` as the `cellbus` binary with OPC UA does.
+    fn parse_config(text: &str, path: &Path) -> Result<gateway::CellConfig, ConfigError> {
+        let registry = gateway::plugins::builtin().with_interface(&crate::Opcua);
+        gateway::config::parse_config(text, path, &registry.config)
+    }
 
     fn parse(opcua: &str) -> Result<Option<OpcuaConfig>, ConfigError> {
         parse_config(&format!("{LINE}{opcua}"), Path::new("cell.toml"))
