@@ -3,10 +3,10 @@
 //! Each body feeds outside text through the code a user's input really takes: the TOML
 //! configuration through [`parse_config`](crate::plugins::parse_config) (what `cellbus config
 //! check` and `serve --config` run, with the gateway crate's own kinds and interfaces),
-//! query-parameter times and steps through the HTTP
-//! API's parsers, and whole query strings through axum's `Query` extractor and the checks
-//! the handlers run. (The OPC UA relay's bodies are `cellbus_opcua::fuzzing`'s.) None may
-//! panic; refusals must be errors, and whatever is accepted must print.
+//! query-parameter times and steps through the HTTP API's parsers, and whole query strings
+//! through axum's `Query` extractor and the checks the handlers run. (The OPC UA relay's
+//! bodies are `cellbus_opcua::fuzzing`'s.) None may panic; refusals must be errors, and
+//! whatever is accepted must print.
 
 use std::path::Path;
 
