@@ -1,7 +1,8 @@
 //! `cellbus serve` and `cellbus config …`: the gateway, and its configuration file.
 
 use gateway::northbound::mqtt::MqttFlags;
-use gateway::northbound::opcua::OpcuaFlags;
+use gateway::options::Flags;
+use gateway::plugins::Registry;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -71,8 +72,55 @@ pub struct ServeArgs {
     /// whose password is the write token; with --config it replaces the [opcua] table's
     /// endpoint (without a table: Basic256Sha256 only, anonymous reading while writes are
     /// off).
+    // A build without OPC UA hides the flag and refuses it in words (`interface_flags`).
+    #[cfg_attr(not(feature = "opcua"), arg(hide = true))]
     #[arg(long, value_name = "IP:PORT")]
     pub opcua: Option<SocketAddr>,
+}
+
+/// The device kinds and interfaces of this build of `cellbus`: the gateway's own, and OPC
+/// UA when built with the `opcua` feature (the default). `serve` and `config check` both
+/// read the configuration with it, so they accept the same files.
+pub fn registry() -> Registry {
+    #[cfg(feature = "opcua")]
+    let registry = gateway::plugins::builtin().with_interface(&cellbus_opcua::Opcua);
+    #[cfg(not(feature = "opcua"))]
+    let registry = without_opcua(gateway::plugins::builtin());
+    registry
+}
+
+/// Why a build without the `opcua` feature refuses a config's `[opcua]` table.
+#[cfg(any(test, not(feature = "opcua")))]
+const NO_OPCUA_TABLE: &str = "this build of cellbus has no OPC UA interface (it was built \
+     without the `opcua` feature): remove the [opcua] table, or use a build with OPC UA";
+
+/// Why a build without the `opcua` feature refuses `serve --opcua`.
+#[cfg(not(feature = "opcua"))]
+const NO_OPCUA_FLAG: &str = "--opcua: this build of cellbus has no OPC UA interface (it was \
+     built without the `opcua` feature): leave the flag out, or use a build with OPC UA";
+
+/// `registry` as a build without OPC UA has it: a config's `[opcua]` table is refused in
+/// those words, not as a table nobody knows.
+#[cfg(any(test, not(feature = "opcua")))]
+fn without_opcua(registry: Registry) -> Registry {
+    registry.with_interface_left_out("opcua", NO_OPCUA_TABLE)
+}
+
+/// What the command line says to the interfaces of this build.
+fn interface_flags(args: &ServeArgs) -> anyhow::Result<Flags> {
+    let flags = Flags::default().with(MqttFlags {
+        broker: args.mqtt.clone(),
+        mode: args.mqtt_mode,
+        node: args.mqtt_node.clone(),
+        primary_host: args.mqtt_primary_host.clone(),
+    });
+    #[cfg(feature = "opcua")]
+    let flags = flags.with(cellbus_opcua::OpcuaFlags { listen: args.opcua });
+    #[cfg(not(feature = "opcua"))]
+    if args.opcua.is_some() {
+        return Err(usage(NO_OPCUA_FLAG));
+    }
+    Ok(flags)
 }
 
 /// The shortest `--retain`: anything shorter is most likely a slip (`30m` is 30 minutes, not
@@ -125,9 +173,11 @@ pub enum ConfigCommand {
 }
 
 pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
+    let registry = registry();
+    let flags = interface_flags(&args)?;
     if let Some(path) = &args.config {
         // A bad file is a usage error (exit 2), reported before anything starts.
-        gateway::check_config(path).map_err(usage)?;
+        gateway::config::check_config(path, &registry.config).map_err(usage)?;
     }
     let options = gateway::ServeOptions {
         listen: args.listen,
@@ -138,16 +188,9 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
         allow_writes: args.allow_writes,
         token: args.token,
         read_token: args.read_token,
-        flags: gateway::options::Flags::default()
-            .with(MqttFlags {
-                broker: args.mqtt,
-                mode: args.mqtt_mode,
-                node: args.mqtt_node,
-                primary_host: args.mqtt_primary_host,
-            })
-            .with(OpcuaFlags { listen: args.opcua }),
+        flags,
     };
-    gateway::serve(options, shutdown_signal()).await?;
+    gateway::serve(options, &registry, shutdown_signal()).await?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -170,7 +213,7 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         ConfigCommand::Check { file } => {
-            let plugins = gateway::plugins::builtin().config;
+            let plugins = registry().config;
             let cell = gateway::config::check_config(&file, &plugins).map_err(usage)?;
             let devices: usize = cell.lines.iter().map(|line| line.devices.len()).sum();
             let interfaces = plugins.interfaces_of(&cell);
@@ -245,5 +288,46 @@ pub async fn shutdown_signal() {
     tokio::select! {
         _ = tokio::signal::ctrl_c() => {}
         () = terminate => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CELL: &str = "[[line]]\nname = \"rework\"\nendpoint = \"tcp://127.0.0.1:1\"\n\
+                        [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n\n[opcua]\n";
+
+    #[test]
+    fn a_build_without_opcua_refuses_an_opcua_table_where_it_is_and_says_why() {
+        let registry = without_opcua(gateway::plugins::builtin());
+        let refused = gateway::config::parse_config(
+            CELL,
+            std::path::Path::new("cell.toml"),
+            &registry.config,
+        )
+        .expect_err("the [opcua] table is refused");
+        let shown = refused.to_string();
+        assert_eq!(refused.position(), Some((8, 2)), "{shown}");
+        assert_eq!(
+            shown.lines().next(),
+            Some(format!("cell.toml:8:2: {NO_OPCUA_TABLE}").as_str())
+        );
+        assert!(
+            shown.contains("no OPC UA interface (it was built without the `opcua` feature)"),
+            "{shown}"
+        );
+    }
+
+    #[cfg(feature = "opcua")]
+    #[test]
+    fn a_build_with_opcua_reads_the_opcua_table() {
+        let cell = gateway::config::parse_config(
+            CELL,
+            std::path::Path::new("cell.toml"),
+            &registry().config,
+        )
+        .expect("the [opcua] table is read");
+        assert!(cell.interfaces.contains_key("opcua"), "{cell:?}");
     }
 }

@@ -1440,9 +1440,8 @@ impl Counters {
                 received: counter.counts(reset)?,
                 client: ProcessUse::of(&counter.pid().to_string(), ticks)?,
                 t_ms: gateway::time::Timestamp::now().0,
-                monitored_items: gateway::northbound::opcua::state(cell)
-                    .map_or(0, |o| o.monitored_items),
-                connections: gateway::northbound::opcua::state(cell).map_or(0, |o| o.connections),
+                monitored_items: cellbus_opcua::state(cell).map_or(0, |o| o.monitored_items),
+                connections: cellbus_opcua::state(cell).map_or(0, |o| o.connections),
             }),
             None => None,
         };
@@ -1789,7 +1788,7 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
                 node: mqtt.as_ref().map(|_| "loadbench".to_owned()),
                 ..Default::default()
             })
-            .with(gateway::northbound::opcua::OpcuaFlags {
+            .with(cellbus_opcua::OpcuaFlags {
                 listen: args
                     .opcua
                     .then(|| "127.0.0.1:0".parse().expect("a valid socket address")),
@@ -1804,7 +1803,9 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
     let pid = simulators.pid();
     let items_file = dir.path().join("opcua-items.txt");
     let report = runtime.block_on(async {
-        let gateway = Gateway::start(options).await?;
+        // The binary's interfaces: the gateway's own and OPC UA.
+        let registry = gateway::plugins::builtin().with_interface(&cellbus_opcua::Opcua);
+        let gateway = Gateway::start_with(options, &registry).await?;
         let addr = gateway.local_addr();
         let gateway_opcua = gateway.url_of("opcua").map(str::to_owned);
         let cell = Arc::clone(gateway.cell());

@@ -1,6 +1,6 @@
 //! Runs the gateway without the CLI: `cargo run -p gateway --example serve -- [--listen
 //! ADDR] [--data DIR] [--config FILE] [--allow-writes]`. Without `--config` it serves the
-//! demo cell. Stops on Ctrl-C.
+//! demo cell. Stops on Ctrl-C. It has the gateway crate's own interfaces (MQTT), not OPC UA.
 
 use std::path::PathBuf;
 
@@ -22,7 +22,11 @@ fn main() -> anyhow::Result<()> {
             ),
         }
     }
-    tokio::runtime::Runtime::new()?.block_on(gateway::serve(options, async {
-        let _ = tokio::signal::ctrl_c().await;
-    }))
+    tokio::runtime::Runtime::new()?.block_on(gateway::serve(
+        options,
+        &gateway::plugins::builtin(),
+        async {
+            let _ = tokio::signal::ctrl_c().await;
+        },
+    ))
 }

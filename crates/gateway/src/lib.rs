@@ -17,9 +17,12 @@
 //!   Thermosald (several regulators on one line), CROSS (JBUS) and Panasonic (a TCP
 //!   machine whose client keeps its own connections and whose R messages become events)
 //!   and generic Modbus (registers named in the config).
-//! - [`northbound`]: the interfaces (MQTT, OPC UA) behind [`northbound::Northbound`].
-//! - [`plugins`]: the registry naming every device kind and interface; DESIGN.md, "Adding
-//!   a device kind" and "Adding an interface", has the steps.
+//! - [`northbound`]: the interfaces behind [`northbound::Northbound`]: MQTT here, OPC UA
+//!   in a crate of its own (`cellbus-opcua`) that the `cellbus` binary includes through
+//!   its `opcua` feature.
+//! - [`plugins`]: the registry naming the gateway's device kinds and interfaces, to which
+//!   a binary adds others; DESIGN.md, "Adding a device kind" and "Adding an interface",
+//!   has the steps.
 //! - [`scheduler`]: one task per line, strict serialisation, exponential backoff of silent
 //!   devices with prompt promotion, line reopening.
 //! - [`cell`]: the live state (values with time and quality), the change stream.

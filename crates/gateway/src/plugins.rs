@@ -1,6 +1,8 @@
-//! The registry: the device kinds and the interfaces this build of the gateway has, each
-//! named by one line here. Nothing in the core names them; it reads them from here (the
-//! config through [`builtin`], `serve` through [`Registry::interfaces`]).
+//! The registry: the device kinds and the interfaces of the gateway crate, each named by
+//! one line here. Nothing in the core names them; it reads them from here (the config
+//! through [`builtin`], `serve` through [`Registry::interfaces`]). An interface of a crate
+//! of its own (OPC UA: `cellbus-opcua`) is added by the binary that includes it
+//! ([`Registry::with_interface`]).
 
 use std::path::Path;
 
@@ -22,19 +24,31 @@ pub struct Registry {
     pub demos: Vec<DemoStart>,
 }
 
-/// The gateway's own device kinds and interfaces.
+impl Registry {
+    /// With the interface `interface` too, started after those already listed; a config
+    /// file may then have its table.
+    pub fn with_interface(mut self, interface: &'static dyn Northbound) -> Self {
+        self.config = self.config.with_table(interface.table());
+        self.interfaces.push(interface);
+        self
+    }
+
+    /// Without the interface whose table is `table`, which this build was made without:
+    /// a config file naming the table is refused where the table is, with `why`.
+    pub fn with_interface_left_out(mut self, table: &'static str, why: &'static str) -> Self {
+        self.config = self.config.with_table_left_out(table, why);
+        self
+    }
+}
+
+/// The gateway crate's own device kinds and interfaces (MQTT).
 pub fn builtin() -> Registry {
-    let interfaces: Vec<&'static dyn Northbound> =
-        vec![&northbound::mqtt::Mqtt, &northbound::opcua::Opcua];
-    let mut config = Plugins::default()
+    let config = Plugins::default()
         .with_kind(jbc::KIND)
         .with_kind(thermosald::KIND)
         .with_kind(cross::KIND)
         .with_kind(panasonic::KIND)
         .with_kind(modbus::KIND);
-    for interface in &interfaces {
-        config = config.with_table(interface.table());
-    }
     let demos: Vec<DemoStart> = vec![
         jbc::demo::start,
         thermosald::demo::start,
@@ -43,19 +57,20 @@ pub fn builtin() -> Registry {
     ];
     Registry {
         config,
-        interfaces,
+        interfaces: Vec::new(),
         demos,
     }
+    .with_interface(&northbound::mqtt::Mqtt)
 }
 
-/// Reads and checks the configuration at `path` with the gateway's own kinds and
+/// Reads and checks the configuration at `path` with the gateway crate's own kinds and
 /// interfaces.
 pub fn check_config(path: &Path) -> Result<CellConfig, ConfigError> {
     config::check_config(path, &builtin().config)
 }
 
-/// Checks configuration text (`path` names it in errors) with the gateway's own kinds and
-/// interfaces.
+/// Checks configuration text (`path` names it in errors) with the gateway crate's own
+/// kinds and interfaces.
 pub fn parse_config(text: &str, path: &Path) -> Result<CellConfig, ConfigError> {
     config::parse_config(text, path, &builtin().config)
 }

@@ -59,17 +59,18 @@ pub fn tune_malloc() -> bool {
     arenas && mmap
 }
 
-/// Runs the gateway until `shutdown` resolves (Ctrl-C, SIGTERM), then stops the pollers,
-/// commits the history and returns.
+/// Runs the gateway with the device kinds and interfaces of `registry` until `shutdown`
+/// resolves (Ctrl-C, SIGTERM), then stops the pollers, commits the history and returns.
 ///
 /// Its first line on standard output, once the port is bound, is exactly
-/// `listening on http://IP:PORT`; other tools wait for it. With OPC UA, the second is
-/// `opcua on opc.tcp://IP:PORT`.
+/// `listening on http://IP:PORT`; other tools wait for it. Each interface that listens
+/// adds one, `NAME on URL` (OPC UA: `opcua on opc.tcp://IP:PORT`).
 pub async fn serve(
     options: ServeOptions,
+    registry: &Registry,
     shutdown: impl Future<Output = ()>,
 ) -> anyhow::Result<()> {
-    let gateway = Gateway::start(options).await?;
+    let gateway = Gateway::start_with(options, registry).await?;
     {
         let mut out = std::io::stdout().lock();
         writeln!(out, "listening on http://{}", gateway.local_addr())
@@ -109,12 +110,15 @@ impl Gateway {
     /// thread; a damaged file is moved aside (a `history_reset` event names it), and a data
     /// directory that cannot be used turns the history off (a `history_failed` event,
     /// `/healthz` degraded, history queries 503) while live values are served.
+    ///
+    /// It has the gateway crate's own device kinds and interfaces
+    /// ([`crate::plugins::builtin`]); [`Gateway::start_with`] takes others.
     pub async fn start(options: ServeOptions) -> anyhow::Result<Self> {
         Self::start_with(options, &crate::plugins::builtin()).await
     }
 
-    /// [`Gateway::start`] with the device kinds and interfaces of `registry` (a test adds
-    /// a kind of its own).
+    /// [`Gateway::start`] with the device kinds and interfaces of `registry` (the
+    /// binary's adds OPC UA; a test may add a kind of its own).
     pub async fn start_with(options: ServeOptions, registry: &Registry) -> anyhow::Result<Self> {
         let (config, demo) = match &options.config {
             Some(path) => {

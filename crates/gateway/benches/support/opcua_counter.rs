@@ -240,7 +240,7 @@ async fn subscribe(
         bail!("no OPC UA session with {url} in 30 s");
     }
     let ns = session
-        .get_namespace_index(gateway::northbound::opcua::space::NAMESPACE_URI)
+        .get_namespace_index(cellbus_opcua::space::NAMESPACE_URI)
         .await
         .context("the cell's namespace")?;
     let mut created = 0;

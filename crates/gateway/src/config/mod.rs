@@ -120,11 +120,15 @@ pub trait TableReader: Sync {
 }
 
 /// What a file may name: the device kinds (`protocol = "…"`) and the interfaces' tables.
-/// `crate::plugins::builtin` lists the gateway's own; a test may add one of its own.
+/// `crate::plugins::builtin` lists the gateway's own; a build adds the interfaces of other
+/// crates, and a test may add a kind of its own.
 #[derive(Clone, Default)]
 pub struct Plugins {
     kinds: Vec<Kind>,
     tables: Vec<&'static dyn TableReader>,
+    /// Tables of interfaces this build was made without, each with why a file naming it
+    /// is refused.
+    left_out: Vec<(&'static str, &'static str)>,
 }
 
 impl Plugins {
@@ -137,6 +141,14 @@ impl Plugins {
     /// With the interface table `reader` reads.
     pub fn with_table(mut self, reader: &'static dyn TableReader) -> Self {
         self.tables.push(reader);
+        self
+    }
+
+    /// With the table `table` of an interface this build was made without: a file that
+    /// names it is refused where the table is, with `why` ("this build has no OPC UA
+    /// interface …") instead of the words for a table nobody knows.
+    pub fn with_table_left_out(mut self, table: &'static str, why: &'static str) -> Self {
+        self.left_out.push((table, why));
         self
     }
 
@@ -183,6 +195,14 @@ impl Plugins {
     fn reader(&self, table: &str) -> Option<&'static dyn TableReader> {
         self.tables.iter().copied().find(|r| r.table() == table)
     }
+
+    /// Why the table `table` is refused, if this build was made without its interface.
+    fn left_out(&self, table: &str) -> Option<&'static str> {
+        self.left_out
+            .iter()
+            .find(|(name, _)| *name == table)
+            .map(|(_, why)| *why)
+    }
 }
 
 impl fmt::Debug for Plugins {
@@ -192,6 +212,10 @@ impl fmt::Debug for Plugins {
             .field(
                 "tables",
                 &self.tables.iter().map(|t| t.table()).collect::<Vec<_>>(),
+            )
+            .field(
+                "left_out",
+                &self.left_out.iter().map(|(t, _)| t).collect::<Vec<_>>(),
             )
             .finish()
     }
@@ -356,16 +380,19 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
             tree.insert(key, value);
             continue;
         }
-        match plugins.reader(key.get_ref()) {
-            Some(reader) => interface_tables.push((reader, value)),
-            None => {
-                let expected: Vec<&str> = CELL_KEYS
-                    .into_iter()
-                    .chain(plugins.tables.iter().map(|t| t.table()))
-                    .collect();
-                errors.push(at(key.span(), unknown_field(key.get_ref(), &expected)));
+        let Some(reader) = plugins.reader(key.get_ref()) else {
+            if let Some(why) = plugins.left_out(key.get_ref()) {
+                errors.push(at(key.span(), why.to_owned()));
+                continue;
             }
-        }
+            let expected: Vec<&str> = CELL_KEYS
+                .into_iter()
+                .chain(plugins.tables.iter().map(|t| t.table()))
+                .collect();
+            errors.push(at(key.span(), unknown_field(key.get_ref(), &expected)));
+            continue;
+        };
+        interface_tables.push((reader, value));
     }
     let mut device_tables = device_tables(tree, plugins, &at, &mut errors);
     if raw.line.is_empty() {

@@ -171,6 +171,22 @@ fn unknown_fields_are_refused_where_they_are() {
 }
 
 #[test]
+fn a_table_of_an_interface_this_build_left_out_is_refused_with_why_where_it_is() {
+    let plugins = crate::plugins::builtin()
+        .config
+        .with_table_left_out("radio", "this build has no radio interface");
+    let text = format!("{ONE}\n[radio]\nchannel = 4\n");
+    let err = crate::config::parse_config(&text, Path::new("cell.toml"), &plugins)
+        .expect_err("the table is refused");
+    assert_eq!(
+        err.to_string().lines().next(),
+        Some("cell.toml:10:2: this build has no radio interface")
+    );
+    // A build that knows nothing of it calls it unknown.
+    refused(&text, 10, 2, "unknown field `radio`");
+}
+
+#[test]
 fn toml_syntax_errors_name_line_and_column() {
     refused("[[line]\nname = \"a\"\n", 1, 8, "expected `]`");
 }

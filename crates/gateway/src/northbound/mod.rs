@@ -7,10 +7,11 @@
 //!
 //! - [`mqtt`]: the cell on an MQTT broker (rumqttc), as a Sparkplug B edge node
 //!   ([`sparkplug::EdgeNode`]) or as plain JSON, with store and forward.
-//! - [`opcua`]: the cell as an OPC UA server (async-opcua).
+//! - OPC UA, the cell as an OPC UA server (async-opcua), is a crate of its own
+//!   (`cellbus-opcua`, in `crates/opcua`) behind the binary's `opcua` feature: it
+//!   implements [`Northbound`] with only what this crate makes public.
 //!
 pub mod mqtt;
-pub mod opcua;
 #[cfg(test)]
 mod tests;
 
@@ -39,9 +40,11 @@ pub fn default_edge_node_id() -> String {
 }
 
 /// An interface that serves the cell to other systems: what `serve` asks of each. It is
-/// listed once in [`crate::plugins`]; `serve` starts every one the config or the options
-/// ask for and stops them in turn. It reads only the cell's change stream and writes only
-/// through the cell's write path.
+/// listed once in a [`Registry`](crate::plugins::Registry) (the gateway's own in
+/// [`crate::plugins::builtin`], another crate's by the binary through
+/// [`Registry::with_interface`](crate::plugins::Registry::with_interface)); `serve` starts
+/// every one the config or the options ask for and stops them in turn. It reads only the
+/// cell's change stream and writes only through the cell's write path.
 pub trait Northbound: Sync + fmt::Debug {
     /// Its name in logs and messages (`mqtt`).
     fn name(&self) -> &'static str;

@@ -69,7 +69,7 @@ pub struct Peers {
     abandoned: AtomicU64,
     per_address: AtomicU64,
     /// Closings are logged at most every 10 s (a flood makes thousands).
-    closings: Mutex<crate::write::LogThrottle>,
+    closings: Mutex<gateway::write::LogThrottle>,
 }
 
 /// Why the relay closed or refused a session.
@@ -307,7 +307,7 @@ pub async fn relay(
     mut stop: watch::Receiver<bool>,
 ) {
     let slots = Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
-    let mut refused = crate::write::LogThrottle::default();
+    let mut refused = gateway::write::LogThrottle::default();
     loop {
         let accepted = tokio::select! {
             accepted = listener.accept() => accepted,

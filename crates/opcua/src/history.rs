@@ -20,12 +20,12 @@ use ::opcua::types::{
 };
 
 use super::space::{gateway_time, opc_time, stored_data_value};
-use crate::point::{PointKind, Quality, Value};
-use crate::store::{History, HistorySample, PageOrder, SampleCursor, Series};
-use crate::time::{Timestamp, duration_millis};
+use gateway::point::{PointKind, Quality, Value};
+use gateway::store::{History, HistorySample, PageOrder, SampleCursor, Series};
+use gateway::time::{Timestamp, duration_millis};
 
 /// The most values one raw read call returns; more come with a continuation point.
-pub const PAGE_MAX: usize = crate::store::MAX_RAW_SAMPLES;
+pub const PAGE_MAX: usize = gateway::store::MAX_RAW_SAMPLES;
 
 /// The most intervals one processed read may ask for (as the HTTP API's buckets).
 pub const MAX_INTERVALS: i64 = 10_000;

@@ -2,6 +2,11 @@
 //! values with their quality from the change stream, writes through the audited write
 //! path, HistoryRead from the history.
 //!
+//! An interface of the gateway in a crate of its own: [`Opcua`] implements
+//! [`Northbound`] with what the `gateway` crate makes public, and the `cellbus` binary adds
+//! it to its registry (`gateway::plugins::builtin().with_interface(&Opcua)`) when built
+//! with its `opcua` feature (the default). A build without it leaves async-opcua out.
+//!
 //! - [`space`]: the sans-IO mapping (node ids, data types, status codes, units, times).
 //! - [`nodes`]: the node manager that builds the address space, writes and reads history.
 //! - [`history`]: HistoryRead raw and processed (Average, Minimum, Maximum), sans-IO.
@@ -12,13 +17,16 @@
 //! - [`chunks`]: the relay's sans-IO view of the messages (whole chunks; on plain channels
 //!   the sessions created, and the CloseSession it sends).
 //! - [`items`]: every node manager wrapped to cap the server's monitored items.
+//! - [`config`]: the `[opcua]` table.
+//! - [`status`]: the server's state in `/healthz` and `/metrics`.
+//! - [`fuzzing`]: the bodies of the fuzz targets over the relay's sniffer and chunk reader.
 //!
 //! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
 //! monitored items are the server's own over those values (no second polling). A point's
 //! monitored item asked to sample at its poll period or faster gets
 //! [`nodes::EVERY_CHANGE_MS`]: every change, with the time it was read. `/healthz` and
 //! `/metrics` read the server's connections, sessions, subscriptions and monitored items
-//! through [`Cell::opcua`]. The same
+//! through the probe it registers with the cell ([`status`]; [`state`] reads it). The same
 //! task raises each of the gateway's events as a BaseEventType event on the device's
 //! object (the gateway object for the gateway's own), which the server also delivers to
 //! event subscriptions on the Server object. The
@@ -26,10 +34,13 @@
 //! (key in `private/`); client certificates are trusted when they are in
 //! `pki/trusted`, and an unknown one is put in `pki/rejected` for an
 //! administrator to move.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
 
 pub mod auth;
 pub mod chunks;
 pub mod config;
+pub mod fuzzing;
 pub mod history;
 pub mod items;
 pub mod nodes;
@@ -61,12 +72,12 @@ use self::items::{Capped, ItemCount, capped};
 use self::nodes::CellManager;
 use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
 use self::space::ids;
-use super::{BoxStart, Northbound, Running, Start};
-use crate::cell::{Cell, LiveMessage};
-use crate::config::{CellConfig, TableReader};
-use crate::http::WritePolicy;
-use crate::options::ServeOptions;
-use crate::time::Timestamp;
+use gateway::cell::{Cell, LiveMessage};
+use gateway::config::{CellConfig, TableReader};
+use gateway::http::WritePolicy;
+use gateway::northbound::{BoxStart, Northbound, Running, Start};
+use gateway::options::ServeOptions;
+use gateway::time::Timestamp;
 pub use status::{OpcuaProbe, OpcuaRefused, OpcuaState, state};
 
 /// How often the gateway object's history row count is refreshed.
@@ -597,7 +608,7 @@ fn resync(
 /// A device's `Status` and `Error` variables' values at `t`.
 fn device_values(
     ns: u16,
-    summary: &crate::cell::DeviceSummary,
+    summary: &gateway::cell::DeviceSummary,
     t: DateTime,
 ) -> [(::opcua::types::NodeId, DataValue); 2] {
     let id = summary.id.as_str();

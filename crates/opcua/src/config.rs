@@ -10,7 +10,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::config::{ConfigError, Settings, Table, TableReader, bounded, duration};
+use gateway::config::{ConfigError, Settings, Table, TableReader, bounded, duration};
 
 /// The `[opcua]` table's reader.
 #[derive(Debug)]
@@ -24,6 +24,34 @@ impl TableReader for OpcuaTable {
     fn read(&self, table: &Table<'_>) -> Result<Settings, ConfigError> {
         let raw: RawOpcua = table.read()?;
         check_opcua(raw, &|span, message| table.at(span, message)).map(Settings::new)
+    }
+
+    fn environment(&self, settings: &Settings) -> Vec<(&'static str, String)> {
+        settings
+            .get::<OpcuaConfig>()
+            .map(|opcua| {
+                opcua
+                    .users
+                    .iter()
+                    .map(|user| ("[[opcua.user]] password_env", user.password_env.clone()))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    fn summary(&self, settings: &Settings) -> String {
+        let Some(opcua) = settings.get::<OpcuaConfig>() else {
+            return String::new();
+        };
+        let users = match opcua.users.len() {
+            0 => String::new(),
+            1 => ", 1 user".to_owned(),
+            n => format!(", {n} users"),
+        };
+        format!(
+            "server on opc.tcp://{}:{} as {}{users}",
+            opcua.host, opcua.port, opcua.application_name
+        )
     }
 }
 
@@ -258,7 +286,7 @@ fn url_host(host: &str) -> String {
 fn default_application_uri(application_name: &str) -> String {
     format!(
         "urn:{}:{application_name}",
-        crate::northbound::default_edge_node_id()
+        gateway::northbound::default_edge_node_id()
     )
 }
 
@@ -441,11 +469,16 @@ mod tests {
     use std::path::Path;
 
     use super::*;
-    use crate::EXAMPLE_CONFIG;
-    use crate::plugins::parse_config;
+    use gateway::EXAMPLE_CONFIG;
 
     const LINE: &str = "[[line]]\nname = \"l\"\nendpoint = \"tcp://127.0.0.1:1\"\n\
                         [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\naddress = 1\n";
+
+    /// Checks `text` as the `cellbus` binary with OPC UA does.
+    fn parse_config(text: &str, path: &Path) -> Result<gateway::CellConfig, ConfigError> {
+        let registry = gateway::plugins::builtin().with_interface(&crate::Opcua);
+        gateway::config::parse_config(text, path, &registry.config)
+    }
 
     fn parse(opcua: &str) -> Result<Option<OpcuaConfig>, ConfigError> {
         parse_config(&format!("{LINE}{opcua}"), Path::new("cell.toml"))
@@ -575,5 +608,35 @@ mod tests {
             assert_eq!(e.position(), Some((9, column)), "{line}: {e}");
             assert!(e.to_string().contains(key), "{line}: {e}");
         }
+    }
+}
+
+#[cfg(test)]
+mod environment_tests {
+    use gateway::plugins::builtin;
+
+    #[test]
+    fn a_users_password_variable_that_is_not_set_fails_the_check_naming_its_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cell.toml");
+        std::fs::write(
+            &path,
+            "[[line]]\nname = \"l\"\nendpoint = \"tcp://127.0.0.1:1\"\n\
+             [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n\
+             [opcua]\n[[opcua.user]]\nname = \"operator\"\n\
+             password_env = \"CELLBUS_TEST_OPCUA_NEVER_SET\"\n",
+        )
+        .unwrap();
+        let plugins = builtin().with_interface(&crate::Opcua).config;
+        let error = gateway::config::check_config(&path, &plugins)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("cell.toml:10:")
+                && error.contains(
+                    "[[opcua.user]] password_env names the environment variable CELLBUS_TEST_OPCUA_NEVER_SET, which is not set here"
+                ),
+            "{error}"
+        );
     }
 }

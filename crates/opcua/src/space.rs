@@ -21,7 +21,7 @@
 //! two more properties: `Kind`, the event's kind as `/api/events` names it, and `Fields`,
 //! its facts for programs as a JSON object) on the device's object (the gateway object
 //! when they concern no device), with the severity of their kind
-//! ([`EventKind::severity`](crate::event::EventKind::severity), shared with the Sparkplug
+//! ([`EventKind::severity`](gateway::event::EventKind::severity), shared with the Sparkplug
 //! events). A client that subscribes to BaseEventType gets them too, without the two.
 
 use ::opcua::nodes::BaseEventType;
@@ -30,10 +30,10 @@ use ::opcua::types::{
     NodeId, Range, StatusCode, UAString, Variant,
 };
 
-use crate::cell::{DeviceStatus, DeviceSummary, PointView};
-use crate::event::Event;
-use crate::point::{EnumState, PointKind, Quality, Value};
-use crate::time::Timestamp;
+use gateway::cell::{DeviceStatus, DeviceSummary, PointView};
+use gateway::event::Event;
+use gateway::point::{EnumState, PointKind, Quality, Value};
+use gateway::time::Timestamp;
 
 /// The namespace of the cell's nodes.
 pub const NAMESPACE_URI: &str = "urn:cellbus:cell";
@@ -258,7 +258,7 @@ pub fn eu_information(unit: &str) -> EUInformation {
 }
 
 /// The write range as an `EURange`.
-pub fn eu_range(range: &crate::point::WriteRange) -> Range {
+pub fn eu_range(range: &gateway::point::WriteRange) -> Range {
     Range {
         low: range.min,
         high: range.max,
@@ -403,11 +403,26 @@ fn unece_unit_id(unit: &str) -> Option<i32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::event::EventKind;
-    use crate::point::DeviceId;
     use ::opcua::types::ObjectTypeId;
+    use gateway::event::EventKind;
+    use gateway::point::DeviceId;
 
-    use crate::testing::air_temperature_view as view;
+    /// jbc1's air temperature (°C, read at 1 s) with `value` and `quality`.
+    fn view(value: Option<Value>, quality: Option<Quality>) -> PointView {
+        let device = DeviceId::new("jbc1").unwrap();
+        PointView {
+            id: gateway::point::PointId::new(&device, "air_temperature").unwrap(),
+            name: "Air temperature".into(),
+            unit: Some("°C".into()),
+            value,
+            text: None,
+            quality,
+            t: Some(Timestamp(1_000)),
+            error: None,
+            alarm: false,
+            period_ms: 1000,
+        }
+    }
 
     fn states(table: &[(i64, &str)]) -> Vec<EnumState> {
         table
@@ -444,7 +459,7 @@ mod tests {
             device: Some(device.clone()),
             point: None,
             message: "cross1: source lost".into(),
-            fields: crate::event::fields([("value", serde_json::json!(2))]),
+            fields: gateway::event::fields([("value", serde_json::json!(2))]),
         };
         let id = event_id(Timestamp(5), 7);
         let raised = cell_event(2, &event, id.clone(), Timestamp(2_000));

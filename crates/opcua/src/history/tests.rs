@@ -1,6 +1,6 @@
 use super::*;
-use crate::point::{DeviceId, PointId};
-use crate::store::HistorySample;
+use gateway::point::{DeviceId, PointId};
+use gateway::store::HistorySample;
 
 fn history(samples: Vec<(i64, Option<f64>, Quality)>) -> History {
     History {

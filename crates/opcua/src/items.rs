@@ -28,7 +28,7 @@ use ::opcua::types::{
     ReadEventDetails, ReadProcessedDetails, ReadRawModifiedDetails, StatusCode, TimestampsToReturn,
 };
 
-use crate::write::LogThrottle;
+use gateway::write::LogThrottle;
 
 /// The monitored items of the whole server, and how many were refused.
 #[derive(Debug)]

@@ -11,8 +11,8 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::Registry;
 use serde::Serialize;
 
-use crate::cell::{Cell, InterfaceStatus};
-use crate::metrics::catch_up;
+use gateway::cell::{Cell, InterfaceStatus};
+use gateway::metrics::catch_up;
 
 /// The interface's name in `/healthz` and in the cell.
 pub const NAME: &str = "opcua";

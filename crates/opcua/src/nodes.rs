@@ -29,11 +29,11 @@ use super::auth::Users;
 use super::history::{self, Aggregate, Fetched, RawRead};
 use super::peers::Peers;
 use super::space::{self, ids};
-use crate::cell::{Cell, DeviceView};
-use crate::driver::{ErrorKind, WriteError};
-use crate::point::{PointId, PointKind, ValueError};
-use crate::time::Timestamp;
-use crate::write::Attempt;
+use gateway::cell::{Cell, DeviceView};
+use gateway::driver::{ErrorKind, WriteError};
+use gateway::point::{PointId, PointKind, ValueError};
+use gateway::time::Timestamp;
+use gateway::write::Attempt;
 
 /// The node manager of the cell.
 pub type CellManager = InMemoryNodeManager<CellNodes>;
@@ -640,7 +640,7 @@ impl CellNodes {
         })
         .await
         .map_err(|_| StatusCode::BadInternalError)?
-        .map_err(|e: crate::store::StoreError| {
+        .map_err(|e: gateway::store::StoreError| {
             tracing::warn!("OPC UA history read failed: {e}");
             StatusCode::BadHistoryOperationUnsupported
         })
@@ -651,7 +651,7 @@ impl CellNodes {
         point: PointId,
         range: history::TimeRange,
         step: Option<Duration>,
-    ) -> Result<crate::store::History, StatusCode> {
+    ) -> Result<gateway::store::History, StatusCode> {
         let cell = Arc::clone(&self.cell);
         tokio::task::spawn_blocking(move || {
             cell.store().history(&point, range.from, range.to, step)
@@ -756,7 +756,9 @@ pub fn write_status(error: &WriteError) -> StatusCode {
         WriteError::UnknownPoint { .. } => StatusCode::BadNodeIdUnknown,
         WriteError::Device(e) if e.kind == ErrorKind::Refused => StatusCode::BadOutOfRange,
         WriteError::Device(e) if e.kind == ErrorKind::Usage => StatusCode::BadOutOfRange,
-        WriteError::Device(_) | WriteError::NotRunning { .. } => StatusCode::BadCommunicationError,
+        // The device did not answer or its line is not running (`Device`, `NotRunning`), or
+        // a failure `WriteError` gains later (it is `non_exhaustive`): nothing was written.
+        _ => StatusCode::BadCommunicationError,
     }
 }
 
