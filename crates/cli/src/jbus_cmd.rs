@@ -877,13 +877,25 @@ pub struct SimModbusArgs {
     /// `holding 0x0100 float32 CDAB = 229.7` or `input 0x20 string:4 = "PUMP 7"`; see the
     /// jbus crate's slave::map). Without it every address of every table exists, holds 0,
     /// and coils and holding registers are writable.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "example")]
     pub map: Option<PathBuf>,
+    /// Serve an example device shipped with cellbus instead of a map file:
+    /// `energy-meter`, a 3-phase meter's float32 input registers (the registers of
+    /// `cellbus config example --modbus-meter`).
+    #[arg(long, value_enum, value_name = "NAME")]
+    pub example: Option<SimExample>,
     /// With --framing tcp: answer as a serial-to-Ethernet gateway (a Moxa MGate) does for
     /// a unit that does not answer, with exception 11 (gateway target failed to respond)
     /// after this long, instead of silence.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
     pub gateway_timeout: Option<Duration>,
+}
+
+/// The example devices `cellbus sim modbus --example` serves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SimExample {
+    /// A 3-phase energy meter: float32 input registers, ABCD.
+    EnergyMeter,
 }
 
 /// Refuses Modbus TCP on a PTY: a serial line has no MBAP.
@@ -952,13 +964,17 @@ pub async fn sim_modbus(args: SimModbusArgs) -> anyhow::Result<ExitCode> {
              --framing tcp too",
         ));
     }
-    let map = match &args.map {
-        Some(path) => {
+    let map = match (&args.map, args.example) {
+        (Some(path), _) => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| usage(format!("cannot read the map {}: {e}", path.display())))?;
             SlaveMap::parse(&text).map_err(|e| usage(format!("map {}: {e}", path.display())))?
         }
-        None => SlaveMap::all_writable(UnitId::jbus(DEFAULT_SLAVE_UNIT).map_err(usage)?),
+        (None, Some(SimExample::EnergyMeter)) => {
+            SlaveMap::parse(gateway::driver::modbus::config::EXAMPLE_METER_MAP)
+                .map_err(|e| anyhow::anyhow!("the shipped energy meter map: {e}"))?
+        }
+        (None, None) => SlaveMap::all_writable(UnitId::jbus(DEFAULT_SLAVE_UNIT).map_err(usage)?),
     };
     let map = match args.unit {
         Some(number) => map.with_unit(UnitId::jbus(number).map_err(usage)?),

@@ -163,7 +163,12 @@ pub enum ConfigCommand {
         file: PathBuf,
     },
     /// Print an example configuration for a real cell.
-    Example,
+    Example {
+        /// Instead: a configuration that reads the example energy meter `cellbus sim modbus
+        /// --example energy-meter --framing tcp` serves, at this endpoint.
+        #[arg(long, value_name = "ENDPOINT", num_args = 0..=1, default_missing_value = "modbus-tcp://127.0.0.1:5020")]
+        modbus_meter: Option<String>,
+    },
     /// Print a CSV register list (name,title,table,address,type,order,scale,offset,unit,
     /// writable_min,writable_max; columns in any order) as [[line.device.register]] tables.
     ImportCsv {
@@ -196,8 +201,16 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<ExitCode> {
 
 pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
     match command {
-        ConfigCommand::Example => {
+        ConfigCommand::Example { modbus_meter: None } => {
             print!("{}", gateway::EXAMPLE_CONFIG);
+            Ok(ExitCode::SUCCESS)
+        }
+        ConfigCommand::Example {
+            modbus_meter: Some(endpoint),
+        } => {
+            let text = gateway::driver::modbus::config::example_meter_config(&endpoint)
+                .map_err(anyhow::Error::msg)?;
+            print!("{text}");
             Ok(ExitCode::SUCCESS)
         }
         ConfigCommand::ImportCsv { file } => {

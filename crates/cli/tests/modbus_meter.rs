@@ -151,3 +151,40 @@ fn config_import_csv_prints_register_tables_and_names_the_row_of_a_mistake() {
         "{err}"
     );
 }
+
+#[test]
+fn the_examples_shipped_in_the_binary_serve_the_meter_and_configure_the_gateway_to_read_it() {
+    // No file of the checkout: what a user of an installed binary has.
+    let sim = Sim::start(&[
+        "modbus",
+        "--framing",
+        "tcp",
+        "--listen",
+        "127.0.0.1:0",
+        "--example",
+        "energy-meter",
+    ]);
+    let out = common::run(&["config", "example", "--modbus-meter", &sim.endpoint]);
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("meter.toml");
+    std::fs::write(&config, &out.stdout).unwrap();
+    let check = common::run(&["config", "check", config.to_str().unwrap()]);
+    assert!(check.status.success(), "{}", common::stderr(&check));
+    common::assert_stdout_has(&check, "meter1 (modbus, address 1): Energy meter (example)");
+
+    let data = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start_with(data.path(), &["--config", config.to_str().unwrap()]);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let points = points(&gateway, "meter1");
+        if let Some((_, value, unit)) = points.iter().find(|(n, _, _)| n == "voltage_l1")
+            && value.as_f64() == Some(230.1)
+        {
+            assert_eq!(unit.as_deref(), Some("V"));
+            break;
+        }
+        assert!(Instant::now() < deadline, "no voltage in time: {points:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}

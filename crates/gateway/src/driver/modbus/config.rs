@@ -201,6 +201,42 @@ pub fn registers_from_csv(file: &Path) -> Result<Vec<RegisterConfig>, ConfigErro
     })
 }
 
+/// The example energy meter's register list (`examples/energy-meter.csv`), shipped in the
+/// binary: a made-up 3-phase meter, float32 input registers, ABCD.
+pub const EXAMPLE_METER_CSV: &str = include_str!("../../../examples/energy-meter.csv");
+
+/// The simulator map that serves the example meter (`examples/energy-meter.map`), shipped
+/// in the binary: `cellbus sim modbus --example energy-meter`.
+pub const EXAMPLE_METER_MAP: &str = include_str!("../../../examples/energy-meter.map");
+
+/// A configuration that reads the example meter at `endpoint` (a `modbus-tcp://` URL, as
+/// `cellbus sim modbus --example energy-meter --framing tcp` prints), its registers as
+/// tables: `cellbus config example --modbus-meter`.
+pub fn example_meter_config(endpoint: &str) -> Result<String, ConfigError> {
+    let path = Path::new("energy-meter.csv");
+    let table = super::register_csv::CsvRegisters::parse(EXAMPLE_METER_CSV, path)?;
+    let registers = check_register_list(&table.rows, None, &|span, message| {
+        table.error(span, message)
+    })?;
+    Ok(format!(
+        "# One energy meter over Modbus TCP: the example meter, as\n\
+         #   cellbus sim modbus --example energy-meter --framing tcp --listen 127.0.0.1:5020\n\
+         # serves it. Check with `cellbus config check`, run with `cellbus serve --config`.\n\
+         [[line]]\n\
+         name = \"meters\"\n\
+         endpoint = \"{endpoint}\"\n\
+         \n\
+         [[line.device]]\n\
+         id = \"meter1\"\n\
+         name = \"Energy meter (example)\"\n\
+         protocol = \"modbus\"\n\
+         address = 1\n\
+         \n\
+         {}",
+        registers_toml(&registers)
+    ))
+}
+
 /// `registers` as `[[line.device.register]]` tables (defaults left out).
 pub fn registers_toml(registers: &[RegisterConfig]) -> String {
     super::register_csv::to_toml(registers)
