@@ -168,8 +168,13 @@ fn init_logging(level: Option<tracing::level_filters::LevelFilter>, service: boo
         None => tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
             if service {
                 // The demo cell's simulators connecting and disconnecting is not news.
-                let quiet = "link::serve=warn".parse().expect("a valid directive");
-                own(tracing::level_filters::LevelFilter::INFO).add_directive(quiet)
+                let mut filter = own(tracing::level_filters::LevelFilter::INFO);
+                for quiet in ["link::serve=warn", "panasonic::server=warn"] {
+                    if let Ok(directive) = quiet.parse() {
+                        filter = filter.add_directive(directive);
+                    }
+                }
+                filter
             } else {
                 own(tracing::level_filters::LevelFilter::WARN)
             }

@@ -274,7 +274,7 @@ impl Link {
                         why
                     };
                     if connected || was_connected {
-                        tracing::warn!("MQTT: {why}");
+                        // The interface_down event is the log line (it names the broker).
                         self.went_down(connected, why.clone());
                     }
                     self.status.set_link(MqttLink::Disconnected(why));
