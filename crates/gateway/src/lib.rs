@@ -30,7 +30,12 @@
 //!   downsampled queries).
 //! - [`http`]: the API, described at `/api/openapi.json`, and the web page at `/`.
 //! - [`metrics`]: Prometheus metrics.
-//! - [`demo`]: the simulated cell `serve` starts without a configuration.
+//! - [`demo`]: the simulated cell `serve` starts without a configuration (each kind's twin
+//!   from its own `driver::<kind>::demo`).
+//! - [`oplog`]: what the operator reads on stderr: events at their kind's level, ups and
+//!   downs throttled, hints.
+//! - [`health`]: `/healthz`'s judgement: ok, degraded or failing, with reasons.
+//! - [`load`]: each serial line's share of its time the configured polls need.
 //! - [`fuzzing`]: the bodies of the fuzz targets over the configuration, query times and
 //!   query strings.
 #![forbid(unsafe_code)]
