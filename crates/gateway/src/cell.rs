@@ -3,8 +3,9 @@
 //!
 //! The [`scheduler`](crate::scheduler) tasks are the only writers of this state; the HTTP
 //! handlers read snapshots ([`Cell::devices`], [`Cell::lines`]) and send writes through
-//! [`Cell::write`], which checks the value and hands it to the line's task, so a write is
-//! serialised with the polls of its line.
+//! the one write gate ([`Cell::check_write`], then [`crate::write::Attempt`]), which hands
+//! the checked value to the line's task, so a write is serialised with the polls of its
+//! line.
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard, RwLockWriteGuard};
