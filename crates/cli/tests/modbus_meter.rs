@@ -17,6 +17,17 @@ fn example(name: &str) -> String {
         .to_owned()
 }
 
+/// The Modbus TCP simulator on a free port, serving what `source` names.
+fn meter(source: &[&str]) -> Sim {
+    Sim::start(
+        &[
+            &["modbus", "--framing", "tcp", "--listen", "127.0.0.1:0"],
+            source,
+        ]
+        .concat(),
+    )
+}
+
 /// The points of `device` in `/api/devices`: name → (value, unit).
 fn points(gateway: &Gateway, device: &str) -> Vec<(String, serde_json::Value, Option<String>)> {
     let body = gateway.get_json("/api/devices");
@@ -52,15 +63,7 @@ fn metric(gateway: &Gateway, prefix: &str) -> Option<f64> {
 
 #[test]
 fn a_simulated_energy_meter_is_read_through_its_csv_register_list_in_the_planned_requests() {
-    let sim = Sim::start(&[
-        "modbus",
-        "--framing",
-        "tcp",
-        "--listen",
-        "127.0.0.1:0",
-        "--map",
-        &example("energy-meter.map"),
-    ]);
+    let sim = meter(&["--map", &example("energy-meter.map")]);
     sim.assert_listens_on("modbus-tcp://");
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(
@@ -155,15 +158,7 @@ fn config_import_csv_prints_register_tables_and_names_the_row_of_a_mistake() {
 #[test]
 fn the_examples_shipped_in_the_binary_serve_the_meter_and_configure_the_gateway_to_read_it() {
     // No file of the checkout: what a user of an installed binary has.
-    let sim = Sim::start(&[
-        "modbus",
-        "--framing",
-        "tcp",
-        "--listen",
-        "127.0.0.1:0",
-        "--example",
-        "energy-meter",
-    ]);
+    let sim = meter(&["--example", "energy-meter"]);
     let out = common::run(&["config", "example", "--modbus-meter", &sim.endpoint]);
     assert!(out.status.success(), "{}", common::stderr(&out));
     let dir = tempfile::tempdir().unwrap();

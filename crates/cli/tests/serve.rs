@@ -173,10 +173,16 @@ fn serve_refuses_a_token_no_client_could_send_and_writes_without_one_as_usage_er
 
 /// `cellbus config check` of a cell.toml holding `text`.
 fn config_check(text: &[u8]) -> Output {
+    let (_dir, path) = config_file(text);
+    run(&["config", "check", path.to_str().unwrap()])
+}
+
+/// `text` as `cell.toml` in a new temporary directory (kept while the first is held).
+fn config_file(text: impl AsRef<[u8]>) -> (tempfile::TempDir, std::path::PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("cell.toml");
     std::fs::write(&path, text).unwrap();
-    run(&["config", "check", path.to_str().unwrap()])
+    (dir, path)
 }
 
 #[test]
@@ -364,16 +370,12 @@ fn a_second_gateway_on_the_same_data_directory_refuses_to_start_naming_the_first
 
 #[test]
 fn config_check_and_serve_refuse_a_password_variable_that_is_not_set_naming_its_line() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("cell.toml");
-    std::fs::write(
-        &path,
+    let (_dir, path) = config_file(
         "[[line]]\nname = \"rework\"\nendpoint = \"tcp://127.0.0.1:9\"\n\
          [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\n\
          [mqtt]\nbroker = \"mqtt://127.0.0.1:1883\"\nusername = \"gw\"\n\
          password_env = \"CELLBUS_TEST_NEVER_SET\"\n",
-    )
-    .unwrap();
+    );
     let check = common::cellbus()
         .args(["config", "check"])
         .arg(&path)
@@ -415,17 +417,12 @@ fn config_check_and_serve_refuse_a_password_variable_that_is_not_set_naming_its_
 
 #[test]
 fn config_check_reports_every_mistake_of_a_file_at_once() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("cell.toml");
-    std::fs::write(
-        &path,
-        "[[line]]\nname = \"a\"\nendpoint = \"tcp://127.0.0.1:9\"\n\
+    let out = config_check(
+        b"[[line]]\nname = \"a\"\nendpoint = \"tcp://127.0.0.1:9\"\n\
          [[line.device]]\nid = \"jbc1\"\nprotocol = \"jbc\"\naddress = 100\n\
          [[line]]\nname = \"b\"\nendpoint = \"tcp://127.0.0.1:10\"\n\
          [[line.device]]\nid = \"sealer9\"\nprotocol = \"thermosald\"\naddress = 9\n",
-    )
-    .unwrap();
-    let out = run(&["config", "check", path.to_str().unwrap()]);
+    );
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert_stderr_has(&out, "2 mistakes:");
     assert_stderr_has(&out, "cell.toml:7:");

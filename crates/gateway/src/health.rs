@@ -149,16 +149,18 @@ mod tests {
         (id.to_owned(), status, why)
     }
 
-    #[test]
-    fn a_cell_whose_devices_answer_with_its_history_written_is_ok() {
-        let facts = Facts {
-            devices: vec![
-                device("jbc1", DeviceStatus::Up),
-                device("jbc2", DeviceStatus::Connecting),
-            ],
+    /// `jbc1` and `jbc2` in these states, the history written.
+    fn stations(jbc1: DeviceStatus, jbc2: DeviceStatus) -> Facts {
+        Facts {
+            devices: vec![device("jbc1", jbc1), device("jbc2", jbc2)],
             history: Some(HistoryState::Ok),
             ..Facts::default()
-        };
+        }
+    }
+
+    #[test]
+    fn a_cell_whose_devices_answer_with_its_history_written_is_ok() {
+        let facts = stations(DeviceStatus::Up, DeviceStatus::Connecting);
         assert_eq!(
             judge(&facts),
             Health {
@@ -171,13 +173,9 @@ mod tests {
     #[test]
     fn some_devices_down_a_line_closed_or_a_link_lost_is_degraded_with_each_reason() {
         let facts = Facts {
-            devices: vec![
-                device("jbc1", DeviceStatus::Up),
-                device("jbc2", DeviceStatus::Down),
-            ],
             lines_closed: vec![("bench".into(), "no such port".into())],
-            history: Some(HistoryState::Ok),
             interfaces_down: vec![("mqtt".into(), "broker link down: refused".into())],
+            ..stations(DeviceStatus::Up, DeviceStatus::Down)
         };
         let health = judge(&facts);
         assert_eq!(health.status, Status::Degraded);
@@ -193,14 +191,7 @@ mod tests {
 
     #[test]
     fn no_device_answering_or_a_history_that_cannot_be_written_is_failing() {
-        let none_answers = Facts {
-            devices: vec![
-                device("jbc1", DeviceStatus::Down),
-                device("jbc2", DeviceStatus::Connecting),
-            ],
-            history: Some(HistoryState::Ok),
-            ..Facts::default()
-        };
+        let none_answers = stations(DeviceStatus::Down, DeviceStatus::Connecting);
         let health = judge(&none_answers);
         assert_eq!(health.status, Status::Failing);
         assert_eq!(health.reasons[0], "no device answers (1 of 2 have failed)");

@@ -860,13 +860,7 @@ fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
             }
         }
     }
-    cell.metrics().value_changes.inc_by(samples.len() as u64);
-    for sample in samples {
-        cell.store().sample(sample);
-    }
-    for view in messages {
-        cell.publish(LiveMessage::Value(Box::new(view)));
-    }
+    record(cell, samples, messages);
     for event in events {
         cell.emit(event);
     }
@@ -987,13 +981,7 @@ fn mark_down(cell: &Cell, entry: &DeviceEntry, error: &DeviceError, retry: Durat
         }
         went_down
     };
-    cell.metrics().value_changes.inc_by(samples.len() as u64);
-    for sample in samples {
-        cell.store().sample(sample);
-    }
-    for view in views {
-        cell.publish(LiveMessage::Value(Box::new(view)));
-    }
+    record(cell, samples, views);
     cell.publish(LiveMessage::Device(Box::new(entry.summary())));
     if went_down {
         let mut fields = crate::event::fields([
@@ -1051,19 +1039,24 @@ fn mark_stale(cell: &Cell, entry: &DeviceEntry) {
             views.push(entry.point_view(i, point, now));
         }
     }
-    cell.metrics().value_changes.inc_by(samples.len() as u64);
-    for sample in samples {
-        cell.store().sample(sample);
-    }
-    for view in views {
-        cell.publish(LiveMessage::Value(Box::new(view)));
-    }
+    record(cell, samples, views);
 }
 
 fn with_unit(value: &Value, unit: Option<&str>) -> String {
     match unit {
         Some(unit) => format!("{value} {unit}"),
         None => value.to_string(),
+    }
+}
+
+/// Records changes: counted, stored in the history, and told to the change stream.
+fn record(cell: &Cell, samples: Vec<Sample>, views: Vec<crate::cell::PointView>) {
+    cell.metrics().value_changes.inc_by(samples.len() as u64);
+    for sample in samples {
+        cell.store().sample(sample);
+    }
+    for view in views {
+        cell.publish(LiveMessage::Value(Box::new(view)));
     }
 }
 

@@ -8,14 +8,19 @@ use panasonic::status::StopMode;
 use panasonic::{Machine, MachineConfig};
 
 async fn rig() -> (PanasonicDriver, panasonic::server::RunningTwin) {
+    let twin = twin().await;
+    let driver = placer(twin.command_addr().port(), twin.event_addr().port(), None);
+    (driver, twin)
+}
+
+/// A machine's twin served on two free loopback ports.
+async fn twin() -> panasonic::server::RunningTwin {
     let any: std::net::SocketAddr = "127.0.0.1:0".parse().unwrap();
-    let twin = TwinServer::bind(any, any, Machine::new(MachineConfig::default()).unwrap())
+    TwinServer::bind(any, any, Machine::new(MachineConfig::default()).unwrap())
         .await
         .unwrap()
         .spawn()
-        .unwrap();
-    let driver = placer(twin.command_addr().port(), twin.event_addr().port(), None);
-    (driver, twin)
+        .unwrap()
 }
 
 /// `placer1`, its machine's ports on this host, its reply timeout `timeout`.
@@ -38,14 +43,9 @@ fn placer(command_port: u16, event_port: u16, timeout: Option<Duration>) -> Pana
 
 #[tokio::test]
 async fn a_refused_event_port_leaves_the_commands_points_and_is_told_once_as_the_events_link() {
-    let any: std::net::SocketAddr = "127.0.0.1:0".parse().unwrap();
-    let twin = TwinServer::bind(any, any, Machine::new(MachineConfig::default()).unwrap())
-        .await
-        .unwrap()
-        .spawn()
-        .unwrap();
+    let twin = twin().await;
     // A port nothing listens on: bound, then closed.
-    let closed = std::net::TcpListener::bind(any).unwrap();
+    let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let wrong = closed.local_addr().unwrap().port();
     drop(closed);
     let mut driver = placer(twin.command_addr().port(), wrong, None);
