@@ -498,7 +498,6 @@ impl Confirmed {
 impl JbcDriver {
     /// A driver for the station `config` describes.
     pub fn new(config: &DriverConfig) -> Result<Self, String> {
-        check_address(config.address)?;
         let defaults = ClientConfig::default();
         let route = match config.address {
             None => None,

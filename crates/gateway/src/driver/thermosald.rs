@@ -300,7 +300,6 @@ pub struct ThermosaldDriver {
 impl ThermosaldDriver {
     /// A driver for the regulator `config` describes.
     pub fn new(config: &DriverConfig) -> Result<Self, String> {
-        check_address(config.address)?;
         let address = config
             .address
             .and_then(|a| u8::try_from(a).ok())
