@@ -817,3 +817,46 @@ async fn a_forged_retained_state_offline_is_answered_and_births_past_max_points_
     );
     historian.wait_healthy("after the rogue client");
 }
+
+#[test]
+fn a_historian_whose_database_is_not_there_says_so_at_the_default_level() {
+    // A port nothing listens on: bound, then closed.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = closed.local_addr().unwrap().port();
+    drop(closed);
+    let mut child = cellbus()
+        .args(["historian", "--mqtt", "mqtt://127.0.0.1:1"])
+        .args([
+            "--database",
+            &format!("postgres://cellbus@127.0.0.1:{port}/plant"),
+        ])
+        .args(["--listen", "127.0.0.1:0"])
+        .env_remove("RUST_LOG")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("cellbus runs");
+    let err = BufReader::new(child.stderr.take().expect("piped"));
+    let (lines, heard) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufRead::lines(err).map_while(Result::ok) {
+            if lines.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut seen = Vec::new();
+    let told = loop {
+        match heard.recv_timeout(LIMIT) {
+            Ok(line) if line.contains("WARN") && line.contains(&format!("127.0.0.1:{port}")) => {
+                break Some(line);
+            }
+            Ok(line) => seen.push(line),
+            Err(_) => break None,
+        }
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    let told = told.unwrap_or_else(|| panic!("no warning naming the database: {seen:?}"));
+    assert!(told.contains("offline meanwhile"), "{told}");
+}
