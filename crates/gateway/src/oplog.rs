@@ -8,6 +8,7 @@
 //! events and writes are debug (they are data: the page, `/api/events` and the interfaces
 //! carry them). A device going down is told with what to check (its kind's
 //! [`DeviceKind::hint`](crate::driver::DeviceKind::hint), in the event's `hint` field). A
+//! device down because its line is, is left to the line's warning (debug). A
 //! device or line that keeps going down and up is logged at most
 //! [`BURST`] times in [`WINDOW`], then once more to say it goes on ([`Throttle`]).
 //!
@@ -161,9 +162,14 @@ pub fn log(throttle: &Mutex<Throttle>, event: &Event) {
         .get("link")
         .and(event.fields.get("state"))
         .and_then(|state| state.as_str());
+    // A device down because its line is: the line's own warning says it once for all of
+    // them (a line of 50 devices would otherwise be 50 warnings).
+    let line_down = event.kind == EventKind::DeviceDown
+        && event.fields.get("error_kind").and_then(|k| k.as_str()) == Some("disconnected");
     let level = match (event.kind, link) {
         (EventKind::DeviceEvent, Some("down")) => Level::WARN,
         (EventKind::DeviceEvent, Some("up")) => Level::INFO,
+        _ if line_down => Level::DEBUG,
         _ => level_of(event.kind),
     };
     match level {

@@ -260,3 +260,39 @@ pub fn unopened_cell(config: &CellConfig, store: &Store) -> Arc<Cell> {
     let (cell, _lines) = Cell::new(config, store.handle(), metrics).unwrap();
     cell
 }
+
+/// Config text for the tests of the config and of each kind's and interface's keys.
+pub mod config {
+    use std::path::Path;
+
+    use crate::config::{CellConfig, ConfigError};
+    use crate::plugins::parse_config;
+
+    /// `text` as the file `cell.toml`, read with the built-in kinds and interfaces.
+    pub fn parse(text: &str) -> Result<CellConfig, ConfigError> {
+        parse_config(text, Path::new("cell.toml"))
+    }
+
+    /// Parses `text`, expecting an error at `line:column` whose message contains `words`.
+    pub fn refused(text: &str, line: usize, column: usize, words: &str) {
+        let err = parse(text).expect_err("the config must be refused");
+        let shown = err.to_string();
+        assert_eq!(err.position(), Some((line, column)), "{shown}");
+        assert!(
+            shown.starts_with(&format!("cell.toml:{line}:{column}: ")),
+            "{shown}"
+        );
+        assert!(shown.contains(words), "{shown}");
+    }
+
+    /// A cell of one JBC station on one serial line.
+    pub const ONE: &str = r#"
+[[line]]
+name = "rework"
+endpoint = "serial:///dev/ttyUSB0"
+
+[[line.device]]
+id = "jbc1"
+protocol = "jbc"
+"#;
+}

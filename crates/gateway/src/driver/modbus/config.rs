@@ -568,3 +568,7 @@ pub(super) fn warnings(devices: &[&DriverConfig]) -> Vec<String> {
     }
     warnings
 }
+
+#[cfg(test)]
+#[path = "config_tests.rs"]
+mod tests;

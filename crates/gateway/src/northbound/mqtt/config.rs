@@ -405,3 +405,7 @@ struct RawMqtt {
     client_cert: Option<Spanned<String>>,
     client_key: Option<Spanned<String>>,
 }
+
+#[cfg(test)]
+#[path = "config_tests.rs"]
+mod tests;
