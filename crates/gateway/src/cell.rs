@@ -40,6 +40,9 @@ pub struct Cell {
     metrics: Arc<Metrics>,
     interfaces: RwLock<Vec<(&'static str, Arc<dyn InterfaceStatus>)>>,
     log_throttle: std::sync::Mutex<crate::oplog::Throttle>,
+    /// A device's own links that are down (a Panasonic machine's Port 2), by device and
+    /// link, with why: told by its events (`link`, `state`, `error` fields).
+    links_down: RwLock<BTreeMap<(DeviceId, String), String>>,
 }
 
 /// The status of an interface the gateway has but that does not run (not configured):
@@ -550,6 +553,7 @@ impl Cell {
             metrics,
             interfaces: RwLock::new(Vec::new()),
             log_throttle: std::sync::Mutex::default(),
+            links_down: RwLock::default(),
         });
         Ok((cell, plans))
     }
@@ -669,8 +673,49 @@ impl Cell {
     pub fn emit(&self, event: Event) {
         self.metrics.events.inc();
         crate::oplog::log(&self.log_throttle, &event);
+        self.note_link(&event);
         self.store.event(event.clone());
         self.publish(LiveMessage::Event(Box::new(event)));
+    }
+
+    /// Follows a device's own link from its events: `link` names it, `state` is `down` (with
+    /// `error`) or `up`.
+    fn note_link(&self, event: &Event) {
+        let (Some(device), Some(link), Some(state)) = (
+            &event.device,
+            event.fields.get("link").and_then(|l| l.as_str()),
+            event.fields.get("state").and_then(|s| s.as_str()),
+        ) else {
+            return;
+        };
+        let key = (device.clone(), link.to_owned());
+        let mut down = self
+            .links_down
+            .write()
+            .unwrap_or_else(PoisonError::into_inner);
+        match state {
+            "down" => {
+                let why = event
+                    .fields
+                    .get("error")
+                    .and_then(|e| e.as_str())
+                    .unwrap_or("no reason given");
+                down.insert(key, why.to_owned());
+            }
+            _ => {
+                down.remove(&key);
+            }
+        }
+    }
+
+    /// The devices' own links that are down: device, link and why.
+    pub fn links_down(&self) -> Vec<(DeviceId, String, String)> {
+        self.links_down
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .map(|((device, link), why)| (device.clone(), link.clone(), why.clone()))
+            .collect()
     }
 
     /// Tells the event-stream clients.

@@ -4,7 +4,8 @@
 //! - `failing` (HTTP 503): the history cannot be written (off since the start, or commits
 //!   failing), or no device answers (at least one has failed and none is up).
 //! - `degraded` (HTTP 200): something is wrong but the gateway does its job for the rest:
-//!   a device down, a line not open, an interface's link down (the MQTT broker).
+//!   a device down, a line not open, a device's own link down (a Panasonic machine's
+//!   events), an interface's link down (the MQTT broker).
 //! - `ok` (HTTP 200): none of these. Devices not polled yet (the first seconds) are not a
 //!   problem.
 //!
@@ -48,6 +49,9 @@ pub struct Facts {
     pub history: Option<HistoryState>,
     /// Each interface whose link is down: its name and why.
     pub interfaces_down: Vec<(String, String)>,
+    /// Each device's own link that is down (a Panasonic machine's events): device, link,
+    /// why.
+    pub links_down: Vec<(String, String, String)>,
 }
 
 impl Facts {
@@ -75,11 +79,17 @@ impl Facts {
             .into_iter()
             .filter_map(|(name, status)| Some((name.to_owned(), status.problem()?)))
             .collect();
+        let links_down = cell
+            .links_down()
+            .into_iter()
+            .map(|(device, link, why)| (device.to_string(), link, why))
+            .collect();
         Facts {
             devices,
             lines_closed,
             history: Some(history),
             interfaces_down,
+            links_down,
         }
     }
 }
@@ -122,6 +132,9 @@ pub fn judge(facts: &Facts) -> Health {
     }
     for (name, why) in &facts.lines_closed {
         degraded.push(format!("line {name} is not open: {why}"));
+    }
+    for (device, link, why) in &facts.links_down {
+        degraded.push(format!("device {device}'s {link} link is down: {why}"));
     }
     for (name, why) in &facts.interfaces_down {
         degraded.push(format!("{name}: {why}"));
@@ -175,6 +188,7 @@ mod tests {
         let facts = Facts {
             lines_closed: vec![("bench".into(), "no such port".into())],
             interfaces_down: vec![("mqtt".into(), "broker link down: refused".into())],
+            links_down: vec![("jbc1".into(), "events".into(), "refused".into())],
             ..stations(DeviceStatus::Up, DeviceStatus::Down)
         };
         let health = judge(&facts);
@@ -184,6 +198,7 @@ mod tests {
             [
                 "device jbc2 is down: no answer in 500 ms",
                 "line bench is not open: no such port",
+                "device jbc1's events link is down: refused",
                 "mqtt: broker link down: refused",
             ]
         );
@@ -216,5 +231,56 @@ mod tests {
             ..Facts::default()
         };
         assert_eq!(judge(&starting).status, Status::Ok);
+    }
+}
+
+#[cfg(test)]
+mod cell_tests {
+    use super::*;
+    use crate::config::{CellConfig, LineConfig};
+    use crate::event::{Event, EventKind, fields};
+    use crate::point::DeviceId;
+    use crate::store::{Store, StoreOptions};
+    use crate::time::Timestamp;
+
+    #[test]
+    fn a_devices_own_link_is_a_reason_while_its_events_say_it_is_down() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+        let config = CellConfig {
+            lines: vec![LineConfig {
+                name: "lan".into(),
+                endpoint: link::Endpoint::parse(
+                    "tcp://127.0.0.1:4001",
+                    link::SerialSettings::new_8n1(9600),
+                )
+                .unwrap(),
+                devices: vec![crate::testing::device("jbc1", 1)],
+                reopen_after_timeouts: 0,
+            }],
+            ..CellConfig::default()
+        };
+        let cell = crate::testing::unopened_cell(&config, &store);
+        let link_event = |state: &str| Event {
+            t: Timestamp::now(),
+            kind: EventKind::DeviceEvent,
+            line: Some("lan".into()),
+            device: Some(DeviceId::new("jbc1").unwrap()),
+            point: None,
+            message: format!("events link {state}"),
+            fields: fields([
+                ("link", serde_json::json!("events")),
+                ("state", serde_json::json!(state)),
+                ("error", serde_json::json!("connection refused")),
+            ]),
+        };
+        cell.emit(link_event("down"));
+        let facts = Facts::of(&cell, HistoryState::Ok);
+        assert_eq!(
+            judge(&facts).reasons,
+            ["device jbc1's events link is down: connection refused"]
+        );
+        cell.emit(link_event("up"));
+        assert!(Facts::of(&cell, HistoryState::Ok).links_down.is_empty());
     }
 }
