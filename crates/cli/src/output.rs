@@ -17,6 +17,29 @@ pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
     UsageError(message.to_string()).into()
 }
 
+/// `--json` of the device commands (jbc, modbus, cross, thermosald, panasonic): global,
+/// so it goes before or after the subcommand like their other options.
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct JsonArg {
+    /// Print JSON instead of text: one object per answer, one per line for a watch.
+    #[arg(long, global = true)]
+    pub json: bool,
+}
+
+/// The `--endpoint` a device command needs. Clap cannot require an option that may come
+/// after the subcommand, so a missing one is refused here (exit 2); `examples` lists what
+/// this command's devices take.
+pub fn endpoint(
+    given: Option<&str>,
+    defaults: link::SerialSettings,
+    examples: &str,
+) -> anyhow::Result<link::Endpoint> {
+    let Some(text) = given else {
+        return Err(usage(format!("--endpoint URL is needed: {examples}")));
+    };
+    link::Endpoint::parse(text, defaults).map_err(usage)
+}
+
 /// The shortest and longest `--timeout` of the clients.
 const TIMEOUTS: (Duration, Duration) = (Duration::from_millis(1), Duration::from_secs(3600));
 

@@ -350,7 +350,11 @@ impl fmt::Display for Endpoint {
                 rs485,
             } => {
                 // A relative path has no URL form: it is written as given, as it is parsed.
-                let scheme = if path.starts_with('/') { "serial://" } else { "" };
+                let scheme = if path.starts_with('/') {
+                    "serial://"
+                } else {
+                    ""
+                };
                 write!(
                     f,
                     "{scheme}{path}?baud={}&framing={}",

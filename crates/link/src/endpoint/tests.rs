@@ -172,7 +172,8 @@ fn a_serial_url_with_a_host_part_is_refused_rather_than_read_as_an_absolute_path
     );
     let err = Endpoint::parse("serial://dev/ttyUSB0?baud=9600", JBC).unwrap_err();
     assert!(
-        err.to_string().contains("write serial:///dev/ttyUSB0 (three slashes)"),
+        err.to_string()
+            .contains("write serial:///dev/ttyUSB0 (three slashes)"),
         "{err}"
     );
 }
