@@ -30,17 +30,27 @@ pub struct Input {
     /// Bytes in hex: `02 52 53 54 31 03 41` or `0252535431…`.
     #[arg(value_name = "HEX", conflicts_with = "file")]
     pub hex: Vec<String>,
-    /// A binary capture file (what a serial sniffer or `socat -x` saved).
+    /// A binary capture file (what a serial sniffer or `socat -x` saved); - reads standard
+    /// input.
     #[arg(long, value_name = "FILE")]
     pub file: Option<PathBuf>,
+}
+
+/// The bytes of a capture file, or of standard input for `-`.
+pub(crate) fn read_capture(path: &std::path::Path) -> anyhow::Result<Vec<u8>> {
+    if path.as_os_str() == "-" {
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut std::io::stdin().lock(), &mut bytes)
+            .context("cannot read standard input")?;
+        return Ok(bytes);
+    }
+    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
 }
 
 impl Input {
     pub(crate) fn bytes(&self) -> anyhow::Result<Vec<u8>> {
         match &self.file {
-            Some(path) => {
-                std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
-            }
+            Some(path) => read_capture(path),
             None if self.hex.is_empty() => {
                 Err(usage("give the bytes as hex arguments or --file FILE"))
             }

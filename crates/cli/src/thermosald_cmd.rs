@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use anyhow::Context;
 use clap::{Args, Subcommand};
 use link::{Line, SerialSettings, SharedLine};
 use serde_json::{Map, json};
@@ -174,7 +173,8 @@ pub struct DecodeInput {
     /// bytes in hex (`25 30 35 31 51 39 39 30 0A`).
     #[arg(value_name = "TEXT|HEX", conflicts_with = "file")]
     pub input: Vec<String>,
-    /// A binary capture file (what a serial sniffer or `socat -x` saved).
+    /// A binary capture file (what a serial sniffer or `socat -x` saved); - reads standard
+    /// input.
     #[arg(long, value_name = "FILE")]
     pub file: Option<PathBuf>,
 }
@@ -701,9 +701,7 @@ pub async fn sim(args: SimThermosaldArgs) -> anyhow::Result<ExitCode> {
 /// `cellbus decode thermosald`.
 pub fn decode(input: DecodeInput) -> anyhow::Result<ExitCode> {
     let bytes = match &input.file {
-        Some(path) => {
-            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?
-        }
+        Some(path) => crate::decode::read_capture(path)?,
         None if input.input.is_empty() => {
             return Err(usage(
                 "give the messages as text (%051Q990), as hex bytes, or --file FILE",
