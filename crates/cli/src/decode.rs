@@ -18,7 +18,11 @@ pub enum DecodeCommand {
     /// requests and responses told apart).
     Modbus(Input),
     /// Thermosald ISC messages (% address message Q/R count data LF), as text or hex.
-    Thermosald(crate::thermosald_cmd::DecodeInput),
+    #[command(mut_arg("hex", |arg| arg.value_name("TEXT|HEX").help(
+        "Messages as text, one per argument (`%051Q990`, with a trailing `\\n` or without), \
+         or bytes in hex (`25 30 35 31 51 39 39 30 0A`)"
+    )))]
+    Thermosald(Input),
     /// Panasonic BM host-protocol messages (256-byte command field, size, data,
     /// terminator): C commands, A/D replies and R messages in words.
     Panasonic(Input),

@@ -29,6 +29,8 @@ pub struct JbcArgs {
     /// 8E1.
     #[arg(long, value_name = "URL", global = true)]
     pub endpoint: Option<String>,
+    #[command(flatten)]
+    pub output: output::JsonArg,
     /// The station's address (00–99).
     #[arg(long, default_value = "01", global = true)]
     pub address: Address,
@@ -44,8 +46,6 @@ pub struct JbcArgs {
     /// Retries after a timeout or a damaged frame (never after a refusal).
     #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
-    #[command(flatten)]
-    pub output: output::JsonArg,
     #[command(subcommand)]
     pub action: JbcAction,
 }
@@ -92,12 +92,7 @@ fn codes_help(title: &str, keep: fn(Code) -> bool) -> String {
 }
 
 pub async fn run(args: JbcArgs) -> anyhow::Result<ExitCode> {
-    let endpoint = output::endpoint(
-        args.endpoint.as_deref(),
-        JBC_LINE,
-        "serial:///dev/ttyUSB0, a device path, or tcp://host:port",
-    )?;
-    crate::output::refuse_modbus_tcp(&endpoint, "a JBC station")?;
+    let endpoint = output::serial_endpoint(args.endpoint.as_deref(), JBC_LINE, "a JBC station")?;
     let route = (!args.no_address).then_some(Route {
         source: args.robot_address,
         target: args.address,

@@ -45,6 +45,8 @@ pub struct LineArgs {
     /// Modbus gateway, `cellbus sim … --framing tcp`). Serial defaults: 9600 baud, 8N1.
     #[arg(long, value_name = "URL", global = true)]
     pub endpoint: Option<String>,
+    #[command(flatten)]
+    pub output: output::JsonArg,
     /// Time to wait for each answer, on top of the frames' time on the wire [default: 500ms;
     /// scan: 200ms].
     #[arg(long, value_parser = crate::output::parse_timeout, global = true)]
@@ -53,8 +55,6 @@ pub struct LineArgs {
     /// exception: that is the device's answer).
     #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
-    #[command(flatten)]
-    pub output: output::JsonArg,
 }
 
 impl LineArgs {

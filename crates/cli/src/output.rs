@@ -53,15 +53,24 @@ pub fn parse_timeout(text: &str) -> Result<Duration, String> {
     Ok(timeout)
 }
 
-/// Refuses a `modbus-tcp://` endpoint for a device that does not speak Modbus (`what`:
-/// "a JBC station").
-pub fn refuse_modbus_tcp(endpoint: &link::Endpoint, what: &str) -> anyhow::Result<()> {
+/// The `--endpoint` of a device that does not speak Modbus (`what`: "a JBC station"):
+/// serial or raw TCP; a `modbus-tcp://` one is refused.
+pub fn serial_endpoint(
+    given: Option<&str>,
+    defaults: link::SerialSettings,
+    what: &str,
+) -> anyhow::Result<link::Endpoint> {
+    let endpoint = endpoint(
+        given,
+        defaults,
+        "serial:///dev/ttyUSB0, a device path, or tcp://host:port",
+    )?;
     if endpoint.is_mbap() {
         return Err(usage(format!(
             "{endpoint}: modbus-tcp:// is for Modbus devices; {what} is reached over serial:// or tcp://"
         )));
     }
-    Ok(())
+    Ok(endpoint)
 }
 
 /// A client's error as the command's error, classified by its [`Failure::kind`]: our own

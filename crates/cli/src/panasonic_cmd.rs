@@ -37,6 +37,8 @@ pub struct PanasonicArgs {
     /// IPv6 in brackets: [::1]:49152.
     #[arg(long, value_name = "HOST[:PORT]", global = true)]
     pub host: Option<String>,
+    #[command(flatten)]
+    pub output: output::JsonArg,
     /// Port 2 (the machine's R messages), for `events`. Default: Port 1's number + 1
     /// (49153 for the default 49152).
     #[arg(long, value_name = "P", global = true)]
@@ -49,8 +51,6 @@ pub struct PanasonicArgs {
     /// repeated.
     #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
-    #[command(flatten)]
-    pub output: output::JsonArg,
     #[command(subcommand)]
     pub action: PanasonicAction,
 }

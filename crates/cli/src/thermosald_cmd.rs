@@ -1,7 +1,6 @@
 //! `cellbus thermosald …`, `cellbus sim thermosald` and `cellbus decode thermosald`:
 //! Thermosald ISC impulse-sealer regulators on an RS-485 line.
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -38,6 +37,8 @@ pub struct ThermosaldArgs {
     /// drops the adapter's local echo.
     #[arg(long, value_name = "URL", global = true)]
     pub endpoint: Option<String>,
+    #[command(flatten)]
+    pub output: output::JsonArg,
     /// The regulator's address, 0–7; `$` to assign an address (set-address only, with one
     /// regulator powered); several for watch: 0,1,2.
     #[arg(long, default_value = "0", value_name = "N", global = true)]
@@ -50,8 +51,6 @@ pub struct ThermosaldArgs {
     /// differs from what was sent is retried once, then reported.
     #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
-    #[command(flatten)]
-    pub output: output::JsonArg,
     #[command(subcommand)]
     pub action: ThermosaldAction,
 }
@@ -166,27 +165,13 @@ pub struct SimThermosaldArgs {
     pub addresses: Vec<Address>,
 }
 
-/// Captured messages for `cellbus decode thermosald`.
-#[derive(Debug, Args)]
-pub struct DecodeInput {
-    /// Messages as text, one per argument (`%051Q990`, with a trailing `\n` or without), or
-    /// bytes in hex (`25 30 35 31 51 39 39 30 0A`).
-    #[arg(value_name = "TEXT|HEX", conflicts_with = "file")]
-    pub input: Vec<String>,
-    /// A binary capture file (what a serial sniffer or `socat -x` saved); - reads standard
-    /// input.
-    #[arg(long, value_name = "FILE")]
-    pub file: Option<PathBuf>,
-}
-
 pub async fn run(args: ThermosaldArgs) -> anyhow::Result<ExitCode> {
     // Everything is checked before the line is opened: a bad argument never reaches it.
-    let endpoint = output::endpoint(
+    let endpoint = output::serial_endpoint(
         args.endpoint.as_deref(),
         THERMOSALD_LINE,
-        "serial:///dev/ttyUSB0, a device path, or tcp://host:port",
+        "a Thermosald regulator",
     )?;
-    crate::output::refuse_modbus_tcp(&endpoint, "a Thermosald regulator")?;
     if let Some(timeout) = args.timeout.filter(|t| *t <= ANSWER_AFTER_RECEPTION) {
         return Err(usage(format!(
             "--timeout {} can never see an answer: a regulator answers {} ms after the question",
@@ -698,17 +683,18 @@ pub async fn sim(args: SimThermosaldArgs) -> anyhow::Result<ExitCode> {
     .await
 }
 
-/// `cellbus decode thermosald`.
-pub fn decode(input: DecodeInput) -> anyhow::Result<ExitCode> {
-    let bytes = match &input.file {
-        Some(path) => crate::decode::read_capture(path)?,
-        None if input.input.is_empty() => {
-            return Err(usage(
-                "give the messages as text (%051Q990), as hex bytes, or --file FILE",
-            ));
-        }
-        None if input.input.iter().any(|arg| arg.contains('%')) => text_bytes(&input.input),
-        None => output::parse_hex(&input.input)?,
+/// `cellbus decode thermosald`: the common input, whose arguments may also be messages as
+/// text (`%051Q990`).
+pub fn decode(input: crate::decode::Input) -> anyhow::Result<ExitCode> {
+    if input.file.is_none() && input.hex.is_empty() {
+        return Err(usage(
+            "give the messages as text (%051Q990), as hex bytes, or --file FILE",
+        ));
+    }
+    let bytes = if input.file.is_none() && input.hex.iter().any(|arg| arg.contains('%')) {
+        text_bytes(&input.hex)
+    } else {
+        input.bytes()?
     };
     crate::decode::dump(FrameCodec, &bytes, thermosald::request::describe)
 }

@@ -81,19 +81,7 @@ fn cross_watch_prints_a_transfer_when_the_preferred_source_fails_and_returns() {
         "--cycle-outage",
         "400ms",
     ]);
-    let out = run_within(
-        &[
-            "cross",
-            "--endpoint",
-            &sim.endpoint,
-            "watch",
-            "--interval",
-            "100ms",
-            "--changes",
-            "2",
-        ],
-        Duration::from_secs(60),
-    );
+    let out = cross_watch(&sim, &["--changes", "2"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let text = stdout(&out);
     assert!(text.contains("S1 failure"), "{text}");
@@ -1487,7 +1475,22 @@ fn modbus_and_cross_options_go_before_or_after_the_subcommand() {
 #[test]
 fn cross_watch_stops_after_count_rounds_or_for_a_while() {
     let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
-    let limit = Duration::from_secs(60);
+    // A steady switch: the state at the start, then no change.
+    let counted = cross_watch(&sim, &["--count", "3", "--json"]);
+    assert!(counted.status.success(), "{}", stderr(&counted));
+    let text = stdout(&counted);
+    assert_eq!(text.lines().count(), 1, "{text}");
+    let timed = cross_watch(&sim, &["--for", "300ms"]);
+    assert!(timed.status.success(), "{}", stderr(&timed));
+    assert!(
+        stdout(&timed).starts_with("0.0 s     load supplied by source 1"),
+        "{}",
+        stdout(&timed)
+    );
+}
+
+/// `cellbus cross --endpoint … watch --interval 100ms ARGS…`, stopped after a minute.
+fn cross_watch(sim: &Sim, args: &[&str]) -> Output {
     let watch = [
         "cross",
         "--endpoint",
@@ -1496,16 +1499,5 @@ fn cross_watch_stops_after_count_rounds_or_for_a_while() {
         "--interval",
         "100ms",
     ];
-    // A steady switch: the state at the start, then no change.
-    let counted = run_within(&[&watch[..], &["--count", "3", "--json"]].concat(), limit);
-    assert!(counted.status.success(), "{}", stderr(&counted));
-    let text = stdout(&counted);
-    assert_eq!(text.lines().count(), 1, "{text}");
-    let timed = run_within(&[&watch[..], &["--for", "300ms"]].concat(), limit);
-    assert!(timed.status.success(), "{}", stderr(&timed));
-    assert!(
-        stdout(&timed).starts_with("0.0 s     load supplied by source 1"),
-        "{}",
-        stdout(&timed)
-    );
+    run_within(&[&watch[..], args].concat(), Duration::from_secs(60))
 }
