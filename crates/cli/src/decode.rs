@@ -18,7 +18,11 @@ pub enum DecodeCommand {
     /// requests and responses told apart).
     Modbus(Input),
     /// Thermosald ISC messages (% address message Q/R count data LF), as text or hex.
-    Thermosald(crate::thermosald_cmd::DecodeInput),
+    #[command(mut_arg("hex", |arg| arg.value_name("TEXT|HEX").help(
+        "Messages as text, one per argument (`%051Q990`, with a trailing `\\n` or without), \
+         or bytes in hex (`25 30 35 31 51 39 39 30 0A`)"
+    )))]
+    Thermosald(Input),
     /// Panasonic BM host-protocol messages (256-byte command field, size, data,
     /// terminator): C commands, A/D replies and R messages in words.
     Panasonic(Input),
@@ -30,17 +34,27 @@ pub struct Input {
     /// Bytes in hex: `02 52 53 54 31 03 41` or `0252535431…`.
     #[arg(value_name = "HEX", conflicts_with = "file")]
     pub hex: Vec<String>,
-    /// A binary capture file (what a serial sniffer or `socat -x` saved).
+    /// A binary capture file (what a serial sniffer or `socat -x` saved); - reads standard
+    /// input.
     #[arg(long, value_name = "FILE")]
     pub file: Option<PathBuf>,
+}
+
+/// The bytes of a capture file, or of standard input for `-`.
+pub(crate) fn read_capture(path: &std::path::Path) -> anyhow::Result<Vec<u8>> {
+    if path.as_os_str() == "-" {
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut std::io::stdin().lock(), &mut bytes)
+            .context("cannot read standard input")?;
+        return Ok(bytes);
+    }
+    std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
 }
 
 impl Input {
     pub(crate) fn bytes(&self) -> anyhow::Result<Vec<u8>> {
         match &self.file {
-            Some(path) => {
-                std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))
-            }
+            Some(path) => read_capture(path),
             None if self.hex.is_empty() => {
                 Err(usage("give the bytes as hex arguments or --file FILE"))
             }

@@ -8,39 +8,44 @@ use clap::{Args, Subcommand};
 use jbc::client::{Client, ClientConfig, DEFAULT_RETRIES};
 use jbc::code::{Code, Reading, Value};
 use jbc::frame::{Address, Route};
-use link::{Endpoint, Line, SerialSettings, SharedLine};
+use link::{Line, SerialSettings, SharedLine};
 use serde_json::{Map, json};
 
 use crate::output::{self, usage};
-use crate::rounds::Rounds;
+use crate::rounds::{Rounds, StopArgs};
 
 /// The station's line defaults: 19200 baud, 8 data bits, even parity, 1 stop bit.
 pub const JBC_LINE: SerialSettings = SerialSettings::new_8e1(19200);
 
 #[derive(Debug, Args)]
+#[command(
+    after_help = "The codes: `cellbus jbc read --help` lists those to read, \
+    `cellbus jbc write --help` those to write. Options go before or after the subcommand."
+)]
 pub struct JbcArgs {
-    /// Where the station is: serial:///dev/ttyUSB0?baud=19200&framing=8E1 or tcp://host:port
-    /// (a serial server or `cellbus sim jbc`). Serial defaults: 19200 baud, 8E1.
-    #[arg(long, value_name = "URL")]
-    pub endpoint: String,
+    /// Where the station is (needed): serial:///dev/ttyUSB0?baud=19200&framing=8E1, a
+    /// device path (/dev/ttyUSB0, or pty/jbc1 relative to the working directory), or
+    /// tcp://host:port (a serial server or `cellbus sim jbc`). Serial defaults: 19200 baud,
+    /// 8E1.
+    #[arg(long, value_name = "URL", global = true)]
+    pub endpoint: Option<String>,
+    #[command(flatten)]
+    pub output: output::JsonArg,
     /// The station's address (00–99).
-    #[arg(long, default_value = "01")]
+    #[arg(long, default_value = "01", global = true)]
     pub address: Address,
     /// Our own (the robot's) address (00–99).
-    #[arg(long, default_value = "00")]
+    #[arg(long, default_value = "00", global = true)]
     pub robot_address: Address,
     /// Send frames without address fields (the station's "address off" setting).
-    #[arg(long, conflicts_with_all = ["address", "robot_address"])]
+    #[arg(long, global = true, conflicts_with_all = ["address", "robot_address"])]
     pub no_address: bool,
     /// Time to wait for each reply.
-    #[arg(long, default_value = "500ms", value_parser = crate::output::parse_timeout)]
+    #[arg(long, default_value = "500ms", value_parser = crate::output::parse_timeout, global = true)]
     pub timeout: Duration,
     /// Retries after a timeout or a damaged frame (never after a refusal).
-    #[arg(long, default_value_t = DEFAULT_RETRIES)]
+    #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
-    /// Print JSON instead of text.
-    #[arg(long, global = true)]
-    pub json: bool,
     #[command(subcommand)]
     pub action: JbcAction,
 }
@@ -48,32 +53,46 @@ pub struct JbcArgs {
 #[derive(Debug, Subcommand)]
 pub enum JbcAction {
     /// Read one value: CODE as in the manual without the R, e.g. ST1, AT1, A11, SMN, MAT.
+    #[command(after_help = codes_help("Codes to read", Code::readable))]
     Read {
-        /// The command code.
+        /// The code to read, without the R (listed below).
         code: String,
     },
     /// Write one value: CODE without the W (ST1, SF1, PS1, MAT, …) and the value in the
     /// code's unit (°C, %, ‰); RSP resets to factory values and takes 0.
+    #[command(after_help = codes_help("Codes to write", Code::writable))]
     Write {
-        /// The command code.
+        /// The code to write, without the W (listed below).
         code: String,
-        /// The value.
+        /// The value, in the code's unit: 380 for 380 °C; PS1 takes 1 (tool on) or 0.
         #[arg(allow_negative_numbers = true)]
         value: i32,
     },
     /// Read every readable value of the station.
     Status,
-    /// Show air temperature, external temperature, power and port status until interrupted.
+    /// Show air temperature, external temperature, power and port status every
+    /// --interval, until --count rounds, --for a while, or Ctrl-C.
     Watch {
         /// Time between readings.
-        #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
+        #[arg(long, default_value = "500ms", value_parser = crate::rounds::parse_period)]
         interval: Duration,
+        #[command(flatten)]
+        stop: StopArgs,
     },
 }
 
+/// The codes `keep` picks, one per line with their words and unit, for `--help`.
+fn codes_help(title: &str, keep: fn(Code) -> bool) -> String {
+    let mut help = format!("{title} (port 1; any case):");
+    for code in Code::all().into_iter().filter(|&code| keep(code)) {
+        let unit = code.unit().map(|u| format!(", {u}")).unwrap_or_default();
+        help.push_str(&format!("\n  {code}  {}{unit}", code.describe()));
+    }
+    help
+}
+
 pub async fn run(args: JbcArgs) -> anyhow::Result<ExitCode> {
-    let endpoint = Endpoint::parse(&args.endpoint, JBC_LINE).map_err(usage)?;
-    crate::output::refuse_modbus_tcp(&endpoint, "a JBC station")?;
+    let endpoint = output::serial_endpoint(args.endpoint.as_deref(), JBC_LINE, "a JBC station")?;
     let route = (!args.no_address).then_some(Route {
         source: args.robot_address,
         target: args.address,
@@ -87,11 +106,12 @@ pub async fn run(args: JbcArgs) -> anyhow::Result<ExitCode> {
     let action = Action::from_args(args.action)?;
     let line = Line::open(&endpoint).await?;
     let mut client = Client::new(SharedLine::new(line), config);
+    let json = args.output.json;
     match action {
-        Action::Read(code) => read(&mut client, code, args.json).await,
-        Action::Write(code, value) => write(&mut client, code, value, args.json).await,
-        Action::Status => status(&mut client, args.json).await,
-        Action::Watch(interval) => watch(&mut client, interval, args.json).await,
+        Action::Read(code) => read(&mut client, code, json).await,
+        Action::Write(code, value) => write(&mut client, code, value, json).await,
+        Action::Status => status(&mut client, json).await,
+        Action::Watch(interval, stop) => watch(&mut client, interval, stop, json).await,
     }
 }
 
@@ -99,7 +119,7 @@ enum Action {
     Read(Code),
     Write(Code, i32),
     Status,
-    Watch(Duration),
+    Watch(Duration, StopArgs),
 }
 
 impl Action {
@@ -109,10 +129,7 @@ impl Action {
             JbcAction::Read { code: c } => Self::Read(code(&c)?),
             JbcAction::Write { code: c, value } => Self::Write(code(&c)?, value),
             JbcAction::Status => Self::Status,
-            JbcAction::Watch { interval } if interval.is_zero() => {
-                return Err(usage("--interval must be longer than 0"));
-            }
-            JbcAction::Watch { interval } => Self::Watch(interval),
+            JbcAction::Watch { interval, stop } => Self::Watch(interval, stop),
         })
     }
 }
@@ -199,7 +216,12 @@ async fn status(client: &mut Client, json: bool) -> anyhow::Result<ExitCode> {
     })
 }
 
-async fn watch(client: &mut Client, interval: Duration, json: bool) -> anyhow::Result<ExitCode> {
+async fn watch(
+    client: &mut Client,
+    interval: Duration,
+    stop: StopArgs,
+    json: bool,
+) -> anyhow::Result<ExitCode> {
     const WATCHED: [&str; 4] = ["AT1", "ET1", "PP1", "PS1"];
     let codes: Vec<Code> = WATCHED
         .iter()
@@ -211,7 +233,7 @@ async fn watch(client: &mut Client, interval: Duration, json: bool) -> anyhow::R
             "time", "air", "external", "power"
         ))?;
     }
-    let mut rounds = Rounds::every(interval);
+    let mut rounds = Rounds::new(interval, stop);
     while rounds.next().await {
         let mut readings = Vec::with_capacity(codes.len());
         for &code in &codes {

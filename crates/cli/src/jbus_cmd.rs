@@ -21,7 +21,7 @@ use serde_json::{Map, Value, json};
 use wire::device::SharedModel;
 
 use crate::output::{self, usage};
-use crate::rounds::Rounds;
+use crate::rounds::{Rounds, StopArgs};
 use crate::sim::{ServeArgs, serve};
 
 /// The CROSS's line defaults (also the defaults for any Modbus line): 9600 baud, 8 data
@@ -38,12 +38,15 @@ pub const DEFAULT_SLAVE_UNIT: u8 = 1;
 /// How the client reaches the line, shared by `modbus` and `cross`.
 #[derive(Debug, Args)]
 pub struct LineArgs {
-    /// Where the line is: serial:///dev/ttyUSB0?baud=9600&framing=8N1, or tcp://host:port (a
+    /// Where the line is (needed): serial:///dev/ttyUSB0?baud=9600&framing=8N1, a device path
+    /// (/dev/ttyUSB0, or pty/cross relative to the working directory), tcp://host:port (a
     /// serial server or `cellbus sim`), optionally tcp://host:port?baud=9600 to keep the
     /// serial line's timing behind it, or modbus-tcp://host[:502] for Modbus TCP (a PLC, a
     /// Modbus gateway, `cellbus sim … --framing tcp`). Serial defaults: 9600 baud, 8N1.
     #[arg(long, value_name = "URL", global = true)]
     pub endpoint: Option<String>,
+    #[command(flatten)]
+    pub output: output::JsonArg,
     /// Time to wait for each answer, on top of the frames' time on the wire [default: 500ms;
     /// scan: 200ms].
     #[arg(long, value_parser = crate::output::parse_timeout, global = true)]
@@ -52,19 +55,15 @@ pub struct LineArgs {
     /// exception: that is the device's answer).
     #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
-    /// Print JSON instead of text.
-    #[arg(long, global = true)]
-    pub json: bool,
 }
 
 impl LineArgs {
     fn endpoint(&self) -> anyhow::Result<Endpoint> {
-        let Some(text) = &self.endpoint else {
-            return Err(usage(
-                "--endpoint URL is needed: serial:///dev/ttyUSB0, tcp://host:port or modbus-tcp://host:port",
-            ));
-        };
-        Endpoint::parse(text, JBUS_LINE).map_err(usage)
+        output::endpoint(
+            self.endpoint.as_deref(),
+            JBUS_LINE,
+            "serial:///dev/ttyUSB0, a device path, tcp://host:port or modbus-tcp://host:port",
+        )
     }
 
     fn config(&self) -> ClientConfig {
@@ -90,61 +89,74 @@ async fn open(endpoint: &Endpoint, config: ClientConfig) -> anyhow::Result<Clien
 // --- cellbus modbus ---
 
 #[derive(Debug, Args)]
+#[command(
+    after_help = "Addresses are 0-based protocol addresses, as on the wire: holding \
+    register 40001 in Modicon numbering is address 0 of the holding registers, input register \
+    30001 address 0 of the input registers. An address that looks like a Modicon number gets a \
+    warning and is used as given. Options go before or after the subcommand."
+)]
 pub struct ModbusArgs {
     #[command(flatten)]
     pub line: LineArgs,
     /// The unit number: 1–247 (JBUS devices: up to 255); 0 sends a write to every unit of
     /// a serial line at once (broadcast: nobody answers; not over Modbus TCP). Needed by
     /// every action but `scan`.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", global = true)]
     pub unit: Option<u8>,
     #[command(subcommand)]
     pub action: ModbusAction,
 }
 
-/// Addresses and values are decimal or 0x hex.
+/// What `cellbus modbus` does. Addresses are the 0-based protocol addresses of the wire,
+/// decimal or 0x hex.
 #[derive(Debug, Subcommand)]
 pub enum ModbusAction {
     /// Function 3: read COUNT values (1–125 registers in all) of holding registers from
-    /// ADDR: plain registers, or values of --type.
+    /// ADDRESS: plain registers, or values of --type.
     ReadHolding(TypedRead),
     /// Function 4: read COUNT values (1–125 registers in all) of input registers from
-    /// ADDR: plain registers, or values of --type.
+    /// ADDRESS: plain registers, or values of --type.
     ReadInput(TypedRead),
-    /// Function 1: read COUNT (1–2000) coils from ADDR.
+    /// Function 1: read COUNT (1–2000) coils from ADDRESS.
     ReadCoils(Read),
-    /// Function 2: read COUNT (1–2000) discrete inputs from ADDR.
+    /// Function 2: read COUNT (1–2000) discrete inputs from ADDRESS.
     ReadDiscrete(Read),
     /// Function 6: write VALUE (0–65535, or -32768–-1 as two's complement) to the holding
-    /// register at ADDR.
+    /// register at ADDRESS.
     WriteRegister {
-        #[arg(value_parser = parse_address)]
-        address: u16,
+        /// The register's protocol address, from 0 (register 40001 is 0), decimal or 0x hex.
+        address: ProtocolAddress,
+        /// The value: 0–65535, 0x hex, or -32768–-1 as two's complement.
         #[arg(value_parser = parse_word, allow_negative_numbers = true)]
         value: u16,
     },
-    /// Function 16: write values to the holding registers from ADDR on (1–123 registers
-    /// in all): plain registers (0–65535, 0x hex, or -32768–-1), or values of --type, each
-    /// encoded in its registers.
+    /// Function 16: write values to the holding registers from ADDRESS on (1–123
+    /// registers in all): plain registers (0–65535, 0x hex, or -32768–-1), or values of
+    /// --type, each encoded in its registers.
     WriteRegisters {
-        #[arg(value_parser = parse_address)]
-        address: u16,
+        /// The first register's protocol address, from 0 (register 40001 is 0), decimal or
+        /// 0x hex.
+        address: ProtocolAddress,
         #[command(flatten)]
         typed: TypeArgs,
+        /// The values, one register each (0–65535, 0x hex, -32768–-1), or values of --type;
+        /// after `--` when the first is negative.
         #[arg(value_name = "VALUE", allow_negative_numbers = true, required = true)]
         values: Vec<String>,
     },
-    /// Function 5: switch the coil at ADDR on or off.
+    /// Function 5: switch the coil at ADDRESS on or off.
     WriteCoil {
-        #[arg(value_parser = parse_address)]
-        address: u16,
+        /// The coil's protocol address, from 0 (coil 00001 is 0), decimal or 0x hex.
+        address: ProtocolAddress,
+        /// on or off (1 or 0).
         #[arg(value_parser = parse_on_off, value_name = "on|off", action = clap::ArgAction::Set)]
         state: bool,
     },
-    /// Function 15: write 1–1968 coils from ADDR on, each 1 or 0.
+    /// Function 15: write 1–1968 coils from ADDRESS on, each 1 or 0.
     WriteCoils {
-        #[arg(value_parser = parse_address)]
-        address: u16,
+        /// The first coil's protocol address, from 0 (coil 00001 is 0), decimal or 0x hex.
+        address: ProtocolAddress,
+        /// The coils' new states, 1 (on) or 0 (off), one per coil.
         #[arg(value_parser = parse_bit_value, value_name = "1|0", required = true)]
         values: Vec<bool>,
     },
@@ -157,22 +169,101 @@ pub enum ModbusAction {
     },
 }
 
-// ADDR and COUNT of a read (no doc comment: the action's own is its help).
+/// ADDRESS and COUNT of a read.
 #[derive(Debug, Clone, Copy, Args)]
 pub struct Read {
-    #[arg(value_parser = parse_address)]
-    pub address: u16,
+    /// The first protocol address, from 0, decimal or 0x hex. Not the Modicon number:
+    /// holding register 40001 and input register 30001 are address 0 of their tables.
+    pub address: ProtocolAddress,
+    /// How many: registers, or values of --type (1–125 registers in all); coils or
+    /// discrete inputs (1–2000).
     #[arg(value_parser = parse_address)]
     pub count: u16,
 }
 
-// A read of registers: ADDR, COUNT and the values' type.
+/// A read of registers: ADDRESS, COUNT and the values' type.
 #[derive(Debug, Clone, Copy, Args)]
 pub struct TypedRead {
     #[command(flatten)]
     pub read: Read,
     #[command(flatten)]
     pub typed: TypeArgs,
+}
+
+/// A protocol address as typed: decimal or 0x hex, 0–65535. Modicon numbering (holding
+/// register 40001, coil 00001) is not taken off it, only warned about
+/// ([`modicon_warning`]), so it keeps how it was written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProtocolAddress {
+    pub value: u16,
+    pub written: Written,
+}
+
+/// How an address was written: Modicon numbers are decimal, coils with five digits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Written {
+    /// `0x9C41`: nobody writes Modicon numbers in hex.
+    Hex,
+    /// `40001`, `17`.
+    Decimal,
+    /// `00017`: five digits with leading zeros, the way Modicon numbers coils.
+    FiveDigits,
+}
+
+impl std::str::FromStr for ProtocolAddress {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        let written = if text.starts_with("0x") || text.starts_with("0X") {
+            Written::Hex
+        } else if text.len() == 5 && text.starts_with('0') {
+            Written::FiveDigits
+        } else {
+            Written::Decimal
+        };
+        Ok(Self {
+            value: parse_address(text)?,
+            written,
+        })
+    }
+}
+
+/// A warning for an address that looks like a Modicon register number (holding register
+/// 40001, input register 30001, discrete input 10001, coil 00001) rather than the 0-based
+/// protocol address the command takes; the command still uses the address as given. Coil
+/// numbers are only recognised written with five digits (`00017`): 1–9999 are ordinary
+/// coil addresses too.
+pub fn modicon_warning(action: &ModbusAction) -> Option<String> {
+    use ModbusAction::*;
+    let (address, registers, verb) = match action {
+        ReadHolding(TypedRead { read, .. }) | ReadInput(TypedRead { read, .. }) => {
+            (read.address, true, "reads")
+        }
+        ReadCoils(read) | ReadDiscrete(read) => (read.address, false, "reads"),
+        WriteRegister { address, .. } | WriteRegisters { address, .. } => {
+            (*address, true, "writes")
+        }
+        WriteCoil { address, .. } | WriteCoils { address, .. } => (*address, false, "writes"),
+        Scan { .. } => return None,
+    };
+    let value = address.value;
+    let (table, first) = match (value, address.written) {
+        (_, Written::Hex) => return None,
+        (30001..=39999, _) if registers => ("input register", 30001),
+        (40001..=49999, _) if registers => ("holding register", 40001),
+        (1..=9999, Written::FiveDigits) if !registers => ("coil", 1),
+        (10001..=19999, _) if !registers => ("discrete input", 10001),
+        _ => return None,
+    };
+    let number = match address.written {
+        Written::FiveDigits => format!("{value:05}"),
+        _ => value.to_string(),
+    };
+    Some(format!(
+        "{number} looks like Modicon {table} {number}, which is protocol address {} of the \
+         {table}s; addresses here are 0-based protocol addresses, so this {verb} address \
+         {value} as asked",
+        value - first
+    ))
 }
 
 /// The type of each value a read or write of registers carries.
@@ -242,6 +333,9 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
     }
     // Build the request before opening the line: bad arguments never touch the device.
     let request = modbus_request(&args.action)?;
+    if let Some(warning) = modicon_warning(&args.action) {
+        eprintln!("cellbus: warning: {warning}");
+    }
     let send = if unit == 0 {
         match request {
             Request::WriteSingleCoil(w) => Send::Broadcast(Broadcast(Write::SingleCoil(w))),
@@ -265,7 +359,7 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
         Send::Broadcast(write) => {
             client.broadcast(&write).await?;
             let request = Request::from(write.0.clone());
-            if args.line.json {
+            if args.line.output.json {
                 output::line(values_json(
                     0,
                     &request,
@@ -280,9 +374,9 @@ pub async fn run_modbus(args: ModbusArgs) -> anyhow::Result<ExitCode> {
         Send::To(addressed) => {
             let answer = match client.request(&addressed).await {
                 Ok(answer) => answer,
-                Err(err) => return Err(refusal(err, &addressed, args.line.json)?),
+                Err(err) => return Err(refusal(err, &addressed, args.line.output.json)?),
             };
-            print_answer(&addressed, &answer, &args.action, args.line.json)?;
+            print_answer(&addressed, &answer, &args.action, args.line.output.json)?;
         }
     }
     Ok(ExitCode::SUCCESS)
@@ -293,24 +387,26 @@ fn modbus_request(action: &ModbusAction) -> anyhow::Result<Request> {
     let format = action.format();
     match action {
         ModbusAction::ReadHolding(TypedRead { read, .. }) => {
-            Request::read_holding_registers(read.address, registers_for(read.count, format)?)
+            Request::read_holding_registers(read.address.value, registers_for(read.count, format)?)
         }
         ModbusAction::ReadInput(TypedRead { read, .. }) => {
-            Request::read_input_registers(read.address, registers_for(read.count, format)?)
+            Request::read_input_registers(read.address.value, registers_for(read.count, format)?)
         }
-        ModbusAction::ReadCoils(read) => Request::read_coils(read.address, read.count),
-        ModbusAction::ReadDiscrete(read) => Request::read_discrete_inputs(read.address, read.count),
+        ModbusAction::ReadCoils(read) => Request::read_coils(read.address.value, read.count),
+        ModbusAction::ReadDiscrete(read) => {
+            Request::read_discrete_inputs(read.address.value, read.count)
+        }
         &ModbusAction::WriteRegister { address, value } => {
-            Ok(Request::write_single_register(address, value))
+            Ok(Request::write_single_register(address.value, value))
         }
         ModbusAction::WriteRegisters {
             address, values, ..
-        } => Request::write_multiple_registers(*address, registers_to_write(values, format)?),
+        } => Request::write_multiple_registers(address.value, registers_to_write(values, format)?),
         &ModbusAction::WriteCoil { address, state } => {
-            Ok(Request::write_single_coil(address, state))
+            Ok(Request::write_single_coil(address.value, state))
         }
         ModbusAction::WriteCoils { address, values } => {
-            Request::write_multiple_coils(*address, values.clone())
+            Request::write_multiple_coils(address.value, values.clone())
         }
         ModbusAction::Scan { .. } => unreachable!("scan sends no single request"),
     }
@@ -392,7 +488,7 @@ async fn scan(
             Err(err) => tracing::debug!(unit = number, "no answer: {err}"),
         }
     }
-    if line.json {
+    if line.output.json {
         let units: Vec<u8> = answering.iter().map(|(n, _)| *n).collect();
         output::line(json!({ "units": units }))?;
     } else if answering.is_empty() {
@@ -626,7 +722,7 @@ pub struct CrossArgs {
     #[command(flatten)]
     pub line: LineArgs,
     /// The switch's unit number (1–255), as set on it.
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_CROSS_UNIT)]
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CROSS_UNIT, global = true)]
     pub unit: u8,
     #[command(subcommand)]
     pub action: CrossAction,
@@ -637,15 +733,18 @@ pub enum CrossAction {
     /// The switch's state in words: what feeds the load, active alarms, states, the mimic
     /// diagram, measures and ratings with their units (4 reads of function 3).
     Status,
-    /// Read the switch every INTERVAL and print what changes: the load's source, alarms
+    /// Read the switch every --interval and print what changes: the load's source, alarms
     /// raised and cleared, states, and the measures at each change; the first line gives
     /// the state at the start. Measures alone (which always move a little) are not changes.
+    /// Runs until --count rounds, --for a while, --changes changes, or Ctrl-C.
     Watch {
         /// Time between readings.
-        #[arg(long, default_value = "1s", value_parser = humantime::parse_duration)]
+        #[arg(long, default_value = "1s", value_parser = crate::rounds::parse_period)]
         interval: Duration,
-        /// Stop after this many changes (default: run until interrupted).
-        #[arg(long, value_name = "N")]
+        #[command(flatten)]
+        stop: StopArgs,
+        /// Stop after this many changes (the state at the start is not one).
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
         changes: Option<u64>,
     },
 }
@@ -653,11 +752,6 @@ pub enum CrossAction {
 pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
     let endpoint = args.line.endpoint()?;
     let unit = UnitId::jbus(args.unit).map_err(usage)?;
-    if let CrossAction::Watch { interval, .. } = args.action
-        && interval.is_zero()
-    {
-        return Err(usage("--interval must be longer than 0"));
-    }
     let mut client = open(&endpoint, args.line.config()).await?;
     match args.action {
         CrossAction::Status => {
@@ -665,7 +759,7 @@ pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
                 .await
                 .map_err(output::failure)
                 .with_context(|| format!("reading the CROSS at unit {unit} on {endpoint}"))?;
-            if args.line.json {
+            if args.line.output.json {
                 output::line(cross_json(unit, &state))?;
             } else {
                 output::line(format!("Chloride CROSS, unit {unit} on {endpoint}"))?;
@@ -673,8 +767,13 @@ pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        CrossAction::Watch { interval, changes } => {
-            watch(&mut client, unit, interval, changes, args.line.json).await
+        CrossAction::Watch {
+            interval,
+            stop,
+            changes,
+        } => {
+            let rounds = Rounds::new(interval, stop);
+            watch(&mut client, unit, rounds, changes, args.line.output.json).await
         }
     }
 }
@@ -682,11 +781,10 @@ pub async fn run_cross(args: CrossArgs) -> anyhow::Result<ExitCode> {
 async fn watch(
     client: &mut Client,
     unit: UnitId,
-    interval: Duration,
+    mut rounds: Rounds,
     stop_after: Option<u64>,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    let mut rounds = Rounds::every(interval);
     let mut last: Option<Discrete> = None;
     let mut lost = false;
     let mut seen = 0u64;

@@ -24,6 +24,11 @@ use clap::{Parser, Subcommand};
 
 /// cellbus: a toolkit and gateway for a production cell's serial and legacy-protocol devices.
 ///
+/// The device commands (jbc, modbus, cross, thermosald, panasonic) take their options
+/// before or after the subcommand: `cellbus jbc --json read ST1` is `cellbus jbc read ST1
+/// --json`. Their watches (and `panasonic events`) take --count N and --for DURATION, and
+/// stop at Ctrl-C.
+///
 /// Exit codes: 0 done, 1 the device refused, did not answer, or the line failed, 2 bad
 /// arguments or configuration.
 #[derive(Debug, Parser)]
@@ -187,4 +192,12 @@ fn init_logging(level: Option<tracing::level_filters::LevelFilter>, service: boo
         .with_ansi(colour)
         .with_writer(std::io::stderr)
         .init();
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_command_line_definitions_are_consistent() {
+        <super::Cli as clap::CommandFactory>::command().debug_assert();
+    }
 }

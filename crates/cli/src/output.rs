@@ -17,6 +17,29 @@ pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
     UsageError(message.to_string()).into()
 }
 
+/// `--json` of the device commands (jbc, modbus, cross, thermosald, panasonic): global,
+/// so it goes before or after the subcommand like their other options.
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct JsonArg {
+    /// Print JSON instead of text: one object per answer, one per line for a watch.
+    #[arg(long, global = true)]
+    pub json: bool,
+}
+
+/// The `--endpoint` a device command needs. Clap cannot require an option that may come
+/// after the subcommand, so a missing one is refused here (exit 2); `examples` lists what
+/// this command's devices take.
+pub fn endpoint(
+    given: Option<&str>,
+    defaults: link::SerialSettings,
+    examples: &str,
+) -> anyhow::Result<link::Endpoint> {
+    let Some(text) = given else {
+        return Err(usage(format!("--endpoint URL is needed: {examples}")));
+    };
+    link::Endpoint::parse(text, defaults).map_err(usage)
+}
+
 /// The shortest and longest `--timeout` of the clients.
 const TIMEOUTS: (Duration, Duration) = (Duration::from_millis(1), Duration::from_secs(3600));
 
@@ -30,15 +53,24 @@ pub fn parse_timeout(text: &str) -> Result<Duration, String> {
     Ok(timeout)
 }
 
-/// Refuses a `modbus-tcp://` endpoint for a device that does not speak Modbus (`what`:
-/// "a JBC station").
-pub fn refuse_modbus_tcp(endpoint: &link::Endpoint, what: &str) -> anyhow::Result<()> {
+/// The `--endpoint` of a device that does not speak Modbus (`what`: "a JBC station"):
+/// serial or raw TCP; a `modbus-tcp://` one is refused.
+pub fn serial_endpoint(
+    given: Option<&str>,
+    defaults: link::SerialSettings,
+    what: &str,
+) -> anyhow::Result<link::Endpoint> {
+    let endpoint = endpoint(
+        given,
+        defaults,
+        "serial:///dev/ttyUSB0, a device path, or tcp://host:port",
+    )?;
     if endpoint.is_mbap() {
         return Err(usage(format!(
             "{endpoint}: modbus-tcp:// is for Modbus devices; {what} is reached over serial:// or tcp://"
         )));
     }
-    Ok(())
+    Ok(endpoint)
 }
 
 /// A client's error as the command's error, classified by its [`Failure::kind`]: our own

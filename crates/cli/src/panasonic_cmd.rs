@@ -20,27 +20,36 @@ use panasonic::{
 use serde_json::{Value, json};
 
 use crate::output::{self, printable, usage};
+use crate::rounds::{Stop, StopArgs};
 
 /// Data bytes shown per message by `decode` (the rest is counted).
 const DATA_SHOWN: usize = 120;
 
 #[derive(Debug, Args)]
+#[command(
+    after_help = "--json: status {\"state\":\"run\",\"mode\":\"remote\"}, program \
+    {\"program\":\"NAME\"}, programs [{\"date\":\"yy/mm/dd\",\"name\":\"NAME\"}], production \
+    {\"header\",\"sections\"}, events one object per R message, the others what was done. \
+    Options go before or after the subcommand."
+)]
 pub struct PanasonicArgs {
-    /// The machine: HOST or HOST:PORT of Port 1 (commands; default port 49152). IPv6 in
-    /// brackets: [::1]:49152.
-    #[arg(long, value_name = "HOST[:PORT]")]
-    pub host: String,
+    /// The machine (needed): HOST or HOST:PORT of Port 1 (commands; default port 49152).
+    /// IPv6 in brackets: [::1]:49152.
+    #[arg(long, value_name = "HOST[:PORT]", global = true)]
+    pub host: Option<String>,
+    #[command(flatten)]
+    pub output: output::JsonArg,
     /// Port 2 (the machine's R messages), for `events`. Default: Port 1's number + 1
     /// (49153 for the default 49152).
-    #[arg(long, value_name = "P")]
+    #[arg(long, value_name = "P", global = true)]
     pub events_port: Option<u16>,
     /// Time to wait for each answer of the machine.
-    #[arg(long, default_value = "5s", value_parser = crate::output::parse_timeout)]
+    #[arg(long, default_value = "5s", value_parser = crate::output::parse_timeout, global = true)]
     pub timeout: Duration,
     /// Retries, on a new connection, of a command that changes nothing (status, names,
     /// lists, uploads) after a lost answer; a download, delete, start or reset is never
     /// repeated.
-    #[arg(long, default_value_t = DEFAULT_RETRIES)]
+    #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
     #[command(subcommand)]
     pub action: PanasonicAction,
@@ -49,31 +58,16 @@ pub struct PanasonicArgs {
 #[derive(Debug, Subcommand)]
 pub enum PanasonicAction {
     /// C2ST: run, ready or error stop; online or remote.
-    Status {
-        /// One JSON object: {"state":"run","mode":"remote"}.
-        #[arg(long)]
-        json: bool,
-    },
+    Status,
     /// C3: the selected product program.
-    Program {
-        /// {"program":"NAME"}.
-        #[arg(long)]
-        json: bool,
-    },
+    Program,
     /// C1RP: the stored product programs with the date each was registered or revised.
-    Programs {
-        /// A JSON array of {"date":"yy/mm/dd","name":"NAME"}.
-        #[arg(long)]
-        json: bool,
-    },
+    Programs,
     /// C1M000 (or C1M900 with --clear): production management data, grand total.
     Production {
         /// Clear the counters after reading them (C1M900; nozzle and feeder totals stay).
         #[arg(long)]
         clear: bool,
-        /// The data as JSON (header and sections).
-        #[arg(long)]
-        json: bool,
     },
     /// C1: a product program as the machine stores it, to stdout or --out FILE.
     Upload {
@@ -105,16 +99,15 @@ pub enum PanasonicAction {
     },
     /// C5RE: resets the machine (Remote mode only); R1RE follows on Port 2 when done.
     Reset,
-    /// Prints the machine's R messages from Port 2 as they arrive, in words, until
-    /// interrupted; reconnects when the connection is lost. Leaves Port 1 free for other
-    /// commands (no keep-alive).
+    /// Prints the machine's R messages from Port 2 as they arrive, in words, until --count
+    /// messages, --for a while, or Ctrl-C; reconnects when the connection is lost. Leaves
+    /// Port 1 free for other commands (no keep-alive).
+    #[command(mut_arg("count", |count| {
+        count.help("Stop after N R messages, at least 1 (default: until --for or Ctrl-C)")
+    }))]
     Events {
-        /// One JSON object per line.
-        #[arg(long)]
-        json: bool,
-        /// Stop after N R messages.
-        #[arg(long, value_name = "N")]
-        count: Option<u64>,
+        #[command(flatten)]
+        stop: StopArgs,
     },
 }
 
@@ -146,7 +139,12 @@ pub type DecodeInput = crate::decode::Input;
 
 pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
     // Everything is checked before the machine is touched: bad arguments exit 2.
-    let (host, command_port) = split_host(&args.host)?;
+    let Some(host) = &args.host else {
+        return Err(usage(
+            "--host HOST[:PORT] is needed: the machine's address, e.g. 192.168.0.20",
+        ));
+    };
+    let (host, command_port) = split_host(host)?;
     let action = Action::from_args(args.action)?;
     let events_port = match args.events_port {
         Some(port) => port,
@@ -159,13 +157,17 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
     let mut config = ClientConfig::commands_only(host, command_port);
     config.timeout = args.timeout;
     config.retries = args.retries;
-    if let Action::Events { json, count } = action {
+    let json = args.output.json;
+    if let Action::Events(stop) = action {
         config.event_port = Some(events_port);
-        return events(config, json, count).await;
+        return events(config, json, stop).await;
     }
     let (client, _events) = Client::connect(config).await.map_err(output::failure)?;
+    // What a command that only acts prints: words, or with --json the JSON object.
+    let done =
+        |words: String, object: Value| output::line(if json { object.to_string() } else { words });
     match action {
-        Action::Status { json } => {
+        Action::Status => {
             let status = client.status().await.map_err(output::failure)?;
             if json {
                 output::line(serde_json::to_string(&status)?)?;
@@ -174,7 +176,7 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
                 output::line(format!("mode:  {}", status.mode.describe()))?;
             }
         }
-        Action::Program { json } => {
+        Action::Program => {
             let name = client.current_program().await.map_err(output::failure)?;
             if json {
                 output::line(json!({ "program": name }))?;
@@ -182,7 +184,7 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
                 output::line(name)?;
             }
         }
-        Action::Programs { json } => {
+        Action::Programs => {
             let list = client.program_list().await.map_err(output::failure)?;
             if json {
                 output::line(serde_json::to_string(&list)?)?;
@@ -192,7 +194,7 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
                 }
             }
         }
-        Action::Production { clear, json } => {
+        Action::Production { clear } => {
             let request = ProductionRequest {
                 scope: ProductionScope::GrandTotal,
                 clear,
@@ -209,19 +211,26 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
         }
         Action::Upload { name, out } => {
             let data = client
-                .upload(Target::Product(name))
+                .upload(Target::Product(name.clone()))
                 .await
                 .map_err(output::failure)?;
             match out {
                 Some(path) => {
                     std::fs::write(&path, &data)
                         .with_context(|| format!("cannot write {}", path.display()))?;
-                    output::line(format!(
-                        "{} written to {}",
-                        wire::words::Bytes(data.len()),
-                        path.display()
-                    ))?;
+                    done(
+                        format!(
+                            "{} written to {}",
+                            wire::words::Bytes(data.len()),
+                            path.display()
+                        ),
+                        json!({ "program": name, "bytes": data.len(), "file": path }),
+                    )?;
                 }
+                None if json => output::line(json!({
+                    "program": name,
+                    "text": String::from_utf8_lossy(&data),
+                }))?,
                 None => {
                     use std::io::Write;
                     let mut stdout = std::io::stdout().lock();
@@ -236,16 +245,20 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
                 .download(Target::Product(name.clone()), data)
                 .await
                 .map_err(output::failure)?;
-            output::line(format!(
-                "program {name} stored on the machine ({len} bytes)"
-            ))?;
+            done(
+                format!("program {name} stored on the machine ({len} bytes)"),
+                json!({ "program": name, "bytes": len, "stored": true }),
+            )?;
         }
         Action::Delete { name } => {
             client
                 .delete(Target::Product(name.clone()))
                 .await
                 .map_err(output::failure)?;
-            output::line(format!("program {name} deleted"))?;
+            done(
+                format!("program {name} deleted"),
+                json!({ "program": name, "deleted": true }),
+            )?;
         }
         Action::Start { mode } => {
             client.start(mode).await.map_err(output::failure)?;
@@ -253,33 +266,30 @@ pub async fn run(args: PanasonicArgs) -> anyhow::Result<ExitCode> {
                 || "in the previous stop mode".to_owned(),
                 |m| format!("in {} mode", m.describe()),
             );
-            output::line(format!(
-                "machine started {how} (A2); R1ST follows on Port 2"
-            ))?;
+            done(
+                format!("machine started {how} (A2); R1ST follows on Port 2"),
+                json!({ "started": true, "mode": mode.map(|m| m.describe()) }),
+            )?;
         }
         Action::Reset => {
             client.reset().await.map_err(output::failure)?;
-            output::line("reset accepted (A2); R1RE follows on Port 2 when done")?;
+            done(
+                "reset accepted (A2); R1RE follows on Port 2 when done".to_owned(),
+                json!({ "reset": true }),
+            )?;
         }
-        Action::Events { .. } => unreachable!("handled above"),
+        Action::Events(_) => unreachable!("handled above"),
     }
     Ok(ExitCode::SUCCESS)
 }
 
 /// A subcommand with its arguments checked.
 enum Action {
-    Status {
-        json: bool,
-    },
-    Program {
-        json: bool,
-    },
-    Programs {
-        json: bool,
-    },
+    Status,
+    Program,
+    Programs,
     Production {
         clear: bool,
-        json: bool,
     },
     Upload {
         name: ProgramName,
@@ -296,10 +306,7 @@ enum Action {
         mode: Option<StopMode>,
     },
     Reset,
-    Events {
-        json: bool,
-        count: Option<u64>,
-    },
+    Events(StopArgs),
 }
 
 impl Action {
@@ -309,10 +316,10 @@ impl Action {
                 .map_err(|e| usage(format!("{text:?}: {e}")))
         };
         Ok(match action {
-            PanasonicAction::Status { json } => Action::Status { json },
-            PanasonicAction::Program { json } => Action::Program { json },
-            PanasonicAction::Programs { json } => Action::Programs { json },
-            PanasonicAction::Production { clear, json } => Action::Production { clear, json },
+            PanasonicAction::Status => Action::Status,
+            PanasonicAction::Program => Action::Program,
+            PanasonicAction::Programs => Action::Programs,
+            PanasonicAction::Production { clear } => Action::Production { clear },
             PanasonicAction::Upload { name: n, out } => Action::Upload {
                 name: name(&n)?,
                 out,
@@ -328,10 +335,7 @@ impl Action {
             PanasonicAction::Delete { name: n } => Action::Delete { name: name(&n)? },
             PanasonicAction::Start { mode } => Action::Start { mode },
             PanasonicAction::Reset => Action::Reset,
-            PanasonicAction::Events { count: Some(0), .. } => {
-                return Err(usage("--count must be at least 1"));
-            }
-            PanasonicAction::Events { json, count } => Action::Events { json, count },
+            PanasonicAction::Events { stop } => Action::Events(stop),
         })
     }
 }
@@ -395,9 +399,11 @@ fn print_production(data: &panasonic::ProductionData) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Prints R messages from Port 2 until interrupted (or `count` of them).
-async fn events(config: ClientConfig, json: bool, count: Option<u64>) -> anyhow::Result<ExitCode> {
+/// Prints R messages from Port 2 until `stop` says (`--count` counts R messages).
+async fn events(config: ClientConfig, json: bool, stop: StopArgs) -> anyhow::Result<ExitCode> {
     let (client, mut stream) = Client::connect(config).await.map_err(output::failure)?;
+    let count = stop.count;
+    let mut stop = Stop::new(stop.duration);
     let printed = async {
         let mut seen = 0;
         while count.is_none_or(|n| seen < n) {
@@ -412,7 +418,7 @@ async fn events(config: ClientConfig, json: bool, count: Option<u64>) -> anyhow:
     };
     tokio::select! {
         printed = printed => printed?,
-        _ = tokio::signal::ctrl_c() => {}
+        () = stop.wait() => {}
     }
     drop(client);
     Ok(ExitCode::SUCCESS)

@@ -1,13 +1,11 @@
 //! `cellbus thermosald …`, `cellbus sim thermosald` and `cellbus decode thermosald`:
 //! Thermosald ISC impulse-sealer regulators on an RS-485 line.
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use anyhow::Context;
 use clap::{Args, Subcommand};
-use link::{Endpoint, Line, SerialSettings, SharedLine};
+use link::{Line, SerialSettings, SharedLine};
 use serde_json::{Map, json};
 use thermosald::client::{self, Client, ClientConfig, ClientError, DEFAULT_RETRIES};
 use thermosald::device::RegulatorBus;
@@ -18,7 +16,7 @@ use thermosald::{Request, diagnostic};
 use wire::device::SharedModel;
 
 use crate::output::{self, usage};
-use crate::rounds::Rounds;
+use crate::rounds::{Rounds, StopArgs};
 use crate::sim::ServeArgs;
 
 /// The regulators' line: 9600 baud, 8 data bits, no parity, 1 stop bit (the spec's only
@@ -26,13 +24,21 @@ use crate::sim::ServeArgs;
 pub const THERMOSALD_LINE: SerialSettings = SerialSettings::new_8n1(9600);
 
 #[derive(Debug, Args)]
+#[command(
+    after_help = "Tables and items: `cellbus thermosald read --help` lists them, \
+    `cellbus thermosald write --help` the writable ones with their ranges. Options go before \
+    or after the subcommand."
+)]
 pub struct ThermosaldArgs {
-    /// Where the RS-485 line is: serial:///dev/ttyUSB0 or tcp://host:port (a serial server or
-    /// `cellbus sim thermosald`). Serial default: 9600 baud, 8N1. RS-485 adapters:
+    /// Where the RS-485 line is (needed): serial:///dev/ttyUSB0, a device path (/dev/ttyUSB0,
+    /// or pty/sealers relative to the working directory), or tcp://host:port (a serial server
+    /// or `cellbus sim thermosald`). Serial default: 9600 baud, 8N1. RS-485 adapters:
     /// `?rs485=rts` (or `dtr`, `rts+dtr`) holds that line at 1 while sending, `&echo=discard`
     /// drops the adapter's local echo.
-    #[arg(long, value_name = "URL")]
-    pub endpoint: String,
+    #[arg(long, value_name = "URL", global = true)]
+    pub endpoint: Option<String>,
+    #[command(flatten)]
+    pub output: output::JsonArg,
     /// The regulator's address, 0–7; `$` to assign an address (set-address only, with one
     /// regulator powered); several for watch: 0,1,2.
     #[arg(long, default_value = "0", value_name = "N", global = true)]
@@ -45,9 +51,6 @@ pub struct ThermosaldArgs {
     /// differs from what was sent is retried once, then reported.
     #[arg(long, default_value_t = DEFAULT_RETRIES, global = true)]
     pub retries: u8,
-    /// Print JSON instead of text.
-    #[arg(long, global = true)]
-    pub json: bool,
     #[command(subcommand)]
     pub action: ThermosaldAction,
 }
@@ -55,19 +58,21 @@ pub struct ThermosaldArgs {
 #[derive(Debug, Subcommand)]
 pub enum ThermosaldAction {
     /// Read a data table (machine, settings, runtime, service), or one item of it.
+    #[command(after_help = items_help())]
     Read {
-        /// machine, settings, runtime or service.
+        /// The table: machine, settings, runtime or service.
         table: String,
-        /// One item, by index (15) or name ("sealing temperature").
+        /// One item, by index (15) or name ("sealing temperature"), listed below.
         #[arg(long, value_name = "I")]
         item: Option<String>,
     },
     /// Write one item in its unit (°C, A, 12.5 for a ×10 gain); checked against the item's
     /// range before anything is sent. The regulator's echo must match.
+    #[command(after_help = writable_help())]
     Write {
-        /// machine, settings or service.
+        /// The table: machine, settings or service.
         table: String,
-        /// The item, by index (15) or name ("sealing temperature").
+        /// The item, by index (15) or name ("sealing temperature"), listed below.
         item: String,
         /// The value in the item's unit.
         #[arg(allow_negative_numbers = true)]
@@ -96,15 +101,58 @@ pub enum ThermosaldAction {
     },
     /// Find which of addresses 0–7 answer, one question each, as fast as the line allows.
     Scan,
-    /// Show temperature, fault and power of one or several addresses (--address 0,1,2).
+    /// Show temperature, fault and power of one or several addresses (--address 0,1,2)
+    /// every --interval, until --count rounds, --for a while, or Ctrl-C.
     Watch {
         /// Time between rounds.
-        #[arg(long, default_value = "1s", value_parser = humantime::parse_duration)]
+        #[arg(long, default_value = "1s", value_parser = crate::rounds::parse_period)]
         interval: Duration,
-        /// Stop after this many rounds, at least 1 (default: until interrupted).
-        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
-        count: Option<u64>,
+        #[command(flatten)]
+        stop: StopArgs,
     },
+}
+
+/// `read --help`'s list: each table's items by index and name.
+fn items_help() -> String {
+    const WIDTH: usize = 96;
+    let mut help = String::from("Items, by index or name:");
+    for table in Table::ALL {
+        let mut line = format!("  {table}:");
+        for item in table.items() {
+            let entry = format!(" {} {},", item.index(), item.name());
+            if line.chars().count() + entry.chars().count() > WIDTH {
+                help.push('\n');
+                help.push_str(line.trim_end());
+                line = String::from("   ");
+            }
+            line.push_str(&entry);
+        }
+        help.push('\n');
+        help.push_str(line.trim_end_matches(','));
+    }
+    help
+}
+
+/// `write --help`'s list: the writable items of each table with their ranges.
+fn writable_help() -> String {
+    let mut help = String::from("Writable items, by index or name:");
+    for table in Table::ALL {
+        for item in table.items().iter().filter(|item| item.writable()) {
+            let unit = match item.unit() {
+                Unit::None => String::new(),
+                unit => format!(" {}", unit.symbol()),
+            };
+            let decimals = item.scale().decimals();
+            help.push_str(&format!(
+                "\n  {table} {:>2}  {}: {:.decimals$} to {:.decimals$}{unit}",
+                item.index(),
+                item.name(),
+                item.min(),
+                item.max(),
+            ));
+        }
+    }
+    help
 }
 
 #[derive(Debug, Args)]
@@ -117,22 +165,13 @@ pub struct SimThermosaldArgs {
     pub addresses: Vec<Address>,
 }
 
-/// Captured messages for `cellbus decode thermosald`.
-#[derive(Debug, Args)]
-pub struct DecodeInput {
-    /// Messages as text, one per argument (`%051Q990`, with a trailing `\n` or without), or
-    /// bytes in hex (`25 30 35 31 51 39 39 30 0A`).
-    #[arg(value_name = "TEXT|HEX", conflicts_with = "file")]
-    pub input: Vec<String>,
-    /// A binary capture file (what a serial sniffer or `socat -x` saved).
-    #[arg(long, value_name = "FILE")]
-    pub file: Option<PathBuf>,
-}
-
 pub async fn run(args: ThermosaldArgs) -> anyhow::Result<ExitCode> {
     // Everything is checked before the line is opened: a bad argument never reaches it.
-    let endpoint = Endpoint::parse(&args.endpoint, THERMOSALD_LINE).map_err(usage)?;
-    crate::output::refuse_modbus_tcp(&endpoint, "a Thermosald regulator")?;
+    let endpoint = output::serial_endpoint(
+        args.endpoint.as_deref(),
+        THERMOSALD_LINE,
+        "a Thermosald regulator",
+    )?;
     if let Some(timeout) = args.timeout.filter(|t| *t <= ANSWER_AFTER_RECEPTION) {
         return Err(usage(format!(
             "--timeout {} can never see an answer: a regulator answers {} ms after the question",
@@ -151,19 +190,19 @@ pub async fn run(args: ThermosaldArgs) -> anyhow::Result<ExitCode> {
         retries: args.retries,
         ..ClientConfig::new(target)
     };
-    let json = args.json;
+    let json = args.output.json;
     match action {
         Action::Scan => scan(&line, args.timeout, json).await,
         Action::Watch {
             addresses,
             interval,
-            count,
+            stop,
         } => {
             let clients = addresses
                 .into_iter()
                 .map(|a| Client::new(line.clone(), config(a.into())))
                 .collect();
-            watch(clients, interval, count, json).await
+            watch(clients, Rounds::new(interval, stop), json).await
         }
         Action::One(target, one) => {
             let mut client = Client::new(line, config(target));
@@ -182,7 +221,7 @@ enum Action {
     Watch {
         addresses: Vec<Address>,
         interval: Duration,
-        count: Option<u64>,
+        stop: StopArgs,
     },
 }
 
@@ -256,13 +295,10 @@ impl Action {
                 one(One::Request(thermosald::Command::MasterReset.into()))?
             }
             ThermosaldAction::Scan => Action::Scan,
-            ThermosaldAction::Watch { interval, .. } if interval.is_zero() => {
-                return Err(usage("--interval must be longer than 0"));
-            }
-            ThermosaldAction::Watch { interval, count } => Action::Watch {
+            ThermosaldAction::Watch { interval, stop } => Action::Watch {
                 addresses: addresses()?,
                 interval,
-                count,
+                stop,
             },
         })
     }
@@ -510,8 +546,7 @@ async fn scan(
 
 async fn watch(
     mut clients: Vec<Client>,
-    interval: Duration,
-    count: Option<u64>,
+    mut rounds: Rounds,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
     let item = |index| {
@@ -530,14 +565,8 @@ async fn watch(
             "time", "address", "temperature", "power"
         ))?;
     }
-    let mut rounds = Rounds::every(interval);
     let mut failures = 0u64;
-    let mut round = 0u64;
-    while count.is_none_or(|count| round < count) {
-        round += 1;
-        if !rounds.next().await {
-            break;
-        }
+    while rounds.next().await {
         for client in &mut clients {
             let address = match client.target() {
                 Target::Address(a) => a.get(),
@@ -654,19 +683,18 @@ pub async fn sim(args: SimThermosaldArgs) -> anyhow::Result<ExitCode> {
     .await
 }
 
-/// `cellbus decode thermosald`.
-pub fn decode(input: DecodeInput) -> anyhow::Result<ExitCode> {
-    let bytes = match &input.file {
-        Some(path) => {
-            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?
-        }
-        None if input.input.is_empty() => {
-            return Err(usage(
-                "give the messages as text (%051Q990), as hex bytes, or --file FILE",
-            ));
-        }
-        None if input.input.iter().any(|arg| arg.contains('%')) => text_bytes(&input.input),
-        None => output::parse_hex(&input.input)?,
+/// `cellbus decode thermosald`: the common input, whose arguments may also be messages as
+/// text (`%051Q990`).
+pub fn decode(input: crate::decode::Input) -> anyhow::Result<ExitCode> {
+    if input.file.is_none() && input.hex.is_empty() {
+        return Err(usage(
+            "give the messages as text (%051Q990), as hex bytes, or --file FILE",
+        ));
+    }
+    let bytes = if input.file.is_none() && input.hex.iter().any(|arg| arg.contains('%')) {
+        text_bytes(&input.hex)
+    } else {
+        input.bytes()?
     };
     crate::decode::dump(FrameCodec, &bytes, thermosald::request::describe)
 }

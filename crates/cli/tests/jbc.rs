@@ -2,7 +2,13 @@
 
 mod common;
 
-use common::{Sim, assert_stderr_has, assert_stdout_has, run, stderr, stdout};
+use std::io::BufRead;
+use std::time::Duration;
+
+use common::{
+    Sim, assert_stderr_has, assert_stdout_has, cellbus, interrupt, run, run_within, spawn_piped,
+    stderr, stdout,
+};
 
 fn jbc(sim: &Sim, args: &[&str]) -> std::process::Output {
     sim.client("jbc", args)
@@ -56,6 +62,101 @@ fn write_json_acknowledges() {
         value,
         serde_json::json!({"code": "SF1", "value": 50, "ok": true})
     );
+}
+
+#[test]
+fn options_go_before_or_after_the_subcommand() {
+    let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
+    let before = run(&["jbc", "--endpoint", &sim.endpoint, "--json", "read", "SMN"]);
+    let after = run(&["jbc", "read", "SMN", "--json", "--endpoint", &sim.endpoint]);
+    assert!(after.status.success(), "{}", stderr(&after));
+    assert_eq!(stdout(&before), stdout(&after));
+    assert_stdout_has(&after, r#""value":"JTSE""#);
+
+    let out = run(&["jbc", "read", "SMN"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert_stderr_has(&out, "--endpoint URL is needed");
+}
+
+#[test]
+fn watch_stops_after_count_rounds_or_for_a_while() {
+    let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
+    let limit = Duration::from_secs(60);
+    let endpoint = sim.endpoint.as_str();
+    let args = [
+        "jbc",
+        "--endpoint",
+        endpoint,
+        "watch",
+        "--interval",
+        "100ms",
+    ];
+    let counted = run_within(&[&args[..], &["--count", "3"]].concat(), limit);
+    assert!(counted.status.success(), "{}", stderr(&counted));
+    let lines: Vec<String> = stdout(&counted).lines().map(str::to_owned).collect();
+    assert_eq!(lines.len(), 1 + 3, "a header and 3 rounds: {lines:?}");
+    assert!(lines[1].starts_with("0.0 s "), "{lines:?}");
+
+    let timed = run_within(&[&args[..], &["--for", "300ms", "--json"]].concat(), limit);
+    assert!(timed.status.success(), "{}", stderr(&timed));
+    let rounds = stdout(&timed).lines().count();
+    // Rounds start at 0, 100 and 200 ms; a slow machine may start fewer before the end.
+    assert!((1..=3).contains(&rounds), "{}", stdout(&timed));
+}
+
+#[test]
+fn ctrl_c_ends_a_watch_after_its_round_with_exit_0() {
+    let sim = Sim::start(&["jbc", "--listen", "127.0.0.1:0"]);
+    let args = [
+        "jbc",
+        "--endpoint",
+        &sim.endpoint,
+        "watch",
+        "--interval",
+        "100ms",
+    ];
+    let mut child = spawn_piped(&args);
+    let mut out = std::io::BufReader::new(child.stdout.take().expect("stdout is piped"));
+    let mut lines = Vec::new();
+    for _ in 0..2 {
+        let mut line = String::new();
+        out.read_line(&mut line).expect("a line");
+        lines.push(line);
+    }
+    assert!(lines[1].starts_with("0.0 s "), "{lines:?}");
+    interrupt(child.id());
+    let status = child.wait().expect("the watch ends");
+    assert!(status.success(), "{status:?}");
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut out, &mut rest).expect("the rest of stdout");
+    assert!(rest.is_empty() || rest.ends_with('\n'), "{rest:?}");
+}
+
+#[test]
+fn a_relative_endpoint_path_is_the_serial_device_in_the_working_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("pty")).unwrap();
+    let pty = dir.path().join("pty/jbc1");
+    let _sim = Sim::start(&["jbc", "--pty", pty.to_str().unwrap()]);
+    // PTYs run at 8N1 whatever is asked (the kernel ignores parity).
+    for endpoint in ["pty/jbc1?framing=8N1", "./pty/jbc1?framing=8N1"] {
+        let out = cellbus()
+            .args(["jbc", "--endpoint", endpoint, "read", "SMN"])
+            .current_dir(dir.path())
+            .output()
+            .expect("cellbus runs");
+        assert!(out.status.success(), "{endpoint}: {}", stderr(&out));
+        assert_stdout_has(&out, "JTSE");
+    }
+
+    let out = cellbus()
+        .args(["jbc", "--endpoint", "serial://pty/jbc1", "read", "SMN"])
+        .current_dir(dir.path())
+        .output()
+        .expect("cellbus runs");
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert_stderr_has(&out, "write serial:///pty/jbc1 (three slashes)");
+    assert_stderr_has(&out, "or pty/jbc1 without serial://");
 }
 
 #[test]

@@ -4,11 +4,10 @@
 mod common;
 
 use std::process::{Output, Stdio};
-use std::sync::mpsc;
 use std::time::Duration;
 
 use common::{
-    Sim, assert_stderr_has, assert_stdout_has, require_python, run, spawn_piped, start_listening,
+    Sim, assert_stderr_has, assert_stdout_has, require_python, run, run_within, start_listening,
     stderr, stdout,
 };
 use serde_json::{Value, json};
@@ -26,26 +25,6 @@ fn cross(sim: &Sim, args: &[&str]) -> Output {
 fn json_of(output: &Output) -> Value {
     serde_json::from_str(stdout(output).trim())
         .unwrap_or_else(|e| panic!("one JSON object expected ({e}): {}", stdout(output)))
-}
-
-/// Runs `cellbus ARGS…`, killing it if it is still running after `limit` (a watchdog for
-/// commands that wait for events; a passing run ends long before).
-fn run_within(args: &[&str], limit: Duration) -> Output {
-    let child = spawn_piped(args);
-    let id = child.id();
-    let (done, finished) = mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = done.send(child.wait_with_output());
-    });
-    match finished.recv_timeout(limit) {
-        Ok(output) => output.expect("cellbus ran"),
-        Err(_) => {
-            let _ = std::process::Command::new("kill")
-                .arg(id.to_string())
-                .status();
-            panic!("cellbus {args:?} still running after {limit:?}");
-        }
-    }
 }
 
 #[test]
@@ -102,19 +81,7 @@ fn cross_watch_prints_a_transfer_when_the_preferred_source_fails_and_returns() {
         "--cycle-outage",
         "400ms",
     ]);
-    let out = run_within(
-        &[
-            "cross",
-            "--endpoint",
-            &sim.endpoint,
-            "watch",
-            "--interval",
-            "100ms",
-            "--changes",
-            "2",
-        ],
-        Duration::from_secs(60),
-    );
+    let out = cross_watch(&sim, &["--changes", "2"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let text = stdout(&out);
     assert!(text.contains("S1 failure"), "{text}");
@@ -1458,4 +1425,79 @@ fn a_simulator_map_that_cannot_be_read_says_why() {
     let out = run(&["sim", "modbus", "--map", missing.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert_stderr_has(&out, "missing.map: No such file or directory");
+}
+
+#[test]
+fn a_modicon_looking_address_is_warned_about_and_read_as_asked() {
+    let sim = Sim::start(&["modbus", "--listen", "127.0.0.1:0"]);
+    let out = modbus(&sim, "1", &["read-holding", "40001", "1"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(stdout(&out), "40001 (0x9C41) =     0 (0x0000)\n");
+    assert_eq!(
+        stderr(&out),
+        "cellbus: warning: 40001 looks like Modicon holding register 40001, which is protocol \
+         address 0 of the holding registers; addresses here are 0-based protocol addresses, so \
+         this reads address 40001 as asked\n"
+    );
+    let plain = modbus(&sim, "1", &["read-holding", "0", "1"]);
+    assert_eq!(stderr(&plain), "");
+}
+
+#[test]
+fn modbus_and_cross_options_go_before_or_after_the_subcommand() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
+    let before = modbus(&sim, "2", &["--json", "read-holding", "0x2E", "1"]);
+    let after = run(&[
+        "modbus",
+        "read-holding",
+        "0x2E",
+        "1",
+        "--unit",
+        "2",
+        "--json",
+        "--endpoint",
+        &sim.endpoint,
+    ]);
+    assert!(after.status.success(), "{}", stderr(&after));
+    assert_eq!(stdout(&before), stdout(&after));
+    let status = run(&[
+        "cross",
+        "status",
+        "--unit",
+        "2",
+        "--endpoint",
+        &sim.endpoint,
+    ]);
+    assert!(status.status.success(), "{}", stderr(&status));
+    assert_stdout_has(&status, "Chloride CROSS, unit 2");
+}
+
+#[test]
+fn cross_watch_stops_after_count_rounds_or_for_a_while() {
+    let sim = Sim::start(&["cross", "--listen", "127.0.0.1:0"]);
+    // A steady switch: the state at the start, then no change.
+    let counted = cross_watch(&sim, &["--count", "3", "--json"]);
+    assert!(counted.status.success(), "{}", stderr(&counted));
+    let text = stdout(&counted);
+    assert_eq!(text.lines().count(), 1, "{text}");
+    let timed = cross_watch(&sim, &["--for", "300ms"]);
+    assert!(timed.status.success(), "{}", stderr(&timed));
+    assert!(
+        stdout(&timed).starts_with("0.0 s     load supplied by source 1"),
+        "{}",
+        stdout(&timed)
+    );
+}
+
+/// `cellbus cross --endpoint … watch --interval 100ms ARGS…`, stopped after a minute.
+fn cross_watch(sim: &Sim, args: &[&str]) -> Output {
+    let watch = [
+        "cross",
+        "--endpoint",
+        &sim.endpoint,
+        "watch",
+        "--interval",
+        "100ms",
+    ];
+    run_within(&[&watch[..], args].concat(), Duration::from_secs(60))
 }

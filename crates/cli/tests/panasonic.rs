@@ -506,3 +506,40 @@ fn the_simulators_help_lists_its_control_commands() {
         assert!(help.contains(command), "{help}");
     }
 }
+
+#[test]
+fn json_goes_before_or_after_the_subcommand_and_acts_are_objects_too() {
+    let machine = Machine::start(&["--remote"]);
+    let before = ok(run(&[
+        "panasonic",
+        "--json",
+        "--host",
+        &machine.command,
+        "status",
+    ]));
+    let after = ok(run(&[
+        "panasonic",
+        "status",
+        "--host",
+        &machine.command,
+        "--json",
+    ]));
+    assert_eq!(before, after);
+    assert_eq!(before.trim_end(), r#"{"state":"ready","mode":"remote"}"#);
+    assert_eq!(
+        ok(machine.run(&["--json", "start", "--mode", "ct"])).trim_end(),
+        r#"{"started":true,"mode":"continuous"}"#
+    );
+    let out = run(&["panasonic", "status"]);
+    assert_eq!(code(&out), 2);
+    assert_stderr_has(&out, "--host HOST[:PORT] is needed");
+}
+
+#[test]
+fn events_for_a_while_ends_with_exit_0_after_the_messages_it_got() {
+    let machine = Machine::start(&["--remote"]);
+    ok(machine.run(&["start"]));
+    let text = ok(machine.run(&["events", "--for", "1s"]));
+    // R1ST was kept for the next host on Port 2; the first board takes 22 s.
+    assert_eq!(text, "R1ST (machine started)\n");
+}

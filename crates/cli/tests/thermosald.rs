@@ -506,7 +506,7 @@ fn watch_goes_on_past_a_dead_regulator_and_exits_1() {
 #[test]
 fn bad_arguments_exit_2_before_the_line_is_opened() {
     let line = Untouched::new();
-    let cases: [(&[&str], &str); 11] = [
+    let cases: [(&[&str], &str); 12] = [
         (
             &["--address", "8", "read", "runtime"],
             "regulator address 8 is not one of 0 to 7",
@@ -531,10 +531,8 @@ fn bad_arguments_exit_2_before_the_line_is_opened() {
             "can never see an answer",
         ),
         (&["set-address", "9"], "9"),
-        (
-            &["watch", "--interval", "0s"],
-            "--interval must be longer than 0",
-        ),
+        (&["watch", "--interval", "0s"], "0s is no time at all"),
+        (&["watch", "--for", "0s"], "0s is no time at all"),
         (&["watch", "--count", "0"], "0 is not in 1.."),
     ];
     for (args, message) in cases {

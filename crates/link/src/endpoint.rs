@@ -4,6 +4,7 @@
 //! serial:///dev/ttyUSB0?baud=19200&framing=8E1
 //! serial:///dev/ttyUSB1?baud=9600&rs485=rts&echo=discard
 //! /dev/ttyUSB0                      (a bare device path is a serial endpoint)
+//! pty/jbc1?baud=9600                (…relative to the working directory; ./pty/jbc1 too)
 //! tcp://192.0.2.10:4001             (raw bytes over TCP: ser2net, Moxa NPort, our simulators)
 //! tcp://127.0.0.1:5020?baud=9600    (…behind which is a 9600-baud line: timing follows it)
 //! modbus-tcp://192.0.2.20:502       (TCP whose protocol frames its own messages: Modbus TCP)
@@ -16,7 +17,11 @@
 //!
 //! Settings a URL leaves out come from the protocol's defaults (JBC: 19200 8E1;
 //! Thermosald and CROSS: 9600 8N1).
+//!
+//! A URL has no room for a relative path: `serial://pty/jbc1` would name host `pty`, so it
+//! is refused rather than read as `/pty/jbc1`. A relative path is written without a scheme.
 
+use std::borrow::Cow;
 use std::fmt;
 use std::str::FromStr;
 use std::time::Duration;
@@ -31,7 +36,8 @@ pub const BAUD_RANGE: std::ops::RangeInclusive<u32> = 50..=4_000_000;
 pub enum Endpoint {
     /// A serial port on this machine.
     Serial {
-        /// Device path, e.g. `/dev/ttyUSB0`.
+        /// Device path, e.g. `/dev/ttyUSB0`, or relative to the working directory
+        /// (`pty/jbc1`).
         path: String,
         /// Speed and framing.
         settings: SerialSettings,
@@ -97,6 +103,30 @@ pub enum EndpointError {
         /// The text given.
         url: String,
     },
+    /// A serial URL with a host part (`serial://pty/jbc1`): a serial port has no host, and
+    /// reading the host as the path's first directory would guess.
+    #[error(
+        "endpoint {url:?} reads {host:?} as a host name, and a serial port has none; write \
+         serial:///{host}{path} (three slashes) for the absolute path /{host}{path}, or \
+         {host}{path} without serial:// for a path relative to the working directory"
+    )]
+    SerialHost {
+        /// The text given.
+        url: String,
+        /// The host part, most likely the path's first directory.
+        host: String,
+        /// The rest of the path.
+        path: String,
+    },
+    /// `HOST:PORT` without a scheme.
+    #[error(
+        "endpoint {url:?} looks like HOST:PORT; write tcp://{url} (a serial server or a \
+         simulator) or modbus-tcp://{url} (Modbus TCP)"
+    )]
+    HostPort {
+        /// The text given.
+        url: String,
+    },
     /// A TCP URL without host or port.
     #[error("endpoint {url:?} needs a host and a port: tcp://host:port")]
     NoHostPort {
@@ -132,16 +162,30 @@ const TCP_OPTIONS: &str = "baud, framing";
 const MODBUS_TCP_OPTIONS: &str = "none: Modbus TCP carries no serial settings";
 
 impl Endpoint {
-    /// Parses `text`, taking the settings it leaves out from `defaults`.
+    /// Parses `text`, taking the settings it leaves out from `defaults`. Text without a
+    /// scheme is a serial device's path, absolute or relative to the working directory,
+    /// optionally followed by `?options`.
     pub fn parse(text: &str, defaults: SerialSettings) -> Result<Self, EndpointError> {
         let text = text.trim();
-        if text.starts_with('/') {
-            return Self::parse(&format!("serial://{text}"), defaults);
+        if looks_like_host_port(text) {
+            return Err(EndpointError::HostPort {
+                url: text.to_owned(),
+            });
         }
-        let url = Url::parse(text).map_err(|e| EndpointError::NotAUrl {
-            url: text.to_owned(),
-            reason: e.to_string(),
-        })?;
+        let url = match Url::parse(text) {
+            Ok(url) => url,
+            Err(url::ParseError::RelativeUrlWithoutBase) => {
+                let (path, query) = text.split_once('?').unwrap_or((text, ""));
+                let options = url::form_urlencoded::parse(query.as_bytes());
+                return Self::serial(text, path.to_owned(), options, defaults);
+            }
+            Err(e) => {
+                return Err(EndpointError::NotAUrl {
+                    url: text.to_owned(),
+                    reason: e.to_string(),
+                });
+            }
+        };
         match url.scheme() {
             "serial" => Self::parse_serial(text, &url, defaults),
             "tcp" => Self::parse_tcp(text, &url, defaults),
@@ -158,11 +202,23 @@ impl Endpoint {
         url: &Url,
         defaults: SerialSettings,
     ) -> Result<Self, EndpointError> {
-        let path = match url.host_str() {
-            // serial://dev/ttyUSB0 (two slashes) reads "dev" as a host: take it as the path.
-            Some(host) if !host.is_empty() => format!("/{host}{}", url.path()),
-            _ => url.path().to_owned(),
-        };
+        if let Some(host) = url.host_str().filter(|h| !h.is_empty()) {
+            return Err(EndpointError::SerialHost {
+                url: text.to_owned(),
+                host: host.to_owned(),
+                path: url.path().to_owned(),
+            });
+        }
+        Self::serial(text, url.path().to_owned(), url.query_pairs(), defaults)
+    }
+
+    /// A serial endpoint at `path` with `options` (`baud`, `framing`, `rs485`, `echo`).
+    fn serial<'a>(
+        text: &str,
+        path: String,
+        options: impl Iterator<Item = (Cow<'a, str>, Cow<'a, str>)>,
+        defaults: SerialSettings,
+    ) -> Result<Self, EndpointError> {
         if path.is_empty() || path == "/" {
             return Err(EndpointError::NoPath {
                 url: text.to_owned(),
@@ -170,7 +226,7 @@ impl Endpoint {
         }
         let mut settings = defaults;
         let mut rs485 = Rs485::default();
-        for (key, value) in url.query_pairs() {
+        for (key, value) in options {
             let bad = |expected: &str| EndpointError::Option {
                 url: text.to_owned(),
                 option: key.to_string(),
@@ -293,9 +349,15 @@ impl fmt::Display for Endpoint {
                 settings,
                 rs485,
             } => {
+                // A relative path has no URL form: it is written as given, as it is parsed.
+                let scheme = if path.starts_with('/') {
+                    "serial://"
+                } else {
+                    ""
+                };
                 write!(
                     f,
-                    "serial://{path}?baud={}&framing={}",
+                    "{scheme}{path}?baud={}&framing={}",
                     settings.baud,
                     settings.framing()
                 )?;
@@ -329,6 +391,14 @@ impl fmt::Display for Endpoint {
             }
         }
     }
+}
+
+/// `host:4001`, `192.0.2.10:4001`, `[::1]:502`: a TCP address given without its scheme.
+fn looks_like_host_port(text: &str) -> bool {
+    !text.contains('/')
+        && text.rsplit_once(':').is_some_and(|(host, port)| {
+            !host.is_empty() && !port.is_empty() && port.bytes().all(|b| b.is_ascii_digit())
+        })
 }
 
 fn parse_baud(value: &str) -> Result<u32, String> {

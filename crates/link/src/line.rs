@@ -416,6 +416,9 @@ fn open_serial(path: &str, settings: &SerialSettings) -> Result<SerialStream, Op
             tokio_serial::ErrorKind::NoDevice => {
                 "; check the device path and the cable (ls /dev/serial/by-id lists the adapters)"
             }
+            tokio_serial::ErrorKind::Io(io::ErrorKind::NotFound) if !path.starts_with('/') => {
+                "; no such device: a path without a leading / is relative to the working directory"
+            }
             tokio_serial::ErrorKind::Io(io::ErrorKind::NotFound) => {
                 "; no such device: check the path (ls /dev/serial/by-id lists the adapters)"
             }
@@ -497,6 +500,18 @@ mod tests {
         let err = Line::open(&endpoint).await.unwrap_err().to_string();
         assert!(err.contains("/dev/cellbus-no-such-port"), "{err}");
         assert!(err.contains("check the"), "{err}");
+    }
+
+    #[tokio::test]
+    async fn opening_a_missing_relative_serial_port_says_where_it_was_looked_for() {
+        let endpoint =
+            Endpoint::parse("cellbus-no-such-dir/jbc1", SerialSettings::new_8n1(9600)).unwrap();
+        let err = Line::open(&endpoint).await.unwrap_err().to_string();
+        assert!(
+            err.starts_with("cannot open serial port cellbus-no-such-dir/jbc1: "),
+            "{err}"
+        );
+        assert!(err.contains("relative to the working directory"), "{err}");
     }
 
     #[tokio::test]

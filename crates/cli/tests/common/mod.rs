@@ -5,6 +5,7 @@
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::process::{Child, ChildStdin, ChildStdout, Command, Output, Stdio};
+use std::sync::mpsc;
 use std::time::{Duration, UNIX_EPOCH};
 
 /// The built `cellbus` binary.
@@ -181,6 +182,35 @@ pub fn spawn_piped(args: &[&str]) -> Child {
         .stderr(Stdio::piped())
         .spawn()
         .expect("cellbus runs")
+}
+
+/// Runs `cellbus ARGS…`, killing it if it is still running after `limit` (a watchdog for
+/// commands that wait for events; a passing run ends long before).
+pub fn run_within(args: &[&str], limit: Duration) -> Output {
+    let child = spawn_piped(args);
+    let id = child.id();
+    let (done, finished) = mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = done.send(child.wait_with_output());
+    });
+    match finished.recv_timeout(limit) {
+        Ok(output) => output.expect("cellbus ran"),
+        Err(_) => {
+            let _ = std::process::Command::new("kill")
+                .arg(id.to_string())
+                .status();
+            panic!("cellbus {args:?} still running after {limit:?}");
+        }
+    }
+}
+
+/// Sends SIGINT (what Ctrl-C sends) to the process `id`.
+pub fn interrupt(id: u32) {
+    let status = Command::new("sh")
+        .args(["-c", &format!("kill -INT {id}")])
+        .status()
+        .expect("sh runs");
+    assert!(status.success(), "kill -INT {id} failed");
 }
 
 /// Now, in ms since the epoch.

@@ -117,7 +117,77 @@ fn bad_urls_are_refused_naming_the_bad_part() {
     assert!(err("http://example.invalid/").contains("scheme \"http\""));
     assert!(err("tcp://127.0.0.1").contains("needs a host and a port"));
     assert!(err("serial://").contains("names no serial device"));
-    assert!(err("ttyUSB0").contains("not a URL"));
+    assert!(err("").contains("names no serial device"));
+    assert!(err("pty/jbc1?baud=fast").contains("baud=\"fast\""));
+}
+
+#[test]
+fn a_path_without_a_scheme_is_a_serial_device_relative_to_the_working_directory() {
+    for text in ["pty/jbc1", "./pty/jbc1", "../cell/pty/jbc1", "ttyUSB0"] {
+        let e = Endpoint::parse(text, JBC).unwrap();
+        assert_eq!(
+            e,
+            Endpoint::Serial {
+                path: text.into(),
+                settings: JBC,
+                rs485: Rs485::default(),
+            }
+        );
+        assert_eq!(e.to_string(), format!("{text}?baud=19200&framing=8E1"));
+        assert_eq!(Endpoint::parse(&e.to_string(), JBC).unwrap(), e);
+    }
+    let e = Endpoint::parse("pty/thermosald?baud=9600&framing=8N1&echo=discard", JBC).unwrap();
+    assert_eq!(e.line_settings(), Some(SerialSettings::new_8n1(9600)));
+    assert!(matches!(e, Endpoint::Serial { path, rs485, .. }
+        if path == "pty/thermosald" && rs485.echo == Echo::Discard));
+}
+
+#[test]
+fn a_bare_absolute_path_takes_options_as_its_url_does() {
+    let bare = Endpoint::parse("/dev/ttyUSB1?baud=9600&rs485=rts", JBC).unwrap();
+    let url = Endpoint::parse("serial:///dev/ttyUSB1?baud=9600&rs485=rts", JBC).unwrap();
+    assert_eq!(bare, url);
+    assert_eq!(
+        bare.to_string(),
+        "serial:///dev/ttyUSB1?baud=9600&framing=8E1&rs485=rts"
+    );
+}
+
+#[test]
+fn a_serial_url_with_a_host_part_is_refused_rather_than_read_as_an_absolute_path() {
+    let err = Endpoint::parse("serial://pty/jbc1", JBC).unwrap_err();
+    assert_eq!(
+        err,
+        EndpointError::SerialHost {
+            url: "serial://pty/jbc1".into(),
+            host: "pty".into(),
+            path: "/jbc1".into(),
+        }
+    );
+    assert_eq!(
+        err.to_string(),
+        "endpoint \"serial://pty/jbc1\" reads \"pty\" as a host name, and a serial port has \
+         none; write serial:///pty/jbc1 (three slashes) for the absolute path /pty/jbc1, or \
+         pty/jbc1 without serial:// for a path relative to the working directory"
+    );
+    let err = Endpoint::parse("serial://dev/ttyUSB0?baud=9600", JBC).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("write serial:///dev/ttyUSB0 (three slashes)"),
+        "{err}"
+    );
+}
+
+#[test]
+fn host_and_port_without_a_scheme_is_refused_naming_the_urls_to_write() {
+    for text in ["127.0.0.1:4001", "localhost:4001", "[::1]:502"] {
+        let err = Endpoint::parse(text, JBC).unwrap_err();
+        assert_eq!(err, EndpointError::HostPort { url: text.into() });
+        assert!(
+            err.to_string().contains(&format!("write tcp://{text}")),
+            "{err}"
+        );
+    }
 }
 
 #[test]
