@@ -324,6 +324,15 @@ impl Checked {
         self.0.as_number()
     }
 
+    /// The number a numeric or enumerated point's driver sends: `check_write` makes a
+    /// number of every value for such a point (only a text point's value is text, and no
+    /// driver calls this for one).
+    pub fn number(&self) -> f64 {
+        self.0
+            .as_number()
+            .expect("check_write gives numbers for numeric and enumerated points")
+    }
+
     /// The value, unwrapped.
     pub fn into_value(self) -> Value {
         self.0

@@ -366,12 +366,7 @@ impl LineTask {
                 Ok(line) => line,
                 Err(error) => {
                     let wait = reopen.next_wait();
-                    self.line_failed(&error, wait);
-                    let until = Instant::now() + wait;
-                    if !self
-                        .wait_refusing_writes(until, &error, &mut shutdown)
-                        .await
-                    {
+                    if !self.failed_then_wait(&error, wait, &mut shutdown).await {
                         return;
                     }
                     continue;
@@ -409,17 +404,25 @@ impl LineTask {
                     } else {
                         reopen.next_wait()
                     };
-                    self.line_failed(&error, wait);
-                    let until = Instant::now() + wait;
-                    if !self
-                        .wait_refusing_writes(until, &error, &mut shutdown)
-                        .await
-                    {
+                    if !self.failed_then_wait(&error, wait, &mut shutdown).await {
                         return;
                     }
                 }
             }
         }
+    }
+
+    /// Marks the line failed for `error` and waits `wait` before the next open, refusing
+    /// writes meanwhile; false when the gateway stops during the wait.
+    async fn failed_then_wait(
+        &mut self,
+        error: &str,
+        wait: Duration,
+        shutdown: &mut watch::Receiver<bool>,
+    ) -> bool {
+        self.line_failed(error, wait);
+        self.wait_refusing_writes(Instant::now() + wait, error, shutdown)
+            .await
     }
 
     async fn poll_loop(&mut self, shutdown: &mut watch::Receiver<bool>) -> Ended {

@@ -760,9 +760,7 @@ impl JbcDriver {
             .ok_or_else(|| WriteError::UnknownPoint {
                 point: point.id.clone(),
             })?;
-        let number = value
-            .as_number()
-            .expect("check_write gives numbers for numeric and enumerated points");
+        let number = value.number();
         // Whole and within the JTSE's range (check_write), so it fits an i32.
         let number = number as i32;
         if let Some((low, high)) = def.limits

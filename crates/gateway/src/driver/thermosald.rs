@@ -504,9 +504,7 @@ impl ThermosaldDriver {
             .ok_or_else(|| WriteError::UnknownPoint {
                 point: point.id.clone(),
             })?;
-        let number = value
-            .as_number()
-            .expect("check_write gives numbers for numeric and enumerated points");
+        let number = value.number();
         let item = def.item();
         let limit = if def.below_max_working {
             Some(

@@ -702,9 +702,7 @@ impl ModbusDriver {
             .ok_or_else(|| WriteError::UnknownPoint {
                 point: point.id.clone(),
             })?;
-        let number = value
-            .as_number()
-            .expect("check_write gives numbers for numeric and enumerated points");
+        let number = value.number();
         let out_of_range = || {
             let (min, max) = register.representable();
             WriteError::Invalid(crate::point::ValueError::OutOfRange {
