@@ -109,7 +109,8 @@ impl Gateway {
     /// The history never stops the start: its file is opened and checked on its own
     /// thread; a damaged file is moved aside (a `history_reset` event names it), and a data
     /// directory that cannot be used turns the history off (a `history_failed` event,
-    /// `/healthz` degraded, history queries 503) while live values are served.
+    /// `/healthz` failing, history queries 503) while live values are served. A data
+    /// directory another gateway holds is refused (see [`crate::store::lock`]).
     ///
     /// It has the gateway crate's own device kinds and interfaces
     /// ([`crate::plugins::builtin`]); [`Gateway::start_with`] takes others.
@@ -355,7 +356,6 @@ impl Pollers {
     }
 }
 
-/// Once the history has opened (or failed to), emits a `history_failed` event if it is off,
 /// The first round's summary is logged at the latest this long after the start, naming the
 /// devices that have not answered yet.
 pub const FIRST_ROUND_LIMIT: Duration = Duration::from_secs(60);
@@ -426,6 +426,7 @@ pub fn first_round_line(cell: &Cell) -> (tracing::Level, String) {
     )
 }
 
+/// Once the history has opened (or failed to), emits a `history_failed` event if it is off,
 /// so the event stream and the log say so; polling does not wait for it.
 fn report_history_off(cell: &Arc<Cell>, data_dir: PathBuf) {
     let cell = Arc::clone(cell);
