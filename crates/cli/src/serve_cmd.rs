@@ -267,7 +267,7 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
                 }
             }
             for (table, words) in interfaces {
-                output::line(format!("  [{table}] {words}"))?;
+                output::line(format!("  [{table}] {words}").trim_end().to_owned())?;
             }
             let overloaded = loads.iter().filter_map(gateway::load::LineLoad::warning);
             for warning in cell

@@ -64,39 +64,66 @@ fn serial_of(endpoint: &Endpoint) -> Option<SerialSettings> {
 
 /// The estimated load of each line with a serial line behind it (lines over plain TCP
 /// are left out: no baud rate to reckon with). Builds each device's driver, as `serve`
-/// will, without opening anything.
+/// will, without opening anything: for `cellbus config check`, which has no cell.
 pub fn line_loads(config: &CellConfig) -> Vec<LineLoad> {
-    config.lines.iter().filter_map(line_load).collect()
+    config
+        .lines
+        .iter()
+        .filter_map(|line| {
+            let serial = serial_of(&line.endpoint)?;
+            let drivers: Vec<_> = line
+                .devices
+                .iter()
+                .filter_map(|d| Some((d, d.driver.build().ok()?)))
+                .collect();
+            let polls = drivers.iter().flat_map(|(device, driver)| {
+                driver.groups().into_iter().map(move |group| {
+                    let period = device.period_of(&group);
+                    (
+                        device.driver.id.as_str(),
+                        driver.as_ref(),
+                        group.name,
+                        period,
+                    )
+                })
+            });
+            Some(line_load(&line.name, serial, polls))
+        })
+        .collect()
 }
 
-fn line_load(line: &LineConfig) -> Option<LineLoad> {
-    let serial = serial_of(&line.endpoint)?;
+/// The serial line behind `line`, if the load of its polls can be estimated.
+pub fn serial_line(line: &LineConfig) -> Option<SerialSettings> {
+    serial_of(&line.endpoint)
+}
+
+/// The load of the line `name` at `serial` from its polls: each device's id, its driver,
+/// one of its groups and the period in force. `serve` gives the drivers its line tasks
+/// already hold.
+pub fn line_load<'a>(
+    name: &str,
+    serial: SerialSettings,
+    polls: impl IntoIterator<Item = (&'a str, &'a dyn Driver, String, Duration)>,
+) -> LineLoad {
     let mut share = 0.0;
     let mut heaviest: Option<(String, String, Duration, Duration)> = None;
     let mut worst = 0.0;
-    for device in &line.devices {
-        let Ok(driver) = device.driver.build() else {
+    for (device, driver, group, period) in polls {
+        let Some(time) = driver.poll_time(&group, serial) else {
             continue;
         };
-        let driver: Box<dyn Driver> = driver;
-        for group in driver.groups() {
-            let period = device.period_of(&group);
-            let Some(time) = driver.poll_time(&group.name, serial) else {
-                continue;
-            };
-            let part = time.as_secs_f64() / period.as_secs_f64().max(1e-3);
-            share += part;
-            if part > worst {
-                worst = part;
-                heaviest = Some((device.driver.id.to_string(), group.name, period, time));
-            }
+        let part = time.as_secs_f64() / period.as_secs_f64().max(1e-3);
+        share += part;
+        if part > worst {
+            worst = part;
+            heaviest = Some((device.to_owned(), group, period, time));
         }
     }
-    Some(LineLoad {
-        line: line.name.clone(),
+    LineLoad {
+        line: name.to_owned(),
         share,
         heaviest,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -128,6 +155,25 @@ mod tests {
                 && warning.contains("lengthen `poll` or `period`"),
             "{warning}"
         );
+    }
+
+    #[test]
+    fn the_line_tasks_serve_runs_estimate_what_config_check_does() {
+        let mut text =
+            "[[line]]\nname = \"sealers\"\nendpoint = \"serial:///dev/ttyUSB0\"\n".to_owned();
+        for n in 0..3 {
+            text += &format!(
+                "[[line.device]]\nid = \"sealer{n}\"\nprotocol = \"thermosald\"\naddress = {n}\npoll = {{ live = \"100ms\" }}\n"
+            );
+        }
+        let config = parse_config(&text, std::path::Path::new("cell.toml")).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let store =
+            crate::store::Store::open(dir.path(), crate::store::StoreOptions::default()).unwrap();
+        let metrics = std::sync::Arc::new(crate::metrics::Metrics::new());
+        let (_cell, tasks) = crate::scheduler::build(&config, store.handle(), metrics).unwrap();
+        let serial = serial_line(&config.lines[0]).unwrap();
+        assert_eq!(tasks[0].load(serial), line_loads(&config)[0]);
     }
 
     #[test]

@@ -37,7 +37,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use link::{Line, SharedLine};
+use link::{Line, SerialSettings, SharedLine};
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
@@ -351,6 +351,22 @@ impl LineTask {
     /// The line's name.
     pub fn name(&self) -> &str {
         &self.line.name
+    }
+
+    /// The estimated load of the line's polls at `serial`, from the drivers and periods in
+    /// force ([`crate::load::line_load`]).
+    pub fn load(&self, serial: SerialSettings) -> crate::load::LineLoad {
+        let polls = self.slots.iter().flat_map(|slot| {
+            slot.entry.groups.iter().map(move |group| {
+                (
+                    slot.entry.id.as_str(),
+                    slot.driver.as_ref(),
+                    group.name.clone(),
+                    group.period,
+                )
+            })
+        });
+        crate::load::line_load(&self.line.name, serial, polls)
     }
 
     /// Polls until `shutdown` turns true (or its sender is dropped).

@@ -10,7 +10,7 @@ use std::time::Duration;
 use anyhow::Context;
 use tokio::sync::watch;
 
-use crate::cell::{Cell, DeviceStatus, NotRunning};
+use crate::cell::{Cell, DeviceStatus, LiveMessage, NotRunning};
 use crate::config::{CellConfig, SAME_TOKENS, check_config, token_fault};
 use crate::demo::DemoCell;
 use crate::event::{Event, EventKind};
@@ -124,11 +124,7 @@ impl Gateway {
         let (config, demo) = match &options.config {
             Some(path) => {
                 let config = check_config(path, &registry.config)?;
-                let overloaded = crate::load::line_loads(&config)
-                    .iter()
-                    .filter_map(crate::load::LineLoad::warning)
-                    .collect::<Vec<_>>();
-                for warning in config.warnings().into_iter().chain(overloaded) {
+                for warning in config.warnings() {
                     tracing::warn!("{}: {warning}", path.display());
                 }
                 (config, None)
@@ -169,6 +165,17 @@ impl Gateway {
         let metrics = Arc::new(Metrics::new());
         let (cell, tasks) = crate::scheduler::build(&config, store.handle(), metrics)
             .map_err(anyhow::Error::msg)?;
+        // Lines asked for more polls than they can carry, from the drivers just built.
+        if let Some(path) = &config.source {
+            for (line, task) in config.lines.iter().zip(&tasks) {
+                let Some(serial) = crate::load::serial_line(line) else {
+                    continue;
+                };
+                if let Some(warning) = task.load(serial).warning() {
+                    tracing::warn!("{}: {warning}", path.display());
+                }
+            }
+        }
         cell.emit(Event::of_gateway(
             EventKind::GatewayStarted,
             format!(
@@ -363,12 +370,19 @@ pub const FIRST_ROUND_LIMIT: Duration = Duration::from_secs(60);
 /// Waits for the first round of polls and logs which devices answer (at the latest after
 /// [`FIRST_ROUND_LIMIT`]).
 async fn first_round(cell: Arc<Cell>) {
+    use tokio::sync::broadcast::error::RecvError;
     let mut live = cell.subscribe();
     let deadline = tokio::time::Instant::now() + FIRST_ROUND_LIMIT;
-    while undecided(&cell) > 0 {
+    // Counted again only when a device's status may have changed: value changes, most of
+    // the stream, pass by.
+    let mut waiting = undecided(&cell);
+    while waiting {
         match tokio::time::timeout_at(deadline, live.recv()).await {
-            Ok(Ok(_) | Err(tokio::sync::broadcast::error::RecvError::Lagged(_))) => {}
-            Ok(Err(tokio::sync::broadcast::error::RecvError::Closed)) | Err(_) => break,
+            Ok(Ok(LiveMessage::Device(_)) | Err(RecvError::Lagged(_))) => {
+                waiting = undecided(&cell);
+            }
+            Ok(Ok(_)) => {}
+            Ok(Err(RecvError::Closed)) | Err(_) => break,
         }
     }
     let (level, line) = first_round_line(&cell);
@@ -379,10 +393,10 @@ async fn first_round(cell: Arc<Cell>) {
     }
 }
 
-fn undecided(cell: &Cell) -> usize {
+/// Whether a device has not been polled yet.
+fn undecided(cell: &Cell) -> bool {
     cell.device_entries()
-        .filter(|d| d.summary().status == DeviceStatus::Connecting)
-        .count()
+        .any(|d| d.read().status == DeviceStatus::Connecting)
 }
 
 /// The first round's line, and its level (a warning when a device does not answer).

@@ -16,8 +16,8 @@ use gateway::driver::{
 use gateway::point::{Checked, PointDescription, PointId, PointKind, PointSpec, Value};
 use gateway::{Gateway, ServeOptions};
 use link::{SerialSettings, SharedLine};
-use running::get_response;
 use serde::Deserialize;
+use testkit::get_response;
 
 /// A counter that counts up by its `step` at every poll.
 #[derive(Debug)]

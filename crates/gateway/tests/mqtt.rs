@@ -12,7 +12,8 @@ use gateway::northbound::mqtt::MqttLink;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber};
 
 mod running;
-use running::{LIMIT, Running, get_response};
+use running::{LIMIT, Running};
+use testkit::get_response;
 
 const NODE: &str = "spBv1.0/cellbus/+/demo";
 const DEVICES: &str = "spBv1.0/cellbus/+/demo/#";

@@ -8,7 +8,7 @@ use gateway::store::{EventFilter, Series, Store, StoreOptions};
 use gateway::time::Timestamp;
 use gateway::{Gateway, ServeOptions};
 mod running;
-use running::get_response;
+use testkit::get_response;
 
 fn options(dir: &std::path::Path) -> ServeOptions {
     ServeOptions {

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use gateway::plugins::Registry;
 use gateway::{Gateway, ServeOptions};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use testkit::get_response;
 
 /// The registry of the `cellbus` binary built with OPC UA.
 fn registry() -> Registry {
@@ -20,20 +20,6 @@ fn options(dir: &std::path::Path) -> ServeOptions {
         data_dir: dir.join("data"),
         ..ServeOptions::default()
     }
-}
-
-/// GETs `path` over a fresh connection: the whole response, head and body.
-async fn get_response(addr: SocketAddr, path: &str) -> String {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream
-        .write_all(
-            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-        )
-        .await
-        .unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
-    response
 }
 
 /// GETs `path` and returns the status line and the JSON body.

@@ -27,6 +27,7 @@
 #![warn(missing_docs)]
 
 pub mod chatter;
+pub mod http;
 #[cfg(feature = "mqtt")]
 pub mod mosquitto;
 pub mod noise;
@@ -38,6 +39,7 @@ pub mod sparkplug_sub;
 pub mod tricks;
 
 pub use chatter::{Chatter, ends_within, ends_within_paused};
+pub use http::get_response;
 #[cfg(feature = "mqtt")]
 pub use mosquitto::{Mosquitto, TlsFiles, password_file};
 pub use noise::{Noise, NoiseConfig, NoiseCounts};

@@ -94,6 +94,40 @@ impl CellConfig {
     pub fn interface<T: std::any::Any>(&self, table: &str) -> Option<&T> {
         self.interfaces.get(table).and_then(Settings::get)
     }
+
+    /// What the file allows but is likely a mistake, one sentence each, naming the device,
+    /// as each device kind sees its devices ([`crate::driver::DeviceKind::warnings`]):
+    /// Modbus registers that share a register.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut kinds: Vec<(Kind, Vec<&DriverConfig>)> = Vec::new();
+        for device in self.lines.iter().flat_map(|line| &line.devices) {
+            let driver = &device.driver;
+            match kinds.iter_mut().find(|(kind, _)| *kind == driver.protocol) {
+                Some((_, devices)) => devices.push(driver),
+                None => kinds.push((driver.protocol, vec![driver])),
+            }
+        }
+        kinds
+            .into_iter()
+            .flat_map(|(kind, devices)| kind.warnings(&devices))
+            .collect()
+    }
+
+    /// The serial ports the file names that are not there now, one sentence each: an
+    /// adapter unplugged, or a path mistyped. `serve` starts anyway and keeps trying to
+    /// open them, so `cellbus config check` warns (a USB adapter may be plugged in later).
+    pub fn absent_ports(&self) -> Vec<String> {
+        self.lines
+            .iter()
+            .filter_map(|line| match &line.endpoint {
+                Endpoint::Serial { path, .. } if !Path::new(path).exists() => Some(format!(
+                    "line {}: serial port {path} is not there now (`ls /dev/serial/by-id` lists the adapters plugged in); `cellbus serve` will keep trying to open it",
+                    line.name
+                )),
+                _ => None,
+            })
+            .collect()
+    }
 }
 
 /// Reads one top-level table of the file that belongs to an interface (`[mqtt]`), beside
@@ -273,6 +307,16 @@ impl DeviceConfig {
             groups: BTreeMap::new(),
             deadband: None,
         }
+    }
+
+    /// How often `group` (its driver's default period) is read: the config's period for it
+    /// by name, else the device's `period`, else the default.
+    pub fn period_of(&self, group: &crate::driver::PollGroup) -> Duration {
+        self.groups
+            .get(&group.name)
+            .copied()
+            .or(self.period)
+            .unwrap_or(group.period)
     }
 }
 
@@ -877,9 +921,6 @@ fn check_device(
     })
 }
 
-/// Longest pacing delay accepted (`delay_between_requests`, `delay_after_connect`).
-pub const MAX_PACING_DELAY: Duration = Duration::from_secs(60);
-
 /// A deadband from `deadband` (absolute) or `deadband_percent`, never both.
 pub fn check_deadband(
     absolute: &Option<Spanned<f64>>,
@@ -914,56 +955,6 @@ pub fn check_deadband(
             }
         }
         (None, None) => Ok(None),
-    }
-}
-
-impl CellConfig {
-    /// What the file allows but is likely a mistake, one sentence each, naming the device,
-    /// as each device kind sees its devices ([`crate::driver::DeviceKind::warnings`]):
-    /// Modbus registers that share a register.
-    pub fn warnings(&self) -> Vec<String> {
-        let mut kinds: Vec<(Kind, Vec<&DriverConfig>)> = Vec::new();
-        for device in self.lines.iter().flat_map(|line| &line.devices) {
-            let driver = &device.driver;
-            match kinds.iter_mut().find(|(kind, _)| *kind == driver.protocol) {
-                Some((_, devices)) => devices.push(driver),
-                None => kinds.push((driver.protocol, vec![driver])),
-            }
-        }
-        kinds
-            .into_iter()
-            .flat_map(|(kind, devices)| kind.warnings(&devices))
-            .collect()
-    }
-}
-
-impl CellConfig {
-    /// The serial ports the file names that are not there now, one sentence each: an
-    /// adapter unplugged, or a path mistyped. `serve` starts anyway and keeps trying to
-    /// open them, so `cellbus config check` warns (a USB adapter may be plugged in later).
-    pub fn absent_ports(&self) -> Vec<String> {
-        self.lines
-            .iter()
-            .filter_map(|line| match &line.endpoint {
-                Endpoint::Serial { path, .. } if !Path::new(path).exists() => Some(format!(
-                    "line {}: serial port {path} is not there now (`ls /dev/serial/by-id` lists the adapters plugged in); `cellbus serve` will keep trying to open it",
-                    line.name
-                )),
-                _ => None,
-            })
-            .collect()
-    }
-}
-
-impl DeviceConfig {
-    /// How often `group` (its driver's default period) is read: the config's period for it
-    /// by name, else the device's `period`, else the default.
-    pub fn period_of(&self, group: &crate::driver::PollGroup) -> Duration {
-        self.groups
-            .get(&group.name)
-            .copied()
-            .or(self.period)
-            .unwrap_or(group.period)
     }
 }
 

@@ -10,7 +10,6 @@ use std::time::{Duration, Instant};
 use gateway::cell::Cell;
 use gateway::northbound::mqtt::MqttLink;
 use gateway::{Gateway, ServeOptions};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 
@@ -66,19 +65,4 @@ impl Running {
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
     }
-}
-
-/// GETs `path` from the gateway at `addr` over a fresh connection: the whole response,
-/// head and body.
-pub async fn get_response(addr: SocketAddr, path: &str) -> String {
-    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
-    stream
-        .write_all(
-            format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-        )
-        .await
-        .unwrap();
-    let mut response = String::new();
-    stream.read_to_string(&mut response).await.unwrap();
-    response
 }
