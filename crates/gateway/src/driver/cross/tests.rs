@@ -8,6 +8,7 @@ use wire::device::SharedModel;
 
 fn config(unit: i64) -> DriverConfig {
     DriverConfig {
+        states: Default::default(),
         id: DeviceId::new("cross1").unwrap(),
         protocol: super::KIND,
         address: Some(unit),

@@ -9,6 +9,7 @@ use wire::device::SharedModel;
 
 fn config(address: Option<i64>) -> DriverConfig {
     DriverConfig {
+        states: Default::default(),
         id: DeviceId::new("jbc1").unwrap(),
         protocol: super::KIND,
         address,

@@ -26,6 +26,7 @@ async fn twin() -> panasonic::server::RunningTwin {
 /// `placer1`, its machine's ports on this host, its reply timeout `timeout`.
 fn placer(command_port: u16, event_port: u16, timeout: Option<Duration>) -> PanasonicDriver {
     PanasonicDriver::new(&DriverConfig {
+        states: Default::default(),
         timeout,
         settings: crate::config::Settings::new(Keys {
             event_port: Some(event_port),
