@@ -117,8 +117,11 @@ const KIND_FACTS: Described = Described {
     machine_states: &MACHINE_STATES,
 };
 
-/// The machine states, with their E10 / IPC-CFX codes: the band heating is sealing, a
-/// calibration is equipment engineering, a fault number a failure.
+/// The machine states, with their E10 / IPC-CFX codes: a band fired in the cycle under
+/// way (its power or the cycle's peak current above 0) is the sealer at work, a band not
+/// fired is ready, a calibration is equipment engineering, a fault number a
+/// failure. A poll every 2 s cannot see each impulse of a 3 s rhythm, and a state that
+/// flipped with each would fill the history: the regulator firing at all is the state.
 pub const MACHINE_STATES: [StateDef; 4] = [
     StateDef {
         name: "sealing",
@@ -142,7 +145,9 @@ pub const MACHINE_STATES: [StateDef; 4] = [
 /// poll did not read the fault and the power.
 fn judge(readings: &[Reading]) -> Option<(usize, Option<String>)> {
     let fault = number_in(readings, "fault")?;
-    let power = number_in(readings, "power")?;
+    // The peak current of the cycle under way stays up between its impulses, when the
+    // power is 0 while the band cools.
+    let power = number_in(readings, "power")?.max(number_in(readings, "maximum_current")?);
     let code = fault as u16;
     Some(match code {
         diagnostic::NONE if power > 0.0 => (0, None),

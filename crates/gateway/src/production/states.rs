@@ -77,12 +77,26 @@ pub fn check_overrides(
 #[derive(Debug, Clone)]
 pub struct StatePoints {
     ids: [PointId; 3],
-    /// The kind's states with the codes in force for this device.
+    /// The kind's states with the codes in force for this device, and the points'
+    /// descriptions: shared by every device with the same ones (a thousand stations hold
+    /// one copy).
+    shared: Arc<Shared>,
+}
+
+/// What devices with the same states and codes share.
+#[derive(Debug, PartialEq)]
+struct Shared {
     table: Box<[(&'static str, StateCode)]>,
     descriptions: [Arc<PointDescription>; 3],
 }
 
+/// Every [`Shared`] made so far: a few per kind (one unless the config moves codes).
+static SHARED: std::sync::Mutex<Vec<Arc<Shared>>> = std::sync::Mutex::new(Vec::new());
+
 impl StatePoints {
+    /// How many points a device with states gets.
+    pub const COUNT: usize = 3;
+
     /// The state points of the device `config` describes, whose kind reports `states`,
     /// read by its poll group `group`.
     pub fn new(config: &DriverConfig, states: &[StateDef], group: &'static str) -> Self {
@@ -127,11 +141,27 @@ impl StatePoints {
             ),
             describe("Machine state reason", PointKind::Text),
         ];
+        let made = Shared {
+            table,
+            descriptions,
+        };
+        let shared = {
+            let mut all = SHARED
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            match all.iter().find(|s| ***s == made) {
+                Some(found) => Arc::clone(found),
+                None => {
+                    let made = Arc::new(made);
+                    all.push(Arc::clone(&made));
+                    made
+                }
+            }
+        };
         let id = |name| point_id(&config.id, name);
         Self {
             ids: [id(STATE_POINT), id(CODE_POINT), id(REASON_POINT)],
-            table,
-            descriptions,
+            shared,
         }
     }
 
@@ -139,7 +169,7 @@ impl StatePoints {
     pub fn specs(&self) -> Vec<PointSpec> {
         self.ids
             .iter()
-            .zip(&self.descriptions)
+            .zip(&self.shared.descriptions)
             .map(|(id, d)| PointSpec::new(id.clone(), Arc::clone(d)))
             .collect()
     }
@@ -147,6 +177,7 @@ impl StatePoints {
     /// The readings of the state at `index` in the kind's list, with the device's reason.
     pub fn readings(&self, index: usize, reason: Option<String>) -> Vec<Reading> {
         let (name, code) = self
+            .shared
             .table
             .get(index)
             .copied()
