@@ -111,6 +111,16 @@ fn uid_of(datasource: &Value, place: &str) -> String {
         .to_owned()
 }
 
+/// The uid of the provisioned source `datasource` names, whose type it gives too.
+fn provisioned(sources: &BTreeMap<String, String>, datasource: &Value, place: &str) -> String {
+    let uid = uid_of(datasource, place);
+    let kind = sources
+        .get(&uid)
+        .unwrap_or_else(|| panic!("{place}: {uid} is not a provisioned source"));
+    assert_eq!(datasource["type"].as_str(), Some(kind.as_str()), "{place}");
+    uid
+}
+
 /// Every query of a dashboard: its panels' targets, its variables', its annotations'.
 fn queries(name: &str, dashboard: &Value) -> Vec<Query> {
     let mut all = Vec::new();
@@ -287,23 +297,35 @@ fn the_dashboards_are_valid_dashboard_json_on_the_provisioned_data_sources() {
                 assert_eq!(panel["type"], "row", "{place}: a panel without queries");
                 continue;
             };
-            let source = uid_of(&panel["datasource"], &place);
-            assert!(sources.contains_key(&source), "{place}: source {source}");
+            let source = provisioned(&sources, &panel["datasource"], &place);
             let mut refs = BTreeSet::new();
             for target in targets {
-                assert_eq!(uid_of(&target["datasource"], &place), source, "{place}");
+                assert_eq!(
+                    provisioned(&sources, &target["datasource"], &place),
+                    source,
+                    "{place}"
+                );
                 let reference = target["refId"].as_str().expect("a refId");
                 assert!(refs.insert(reference), "{place}: refId {reference} twice");
             }
         }
         assert!(!ids.is_empty(), "{name}: no panels");
-        for query in queries(name, dashboard) {
-            assert!(
-                sources.contains_key(&query.source),
-                "{}: source {}",
-                query.place(),
-                query.source
+        let sourced = variables
+            .values()
+            .map(|v| (format!("variable {}", v["name"]), &v["datasource"]))
+            .filter(|(_, source)| !source.is_null())
+            .chain(
+                dashboard["annotations"]["list"]
+                    .as_array()
+                    .expect("an annotations list")
+                    .iter()
+                    .filter(|a| a["builtIn"] != 1)
+                    .map(|a| (format!("annotation {}", a["name"]), &a["datasource"])),
             );
+        for (owner, source) in sourced {
+            provisioned(&sources, source, &format!("{name}: {owner}"));
+        }
+        for query in queries(name, dashboard) {
             for used in variables_used(&query.text) {
                 assert!(
                     variables.contains_key(used.as_str()),
