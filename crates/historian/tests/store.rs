@@ -268,6 +268,15 @@ async fn machine_state_samples_make_intervals_from_one_change_to_the_next() {
         hour(7, 20),
         Some(("run", 1100.0, "")),
     ));
+    // The historian goes offline and the gateway's death says so: stale samples without
+    // values, which change nothing (the gateway read on; the gap's changes come later).
+    for point in ["machine_state", "machine_state_code", "machine_state_reason"] {
+        samples.push(SampleRow {
+            value: None,
+            quality: Quality::Stale,
+            ..sample("placer1", point, hour(7, 40), 0.0)
+        });
+    }
     // The device stops answering (DDEATH), then is born again in another state.
     samples.extend(machine_state("placer1", hour(8, 0), None));
     samples.extend(machine_state(
@@ -299,7 +308,7 @@ async fn machine_state_samples_make_intervals_from_one_change_to_the_next() {
         })
         .await
         .expect("write");
-    assert_eq!(written.samples, 28);
+    assert_eq!(written.samples, 31);
 
     let sql = client(&url).await;
     let intervals = column(

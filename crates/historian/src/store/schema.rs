@@ -190,9 +190,13 @@ fn version_3(_: SamplesLayout) -> Vec<&'static str> {
 ///
 /// - every instant one of the three has a sample is a moment; at each moment each point
 ///   holds its latest sample at or before it (a point that did not change sent nothing);
+/// - a stale sample changes nothing: the gateway still had the reading (late on a busy
+///   line, or not sent while the historian was offline, whose changes come later with
+///   their own times), and the gateway's own rule keeps a stale value; Sparkplug carries
+///   no value with it, so the view passes over it;
 /// - the state is unknown (code 0, category `unknown`, no reason) when the state or the
-///   code holds no value: a bad or stale sample (the device not answering, its gateway dead
-///   or its reading late) or no sample yet;
+///   code holds no value: a bad sample (the device not answering, its gateway dead) or no
+///   sample yet;
 /// - the category is the code's thousands (1 productive … 6 non_scheduled); a code off the
 ///   scale (not 1000–6999, or not whole) is 0 and `unknown`, with the device's word kept;
 /// - an empty reason is NULL;
@@ -272,6 +276,7 @@ fn version_4(_: SamplesLayout) -> Vec<&'static str> {
                                     FROM samples s JOIN points p ON p.id = s.point_id
                                     WHERE p.point IN ('machine_state', 'machine_state_code',
                                         'machine_state_reason')
+                                        AND s.quality <> 1
                                     GROUP BY p.group_id, p.node, p.device, s.t
                                 ) moments
                                 WINDOW device_time AS (PARTITION BY group_id, node, device
