@@ -270,7 +270,11 @@ async fn machine_state_samples_make_intervals_from_one_change_to_the_next() {
     ));
     // The historian goes offline and the gateway's death says so: stale samples without
     // values, which change nothing (the gateway read on; the gap's changes come later).
-    for point in ["machine_state", "machine_state_code", "machine_state_reason"] {
+    for point in [
+        "machine_state",
+        "machine_state_code",
+        "machine_state_reason",
+    ] {
         samples.push(SampleRow {
             value: None,
             quality: Quality::Stale,
