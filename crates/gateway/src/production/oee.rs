@@ -1,7 +1,11 @@
 //! OEE, the state breakdown and the stops of a range, from its state intervals, its
 //! planned time and its counters: sans IO, so every figure has a hand-computed test.
 //!
-//! - Planned production time: the shifts less their breaks, within the range.
+//! - Planned production time: the shifts less their breaks, within the range, less the
+//!   time without data (before the gateway first polled the device, or while it was not
+//!   running): what the machine did then is not known, so it is neither run nor stop. A
+//!   device that did not answer while the gateway ran is a stop (unknown): a machine
+//!   switched off in its shift is not producing.
 //! - Availability = run time / planned time. Run time is the productive (E10 1000s) time
 //!   in planned time, plus stops shorter than `micro_stop` when one is configured (a
 //!   short stop is then a speed loss, counted in performance, not availability).
@@ -60,8 +64,10 @@ pub struct Breakdown {
     /// Seconds per state (planned time by the device's states, the rest as outside shifts
     /// or breaks), longest first: they add up to the range.
     pub states: Vec<StateTime>,
-    /// Planned seconds.
+    /// Planned seconds with data.
     pub planned_s: f64,
+    /// Planned seconds without data, left out of `planned_s`.
+    pub unobserved_s: f64,
     /// Productive seconds in planned time.
     pub productive_s: f64,
     /// Stops shorter than the micro-stop threshold, counted as run time.
@@ -84,6 +90,7 @@ pub fn breakdown(
     let mut stops: BTreeMap<String, Stop> = BTreeMap::new();
     let mut micro: Option<Stop> = None;
     let (mut planned_s, mut productive_s, mut unscheduled_s) = (0.0, 0.0, 0.0);
+    let mut unobserved_s = 0.0;
     let mut failures = 0;
     for interval in intervals {
         let inside = overlap(interval.start, interval.end, &planned.work);
@@ -102,10 +109,16 @@ pub fn breakdown(
         if inside <= 0.0 {
             continue;
         }
-        planned_s += inside;
         *states
             .entry((interval.state.clone(), interval.code))
             .or_default() += inside;
+        if interval.category == Category::Unknown
+            && interval.reason.as_deref() == Some(super::states::NO_DATA)
+        {
+            unobserved_s += inside;
+            continue;
+        }
+        planned_s += inside;
         let category = interval.category;
         if category == Category::Productive {
             productive_s += inside;
@@ -160,6 +173,7 @@ pub fn breakdown(
     Breakdown {
         states,
         planned_s,
+        unobserved_s,
         productive_s,
         micro_stops: micro,
         stops,
@@ -293,9 +307,14 @@ pub fn oee(b: &Breakdown, counts: &Counts, ideal: &IdealCycle, planned_elapsed_s
             Some((planned_elapsed_s / seconds).floor()),
             "planned time so far / the configured ideal cycle".to_owned(),
         ),
-        (_, Some(plan)) => (
+        (_, Some(plan)) if plan > 0.0 => (
             Some(plan),
             "the machine's own production plan".to_owned(),
+        ),
+        (_, Some(_)) => (
+            None,
+            "no ideal cycle configured, and the machine's production plan is not set (0)"
+                .to_owned(),
         ),
         _ => (None, "no ideal cycle configured and no plan from the machine".to_owned()),
     };

@@ -246,6 +246,37 @@ fn time_outside_every_shift_is_not_scheduled_and_not_planned() {
     assert_eq!(outside.category, Category::NonScheduled);
 }
 
+/// A 24 h shift, 1,000 s asked: no data 0–400 (the gateway was not running), run
+/// 400–700, the device not answering 700–800, run 800–1,000. Planned with data: 600 s,
+/// of which 500 s run; the silent device is a stop.
+#[test]
+fn time_without_data_is_left_out_of_planned_time_but_a_silent_device_is_a_stop() {
+    use crate::production::states::{NO_DATA, NOT_ANSWERING};
+    let shifts = Shifts::new(Some("UTC"), Vec::new()).unwrap();
+    let t = |s: i64| {
+        let base = utc("2026-11-02T08:00:00Z").0;
+        jiff::Timestamp::from_millisecond(base + s * 1000)
+            .unwrap()
+            .to_string()
+    };
+    let unknown = |a: i64, b: i64, why: &str| iv(&t(a), &t(b), "unknown", 0, Some(why));
+    let intervals = vec![
+        unknown(0, 400, NO_DATA),
+        iv(&t(400), &t(700), "run", 1100, None),
+        unknown(700, 800, NOT_ANSWERING),
+        iv(&t(800), &t(1000), "run", 1100, None),
+    ];
+    let planned = shifts.planned(utc(&t(0)), utc(&t(1000)));
+    let b = breakdown(&intervals, &planned, None);
+    assert_eq!(b.planned_s, 600.0);
+    assert_eq!(b.unobserved_s, 400.0);
+    assert_eq!(seconds_of(&b, "unknown"), 500.0, "both unknowns are states");
+    let oee = oee(&b, &Counts::default(), &IdealCycle::Unknown, b.planned_s);
+    assert!(close(oee.availability, 500.0 / 600.0));
+    assert_eq!(oee.stops.len(), 1);
+    assert!(oee.stops[0].reason.contains(NOT_ANSWERING));
+}
+
 #[test]
 fn a_counter_that_resets_counts_what_it_counted_after_the_reset() {
     // 100 → 150 (+50), reset, 30 (+30), 50 (+20).
