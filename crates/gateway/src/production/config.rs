@@ -268,3 +268,6 @@ pub(crate) fn read_production(
     }
     Ok(Some(settings))
 }
+
+#[cfg(test)]
+mod tests;
