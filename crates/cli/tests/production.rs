@@ -36,9 +36,12 @@ fn the_demo_placers_production_agrees_with_its_states_metrics_and_points() {
     let production = loop {
         let p = gateway.get_json("/api/production?device=placer1");
         let stopped = p["stops"].as_array().is_some_and(|stops| {
-            stops
-                .iter()
-                .any(|s| s["reason"].as_str().unwrap().starts_with("parts exhausted: feeder 7"))
+            stops.iter().any(|s| {
+                s["reason"]
+                    .as_str()
+                    .unwrap()
+                    .starts_with("parts exhausted: feeder 7")
+            })
         });
         if stopped && p["boards"].as_f64().unwrap_or(0.0) >= 1.0 {
             break p;
@@ -66,14 +69,20 @@ fn the_demo_placers_production_agrees_with_its_states_metrics_and_points() {
             .or_default() += seconds_between(&i["start"], &i["end"]);
     }
     let total: f64 = by_state.values().sum();
-    assert!((total - span).abs() < 0.01, "intervals {total} s of {span} s");
+    assert!(
+        (total - span).abs() < 0.01,
+        "intervals {total} s of {span} s"
+    );
     let listed: f64 = production["states"]
         .as_array()
         .unwrap()
         .iter()
         .map(|s| s["seconds"].as_f64().unwrap())
         .sum();
-    assert!((listed - span).abs() < 0.01, "states {listed} s of {span} s");
+    assert!(
+        (listed - span).abs() < 0.01,
+        "states {listed} s of {span} s"
+    );
     for s in production["states"].as_array().unwrap() {
         let state = s["state"].as_str().unwrap();
         let seconds = s["seconds"].as_f64().unwrap();
@@ -97,7 +106,10 @@ fn the_demo_placers_production_agrees_with_its_states_metrics_and_points() {
     assert!((availability - run / planned).abs() < 1e-9, "{production}");
     let boards = production["boards"].as_f64().unwrap();
     let performance = production["performance"].as_f64().unwrap();
-    assert!((performance - 20.0 * boards / run).abs() < 1e-9, "{production}");
+    assert!(
+        (performance - 20.0 * boards / run).abs() < 1e-9,
+        "{production}"
+    );
     assert_eq!(
         production["basis"]["performance"],
         "ideal cycle 20 s, from the config"
@@ -129,8 +141,8 @@ fn the_demo_placers_production_agrees_with_its_states_metrics_and_points() {
             .cloned()
             .unwrap();
         let (_, metrics) = gateway.get("/metrics");
-        let gauge = metrics
-            .contains("cellbus_oee_ratio{device=\"placer1\",part=\"oee\",window=\"shift\"}");
+        let gauge =
+            metrics.contains("cellbus_oee_ratio{device=\"placer1\",part=\"oee\",window=\"shift\"}");
         let seconds = metrics.contains(
             "cellbus_device_state_seconds_total{device=\"placer1\",category=\"productive\"}",
         );

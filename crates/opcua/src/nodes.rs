@@ -214,15 +214,19 @@ fn build_device(
         let node = ids::point(ns, point_id);
         let parent = if gateway::production::is_production_point(point.view.id.name()) {
             if !production_made {
-                ObjectBuilder::new(&production, QualifiedName::new(ns, "Production"), "Production")
-                    .description(
-                        "The device's machine state on the SEMI E10 scale (its word, its \
+                ObjectBuilder::new(
+                    &production,
+                    QualifiedName::new(ns, "Production"),
+                    "Production",
+                )
+                .description(
+                    "The device's machine state on the SEMI E10 scale (its word, its \
                          IPC-CFX code, its reason) and, for a device that counts production, \
                          the OEE of the shift under way",
-                    )
-                    .is_folder()
-                    .component_of(device_id.clone())
-                    .insert(space);
+                )
+                .is_folder()
+                .component_of(device_id.clone())
+                .insert(space);
                 production_made = true;
             }
             production.clone()

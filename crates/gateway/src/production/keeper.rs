@@ -34,10 +34,7 @@ const CLOCK_TICK: Duration = Duration::from_secs(5);
 pub fn close_gap(cell: &Cell, data_dir: &Path) {
     let store = cell.store();
     if store.wait_open().is_err()
-        || matches!(
-            store.health(Timestamp::now()).history,
-            HistoryState::Off(_)
-        )
+        || matches!(store.health(Timestamp::now()).history, HistoryState::Off(_))
     {
         return;
     }

@@ -129,7 +129,12 @@ pub const OEE_POINTS: [(&str, &str); 4] = [
 /// its OEE): interfaces that group points put them together (OPC UA's `Production`
 /// folder).
 pub fn is_production_point(name: &str) -> bool {
-    [states::STATE_POINT, states::CODE_POINT, states::REASON_POINT].contains(&name)
+    [
+        states::STATE_POINT,
+        states::CODE_POINT,
+        states::REASON_POINT,
+    ]
+    .contains(&name)
         || OEE_POINTS.iter().any(|(point, _)| *point == name)
 }
 

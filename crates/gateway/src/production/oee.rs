@@ -103,7 +103,10 @@ pub fn breakdown(
         }
         if outside > 1e-9 {
             *states
-                .entry((OUTSIDE_SHIFTS.into(), StateCode::new(6100).expect("on the scale")))
+                .entry((
+                    OUTSIDE_SHIFTS.into(),
+                    StateCode::new(6100).expect("on the scale"),
+                ))
                 .or_default() += outside;
         }
         if inside <= 0.0 {
@@ -132,7 +135,10 @@ pub fn breakdown(
             && whole < threshold
         {
             let stop = micro.get_or_insert_with(|| Stop {
-                reason: format!("short stops under {}", humantime::format_duration(threshold)),
+                reason: format!(
+                    "short stops under {}",
+                    humantime::format_duration(threshold)
+                ),
                 category: Category::Standby,
                 count: 0,
                 seconds: 0.0,
@@ -268,7 +274,10 @@ pub fn oee(b: &Breakdown, counts: &Counts, ideal: &IdealCycle, planned_elapsed_s
         IdealCycle::Configured {
             seconds,
             program: Some(p),
-        } => format!("ideal cycle {} s for program {p}, from the config", trim(*seconds)),
+        } => format!(
+            "ideal cycle {} s for program {p}, from the config",
+            trim(*seconds)
+        ),
         IdealCycle::Configured {
             seconds,
             program: None,
@@ -286,15 +295,19 @@ pub fn oee(b: &Breakdown, counts: &Counts, ideal: &IdealCycle, planned_elapsed_s
             "; over 100 %: the machine ran faster than the ideal cycle, which is set too long",
         );
     }
-    let (quality, quality_words) = match (counts.good_boards, counts.boards, counts.placed, counts.pickups) {
+    let (quality, quality_words) = match (
+        counts.good_boards,
+        counts.boards,
+        counts.placed,
+        counts.pickups,
+    ) {
         (Some(good), Some(boards), _, _) => (
             ratio(good, boards),
             "good boards / boards finished (the configured good-board count)".to_owned(),
         ),
         (_, _, Some(placed), Some(pickups)) => (
             ratio(placed, pickups),
-            "placement yield: parts placed / pickups (no good-board count configured)"
-                .to_owned(),
+            "placement yield: parts placed / pickups (no good-board count configured)".to_owned(),
         ),
         _ => (None, "no counts to reckon quality from".to_owned()),
     };
@@ -307,16 +320,18 @@ pub fn oee(b: &Breakdown, counts: &Counts, ideal: &IdealCycle, planned_elapsed_s
             Some((planned_elapsed_s / seconds).floor()),
             "planned time so far / the configured ideal cycle".to_owned(),
         ),
-        (_, Some(plan)) if plan > 0.0 => (
-            Some(plan),
-            "the machine's own production plan".to_owned(),
-        ),
+        (_, Some(plan)) if plan > 0.0 => {
+            (Some(plan), "the machine's own production plan".to_owned())
+        }
         (_, Some(_)) => (
             None,
             "no ideal cycle configured, and the machine's production plan is not set (0)"
                 .to_owned(),
         ),
-        _ => (None, "no ideal cycle configured and no plan from the machine".to_owned()),
+        _ => (
+            None,
+            "no ideal cycle configured and no plan from the machine".to_owned(),
+        ),
     };
     let mut stops = b.stops.clone();
     if let Some(m) = &b.micro_stops {

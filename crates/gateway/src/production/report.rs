@@ -214,11 +214,7 @@ fn ideal_cycle(
         && !settings.ideal_cycle_by_program.is_empty()
     {
         let program = store
-            .history_nearest(
-                &states::point_id(device, name),
-                Timestamp(to.0 - 1),
-                false,
-            )?
+            .history_nearest(&states::point_id(device, name), Timestamp(to.0 - 1), false)?
             .and_then(|s| s.value);
         if let Some(Value::Text(program)) = program
             && let Some(cycle) = settings.ideal_cycle_by_program.get(program.trim())

@@ -327,7 +327,8 @@ pub fn intervals(samples: &StateSamples, from: Timestamp, to: Timestamp) -> Vec<
                 }
             }
             (state, code) => {
-                let gateway_down = matches!(reason, Held::Bad(Some(Value::Text(t))) if t == GATEWAY_DOWN);
+                let gateway_down =
+                    matches!(reason, Held::Bad(Some(Value::Text(t))) if t == GATEWAY_DOWN);
                 let answered = matches!(state, Held::Bad(_)) || matches!(code, Held::Bad(_));
                 Interval {
                     start: *start,

@@ -95,7 +95,10 @@ fn a_night_break_after_midnight_is_within_its_shift() {
 
 #[test]
 fn a_device_moves_its_states_to_other_codes_by_name() {
-    let config = parse(&format!("{PLACER}states = {{ ready = 2200, setup = 4400 }}\n")).unwrap();
+    let config = parse(&format!(
+        "{PLACER}states = {{ ready = 2200, setup = 4400 }}\n"
+    ))
+    .unwrap();
     let driver = &config.lines[0].devices[0].driver;
     assert_eq!(driver.states["ready"].get(), 2200);
     assert_eq!(driver.states["setup"].get(), 4400);
@@ -116,7 +119,10 @@ fn a_device_moves_its_states_to_other_codes_by_name() {
                  states = { run = 1100 }\n\
                  [[line.device.register]]\nname = \"power\"\naddress = 0\ntype = \"float32\"\n";
     let error = parse(meter).unwrap_err().to_string();
-    assert!(error.contains("modbus devices report no machine states"), "{error}");
+    assert!(
+        error.contains("modbus devices report no machine states"),
+        "{error}"
+    );
 }
 
 #[test]

@@ -59,11 +59,23 @@ fn early_shift() -> (Vec<Interval>, Planned) {
     let at = |t: &str| format!("{day}{t}:00Z");
     let intervals = vec![
         iv(&at("06:00"), &at("09:00"), "run", 1100, None),
-        iv(&at("09:00"), &at("09:20"), "parts exhausted", 5500, Some("feeder 7")),
+        iv(
+            &at("09:00"),
+            &at("09:20"),
+            "parts exhausted",
+            5500,
+            Some("feeder 7"),
+        ),
         iv(&at("09:20"), &at("10:40"), "run", 1100, None),
         iv(&at("10:40"), &at("11:00"), "ready", 2000, None),
         iv(&at("11:00"), &at("13:00"), "run", 1100, None),
-        iv(&at("13:00"), &at("13:10"), "error stop", 5000, Some("error code 5")),
+        iv(
+            &at("13:00"),
+            &at("13:10"),
+            "error stop",
+            5000,
+            Some("error code 5"),
+        ),
         iv(&at("13:10"), &at("14:00"), "run", 1100, None),
     ];
     let planned = shifts.planned(utc(&at("06:00")), utc(&at("14:00")));
@@ -141,7 +153,13 @@ fn a_range_that_starts_mid_stop_in_a_shift_across_midnight_counts_only_its_part(
             5500,
             Some("feeder 9"),
         ),
-        iv("2026-11-03T00:15:00Z", "2026-11-03T06:00:00Z", "run", 1100, None),
+        iv(
+            "2026-11-03T00:15:00Z",
+            "2026-11-03T06:00:00Z",
+            "run",
+            1100,
+            None,
+        ),
     ];
     let planned = shifts.planned(from, to);
     let b = breakdown(&intervals, &planned, None);
@@ -226,11 +244,7 @@ fn a_performance_over_a_hundred_percent_says_the_ideal_cycle_is_too_long() {
 
 #[test]
 fn time_outside_every_shift_is_not_scheduled_and_not_planned() {
-    let shifts = Shifts::new(
-        Some("UTC"),
-        vec![shift("early", "06:00", "14:00", &[])],
-    )
-    .unwrap();
+    let shifts = Shifts::new(Some("UTC"), vec![shift("early", "06:00", "14:00", &[])]).unwrap();
     let intervals = vec![iv(
         "2026-11-02T12:00:00Z",
         "2026-11-02T16:00:00Z",
