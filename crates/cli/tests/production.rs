@@ -12,7 +12,8 @@ use common::Gateway;
 use serde_json::Value;
 
 /// How long the demo may take to finish a board and run out of parts: its operator starts
-/// the machine after 10 s and lets a feeder run out after 50 s of running.
+/// the machine after 2 s and lets a feeder run out after 50 s of running (generous: CI's
+/// two cores run other tests meanwhile).
 const WITHIN: Duration = Duration::from_secs(180);
 
 fn seconds_between(from: &Value, to: &Value) -> f64 {
