@@ -145,15 +145,9 @@ pub(crate) async fn states(
     State(s): State<AppState>,
     query: Result<Query<ProductionQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
-    let Asked {
-        device,
-        now,
-        from,
-        to,
-        ..
-    } = asked(&s, query)?;
+    let a = asked(&s, query)?;
     let answer = run_query(&s, move |store| {
-        report::states(&store, &device, from, to, now)
+        report::states(&store, &a.device, a.from, a.to, a.now)
     })
     .await?;
     Ok(Json(answer).into_response())
@@ -165,16 +159,11 @@ pub(crate) async fn production(
     State(s): State<AppState>,
     query: Result<Query<ProductionQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
-    let Asked {
-        device,
-        now,
-        from,
-        to,
-        shift,
-    } = asked(&s, query)?;
+    let a = asked(&s, query)?;
     let cell = std::sync::Arc::clone(&s.cell);
     let answer = run_query(&s, move |store| {
-        report::production(&store, &cell.production, &device, (from, to), shift, now)
+        let range = (a.from, a.to);
+        report::production(&store, &cell.production, &a.device, range, a.shift, a.now)
     })
     .await?;
     Ok(Json(answer).into_response())
