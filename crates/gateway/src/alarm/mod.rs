@@ -1,6 +1,7 @@
 //! Alarms an operator works with, by ISA-18.2: each alarm's state ([`state`]) and the
 //! limit alarms on numeric points ([`limit`]).
 
+pub mod config;
 pub mod limit;
 pub mod state;
 

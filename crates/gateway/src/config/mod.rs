@@ -89,6 +89,8 @@ pub struct CellConfig {
     pub interfaces: BTreeMap<&'static str, Settings>,
     /// The shifts (`[[shift]]`) in the cell's `time_zone`.
     pub shifts: crate::production::Shifts,
+    /// The limit alarms (`[[alarm]]`).
+    pub alarms: Vec<crate::alarm::config::AlarmConfig>,
 }
 
 impl CellConfig {
@@ -387,7 +389,7 @@ pub fn check_config(path: &Path, plugins: &Plugins) -> Result<CellConfig, Config
 }
 
 /// The keys of the file's top level that are the cell's own.
-const CELL_KEYS: [&str; 5] = ["token", "read_token", "time_zone", "shift", "line"];
+const CELL_KEYS: [&str; 6] = ["token", "read_token", "time_zone", "shift", "line", "alarm"];
 
 /// The keys every `[[line.device]]` takes, whatever its kind.
 const DEVICE_KEYS: [&str; 12] = [
@@ -529,11 +531,13 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
             ));
         }
     }
+    let alarms = crate::alarm::config::read_alarms(raw.alarm, &lines, &at, &mut errors);
     if let Some(error) = ConfigError::all(errors) {
         return Err(error);
     }
     Ok(CellConfig {
         shifts,
+        alarms,
         source: Some(path.to_owned()),
         token: raw.token.map(Spanned::into_inner),
         read_token: raw.read_token.map(Spanned::into_inner),
@@ -1023,6 +1027,8 @@ struct RawConfig {
     time_zone: Option<Spanned<String>>,
     #[serde(default)]
     shift: Vec<crate::production::config::RawShift>,
+    #[serde(default)]
+    alarm: Vec<crate::alarm::config::RawAlarm>,
     #[serde(default)]
     line: Vec<RawLine>,
 }

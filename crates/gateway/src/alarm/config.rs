@@ -1,0 +1,232 @@
+//! The config's `[[alarm]]` tables: limit alarms on any numeric point of the cell.
+//!
+//! ```toml
+//! [[alarm]]
+//! point = "meter1.active_power"
+//! high = 180.0            # and/or high_high, low, low_low, rate_of_change (per second)
+//! deadband = 2.0          # it returns to normal only below high - deadband
+//! on_delay = "5s"         # the condition must hold this long to raise it
+//! off_delay = "5s"        # and be gone this long to clear it
+//! priority = "high"       # low, medium, high, urgent (or 1 to 4)
+//! message = "Cell supply near its limit"
+//! category = "process"
+//! chatter = { activations = 5, window = "10m", shelve = "30m" }
+//! ```
+
+use std::ops::Range;
+use std::time::Duration;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::Priority;
+use super::limit::Limits;
+use super::state::ChatterRule;
+use crate::config::{ConfigError, LineConfig, duration};
+use crate::point::{PointId, PointKind};
+
+/// Longest on or off delay, and longest chatter window or shelving.
+const MAX_DELAY: Duration = Duration::from_secs(24 * 3600);
+
+/// A limit alarm of the config, checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AlarmConfig {
+    /// The point it watches.
+    pub point: PointId,
+    /// Its limits, delays and deadband.
+    pub limits: Limits,
+    /// Its priority (medium unless given).
+    pub priority: Priority,
+    /// Words for the operator (the point's name and the limit when not given).
+    pub message: Option<String>,
+    /// A category of the plant's own (`process`, `safety`, `quality`).
+    pub category: Option<String>,
+    /// When it chatters.
+    pub chatter: Option<ChatterRule>,
+}
+
+/// An `[[alarm]]` as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawAlarm {
+    point: Spanned<String>,
+    high_high: Option<Spanned<f64>>,
+    high: Option<Spanned<f64>>,
+    low: Option<Spanned<f64>>,
+    low_low: Option<Spanned<f64>>,
+    rate_of_change: Option<Spanned<f64>>,
+    deadband: Option<Spanned<f64>>,
+    on_delay: Option<Spanned<String>>,
+    off_delay: Option<Spanned<String>>,
+    priority: Option<Spanned<RawPriority>>,
+    message: Option<String>,
+    category: Option<String>,
+    chatter: Option<Spanned<RawChatter>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(
+    untagged,
+    expecting = "priority is low, medium, high or urgent (or 1 to 4)"
+)]
+enum RawPriority {
+    Number(i64),
+    Name(String),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawChatter {
+    activations: Spanned<i64>,
+    window: Spanned<String>,
+    shelve: Option<Spanned<String>>,
+}
+
+/// The `[[alarm]]` tables against the cell's `lines`: each point must be a numeric point
+/// of a device of the cell, its limits able to hold. Each mistake goes to `errors`.
+pub(crate) fn read_alarms(
+    raw: Vec<RawAlarm>,
+    lines: &[LineConfig],
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+    errors: &mut Vec<ConfigError>,
+) -> Vec<AlarmConfig> {
+    let mut alarms = Vec::new();
+    for alarm in raw {
+        match read_alarm(alarm, lines, at) {
+            Ok(alarm) => alarms.push(alarm),
+            Err(e) => errors.push(e),
+        }
+    }
+    alarms
+}
+
+fn read_alarm(
+    raw: RawAlarm,
+    lines: &[LineConfig],
+    at: &impl Fn(Range<usize>, String) -> ConfigError,
+) -> Result<AlarmConfig, ConfigError> {
+    let text = raw.point.get_ref();
+    let point = PointId::parse(text).map_err(|e| {
+        at(
+            raw.point.span(),
+            format!(
+                "alarm point {text:?} is not a point id (device.point): {}",
+                e.rule
+            ),
+        )
+    })?;
+    check_point(&point, lines).map_err(|m| at(raw.point.span(), m))?;
+    let number = |v: &Option<Spanned<f64>>| v.as_ref().map(|s| *s.get_ref());
+    let delay = |d: &Option<Spanned<String>>, what: &str| {
+        d.as_ref()
+            .map(|d| duration(d, Duration::ZERO, MAX_DELAY, what, at))
+            .transpose()
+    };
+    let limits = Limits {
+        high_high: number(&raw.high_high),
+        high: number(&raw.high),
+        low: number(&raw.low),
+        low_low: number(&raw.low_low),
+        rate_of_change: number(&raw.rate_of_change),
+        deadband: number(&raw.deadband).unwrap_or(0.0),
+        on_delay: delay(&raw.on_delay, "on_delay")?.unwrap_or_default(),
+        off_delay: delay(&raw.off_delay, "off_delay")?.unwrap_or_default(),
+    };
+    limits
+        .check()
+        .map_err(|m| at(raw.point.span(), format!("alarm on {point}: {m}")))?;
+    let priority = match &raw.priority {
+        None => Priority::Medium,
+        Some(p) => {
+            let found = match p.get_ref() {
+                RawPriority::Number(n) => Priority::parse(&n.to_string()),
+                RawPriority::Name(name) => Priority::parse(name.trim()),
+            };
+            found.ok_or_else(|| {
+                at(
+                    p.span(),
+                    "priority is low, medium, high or urgent (or 1 to 4)".into(),
+                )
+            })?
+        }
+    };
+    let chatter = match &raw.chatter {
+        None => None,
+        Some(c) => {
+            let c = c.get_ref();
+            let activations = u32::try_from(*c.activations.get_ref())
+                .ok()
+                .filter(|n| *n >= 1)
+                .ok_or_else(|| {
+                    at(
+                        c.activations.span(),
+                        format!(
+                            "chatter activations {} must be 1 or more",
+                            c.activations.get_ref()
+                        ),
+                    )
+                })?;
+            let second = Duration::from_secs(1);
+            Some(ChatterRule {
+                activations,
+                window: duration(&c.window, second, MAX_DELAY, "chatter window", at)?,
+                shelve: c
+                    .shelve
+                    .as_ref()
+                    .map(|s| duration(s, second, super::state::MAX_SHELVE, "chatter shelve", at))
+                    .transpose()?,
+            })
+        }
+    };
+    Ok(AlarmConfig {
+        point,
+        limits,
+        priority,
+        message: raw.message,
+        category: raw.category,
+        chatter,
+    })
+}
+
+/// Whether `point` is a numeric point of a device of `lines` (its driver lists the
+/// device's points; building one opens nothing).
+fn check_point(point: &PointId, lines: &[LineConfig]) -> Result<(), String> {
+    let Some(device) = lines
+        .iter()
+        .flat_map(|l| &l.devices)
+        .find(|d| d.driver.id.as_str() == point.device())
+    else {
+        return Err(format!(
+            "alarm point {point}: the cell has no device {:?}",
+            point.device()
+        ));
+    };
+    let points = device.driver.build()?.points();
+    let Some(spec) = points.iter().find(|p| p.id == *point) else {
+        let numeric: Vec<&str> = points
+            .iter()
+            .filter(|p| p.kind == PointKind::Numeric)
+            .map(|p| p.id.name())
+            .take(12)
+            .collect();
+        return Err(format!(
+            "device {} has no point {:?}; its numeric points include {}",
+            point.device(),
+            point.name(),
+            numeric.join(", ")
+        ));
+    };
+    if spec.kind != PointKind::Numeric {
+        return Err(format!(
+            "alarm point {point} is not a number ({}): limits apply to numeric points",
+            match spec.kind {
+                PointKind::Text => "text",
+                _ => "an enumeration",
+            }
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;
