@@ -125,6 +125,191 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
     eprintln!("{seen}");
 }
 
+/// The trend view on the demo cell: two points picked by typing, a zoom by dragging, moves
+/// by button, shift-drag and finger, each asking `/api/history` for exactly the span then
+/// shown, in buckets that fit the chart; the CSV holds exactly the series the zoom's answers
+/// make; the address brings the same view back after a reload.
+#[test]
+fn a_trend_asks_for_each_span_it_shows_downloads_it_as_csv_and_comes_back_from_its_address() {
+    let browser = browser();
+    let data = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start(data.path());
+    let screenshot = data.path().join("trend.png");
+    let seen = what_the_page_saw(&mut browser.script("trend.mjs", &gateway, &screenshot));
+    let points = ["sealer0.temperature", "cross1.load_power"];
+    assert_eq!(seen["picked"]["chosen"], serde_json::json!(points));
+    assert_eq!(
+        seen["picked"]["address"],
+        "#view=trend&points=sealer0.temperature,cross1.load_power&range=10m"
+    );
+    let legend = seen["legend"].to_string();
+    assert!(
+        legend.contains("Current temperature (°C)") && legend.contains("Load power (kVA)"),
+        "both series are drawn, with their units: {legend}"
+    );
+
+    // The last 10 minutes, asked for as such: the gateway says when now is.
+    for asked in seen["first"]["asked"].as_array().unwrap() {
+        assert_eq!(
+            (&asked["from"], &asked["to"]),
+            (&"-10m".into(), &"now".into())
+        );
+    }
+    let first = shown(&seen["first"]);
+    assert!(
+        (600_000..=601_000).contains(&(first.1 - first.0)),
+        "{first:?}"
+    );
+
+    // The zoom asked for the newest tenth of it, and shows what it asked for.
+    let zoom = asked_span(&seen["zoom"], &points);
+    assert_eq!(zoom, shown(&seen["zoom"]));
+    assert!(
+        first.0 <= zoom.0 && zoom.1 <= first.1,
+        "{zoom:?} within {first:?}"
+    );
+    let span = zoom.1 - zoom.0;
+    assert!(
+        (50_000..=70_000).contains(&span),
+        "a tenth of 10 minutes: {span} ms"
+    );
+    let address = seen["zoom"]["address"].as_str().unwrap();
+    assert!(
+        address.contains("&from=") && address.contains("&to="),
+        "{address}"
+    );
+
+    // ◀ moved it earlier by half, a shift-drag later, a finger earlier again: each move
+    // asked for the span it then showed, as long as before.
+    let earlier = asked_span(&seen["earlier"], &points);
+    assert_eq!(earlier, shown(&seen["earlier"]));
+    assert!(
+        (earlier.0 - (zoom.0 - span / 2)).abs() <= 2,
+        "{earlier:?} {zoom:?}"
+    );
+    let dragged = asked_span(&seen["dragged"], &points);
+    assert_eq!(dragged, shown(&seen["dragged"]));
+    assert!(
+        dragged.0 > earlier.0,
+        "shift-drag to the left shows later: {dragged:?}"
+    );
+    let touched = asked_span(&seen["touched"], &points);
+    assert_eq!(touched, shown(&seen["touched"]));
+    assert!(
+        touched.0 < dragged.0,
+        "a finger to the right shows earlier: {touched:?}"
+    );
+    for moved in [earlier, dragged, touched] {
+        assert!(
+            ((moved.1 - moved.0) - span).abs() <= 2,
+            "{moved:?} as long as {span}"
+        );
+    }
+
+    // The CSV: a time column and one per point with its unit, a row per time the answers
+    // hold a bucket (and the span's two ends), each point's value held from its last bucket.
+    let csv = &seen["csv"];
+    assert!(csv["name"].as_str().unwrap().ends_with(".csv"));
+    let text = csv["text"].as_str().unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("time,sealer0.temperature (°C),cross1.load_power (kVA)")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let answers = seen["zoom"]["answers"].as_array().unwrap();
+    // Times are RFC 3339 with milliseconds in UTC, the page's as the gateway's: they sort
+    // as text.
+    let (from, to) = (
+        answers[0]["from"].as_str().unwrap(),
+        answers[0]["to"].as_str().unwrap(),
+    );
+    let mut times: Vec<&str> = answers
+        .iter()
+        .flat_map(|a| a["buckets"].as_array().unwrap())
+        .map(|b| b["t"].as_str().unwrap())
+        .filter(|t| (from..to).contains(t))
+        .chain([from, to])
+        .collect();
+    times.sort_unstable();
+    times.dedup();
+    assert_eq!(
+        rows.iter().map(|r| r[0]).collect::<Vec<_>>(),
+        times,
+        "a row per bucket's time and the span's ends"
+    );
+    for (column, answer) in answers.iter().enumerate() {
+        let buckets = answer["buckets"].as_array().unwrap();
+        assert!(
+            !buckets.is_empty(),
+            "{} has history: {answer}",
+            points[column]
+        );
+        let mut held = answer["before"]["value"].as_f64();
+        let mut next = buckets.iter().peekable();
+        for row in &rows {
+            while let Some(b) = next.next_if(|b| b["t"].as_str().unwrap() <= row[0]) {
+                held = b["avg"].as_f64();
+            }
+            let shown = row[column + 1];
+            match held {
+                Some(value) => assert_eq!(shown.parse::<f64>().ok(), Some(value), "{row:?}"),
+                None => assert_eq!(shown, "", "{row:?}"),
+            }
+        }
+    }
+    assert!(screenshot.exists());
+
+    // The address keeps the view: the reload shows the same points over the same span, and
+    // asks for just that.
+    let reloaded = &seen["reloaded"];
+    assert_eq!(reloaded["address"], seen["address"]);
+    assert_eq!(reloaded["chosen"], serde_json::json!(points));
+    assert_eq!(
+        shown(&serde_json::json!({ "shown": reloaded["span"] })),
+        touched
+    );
+    assert_eq!(asked_span(reloaded, &points), touched);
+
+    assert!(
+        seen["phone"]["overflow"].as_i64().unwrap() <= 0,
+        "nothing wider than a 360 px phone: {}",
+        seen["phone"]
+    );
+}
+
+/// The span (ms since the epoch) a trend step of `trend.mjs` says it shows.
+fn shown(step: &serde_json::Value) -> (i64, i64) {
+    let shown = &step["shown"];
+    (
+        shown["from"].as_i64().unwrap(),
+        shown["to"].as_i64().unwrap(),
+    )
+}
+
+/// The span a trend step asked `/api/history` for: one query per point, all for the same
+/// span (RFC 3339) in the same buckets, from 50 to 10,000 of them.
+fn asked_span(step: &serde_json::Value, points: &[&str]) -> (i64, i64) {
+    let asked = step["asked"].as_array().unwrap();
+    let named: Vec<&str> = asked.iter().map(|a| a["point"].as_str().unwrap()).collect();
+    assert_eq!(named, points, "{step}");
+    let first = &asked[0];
+    for other in asked {
+        for field in ["from", "to", "step"] {
+            assert_eq!(other[field], first[field], "{step}");
+        }
+    }
+    let from = first["from_ms"].as_i64().expect("from is a time");
+    let to = first["to_ms"].as_i64().expect("to is a time");
+    let bucket = humantime::parse_duration(first["step"].as_str().unwrap()).unwrap();
+    let buckets = u128::try_from(to - from).unwrap() / bucket.as_millis();
+    assert!(
+        (50..=10_000).contains(&buckets),
+        "{buckets} buckets: {step}"
+    );
+    (from, to)
+}
+
 /// Where the browser test's scripts live and the Chromium they drive.
 struct Browser {
     web: std::path::PathBuf,

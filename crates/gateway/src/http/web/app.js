@@ -6,6 +6,7 @@
 // snapshot and changes and nothing of the rest; at most PAGE_SIZE cards are on the page,
 // and a plot loads its history when it scrolls into view. The view is in the address
 // (`#line=NAME`, `&q=TEXT` for a search, `&page=N`), so a link opens the same view.
+// `#view=trend&…` shows the trend view instead (trend.js, loaded before this script).
 //
 // DOM contract (for tests and other tools): each device is <section class="device"
 // id="device-ID" data-status="up|down|connecting">; each point is an element with
@@ -157,6 +158,11 @@ function renderDevice(device) {
   const address = device.address === null ? 'no address' : `address ${device.address}`;
   card.querySelector('.device-meta').textContent =
     `${device.id} · ${device.protocol.toUpperCase()} · line ${device.line} · ${address}`;
+  const trendLink = card.querySelector('.trend-link');
+  const trended = readingsToTrend(device);
+  trendLink.hidden = trended.length === 0;
+  trendLink.href = `#view=trend&points=${trended.join(',')}&range=1h`;
+  trendLink.title = 'Its readings over the last hour';
   for (const point of device.points) {
     const primary = isLive(device, point);
     if (point.kind.type === 'numeric') {
@@ -171,6 +177,14 @@ function renderDevice(device) {
     setUpWriteForm(device, write.querySelector('form'));
   }
   return card;
+}
+
+/** The points a device's "Trend" link opens: its live measurements, else its live states. */
+function readingsToTrend(device) {
+  const live = device.points.filter((p) => isLive(device, p));
+  const numbers = live.filter((p) => p.kind.type === 'numeric');
+  const chosen = numbers.length ? numbers : live.filter((p) => p.kind.type === 'enum');
+  return chosen.slice(0, 4).map((p) => p.id);
 }
 
 function renderTile(point) {
@@ -464,6 +478,30 @@ async function refreshLines() {
   }
 }
 
+// ---- the pages: the cell, a trend ----------------------------------------------------------
+
+/** The page the address asks for: `#view=trend…`, else the cell. */
+function pageFromAddress() {
+  const params = new URLSearchParams(window.location.hash.slice(1));
+  return { page: params.get('view') === 'trend' ? 'trend' : 'cell', params };
+}
+
+const PAGE_TITLES = { cell: 'cell overview', trend: 'trend' };
+
+/** Shows the page the address asks for (only which is visible, with `load` false). */
+function showPage(load = true) {
+  const { page, params } = pageFromAddress();
+  document.getElementById('cell-view').hidden = page !== 'cell';
+  document.getElementById('trend-view').hidden = page !== 'trend';
+  for (const tab of document.querySelectorAll('.pages a')) {
+    if (tab.dataset.page === page) tab.setAttribute('aria-current', 'page');
+    else tab.removeAttribute('aria-current');
+  }
+  document.querySelector('.subtitle').textContent = PAGE_TITLES[page];
+  document.title = `cellbus · ${PAGE_TITLES[page]}`;
+  if (load) showTrend(page === 'trend' ? params : null);
+}
+
 // ---- the view: which devices are shown ------------------------------------------------
 
 function viewFromAddress() {
@@ -517,6 +555,7 @@ function showView(wanted, how) {
   const address = addressOf(view);
   const current = window.location.hash || window.location.pathname + window.location.search;
   if (how && address !== current) window.history[`${how}State`](null, '', address);
+  document.getElementById('tab-cell').href = address.startsWith('#') ? address : '#';
 
   document.getElementById('line-select').value = view.line;
   const search = document.getElementById('search');
@@ -573,7 +612,9 @@ function setUpToolbar() {
   document.getElementById('next').addEventListener('click', () => turn(1));
   // Back, forward, or an address typed or pasted.
   const follow = () => {
-    if (state.view) showView(viewFromAddress(), null);
+    if (!state.view) return;
+    if (pageFromAddress().page === 'cell') showView(viewFromAddress(), null);
+    showPage();
   };
   window.addEventListener('popstate', follow);
   window.addEventListener('hashchange', follow);
@@ -830,7 +871,9 @@ async function start() {
       state.lines = lines;
       state.order = lines.flatMap((line) => line.devices);
       renderLineChoice();
-      showView(viewFromAddress(), 'replace');
+      // The cell's view is recorded in the address only when it is the page shown.
+      showView(viewFromAddress(), pageFromAddress().page === 'cell' ? 'replace' : null);
+      showPage();
       return;
     }
     why = response.status === 401 ? 'This gateway needs its read token: reload the page to give it.'
@@ -843,6 +886,8 @@ async function start() {
 }
 
 setUpToolbar();
+setUpTrend();
+showPage(false);
 start();
 tick();
 setInterval(tick, 1000);
