@@ -43,6 +43,8 @@ pub struct Cell {
     /// A device's own links that are down (a Panasonic machine's Port 2), by device and
     /// link, with why: told by its events (`link`, `state`, `error` fields).
     links_down: RwLock<BTreeMap<(DeviceId, String), String>>,
+    /// The shifts, and which devices report states and production.
+    pub production: crate::production::Plan,
 }
 
 /// The status of an interface the gateway has but that does not run (not configured):
@@ -482,7 +484,10 @@ impl Cell {
             let mut slots: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)> = Vec::new();
             for device in &line.devices {
                 let driver = device.driver.build()?;
-                let points = driver.points();
+                let mut points = driver.points();
+                if device.driver.protocol.production().is_some() {
+                    points.extend(crate::production::oee_specs(&device.driver.id));
+                }
                 let groups = driver
                     .groups()
                     .into_iter()
@@ -554,6 +559,7 @@ impl Cell {
             interfaces: RwLock::new(Vec::new()),
             log_throttle: std::sync::Mutex::default(),
             links_down: RwLock::default(),
+            production: crate::production::Plan::of(config),
         });
         Ok((cell, plans))
     }
@@ -827,6 +833,9 @@ impl DeviceEntry {
 
     /// The period of a poll group.
     pub fn period(&self, group: &str) -> Duration {
+        if group == crate::production::OEE_GROUP {
+            return crate::production::OEE_PERIOD;
+        }
         self.groups
             .iter()
             .find(|g| g.name == group)

@@ -123,6 +123,7 @@ pub fn device(
 ) -> std::io::Result<DeviceConfig> {
     let id = DeviceId::new(id).map_err(|e| std::io::Error::other(e.to_string()))?;
     let driver = DriverConfig {
+        states: Default::default(),
         address,
         ..DriverConfig::new(id, kind)
     };

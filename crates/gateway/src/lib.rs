@@ -56,6 +56,7 @@ pub mod oplog;
 pub mod options;
 pub mod plugins;
 pub mod point;
+pub mod production;
 pub mod scheduler;
 pub mod serve;
 pub mod store;

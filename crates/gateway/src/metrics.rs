@@ -65,6 +65,26 @@ pub struct LineLabels {
     pub line: String,
 }
 
+/// Labels of the time per E10 category.
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct StateLabels {
+    /// The device's id.
+    pub device: String,
+    /// The E10 category (`productive`, `unscheduled_down`, …, `unknown`).
+    pub category: String,
+}
+
+/// Labels of the OEE gauges.
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct OeeLabels {
+    /// The device's id.
+    pub device: String,
+    /// `availability`, `performance`, `quality` or `oee`.
+    pub part: String,
+    /// The range: `shift` (the current shift so far).
+    pub window: String,
+}
+
 /// Labels of the write counter.
 #[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct WriteLabels {
@@ -107,6 +127,10 @@ pub struct Metrics {
     pub writes: Family<WriteLabels, Counter>,
     /// Open event streams.
     pub sse_clients: Gauge,
+    /// Seconds each device spent in each E10 category.
+    pub device_state_seconds: Family<StateLabels, Counter<f64, AtomicU64>>,
+    /// The OEE of each producing device's current shift, and its parts.
+    pub oee: Family<OeeLabels, Gauge<f64, AtomicU64>>,
     history_rows: Counter,
     history_commit_errors: Counter,
     history_rows_dropped: Counter,
@@ -170,6 +194,31 @@ impl Metrics {
             .map_or(0, |c| c.get())
     }
 
+    /// The counter of seconds `device` spent in `category`.
+    pub fn state_seconds(
+        &self,
+        device: &str,
+        category: crate::production::Category,
+    ) -> Counter<f64, AtomicU64> {
+        self.device_state_seconds
+            .get_or_create(&StateLabels {
+                device: device.to_owned(),
+                category: category.as_str().to_owned(),
+            })
+            .clone()
+    }
+
+    /// The gauge of `part` of `device`'s OEE this shift.
+    pub fn oee_ratio(&self, device: &str, part: &str) -> Gauge<f64, AtomicU64> {
+        self.oee
+            .get_or_create(&OeeLabels {
+                device: device.to_owned(),
+                part: part.to_owned(),
+                window: "shift".to_owned(),
+            })
+            .clone()
+    }
+
     /// Registers every metric.
     pub fn new() -> Self {
         let mut registry = Registry::with_prefix("cellbus");
@@ -187,6 +236,8 @@ impl Metrics {
         let events = Counter::default();
         let writes = Family::<WriteLabels, Counter>::default();
         let sse_clients = Gauge::default();
+        let device_state_seconds = Family::<StateLabels, Counter<f64, AtomicU64>>::default();
+        let oee = Family::<OeeLabels, Gauge<f64, AtomicU64>>::default();
         let history_rows = Counter::default();
         let history_commit_errors = Counter::default();
         let history_rows_dropped = Counter::default();
@@ -242,6 +293,16 @@ impl Metrics {
             sse_clients.clone(),
         );
         registry.register(
+            "device_state_seconds",
+            "Time the device spent in each SEMI E10 category (unknown: no data)",
+            device_state_seconds.clone(),
+        );
+        registry.register(
+            "oee_ratio",
+            "OEE of the current shift so far and its parts (availability, performance, quality), 0-1",
+            oee.clone(),
+        );
+        registry.register(
             "history_rows_written",
             "Rows committed to the history database (samples, events, audit)",
             history_rows.clone(),
@@ -277,6 +338,8 @@ impl Metrics {
             events,
             writes,
             sse_clients,
+            device_state_seconds,
+            oee,
             history_rows,
             history_commit_errors,
             history_rows_dropped,

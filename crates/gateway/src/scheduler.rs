@@ -788,7 +788,7 @@ fn closed_line(name: &str) -> SharedLine {
 }
 
 /// Stores and publishes what changed in a poll's readings.
-fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
+pub(crate) fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Reading>) {
     let now = Timestamp::now();
     let mut samples = Vec::new();
     let mut messages = Vec::new();

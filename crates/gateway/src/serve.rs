@@ -194,8 +194,21 @@ impl Gateway {
             ),
         ));
         report_history_off(&cell, options.data_dir.clone());
+        // The states of the time this gateway did not see are unknown: marked before the
+        // first poll.
+        {
+            let (cell, dir) = (Arc::clone(&cell), options.data_dir.clone());
+            tokio::task::spawn_blocking(move || crate::production::keeper::close_gap(&cell, &dir))
+                .await
+                .context("the production keeper's start failed")?;
+        }
         let (stop, stopped) = watch::channel(false);
         let pollers = Pollers::start(tasks, stopped.clone())?;
+        tokio::spawn(crate::production::keeper::run(
+            Arc::clone(&cell),
+            options.data_dir.clone(),
+            stopped.clone(),
+        ));
         tokio::spawn(first_round(Arc::clone(&cell)));
         // Every interface this gateway has shows in `/healthz`: `null` until it runs.
         for interface in &registry.interfaces {

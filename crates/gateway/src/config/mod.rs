@@ -87,6 +87,8 @@ pub struct CellConfig {
     pub lines: Vec<LineConfig>,
     /// What the interfaces read from their tables (`[mqtt]`, `[opcua]`), by table name.
     pub interfaces: BTreeMap<&'static str, Settings>,
+    /// The shifts (`[[shift]]`) in the cell's `time_zone`.
+    pub shifts: crate::production::Shifts,
 }
 
 impl CellConfig {
@@ -294,6 +296,8 @@ pub struct DeviceConfig {
     /// Deadband of its numeric points that name none of their own (`deadband` or
     /// `deadband_percent` in the device table).
     pub deadband: Option<Deadband>,
+    /// Its `[line.device.production]` settings, for a kind that produces.
+    pub production: Option<crate::production::ProductionSettings>,
 }
 
 impl DeviceConfig {
@@ -306,6 +310,7 @@ impl DeviceConfig {
             period: None,
             groups: BTreeMap::new(),
             deadband: None,
+            production: None,
         }
     }
 
@@ -382,10 +387,10 @@ pub fn check_config(path: &Path, plugins: &Plugins) -> Result<CellConfig, Config
 }
 
 /// The keys of the file's top level that are the cell's own.
-const CELL_KEYS: [&str; 3] = ["token", "read_token", "line"];
+const CELL_KEYS: [&str; 5] = ["token", "read_token", "time_zone", "shift", "line"];
 
 /// The keys every `[[line.device]]` takes, whatever its kind.
-const DEVICE_KEYS: [&str; 10] = [
+const DEVICE_KEYS: [&str; 12] = [
     "id",
     "name",
     "protocol",
@@ -396,6 +401,8 @@ const DEVICE_KEYS: [&str; 10] = [
     "poll",
     "deadband",
     "deadband_percent",
+    "states",
+    "production",
 ];
 
 /// Checks configuration text; `path` names it in errors.
@@ -494,10 +501,36 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
             Err(e) => errors.push(e),
         }
     }
+    let shifts = crate::production::config::read_shifts(
+        raw.time_zone.as_ref(),
+        &raw.shift,
+        &at,
+        &mut errors,
+    );
+    let device_ids: HashSet<&str> = lines
+        .iter()
+        .flat_map(|l: &LineConfig| &l.devices)
+        .map(|d| d.driver.id.as_str())
+        .collect();
+    for device in lines.iter().flat_map(|l| &l.devices) {
+        if let Some(good) = device.production.as_ref().and_then(|p| p.good_boards.as_ref())
+            && !device_ids.contains(good.device())
+        {
+            errors.push(at(
+                0..0,
+                format!(
+                    "device {}: good_boards names {good}, but the cell has no device {:?}",
+                    device.driver.id,
+                    good.device()
+                ),
+            ));
+        }
+    }
     if let Some(error) = ConfigError::all(errors) {
         return Err(error);
     }
     Ok(CellConfig {
+        shifts,
         source: Some(path.to_owned()),
         token: raw.token.map(Spanned::into_inner),
         read_token: raw.read_token.map(Spanned::into_inner),
@@ -880,7 +913,20 @@ fn check_device(
         &context,
         scratch,
     )?;
+    let states = crate::production::config::read_states(
+        protocol.name(),
+        protocol.machine_states(),
+        raw.states.as_ref(),
+        at,
+    )?;
+    let production = crate::production::config::read_production(
+        protocol.name(),
+        protocol.production().is_some(),
+        raw.production.as_ref(),
+        at,
+    )?;
     let driver_config = DriverConfig {
+        states,
         id: id.clone(),
         protocol,
         address,
@@ -918,6 +964,7 @@ fn check_device(
         period,
         groups,
         deadband,
+        production,
     })
 }
 
@@ -970,6 +1017,9 @@ impl fmt::Display for LineConfig {
 struct RawConfig {
     token: Option<Spanned<String>>,
     read_token: Option<Spanned<String>>,
+    time_zone: Option<Spanned<String>>,
+    #[serde(default)]
+    shift: Vec<crate::production::config::RawShift>,
     #[serde(default)]
     line: Vec<RawLine>,
 }
@@ -998,6 +1048,8 @@ struct RawDevice {
     poll: BTreeMap<String, Spanned<String>>,
     deadband: Option<Spanned<f64>>,
     deadband_percent: Option<Spanned<f64>>,
+    states: Option<Spanned<BTreeMap<String, i64>>>,
+    production: Option<Spanned<crate::production::config::RawProduction>>,
 }
 
 #[derive(Debug, Deserialize)]

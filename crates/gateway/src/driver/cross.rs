@@ -41,6 +41,7 @@ use super::{
     PollGroup, Reading, WriteError, point_ids,
 };
 use crate::event::EventKind;
+use crate::production::{StateDef, StatePoints};
 use crate::point::{
     AlarmRule, Checked, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
 };
@@ -69,6 +70,49 @@ const GROUPS: [(&str, Duration); 2] = [
 pub const KIND: Kind = Kind::new(&KIND_FACTS);
 
 /// What the config and the line tasks need to know of the kind.
+/// The machine states, with their E10 / IPC-CFX codes. The switch's work is the load
+/// being fed: fed through a static switch is productive (the alarms active meanwhile are
+/// the reason), through a manual bypass the switch is out of service for maintenance,
+/// an open output breaker is a planned disconnection, a load not supplied a failure.
+pub const MACHINE_STATES: [StateDef; 5] = [
+    StateDef {
+        name: "load on S1",
+        code: 1100,
+    },
+    StateDef {
+        name: "load on S2",
+        code: 1100,
+    },
+    StateDef {
+        name: "load on bypass",
+        code: 4300,
+    },
+    StateDef {
+        name: "output breaker open",
+        code: 4000,
+    },
+    StateDef {
+        name: "load not supplied",
+        code: 5000,
+    },
+];
+
+/// The machine state of a read internal state, and its reason (the active alarms).
+fn judge(internal: &InternalState) -> (usize, Option<String>) {
+    let alarms = internal.alarms();
+    let reason = (!alarms.is_empty()).then(|| alarms.join(", "));
+    let state = match internal.feed() {
+        Feed::StaticSwitch(Source::S1) => 0,
+        Feed::StaticSwitch(Source::S2) => 1,
+        Feed::Bypass(source) => {
+            return (2, Some(format!("through the bypass of {source}")));
+        }
+        Feed::OutputBreakerOpen => 3,
+        Feed::NotSupplied => 4,
+    };
+    (state, reason)
+}
+
 const KIND_FACTS: Described = Described {
     name: "cross",
     serial: DEFAULT_SERIAL,
@@ -77,6 +121,7 @@ const KIND_FACTS: Described = Described {
     groups: &GROUPS,
     speaks_modbus: true,
     build: |config| Ok(Box::new(CrossDriver::new(config)?)),
+    machine_states: &MACHINE_STATES,
 };
 
 /// Checks a JBUS unit number: 1–255 (JBUS allows numbers above Modbus's 247).
@@ -239,6 +284,8 @@ pub struct CrossDriver {
     events: Vec<DeviceEvent>,
     /// The good readings of a poll that then failed, until the scheduler takes them.
     partial: Vec<Reading>,
+    /// The machine state points.
+    machine: StatePoints,
 }
 
 impl CrossDriver {
@@ -259,6 +306,7 @@ impl CrossDriver {
             last: None,
             events: Vec::new(),
             partial: Vec::new(),
+            machine: StatePoints::new(config, &MACHINE_STATES, LIVE),
         })
     }
 
@@ -349,6 +397,10 @@ impl CrossDriver {
                 self.note_changes(internal);
             }
             readings = self.live_readings(&internal, Some(&measures));
+            if let Ok(internal) = &internal {
+                let (state, reason) = judge(internal);
+                readings.extend(self.machine.readings(state, reason));
+            }
         } else if group == RATINGS {
             let ratings = self
                 .read_area(Area::Ratings)
@@ -453,6 +505,7 @@ impl Driver for CrossDriver {
         DEFS.iter()
             .zip(&self.ids)
             .map(|(def, id)| Self::spec(def, id.clone()))
+            .chain(self.machine.specs())
             .collect()
     }
 

@@ -44,6 +44,8 @@ use super::{
     BoxFuture, Described, DeviceError, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
     WriteError, enum_states, point_ids,
 };
+use crate::production::states::number_in;
+use crate::production::{StateDef, StatePoints};
 use crate::point::{
     AlarmRule, Checked, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError, WriteRange,
@@ -78,6 +80,7 @@ const KIND_FACTS: Described = Described {
     groups: &GROUPS,
     speaks_modbus: false,
     build: |config| Ok(Box::new(JbcDriver::new(config)?)),
+    machine_states: &MACHINE_STATES,
 };
 
 /// Checks a station address: 0–99, or `None` for the form without addresses.
@@ -441,6 +444,54 @@ const POINTS: &[Def] = &[
     ),
 ];
 
+/// The machine states, with their E10 / IPC-CFX codes: hot air flowing is work, a tool
+/// missing is waiting for a support tool, a tool or station error a failure.
+pub const MACHINE_STATES: [StateDef; 5] = [
+    StateDef {
+        name: "in use",
+        code: 1100,
+    },
+    StateDef {
+        name: "idle",
+        code: 2000,
+    },
+    StateDef {
+        name: "no tool",
+        code: 2300,
+    },
+    StateDef {
+        name: "tool error",
+        code: 5000,
+    },
+    StateDef {
+        name: "station error",
+        code: 5000,
+    },
+];
+
+/// The machine state a `live` poll's readings show, and its reason; `None` when the
+/// poll did not read the errors and the tool's status.
+fn judge(readings: &[Reading]) -> Option<(usize, Option<String>)> {
+    let station = number_in(readings, "station_error")?;
+    let tool = number_in(readings, "tool_error")?;
+    let on = number_in(readings, "tool_on")?;
+    let words = |n: f64| ToolError::from_code(n as i32).map(ToolError::words);
+    Some(if station != 0.0 {
+        let words = StationError::from_code(station as i32).map(StationError::words);
+        (4, Some(words.unwrap_or("unknown station error").to_owned()))
+    } else if tool == f64::from(ToolError::NoTool.code())
+        || number_in(readings, "connected_tool") == Some(f64::from(Tool::None.number()))
+    {
+        (2, None)
+    } else if tool != 0.0 && tool != f64::from(ToolError::CheckingTool.code()) {
+        (3, Some(words(tool).unwrap_or("unknown tool error").to_owned()))
+    } else if on == 1.0 {
+        (0, None)
+    } else {
+        (1, None)
+    })
+}
+
 /// A JBC station on a line.
 pub struct JbcDriver {
     device: DeviceId,
@@ -454,6 +505,8 @@ pub struct JbcDriver {
     confirmed: Confirmed,
     /// The good readings of a poll that then failed, until the scheduler takes them.
     partial: Vec<Reading>,
+    /// The machine state points.
+    machine: StatePoints,
 }
 
 /// The last confirmed value of each code: a few codes, so a short list searched in
@@ -524,6 +577,7 @@ impl JbcDriver {
             client: None,
             confirmed: Confirmed::default(),
             partial: Vec::new(),
+            machine: StatePoints::new(config, &MACHINE_STATES, LIVE),
         })
     }
 }
@@ -701,6 +755,11 @@ impl JbcDriver {
                 value,
             });
         }
+        if group == LIVE
+            && let Some((state, reason)) = judge(&readings)
+        {
+            readings.extend(self.machine.readings(state, reason));
+        }
         Ok(readings)
     }
 
@@ -799,6 +858,7 @@ impl Driver for JbcDriver {
             .iter()
             .zip(DESCRIPTIONS.iter())
             .map(|(id, description)| PointSpec::new(id.clone(), Arc::clone(description)))
+            .chain(self.machine.specs())
             .collect()
     }
 

@@ -441,6 +441,20 @@ pub trait DeviceKind: Send + Sync + 'static {
     /// The driver for a device; `Err` says, in words, why the config cannot work (a
     /// Modbus read plan that cannot be made), and the config check shows it at the device.
     fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String>;
+
+    /// The machine states its devices report on the SEMI E10 scale, with their default
+    /// codes; none by default. Its drivers report them through
+    /// [`crate::production::StatePoints`]; a device's `states` table in the config moves
+    /// one to another code.
+    fn machine_states(&self) -> &'static [crate::production::StateDef] {
+        &[]
+    }
+
+    /// Which of its points count what it produces, if it produces (the placement machine's
+    /// boards): the gateway works out its OEE from them.
+    fn production(&self) -> Option<&'static crate::production::ProductionPoints> {
+        None
+    }
 }
 
 /// A device kind told by its facts alone, as most are: a kind with keys of its own or
@@ -461,6 +475,8 @@ pub struct Described {
     pub speaks_modbus: bool,
     /// The driver for a device.
     pub build: fn(&DriverConfig) -> Result<Box<dyn Driver>, String>,
+    /// The machine states it reports ([`DeviceKind::machine_states`]).
+    pub machine_states: &'static [crate::production::StateDef],
 }
 
 impl DeviceKind for Described {
@@ -482,6 +498,10 @@ impl DeviceKind for Described {
 
     fn groups(&self) -> &'static [(&'static str, Duration)] {
         self.groups
+    }
+
+    fn machine_states(&self) -> &'static [crate::production::StateDef] {
+        self.machine_states
     }
 
     fn speaks_modbus(&self) -> bool {
@@ -612,6 +632,8 @@ pub struct DriverConfig {
     /// What the kind read from its own keys ([`DeviceKind::read_keys`]): a Modbus
     /// device's registers, a Panasonic machine's event port.
     pub settings: Settings,
+    /// The codes the config's `states` table gives some of its machine states.
+    pub states: crate::production::states::StateOverrides,
 }
 
 impl DriverConfig {
@@ -626,6 +648,7 @@ impl DriverConfig {
             retries: None,
             endpoint: None,
             settings: Settings::default(),
+            states: Default::default(),
         }
     }
 

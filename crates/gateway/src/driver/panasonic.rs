@@ -25,6 +25,12 @@
 //! management data, read without clearing). The run state going from run to ready or
 //! error (and back) is a `state_changed` event; the error state is an alarm.
 //!
+//! Machine states (SEMI E10, [`MACHINE_STATES`]): the run state of each `live` poll,
+//! refined by the R messages that came before it: an error stop after R2E03 is `parts
+//! exhausted` (5500, with the feeder, step and nozzle as its reason), after another R2E
+//! `error stop` (5000, with the error code), during a recovery `recovery` (5300); ready
+//! after a program was selected is `setup` (4500) until the machine runs again.
+//!
 //! Nothing is writable: C5 start and reset are commands, not values, and the gateway writes
 //! values only.
 
@@ -48,6 +54,7 @@ use super::{
     PollGroup, Reading, WriteError,
 };
 use crate::event::{EventKind, Fields, fields};
+use crate::production::{ProductionPoints, StateDef, StatePoints};
 use crate::point::{
     AlarmRule, Checked, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError,
@@ -106,6 +113,51 @@ const GROUPS: [(&str, Duration); 3] = [
     (PROGRAM, Duration::from_secs(10)),
     (PRODUCTION, Duration::from_secs(10)),
 ];
+
+/// The machine states, with their E10 / IPC-CFX codes (the indexes below name them).
+pub const MACHINE_STATES: [StateDef; 6] = [
+    StateDef {
+        name: "run",
+        code: 1100,
+    },
+    StateDef {
+        name: "ready",
+        code: 2000,
+    },
+    StateDef {
+        name: "error stop",
+        code: 5000,
+    },
+    StateDef {
+        name: "parts exhausted",
+        code: 5500,
+    },
+    StateDef {
+        name: "recovery",
+        code: 5300,
+    },
+    StateDef {
+        name: "setup",
+        code: 4500,
+    },
+];
+const RUN: usize = 0;
+const READY: usize = 1;
+const ERROR_STOP: usize = 2;
+const PARTS_EXHAUSTED: usize = 3;
+const RECOVERY: usize = 4;
+const SETUP: usize = 5;
+
+/// What the machine counts: boards against its plan, pickups and placements for the
+/// placement yield, and each board's time (R0CT) for the best cycle.
+pub const PRODUCTION_POINTS: ProductionPoints = ProductionPoints {
+    boards: "boards_produced",
+    planned: Some("boards_planned"),
+    pickups: Some("pickups"),
+    placed: Some("parts_placed"),
+    program: Some("program"),
+    cycle_event: Some(("board_finished", "board_time_s")),
+};
 
 /// A Panasonic BM placement machine, host computer protocol over TCP (two ports, R events).
 #[derive(Debug)]
@@ -167,6 +219,14 @@ impl DeviceKind for Panasonic {
 
     fn build(&self, config: &DriverConfig) -> Result<Box<dyn Driver>, String> {
         Ok(Box::new(PanasonicDriver::new(config)?))
+    }
+
+    fn machine_states(&self) -> &'static [StateDef] {
+        &MACHINE_STATES
+    }
+
+    fn production(&self) -> Option<&'static ProductionPoints> {
+        Some(&PRODUCTION_POINTS)
     }
 }
 
@@ -241,6 +301,77 @@ pub struct PanasonicDriver {
     events: Vec<DeviceEvent>,
     /// Port 2 (R messages) cannot be reached: told once, until it connects.
     port2_down: bool,
+    /// The machine state points.
+    machine: StatePoints,
+    /// What the R messages said since the machine last ran.
+    told: Told,
+}
+
+/// What the R messages told of a stop, for the machine state.
+#[derive(Debug, Default)]
+struct Told {
+    /// The last error stop (R2E): parts exhausted, and its reason in words.
+    error: Option<(bool, String)>,
+    /// A recovery (R2RS) is under way.
+    recovering: bool,
+    /// A program was selected (R1SE) while the machine was not running.
+    setup: bool,
+}
+
+impl Told {
+    /// The machine state for run state `state`, and its reason.
+    fn state(&self, state: RunState) -> (usize, Option<String>) {
+        match state {
+            RunState::Run => (RUN, None),
+            RunState::Ready if self.setup => (SETUP, None),
+            RunState::Ready => (READY, None),
+            RunState::Error if self.recovering => (RECOVERY, None),
+            RunState::Error => match &self.error {
+                Some((true, reason)) => (PARTS_EXHAUSTED, Some(reason.clone())),
+                Some((false, reason)) => (ERROR_STOP, Some(reason.clone())),
+                None => (ERROR_STOP, None),
+            },
+        }
+    }
+
+    /// Notes what an R message says about the machine's state.
+    fn note(&mut self, event: &Event) {
+        match event {
+            Event::Error(info) => {
+                let reason = if info.is_parts_exhausted() {
+                    format!(
+                        "feeder {} (step {}, nozzle {})",
+                        info.feeder(),
+                        info.step(),
+                        info.nozzle()
+                    )
+                } else {
+                    format!(
+                        "error code {} at step {}, nozzle {}, feeder {}",
+                        info.code(),
+                        info.step(),
+                        info.nozzle(),
+                        info.feeder()
+                    )
+                };
+                self.error = Some((info.is_parts_exhausted(), reason));
+                self.recovering = false;
+            }
+            Event::RecoveryStarted | Event::RecoveryRetry => self.recovering = true,
+            Event::RecoveryOk | Event::RecoveryStop => self.recovering = false,
+            Event::Se { .. } | Event::SeNg { .. } => self.setup = true,
+            Event::Started | Event::ResetDone => {
+                self.error = None;
+                self.recovering = false;
+            }
+            _ => {}
+        }
+    }
+
+    /// The machine runs: every stop is over.
+    fn running(&mut self) {
+        *self = Told::default();
+    }
 }
 
 impl Drop for PanasonicDriver {
@@ -289,6 +420,8 @@ impl PanasonicDriver {
             state: None,
             events: Vec::new(),
             port2_down: false,
+            machine: StatePoints::new(config, &MACHINE_STATES, LIVE),
+            told: Told::default(),
         })
     }
 
@@ -348,7 +481,13 @@ impl PanasonicDriver {
                     .await
                     .map_err(|e| DeviceError::of(&e))?;
                 self.note_state(status.state);
-                vec![
+                // The R messages that came before this answer refine the state.
+                self.drain_notices();
+                if status.state == RunState::Run {
+                    self.told.running();
+                }
+                let (machine, reason) = self.told.state(status.state);
+                let mut readings = vec![
                     Reading {
                         point: self.id(STATE),
                         value: Ok(Value::Number(state_number(status.state) as f64)),
@@ -360,7 +499,9 @@ impl PanasonicDriver {
                             ControlMode::Remote => 1.0,
                         })),
                     },
-                ]
+                ];
+                readings.extend(self.machine.readings(machine, reason));
+                readings
             }
             PROGRAM => {
                 let value = match self.client().await?.current_program().await {
@@ -506,7 +647,10 @@ impl PanasonicDriver {
             Notice::Event(Event::Heartbeat { .. })
             | Notice::Connected { .. }
             | Notice::ConnectFailed { .. } => return,
-            Notice::Event(event) => (format!("R message {event}"), event_fields(event)),
+            Notice::Event(event) => {
+                self.told.note(event);
+                (format!("R message {event}"), event_fields(event))
+            }
             other => (other.to_string(), Fields::new()),
         };
         self.events.push(DeviceEvent {
@@ -631,6 +775,7 @@ impl Driver for PanasonicDriver {
             let index = FIRST_RATE + i;
             points.push(self.spec(index, title, Some("%"), PointKind::Numeric, PRODUCTION));
         }
+        points.extend(self.machine.specs());
         points
     }
 

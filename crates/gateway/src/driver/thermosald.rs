@@ -69,6 +69,8 @@ use super::{
     BoxFuture, Described, DeviceError, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
     WriteError, enum_states, point_ids,
 };
+use crate::production::states::number_in;
+use crate::production::{StateDef, StatePoints};
 use crate::point::{
     AlarmRule, Checked, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError, WriteRange,
@@ -112,7 +114,53 @@ const KIND_FACTS: Described = Described {
     groups: &GROUPS,
     speaks_modbus: false,
     build: |config| Ok(Box::new(ThermosaldDriver::new(config)?)),
+    machine_states: &MACHINE_STATES,
 };
+
+/// The machine states, with their E10 / IPC-CFX codes: a band fired in the cycle under
+/// way (its power or the cycle's peak current above 0) is the sealer at work, a band not
+/// fired is ready, a calibration is equipment engineering, a fault number a
+/// failure. A poll every 2 s cannot see each impulse of a 3 s rhythm, and a state that
+/// flipped with each would fill the history: the regulator firing at all is the state.
+pub const MACHINE_STATES: [StateDef; 4] = [
+    StateDef {
+        name: "sealing",
+        code: 1100,
+    },
+    StateDef {
+        name: "ready",
+        code: 2000,
+    },
+    StateDef {
+        name: "calibrating",
+        code: 3200,
+    },
+    StateDef {
+        name: "fault",
+        code: 5000,
+    },
+];
+
+/// The machine state a run-time poll's readings show, and its reason; `None` when the
+/// poll did not read the fault and the power.
+fn judge(readings: &[Reading]) -> Option<(usize, Option<String>)> {
+    let fault = number_in(readings, "fault")?;
+    // The peak current of the cycle under way stays up between its impulses, when the
+    // power is 0 while the band cools.
+    let power = number_in(readings, "power")?.max(number_in(readings, "maximum_current")?);
+    let code = fault as u16;
+    Some(match code {
+        diagnostic::NONE if power > 0.0 => (0, None),
+        diagnostic::NONE => (1, None),
+        diagnostic::CALIBRATION_REQUEST | diagnostic::CALIBRATION_IN_PROGRESS => {
+            (2, Some(diagnostic::describe(code).to_owned()))
+        }
+        _ => (
+            3,
+            Some(format!("fault {code}: {}", diagnostic::describe(code))),
+        ),
+    })
+}
 
 /// Checks a regulator address: 0–7.
 pub fn check_address(address: Option<i64>) -> Result<(), String> {
@@ -295,6 +343,8 @@ pub struct ThermosaldDriver {
     /// Each point's id, in the order of [`POINTS`] (made once: readings share them with
     /// the cell's point specs).
     ids: Box<[PointId]>,
+    /// The machine state points.
+    machine: StatePoints,
 }
 
 impl ThermosaldDriver {
@@ -316,6 +366,7 @@ impl ThermosaldDriver {
             client: None,
             confirmed: BTreeMap::new(),
             ids: point_ids(&config.id, POINTS.iter().map(|def| def.name)),
+            machine: StatePoints::new(config, &MACHINE_STATES, LIVE),
         })
     }
 
@@ -415,7 +466,7 @@ impl ThermosaldDriver {
                 };
             }
         }
-        Ok(defs
+        let mut readings: Vec<Reading> = defs
             .iter()
             .zip(outcomes)
             .filter_map(|(&(at, _), outcome)| {
@@ -424,7 +475,13 @@ impl ThermosaldDriver {
                     value,
                 })
             })
-            .collect())
+            .collect();
+        if group == LIVE
+            && let Some((state, reason)) = judge(&readings)
+        {
+            readings.extend(self.machine.readings(state, reason));
+        }
+        Ok(readings)
     }
 
     /// Records `first` as its item's confirmed value when the `second` read agrees; else
@@ -555,6 +612,7 @@ impl Driver for ThermosaldDriver {
             .iter()
             .zip(&self.ids)
             .map(|(def, id)| Self::spec(def, id.clone()))
+            .chain(self.machine.specs())
             .collect()
     }
 

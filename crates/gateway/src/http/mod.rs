@@ -30,6 +30,7 @@ use crate::store::EventFilter;
 use crate::time::Timestamp;
 
 mod listing;
+mod production;
 pub mod server;
 pub mod web;
 mod write;
@@ -133,6 +134,8 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
         .route("/api/events", get(events))
         .route("/api/events/stream", get(stream))
         .route("/api/audit", get(audit))
+        .route("/api/states", get(production::states))
+        .route("/api/production", get(production::production))
         .route("/api/openapi.json", get(openapi))
         .merge(web::routes())
         .fallback(no_route)

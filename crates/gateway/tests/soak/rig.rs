@@ -542,6 +542,7 @@ impl CellSet {
 
 fn device(id: &str, protocol: Kind, address: i64, options: &SoakOptions) -> DeviceConfig {
     let driver = DriverConfig {
+        states: Default::default(),
         address: Some(address),
         timeout: Some(options.timeout),
         ..DriverConfig::new(

@@ -1,6 +1,7 @@
 use std::collections::HashSet;
 
 use super::*;
+use crate::production::StatePoints;
 use crate::point::DeviceId;
 use crate::testing::reading as value;
 use jbus::cross::device::CrossTwin;
@@ -8,6 +9,7 @@ use wire::device::SharedModel;
 
 fn config(unit: i64) -> DriverConfig {
     DriverConfig {
+        states: Default::default(),
         id: DeviceId::new("cross1").unwrap(),
         protocol: super::KIND,
         address: Some(unit),
@@ -68,9 +70,17 @@ async fn a_healthy_switch_feeds_the_load_from_source_1_with_measures_in_their_un
     let live = driver.poll(LIVE).await.unwrap();
     assert_eq!(
         live.len(),
-        DEFS.iter().filter(|d| d.group() == LIVE).count()
+        DEFS.iter().filter(|d| d.group() == LIVE).count() + StatePoints::COUNT
     );
     assert_eq!(value(&live, "load_feed"), Ok(Value::Number(1.0)));
+    assert_eq!(
+        value(&live, "machine_state"),
+        Ok(Value::Text("load on S1".into()))
+    );
+    assert_eq!(
+        value(&live, "machine_state_code"),
+        Ok(Value::Number(1100.0))
+    );
     assert_eq!(value(&live, "s1_alarms"), Ok(Value::Text("none".into())));
     let v = number(&live, "s1_voltage_u");
     assert!((220.0..240.0).contains(&v), "{v}");

@@ -1,4 +1,5 @@
 use super::*;
+use crate::production::StatePoints;
 use crate::driver::ErrorKind;
 use crate::testing::CheckThenWrite;
 use crate::testing::reading as value;
@@ -9,6 +10,7 @@ use wire::device::SharedModel;
 
 fn config(address: Option<i64>) -> DriverConfig {
     DriverConfig {
+        states: Default::default(),
         id: DeviceId::new("jbc1").unwrap(),
         protocol: super::KIND,
         address,
@@ -177,7 +179,7 @@ fn every_station_shares_one_description_per_point_and_has_its_own_ids() {
     })
     .unwrap()
     .points();
-    assert_eq!(one.len(), POINTS.len());
+    assert_eq!(one.len(), POINTS.len() + StatePoints::COUNT);
     for (a, b) in one.iter().zip(&two) {
         assert!(Arc::ptr_eq(&a.description, &b.description), "{}", a.id);
         assert_eq!(a.id.name(), b.id.name());
@@ -190,7 +192,7 @@ fn every_point_has_a_valid_id_and_belongs_to_a_known_group() {
     let driver = JbcDriver::new(&config(Some(1))).unwrap();
     let groups: Vec<String> = driver.groups().into_iter().map(|g| g.name).collect();
     let points = driver.points();
-    assert_eq!(points.len(), POINTS.len());
+    assert_eq!(points.len(), POINTS.len() + StatePoints::COUNT);
     for p in &points {
         assert_eq!(p.id.device(), "jbc1");
         assert!(groups.contains(&p.group.to_string()), "{}", p.id);
@@ -239,12 +241,20 @@ async fn a_live_poll_reads_temperatures_status_digits_and_errors() {
     let readings = driver.poll(LIVE).await.unwrap();
     assert_eq!(
         readings.len(),
-        POINTS.iter().filter(|d| d.group == LIVE).count()
+        POINTS.iter().filter(|d| d.group == LIVE).count() + StatePoints::COUNT
     );
     assert!(matches!(value(&readings, "air_temperature"), Ok(Value::Number(t)) if t < 100.0));
     assert_eq!(value(&readings, "tool_on"), Ok(Value::Number(0.0)));
     assert_eq!(value(&readings, "tool_error"), Ok(Value::Number(3.0)));
     assert_eq!(value(&readings, "connected_tool"), Ok(Value::Number(1.0)));
+    assert_eq!(
+        value(&readings, "machine_state"),
+        Ok(Value::Text("tool error".into()))
+    );
+    assert_eq!(
+        value(&readings, "machine_state_reason"),
+        Ok(Value::Text("Heater malfunction: replace heater".into()))
+    );
     let info = driver.poll(INFO).await.unwrap();
     assert_eq!(value(&info, "model"), Ok(Value::Text("JTSE".into())));
 }
@@ -266,7 +276,12 @@ async fn group_reads_says_what_each_group_reads_and_gives() {
     );
     for read in &reads {
         let readings = driver.poll(read.group).await.unwrap();
-        assert_eq!(readings.len(), read.points, "{}", read.group);
+        let states = if read.group == LIVE {
+            StatePoints::COUNT
+        } else {
+            0
+        };
+        assert_eq!(readings.len(), read.points + states, "{}", read.group);
         for (i, code) in read.codes.iter().enumerate() {
             assert!(
                 !read.codes[..i].contains(code),

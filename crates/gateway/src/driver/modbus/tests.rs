@@ -54,6 +54,7 @@ fn rig_with(
     let (a, b) = tokio::io::duplex(1024);
     tokio::spawn(link::serve::serve_stream(b, slave.line(), None));
     let mut driver = ModbusDriver::new(&DriverConfig {
+        states: Default::default(),
         id: DeviceId::new("chiller1").unwrap(),
         protocol: super::KIND,
         address: Some(17),

@@ -26,6 +26,7 @@ async fn twin() -> panasonic::server::RunningTwin {
 /// `placer1`, its machine's ports on this host, its reply timeout `timeout`.
 fn placer(command_port: u16, event_port: u16, timeout: Option<Duration>) -> PanasonicDriver {
     PanasonicDriver::new(&DriverConfig {
+        states: Default::default(),
         timeout,
         settings: crate::config::Settings::new(Keys {
             event_port: Some(event_port),
@@ -180,6 +181,65 @@ async fn r_messages_and_run_state_changes_become_events() {
     assert_eq!(fields["event"], "parts_exhausted", "{fields}");
     assert_eq!(fields["error_code"], 3, "{fields}");
     assert!(fields["feeder"].is_u64(), "{fields}");
+    // The next status answer is an E10 unscheduled stop for consumables, with the feeder.
+    let live = driver.poll(LIVE).await.unwrap();
+    assert_eq!(
+        value(&live, "machine_state"),
+        Ok(Value::Text("parts exhausted".into()))
+    );
+    assert_eq!(
+        value(&live, "machine_state_code"),
+        Ok(Value::Number(5500.0))
+    );
+    let reason = format!(
+        "feeder {} (step {}, nozzle {})",
+        fields["feeder"], fields["step"], fields["nozzle"]
+    );
+    assert_eq!(
+        value(&live, "machine_state_reason"),
+        Ok(Value::Text(reason))
+    );
+}
+
+#[test]
+fn the_r_messages_before_a_status_answer_say_which_stop_the_machine_is_in() {
+    use panasonic::event::ErrorInfo;
+    let name = |(index, reason): (usize, Option<String>)| {
+        (MACHINE_STATES[index].name, reason)
+    };
+    let mut told = Told::default();
+    assert_eq!(name(told.state(RunState::Error)), ("error stop", None));
+    told.note(&Event::Error(ErrorInfo::new(12, 1, 2, 3).unwrap()));
+    assert_eq!(
+        name(told.state(RunState::Error)),
+        (
+            "error stop",
+            Some("error code 12 at step 1, nozzle 2, feeder 3".into())
+        )
+    );
+    told.note(&Event::RecoveryStarted);
+    assert_eq!(name(told.state(RunState::Error)), ("recovery", None));
+    told.note(&Event::RecoveryStop);
+    assert_eq!(name(told.state(RunState::Error)).0, "error stop");
+    told.note(&Event::ResetDone);
+    told.note(&Event::Se { program: None });
+    assert_eq!(name(told.state(RunState::Ready)), ("setup", None));
+    told.running();
+    assert_eq!(name(told.state(RunState::Ready)), ("ready", None));
+    assert_eq!(name(told.state(RunState::Run)), ("run", None));
+}
+
+#[test]
+fn every_kinds_machine_states_have_codes_on_the_e10_scale_and_distinct_names() {
+    for kind in crate::plugins::builtin().config.kinds() {
+        let states = kind.machine_states();
+        for s in states {
+            let code = crate::production::StateCode::new(i64::from(s.code));
+            assert!(code.is_ok(), "{kind}: {}: {code:?}", s.name);
+        }
+        let names: HashSet<_> = states.iter().map(|s| s.name).collect();
+        assert_eq!(names.len(), states.len(), "{kind}");
+    }
 }
 
 #[test]

@@ -4,6 +4,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use super::*;
+use crate::production::StatePoints;
 use crate::testing::reading as value;
 use thermosald::device::RegulatorBus;
 use wire::Transmit;
@@ -11,6 +12,7 @@ use wire::device::{Device, FaultInjector, ModelLine, SharedModel};
 
 fn config(id: &str, address: i64) -> DriverConfig {
     DriverConfig {
+        states: Default::default(),
         id: DeviceId::new(id).unwrap(),
         protocol: super::KIND,
         address: Some(address),
@@ -66,7 +68,7 @@ fn every_point_names_an_item_with_a_unit_and_a_known_group() {
     let driver = ThermosaldDriver::new(&config("sealer0", 0)).unwrap();
     let groups: Vec<String> = driver.groups().into_iter().map(|g| g.name).collect();
     let points = driver.points();
-    assert_eq!(points.len(), POINTS.len());
+    assert_eq!(points.len(), POINTS.len() + StatePoints::COUNT);
     for p in &points {
         assert!(groups.contains(&p.group.to_string()), "{}", p.id);
     }
@@ -101,9 +103,14 @@ async fn three_regulators_on_one_line_each_answer_their_own_polls() {
     let (mut drivers, _model) = rig(&[0, 1, 2]);
     for driver in &mut drivers {
         let live = driver.poll(LIVE).await.unwrap();
-        assert_eq!(live.len(), 6);
+        assert_eq!(live.len(), 6 + StatePoints::COUNT);
         assert!(matches!(value(&live, "temperature"), Ok(Value::Number(t)) if t > 0.0));
         assert_eq!(value(&live, "fault"), Ok(Value::Number(0.0)));
+        assert_eq!(
+            value(&live, "machine_state"),
+            Ok(Value::Text("sealing".into())),
+            "the twin's packaging machine seals every 3 s"
+        );
         for group in [SETTINGS, MACHINE, SERVICE] {
             let readings = driver.poll(group).await.unwrap();
             assert!(readings.iter().all(|r| r.value.is_ok()), "{readings:?}");

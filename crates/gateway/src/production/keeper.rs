@@ -1,0 +1,192 @@
+//! What the gateway keeps of production while it runs: each producing device's OEE of the
+//! current shift as points (so every interface carries it), the time each device spends
+//! per E10 category (the metrics), and a mark of when it was last running, so that the
+//! time a stopped gateway did not see is unknown, not the last state stretched over it.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use tokio::sync::{broadcast, watch};
+
+use super::e10::{Category, StateCode};
+use super::states::{self, CODE_POINT};
+use super::{OEE_PERIOD, report};
+use crate::cell::{Cell, LiveMessage};
+use crate::driver::Reading;
+use crate::point::{Quality, Value};
+use crate::store::{HistoryState, Sample, read_setting, write_setting};
+use crate::time::Timestamp;
+
+/// The setting holding when the gateway last ran, ms since the epoch.
+pub const ALIVE_SETTING: &str = "production_alive_ms";
+
+/// How often the time per category is brought up to date for the metrics.
+const CLOCK_TICK: Duration = Duration::from_secs(5);
+
+/// Before the first poll: the devices' states since the gateway last ran are unknown. For
+/// each state point whose last stored change is a good value, a bad one is stored just
+/// after the later of that change and the gateway's last mark of life, so the interval it
+/// began ends there. Blocking (the history's queries).
+pub fn close_gap(cell: &Cell, data_dir: &Path) {
+    let store = cell.store();
+    if store.wait_open().is_err()
+        || matches!(
+            store.health(Timestamp::now()).history,
+            HistoryState::Off(_)
+        )
+    {
+        return;
+    }
+    let alive = read_setting(data_dir, ALIVE_SETTING).ok().flatten();
+    let now = Timestamp::now();
+    for device in &cell.production.with_states {
+        for name in [states::STATE_POINT, CODE_POINT, states::REASON_POINT] {
+            let point = states::point_id(device, name);
+            let Ok(Some(last)) = store.history_nearest(&point, now, false) else {
+                continue;
+            };
+            if last.quality == Quality::Bad || last.value.is_none() {
+                continue;
+            }
+            let t = Timestamp(alive.unwrap_or(last.t.0).max(last.t.0) + 1);
+            if t >= now {
+                continue;
+            }
+            store.sample(Sample {
+                point,
+                t,
+                value: None,
+                quality: Quality::Bad,
+            });
+        }
+    }
+}
+
+/// Runs until `stop` turns true: the OEE points every [`OEE_PERIOD`], the metrics' time
+/// per category, and the mark of life in `data_dir`.
+pub async fn run(cell: Arc<Cell>, data_dir: PathBuf, mut stop: watch::Receiver<bool>) {
+    let mut changes = cell.subscribe();
+    let mut clocks = Clocks::new(&cell);
+    let mut oee = tokio::time::interval(OEE_PERIOD);
+    oee.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut tick = tokio::time::interval(CLOCK_TICK);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            _ = stop.changed() => break,
+            _ = oee.tick() => {
+                let cell = Arc::clone(&cell);
+                let dir = data_dir.clone();
+                let _ = tokio::task::spawn_blocking(move || {
+                    let _ = write_setting(&dir, ALIVE_SETTING, Timestamp::now().0);
+                    current_oee(&cell);
+                })
+                .await;
+            }
+            _ = tick.tick() => clocks.flush(&cell),
+            message = changes.recv() => match message {
+                Ok(LiveMessage::Value(view)) if view.id.name() == CODE_POINT => {
+                    let code = match (view.quality, &view.value) {
+                        (Some(Quality::Good | Quality::Stale), Some(v)) => v
+                            .as_number()
+                            .and_then(|n| StateCode::new(n as i64).ok())
+                            .unwrap_or(StateCode::UNKNOWN),
+                        _ => StateCode::UNKNOWN,
+                    };
+                    clocks.set(&cell, view.id.device(), code.category());
+                }
+                Err(broadcast::error::RecvError::Closed) => break,
+                _ => {}
+            },
+        }
+    }
+    clocks.flush(&cell);
+}
+
+/// Each producing device's OEE of the shift it is in, so far, as its OEE points and
+/// gauges. Outside every shift the points keep the last shift's figures.
+fn current_oee(cell: &Cell) {
+    let now = Timestamp::now();
+    let Some(shift) = cell.production.shifts.at(now) else {
+        return;
+    };
+    for device in cell.production.producers.keys() {
+        let Some(entry) = cell.device_entry(device.as_str()) else {
+            continue;
+        };
+        let Ok(report) = report::production(
+            cell.store(),
+            &cell.production,
+            device,
+            (shift.start, now),
+            None,
+            now,
+        ) else {
+            continue;
+        };
+        let Some(oee) = report.production else {
+            continue;
+        };
+        let parts = [
+            ("oee", oee.oee),
+            ("availability", oee.availability),
+            ("performance", oee.performance),
+            ("quality", oee.quality),
+        ];
+        let mut readings = Vec::new();
+        for ((part, value), (name, _)) in parts.into_iter().zip(super::OEE_POINTS) {
+            let gauge = cell.metrics().oee_ratio(device.as_str(), part);
+            gauge.set(value.unwrap_or(f64::NAN));
+            if let Some(value) = value {
+                readings.push(Reading {
+                    point: states::point_id(device, name),
+                    value: Ok(Value::Number((value * 10_000.0).round() / 10_000.0)),
+                });
+            }
+        }
+        crate::scheduler::apply_readings(cell, entry, readings);
+    }
+}
+
+/// The time each device with states has spent per category since the last flush.
+struct Clocks {
+    running: HashMap<String, (Category, Instant)>,
+}
+
+impl Clocks {
+    fn new(cell: &Cell) -> Self {
+        let now = Instant::now();
+        let running = cell
+            .production
+            .with_states
+            .iter()
+            .map(|d| (d.to_string(), (Category::Unknown, now)))
+            .collect();
+        Self { running }
+    }
+
+    /// `device` is now in `category`: the time in the last one is counted.
+    fn set(&mut self, cell: &Cell, device: &str, category: Category) {
+        let now = Instant::now();
+        if let Some((was, since)) = self.running.get_mut(device) {
+            cell.metrics()
+                .state_seconds(device, *was)
+                .inc_by(now.duration_since(*since).as_secs_f64());
+            *was = category;
+            *since = now;
+        }
+    }
+
+    /// Counts the time up to now in each device's category.
+    fn flush(&mut self, cell: &Cell) {
+        let now = Instant::now();
+        for (device, (category, since)) in &mut self.running {
+            cell.metrics()
+                .state_seconds(device, *category)
+                .inc_by(now.duration_since(*since).as_secs_f64());
+            *since = now;
+        }
+    }
+}

@@ -1,0 +1,373 @@
+//! A device's machine states as points, and the intervals the history makes of them.
+//!
+//! A device kind lists the states it reports, each with its default code
+//! ([`StateDef`]); a device's `states` table in the config moves a state to another code
+//! (`states = { ready = 2200 }`). The driver reports its state after each poll of the
+//! group that reads it through [`StatePoints`], as three points of the device:
+//! `machine_state` (the device's own word: `run`, `parts exhausted`),
+//! `machine_state_code` (the E10 / IPC-CFX code, an enumeration labelled with its words)
+//! and `machine_state_reason` (what the device said: the feeder, the fault number; empty
+//! when it said nothing). Being points, they are kept in the history on change, survive a
+//! `kill -9` like any sample, and reach MQTT, OPC UA and the plant historian as every
+//! point does. An interval runs from one change of the three to the next; a bad sample (the
+//! device not answering) or no sample at all is unknown.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use serde::Serialize;
+
+use super::e10::{Category, StateCode};
+use crate::driver::{DriverConfig, Reading};
+use crate::point::{
+    DeviceId, EnumState, PointDescription, PointId, PointKind, PointSpec, Quality, Value,
+};
+use crate::store::HistorySample;
+use crate::time::Timestamp;
+
+/// The point with the device's own word for its state.
+pub const STATE_POINT: &str = "machine_state";
+/// The point with the state's E10 / IPC-CFX code.
+pub const CODE_POINT: &str = "machine_state_code";
+/// The point with the reason the device gave, empty when none.
+pub const REASON_POINT: &str = "machine_state_reason";
+
+/// One state a device kind reports, with its code unless the config moves it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StateDef {
+    /// The device's word (`parts exhausted`), as the `machine_state` point shows it and
+    /// the config's `states` table names it.
+    pub name: &'static str,
+    /// Its E10 / IPC-CFX code (5500): a kind's test checks it is on the scale.
+    pub code: u16,
+}
+
+/// The codes the config gives some of a device's states (`states = { ready = 2200 }`),
+/// checked against its kind's states when the file is read.
+pub type StateOverrides = BTreeMap<String, StateCode>;
+
+/// Checks a device's `states` table against its kind's states: each key a state of the
+/// kind, each value a code of the scale. The error names the key and what is allowed.
+pub fn check_overrides(
+    kind: &str,
+    states: &[StateDef],
+    raw: &BTreeMap<String, i64>,
+) -> Result<StateOverrides, String> {
+    if states.is_empty() && !raw.is_empty() {
+        return Err(format!(
+            "{kind} devices report no machine states, so `states` has nothing to map"
+        ));
+    }
+    let mut overrides = StateOverrides::new();
+    for (name, code) in raw {
+        if !states.iter().any(|s| s.name == name) {
+            let names: Vec<String> = states.iter().map(|s| format!("{:?}", s.name)).collect();
+            return Err(format!(
+                "{kind} devices have no machine state {name:?}; their states: {}",
+                names.join(", ")
+            ));
+        }
+        let code = StateCode::new(*code).map_err(|e| format!("states.{name:?}: {e}"))?;
+        overrides.insert(name.clone(), code);
+    }
+    Ok(overrides)
+}
+
+/// A device's state points: the specs to list and the readings of a state.
+#[derive(Debug, Clone)]
+pub struct StatePoints {
+    ids: [PointId; 3],
+    /// The kind's states with the codes in force for this device, and the points'
+    /// descriptions: shared by every device with the same ones (a thousand stations hold
+    /// one copy).
+    shared: Arc<Shared>,
+}
+
+/// What devices with the same states and codes share.
+#[derive(Debug, PartialEq)]
+struct Shared {
+    table: Box<[(&'static str, StateCode)]>,
+    descriptions: [Arc<PointDescription>; 3],
+}
+
+/// Every [`Shared`] made so far: a few per kind (one unless the config moves codes).
+static SHARED: std::sync::Mutex<Vec<Arc<Shared>>> = std::sync::Mutex::new(Vec::new());
+
+impl StatePoints {
+    /// How many points a device with states gets.
+    pub const COUNT: usize = 3;
+
+    /// The state points of the device `config` describes, whose kind reports `states`,
+    /// read by its poll group `group`.
+    pub fn new(config: &DriverConfig, states: &[StateDef], group: &'static str) -> Self {
+        let table: Box<[(&'static str, StateCode)]> = states
+            .iter()
+            .map(|s| {
+                let code = config
+                    .states
+                    .get(s.name)
+                    .copied()
+                    .or_else(|| StateCode::new(i64::from(s.code)).ok())
+                    .unwrap_or(StateCode::UNKNOWN);
+                (s.name, code)
+            })
+            .collect();
+        let mut codes: Vec<StateCode> = table.iter().map(|(_, c)| *c).collect();
+        codes.sort();
+        codes.dedup();
+        let describe = |name: &'static str, kind: PointKind| {
+            Arc::new(PointDescription {
+                name: name.into(),
+                unit: None,
+                kind,
+                group: group.into(),
+                writable: None,
+                alarm: None,
+            })
+        };
+        let descriptions = [
+            describe("Machine state", PointKind::Text),
+            describe(
+                "Machine state (E10)",
+                PointKind::Enum {
+                    states: codes
+                        .iter()
+                        .map(|c| EnumState {
+                            value: i64::from(c.get()),
+                            label: format!("{c} {}", c.words()).into(),
+                        })
+                        .collect(),
+                },
+            ),
+            describe("Machine state reason", PointKind::Text),
+        ];
+        let made = Shared {
+            table,
+            descriptions,
+        };
+        let shared = {
+            let mut all = SHARED
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            match all.iter().find(|s| ***s == made) {
+                Some(found) => Arc::clone(found),
+                None => {
+                    let made = Arc::new(made);
+                    all.push(Arc::clone(&made));
+                    made
+                }
+            }
+        };
+        let id = |name| point_id(&config.id, name);
+        Self {
+            ids: [id(STATE_POINT), id(CODE_POINT), id(REASON_POINT)],
+            shared,
+        }
+    }
+
+    /// The three points' specs, to append to the driver's.
+    pub fn specs(&self) -> Vec<PointSpec> {
+        self.ids
+            .iter()
+            .zip(&self.shared.descriptions)
+            .map(|(id, d)| PointSpec::new(id.clone(), Arc::clone(d)))
+            .collect()
+    }
+
+    /// The readings of the state at `index` in the kind's list, with the device's reason.
+    pub fn readings(&self, index: usize, reason: Option<String>) -> Vec<Reading> {
+        let (name, code) = self
+            .shared
+            .table
+            .get(index)
+            .copied()
+            .unwrap_or(("unknown", StateCode::UNKNOWN));
+        let values = [
+            Value::Text(name.to_owned()),
+            Value::Number(f64::from(code.get())),
+            Value::Text(reason.unwrap_or_default()),
+        ];
+        self.ids
+            .iter()
+            .zip(values)
+            .map(|(id, value)| Reading {
+                point: id.clone(),
+                value: Ok(value),
+            })
+            .collect()
+    }
+
+    /// The ids of the three points: the state, its code, its reason.
+    pub fn ids(&self) -> &[PointId; 3] {
+        &self.ids
+    }
+}
+
+/// The good number a poll read for point `name`, if it read one: what a driver judges
+/// its state from.
+pub fn number_in(readings: &[Reading], name: &str) -> Option<f64> {
+    readings
+        .iter()
+        .find(|r| r.point.name() == name)
+        .and_then(|r| r.value.as_ref().ok())
+        .and_then(Value::as_number)
+}
+
+/// The id of `device`'s point `name`.
+pub fn point_id(device: &DeviceId, name: &str) -> PointId {
+    PointId::new(device, name).expect("the state points' names are valid point names")
+}
+
+/// One stretch of time in one state.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Interval {
+    /// When it began (clipped to the range asked for).
+    pub start: Timestamp,
+    /// When it ended (clipped likewise).
+    pub end: Timestamp,
+    /// The device's word, `unknown` without data.
+    pub state: String,
+    /// Its E10 category.
+    pub category: Category,
+    /// Its code, 0 when unknown.
+    pub code: StateCode,
+    /// What the device gave as the reason, if anything; why there is no data, if unknown.
+    pub reason: Option<String>,
+}
+
+impl Interval {
+    /// Its length in milliseconds.
+    pub fn millis(&self) -> i64 {
+        self.end.0 - self.start.0
+    }
+}
+
+/// What the history holds of a device's state points for a range: each point's change
+/// in force at the start (`before`) and its changes in the range, oldest first.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StateSamples {
+    /// `machine_state`.
+    pub state: Changes,
+    /// `machine_state_code`.
+    pub code: Changes,
+    /// `machine_state_reason`.
+    pub reason: Changes,
+}
+
+/// One point's changes: the one in force at the range's start, then those in it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Changes {
+    /// The last change before the range.
+    pub before: Option<HistorySample>,
+    /// The changes in the range, oldest first.
+    pub during: Vec<HistorySample>,
+}
+
+/// Why an interval has no state: no data at all.
+pub const NO_DATA: &str = "no data: the device was not polled or the gateway was not running";
+/// Why an interval has no state: the device did not answer.
+pub const NOT_ANSWERING: &str = "the device did not answer";
+
+/// The intervals of `[from, to)` that `samples` make: one per change of state, code or
+/// reason, unknown where there is no good value. They cover the range without gaps.
+pub fn intervals(samples: &StateSamples, from: Timestamp, to: Timestamp) -> Vec<Interval> {
+    // Every moment one of the three changes, with its value then.
+    let mut moments: Vec<Timestamp> = [&samples.state, &samples.code, &samples.reason]
+        .iter()
+        .flat_map(|c| c.during.iter().map(|s| s.t))
+        .filter(|t| *t > from && *t < to)
+        .collect();
+    moments.push(from);
+    moments.sort();
+    moments.dedup();
+    let series = [&samples.state, &samples.code, &samples.reason];
+    let mut next = [0usize; 3];
+    let mut out: Vec<Interval> = Vec::new();
+    for (i, start) in moments.iter().enumerate() {
+        let end = moments.get(i + 1).copied().unwrap_or(to);
+        if end <= *start {
+            continue;
+        }
+        // Each series' cursor moves past the changes up to this moment: one pass in all.
+        let [state, code, reason] = [0, 1, 2].map(|k| {
+            let changes = series[k];
+            while next[k] < changes.during.len() && changes.during[next[k]].t <= *start {
+                next[k] += 1;
+            }
+            let last = match next[k] {
+                0 => changes.before.as_ref(),
+                n => changes.during.get(n - 1),
+            };
+            held(last)
+        });
+        let interval = match (state, code) {
+            (Held::Value(state), Held::Value(code)) => {
+                let code = code
+                    .as_number()
+                    .and_then(|n| StateCode::new(n as i64).ok())
+                    .unwrap_or(StateCode::UNKNOWN);
+                Interval {
+                    start: *start,
+                    end,
+                    state: match state {
+                        Value::Text(t) => t.clone(),
+                        other => other.to_string(),
+                    },
+                    category: code.category(),
+                    code,
+                    reason: match reason {
+                        Held::Value(Value::Text(t)) if !t.is_empty() => Some(t.clone()),
+                        _ => None,
+                    },
+                }
+            }
+            (state, code) => Interval {
+                start: *start,
+                end,
+                state: "unknown".into(),
+                category: Category::Unknown,
+                code: StateCode::UNKNOWN,
+                reason: Some(
+                    if matches!(state, Held::Bad) || matches!(code, Held::Bad) {
+                        NOT_ANSWERING
+                    } else {
+                        NO_DATA
+                    }
+                    .into(),
+                ),
+            },
+        };
+        match out.last_mut() {
+            Some(last)
+                if last.end == interval.start
+                    && last.state == interval.state
+                    && last.code == interval.code
+                    && last.reason == interval.reason =>
+            {
+                last.end = interval.end;
+            }
+            _ => out.push(interval),
+        }
+    }
+    out
+}
+
+/// What a point held at a moment.
+enum Held<'a> {
+    Nothing,
+    Bad,
+    Value(&'a Value),
+}
+
+fn held(last: Option<&HistorySample>) -> Held<'_> {
+    match last {
+        None => Held::Nothing,
+        Some(s) => match (&s.value, s.quality) {
+            (Some(v), Quality::Good | Quality::Stale) => Held::Value(v),
+            _ => Held::Bad,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests;
