@@ -278,6 +278,172 @@ fn a_trend_asks_for_each_span_it_shows_downloads_it_as_csv_and_comes_back_from_i
     );
 }
 
+/// The production view on the demo, as a supervisor opens it (the Production tab): the
+/// placement machine's state bars hold one segment per interval of the `/api/states`
+/// answer they were drawn from, in place and in their category's colour (the legend's);
+/// pointing at one names it; OEE, availability, performance and quality are the
+/// `/api/production` answer's, as percentages with one decimal; the stops are its stops;
+/// the page asks again by itself.
+#[test]
+fn the_production_view_shows_the_placement_machines_states_oee_and_stops_as_the_api_says() {
+    let browser = browser();
+    let data = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start(data.path());
+    let screenshot = data.path().join("production.png");
+    let seen = what_the_page_saw(&mut browser.script("production.mjs", &gateway, &screenshot));
+    let first = &seen["first"];
+    assert_eq!(
+        first["device"], "placer1",
+        "the demo's placement machine first"
+    );
+    let answers = seen["answers"].as_array().unwrap();
+    let answer = |path: &str, query: &str, to: &serde_json::Value| -> serde_json::Value {
+        answers
+            .iter()
+            .find(|a| a["path"] == path && a["query"] == query && &a["body"]["to"] == to)
+            .unwrap_or_else(|| panic!("no answer of {path}{query} to {to}: {answers:?}"))["body"]
+            .clone()
+    };
+
+    // The legend: a colour per category, none alike.
+    let legend = first["legend"].as_object().unwrap();
+    let categories = [
+        "productive",
+        "standby",
+        "engineering",
+        "scheduled_down",
+        "unscheduled_down",
+        "non_scheduled",
+        "unknown",
+    ];
+    assert_eq!(legend.keys().collect::<Vec<_>>().len(), categories.len());
+    let mut colours: Vec<&str> = legend.values().map(|c| c.as_str().unwrap()).collect();
+    colours.sort_unstable();
+    colours.dedup();
+    assert_eq!(colours.len(), categories.len(), "{legend:?}");
+
+    // Each bar: the answer it was drawn from, a segment per interval, in place and colour.
+    for (bar, query) in [
+        ("shift", "?device=placer1"),
+        ("hour", "?device=placer1&from=-1h&to=now"),
+    ] {
+        let drawn = &first[bar];
+        let states = answer("/api/states", query, &drawn["answered"]);
+        let intervals = states["intervals"].as_array().unwrap();
+        let segments = drawn["segments"].as_array().unwrap();
+        assert_eq!(segments.len(), intervals.len(), "{bar}: {drawn}");
+        assert!(
+            intervals.iter().any(|i| i["category"] != "unknown"),
+            "{bar}: the machine's states: {states}"
+        );
+        let (from, to) = (
+            drawn["from"].as_f64().unwrap(),
+            drawn["to"].as_f64().unwrap(),
+        );
+        let width = drawn["width"].as_f64().unwrap();
+        let x = |t: &serde_json::Value| {
+            let t = humantime::parse_rfc3339(t.as_str().unwrap()).unwrap();
+            let ms = t.duration_since(std::time::UNIX_EPOCH).unwrap().as_millis() as f64;
+            (ms - from) / (to - from) * width
+        };
+        for (segment, interval) in segments.iter().zip(intervals) {
+            for field in ["start", "end", "state", "category"] {
+                assert_eq!(segment[field], interval[field], "{bar}: {segment}");
+            }
+            assert_eq!(segment["code"], interval["code"].to_string());
+            assert_eq!(segment["reason"], interval["reason"].as_str().unwrap_or(""));
+            let (left, right) = (x(&interval["start"]), x(&interval["end"]));
+            let shown = segment["left"].as_f64().unwrap();
+            assert!((shown - left).abs() < 1.5, "{bar}: {segment} at {left}");
+            let wide = segment["width"].as_f64().unwrap();
+            assert!((wide - (right - left)).abs() < 1.5, "{bar}: {segment}");
+            let category = interval["category"].as_str().unwrap();
+            assert_eq!(segment["colour"], legend[category], "{bar}: {segment}");
+        }
+        if bar == "shift" {
+            // The whole shift, now inside it.
+            let production = answer("/api/production", "?device=placer1", &first["answered"]);
+            let shift = &production["shift"];
+            assert_eq!(x(&shift["start"]), 0.0);
+            assert!((x(&shift["end"]) - width).abs() < 0.5, "{shift} {drawn}");
+        }
+    }
+
+    // Pointing at a segment names its interval.
+    let pointed = &seen["pointed"];
+    assert_eq!(pointed["start"], pointed["segment"]["start"]);
+    let words = pointed["text"].as_str().unwrap();
+    assert!(
+        words.contains(pointed["segment"]["state"].as_str().unwrap()),
+        "{pointed}"
+    );
+
+    // The figures: the production answer's, rounded to one decimal of a percent (the
+    // script waited for a finished board, which makes the OEE a number).
+    let production = answer("/api/production", "?device=placer1", &first["answered"]);
+    assert!(production["oee"].is_number(), "{production}");
+    for shown in [first, &seen["later"]] {
+        let production = answer("/api/production", "?device=placer1", &shown["answered"]);
+        for (figure, field) in [
+            ("oee", "oee"),
+            ("availability", "availability"),
+            ("performance", "performance"),
+            ("quality", "quality"),
+        ] {
+            let text = shown["figures"][figure].as_str().unwrap();
+            match production[field].as_f64() {
+                None => assert_eq!(text, "—", "{figure}: {production}"),
+                Some(ratio) => {
+                    let number = text.strip_suffix(" %").unwrap_or_else(|| panic!("{text}"));
+                    assert_eq!(number.split('.').nth(1).map(str::len), Some(1), "{text}");
+                    let percent: f64 = number.parse().unwrap();
+                    assert!(
+                        (percent - ratio * 100.0).abs() <= 0.05 + 1e-9,
+                        "{figure}: {text} for {ratio}"
+                    );
+                }
+            }
+        }
+        let boards = production["boards"].as_f64().unwrap();
+        assert!(
+            shown["figures"]["boards"]
+                .as_str()
+                .unwrap()
+                .starts_with(&boards.to_string()),
+            "{shown}"
+        );
+        for (figure, field) in [("mtbf", "mtbf_s"), ("mttr", "mttr_s")] {
+            let text = shown["figures"][figure].as_str().unwrap();
+            assert_eq!(text == "—", production[field].is_null(), "{figure}: {text}");
+        }
+        // The stops, longest first; the time without data is not one of the bars.
+        let stops: Vec<&serde_json::Value> = production["stops"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|s| s["category"] != "unknown")
+            .collect();
+        let listed = shown["stops"].as_array().unwrap();
+        assert_eq!(listed.len(), stops.len(), "{shown}");
+        for (row, stop) in listed.iter().zip(&stops) {
+            assert_eq!(row["reason"], stop["reason"]);
+            assert_eq!(row["count"], stop["count"].to_string());
+            let text = row["text"].as_str().unwrap();
+            let minutes: f64 = text.split(" min").next().unwrap().parse().unwrap();
+            let exact = stop["seconds"].as_f64().unwrap() / 60.0;
+            assert!((minutes - exact).abs() <= 0.05 + 1e-9, "{row}: {stop}");
+        }
+    }
+    // Asked again by itself: a later answer, drawn.
+    assert!(seen["later"]["answered"].as_str() > first["answered"].as_str());
+    assert!(screenshot.exists());
+    assert!(
+        seen["phone"]["overflow"].as_i64().unwrap() <= 0,
+        "nothing wider than a 360 px phone: {}",
+        seen["phone"]
+    );
+}
+
 /// The span (ms since the epoch) a trend step of `trend.mjs` says it shows.
 fn shown(step: &serde_json::Value) -> (i64, i64) {
     let shown = &step["shown"];

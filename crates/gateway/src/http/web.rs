@@ -1,8 +1,9 @@
-//! The web page at `/`: one HTML file, a style sheet and two scripts, with the chart library
+//! The web page at `/`: one HTML file, a style sheet and three scripts, with the chart library
 //! of its trend view (uPlot 1.6.32, MIT, vendored unchanged under `web/vendor/` with its
 //! licence), all compiled into the binary. Nothing is fetched from elsewhere at run time
 //! (plants are offline): no CDN, no web fonts. The page follows `/api/events/stream`,
-//! draws its own small plots and asks `/api/history` for the trend view.
+//! draws its own small plots, asks `/api/history` for the trend view and `/api/states` and
+//! `/api/production` for the production view.
 
 use axum::Router;
 use axum::http::header;
@@ -19,6 +20,8 @@ pub const APP_CSS: &str = include_str!("web/app.css");
 pub const APP_JS: &str = include_str!("web/app.js");
 /// The trend view's script.
 pub const TREND_JS: &str = include_str!("web/trend.js");
+/// The production view's script.
+pub const PRODUCTION_JS: &str = include_str!("web/production.js");
 /// uPlot, the trend view's charts (its release's minified script, unchanged).
 pub const UPLOT_JS: &str = include_str!("web/vendor/uPlot.iife.min.js");
 /// uPlot's style sheet.
@@ -32,6 +35,7 @@ pub const PAGE_ROUTES: &[(&str, &str)] = &[
     ("GET", "/app.css"),
     ("GET", "/app.js"),
     ("GET", "/trend.js"),
+    ("GET", "/production.js"),
     ("GET", "/vendor/uPlot.iife.min.js"),
     ("GET", "/vendor/uPlot.min.css"),
     ("GET", "/vendor/uPlot.LICENSE"),
@@ -46,6 +50,7 @@ pub(super) fn routes() -> Router<AppState> {
         .route("/app.css", get(|| asset(CSS, APP_CSS)))
         .route("/app.js", get(|| asset(JS, APP_JS)))
         .route("/trend.js", get(|| asset(JS, TREND_JS)))
+        .route("/production.js", get(|| asset(JS, PRODUCTION_JS)))
         .route("/vendor/uPlot.iife.min.js", get(|| asset(JS, UPLOT_JS)))
         .route("/vendor/uPlot.min.css", get(|| asset(CSS, UPLOT_CSS)))
         .route(

@@ -6,7 +6,8 @@
 // snapshot and changes and nothing of the rest; at most PAGE_SIZE cards are on the page,
 // and a plot loads its history when it scrolls into view. The view is in the address
 // (`#line=NAME`, `&q=TEXT` for a search, `&page=N`), so a link opens the same view.
-// `#view=trend&…` shows the trend view instead (trend.js, loaded before this script).
+// `#view=trend&…` shows the trend view instead, `#view=production&device=ID` a device's
+// production (trend.js and production.js, loaded before this script).
 //
 // DOM contract (for tests and other tools): each device is <section class="device"
 // id="device-ID" data-status="up|down|connecting">; each point is an element with
@@ -163,6 +164,10 @@ function renderDevice(device) {
   trendLink.hidden = trended.length === 0;
   trendLink.href = `#view=trend&points=${trended.join(',')}&range=1h`;
   trendLink.title = 'Its readings over the last hour';
+  const productionLink = card.querySelector('.production-link');
+  productionLink.hidden = !device.points.some((p) => p.id === `${device.id}.machine_state`);
+  productionLink.href = `#view=production&device=${device.id}`;
+  productionLink.title = 'Its machine states this shift, and its OEE when it counts boards';
   for (const point of device.points) {
     const primary = isLive(device, point);
     if (point.kind.type === 'numeric') {
@@ -213,6 +218,7 @@ function updatePoint(view, live = true) {
   if (!device) return;
   const point = Object.assign(device.byId.get(view.id) || {}, view);
   device.byId.set(view.id, point);
+  if (live && view.id === `${deviceId}.machine_state`) productionNoticed(deviceId);
   const node = document.getElementById(`point-${view.id}`);
   if (!node) return;
   node.dataset.quality = judge(point);
@@ -478,28 +484,32 @@ async function refreshLines() {
   }
 }
 
-// ---- the pages: the cell, a trend ----------------------------------------------------------
+// ---- the pages: the cell, a trend, production ---------------------------------------------
 
-/** The page the address asks for: `#view=trend…`, else the cell. */
+const PAGE_TITLES = { cell: 'cell overview', trend: 'trend', production: 'production' };
+
+/** The page the address asks for: `#view=trend…`, `#view=production…`, else the cell. */
 function pageFromAddress() {
   const params = new URLSearchParams(window.location.hash.slice(1));
-  return { page: params.get('view') === 'trend' ? 'trend' : 'cell', params };
+  const view = params.get('view');
+  return { page: view in PAGE_TITLES ? view : 'cell', params };
 }
-
-const PAGE_TITLES = { cell: 'cell overview', trend: 'trend' };
 
 /** Shows the page the address asks for (only which is visible, with `load` false). */
 function showPage(load = true) {
   const { page, params } = pageFromAddress();
   document.getElementById('cell-view').hidden = page !== 'cell';
   document.getElementById('trend-view').hidden = page !== 'trend';
+  document.getElementById('production-view').hidden = page !== 'production';
   for (const tab of document.querySelectorAll('.pages a')) {
     if (tab.dataset.page === page) tab.setAttribute('aria-current', 'page');
     else tab.removeAttribute('aria-current');
   }
   document.querySelector('.subtitle').textContent = PAGE_TITLES[page];
   document.title = `cellbus · ${PAGE_TITLES[page]}`;
-  if (load) showTrend(page === 'trend' ? params : null);
+  if (!load) return;
+  showTrend(page === 'trend' ? params : null);
+  showProduction(page === 'production' ? params : null);
 }
 
 // ---- the view: which devices are shown ------------------------------------------------
@@ -843,6 +853,7 @@ function connect(query) {
     renderDevices(snapshot.devices);
     renderLines(snapshot.lines);
     loadEvents();
+    productionSnapshot();
   });
   opened.addEventListener('value', (e) => updatePoint(JSON.parse(e.data)));
   opened.addEventListener('device', (e) => updateDeviceStatus(JSON.parse(e.data)));
@@ -887,6 +898,7 @@ async function start() {
 
 setUpToolbar();
 setUpTrend();
+setUpProduction();
 showPage(false);
 start();
 tick();
