@@ -116,14 +116,13 @@ function productionNoticed(deviceId) {
   }, 1000);
 }
 
-function updateProductionLinks() {
+/** The Production tab and the view's trend link, for the device shown (`counting` boards). */
+function updateProductionLinks(counting = false) {
   const id = production.device;
   document.getElementById('tab-production').href = id ? `#view=production&device=${id}` : '#view=production';
   const trendLink = document.getElementById('production-trend');
   trendLink.hidden = !id;
   if (!id) return;
-  const device = state.devices.get(id);
-  const counting = device ? reportsStates(device, true) : false;
   const points = counting
     ? ['oee', 'oee_availability', 'oee_performance', 'oee_quality'].map((p) => `${id}.${p}`)
     : [`${id}.machine_state_code`];
@@ -348,6 +347,7 @@ function renderNumbers(report) {
   const counting = 'oee' in report;
   numbers.hidden = !counting;
   document.getElementById('production-stops').hidden = !counting;
+  updateProductionLinks(counting);
   if (!counting) {
     document.getElementById('production-note').textContent =
       'This device counts no boards: the page shows its machine states only.';

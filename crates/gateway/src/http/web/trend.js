@@ -403,9 +403,10 @@ function plotOptions() {
         size: 56,
       };
       if (enumeration) {
+        const labels = (point.kind.states || []).map((s) => s.label);
         axis.values = (u, splits) => splits.map((v) => formatTrendValue(id, v));
-        axis.size = 90;
-        axis.splits = () => (point.kind.states || []).map((s) => s.value);
+        axis.size = Math.min(170, 20 + 7 * Math.max(4, ...labels.map((l) => l.length)));
+        axis.splits = (u, index, min, max) => enumSplits(u, scale, point.kind.states || [], min, max);
         scales[scale].range = (u, low, high) => [Math.min(low, 0) - 0.5, Math.max(high, 1) + 0.5];
       }
       axes.push(axis);
@@ -447,6 +448,20 @@ function plotOptions() {
       }],
     },
   };
+}
+
+/** An enumeration's values within min..max, at least 16 px apart on its axis. */
+function enumSplits(u, scale, states, min, max) {
+  const kept = [];
+  let last = null;
+  for (const value of states.map((s) => s.value).filter((v) => v >= min && v <= max).sort((a, b) => a - b)) {
+    const at = u.valToPos(value, scale);
+    if (last === null || Math.abs(at - last) >= 16) {
+      kept.push(value);
+      last = at;
+    }
+  }
+  return kept;
 }
 
 /** Draws `data` (null: nothing to draw), building the chart when its points changed. */
