@@ -57,7 +57,8 @@ enum Command {
     Serve(serve_cmd::ServeArgs),
     /// Run the plant historian: a Sparkplug B primary host that takes every gateway's data
     /// off the plant's MQTT broker into PostgreSQL (views cellbus_samples, cellbus_events,
-    /// cellbus_points), and serves the gateway's history API for the whole plant.
+    /// cellbus_points, cellbus_states), and serves the gateway's history API for the whole
+    /// plant.
     ///
     /// Exit codes: 0 stopped by Ctrl-C or SIGTERM (pending rows committed), 1 PostgreSQL
     /// refused the login or the schema is newer, 2 bad arguments.

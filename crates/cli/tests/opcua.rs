@@ -118,6 +118,7 @@ fn an_independent_opcua_client_browses_reads_gets_every_stored_change_on_a_subsc
         "endpoints, all at",
         "devices and",
         "enumerations with EnumValues",
+        "Production folders)",
         "points read Good",
         "/healthz shows the OPC UA session",
         "an absolute deadband held back",

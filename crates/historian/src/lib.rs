@@ -6,7 +6,8 @@
 //! - [`store`]: the PostgreSQL side: the versioned schema, the day partitions of the
 //!   samples (or a TimescaleDB hypertable), batch writes by binary `COPY` that never store a
 //!   replayed sample twice, the views with a stable shape that users and Grafana query
-//!   (`cellbus_samples`, `cellbus_events`, `cellbus_points`), and the plant API's queries.
+//!   (`cellbus_samples`, `cellbus_events`, `cellbus_points`, `cellbus_states`), and the
+//!   plant API's queries.
 //! - [`ingest`]: what the Sparkplug host ([`sparkplug::Host`]) made of a message, as rows.
 //! - [`writer`]: the one writer task: batches every 100 ms or 10,000 samples, retries on a
 //!   new connection, bounded memory, the database's state for the MQTT side.

@@ -121,14 +121,14 @@ async fn column(client: &Client, sql: &str) -> Vec<String> {
 async fn the_schema_is_created_on_first_connect_and_not_migrated_again() {
     let (_pg, url) = database();
     let first = Store::connect(&url).await.expect("first connect");
-    assert_eq!(first.migrated(), [1, 2, SCHEMA_VERSION]);
+    assert_eq!(first.migrated(), [1, 2, 3, SCHEMA_VERSION]);
     assert_eq!(first.layout(), SamplesLayout::DayPartitions);
     let second = Store::connect(&url).await.expect("second connect");
     assert_eq!(second.migrated(), [] as [i32; 0]);
     let sql = client(&url).await;
     assert_eq!(
         column(&sql, "SELECT version::text FROM cellbus_schema ORDER BY 1").await,
-        ["1", "2", "3"]
+        ["1", "2", "3", "4"]
     );
 }
 
@@ -191,6 +191,151 @@ async fn the_views_have_exactly_the_stable_column_names_and_types() {
             "write_min double precision",
             "write_max double precision",
             "group_id text",
+        ]
+    );
+    assert_eq!(
+        shape("cellbus_states").await,
+        [
+            "node text",
+            "device text",
+            "start timestamp with time zone",
+            "end timestamp with time zone",
+            "state text",
+            "code integer",
+            "category text",
+            "reason text",
+            "group_id text",
+        ]
+    );
+}
+
+/// The samples a gateway sends for a device's machine state at `ms`: its word, its code
+/// and its reason; all three bad (no value) for `None`, as a DDEATH makes them.
+fn machine_state(device: &str, ms: u64, state: Option<(&str, f64, &str)>) -> Vec<SampleRow> {
+    let text = |point: &str, text: Option<&str>| SampleRow {
+        text: text.map(str::to_owned),
+        value: None,
+        quality: if text.is_some() {
+            Quality::Good
+        } else {
+            Quality::Bad
+        },
+        ..sample(device, point, ms, 0.0)
+    };
+    vec![
+        text("machine_state", state.map(|s| s.0)),
+        SampleRow {
+            value: state.map(|s| s.1),
+            quality: if state.is_some() {
+                Quality::Good
+            } else {
+                Quality::Bad
+            },
+            ..sample(device, "machine_state_code", ms, 0.0)
+        },
+        text("machine_state_reason", state.map(|s| s.2)),
+    ]
+}
+
+#[tokio::test]
+async fn machine_state_samples_make_intervals_from_one_change_to_the_next() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let hour = |h: u64, m: u64| MIDNIGHT_MS + h * 3_600_000 + m * 60_000;
+    let mut samples = Vec::new();
+    samples.extend(machine_state(
+        "placer1",
+        hour(6, 0),
+        Some(("run", 1100.0, "")),
+    ));
+    // A rebirth sends the same values again: the interval goes on.
+    samples.extend(machine_state(
+        "placer1",
+        hour(6, 30),
+        Some(("run", 1100.0, "")),
+    ));
+    let exhausted = Some(("parts exhausted", 5500.0, "feeder 7 (step 87, nozzle 7)"));
+    samples.extend(machine_state("placer1", hour(7, 0), exhausted));
+    // The reason changes, the state does not: only the reason is sent.
+    samples.push(SampleRow {
+        text: Some("feeder 8 (step 88, nozzle 8)".into()),
+        value: None,
+        ..sample("placer1", "machine_state_reason", hour(7, 10), 0.0)
+    });
+    // Back to work: the state and its code change, the reason empties.
+    samples.extend(machine_state(
+        "placer1",
+        hour(7, 20),
+        Some(("run", 1100.0, "")),
+    ));
+    // The historian goes offline and the gateway's death says so: stale samples without
+    // values, which change nothing (the gateway read on; the gap's changes come later).
+    for point in [
+        "machine_state",
+        "machine_state_code",
+        "machine_state_reason",
+    ] {
+        samples.push(SampleRow {
+            value: None,
+            quality: Quality::Stale,
+            ..sample("placer1", point, hour(7, 40), 0.0)
+        });
+    }
+    // The device stops answering (DDEATH), then is born again in another state.
+    samples.extend(machine_state("placer1", hour(8, 0), None));
+    samples.extend(machine_state(
+        "placer1",
+        hour(8, 5),
+        Some(("ready", 2200.0, "")),
+    ));
+    // Only the word and the code change: the empty reason sent at 08:05 still holds.
+    let mut error_stop = machine_state("placer1", hour(9, 0), Some(("error stop", 5300.0, "")));
+    error_stop.pop();
+    samples.extend(error_stop);
+    // Another device of the node, and one whose code is off the E10 scale.
+    samples.extend(machine_state(
+        "placer2",
+        hour(6, 30),
+        Some(("run", 1100.0, "")),
+    ));
+    samples.extend(machine_state(
+        "placer3",
+        hour(6, 30),
+        Some(("odd", 9100.0, "")),
+    ));
+    // Samples of other points make no moments.
+    samples.push(sample("placer1", "oee", hour(6, 45), 0.5));
+    let written = store
+        .write(&Batch {
+            samples,
+            ..Batch::default()
+        })
+        .await
+        .expect("write");
+    assert_eq!(written.samples, 31);
+
+    let sql = client(&url).await;
+    let intervals = column(
+        &sql,
+        "SELECT format('%s %s-%s %s %s %s %s', device, to_char(start AT TIME ZONE 'UTC', \
+             'HH24:MI'), coalesce(to_char(\"end\" AT TIME ZONE 'UTC', 'HH24:MI'), 'open'), \
+             state, code, category, coalesce(reason, '-')) \
+         FROM cellbus_states WHERE node = 'cell1' AND group_id = 'plant' \
+         ORDER BY device, start",
+    )
+    .await;
+    assert_eq!(
+        intervals,
+        [
+            "placer1 06:00-07:00 run 1100 productive -",
+            "placer1 07:00-07:10 parts exhausted 5500 unscheduled_down feeder 7 (step 87, nozzle 7)",
+            "placer1 07:10-07:20 parts exhausted 5500 unscheduled_down feeder 8 (step 88, nozzle 8)",
+            "placer1 07:20-08:00 run 1100 productive -",
+            "placer1 08:00-08:05 unknown 0 unknown -",
+            "placer1 08:05-09:00 ready 2200 standby -",
+            "placer1 09:00-open error stop 5300 unscheduled_down -",
+            "placer2 06:30-open run 1100 productive -",
+            "placer3 06:30-open odd 0 unknown -",
         ]
     );
 }

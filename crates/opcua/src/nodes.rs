@@ -206,9 +206,33 @@ fn build_device(
         "Why the device is down, or its last refusal (empty when none)",
         space::device_error(&device.summary),
     );
+    // The machine state and the OEE go in a `Production` folder, made with its first point.
+    let production = ids::production(ns, id);
+    let mut production_made = false;
     for point in &device.points {
         let point_id = point.view.id.as_str();
         let node = ids::point(ns, point_id);
+        let parent = if gateway::production::is_production_point(point.view.id.name()) {
+            if !production_made {
+                ObjectBuilder::new(
+                    &production,
+                    QualifiedName::new(ns, "Production"),
+                    "Production",
+                )
+                .description(
+                    "The device's machine state on the SEMI E10 scale (its word, its \
+                         IPC-CFX code, its reason) and, for a device that counts production, \
+                         the OEE of the shift under way",
+                )
+                .is_folder()
+                .component_of(device_id.clone())
+                .insert(space);
+                production_made = true;
+            }
+            production.clone()
+        } else {
+            device_id.clone()
+        };
         let mut access = AccessLevel::CURRENT_READ | AccessLevel::HISTORY_READ;
         if point.writable.is_some() {
             access |= AccessLevel::CURRENT_WRITE;
@@ -228,7 +252,7 @@ fn build_device(
             .historizing(true)
             .minimum_sampling_interval(point.view.period_ms as f64)
             .has_type_definition(type_definition)
-            .component_of(device_id.clone())
+            .component_of(parent)
             .insert(space);
         set(
             space,

@@ -65,6 +65,11 @@ pub mod ids {
         NodeId::new(ns, device.to_owned())
     }
 
+    /// A device's `Production` folder (its machine state and OEE).
+    pub fn production(ns: u16, device: &str) -> NodeId {
+        NodeId::new(ns, format!("{device}/Production"))
+    }
+
     /// A device's `Status` variable.
     pub fn device_status(ns: u16, device: &str) -> NodeId {
         NodeId::new(ns, format!("{device}/Status"))

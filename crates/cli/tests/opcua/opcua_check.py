@@ -94,6 +94,10 @@ async def cell_tree(client):
             children = {}
             for child in await device.get_children():
                 children[(await child.read_browse_name()).Name] = child
+            # The machine state and OEE points are in the device's Production folder.
+            if "Production" in children:
+                for child in await children["Production"].get_children():
+                    children[(await child.read_browse_name()).Name] = child
             tree[name] = (line_name, children)
     return ns, tree
 
@@ -109,7 +113,8 @@ async def check_tree(client, devices):
         line, children = tree[d["id"]]
         assert line == d["line"], (d["id"], line, d["line"])
         names = {p["id"].split(".", 1)[1] for p in d["points"]}
-        assert set(children) == names | {"Status", "Error"}, (d["id"], sorted(children))
+        folders = {"Production"} if "machine_state" in names else set()
+        assert set(children) == names | {"Status", "Error"} | folders, (d["id"], sorted(children))
         status = await children["Status"].read_value()
         assert status in ("up", "down", "backed off", "connecting"), status
         for p in d["points"]:
@@ -142,7 +147,9 @@ async def check_tree(client, devices):
                 enums += 1
             points += 1
     assert enums > 0, "the demo cell has enumeration points"
-    ok(f"{len(devices)} devices and {points} points match /api/devices ({enums} enumerations with EnumValues)")
+    production = sum(1 for d in devices if "Production" in tree[d["id"]][1])
+    assert production > 0, "no device has a Production folder"
+    ok(f"{len(devices)} devices and {points} points match /api/devices ({enums} enumerations with EnumValues, {production} Production folders)")
     return ns, tree
 
 

@@ -513,7 +513,10 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
         .map(|d| d.driver.id.as_str())
         .collect();
     for device in lines.iter().flat_map(|l| &l.devices) {
-        if let Some(good) = device.production.as_ref().and_then(|p| p.good_boards.as_ref())
+        if let Some(good) = device
+            .production
+            .as_ref()
+            .and_then(|p| p.good_boards.as_ref())
             && !device_ids.contains(good.device())
         {
             errors.push(at(

@@ -41,10 +41,10 @@ use super::{
     PollGroup, Reading, WriteError, point_ids,
 };
 use crate::event::EventKind;
-use crate::production::{StateDef, StatePoints};
 use crate::point::{
     AlarmRule, Checked, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
 };
+use crate::production::{StateDef, StatePoints};
 
 /// A CROSS line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);

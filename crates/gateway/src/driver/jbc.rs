@@ -44,12 +44,12 @@ use super::{
     BoxFuture, Described, DeviceError, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
     WriteError, enum_states, point_ids,
 };
-use crate::production::states::number_in;
-use crate::production::{StateDef, StatePoints};
 use crate::point::{
     AlarmRule, Checked, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError, WriteRange,
 };
+use crate::production::states::number_in;
+use crate::production::{StateDef, StatePoints};
 
 /// A JTSE's line when the URL says nothing: 19200 baud, 8E1 (the manual's example).
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8e1(19200);
@@ -484,7 +484,10 @@ fn judge(readings: &[Reading]) -> Option<(usize, Option<String>)> {
     {
         (2, None)
     } else if tool != 0.0 && tool != f64::from(ToolError::CheckingTool.code()) {
-        (3, Some(words(tool).unwrap_or("unknown tool error").to_owned()))
+        (
+            3,
+            Some(words(tool).unwrap_or("unknown tool error").to_owned()),
+        )
     } else if on == 1.0 {
         (0, None)
     } else {

@@ -54,11 +54,11 @@ use super::{
     PollGroup, Reading, WriteError,
 };
 use crate::event::{EventKind, Fields, fields};
-use crate::production::{ProductionPoints, StateDef, StatePoints};
 use crate::point::{
     AlarmRule, Checked, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError,
 };
+use crate::production::{ProductionPoints, StateDef, StatePoints};
 use crate::time::Timestamp;
 
 /// The status, every second.

@@ -69,12 +69,12 @@ use super::{
     BoxFuture, Described, DeviceError, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
     WriteError, enum_states, point_ids,
 };
-use crate::production::states::number_in;
-use crate::production::{StateDef, StatePoints};
 use crate::point::{
     AlarmRule, Checked, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError, WriteRange,
 };
+use crate::production::states::number_in;
+use crate::production::{StateDef, StatePoints};
 
 /// A Thermosald line when the URL says nothing: 9600 baud, 8N1 (the spec's).
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);

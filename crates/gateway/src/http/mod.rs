@@ -56,6 +56,8 @@ pub const API_ROUTES: &[(&str, &str)] = &[
     ("GET", "/api/events"),
     ("GET", "/api/events/stream"),
     ("GET", "/api/audit"),
+    ("GET", "/api/states"),
+    ("GET", "/api/production"),
     ("GET", "/api/openapi.json"),
 ];
 

@@ -75,7 +75,11 @@ fn range(
     if q.from.is_none() && q.to.is_none() {
         return Ok(match shifts.at(now) {
             Some(window) => (window.start, window.end, Some(window)),
-            None => (now.minus(std::time::Duration::from_secs(24 * 3600)), now, None),
+            None => (
+                now.minus(std::time::Duration::from_secs(24 * 3600)),
+                now,
+                None,
+            ),
         });
     }
     let to = kit::history::parse_time("to", q.to.as_deref(), now)?.unwrap_or(now);
@@ -122,7 +126,10 @@ pub(crate) async fn states(
     let device = device(&s, &q)?;
     let now = Timestamp::now();
     let (from, to, _) = range(&s, &q, now)?;
-    let answer = run_query(&s, move |store| report::states(&store, &device, from, to, now)).await?;
+    let answer = run_query(&s, move |store| {
+        report::states(&store, &device, from, to, now)
+    })
+    .await?;
     Ok(Json(answer).into_response())
 }
 

@@ -1425,3 +1425,140 @@ async fn device_listings_are_served_as_json() {
         assert!(body.is_object(), "{uri}: {body}");
     }
 }
+
+/// Stores `jbc1`'s machine state `(state, code, reason)` at `t`.
+fn store_state(rig: &Rig, t: Timestamp, state: &str, code: f64, reason: &str) {
+    use crate::point::{Quality, Value};
+    use crate::store::Sample;
+    for (name, value) in [
+        ("machine_state", Value::Text(state.into())),
+        ("machine_state_code", Value::Number(code)),
+        ("machine_state_reason", Value::Text(reason.into())),
+    ] {
+        rig.cell.store().sample(Sample {
+            point: PointId::parse(&format!("jbc1.{name}")).unwrap(),
+            t,
+            value: Some(value),
+            quality: Quality::Good,
+        });
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn states_and_production_of_a_range_agree_and_add_up_to_it() {
+    let rig = rig(1);
+    let app = app(&rig, true);
+    // An hour ago (the live polls store at the wall clock's now, after the range): in
+    // use 0–600 s, a tool error 600–900 s, in use 900–1,200 s.
+    let base = Timestamp::now().minus(Duration::from_secs(3600));
+    let at = |s: u64| base.plus(Duration::from_secs(s));
+    store_state(&rig, at(0), "in use", 1100.0, "");
+    store_state(&rig, at(600), "tool error", 5000.0, "Heater malfunction");
+    store_state(&rig, at(900), "in use", 1100.0, "");
+    rig.cell.store().flush().await.unwrap();
+    let range = format!("device=jbc1&from={}&to={}", at(0), at(1200));
+
+    let (status, states) = get(&app, &format!("/api/states?{range}")).await;
+    assert_eq!(status, StatusCode::OK, "{states}");
+    let intervals = states["intervals"].as_array().unwrap();
+    let seen: Vec<(&str, &str, i64)> = intervals
+        .iter()
+        .map(|i| {
+            (
+                i["state"].as_str().unwrap(),
+                i["category"].as_str().unwrap(),
+                i["code"].as_i64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        seen,
+        [
+            ("in use", "productive", 1100),
+            ("tool error", "unscheduled_down", 5000),
+            ("in use", "productive", 1100),
+        ]
+    );
+    assert_eq!(intervals[1]["reason"], "Heater malfunction");
+    assert_eq!(intervals[1]["start"], json!(at(600)));
+
+    let (status, production) = get(&app, &format!("/api/production?{range}")).await;
+    assert_eq!(status, StatusCode::OK, "{production}");
+    let seconds: f64 = production["states"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["seconds"].as_f64().unwrap())
+        .sum();
+    assert_eq!(seconds, 1200.0, "the states add up to the range");
+    // One shift of 24 h by default: everything is planned.
+    assert_eq!(production["planned_s"], 1200.0);
+    assert!(
+        production.get("oee").is_none(),
+        "a station counts no production: {production}"
+    );
+    let run = production["states"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["category"] == "productive")
+        .unwrap();
+    assert_eq!(run["seconds"], 900.0);
+    assert_eq!(run["code"], 1100);
+}
+
+#[tokio::test(start_paused = true)]
+async fn production_queries_that_cannot_be_answered_say_why() {
+    let rig = rig(1);
+    let app = app(&rig, true);
+    for (uri, status, words) in [
+        ("/api/states", StatusCode::BAD_REQUEST, "device is missing"),
+        ("/api/states?device=nope", StatusCode::NOT_FOUND, "nope"),
+        (
+            "/api/production?device=jbc1&shift=late",
+            StatusCode::NOT_FOUND,
+            "no shift \"late\"; the cell's shifts: day",
+        ),
+        (
+            "/api/production?device=jbc1&day=2026-11-02",
+            StatusCode::BAD_REQUEST,
+            "day needs shift",
+        ),
+        (
+            "/api/production?device=jbc1&shift=day&day=2 Nov",
+            StatusCode::BAD_REQUEST,
+            "is not a date",
+        ),
+        (
+            "/api/production?device=jbc1&shift=day&from=-1h",
+            StatusCode::BAD_REQUEST,
+            "not both",
+        ),
+        (
+            "/api/production?device=jbc1&from=-40d",
+            StatusCode::BAD_REQUEST,
+            "longer than 31 days",
+        ),
+        (
+            "/api/states?device=jbc1&from=-1h&to=-2h",
+            StatusCode::BAD_REQUEST,
+            "must be before",
+        ),
+        (
+            "/api/states?device=jbc1&colour=red",
+            StatusCode::BAD_REQUEST,
+            "colour",
+        ),
+    ] {
+        let uri = uri.replace(' ', "%20");
+        let (got, body) = get(&app, &uri).await;
+        assert_eq!(got, status, "{uri}: {body}");
+        assert!(error_of(&body).contains(words), "{uri}: {body}");
+    }
+    // A named shift on a day: the whole shift, named in the answer.
+    let (status, body) = get(&app, "/api/production?device=jbc1&shift=day&day=2026-07-15").await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    assert_eq!(body["shift"]["name"], "day");
+    assert_eq!(body["shift"]["day"], "2026-07-15");
+    assert_eq!(body["unobserved_s"], 24.0 * 3600.0, "{body}");
+}

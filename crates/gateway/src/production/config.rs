@@ -115,9 +115,8 @@ fn read_shift(
     let end = clock(&raw.end, "end")?;
     let days = match &raw.days {
         None => EVERY_DAY.to_vec(),
-        Some(days) => read_days(days.get_ref()).map_err(|m| {
-            at(days.span(), format!("shift {name:?}: {m}"))
-        })?,
+        Some(days) => read_days(days.get_ref())
+            .map_err(|m| at(days.span(), format!("shift {name:?}: {m}")))?,
     };
     // Minutes from the shift's start, for checking that breaks fall within it.
     let offset = |t: Time| -> i64 {
@@ -213,7 +212,9 @@ pub(crate) fn read_production(
     if !produces {
         return Err(at(
             raw.span(),
-            format!("{kind} devices count no production, so [line.device.production] does not apply to them"),
+            format!(
+                "{kind} devices count no production, so [line.device.production] does not apply to them"
+            ),
         ));
     }
     let raw = raw.get_ref();
@@ -268,3 +269,6 @@ pub(crate) fn read_production(
     }
     Ok(Some(settings))
 }
+
+#[cfg(test)]
+mod tests;

@@ -201,7 +201,10 @@ mod tests {
             Category::UnscheduledDown
         );
         assert_eq!(StateCode::new(2202).unwrap().category(), Category::Standby);
-        assert_eq!(StateCode::new(1100).unwrap().category(), Category::Productive);
+        assert_eq!(
+            StateCode::new(1100).unwrap().category(),
+            Category::Productive
+        );
         assert_eq!(StateCode::UNKNOWN.category(), Category::Unknown);
     }
 

@@ -28,14 +28,13 @@ const CLOCK_TICK: Duration = Duration::from_secs(5);
 /// Before the first poll: the devices' states since the gateway last ran are unknown. For
 /// each state point whose last stored change is a good value, a bad one is stored just
 /// after the later of that change and the gateway's last mark of life, so the interval it
-/// began ends there. Blocking (the history's queries).
+/// began ends there; the reason point's carries [`states::GATEWAY_DOWN`], so the time up
+/// to the first poll counts as no data, not as a device that did not answer. Blocking (the
+/// history's queries).
 pub fn close_gap(cell: &Cell, data_dir: &Path) {
     let store = cell.store();
     if store.wait_open().is_err()
-        || matches!(
-            store.health(Timestamp::now()).history,
-            HistoryState::Off(_)
-        )
+        || matches!(store.health(Timestamp::now()).history, HistoryState::Off(_))
     {
         return;
     }
@@ -54,10 +53,12 @@ pub fn close_gap(cell: &Cell, data_dir: &Path) {
             if t >= now {
                 continue;
             }
+            let value =
+                (name == states::REASON_POINT).then(|| Value::Text(states::GATEWAY_DOWN.into()));
             store.sample(Sample {
                 point,
                 t,
-                value: None,
+                value,
                 quality: Quality::Bad,
             });
         }
@@ -188,5 +189,73 @@ impl Clocks {
                 .inc_by(now.duration_since(*since).as_secs_f64());
             *since = now;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    use super::*;
+    use crate::metrics::Metrics;
+    use crate::point::PointId;
+    use crate::store::{Store, StoreOptions};
+    use crate::testing::config::{ONE, parse};
+
+    #[tokio::test]
+    async fn the_time_a_stopped_gateway_did_not_see_is_no_data_not_the_last_state_stretched() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
+        let config = parse(ONE).unwrap();
+        let (cell, _plans) = Cell::new(&config, store.handle(), Arc::new(Metrics::new())).unwrap();
+        // The station was in use an hour ago; the gateway's last mark of life was 10 s later.
+        let was = Timestamp::now().minus(Duration::from_secs(3600));
+        for (name, value) in [
+            (states::STATE_POINT, Value::Text("in use".into())),
+            (CODE_POINT, Value::Number(1100.0)),
+            (states::REASON_POINT, Value::Text(String::new())),
+        ] {
+            cell.store().sample(Sample {
+                point: PointId::parse(&format!("jbc1.{name}")).unwrap(),
+                t: was,
+                value: Some(value),
+                quality: Quality::Good,
+            });
+        }
+        cell.store().flush().await.unwrap();
+        let alive = was.plus(Duration::from_secs(10));
+        write_setting(dir.path(), ALIVE_SETTING, alive.0).unwrap();
+
+        let path = dir.path().to_owned();
+        let closing = Arc::clone(&cell);
+        tokio::task::spawn_blocking(move || close_gap(&closing, &path))
+            .await
+            .unwrap();
+        cell.store().flush().await.unwrap();
+
+        let device = crate::point::DeviceId::new("jbc1").unwrap();
+        let now = Timestamp::now();
+        let report = report::states(cell.store(), &device, was, now, now).unwrap();
+        let seen: Vec<(&str, Option<&str>)> = report
+            .intervals
+            .iter()
+            .map(|i| (i.state.as_str(), i.reason.as_deref()))
+            .collect();
+        assert_eq!(
+            seen,
+            [("in use", None), ("unknown", Some(states::NO_DATA))],
+            "{report:?}"
+        );
+        assert_eq!(report.intervals[0].end, Timestamp(alive.0 + 1));
+        // A second start finds the gap already closed and adds nothing.
+        let path = dir.path().to_owned();
+        let again = Arc::clone(&cell);
+        tokio::task::spawn_blocking(move || close_gap(&again, &path))
+            .await
+            .unwrap();
+        cell.store().flush().await.unwrap();
+        let report = report::states(cell.store(), &device, was, now, now).unwrap();
+        assert_eq!(report.intervals.len(), 2);
     }
 }

@@ -125,6 +125,19 @@ pub const OEE_POINTS: [(&str, &str); 4] = [
     ("oee_quality", "Quality (this shift)"),
 ];
 
+/// Whether a device's point `name` is one of its production points (its machine state,
+/// its OEE): interfaces that group points put them together (OPC UA's `Production`
+/// folder).
+pub fn is_production_point(name: &str) -> bool {
+    [
+        states::STATE_POINT,
+        states::CODE_POINT,
+        states::REASON_POINT,
+    ]
+    .contains(&name)
+        || OEE_POINTS.iter().any(|(point, _)| *point == name)
+}
+
 /// The poll group of the OEE points: not polled, kept by the [`keeper`].
 pub const OEE_GROUP: &str = "oee";
 

@@ -1,7 +1,11 @@
 //! OEE, the state breakdown and the stops of a range, from its state intervals, its
 //! planned time and its counters: sans IO, so every figure has a hand-computed test.
 //!
-//! - Planned production time: the shifts less their breaks, within the range.
+//! - Planned production time: the shifts less their breaks, within the range, less the
+//!   time without data (before the gateway first polled the device, or while it was not
+//!   running): what the machine did then is not known, so it is neither run nor stop. A
+//!   device that did not answer while the gateway ran is a stop (unknown): a machine
+//!   switched off in its shift is not producing.
 //! - Availability = run time / planned time. Run time is the productive (E10 1000s) time
 //!   in planned time, plus stops shorter than `micro_stop` when one is configured (a
 //!   short stop is then a speed loss, counted in performance, not availability).
@@ -60,8 +64,10 @@ pub struct Breakdown {
     /// Seconds per state (planned time by the device's states, the rest as outside shifts
     /// or breaks), longest first: they add up to the range.
     pub states: Vec<StateTime>,
-    /// Planned seconds.
+    /// Planned seconds with data.
     pub planned_s: f64,
+    /// Planned seconds without data, left out of `planned_s`.
+    pub unobserved_s: f64,
     /// Productive seconds in planned time.
     pub productive_s: f64,
     /// Stops shorter than the micro-stop threshold, counted as run time.
@@ -84,6 +90,7 @@ pub fn breakdown(
     let mut stops: BTreeMap<String, Stop> = BTreeMap::new();
     let mut micro: Option<Stop> = None;
     let (mut planned_s, mut productive_s, mut unscheduled_s) = (0.0, 0.0, 0.0);
+    let mut unobserved_s = 0.0;
     let mut failures = 0;
     for interval in intervals {
         let inside = overlap(interval.start, interval.end, &planned.work);
@@ -96,16 +103,25 @@ pub fn breakdown(
         }
         if outside > 1e-9 {
             *states
-                .entry((OUTSIDE_SHIFTS.into(), StateCode::new(6100).expect("on the scale")))
+                .entry((
+                    OUTSIDE_SHIFTS.into(),
+                    StateCode::new(6100).expect("on the scale"),
+                ))
                 .or_default() += outside;
         }
         if inside <= 0.0 {
             continue;
         }
-        planned_s += inside;
         *states
             .entry((interval.state.clone(), interval.code))
             .or_default() += inside;
+        if interval.category == Category::Unknown
+            && interval.reason.as_deref() == Some(super::states::NO_DATA)
+        {
+            unobserved_s += inside;
+            continue;
+        }
+        planned_s += inside;
         let category = interval.category;
         if category == Category::Productive {
             productive_s += inside;
@@ -119,7 +135,10 @@ pub fn breakdown(
             && whole < threshold
         {
             let stop = micro.get_or_insert_with(|| Stop {
-                reason: format!("short stops under {}", humantime::format_duration(threshold)),
+                reason: format!(
+                    "short stops under {}",
+                    humantime::format_duration(threshold)
+                ),
                 category: Category::Standby,
                 count: 0,
                 seconds: 0.0,
@@ -160,6 +179,7 @@ pub fn breakdown(
     Breakdown {
         states,
         planned_s,
+        unobserved_s,
         productive_s,
         micro_stops: micro,
         stops,
@@ -254,7 +274,10 @@ pub fn oee(b: &Breakdown, counts: &Counts, ideal: &IdealCycle, planned_elapsed_s
         IdealCycle::Configured {
             seconds,
             program: Some(p),
-        } => format!("ideal cycle {} s for program {p}, from the config", trim(*seconds)),
+        } => format!(
+            "ideal cycle {} s for program {p}, from the config",
+            trim(*seconds)
+        ),
         IdealCycle::Configured {
             seconds,
             program: None,
@@ -272,15 +295,19 @@ pub fn oee(b: &Breakdown, counts: &Counts, ideal: &IdealCycle, planned_elapsed_s
             "; over 100 %: the machine ran faster than the ideal cycle, which is set too long",
         );
     }
-    let (quality, quality_words) = match (counts.good_boards, counts.boards, counts.placed, counts.pickups) {
+    let (quality, quality_words) = match (
+        counts.good_boards,
+        counts.boards,
+        counts.placed,
+        counts.pickups,
+    ) {
         (Some(good), Some(boards), _, _) => (
             ratio(good, boards),
             "good boards / boards finished (the configured good-board count)".to_owned(),
         ),
         (_, _, Some(placed), Some(pickups)) => (
             ratio(placed, pickups),
-            "placement yield: parts placed / pickups (no good-board count configured)"
-                .to_owned(),
+            "placement yield: parts placed / pickups (no good-board count configured)".to_owned(),
         ),
         _ => (None, "no counts to reckon quality from".to_owned()),
     };
@@ -293,11 +320,18 @@ pub fn oee(b: &Breakdown, counts: &Counts, ideal: &IdealCycle, planned_elapsed_s
             Some((planned_elapsed_s / seconds).floor()),
             "planned time so far / the configured ideal cycle".to_owned(),
         ),
-        (_, Some(plan)) => (
-            Some(plan),
-            "the machine's own production plan".to_owned(),
+        (_, Some(plan)) if plan > 0.0 => {
+            (Some(plan), "the machine's own production plan".to_owned())
+        }
+        (_, Some(_)) => (
+            None,
+            "no ideal cycle configured, and the machine's production plan is not set (0)"
+                .to_owned(),
         ),
-        _ => (None, "no ideal cycle configured and no plan from the machine".to_owned()),
+        _ => (
+            None,
+            "no ideal cycle configured and no plan from the machine".to_owned(),
+        ),
     };
     let mut stops = b.stops.clone();
     if let Some(m) = &b.micro_stops {

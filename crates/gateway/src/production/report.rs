@@ -47,8 +47,11 @@ pub struct Report {
     /// The shift asked for, if one was.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub shift: Option<ShiftWindow>,
-    /// Planned production seconds in the range.
+    /// Planned production seconds in the range that have data.
     pub planned_s: f64,
+    /// Planned seconds without data (before the first poll, the gateway not running): left
+    /// out of `planned_s`, still in `states` as unknown.
+    pub unobserved_s: f64,
     /// Seconds per state; they add up to the range.
     pub states: Vec<StateTime>,
     /// OEE and its parts, for a device that counts production.
@@ -93,7 +96,7 @@ pub fn production(
         Some(producer) => {
             let counts = counts(store, device, producer, from, to)?;
             let ideal = ideal_cycle(store, device, producer, from, to)?;
-            let elapsed = planned.millis() as f64 / 1000.0;
+            let elapsed = breakdown.planned_s;
             Some(oee::oee(&breakdown, &counts, &ideal, elapsed))
         }
         None => None,
@@ -104,6 +107,7 @@ pub fn production(
         to,
         shift,
         planned_s: breakdown.planned_s,
+        unobserved_s: breakdown.unobserved_s,
         states: breakdown.states,
         production,
     })
@@ -210,11 +214,7 @@ fn ideal_cycle(
         && !settings.ideal_cycle_by_program.is_empty()
     {
         let program = store
-            .history_nearest(
-                &states::point_id(device, name),
-                Timestamp(to.0 - 1),
-                false,
-            )?
+            .history_nearest(&states::point_id(device, name), Timestamp(to.0 - 1), false)?
             .and_then(|s| s.value);
         if let Some(Value::Text(program)) = program
             && let Some(cycle) = settings.ideal_cycle_by_program.get(program.trim())

@@ -167,7 +167,10 @@ impl Shifts {
             } else {
                 day
             };
-            let zoned = start_day.to_datetime(time).to_zoned(self.zone.clone()).ok()?;
+            let zoned = start_day
+                .to_datetime(time)
+                .to_zoned(self.zone.clone())
+                .ok()?;
             Some(Timestamp(zoned.timestamp().as_millisecond()))
         };
         let start = at(shift.start)?;

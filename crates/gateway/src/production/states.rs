@@ -268,6 +268,11 @@ pub const NO_DATA: &str = "no data: the device was not polled or the gateway was
 /// Why an interval has no state: the device did not answer.
 pub const NOT_ANSWERING: &str = "the device did not answer";
 
+/// What the keeper stores, as a bad sample of the reason point, where the gateway's stop
+/// began: the time up to the next change has no data, like time before the first poll
+/// ([`super::keeper::close_gap`]).
+pub const GATEWAY_DOWN: &str = "the gateway was not running";
+
 /// The intervals of `[from, to)` that `samples` make: one per change of state, code or
 /// reason, unknown where there is no good value. They cover the range without gaps.
 pub fn intervals(samples: &StateSamples, from: Timestamp, to: Timestamp) -> Vec<Interval> {
@@ -321,21 +326,26 @@ pub fn intervals(samples: &StateSamples, from: Timestamp, to: Timestamp) -> Vec<
                     },
                 }
             }
-            (state, code) => Interval {
-                start: *start,
-                end,
-                state: "unknown".into(),
-                category: Category::Unknown,
-                code: StateCode::UNKNOWN,
-                reason: Some(
-                    if matches!(state, Held::Bad) || matches!(code, Held::Bad) {
-                        NOT_ANSWERING
-                    } else {
-                        NO_DATA
-                    }
-                    .into(),
-                ),
-            },
+            (state, code) => {
+                let gateway_down =
+                    matches!(reason, Held::Bad(Some(Value::Text(t))) if t == GATEWAY_DOWN);
+                let answered = matches!(state, Held::Bad(_)) || matches!(code, Held::Bad(_));
+                Interval {
+                    start: *start,
+                    end,
+                    state: "unknown".into(),
+                    category: Category::Unknown,
+                    code: StateCode::UNKNOWN,
+                    reason: Some(
+                        if answered && !gateway_down {
+                            NOT_ANSWERING
+                        } else {
+                            NO_DATA
+                        }
+                        .into(),
+                    ),
+                }
+            }
         };
         match out.last_mut() {
             Some(last)
@@ -355,7 +365,8 @@ pub fn intervals(samples: &StateSamples, from: Timestamp, to: Timestamp) -> Vec<
 /// What a point held at a moment.
 enum Held<'a> {
     Nothing,
-    Bad,
+    /// A bad sample, with what it carries (the keeper's [`GATEWAY_DOWN`]).
+    Bad(Option<&'a Value>),
     Value(&'a Value),
 }
 
@@ -364,7 +375,7 @@ fn held(last: Option<&HistorySample>) -> Held<'_> {
         None => Held::Nothing,
         Some(s) => match (&s.value, s.quality) {
             (Some(v), Quality::Good | Quality::Stale) => Held::Value(v),
-            _ => Held::Bad,
+            (value, _) => Held::Bad(value.as_ref()),
         },
     }
 }

@@ -25,7 +25,10 @@
 //!   point, t, value, text, quality, group_id)` with quality as `good`/`stale`/`bad`,
 //!   `cellbus_events(t, node, device, point, line, kind, severity, message, group_id)` and
 //!   `cellbus_points(node, device, point, unit, description, datatype, writable, write_min,
-//!   write_max, group_id)` (columns are only ever added at the end).
+//!   write_max, group_id)` (columns are only ever added at the end); since version 4
+//!   `cellbus_states(node, device, start, "end", state, code, category, reason, group_id)`,
+//!   each device's machine states as intervals made from its `machine_state`,
+//!   `machine_state_code` and `machine_state_reason` samples (`schema::version_4`).
 //!
 //! Samples dated before 2000, more than a day ahead of the historian's clock, or older
 //! than the maximum age ([`Store::set_max_age`]; the historian's `--max-age`, 31 days by

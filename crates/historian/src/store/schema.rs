@@ -10,7 +10,7 @@ use tokio_postgres::Client;
 use super::StoreError;
 
 /// The newest schema version this build writes.
-pub const SCHEMA_VERSION: i32 = 3;
+pub const SCHEMA_VERSION: i32 = 4;
 
 /// The advisory lock (per database) held while migrating: "cellbus" and 1.
 const MIGRATION_LOCK: i64 = 0x6365_6c6c_6275_7301;
@@ -51,6 +51,11 @@ const MIGRATIONS: &[Migration] = &[
         version: 3,
         what: "events keep their fields (the facts beside the words)",
         statements: version_3,
+    },
+    Migration {
+        version: 4,
+        what: "the cellbus_states view: each device's machine states as intervals",
+        statements: version_4,
     },
 ];
 
@@ -174,6 +179,116 @@ fn version_3(_: SamplesLayout) -> Vec<&'static str> {
         "CREATE OR REPLACE VIEW cellbus_events AS
             SELECT t, node, device, point, line, kind, severity, message, group_id, fields
             FROM events",
+    ]
+}
+
+/// Version 4: `cellbus_states(node, device, start, "end", state, code, category, reason,
+/// group_id)`, each device's machine states as intervals, made from the three points a
+/// gateway publishes for a device that reports its state: `machine_state` (the device's
+/// word), `machine_state_code` (the SEMI E10 / IPC-CFX code) and `machine_state_reason`
+/// (text, empty when none). The rules are the gateway's own (`production::states`):
+///
+/// - every instant one of the three has a sample is a moment; at each moment each point
+///   holds its latest sample at or before it (a point that did not change sent nothing);
+/// - a stale sample changes nothing: the gateway still had the reading (late on a busy
+///   line, or not sent while the historian was offline, whose changes come later with
+///   their own times), and the gateway's own rule keeps a stale value; Sparkplug carries
+///   no value with it, so the view passes over it;
+/// - the state is unknown (code 0, category `unknown`, no reason) when the state or the
+///   code holds no value: a bad sample (the device not answering, its gateway dead) or no
+///   sample yet;
+/// - the category is the code's thousands (1 productive … 6 non_scheduled); a code off the
+///   scale (not 1000–6999, or not whole) is 0 and `unknown`, with the device's word kept;
+/// - an empty reason is NULL;
+/// - a moment that holds the same state, code and reason as the one before (a rebirth
+///   sending the values again) continues its interval;
+/// - an interval ends where the device's next one starts; the last one's end is NULL (it
+///   is still open).
+///
+/// The view is computed from the samples of the device's three points each time it is
+/// read: a condition on node and device reaches the samples (they are the partitions of
+/// every window), a condition on time does not (an interval's end is the next start), so a
+/// query reads the whole state history of the devices it names. Run-length counts carry
+/// each point's last sample forward (`state_run` and its kin number the point's samples so
+/// far; within one run the first row holds the sample).
+fn version_4(_: SamplesLayout) -> Vec<&'static str> {
+    vec![
+        r#"CREATE VIEW cellbus_states AS
+            SELECT node, device, start, lead(start) OVER device_time AS "end", state, code,
+                category, reason, group_id
+            FROM (
+                SELECT group_id, node, device, start, state, code, category, reason,
+                    state IS DISTINCT FROM lag(state) OVER device_time
+                        OR code IS DISTINCT FROM lag(code) OVER device_time
+                        OR reason IS DISTINCT FROM lag(reason) OVER device_time AS changed
+                FROM (
+                    SELECT group_id, node, device, t AS start,
+                        CASE WHEN known THEN state ELSE 'unknown' END AS state,
+                        CASE WHEN known THEN code ELSE 0 END AS code,
+                        CASE WHEN known THEN
+                            CASE code / 1000
+                                WHEN 1 THEN 'productive'
+                                WHEN 2 THEN 'standby'
+                                WHEN 3 THEN 'engineering'
+                                WHEN 4 THEN 'scheduled_down'
+                                WHEN 5 THEN 'unscheduled_down'
+                                WHEN 6 THEN 'non_scheduled'
+                                ELSE 'unknown'
+                            END
+                        ELSE 'unknown' END AS category,
+                        CASE WHEN known THEN nullif(reason, '') END AS reason
+                    FROM (
+                        SELECT group_id, node, device, t, state, reason,
+                            state IS NOT NULL AND code_value IS NOT NULL AS known,
+                            CASE WHEN code_value >= 1000 AND code_value < 7000
+                                    AND code_value = trunc(code_value)
+                                THEN code_value::integer ELSE 0 END AS code
+                        FROM (
+                            SELECT group_id, node, device, t,
+                                first_value(state) OVER (PARTITION BY group_id, node,
+                                    device, state_run ORDER BY t) AS state,
+                                first_value(code) OVER (PARTITION BY group_id, node,
+                                    device, code_run ORDER BY t) AS code_value,
+                                first_value(reason) OVER (PARTITION BY group_id, node,
+                                    device, reason_run ORDER BY t) AS reason
+                            FROM (
+                                SELECT group_id, node, device, t, state, code, reason,
+                                    count(*) FILTER (WHERE has_state) OVER device_time
+                                        AS state_run,
+                                    count(*) FILTER (WHERE has_code) OVER device_time
+                                        AS code_run,
+                                    count(*) FILTER (WHERE has_reason) OVER device_time
+                                        AS reason_run
+                                FROM (
+                                    SELECT p.group_id, p.node, p.device, s.t,
+                                        bool_or(p.point = 'machine_state') AS has_state,
+                                        bool_or(p.point = 'machine_state_code') AS has_code,
+                                        bool_or(p.point = 'machine_state_reason')
+                                            AS has_reason,
+                                        max(s.text) FILTER (WHERE p.point = 'machine_state')
+                                            AS state,
+                                        max(s.value)
+                                            FILTER (WHERE p.point = 'machine_state_code')
+                                            AS code,
+                                        max(s.text)
+                                            FILTER (WHERE p.point = 'machine_state_reason')
+                                            AS reason
+                                    FROM samples s JOIN points p ON p.id = s.point_id
+                                    WHERE p.point IN ('machine_state', 'machine_state_code',
+                                        'machine_state_reason')
+                                        AND s.quality <> 1
+                                    GROUP BY p.group_id, p.node, p.device, s.t
+                                ) moments
+                                WINDOW device_time AS (PARTITION BY group_id, node, device
+                                    ORDER BY t)
+                            ) runs
+                        ) held
+                    ) coded
+                ) worded
+                WINDOW device_time AS (PARTITION BY group_id, node, device ORDER BY start)
+            ) compared
+            WHERE changed
+            WINDOW device_time AS (PARTITION BY group_id, node, device ORDER BY start)"#,
     ]
 }
 

@@ -204,9 +204,7 @@ async fn r_messages_and_run_state_changes_become_events() {
 #[test]
 fn the_r_messages_before_a_status_answer_say_which_stop_the_machine_is_in() {
     use panasonic::event::ErrorInfo;
-    let name = |(index, reason): (usize, Option<String>)| {
-        (MACHINE_STATES[index].name, reason)
-    };
+    let name = |(index, reason): (usize, Option<String>)| (MACHINE_STATES[index].name, reason);
     let mut told = Told::default();
     assert_eq!(name(told.state(RunState::Error)), ("error stop", None));
     told.note(&Event::Error(ErrorInfo::new(12, 1, 2, 3).unwrap()));

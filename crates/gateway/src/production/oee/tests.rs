@@ -59,11 +59,23 @@ fn early_shift() -> (Vec<Interval>, Planned) {
     let at = |t: &str| format!("{day}{t}:00Z");
     let intervals = vec![
         iv(&at("06:00"), &at("09:00"), "run", 1100, None),
-        iv(&at("09:00"), &at("09:20"), "parts exhausted", 5500, Some("feeder 7")),
+        iv(
+            &at("09:00"),
+            &at("09:20"),
+            "parts exhausted",
+            5500,
+            Some("feeder 7"),
+        ),
         iv(&at("09:20"), &at("10:40"), "run", 1100, None),
         iv(&at("10:40"), &at("11:00"), "ready", 2000, None),
         iv(&at("11:00"), &at("13:00"), "run", 1100, None),
-        iv(&at("13:00"), &at("13:10"), "error stop", 5000, Some("error code 5")),
+        iv(
+            &at("13:00"),
+            &at("13:10"),
+            "error stop",
+            5000,
+            Some("error code 5"),
+        ),
         iv(&at("13:10"), &at("14:00"), "run", 1100, None),
     ];
     let planned = shifts.planned(utc(&at("06:00")), utc(&at("14:00")));
@@ -141,7 +153,13 @@ fn a_range_that_starts_mid_stop_in_a_shift_across_midnight_counts_only_its_part(
             5500,
             Some("feeder 9"),
         ),
-        iv("2026-11-03T00:15:00Z", "2026-11-03T06:00:00Z", "run", 1100, None),
+        iv(
+            "2026-11-03T00:15:00Z",
+            "2026-11-03T06:00:00Z",
+            "run",
+            1100,
+            None,
+        ),
     ];
     let planned = shifts.planned(from, to);
     let b = breakdown(&intervals, &planned, None);
@@ -226,11 +244,7 @@ fn a_performance_over_a_hundred_percent_says_the_ideal_cycle_is_too_long() {
 
 #[test]
 fn time_outside_every_shift_is_not_scheduled_and_not_planned() {
-    let shifts = Shifts::new(
-        Some("UTC"),
-        vec![shift("early", "06:00", "14:00", &[])],
-    )
-    .unwrap();
+    let shifts = Shifts::new(Some("UTC"), vec![shift("early", "06:00", "14:00", &[])]).unwrap();
     let intervals = vec![iv(
         "2026-11-02T12:00:00Z",
         "2026-11-02T16:00:00Z",
@@ -244,6 +258,37 @@ fn time_outside_every_shift_is_not_scheduled_and_not_planned() {
     assert_eq!(seconds_of(&b, OUTSIDE_SHIFTS), 7_200.0);
     let outside = b.states.iter().find(|s| s.state == OUTSIDE_SHIFTS).unwrap();
     assert_eq!(outside.category, Category::NonScheduled);
+}
+
+/// A 24 h shift, 1,000 s asked: no data 0–400 (the gateway was not running), run
+/// 400–700, the device not answering 700–800, run 800–1,000. Planned with data: 600 s,
+/// of which 500 s run; the silent device is a stop.
+#[test]
+fn time_without_data_is_left_out_of_planned_time_but_a_silent_device_is_a_stop() {
+    use crate::production::states::{NO_DATA, NOT_ANSWERING};
+    let shifts = Shifts::new(Some("UTC"), Vec::new()).unwrap();
+    let t = |s: i64| {
+        let base = utc("2026-11-02T08:00:00Z").0;
+        jiff::Timestamp::from_millisecond(base + s * 1000)
+            .unwrap()
+            .to_string()
+    };
+    let unknown = |a: i64, b: i64, why: &str| iv(&t(a), &t(b), "unknown", 0, Some(why));
+    let intervals = vec![
+        unknown(0, 400, NO_DATA),
+        iv(&t(400), &t(700), "run", 1100, None),
+        unknown(700, 800, NOT_ANSWERING),
+        iv(&t(800), &t(1000), "run", 1100, None),
+    ];
+    let planned = shifts.planned(utc(&t(0)), utc(&t(1000)));
+    let b = breakdown(&intervals, &planned, None);
+    assert_eq!(b.planned_s, 600.0);
+    assert_eq!(b.unobserved_s, 400.0);
+    assert_eq!(seconds_of(&b, "unknown"), 500.0, "both unknowns are states");
+    let oee = oee(&b, &Counts::default(), &IdealCycle::Unknown, b.planned_s);
+    assert!(close(oee.availability, 500.0 / 600.0));
+    assert_eq!(oee.stops.len(), 1);
+    assert!(oee.stops[0].reason.contains(NOT_ANSWERING));
 }
 
 #[test]
