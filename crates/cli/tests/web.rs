@@ -282,8 +282,8 @@ fn a_trend_asks_for_each_span_it_shows_downloads_it_as_csv_and_comes_back_from_i
 /// placement machine's state bars hold one segment per interval of the `/api/states`
 /// answer they were drawn from, in place and in their category's colour (the legend's);
 /// pointing at one names it; OEE, availability, performance and quality are the
-/// `/api/production` answer's, as percentages with one decimal; the stops are its stops;
-/// the page asks again by itself.
+/// `/api/production` answer's, as percentages with one decimal; the stops are its stops,
+/// the feeder that ran out named; the page asks again by itself.
 #[test]
 fn the_production_view_shows_the_placement_machines_states_oee_and_stops_as_the_api_says() {
     let browser = browser();
@@ -382,6 +382,11 @@ fn the_production_view_shows_the_placement_machines_states_oee_and_stops_as_the_
     // script waited for a finished board, which makes the OEE a number).
     let production = answer("/api/production", "?device=placer1", &first["answered"]);
     assert!(production["oee"].is_number(), "{production}");
+    let stops = first["stops"].to_string();
+    assert!(
+        stops.contains("parts exhausted: feeder 7"),
+        "the stop names its feeder: {stops}"
+    );
     for shown in [first, &seen["later"]] {
         let production = answer("/api/production", "?device=placer1", &shown["answered"]);
         for (figure, field) in [
@@ -416,13 +421,9 @@ fn the_production_view_shows_the_placement_machines_states_oee_and_stops_as_the_
             let text = shown["figures"][figure].as_str().unwrap();
             assert_eq!(text == "—", production[field].is_null(), "{figure}: {text}");
         }
-        // The stops, longest first; the time without data is not one of the bars.
-        let stops: Vec<&serde_json::Value> = production["stops"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .filter(|s| s["category"] != "unknown")
-            .collect();
+        // The stops, longest first.
+        let stops: Vec<&serde_json::Value> =
+            production["stops"].as_array().unwrap().iter().collect();
         let listed = shown["stops"].as_array().unwrap();
         assert_eq!(listed.len(), stops.len(), "{shown}");
         for (row, stop) in listed.iter().zip(&stops) {

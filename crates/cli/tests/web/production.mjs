@@ -1,11 +1,12 @@
 // The production view in headless Chromium, on the demo cell, as a supervisor opens it:
 // the cell page, then the Production tab, which shows the placement machine. Once the
-// machine has finished a board (its OEE is then a number), records what the page shows
-// (the state bars' segments with their place and colour, the legend, the figures, the
-// stops) and every /api/states and /api/production answer the page got, so the Rust test
-// can hold each to the answer it was drawn from; points at the widest segment of the last
-// hour's bar and records what the page then says; waits for the page to ask again by
-// itself; looks at the view on a 360 px phone.
+// machine has finished a board (its OEE is then a number) and run out of parts (a stop
+// with its feeder), records what the page shows (the state bars' segments with their
+// place and colour, the legend, the figures, the stops) and every /api/states and
+// /api/production answer the page got, so the Rust test can hold each to the answer it was
+// drawn from; points at the widest segment of the last hour's bar and records what the
+// page then says; waits for the page to ask again by itself; looks at the view on a 360 px
+// phone.
 // Usage: node production.mjs http://127.0.0.1:PORT screenshot.png
 // Prints one JSON line with what it saw; exits non-zero with a reason otherwise.
 import { launch, openPage } from './browser.mjs';
@@ -31,11 +32,13 @@ try {
   await page.waitForSelector('#shift-bar .segment:not(.cat-unknown)', { timeout: 30000 });
   await page.waitForSelector('#hour-bar .segment:not(.cat-unknown)', { timeout: 30000 });
   await page.waitForSelector('#production-numbers:not([hidden])', { timeout: 30000 });
-  // The OEE is a number once the machine has finished a board (about 35 s after the start).
+  // The OEE is a number once the machine has finished a board, and the demo's machine runs
+  // out of parts within its first minute or so: wait for both.
   await page.waitForFunction(
-    () => document.querySelector('[data-figure="oee"] .value').textContent !== '—',
+    () => document.querySelector('[data-figure="oee"] .value').textContent !== '—'
+      && [...document.querySelectorAll('#stops li.stop')].some((li) => li.dataset.reason.startsWith('parts exhausted')),
     null,
-    { timeout: 120000, polling: 100 },
+    { timeout: 150000, polling: 100 },
   );
 
   const shown = () => page.evaluate(() => {

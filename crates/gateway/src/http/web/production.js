@@ -203,8 +203,9 @@ function renderShiftWords(report) {
     const sameDay = new Date(start).toDateString() === new Date(end - 1).toDateString();
     const midnight = formatHour(end) === '00:00' ? '24:00' : formatHour(end);
     const until = sameDay ? midnight : `${formatDay(end)} ${formatHour(end)}`;
+    const unobserved = report.unobserved_s ? `, ${formatDuration(report.unobserved_s)} without data` : '';
     words.textContent = `Shift ${report.shift.name}: ${formatDay(start)} ${formatHour(start)} – ${until}`
-      + ` · ${formatDuration(report.planned_s)} planned so far`;
+      + ` · ${formatDuration(report.planned_s)} planned so far${unobserved}`;
   } else {
     words.textContent = 'Outside every shift: the last 24 hours';
   }
@@ -377,11 +378,10 @@ function renderNumbers(report) {
   basis.replaceChildren(...said.flatMap(([what, words]) => [el('dt', '', what), el('dd', '', words)]));
 }
 
-/** The stops' Pareto: minutes per reason, longest first; time without data on a line of its own. */
+/** The stops' Pareto: minutes per reason, longest first; the time without data below it. */
 function renderStops(report) {
   const list = document.getElementById('stops');
-  const stops = (report.stops || []).filter((s) => s.category !== 'unknown')
-    .sort((a, b) => b.seconds - a.seconds);
+  const stops = [...(report.stops || [])].sort((a, b) => b.seconds - a.seconds);
   const most = Math.max(1, ...stops.map((s) => s.seconds));
   list.replaceChildren(...stops.map((stop) => {
     const item = el('li', 'stop');
@@ -398,23 +398,23 @@ function renderStops(report) {
     return item;
   }));
   if (!stops.length) list.append(el('li', 'placeholder', 'No stops in this shift so far.'));
-  const unknown = (report.stops || []).filter((s) => s.category === 'unknown')
-    .reduce((sum, s) => sum + s.seconds, 0);
-  document.getElementById('stops-unknown').textContent = unknown
-    ? `Without data: ${formatDuration(unknown)} (the device was not polled or the gateway was not running), not in the bars.`
+  const unobserved = report.unobserved_s || 0;
+  document.getElementById('stops-unobserved').textContent = unobserved
+    ? `Without data for ${formatDuration(unobserved)} of the shift (the gateway was not running,`
+      + ' or had not polled the machine yet): that time is not planned time, nor a stop.'
     : '';
 }
 
-/** Time in each state over the shift so far, longest first. */
+/** Time in each state over the shift so far, longest first, with its share of that time. */
 function renderStateTimes(report) {
   const table = document.getElementById('state-times');
-  const planned = report.planned_s || 0;
   const rows = [...(report.states || [])].sort((a, b) => b.seconds - a.seconds);
+  const whole = rows.reduce((sum, row) => sum + row.seconds, 0);
   table.replaceChildren(...rows.map((row) => {
     const tr = el('tr');
     const name = el('td');
     name.append(el('span', `swatch cat-${row.category}`), el('span', '', row.state));
-    const share = planned ? `${((100 * row.seconds) / planned).toFixed(1)} %` : '';
+    const share = whole ? `${((100 * row.seconds) / whole).toFixed(1)} %` : '';
     tr.append(name, el('td', 'muted', CATEGORY_WORDS.get(row.category) || row.category),
       el('td', 'number', formatDuration(row.seconds)), el('td', 'number', share));
     return tr;
