@@ -107,7 +107,8 @@ function showTrend(params) {
   trend.timer = setInterval(refreshTrend, TREND_REFRESH_MS);
   trendTab();
   renderTrendControls();
-  if (same && trend.plot) {
+  // Back to a fixed span already drawn: nothing to ask (a range ending now has moved on).
+  if (same && trend.plot && !trend.range) {
     resizeTrend();
     return;
   }
