@@ -378,7 +378,7 @@ function renderNumbers(report) {
   basis.replaceChildren(...said.flatMap(([what, words]) => [el('dt', '', what), el('dd', '', words)]));
 }
 
-/** The stops' Pareto: minutes per reason, longest first; the time without data below it. */
+/** The stops' Pareto: minutes (seconds under one) per reason, longest first; the time without data below it. */
 function renderStops(report) {
   const list = document.getElementById('stops');
   const stops = [...(report.stops || [])].sort((a, b) => b.seconds - a.seconds);
@@ -392,9 +392,9 @@ function renderStops(report) {
     const fill = el('div', `cat-${stop.category || 'unscheduled_down'}`);
     fill.style.width = `${(stop.seconds / most) * 100}%`;
     bar.append(fill);
-    const minutes = `${(stop.seconds / 60).toFixed(1)} min`;
+    const long = stop.seconds < 60 ? `${Math.round(stop.seconds)} s` : `${(stop.seconds / 60).toFixed(1)} min`;
     const times = `${stop.count} ${stop.count === 1 ? 'time' : 'times'}`;
-    item.append(el('span', 'stop-reason', stop.reason), bar, el('span', 'stop-time', `${minutes} · ${times}`));
+    item.append(el('span', 'stop-reason', stop.reason), bar, el('span', 'stop-time', `${long} · ${times}`));
     return item;
   }));
   if (!stops.length) list.append(el('li', 'placeholder', 'No stops in this shift so far.'));

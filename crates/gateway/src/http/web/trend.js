@@ -383,7 +383,7 @@ function plotOptions() {
   const scales = { x: { time: true, auto: false } };
   const axes = [{
     stroke: muted, grid: { stroke: grid, width: 1 }, ticks: { stroke: grid, width: 1 },
-    values: timeTicks, size: 46,
+    values: timeTicks, size: 46, space: 80,
   }];
   const series = [{ label: 'Time', value: (u, t) => (t === null ? '—' : formatWhen(t, true)) }];
   const stepped = uPlot.paths.stepped({ align: 1 });
