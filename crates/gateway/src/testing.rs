@@ -285,6 +285,17 @@ pub mod config {
         assert!(shown.contains(words), "{shown}");
     }
 
+    /// A cell of one Panasonic placement machine.
+    pub const PLACER: &str = r#"
+[[line]]
+name = "placement"
+endpoint = "tcp://192.0.2.50:49152"
+
+[[line.device]]
+id = "placer1"
+protocol = "panasonic"
+"#;
+
     /// A cell of one JBC station on one serial line.
     pub const ONE: &str = r#"
 [[line]]

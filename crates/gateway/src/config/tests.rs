@@ -1,7 +1,7 @@
 use super::*;
 use crate::driver::DriverConfig;
 use crate::plugins::check_config;
-use crate::testing::config::{ONE, parse, refused};
+use crate::testing::config::{ONE, PLACER, parse, refused};
 use table::hide_secret;
 
 /// A Panasonic machine's event port, if its table names one.
@@ -307,16 +307,6 @@ fn thermosald_and_cross_mistakes_are_refused_where_they_are() {
         "1 to 255",
     );
 }
-
-const PLACER: &str = r#"
-[[line]]
-name = "placement"
-endpoint = "tcp://192.0.2.50:49152"
-
-[[line.device]]
-id = "placer1"
-protocol = "panasonic"
-"#;
 
 #[test]
 fn a_panasonic_machine_takes_its_ports_from_the_endpoint_and_event_port() {

@@ -75,40 +75,30 @@ pub const KIND: Kind = Kind::new(&KIND_FACTS);
 /// the reason), through a manual bypass the switch is out of service for maintenance,
 /// an open output breaker is a planned disconnection, a load not supplied a failure.
 pub const MACHINE_STATES: [StateDef; 5] = [
-    StateDef {
-        name: "load on S1",
-        code: 1100,
-    },
-    StateDef {
-        name: "load on S2",
-        code: 1100,
-    },
-    StateDef {
-        name: "load on bypass",
-        code: 4300,
-    },
-    StateDef {
-        name: "output breaker open",
-        code: 4000,
-    },
-    StateDef {
-        name: "load not supplied",
-        code: 5000,
-    },
+    StateDef::new("load on S1", 1100),
+    StateDef::new("load on S2", 1100),
+    StateDef::new("load on bypass", 4300),
+    StateDef::new("output breaker open", 4000),
+    StateDef::new("load not supplied", 5000),
 ];
+const ON_S1: usize = 0;
+const ON_S2: usize = 1;
+const ON_BYPASS: usize = 2;
+const BREAKER_OPEN: usize = 3;
+const NOT_SUPPLIED: usize = 4;
 
 /// The machine state of a read internal state, and its reason (the active alarms).
 fn judge(internal: &InternalState) -> (usize, Option<String>) {
     let alarms = internal.alarms();
     let reason = (!alarms.is_empty()).then(|| alarms.join(", "));
     let state = match internal.feed() {
-        Feed::StaticSwitch(Source::S1) => 0,
-        Feed::StaticSwitch(Source::S2) => 1,
+        Feed::StaticSwitch(Source::S1) => ON_S1,
+        Feed::StaticSwitch(Source::S2) => ON_S2,
         Feed::Bypass(source) => {
-            return (2, Some(format!("through the bypass of {source}")));
+            return (ON_BYPASS, Some(format!("through the bypass of {source}")));
         }
-        Feed::OutputBreakerOpen => 3,
-        Feed::NotSupplied => 4,
+        Feed::OutputBreakerOpen => BREAKER_OPEN,
+        Feed::NotSupplied => NOT_SUPPLIED,
     };
     (state, reason)
 }

@@ -447,27 +447,17 @@ const POINTS: &[Def] = &[
 /// The machine states, with their E10 / IPC-CFX codes: hot air flowing is work, a tool
 /// missing is waiting for a support tool, a tool or station error a failure.
 pub const MACHINE_STATES: [StateDef; 5] = [
-    StateDef {
-        name: "in use",
-        code: 1100,
-    },
-    StateDef {
-        name: "idle",
-        code: 2000,
-    },
-    StateDef {
-        name: "no tool",
-        code: 2300,
-    },
-    StateDef {
-        name: "tool error",
-        code: 5000,
-    },
-    StateDef {
-        name: "station error",
-        code: 5000,
-    },
+    StateDef::new("in use", 1100),
+    StateDef::new("idle", 2000),
+    StateDef::new("no tool", 2300),
+    StateDef::new("tool error", 5000),
+    StateDef::new("station error", 5000),
 ];
+const IN_USE: usize = 0;
+const IDLE: usize = 1;
+const NO_TOOL: usize = 2;
+const TOOL_ERROR: usize = 3;
+const STATION_ERROR: usize = 4;
 
 /// The machine state a `live` poll's readings show, and its reason; `None` when the
 /// poll did not read the errors and the tool's status.
@@ -478,20 +468,19 @@ fn judge(readings: &[Reading]) -> Option<(usize, Option<String>)> {
     let words = |n: f64| ToolError::from_code(n as i32).map(ToolError::words);
     Some(if station != 0.0 {
         let words = StationError::from_code(station as i32).map(StationError::words);
-        (4, Some(words.unwrap_or("unknown station error").to_owned()))
+        let words = words.unwrap_or("unknown station error");
+        (STATION_ERROR, Some(words.to_owned()))
     } else if tool == f64::from(ToolError::NoTool.code())
         || number_in(readings, "connected_tool") == Some(f64::from(Tool::None.number()))
     {
-        (2, None)
+        (NO_TOOL, None)
     } else if tool != 0.0 && tool != f64::from(ToolError::CheckingTool.code()) {
-        (
-            3,
-            Some(words(tool).unwrap_or("unknown tool error").to_owned()),
-        )
+        let words = words(tool).unwrap_or("unknown tool error");
+        (TOOL_ERROR, Some(words.to_owned()))
     } else if on == 1.0 {
-        (0, None)
+        (IN_USE, None)
     } else {
-        (1, None)
+        (IDLE, None)
     })
 }
 

@@ -116,30 +116,12 @@ const GROUPS: [(&str, Duration); 3] = [
 
 /// The machine states, with their E10 / IPC-CFX codes (the indexes below name them).
 pub const MACHINE_STATES: [StateDef; 6] = [
-    StateDef {
-        name: "run",
-        code: 1100,
-    },
-    StateDef {
-        name: "ready",
-        code: 2000,
-    },
-    StateDef {
-        name: "error stop",
-        code: 5000,
-    },
-    StateDef {
-        name: "parts exhausted",
-        code: 5500,
-    },
-    StateDef {
-        name: "recovery",
-        code: 5300,
-    },
-    StateDef {
-        name: "setup",
-        code: 4500,
-    },
+    StateDef::new("run", 1100),
+    StateDef::new("ready", 2000),
+    StateDef::new("error stop", 5000),
+    StateDef::new("parts exhausted", 5500),
+    StateDef::new("recovery", 5300),
+    StateDef::new("setup", 4500),
 ];
 const RUN: usize = 0;
 const READY: usize = 1;

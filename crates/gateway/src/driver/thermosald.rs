@@ -123,23 +123,15 @@ const KIND_FACTS: Described = Described {
 /// failure. A poll every 2 s cannot see each impulse of a 3 s rhythm, and a state that
 /// flipped with each would fill the history: the regulator firing at all is the state.
 pub const MACHINE_STATES: [StateDef; 4] = [
-    StateDef {
-        name: "sealing",
-        code: 1100,
-    },
-    StateDef {
-        name: "ready",
-        code: 2000,
-    },
-    StateDef {
-        name: "calibrating",
-        code: 3200,
-    },
-    StateDef {
-        name: "fault",
-        code: 5000,
-    },
+    StateDef::new("sealing", 1100),
+    StateDef::new("ready", 2000),
+    StateDef::new("calibrating", 3200),
+    StateDef::new("fault", 5000),
 ];
+const SEALING: usize = 0;
+const READY: usize = 1;
+const CALIBRATING: usize = 2;
+const FAULT: usize = 3;
 
 /// The machine state a run-time poll's readings show, and its reason; `None` when the
 /// poll did not read the fault and the power.
@@ -150,13 +142,13 @@ fn judge(readings: &[Reading]) -> Option<(usize, Option<String>)> {
     let power = number_in(readings, "power")?.max(number_in(readings, "maximum_current")?);
     let code = fault as u16;
     Some(match code {
-        diagnostic::NONE if power > 0.0 => (0, None),
-        diagnostic::NONE => (1, None),
+        diagnostic::NONE if power > 0.0 => (SEALING, None),
+        diagnostic::NONE => (READY, None),
         diagnostic::CALIBRATION_REQUEST | diagnostic::CALIBRATION_IN_PROGRESS => {
-            (2, Some(diagnostic::describe(code).to_owned()))
+            (CALIBRATING, Some(diagnostic::describe(code).to_owned()))
         }
         _ => (
-            3,
+            FAULT,
             Some(format!("fault {code}: {}", diagnostic::describe(code))),
         ),
     })

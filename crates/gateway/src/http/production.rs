@@ -117,17 +117,37 @@ fn device(s: &AppState, q: &ProductionQuery) -> ApiResult<DeviceId> {
     Ok(entry.id.clone())
 }
 
+/// What a states or production query asks for: the device, now, and the range.
+struct Asked {
+    device: DeviceId,
+    now: Timestamp,
+    from: Timestamp,
+    to: Timestamp,
+    shift: Option<ShiftWindow>,
+}
+
+fn asked(s: &AppState, query: Result<Query<ProductionQuery>, QueryRejection>) -> ApiResult<Asked> {
+    let Query(q) = query?;
+    let device = device(s, &q)?;
+    let now = Timestamp::now();
+    let (from, to, shift) = range(s, &q, now)?;
+    Ok(Asked {
+        device,
+        now,
+        from,
+        to,
+        shift,
+    })
+}
+
 /// `GET /api/states?device=ID&from=&to=`: the device's state intervals.
 pub(crate) async fn states(
     State(s): State<AppState>,
     query: Result<Query<ProductionQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
-    let Query(q) = query?;
-    let device = device(&s, &q)?;
-    let now = Timestamp::now();
-    let (from, to, _) = range(&s, &q, now)?;
+    let a = asked(&s, query)?;
     let answer = run_query(&s, move |store| {
-        report::states(&store, &device, from, to, now)
+        report::states(&store, &a.device, a.from, a.to, a.now)
     })
     .await?;
     Ok(Json(answer).into_response())
@@ -139,13 +159,11 @@ pub(crate) async fn production(
     State(s): State<AppState>,
     query: Result<Query<ProductionQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
-    let Query(q) = query?;
-    let device = device(&s, &q)?;
-    let now = Timestamp::now();
-    let (from, to, shift) = range(&s, &q, now)?;
+    let a = asked(&s, query)?;
     let cell = std::sync::Arc::clone(&s.cell);
     let answer = run_query(&s, move |store| {
-        report::production(&store, &cell.production, &device, (from, to), shift, now)
+        let range = (a.from, a.to);
+        report::production(&store, &cell.production, &a.device, range, a.shift, a.now)
     })
     .await?;
     Ok(Json(answer).into_response())

@@ -42,6 +42,13 @@ pub struct StateDef {
     pub code: u16,
 }
 
+impl StateDef {
+    /// State `name` at `code`.
+    pub const fn new(name: &'static str, code: u16) -> Self {
+        Self { name, code }
+    }
+}
+
 /// The codes the config gives some of a device's states (`states = { ready = 2200 }`),
 /// checked against its kind's states when the file is read.
 pub type StateOverrides = BTreeMap<String, StateCode>;

@@ -1,14 +1,4 @@
-use crate::testing::config::{ONE, parse, refused};
-
-const PLACER: &str = r#"
-[[line]]
-name = "smt"
-endpoint = "tcp://192.0.2.10:49152"
-
-[[line.device]]
-id = "placer1"
-protocol = "panasonic"
-"#;
+use crate::testing::config::{ONE, PLACER, parse, refused};
 
 #[test]
 fn shifts_are_read_in_the_cells_time_zone_with_their_days_and_breaks() {

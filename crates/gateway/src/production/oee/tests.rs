@@ -33,6 +33,14 @@ fn shift(name: &str, start: &str, end: &str, breaks: &[(&str, &str)]) -> Shift {
     }
 }
 
+/// `s` seconds after 08:00 UTC on 2026-11-02, as RFC 3339.
+fn after_eight(s: i64) -> String {
+    let base = utc("2026-11-02T08:00:00Z").0;
+    jiff::Timestamp::from_millisecond(base + s * 1000)
+        .unwrap()
+        .to_string()
+}
+
 fn seconds_of(b: &Breakdown, state: &str) -> f64 {
     b.states
         .iter()
@@ -195,12 +203,7 @@ fn a_range_that_starts_mid_stop_in_a_shift_across_midnight_counts_only_its_part(
 #[test]
 fn stops_under_the_micro_stop_threshold_are_run_time_and_one_line_of_the_stops() {
     let shifts = Shifts::new(Some("UTC"), Vec::new()).unwrap();
-    let t = |s: i64| {
-        let base = utc("2026-11-02T08:00:00Z").0;
-        jiff::Timestamp::from_millisecond(base + s * 1000)
-            .unwrap()
-            .to_string()
-    };
+    let t = after_eight;
     let intervals = vec![
         iv(&t(0), &t(600), "run", 1100, None),
         iv(&t(600), &t(660), "ready", 2000, None),
@@ -267,12 +270,7 @@ fn time_outside_every_shift_is_not_scheduled_and_not_planned() {
 fn time_without_data_is_left_out_of_planned_time_but_a_silent_device_is_a_stop() {
     use crate::production::states::{NO_DATA, NOT_ANSWERING};
     let shifts = Shifts::new(Some("UTC"), Vec::new()).unwrap();
-    let t = |s: i64| {
-        let base = utc("2026-11-02T08:00:00Z").0;
-        jiff::Timestamp::from_millisecond(base + s * 1000)
-            .unwrap()
-            .to_string()
-    };
+    let t = after_eight;
     let unknown = |a: i64, b: i64, why: &str| iv(&t(a), &t(b), "unknown", 0, Some(why));
     let intervals = vec![
         unknown(0, 400, NO_DATA),

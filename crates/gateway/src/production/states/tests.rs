@@ -129,16 +129,7 @@ fn the_intervals_cover_the_range_without_gaps_or_overlaps() {
 
 #[test]
 fn a_states_table_naming_a_state_the_kind_lacks_or_a_code_off_the_scale_is_refused() {
-    const STATES: [StateDef; 2] = [
-        StateDef {
-            name: "run",
-            code: 1100,
-        },
-        StateDef {
-            name: "ready",
-            code: 2000,
-        },
-    ];
+    const STATES: [StateDef; 2] = [StateDef::new("run", 1100), StateDef::new("ready", 2000)];
     let raw = |k: &str, v: i64| BTreeMap::from([(k.to_owned(), v)]);
     let moved = check_overrides("placer", &STATES, &raw("ready", 2200)).unwrap();
     assert_eq!(moved["ready"].get(), 2200);
