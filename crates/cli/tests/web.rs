@@ -125,6 +125,364 @@ fn a_cell_of_a_thousand_devices_shows_one_line_at_a_time_and_streams_only_what_i
     eprintln!("{seen}");
 }
 
+/// The trend view on the demo cell: two points picked by typing, a zoom by dragging, moves
+/// by button, shift-drag and finger, each asking `/api/history` for exactly the span then
+/// shown, in buckets that fit the chart; the CSV holds exactly the series the zoom's answers
+/// make; the address brings the same view back after a reload.
+#[test]
+fn a_trend_asks_for_each_span_it_shows_downloads_it_as_csv_and_comes_back_from_its_address() {
+    let browser = browser();
+    let data = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start(data.path());
+    let screenshot = data.path().join("trend.png");
+    let seen = what_the_page_saw(&mut browser.script("trend.mjs", &gateway, &screenshot));
+    let points = ["sealer0.temperature", "cross1.load_power"];
+    assert_eq!(seen["picked"]["chosen"], serde_json::json!(points));
+    assert_eq!(
+        seen["picked"]["address"],
+        "#view=trend&points=sealer0.temperature,cross1.load_power&range=10m"
+    );
+    let legend = seen["legend"].to_string();
+    assert!(
+        legend.contains("Current temperature (°C)") && legend.contains("Load power (kVA)"),
+        "both series are drawn, with their units: {legend}"
+    );
+
+    // The last 10 minutes, asked for as such: the gateway says when now is.
+    for asked in seen["first"]["asked"].as_array().unwrap() {
+        assert_eq!(
+            (&asked["from"], &asked["to"]),
+            (&"-10m".into(), &"now".into())
+        );
+    }
+    let first = shown(&seen["first"]);
+    assert!(
+        (600_000..=601_000).contains(&(first.1 - first.0)),
+        "{first:?}"
+    );
+
+    // The zoom asked for the newest tenth of it, and shows what it asked for.
+    let zoom = asked_span(&seen["zoom"], &points);
+    assert_eq!(zoom, shown(&seen["zoom"]));
+    assert!(
+        first.0 <= zoom.0 && zoom.1 <= first.1,
+        "{zoom:?} within {first:?}"
+    );
+    let span = zoom.1 - zoom.0;
+    assert!(
+        (50_000..=70_000).contains(&span),
+        "a tenth of 10 minutes: {span} ms"
+    );
+    let address = seen["zoom"]["address"].as_str().unwrap();
+    assert!(
+        address.contains("&from=") && address.contains("&to="),
+        "{address}"
+    );
+
+    // ◀ moved it earlier by half, a shift-drag later, a finger earlier again: each move
+    // asked for the span it then showed, as long as before.
+    let earlier = asked_span(&seen["earlier"], &points);
+    assert_eq!(earlier, shown(&seen["earlier"]));
+    assert!(
+        (earlier.0 - (zoom.0 - span / 2)).abs() <= 2,
+        "{earlier:?} {zoom:?}"
+    );
+    let dragged = asked_span(&seen["dragged"], &points);
+    assert_eq!(dragged, shown(&seen["dragged"]));
+    assert!(
+        dragged.0 > earlier.0,
+        "shift-drag to the left shows later: {dragged:?}"
+    );
+    let touched = asked_span(&seen["touched"], &points);
+    assert_eq!(touched, shown(&seen["touched"]));
+    assert!(
+        touched.0 < dragged.0,
+        "a finger to the right shows earlier: {touched:?}"
+    );
+    for moved in [earlier, dragged, touched] {
+        assert!(
+            ((moved.1 - moved.0) - span).abs() <= 2,
+            "{moved:?} as long as {span}"
+        );
+    }
+
+    // The CSV: a time column and one per point with its unit, a row per time the answers
+    // hold a bucket (and the span's two ends), each point's value held from its last bucket.
+    let csv = &seen["csv"];
+    assert!(csv["name"].as_str().unwrap().ends_with(".csv"));
+    let text = csv["text"].as_str().unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("time,sealer0.temperature (°C),cross1.load_power (kVA)")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let answers = seen["zoom"]["answers"].as_array().unwrap();
+    // Times are RFC 3339 with milliseconds in UTC, the page's as the gateway's: they sort
+    // as text.
+    let (from, to) = (
+        answers[0]["from"].as_str().unwrap(),
+        answers[0]["to"].as_str().unwrap(),
+    );
+    let mut times: Vec<&str> = answers
+        .iter()
+        .flat_map(|a| a["buckets"].as_array().unwrap())
+        .map(|b| b["t"].as_str().unwrap())
+        .filter(|t| (from..to).contains(t))
+        .chain([from, to])
+        .collect();
+    times.sort_unstable();
+    times.dedup();
+    assert_eq!(
+        rows.iter().map(|r| r[0]).collect::<Vec<_>>(),
+        times,
+        "a row per bucket's time and the span's ends"
+    );
+    for (column, answer) in answers.iter().enumerate() {
+        let buckets = answer["buckets"].as_array().unwrap();
+        assert!(
+            !buckets.is_empty(),
+            "{} has history: {answer}",
+            points[column]
+        );
+        let mut held = answer["before"]["value"].as_f64();
+        let mut next = buckets.iter().peekable();
+        for row in &rows {
+            while let Some(b) = next.next_if(|b| b["t"].as_str().unwrap() <= row[0]) {
+                held = b["avg"].as_f64();
+            }
+            let shown = row[column + 1];
+            match held {
+                Some(value) => assert_eq!(shown.parse::<f64>().ok(), Some(value), "{row:?}"),
+                None => assert_eq!(shown, "", "{row:?}"),
+            }
+        }
+    }
+    assert!(screenshot.exists());
+
+    // The address keeps the view: the reload shows the same points over the same span, and
+    // asks for just that.
+    let reloaded = &seen["reloaded"];
+    assert_eq!(reloaded["address"], seen["address"]);
+    assert_eq!(reloaded["chosen"], serde_json::json!(points));
+    assert_eq!(
+        shown(&serde_json::json!({ "shown": reloaded["span"] })),
+        touched
+    );
+    assert_eq!(asked_span(reloaded, &points), touched);
+
+    assert!(
+        seen["phone"]["overflow"].as_i64().unwrap() <= 0,
+        "nothing wider than a 360 px phone: {}",
+        seen["phone"]
+    );
+}
+
+/// The production view on the demo, as a supervisor opens it (the Production tab): the
+/// placement machine's state bars hold one segment per interval of the `/api/states`
+/// answer they were drawn from, in place and in their category's colour (the legend's);
+/// pointing at one names it; OEE, availability, performance and quality are the
+/// `/api/production` answer's, as percentages with one decimal; the stops are its stops,
+/// the feeder that ran out named; the page asks again by itself.
+#[test]
+fn the_production_view_shows_the_placement_machines_states_oee_and_stops_as_the_api_says() {
+    let browser = browser();
+    let data = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start(data.path());
+    let screenshot = data.path().join("production.png");
+    let seen = what_the_page_saw(&mut browser.script("production.mjs", &gateway, &screenshot));
+    let first = &seen["first"];
+    assert_eq!(
+        first["device"], "placer1",
+        "the demo's placement machine first"
+    );
+    let answers = seen["answers"].as_array().unwrap();
+    let answer = |path: &str, query: &str, to: &serde_json::Value| -> serde_json::Value {
+        answers
+            .iter()
+            .find(|a| a["path"] == path && a["query"] == query && &a["body"]["to"] == to)
+            .unwrap_or_else(|| panic!("no answer of {path}{query} to {to}: {answers:?}"))["body"]
+            .clone()
+    };
+
+    // The legend: a colour per category, none alike.
+    let legend = first["legend"].as_object().unwrap();
+    let categories = [
+        "productive",
+        "standby",
+        "engineering",
+        "scheduled_down",
+        "unscheduled_down",
+        "non_scheduled",
+        "unknown",
+    ];
+    assert_eq!(legend.keys().collect::<Vec<_>>().len(), categories.len());
+    let mut colours: Vec<&str> = legend.values().map(|c| c.as_str().unwrap()).collect();
+    colours.sort_unstable();
+    colours.dedup();
+    assert_eq!(colours.len(), categories.len(), "{legend:?}");
+
+    // Each bar: the answer it was drawn from, a segment per interval, in place and colour.
+    for (bar, query) in [
+        ("shift", "?device=placer1"),
+        ("hour", "?device=placer1&from=-1h&to=now"),
+    ] {
+        let drawn = &first[bar];
+        let states = answer("/api/states", query, &drawn["answered"]);
+        let intervals = states["intervals"].as_array().unwrap();
+        let segments = drawn["segments"].as_array().unwrap();
+        assert_eq!(segments.len(), intervals.len(), "{bar}: {drawn}");
+        assert!(
+            intervals.iter().any(|i| i["category"] != "unknown"),
+            "{bar}: the machine's states: {states}"
+        );
+        let (from, to) = (
+            drawn["from"].as_f64().unwrap(),
+            drawn["to"].as_f64().unwrap(),
+        );
+        let width = drawn["width"].as_f64().unwrap();
+        let x = |t: &serde_json::Value| {
+            let t = humantime::parse_rfc3339(t.as_str().unwrap()).unwrap();
+            let ms = t.duration_since(std::time::UNIX_EPOCH).unwrap().as_millis() as f64;
+            (ms - from) / (to - from) * width
+        };
+        for (segment, interval) in segments.iter().zip(intervals) {
+            for field in ["start", "end", "state", "category"] {
+                assert_eq!(segment[field], interval[field], "{bar}: {segment}");
+            }
+            assert_eq!(segment["code"], interval["code"].to_string());
+            assert_eq!(segment["reason"], interval["reason"].as_str().unwrap_or(""));
+            let (left, right) = (x(&interval["start"]), x(&interval["end"]));
+            let shown = segment["left"].as_f64().unwrap();
+            assert!((shown - left).abs() < 1.5, "{bar}: {segment} at {left}");
+            let wide = segment["width"].as_f64().unwrap();
+            assert!((wide - (right - left)).abs() < 1.5, "{bar}: {segment}");
+            let category = interval["category"].as_str().unwrap();
+            assert_eq!(segment["colour"], legend[category], "{bar}: {segment}");
+        }
+        if bar == "shift" {
+            // The whole shift, now inside it.
+            let production = answer("/api/production", "?device=placer1", &first["answered"]);
+            let shift = &production["shift"];
+            assert_eq!(x(&shift["start"]), 0.0);
+            assert!((x(&shift["end"]) - width).abs() < 0.5, "{shift} {drawn}");
+        }
+    }
+
+    // Pointing at a segment names its interval.
+    let pointed = &seen["pointed"];
+    assert_eq!(pointed["start"], pointed["segment"]["start"]);
+    let words = pointed["text"].as_str().unwrap();
+    assert!(
+        words.contains(pointed["segment"]["state"].as_str().unwrap()),
+        "{pointed}"
+    );
+
+    // The figures: the production answer's, rounded to one decimal of a percent (the
+    // script waited for a finished board, which makes the OEE a number).
+    let production = answer("/api/production", "?device=placer1", &first["answered"]);
+    assert!(production["oee"].is_number(), "{production}");
+    let stops = first["stops"].to_string();
+    assert!(
+        stops.contains("parts exhausted: feeder 7"),
+        "the stop names its feeder: {stops}"
+    );
+    for shown in [first, &seen["later"]] {
+        let production = answer("/api/production", "?device=placer1", &shown["answered"]);
+        for (figure, field) in [
+            ("oee", "oee"),
+            ("availability", "availability"),
+            ("performance", "performance"),
+            ("quality", "quality"),
+        ] {
+            let text = shown["figures"][figure].as_str().unwrap();
+            match production[field].as_f64() {
+                None => assert_eq!(text, "—", "{figure}: {production}"),
+                Some(ratio) => {
+                    let number = text.strip_suffix(" %").unwrap_or_else(|| panic!("{text}"));
+                    assert_eq!(number.split('.').nth(1).map(str::len), Some(1), "{text}");
+                    let percent: f64 = number.parse().unwrap();
+                    assert!(
+                        (percent - ratio * 100.0).abs() <= 0.05 + 1e-9,
+                        "{figure}: {text} for {ratio}"
+                    );
+                }
+            }
+        }
+        let boards = production["boards"].as_f64().unwrap();
+        assert!(
+            shown["figures"]["boards"]
+                .as_str()
+                .unwrap()
+                .starts_with(&boards.to_string()),
+            "{shown}"
+        );
+        for (figure, field) in [("mtbf", "mtbf_s"), ("mttr", "mttr_s")] {
+            let text = shown["figures"][figure].as_str().unwrap();
+            assert_eq!(text == "—", production[field].is_null(), "{figure}: {text}");
+        }
+        // The stops, longest first.
+        let stops: Vec<&serde_json::Value> =
+            production["stops"].as_array().unwrap().iter().collect();
+        let listed = shown["stops"].as_array().unwrap();
+        assert_eq!(listed.len(), stops.len(), "{shown}");
+        for (row, stop) in listed.iter().zip(&stops) {
+            assert_eq!(row["reason"], stop["reason"]);
+            assert_eq!(row["count"], stop["count"].to_string());
+            // Minutes to a tenth, or whole seconds under a minute.
+            let text = row["text"].as_str().unwrap();
+            let seconds = stop["seconds"].as_f64().unwrap();
+            let (shown, exact, within) = match text.split_once(" min") {
+                Some((minutes, _)) => (minutes, seconds / 60.0, 0.05),
+                None => (text.split(" s").next().unwrap(), seconds, 0.5),
+            };
+            let shown: f64 = shown.parse().unwrap();
+            assert!((shown - exact).abs() <= within + 1e-9, "{row}: {stop}");
+            assert_eq!(seconds < 60.0, !text.contains(" min"), "{row}");
+        }
+    }
+    // Asked again by itself: a later answer, drawn.
+    assert!(seen["later"]["answered"].as_str() > first["answered"].as_str());
+    assert!(screenshot.exists());
+    assert!(
+        seen["phone"]["overflow"].as_i64().unwrap() <= 0,
+        "nothing wider than a 360 px phone: {}",
+        seen["phone"]
+    );
+}
+
+/// The span (ms since the epoch) a trend step of `trend.mjs` says it shows.
+fn shown(step: &serde_json::Value) -> (i64, i64) {
+    let shown = &step["shown"];
+    (
+        shown["from"].as_i64().unwrap(),
+        shown["to"].as_i64().unwrap(),
+    )
+}
+
+/// The span a trend step asked `/api/history` for: one query per point, all for the same
+/// span (RFC 3339) in the same buckets, from 50 to 10,000 of them.
+fn asked_span(step: &serde_json::Value, points: &[&str]) -> (i64, i64) {
+    let asked = step["asked"].as_array().unwrap();
+    let named: Vec<&str> = asked.iter().map(|a| a["point"].as_str().unwrap()).collect();
+    assert_eq!(named, points, "{step}");
+    let first = &asked[0];
+    for other in asked {
+        for field in ["from", "to", "step"] {
+            assert_eq!(other[field], first[field], "{step}");
+        }
+    }
+    let from = first["from_ms"].as_i64().expect("from is a time");
+    let to = first["to_ms"].as_i64().expect("to is a time");
+    let bucket = humantime::parse_duration(first["step"].as_str().unwrap()).unwrap();
+    let buckets = u128::try_from(to - from).unwrap() / bucket.as_millis();
+    assert!(
+        (50..=10_000).contains(&buckets),
+        "{buckets} buckets: {step}"
+    );
+    (from, to)
+}
+
 /// Where the browser test's scripts live and the Chromium they drive.
 struct Browser {
     web: std::path::PathBuf,

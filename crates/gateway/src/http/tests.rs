@@ -939,14 +939,26 @@ async fn the_page_and_its_assets_are_served_and_fetch_nothing_from_elsewhere() {
         let text = String::from_utf8(body.to_vec()).unwrap();
         let expected = match *path {
             "/" => "text/html",
-            "/app.css" => "text/css",
+            p if p.ends_with(".css") => "text/css",
+            p if p.ends_with(".LICENSE") => "text/plain",
             _ => "text/javascript",
         };
         assert!(content_type.starts_with(expected), "{path}: {content_type}");
+        // A vendored file starts with its banner (`/*! https://github.com/… */`), a
+        // comment naming where it comes from, not something fetched.
+        let code = match text.strip_prefix("/*!") {
+            Some(rest) => rest.split_once("*/").map_or(rest, |(_, code)| code),
+            None => &text,
+        };
         for external in ["http://", "https://", "//fonts.", "@import", "cdn"] {
-            assert!(!text.contains(external), "{path} refers to {external}");
+            assert!(!code.contains(external), "{path} refers to {external}");
         }
     }
+    // The chart library is served with its licence, and the page loads both of its files.
+    assert!(web::UPLOT_LICENSE.starts_with("The MIT License"));
+    assert!(web::UPLOT_JS.starts_with("/*! https://github.com/leeoniya/uPlot (v1.6.32) */"));
+    assert!(web::INDEX_HTML.contains(r#"<script src="/vendor/uPlot.iife.min.js"></script>"#));
+    assert!(web::INDEX_HTML.contains(r#"href="/vendor/uPlot.min.css""#));
     // The page is built from the stream and marks devices and points for tests and tools.
     assert!(web::INDEX_HTML.contains(r#"<script src="/app.js"></script>"#));
     assert!(web::APP_JS.contains("new EventSource("));

@@ -1,6 +1,9 @@
-//! The web page at `/`: one HTML file, a style sheet and a script, compiled into the
-//! binary. Nothing is fetched from elsewhere at run time (plants are offline): no CDN, no
-//! web fonts. The page follows `/api/events/stream` and draws its own plots.
+//! The web page at `/`: one HTML file, a style sheet and three scripts, with the chart library
+//! of its trend view (uPlot 1.6.32, MIT, vendored unchanged under `web/vendor/` with its
+//! licence), all compiled into the binary. Nothing is fetched from elsewhere at run time
+//! (plants are offline): no CDN, no web fonts. The page follows `/api/events/stream`,
+//! draws its own small plots, asks `/api/history` for the trend view and `/api/states` and
+//! `/api/production` for the production view.
 
 use axum::Router;
 use axum::http::header;
@@ -15,21 +18,44 @@ pub const INDEX_HTML: &str = include_str!("web/index.html");
 pub const APP_CSS: &str = include_str!("web/app.css");
 /// Its script.
 pub const APP_JS: &str = include_str!("web/app.js");
+/// The trend view's script.
+pub const TREND_JS: &str = include_str!("web/trend.js");
+/// The production view's script.
+pub const PRODUCTION_JS: &str = include_str!("web/production.js");
+/// uPlot, the trend view's charts (its release's minified script, unchanged).
+pub const UPLOT_JS: &str = include_str!("web/vendor/uPlot.iife.min.js");
+/// uPlot's style sheet.
+pub const UPLOT_CSS: &str = include_str!("web/vendor/uPlot.min.css");
+/// uPlot's licence (MIT), served beside it.
+pub const UPLOT_LICENSE: &str = include_str!("web/vendor/uPlot.LICENSE");
 
 /// The page's routes: method and path.
-pub const PAGE_ROUTES: &[(&str, &str)] = &[("GET", "/"), ("GET", "/app.css"), ("GET", "/app.js")];
+pub const PAGE_ROUTES: &[(&str, &str)] = &[
+    ("GET", "/"),
+    ("GET", "/app.css"),
+    ("GET", "/app.js"),
+    ("GET", "/trend.js"),
+    ("GET", "/production.js"),
+    ("GET", "/vendor/uPlot.iife.min.js"),
+    ("GET", "/vendor/uPlot.min.css"),
+    ("GET", "/vendor/uPlot.LICENSE"),
+];
 
 /// Routes serving the page.
 pub(super) fn routes() -> Router<AppState> {
+    const JS: &str = "text/javascript; charset=utf-8";
+    const CSS: &str = "text/css; charset=utf-8";
     Router::new()
         .route("/", get(|| asset("text/html; charset=utf-8", INDEX_HTML)))
+        .route("/app.css", get(|| asset(CSS, APP_CSS)))
+        .route("/app.js", get(|| asset(JS, APP_JS)))
+        .route("/trend.js", get(|| asset(JS, TREND_JS)))
+        .route("/production.js", get(|| asset(JS, PRODUCTION_JS)))
+        .route("/vendor/uPlot.iife.min.js", get(|| asset(JS, UPLOT_JS)))
+        .route("/vendor/uPlot.min.css", get(|| asset(CSS, UPLOT_CSS)))
         .route(
-            "/app.css",
-            get(|| asset("text/css; charset=utf-8", APP_CSS)),
-        )
-        .route(
-            "/app.js",
-            get(|| asset("text/javascript; charset=utf-8", APP_JS)),
+            "/vendor/uPlot.LICENSE",
+            get(|| asset("text/plain; charset=utf-8", UPLOT_LICENSE)),
         )
 }
 

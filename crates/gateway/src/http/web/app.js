@@ -6,6 +6,8 @@
 // snapshot and changes and nothing of the rest; at most PAGE_SIZE cards are on the page,
 // and a plot loads its history when it scrolls into view. The view is in the address
 // (`#line=NAME`, `&q=TEXT` for a search, `&page=N`), so a link opens the same view.
+// `#view=trend&…` shows the trend view instead, `#view=production&device=ID` a device's
+// production (trend.js and production.js, loaded before this script).
 //
 // DOM contract (for tests and other tools): each device is <section class="device"
 // id="device-ID" data-status="up|down|connecting">; each point is an element with
@@ -157,6 +159,15 @@ function renderDevice(device) {
   const address = device.address === null ? 'no address' : `address ${device.address}`;
   card.querySelector('.device-meta').textContent =
     `${device.id} · ${device.protocol.toUpperCase()} · line ${device.line} · ${address}`;
+  const trendLink = card.querySelector('.trend-link');
+  const trended = readingsToTrend(device);
+  trendLink.hidden = trended.length === 0;
+  trendLink.href = `#view=trend&points=${trended.join(',')}&range=1h`;
+  trendLink.title = 'Its readings over the last hour';
+  const productionLink = card.querySelector('.production-link');
+  productionLink.hidden = !device.points.some((p) => p.id === `${device.id}.machine_state`);
+  productionLink.href = `#view=production&device=${device.id}`;
+  productionLink.title = 'Its machine states this shift, and its OEE when it counts boards';
   for (const point of device.points) {
     const primary = isLive(device, point);
     if (point.kind.type === 'numeric') {
@@ -171,6 +182,14 @@ function renderDevice(device) {
     setUpWriteForm(device, write.querySelector('form'));
   }
   return card;
+}
+
+/** The points a device's "Trend" link opens: its live measurements, else its live states. */
+function readingsToTrend(device) {
+  const live = device.points.filter((p) => isLive(device, p));
+  const numbers = live.filter((p) => p.kind.type === 'numeric');
+  const chosen = numbers.length ? numbers : live.filter((p) => p.kind.type === 'enum');
+  return chosen.slice(0, 4).map((p) => p.id);
 }
 
 function renderTile(point) {
@@ -199,6 +218,7 @@ function updatePoint(view, live = true) {
   if (!device) return;
   const point = Object.assign(device.byId.get(view.id) || {}, view);
   device.byId.set(view.id, point);
+  if (live && view.id === `${deviceId}.machine_state`) productionNoticed(deviceId);
   const node = document.getElementById(`point-${view.id}`);
   if (!node) return;
   node.dataset.quality = judge(point);
@@ -464,6 +484,34 @@ async function refreshLines() {
   }
 }
 
+// ---- the pages: the cell, a trend, production ---------------------------------------------
+
+const PAGE_TITLES = { cell: 'cell overview', trend: 'trend', production: 'production' };
+
+/** The page the address asks for: `#view=trend…`, `#view=production…`, else the cell. */
+function pageFromAddress() {
+  const params = new URLSearchParams(window.location.hash.slice(1));
+  const view = params.get('view');
+  return { page: view in PAGE_TITLES ? view : 'cell', params };
+}
+
+/** Shows the page the address asks for (only which is visible, with `load` false). */
+function showPage(load = true) {
+  const { page, params } = pageFromAddress();
+  document.getElementById('cell-view').hidden = page !== 'cell';
+  document.getElementById('trend-view').hidden = page !== 'trend';
+  document.getElementById('production-view').hidden = page !== 'production';
+  for (const tab of document.querySelectorAll('.pages a')) {
+    if (tab.dataset.page === page) tab.setAttribute('aria-current', 'page');
+    else tab.removeAttribute('aria-current');
+  }
+  document.querySelector('.subtitle').textContent = PAGE_TITLES[page];
+  document.title = `cellbus · ${PAGE_TITLES[page]}`;
+  if (!load) return;
+  showTrend(page === 'trend' ? params : null);
+  showProduction(page === 'production' ? params : null);
+}
+
 // ---- the view: which devices are shown ------------------------------------------------
 
 function viewFromAddress() {
@@ -517,6 +565,7 @@ function showView(wanted, how) {
   const address = addressOf(view);
   const current = window.location.hash || window.location.pathname + window.location.search;
   if (how && address !== current) window.history[`${how}State`](null, '', address);
+  document.getElementById('tab-cell').href = address.startsWith('#') ? address : '#';
 
   document.getElementById('line-select').value = view.line;
   const search = document.getElementById('search');
@@ -573,7 +622,9 @@ function setUpToolbar() {
   document.getElementById('next').addEventListener('click', () => turn(1));
   // Back, forward, or an address typed or pasted.
   const follow = () => {
-    if (state.view) showView(viewFromAddress(), null);
+    if (!state.view) return;
+    if (pageFromAddress().page === 'cell') showView(viewFromAddress(), null);
+    showPage();
   };
   window.addEventListener('popstate', follow);
   window.addEventListener('hashchange', follow);
@@ -802,6 +853,7 @@ function connect(query) {
     renderDevices(snapshot.devices);
     renderLines(snapshot.lines);
     loadEvents();
+    productionSnapshot();
   });
   opened.addEventListener('value', (e) => updatePoint(JSON.parse(e.data)));
   opened.addEventListener('device', (e) => updateDeviceStatus(JSON.parse(e.data)));
@@ -830,7 +882,9 @@ async function start() {
       state.lines = lines;
       state.order = lines.flatMap((line) => line.devices);
       renderLineChoice();
-      showView(viewFromAddress(), 'replace');
+      // The cell's view is recorded in the address only when it is the page shown.
+      showView(viewFromAddress(), pageFromAddress().page === 'cell' ? 'replace' : null);
+      showPage();
       return;
     }
     why = response.status === 401 ? 'This gateway needs its read token: reload the page to give it.'
@@ -843,6 +897,9 @@ async function start() {
 }
 
 setUpToolbar();
+setUpTrend();
+setUpProduction();
+showPage(false);
 start();
 tick();
 setInterval(tick, 1000);
