@@ -204,6 +204,11 @@ impl Gateway {
         }
         let (stop, stopped) = watch::channel(false);
         let pollers = Pollers::start(tasks, stopped.clone())?;
+        tokio::spawn(crate::alarm::keeper::run(
+            Arc::clone(&cell),
+            config.alarms.clone(),
+            stopped.clone(),
+        ));
         tokio::spawn(crate::production::keeper::run(
             Arc::clone(&cell),
             options.data_dir.clone(),

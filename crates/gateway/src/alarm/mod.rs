@@ -1,7 +1,9 @@
-//! Alarms an operator works with, by ISA-18.2: each alarm's state ([`state`]) and the
-//! limit alarms on numeric points ([`limit`]).
+//! Alarms an operator works with, by ISA-18.2: each alarm's state ([`state`]), the limit
+//! alarms on numeric points ([`limit`]) the config's `[[alarm]]` tables set ([`config`]),
+//! and the task that runs them on the change stream ([`keeper`]).
 
 pub mod config;
+pub mod keeper;
 pub mod limit;
 pub mod state;
 
