@@ -179,7 +179,7 @@ fn historian_rows(pg: &Postgres, node: &str, from: i64, to: i64) -> BTreeMap<Str
         "plant",
         &format!(
             "SELECT device || '.' || point, (extract(epoch from t) * 1000)::bigint, quality, \
-             coalesce(value::text, text) FROM cellbus_samples WHERE node = '{node}' \
+             coalesce(value::text, '=' || text) FROM cellbus_samples WHERE node = '{node}' \
              AND device <> '' AND t >= to_timestamp({from} / 1000.0) \
              AND t < to_timestamp({to} / 1000.0) ORDER BY 1, 2"
         ),
@@ -188,10 +188,13 @@ fn historian_rows(pg: &Postgres, node: &str, from: i64, to: i64) -> BTreeMap<Str
     for line in out.lines().filter(|l| !l.is_empty()) {
         let f: Vec<&str> = line.splitn(4, '|').collect();
         let quality = f[2].to_owned();
-        let value = (quality == "good" && !f[3].is_empty()).then(|| {
-            // Numbers as the API prints them (shortest form), text as it is.
-            f[3].parse::<f64>()
-                .map_or_else(|_| f[3].to_owned(), |n| format!("{n}"))
+        // Text comes as `=TEXT` (an empty text is `=`, not NULL's empty field); numbers as
+        // the API prints them (shortest form).
+        let value = (quality == "good" && !f[3].is_empty()).then(|| match f[3].strip_prefix('=') {
+            Some(text) => text.to_owned(),
+            None => f[3]
+                .parse::<f64>()
+                .map_or_else(|_| f[3].to_owned(), |n| format!("{n}")),
         });
         rows.entry(f[0].to_owned()).or_default().push(Row {
             t: f[1].parse().unwrap(),

@@ -27,8 +27,8 @@
 //!
 //! Machine states (SEMI E10, [`MACHINE_STATES`]): the run state of each `live` poll,
 //! refined by the R messages that came before it: an error stop after R2E03 is `parts
-//! exhausted` (5500, with the feeder, step and nozzle as its reason), after another R2E
-//! `error stop` (5000, with the error code), during a recovery `recovery` (5300); ready
+//! exhausted` (5500, with the feeder as its reason, so the stops sort by feeder), after
+//! another R2E `error stop` (5000, with the error code and feeder), during a recovery `recovery` (5300); ready
 //! after a program was selected is `setup` (4500) until the machine runs again.
 //!
 //! Nothing is writable: C5 start and reset are commands, not values, and the gateway writes
@@ -320,21 +320,12 @@ impl Told {
     fn note(&mut self, event: &Event) {
         match event {
             Event::Error(info) => {
+                // What a supervisor sorts stops by: the feeder that ran out, the error and
+                // its feeder; the step and nozzle are in the R message's event.
                 let reason = if info.is_parts_exhausted() {
-                    format!(
-                        "feeder {} (step {}, nozzle {})",
-                        info.feeder(),
-                        info.step(),
-                        info.nozzle()
-                    )
+                    format!("feeder {}", info.feeder())
                 } else {
-                    format!(
-                        "error code {} at step {}, nozzle {}, feeder {}",
-                        info.code(),
-                        info.step(),
-                        info.nozzle(),
-                        info.feeder()
-                    )
+                    format!("error code {}, feeder {}", info.code(), info.feeder())
                 };
                 self.error = Some((info.is_parts_exhausted(), reason));
                 self.recovering = false;

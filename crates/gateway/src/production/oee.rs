@@ -48,7 +48,7 @@ pub struct StateTime {
 /// One reason the machine stopped, with how often and how long.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Stop {
-    /// The state and what the device said (`parts exhausted: feeder 7 (step 87, nozzle 7)`).
+    /// The state and what the device said (`parts exhausted: feeder 7`).
     pub reason: String,
     /// Its category.
     pub category: Category,

@@ -191,10 +191,7 @@ async fn r_messages_and_run_state_changes_become_events() {
         value(&live, "machine_state_code"),
         Ok(Value::Number(5500.0))
     );
-    let reason = format!(
-        "feeder {} (step {}, nozzle {})",
-        fields["feeder"], fields["step"], fields["nozzle"]
-    );
+    let reason = format!("feeder {}", fields["feeder"]);
     assert_eq!(
         value(&live, "machine_state_reason"),
         Ok(Value::Text(reason))
@@ -210,10 +207,7 @@ fn the_r_messages_before_a_status_answer_say_which_stop_the_machine_is_in() {
     told.note(&Event::Error(ErrorInfo::new(12, 1, 2, 3).unwrap()));
     assert_eq!(
         name(told.state(RunState::Error)),
-        (
-            "error stop",
-            Some("error code 12 at step 1, nozzle 2, feeder 3".into())
-        )
+        ("error stop", Some("error code 12, feeder 3".into()))
     );
     told.note(&Event::RecoveryStarted);
     assert_eq!(name(told.state(RunState::Error)), ("recovery", None));

@@ -67,14 +67,11 @@ fn a_range_that_starts_mid_interval_takes_the_state_in_force_before_it() {
     let mut samples = together(&[(50, "run", 1100, "")]);
     samples.state.before = Some(good(5, text("parts exhausted")));
     samples.code.before = Some(good(5, Value::Number(5500.0)));
-    samples.reason.before = Some(good(5, text("feeder 7 (step 87, nozzle 7)")));
+    samples.reason.before = Some(good(5, text("feeder 7")));
     let got = intervals(&samples, t(20), t(80));
     assert_eq!(got[0].state, "parts exhausted");
     assert_eq!(got[0].category, Category::UnscheduledDown);
-    assert_eq!(
-        got[0].reason.as_deref(),
-        Some("feeder 7 (step 87, nozzle 7)")
-    );
+    assert_eq!(got[0].reason.as_deref(), Some("feeder 7"));
     assert_eq!((got[0].start, got[0].end), (t(20), t(50)));
 }
 
