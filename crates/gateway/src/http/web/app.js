@@ -308,9 +308,10 @@ function pumpHistory() {
 async function loadHistory(pointId, generation) {
   try {
     const response = await api(`/api/history?point=${encodeURIComponent(pointId)}&from=-10m`);
-    if (!response.ok || generation !== state.generation) return;
-    const answer = await response.json();
-    if (generation !== state.generation) return;
+    // The body is read to its end whatever happens next: until it is, the request is still
+    // open, and its turn would be given to the next while it holds a connection.
+    const answer = response.ok ? await response.json() : (await response.text(), null);
+    if (!answer || generation !== state.generation) return;
     const samples = (answer.before ? [answer.before] : []).concat(answer.samples || []);
     const loaded = samples.map((s) => [
       Date.parse(s.t),
