@@ -5,7 +5,7 @@
 // here) before it shows anything.
 // With MQTT set, the gateway publishes to a broker: the page must show the MQTT link up.
 // Prints one JSON line with what it saw; exits non-zero with a reason otherwise.
-import { launch, openPage } from './browser.mjs';
+import { launch, openPage, onAPhone } from './browser.mjs';
 
 const [base, screenshot] = process.argv.slice(2);
 
@@ -80,15 +80,7 @@ try {
     return Object.fromEntries(Object.entries(byUnit).map(([u, d]) => [u, [...d]]));
   });
   // On a phone: nothing wider than the screen.
-  await page.setViewportSize({ width: 360, height: 780 });
-  const phone = await page.evaluate(() => ({
-    overflow: document.documentElement.scrollWidth - window.innerWidth,
-    widest: [...document.querySelectorAll('body *')]
-      .filter((el) => el.getBoundingClientRect().right > window.innerWidth + 1)
-      .slice(0, 5)
-      .map((el) => `${el.tagName.toLowerCase()}.${el.className}#${el.id}`),
-  }));
-  if (screenshot) await page.screenshot({ path: screenshot.replace(/\.png$/, '-phone.png'), fullPage: true });
+  const phone = await onAPhone(page, screenshot);
   if (errors.length) throw new Error(`the page threw: ${errors.join('; ')}`);
   console.log(JSON.stringify({ devices: ids, points: before.length, change, asked, mqtt, summary, formats, phone }));
 } finally {

@@ -9,7 +9,7 @@
 // phone.
 // Usage: node production.mjs http://127.0.0.1:PORT screenshot.png
 // Prints one JSON line with what it saw; exits non-zero with a reason otherwise.
-import { launch, openPage } from './browser.mjs';
+import { launch, openPage, onAPhone } from './browser.mjs';
 
 const [base, screenshot] = process.argv.slice(2);
 
@@ -105,15 +105,7 @@ try {
   const later = await shown();
 
   // On a phone: nothing wider than the screen.
-  await page.setViewportSize({ width: 360, height: 780 });
-  const phone = await page.evaluate(() => ({
-    overflow: document.documentElement.scrollWidth - window.innerWidth,
-    widest: [...document.querySelectorAll('body *')]
-      .filter((el) => el.getBoundingClientRect().right > window.innerWidth + 1)
-      .slice(0, 5)
-      .map((el) => `${el.tagName.toLowerCase()}.${el.className}#${el.id}`),
-  }));
-  if (screenshot) await page.screenshot({ path: screenshot.replace(/\.png$/, '-phone.png'), fullPage: true });
+  const phone = await onAPhone(page, screenshot);
   if (errors.length) throw new Error(`the page threw: ${errors.join('; ')}`);
   console.log(JSON.stringify({
     first, pointed: { ...pointed, segment: widest }, later, phone, answers: await Promise.all(answers),

@@ -11,7 +11,7 @@
 // Usage: node trend.mjs http://127.0.0.1:PORT screenshot.png
 // Prints one JSON line with what it saw; exits non-zero with a reason otherwise.
 import { readFile } from 'node:fs/promises';
-import { launch, openPage } from './browser.mjs';
+import { launch, openPage, onAPhone } from './browser.mjs';
 
 const [base, screenshot] = process.argv.slice(2);
 
@@ -160,19 +160,12 @@ try {
   };
 
   // On a phone: nothing wider than the screen.
-  await page.setViewportSize({ width: 360, height: 780 });
-  await page.waitForFunction(() => {
-    const plot = document.querySelector('#trend-plot .uplot');
-    return plot && plot.getBoundingClientRect().width <= window.innerWidth;
-  }, null, { timeout: 20000, polling: 50 });
-  const phone = await page.evaluate(() => ({
-    overflow: document.documentElement.scrollWidth - window.innerWidth,
-    widest: [...document.querySelectorAll('body *')]
-      .filter((el) => el.getBoundingClientRect().right > window.innerWidth + 1)
-      .slice(0, 5)
-      .map((el) => `${el.tagName.toLowerCase()}.${el.className}#${el.id}`),
-  }));
-  if (screenshot) await page.screenshot({ path: screenshot.replace(/\.png$/, '-phone.png'), fullPage: true });
+  const phone = await onAPhone(page, screenshot, async () => {
+    await page.waitForFunction(() => {
+      const plot = document.querySelector('#trend-plot .uplot');
+      return plot && plot.getBoundingClientRect().width <= window.innerWidth;
+    }, null, { timeout: 20000, polling: 50 });
+  });
   if (errors.length) throw new Error(`the page threw: ${errors.join('; ')}`);
   console.log(JSON.stringify({
     picked, legend, first: { asked: firstAsked, shown: first },

@@ -185,23 +185,16 @@ impl Condition {
 
     /// Time passes: `Some(active)` when a delay has run out.
     pub fn tick(&mut self, now: Timestamp) -> Option<bool> {
-        if self.raw == self.active {
-            return None;
-        }
-        let delay = if self.raw {
-            self.limits.on_delay
-        } else {
-            self.limits.off_delay
-        };
-        let since = self.since.unwrap_or(now);
-        if now.0 - since.0 >= i64::try_from(delay.as_millis()).unwrap_or(i64::MAX) {
+        let due = self.due()?;
+        if now >= due {
             self.active = self.raw;
             return Some(self.active);
         }
         None
     }
 
-    /// When [`Condition::tick`] will next change something, if it will.
+    /// When [`Condition::tick`] will next change something, if it will: the raw test
+    /// differs from the alarm, and its delay (on or off) runs from when it began to.
     pub fn due(&self) -> Option<Timestamp> {
         if self.raw == self.active {
             return None;

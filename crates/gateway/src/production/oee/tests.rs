@@ -41,6 +41,14 @@ fn after_eight(s: i64) -> String {
         .to_string()
 }
 
+/// Each stop as (reason, count, seconds).
+fn stops(oee: &Oee) -> Vec<(&str, u32, f64)> {
+    oee.stops
+        .iter()
+        .map(|s| (s.reason.as_str(), s.count, s.seconds))
+        .collect()
+}
+
 fn seconds_of(b: &Breakdown, state: &str) -> f64 {
     b.states
         .iter()
@@ -124,13 +132,8 @@ fn an_early_shift_with_a_break_adds_up_and_gives_its_hand_computed_oee() {
     // Two failures (5500 and 5000): 24,000 / 2 and (1,200 + 600) / 2.
     assert!(close(oee.mtbf_s, 12_000.0));
     assert!(close(oee.mttr_s, 900.0));
-    let stops: Vec<(&str, u32, f64)> = oee
-        .stops
-        .iter()
-        .map(|s| (s.reason.as_str(), s.count, s.seconds))
-        .collect();
     assert_eq!(
-        stops,
+        stops(&oee),
         [
             ("parts exhausted: feeder 7", 1, 1_200.0),
             ("ready", 1, 1_200.0),
@@ -216,13 +219,8 @@ fn stops_under_the_micro_stop_threshold_are_run_time_and_one_line_of_the_stops()
     assert!(close(oee.availability, 0.8));
     assert_eq!(oee.performance, None);
     assert_eq!(oee.oee, None);
-    let stops: Vec<(&str, u32, f64)> = oee
-        .stops
-        .iter()
-        .map(|s| (s.reason.as_str(), s.count, s.seconds))
-        .collect();
     assert_eq!(
-        stops,
+        stops(&oee),
         [("error stop", 1, 300.0), ("short stops under 2m", 1, 60.0)]
     );
 }
