@@ -27,8 +27,8 @@ pub(crate) struct ProductionQuery {
     day: Option<String>,
 }
 
-/// The range asked for: `from`/`to`, or `shift` (on `day`, default today), or without
-/// either the shift under way (or, outside every shift, the last 24 h).
+/// The range asked for: `from`/`to`, or `shift` (on `day`, default today), or a whole
+/// `day`, or without any the shift under way (or, outside every shift, the last 24 h).
 fn range(
     s: &AppState,
     q: &ProductionQuery,
@@ -40,19 +40,29 @@ fn range(
             "give either shift (and day) or from and to, not both",
         ));
     }
-    if q.day.is_some() && q.shift.is_none() {
+    if q.day.is_some() && (q.from.is_some() || q.to.is_some()) {
         return Err(ApiError::bad_request(
-            "day needs shift: ?shift=NAME&day=YYYY-MM-DD (or give from and to)",
+            "give either day (and shift) or from and to, not both",
         ));
+    }
+    let day = |text: &str| {
+        text.parse::<jiff::civil::Date>().map_err(|_| {
+            ApiError::bad_request(format!(
+                "day {:?} is not a date; write YYYY-MM-DD",
+                kit::bounded::cut(text, 40)
+            ))
+        })
+    };
+    if let (None, Some(text)) = (&q.shift, &q.day) {
+        // A whole day, midnight to midnight in the cell's zone.
+        let (from, to) = shifts
+            .day(day(text)?)
+            .ok_or_else(|| ApiError::bad_request("day is outside the calendar"))?;
+        return Ok((from, to, None));
     }
     if let Some(name) = &q.shift {
         let day = match &q.day {
-            Some(text) => text.parse::<jiff::civil::Date>().map_err(|_| {
-                ApiError::bad_request(format!(
-                    "day {:?} is not a date; write YYYY-MM-DD",
-                    kit::bounded::cut(text, 40)
-                ))
-            })?,
+            Some(text) => day(text)?,
             None => shifts.day_of(now),
         };
         let Some(known) = shifts.shifts().iter().find(|s| &s.name == name) else {

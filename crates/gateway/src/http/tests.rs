@@ -1520,9 +1520,9 @@ async fn production_queries_that_cannot_be_answered_say_why() {
             "no shift \"late\"; the cell's shifts: day",
         ),
         (
-            "/api/production?device=jbc1&day=2026-11-02",
+            "/api/production?device=jbc1&day=2026-11-02&from=-1h",
             StatusCode::BAD_REQUEST,
-            "day needs shift",
+            "not both",
         ),
         (
             "/api/production?device=jbc1&shift=day&day=2 Nov",
@@ -1560,5 +1560,10 @@ async fn production_queries_that_cannot_be_answered_say_why() {
     assert_eq!(status, StatusCode::OK, "{body}");
     assert_eq!(body["shift"]["name"], "day");
     assert_eq!(body["shift"]["day"], "2026-07-15");
+    assert_eq!(body["unobserved_s"], 24.0 * 3600.0, "{body}");
+    // A whole day without a shift: midnight to midnight.
+    let (status, body) = get(&app, "/api/production?device=jbc1&day=2026-07-15").await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    assert!(body.get("shift").is_none(), "{body}");
     assert_eq!(body["unobserved_s"], 24.0 * 3600.0, "{body}");
 }

@@ -128,6 +128,16 @@ impl Shifts {
         to_jiff(t).to_zoned(self.zone.clone()).date()
     }
 
+    /// Day `day` in the cell's zone, from its midnight to the next (23 or 25 h on the days
+    /// the clocks change).
+    pub fn day(&self, day: Date) -> Option<(Timestamp, Timestamp)> {
+        let start = |d: Date| -> Option<Timestamp> {
+            let zoned = d.to_zoned(self.zone.clone()).ok()?;
+            Some(Timestamp(zoned.timestamp().as_millisecond()))
+        };
+        Some((start(day)?, start(day.tomorrow().ok()?)?))
+    }
+
     /// The shifts that overlap `[from, to)`, in time order.
     pub fn windows(&self, from: Timestamp, to: Timestamp) -> Vec<ShiftWindow> {
         let mut out = Vec::new();

@@ -73,6 +73,14 @@ fn a_night_shift_on_the_night_the_clocks_go_forward_is_an_hour_shorter() {
 }
 
 #[test]
+fn a_day_runs_from_midnight_to_midnight_and_is_23_hours_when_the_clocks_go_forward() {
+    let shifts = Shifts::new(Some("Europe/Berlin"), Vec::new()).unwrap();
+    let (from, to) = shifts.day("2026-03-29".parse().unwrap()).unwrap();
+    assert_eq!(from, utc("2026-03-28T23:00:00Z"));
+    assert_eq!(to, utc("2026-03-29T22:00:00Z"));
+}
+
+#[test]
 fn a_range_that_cuts_a_shift_plans_only_its_part_of_it() {
     let shifts = Shifts::new(Some("UTC"), vec![night()]).unwrap();
     let planned = shifts.planned(utc("2026-11-03T01:00:00Z"), utc("2026-11-03T03:00:00Z"));
