@@ -40,6 +40,11 @@ impl Stop {
     /// caught from here on; one that comes while the watch is busy (reading a device) is
     /// kept until it next waits.
     pub fn new(duration: Option<Duration>) -> Self {
+        Self::from(Instant::now(), duration)
+    }
+
+    /// Like [`Stop::new`], the deadline counted from `start`.
+    fn from(start: Instant, duration: Option<Duration>) -> Self {
         let (tell, interrupted) = watch::channel(false);
         // Registered now, not when a task first runs: a Ctrl-C right after the first round
         // must not find SIGINT's default action (ending the process mid-line) still set.
@@ -54,7 +59,7 @@ impl Stop {
             Err(e) => tracing::debug!("Ctrl-C is not caught, it ends the watch at once: {e}"),
         }
         Self {
-            deadline: duration.map(|d| Instant::now() + d),
+            deadline: duration.map(|d| start + d),
             interrupted,
         }
     }
@@ -93,12 +98,15 @@ pub struct Rounds {
 impl Rounds {
     /// Rounds every `interval`, the first at once, until `stop` says.
     pub fn new(interval: Duration, stop: StopArgs) -> Self {
-        let mut ticker = tokio::time::interval(interval);
+        // One start for the ticks and the deadline: a tick due exactly at `--for`'s end
+        // (the fourth of `--interval 100ms --for 300ms`) is at it, not a hair before it.
+        let start = Instant::now();
+        let mut ticker = tokio::time::interval_at(start, interval);
         ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
         Self {
             ticker,
-            started: Instant::now(),
-            stop: Stop::new(stop.duration),
+            started: start,
+            stop: Stop::from(start, stop.duration),
             left: stop.count,
         }
     }
