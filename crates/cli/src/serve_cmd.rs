@@ -269,6 +269,16 @@ pub fn config(command: ConfigCommand) -> anyhow::Result<ExitCode> {
             for (table, words) in interfaces {
                 output::line(format!("  [{table}] {words}").trim_end().to_owned())?;
             }
+            let shifts = &cell.shifts;
+            let each: Vec<String> = shifts.shifts().iter().map(ToString::to_string).collect();
+            output::line(format!(
+                "  shifts ({}): {}",
+                shifts.zone_name(),
+                each.join("; ")
+            ))?;
+            for alarm in &cell.alarms {
+                output::line(format!("  alarm on {}", alarm.describe()))?;
+            }
             let overloaded = loads.iter().filter_map(gateway::load::LineLoad::warning);
             for warning in cell
                 .warnings()

@@ -206,6 +206,22 @@ fn the_example_configuration_passes_its_own_check() {
     let out = config_check(&example.stdout);
     assert!(out.status.success(), "{}", stderr(&out));
     assert_stdout_has(&out, ": ok,");
+    assert_stdout_has(
+        &out,
+        "early: mon, tue, wed, thu, fri 06:00–14:00, 2 breaks; late: mon, tue, wed, thu, fri 14:00–22:00, 1 break",
+    );
+    // With a limit alarm: told in words.
+    let mut text = example.stdout.clone();
+    text.extend_from_slice(
+        b"\n[[alarm]]\npoint = \"jbc1.air_temperature\"\nhigh = 450.0\ndeadband = 5.0\n\
+          on_delay = \"5s\"\npriority = \"urgent\"\n",
+    );
+    let out = config_check(&text);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_stdout_has(
+        &out,
+        "  alarm on jbc1.air_temperature: above 450 (deadband 5, on delay 5s), urgent priority",
+    );
 }
 
 #[test]

@@ -45,6 +45,46 @@ pub struct AlarmConfig {
     pub chatter: Option<ChatterRule>,
 }
 
+impl AlarmConfig {
+    /// Its limits in words: `sealer0.temperature: above 190 (deadband 5, on delay 5s),
+    /// high priority`.
+    pub fn describe(&self) -> String {
+        let l = &self.limits;
+        let mut parts: Vec<String> = [
+            ("above", l.high_high, " (high-high)"),
+            ("above", l.high, ""),
+            ("below", l.low, ""),
+            ("below", l.low_low, " (low-low)"),
+        ]
+        .into_iter()
+        .filter_map(|(word, v, which)| v.map(|v| format!("{word} {v}{which}")))
+        .collect();
+        if let Some(rate) = l.rate_of_change {
+            parts.push(format!("changing faster than {rate}/s"));
+        }
+        let mut extra = Vec::new();
+        if l.deadband > 0.0 {
+            extra.push(format!("deadband {}", l.deadband));
+        }
+        for (word, d) in [("on delay", l.on_delay), ("off delay", l.off_delay)] {
+            if !d.is_zero() {
+                extra.push(format!("{word} {}", humantime::format_duration(d)));
+            }
+        }
+        let extra = if extra.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", extra.join(", "))
+        };
+        format!(
+            "{}: {}{extra}, {} priority",
+            self.point,
+            parts.join(" or "),
+            self.priority.as_str()
+        )
+    }
+}
+
 /// An `[[alarm]]` as written.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

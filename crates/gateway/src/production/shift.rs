@@ -324,6 +324,34 @@ pub fn clock(text: &str) -> Option<Time> {
     Time::new(h.parse().ok()?, m.parse().ok()?, 0, 0).ok()
 }
 
+impl fmt::Display for Shift {
+    /// `early: mon, tue, wed, thu, fri 06:00–14:00, 2 breaks`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let days = if self.days.len() == 7 {
+            "every day".to_owned()
+        } else {
+            const SHORT: [&str; 7] = ["mon", "tue", "wed", "thu", "fri", "sat", "sun"];
+            self.days
+                .iter()
+                .map(|d| SHORT[d.to_monday_zero_offset() as usize])
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        write!(
+            f,
+            "{}: {days} {}–{}",
+            self.name,
+            self.start.strftime("%H:%M"),
+            self.end.strftime("%H:%M")
+        )?;
+        match self.breaks.len() {
+            0 => Ok(()),
+            1 => f.write_str(", 1 break"),
+            n => write!(f, ", {n} breaks"),
+        }
+    }
+}
+
 impl fmt::Display for ShiftWindow {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{} on {}", self.name, self.day)
