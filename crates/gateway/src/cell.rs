@@ -47,6 +47,21 @@ pub struct Cell {
     pub production: crate::production::Plan,
 }
 
+/// The shifts of `config`, its devices with states and those that produce.
+fn production_plan(config: &CellConfig) -> crate::production::Plan {
+    let mut plan = crate::production::Plan::new(config.shifts.clone());
+    for device in config.lines.iter().flat_map(|l| &l.devices) {
+        let kind = device.driver.protocol;
+        plan.add(
+            &device.driver.id,
+            kind.machine_states(),
+            kind.production(),
+            device.production.clone(),
+        );
+    }
+    plan
+}
+
 /// The status of an interface the gateway has but that does not run (not configured):
 /// `null` under its name in `/healthz`, until the interface registers its own.
 #[derive(Debug)]
@@ -559,7 +574,7 @@ impl Cell {
             interfaces: RwLock::new(Vec::new()),
             log_throttle: std::sync::Mutex::default(),
             links_down: RwLock::default(),
-            production: crate::production::Plan::of(config),
+            production: production_plan(config),
         });
         Ok((cell, plans))
     }

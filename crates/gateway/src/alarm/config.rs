@@ -22,8 +22,8 @@ use toml::Spanned;
 use super::Priority;
 use super::limit::Limits;
 use super::state::ChatterRule;
-use crate::config::{ConfigError, LineConfig, duration};
-use crate::point::{PointId, PointKind};
+use crate::config::table::{ConfigError, duration};
+use crate::point::{PointId, PointKind, PointSpec};
 
 /// Longest on or off delay, and longest chatter window or shelving.
 const MAX_DELAY: Duration = Duration::from_secs(24 * 3600);
@@ -122,17 +122,22 @@ struct RawChatter {
     shelve: Option<Spanned<String>>,
 }
 
-/// The `[[alarm]]` tables against the cell's `lines`: each point must be a numeric point
-/// of a device of the cell, its limits able to hold. Each mistake goes to `errors`.
+/// A device's points by its id: `None` when the cell has no such device, an error when
+/// its driver cannot be made.
+pub(crate) type PointsOf<'a> = dyn Fn(&str) -> Option<Result<Vec<PointSpec>, String>> + 'a;
+
+/// The `[[alarm]]` tables against the cell's devices (`points_of`): each point must be a
+/// numeric point of a device of the cell, its limits able to hold. Each mistake goes to
+/// `errors`.
 pub(crate) fn read_alarms(
     raw: Vec<RawAlarm>,
-    lines: &[LineConfig],
+    points_of: &PointsOf<'_>,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
     errors: &mut Vec<ConfigError>,
 ) -> Vec<AlarmConfig> {
     let mut alarms = Vec::new();
     for alarm in raw {
-        match read_alarm(alarm, lines, at) {
+        match read_alarm(alarm, points_of, at) {
             Ok(alarm) => alarms.push(alarm),
             Err(e) => errors.push(e),
         }
@@ -142,7 +147,7 @@ pub(crate) fn read_alarms(
 
 fn read_alarm(
     raw: RawAlarm,
-    lines: &[LineConfig],
+    points_of: &PointsOf<'_>,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<AlarmConfig, ConfigError> {
     let text = raw.point.get_ref();
@@ -155,7 +160,7 @@ fn read_alarm(
             ),
         )
     })?;
-    check_point(&point, lines).map_err(|m| at(raw.point.span(), m))?;
+    check_point(&point, points_of).map_err(|m| at(raw.point.span(), m))?;
     let number = |v: &Option<Spanned<f64>>| v.as_ref().map(|s| *s.get_ref());
     let delay = |d: &Option<Spanned<String>>, what: &str| {
         d.as_ref()
@@ -228,20 +233,16 @@ fn read_alarm(
     })
 }
 
-/// Whether `point` is a numeric point of a device of `lines` (its driver lists the
+/// Whether `point` is a numeric point of a device of the cell (its driver lists the
 /// device's points; building one opens nothing).
-fn check_point(point: &PointId, lines: &[LineConfig]) -> Result<(), String> {
-    let Some(device) = lines
-        .iter()
-        .flat_map(|l| &l.devices)
-        .find(|d| d.driver.id.as_str() == point.device())
-    else {
+fn check_point(point: &PointId, points_of: &PointsOf<'_>) -> Result<(), String> {
+    let Some(points) = points_of(point.device()) else {
         return Err(format!(
             "alarm point {point}: the cell has no device {:?}",
             point.device()
         ));
     };
-    let points = device.driver.build()?.points();
+    let points = points?;
     let Some(spec) = points.iter().find(|p| p.id == *point) else {
         let numeric: Vec<&str> = points
             .iter()

@@ -531,7 +531,14 @@ pub fn parse_config(text: &str, path: &Path, plugins: &Plugins) -> Result<CellCo
             ));
         }
     }
-    let alarms = crate::alarm::config::read_alarms(raw.alarm, &lines, &at, &mut errors);
+    let points_of = |device: &str| {
+        lines
+            .iter()
+            .flat_map(|l: &LineConfig| &l.devices)
+            .find(|d| d.driver.id.as_str() == device)
+            .map(|d| d.driver.build().map(|driver| driver.points()))
+    };
+    let alarms = crate::alarm::config::read_alarms(raw.alarm, &points_of, &at, &mut errors);
     if let Some(error) = ConfigError::all(errors) {
         return Err(error);
     }

@@ -36,6 +36,7 @@ use jbus::cross::{
 use jbus::rtu::UnitId;
 use link::{SerialSettings, SharedLine};
 
+use super::machine::StatePoints;
 use super::{
     BoxFuture, Described, DeviceError, DeviceEvent, Driver, DriverConfig, ErrorKind, Kind,
     PollGroup, Reading, WriteError, point_ids,
@@ -44,7 +45,7 @@ use crate::event::EventKind;
 use crate::point::{
     AlarmRule, Checked, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
 };
-use crate::production::{StateDef, StatePoints};
+use crate::production::StateDef;
 
 /// A CROSS line when the URL says nothing: 9600 baud, 8N1.
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);

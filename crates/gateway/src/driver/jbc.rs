@@ -40,6 +40,7 @@ use jbc::device::{ADJUST_TEMP_RANGE, AIR_FLOW_RANGE, AIR_TEMP_RANGE, EXTERNAL_TE
 use jbc::frame::{Address, Route};
 use link::{SerialSettings, SharedLine};
 
+use super::machine::{StatePoints, number_in};
 use super::{
     BoxFuture, Described, DeviceError, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
     WriteError, enum_states, point_ids,
@@ -48,8 +49,7 @@ use crate::point::{
     AlarmRule, Checked, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError, WriteRange,
 };
-use crate::production::states::number_in;
-use crate::production::{StateDef, StatePoints};
+use crate::production::StateDef;
 
 /// A JTSE's line when the URL says nothing: 19200 baud, 8E1 (the manual's example).
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8e1(19200);

@@ -42,6 +42,7 @@ use crate::point::{Checked, DeviceId, PointId, PointSpec, Value, ValueError};
 
 pub mod cross;
 pub mod jbc;
+pub mod machine;
 pub mod modbus;
 pub mod panasonic;
 pub mod thermosald;
@@ -444,7 +445,7 @@ pub trait DeviceKind: Send + Sync + 'static {
 
     /// The machine states its devices report on the SEMI E10 scale, with their default
     /// codes; none by default. Its drivers report them through
-    /// [`crate::production::StatePoints`]; a device's `states` table in the config moves
+    /// [`machine::StatePoints`]; a device's `states` table in the config moves
     /// one to another code.
     fn machine_states(&self) -> &'static [crate::production::StateDef] {
         &[]

@@ -49,6 +49,7 @@ use panasonic::{DEFAULT_EVENT_PORT, Port};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
+use super::machine::StatePoints;
 use super::{
     BoxFuture, DeviceError, DeviceEvent, DeviceKind, Driver, DriverConfig, ErrorKind, Kind,
     PollGroup, Reading, WriteError,
@@ -58,7 +59,7 @@ use crate::point::{
     AlarmRule, Checked, EnumState, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError,
 };
-use crate::production::{ProductionPoints, StateDef, StatePoints};
+use crate::production::{ProductionPoints, StateDef};
 use crate::time::Timestamp;
 
 /// The status, every second.

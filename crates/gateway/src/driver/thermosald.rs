@@ -65,6 +65,7 @@ use thermosald::exchange::Values;
 use thermosald::tables::{self, Item, Table, machine, runtime, service, settings};
 use thermosald::{Address, RawValue, Read, Target};
 
+use super::machine::{StatePoints, number_in};
 use super::{
     BoxFuture, Described, DeviceError, Driver, DriverConfig, ErrorKind, Kind, PollGroup, Reading,
     WriteError, enum_states, point_ids,
@@ -73,8 +74,7 @@ use crate::point::{
     AlarmRule, Checked, DeviceId, PointDescription, PointId, PointKind, PointSpec, Value,
     ValueError, WriteRange,
 };
-use crate::production::states::number_in;
-use crate::production::{StateDef, StatePoints};
+use crate::production::StateDef;
 
 /// A Thermosald line when the URL says nothing: 9600 baud, 8N1 (the spec's).
 pub const DEFAULT_SERIAL: SerialSettings = SerialSettings::new_8n1(9600);

@@ -12,7 +12,7 @@ use toml::Spanned;
 use super::shift::{self, EVERY_DAY, Shift, Shifts};
 use super::states::{StateOverrides, check_overrides};
 use super::{ProductionSettings, StateDef};
-use crate::config::{ConfigError, duration};
+use crate::config::table::{ConfigError, duration};
 use crate::point::PointId;
 
 /// Longest ideal cycle or micro-stop threshold accepted.

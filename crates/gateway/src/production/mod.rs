@@ -2,7 +2,7 @@
 //!
 //! - [`e10`]: the categories and the IPC-CFX codes.
 //! - [`states`]: a device's state points (`machine_state`, `machine_state_code`,
-//!   `machine_state_reason`), which drivers report through [`states::StatePoints`], and
+//!   `machine_state_reason`), which drivers report through `driver::machine::StatePoints`, and
 //!   the intervals the history makes of them.
 //! - [`shift`]: the `[[shift]]` tables and `time_zone`: planned production time.
 //! - [`oee`]: the breakdown of a range by state, its stops and its OEE, sans IO.
@@ -19,7 +19,6 @@ use std::time::Duration;
 
 use std::sync::Arc;
 
-use crate::config::CellConfig;
 use crate::point::{DeviceId, PointDescription, PointKind, PointSpec};
 
 pub mod config;
@@ -32,7 +31,7 @@ pub mod states;
 
 pub use e10::{Category, StateCode};
 pub use shift::Shifts;
-pub use states::{StateDef, StatePoints};
+pub use states::StateDef;
 
 /// The points of a device kind that count its production, by their names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -87,28 +86,35 @@ pub struct Plan {
 }
 
 impl Plan {
-    /// The plan of `config`.
-    pub fn of(config: &CellConfig) -> Self {
-        let mut plan = Plan {
-            shifts: config.shifts.clone(),
+    /// A plan of `shifts`, without devices yet.
+    pub fn new(shifts: Shifts) -> Self {
+        Plan {
+            shifts,
             ..Plan::default()
-        };
-        for device in config.lines.iter().flat_map(|l| &l.devices) {
-            let kind = device.driver.protocol;
-            if !kind.machine_states().is_empty() {
-                plan.with_states.push(device.driver.id.clone());
-            }
-            if let Some(points) = kind.production() {
-                plan.producers.insert(
-                    device.driver.id.clone(),
-                    Producer {
-                        points: *points,
-                        settings: device.production.clone().unwrap_or_default(),
-                    },
-                );
-            }
         }
-        plan
+    }
+
+    /// Adds `device`, whose kind reports `states` and counts `production` with the
+    /// config's `settings`.
+    pub fn add(
+        &mut self,
+        device: &DeviceId,
+        states: &[StateDef],
+        production: Option<&ProductionPoints>,
+        settings: Option<ProductionSettings>,
+    ) {
+        if !states.is_empty() {
+            self.with_states.push(device.clone());
+        }
+        if let Some(points) = production {
+            self.producers.insert(
+                device.clone(),
+                Producer {
+                    points: *points,
+                    settings: settings.unwrap_or_default(),
+                },
+            );
+        }
     }
 
     /// Whether `device` reports machine states.

@@ -1,8 +1,8 @@
 use std::collections::HashSet;
 
 use super::*;
+use crate::driver::machine::StatePoints;
 use crate::point::DeviceId;
-use crate::production::StatePoints;
 use crate::testing::reading as value;
 use jbus::cross::device::CrossTwin;
 use wire::device::SharedModel;

@@ -1,6 +1,6 @@
 use super::*;
 use crate::driver::ErrorKind;
-use crate::production::StatePoints;
+use crate::driver::machine::StatePoints;
 use crate::testing::CheckThenWrite;
 use crate::testing::reading as value;
 use jbc::device::{Station, StationConfig};

@@ -4,7 +4,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use super::*;
-use crate::production::StatePoints;
+use crate::driver::machine::StatePoints;
 use crate::testing::reading as value;
 use thermosald::device::RegulatorBus;
 use wire::Transmit;
