@@ -85,6 +85,13 @@ pub struct OeeLabels {
     pub window: String,
 }
 
+/// Labels of the alarm gauges.
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct PriorityLabels {
+    /// `low`, `medium`, `high` or `urgent`.
+    pub priority: String,
+}
+
 /// Labels of the write counter.
 #[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct WriteLabels {
@@ -131,6 +138,10 @@ pub struct Metrics {
     pub device_state_seconds: Family<StateLabels, Counter<f64, AtomicU64>>,
     /// The OEE of each producing device's current shift, and its parts.
     pub oee: Family<OeeLabels, Gauge<f64, AtomicU64>>,
+    /// Limit alarms whose condition is active, by priority.
+    pub alarms_active: Family<PriorityLabels, Gauge>,
+    /// Limit alarms waiting for an acknowledgement (active or returned), by priority.
+    pub alarms_unacknowledged: Family<PriorityLabels, Gauge>,
     history_rows: Counter,
     history_commit_errors: Counter,
     history_rows_dropped: Counter,
@@ -238,6 +249,8 @@ impl Metrics {
         let sse_clients = Gauge::default();
         let device_state_seconds = Family::<StateLabels, Counter<f64, AtomicU64>>::default();
         let oee = Family::<OeeLabels, Gauge<f64, AtomicU64>>::default();
+        let alarms_active = Family::<PriorityLabels, Gauge>::default();
+        let alarms_unacknowledged = Family::<PriorityLabels, Gauge>::default();
         let history_rows = Counter::default();
         let history_commit_errors = Counter::default();
         let history_rows_dropped = Counter::default();
@@ -303,6 +316,16 @@ impl Metrics {
             oee.clone(),
         );
         registry.register(
+            "alarms_active",
+            "Limit alarms whose condition is active, by priority",
+            alarms_active.clone(),
+        );
+        registry.register(
+            "alarms_unacknowledged",
+            "Limit alarms waiting for an acknowledgement (active or returned to normal), by priority",
+            alarms_unacknowledged.clone(),
+        );
+        registry.register(
             "history_rows_written",
             "Rows committed to the history database (samples, events, audit)",
             history_rows.clone(),
@@ -340,6 +363,8 @@ impl Metrics {
             sse_clients,
             device_state_seconds,
             oee,
+            alarms_active,
+            alarms_unacknowledged,
             history_rows,
             history_commit_errors,
             history_rows_dropped,

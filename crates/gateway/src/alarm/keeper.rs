@@ -85,6 +85,27 @@ impl Watcher {
         }
     }
 
+    /// Per priority: alarms whose condition is active, and alarms waiting for an
+    /// acknowledgement (ISA-18.2's unacknowledged and returned unacknowledged).
+    pub fn counts(&self) -> Vec<(super::Priority, i64, i64)> {
+        super::Priority::ALL
+            .into_iter()
+            .map(|priority| {
+                let of = self
+                    .watched
+                    .iter()
+                    .filter(|w| self.configs[w.config].priority == priority);
+                let active = of.clone().filter(|w| w.alarm.state().active()).count();
+                let unacked = of.filter(|w| w.alarm.state().unacknowledged()).count();
+                (
+                    priority,
+                    i64::try_from(active).unwrap_or(i64::MAX),
+                    i64::try_from(unacked).unwrap_or(i64::MAX),
+                )
+            })
+            .collect()
+    }
+
     /// Whether `point` is watched.
     pub fn watches(&self, point: &PointId) -> bool {
         self.by_point.contains_key(point)
@@ -176,6 +197,7 @@ pub async fn run(cell: Arc<Cell>, configs: Vec<AlarmConfig>, mut stop: watch::Re
         return;
     }
     let mut watcher = Watcher::new(configs);
+    gauges(&cell, &watcher);
     let mut changes = cell.subscribe();
     let mut tick = tokio::time::interval(TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -195,9 +217,27 @@ pub async fn run(cell: Arc<Cell>, configs: Vec<AlarmConfig>, mut stop: watch::Re
                 _ => Vec::new(),
             },
         };
+        if !raised.is_empty() {
+            gauges(&cell, &watcher);
+        }
         for r in raised {
             emit(&cell, &watcher, &r);
         }
+    }
+}
+
+/// The alarm gauges of the metrics, from the watcher's counts.
+fn gauges(cell: &Cell, watcher: &Watcher) {
+    let metrics = cell.metrics();
+    for (priority, active, unacked) in watcher.counts() {
+        let labels = crate::metrics::PriorityLabels {
+            priority: priority.as_str().to_owned(),
+        };
+        metrics.alarms_active.get_or_create(&labels).set(active);
+        metrics
+            .alarms_unacknowledged
+            .get_or_create(&labels)
+            .set(unacked);
     }
 }
 
