@@ -307,15 +307,7 @@ fn the_production_view_shows_the_placement_machines_states_oee_and_stops_as_the_
 
     // The legend: a colour per category, none alike.
     let legend = first["legend"].as_object().unwrap();
-    let categories = [
-        "productive",
-        "standby",
-        "engineering",
-        "scheduled_down",
-        "unscheduled_down",
-        "non_scheduled",
-        "unknown",
-    ];
+    let categories = gateway::production::Category::ALL;
     assert_eq!(legend.keys().collect::<Vec<_>>().len(), categories.len());
     let mut colours: Vec<&str> = legend.values().map(|c| c.as_str().unwrap()).collect();
     colours.sort_unstable();

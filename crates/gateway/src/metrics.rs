@@ -65,33 +65,6 @@ pub struct LineLabels {
     pub line: String,
 }
 
-/// Labels of the time per E10 category.
-#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
-pub struct StateLabels {
-    /// The device's id.
-    pub device: String,
-    /// The E10 category (`productive`, `unscheduled_down`, …, `unknown`).
-    pub category: String,
-}
-
-/// Labels of the OEE gauges.
-#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
-pub struct OeeLabels {
-    /// The device's id.
-    pub device: String,
-    /// `availability`, `performance`, `quality` or `oee`.
-    pub part: String,
-    /// The range: `shift` (the current shift so far).
-    pub window: String,
-}
-
-/// Labels of the alarm gauges.
-#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
-pub struct PriorityLabels {
-    /// `low`, `medium`, `high` or `urgent`.
-    pub priority: String,
-}
-
 /// Labels of the write counter.
 #[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct WriteLabels {
@@ -134,14 +107,6 @@ pub struct Metrics {
     pub writes: Family<WriteLabels, Counter>,
     /// Open event streams.
     pub sse_clients: Gauge,
-    /// Seconds each device spent in each E10 category.
-    pub device_state_seconds: Family<StateLabels, Counter<f64, AtomicU64>>,
-    /// The OEE of each producing device's current shift, and its parts.
-    pub oee: Family<OeeLabels, Gauge<f64, AtomicU64>>,
-    /// Limit alarms whose condition is active, by priority.
-    pub alarms_active: Family<PriorityLabels, Gauge>,
-    /// Limit alarms waiting for an acknowledgement (active or returned), by priority.
-    pub alarms_unacknowledged: Family<PriorityLabels, Gauge>,
     history_rows: Counter,
     history_commit_errors: Counter,
     history_rows_dropped: Counter,
@@ -205,31 +170,6 @@ impl Metrics {
             .map_or(0, |c| c.get())
     }
 
-    /// The counter of seconds `device` spent in `category`.
-    pub fn state_seconds(
-        &self,
-        device: &str,
-        category: crate::production::Category,
-    ) -> Counter<f64, AtomicU64> {
-        self.device_state_seconds
-            .get_or_create(&StateLabels {
-                device: device.to_owned(),
-                category: category.as_str().to_owned(),
-            })
-            .clone()
-    }
-
-    /// The gauge of `part` of `device`'s OEE this shift.
-    pub fn oee_ratio(&self, device: &str, part: &str) -> Gauge<f64, AtomicU64> {
-        self.oee
-            .get_or_create(&OeeLabels {
-                device: device.to_owned(),
-                part: part.to_owned(),
-                window: "shift".to_owned(),
-            })
-            .clone()
-    }
-
     /// Registers every metric.
     pub fn new() -> Self {
         let mut registry = Registry::with_prefix("cellbus");
@@ -247,10 +187,6 @@ impl Metrics {
         let events = Counter::default();
         let writes = Family::<WriteLabels, Counter>::default();
         let sse_clients = Gauge::default();
-        let device_state_seconds = Family::<StateLabels, Counter<f64, AtomicU64>>::default();
-        let oee = Family::<OeeLabels, Gauge<f64, AtomicU64>>::default();
-        let alarms_active = Family::<PriorityLabels, Gauge>::default();
-        let alarms_unacknowledged = Family::<PriorityLabels, Gauge>::default();
         let history_rows = Counter::default();
         let history_commit_errors = Counter::default();
         let history_rows_dropped = Counter::default();
@@ -306,26 +242,6 @@ impl Metrics {
             sse_clients.clone(),
         );
         registry.register(
-            "device_state_seconds",
-            "Time the device spent in each SEMI E10 category (unknown: no data)",
-            device_state_seconds.clone(),
-        );
-        registry.register(
-            "oee_ratio",
-            "OEE of the current shift so far and its parts (availability, performance, quality), 0-1",
-            oee.clone(),
-        );
-        registry.register(
-            "alarms_active",
-            "Limit alarms whose condition is active, by priority",
-            alarms_active.clone(),
-        );
-        registry.register(
-            "alarms_unacknowledged",
-            "Limit alarms waiting for an acknowledgement (active or returned to normal), by priority",
-            alarms_unacknowledged.clone(),
-        );
-        registry.register(
             "history_rows_written",
             "Rows committed to the history database (samples, events, audit)",
             history_rows.clone(),
@@ -361,10 +277,6 @@ impl Metrics {
             events,
             writes,
             sse_clients,
-            device_state_seconds,
-            oee,
-            alarms_active,
-            alarms_unacknowledged,
             history_rows,
             history_commit_errors,
             history_rows_dropped,
@@ -373,7 +285,8 @@ impl Metrics {
         }
     }
 
-    /// Registers an interface's metrics (named `cellbus_…` like the rest), when it starts.
+    /// Registers the metrics of an interface or a core task (MQTT, OPC UA, the production
+    /// and alarm keepers), named `cellbus_…` like the rest, when it starts.
     pub fn register(&self, register: impl FnOnce(&mut Registry)) {
         register(
             &mut self

@@ -8,6 +8,10 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::registry::Registry;
 use tokio::sync::{broadcast, watch};
 
 use super::config::AlarmConfig;
@@ -20,6 +24,47 @@ use crate::time::Timestamp;
 
 /// How often the delays are looked at.
 const TICK: Duration = Duration::from_millis(250);
+
+/// Labels of the alarm gauges.
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct PriorityLabels {
+    priority: String,
+}
+
+/// The keeper's metrics, registered when it starts.
+#[derive(Debug, Default)]
+struct AlarmMetrics {
+    /// Limit alarms whose condition is active, by priority.
+    active: Family<PriorityLabels, Gauge>,
+    /// Limit alarms waiting for an acknowledgement (active or returned), by priority.
+    unacknowledged: Family<PriorityLabels, Gauge>,
+}
+
+impl AlarmMetrics {
+    fn register(&self, registry: &mut Registry) {
+        registry.register(
+            "alarms_active",
+            "Limit alarms whose condition is active, by priority",
+            self.active.clone(),
+        );
+        registry.register(
+            "alarms_unacknowledged",
+            "Limit alarms waiting for an acknowledgement (active or returned to normal), by priority",
+            self.unacknowledged.clone(),
+        );
+    }
+
+    /// The gauges from the watcher's counts.
+    fn set(&self, watcher: &Watcher) {
+        for (priority, active, unacked) in watcher.counts() {
+            let labels = PriorityLabels {
+                priority: priority.as_str().to_owned(),
+            };
+            self.active.get_or_create(&labels).set(active);
+            self.unacknowledged.get_or_create(&labels).set(unacked);
+        }
+    }
+}
 
 /// One limit alarm: its level's condition and its ISA-18.2 state.
 #[derive(Debug)]
@@ -56,7 +101,6 @@ pub struct Watcher {
     configs: Vec<AlarmConfig>,
     watched: Vec<Watched>,
     by_point: HashMap<PointId, Vec<usize>>,
-    last: HashMap<PointId, f64>,
 }
 
 impl Watcher {
@@ -81,7 +125,6 @@ impl Watcher {
             configs,
             watched,
             by_point,
-            last: HashMap::new(),
         }
     }
 
@@ -121,14 +164,6 @@ impl Watcher {
         let Some(indexes) = self.by_point.get(point) else {
             return Vec::new();
         };
-        match value {
-            Some(v) => {
-                self.last.insert(point.clone(), v);
-            }
-            None => {
-                self.last.remove(point);
-            }
-        }
         let mut out = Vec::new();
         for &i in indexes {
             let w = &mut self.watched[i];
@@ -152,8 +187,7 @@ impl Watcher {
         for w in &mut self.watched {
             w.alarm.tick(now);
             if let Some(active) = w.condition.tick(now) {
-                let point = &self.configs[w.config].point;
-                let value = self.last.get(point).copied();
+                let value = w.condition.last_value();
                 out.push(Self::raised(&self.configs, w, active, value, now));
             }
         }
@@ -197,7 +231,10 @@ pub async fn run(cell: Arc<Cell>, configs: Vec<AlarmConfig>, mut stop: watch::Re
         return;
     }
     let mut watcher = Watcher::new(configs);
-    gauges(&cell, &watcher);
+    let metrics = AlarmMetrics::default();
+    cell.metrics()
+        .register(|registry| metrics.register(registry));
+    metrics.set(&watcher);
     let mut changes = cell.subscribe();
     let mut tick = tokio::time::interval(TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -218,26 +255,11 @@ pub async fn run(cell: Arc<Cell>, configs: Vec<AlarmConfig>, mut stop: watch::Re
             },
         };
         if !raised.is_empty() {
-            gauges(&cell, &watcher);
+            metrics.set(&watcher);
         }
         for r in raised {
             emit(&cell, &watcher, &r);
         }
-    }
-}
-
-/// The alarm gauges of the metrics, from the watcher's counts.
-fn gauges(cell: &Cell, watcher: &Watcher) {
-    let metrics = cell.metrics();
-    for (priority, active, unacked) in watcher.counts() {
-        let labels = crate::metrics::PriorityLabels {
-            priority: priority.as_str().to_owned(),
-        };
-        metrics.alarms_active.get_or_create(&labels).set(active);
-        metrics
-            .alarms_unacknowledged
-            .get_or_create(&labels)
-            .set(unacked);
     }
 }
 

@@ -166,6 +166,11 @@ impl Condition {
         self.level
     }
 
+    /// The last value seen, if the point still has one.
+    pub fn last_value(&self) -> Option<f64> {
+        self.last.map(|(value, _)| value)
+    }
+
     /// A new value at `now`: `Some(active)` when the alarm's condition changes.
     pub fn value(&mut self, value: f64, now: Timestamp) -> Option<bool> {
         let raw = self.test(value, now);

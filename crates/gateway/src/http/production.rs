@@ -92,14 +92,16 @@ fn range(
             ),
         });
     }
-    let to = kit::history::parse_time("to", q.to.as_deref(), now)?.unwrap_or(now);
-    let from = kit::history::parse_time("from", q.from.as_deref(), now)?
-        .unwrap_or(to.minus(kit::history::DEFAULT_HISTORY));
-    if from >= to {
-        return Err(ApiError::bad_request(format!(
-            "from ({from}) must be before to ({to})"
-        )));
-    }
+    // The history's own reading of a range: its defaults, forms and checks.
+    let kit::history::HistoryRange { from, to, .. } = kit::history::history_range(
+        &kit::history::HistoryQuery {
+            point: None,
+            from: q.from.clone(),
+            to: q.to.clone(),
+            step: None,
+        },
+        now,
+    )?;
     if to.0 - from.0 > MAX_RANGE_MS {
         return Err(ApiError::bad_request(format!(
             "the range from {from} to {to} is longer than 31 days; ask for less"

@@ -157,6 +157,11 @@ impl StateCode {
         })
     }
 
+    /// The code a stored number holds: unknown when it is off the scale.
+    pub fn of_number(n: f64) -> StateCode {
+        StateCode::new(n as i64).unwrap_or(StateCode::UNKNOWN)
+    }
+
     /// The number.
     pub fn get(self) -> u16 {
         self.0

@@ -8,6 +8,12 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::registry::Registry;
+use std::sync::atomic::AtomicU64;
 use tokio::sync::{broadcast, watch};
 
 use super::e10::{Category, StateCode};
@@ -21,6 +27,66 @@ use crate::time::Timestamp;
 
 /// The setting holding when the gateway last ran, ms since the epoch.
 pub const ALIVE_SETTING: &str = "production_alive_ms";
+
+/// Labels of the time per E10 category.
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct StateLabels {
+    device: String,
+    category: String,
+}
+
+/// Labels of the OEE gauges.
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct OeeLabels {
+    device: String,
+    part: String,
+    window: String,
+}
+
+/// The keeper's metrics, registered when it starts.
+#[derive(Debug, Clone, Default)]
+struct ProductionMetrics {
+    /// Seconds each device spent in each E10 category.
+    state_seconds: Family<StateLabels, Counter<f64, AtomicU64>>,
+    /// The OEE of each producing device's current shift, and its parts.
+    oee: Family<OeeLabels, Gauge<f64, AtomicU64>>,
+}
+
+impl ProductionMetrics {
+    fn register(&self, registry: &mut Registry) {
+        registry.register(
+            "device_state_seconds",
+            "Time the device spent in each SEMI E10 category (unknown: no data)",
+            self.state_seconds.clone(),
+        );
+        registry.register(
+            "oee_ratio",
+            "OEE of the current shift so far and its parts (availability, performance, quality), 0-1",
+            self.oee.clone(),
+        );
+    }
+
+    /// Counts `seconds` of `device` in `category`.
+    fn add(&self, device: &str, category: Category, seconds: f64) {
+        self.state_seconds
+            .get_or_create(&StateLabels {
+                device: device.to_owned(),
+                category: category.as_str().to_owned(),
+            })
+            .inc_by(seconds);
+    }
+
+    /// Sets `part` of `device`'s OEE this shift (NaN: not known).
+    fn set_oee(&self, device: &str, part: &str, value: f64) {
+        self.oee
+            .get_or_create(&OeeLabels {
+                device: device.to_owned(),
+                part: part.to_owned(),
+                window: "shift".to_owned(),
+            })
+            .set(value);
+    }
+}
 
 /// How often the time per category is brought up to date for the metrics.
 const CLOCK_TICK: Duration = Duration::from_secs(5);
@@ -68,8 +134,11 @@ pub fn close_gap(cell: &Cell, data_dir: &Path) {
 /// Runs until `stop` turns true: the OEE points every [`OEE_PERIOD`], the metrics' time
 /// per category, and the mark of life in `data_dir`.
 pub async fn run(cell: Arc<Cell>, data_dir: PathBuf, mut stop: watch::Receiver<bool>) {
+    let metrics = ProductionMetrics::default();
+    cell.metrics()
+        .register(|registry| metrics.register(registry));
     let mut changes = cell.subscribe();
-    let mut clocks = Clocks::new(&cell);
+    let mut clocks = Clocks::new(&cell, metrics.clone());
     let mut oee = tokio::time::interval(OEE_PERIOD);
     oee.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut tick = tokio::time::interval(CLOCK_TICK);
@@ -80,35 +149,33 @@ pub async fn run(cell: Arc<Cell>, data_dir: PathBuf, mut stop: watch::Receiver<b
             _ = oee.tick() => {
                 let cell = Arc::clone(&cell);
                 let dir = data_dir.clone();
+                let metrics = metrics.clone();
                 let _ = tokio::task::spawn_blocking(move || {
                     let _ = write_setting(&dir, ALIVE_SETTING, Timestamp::now().0);
-                    current_oee(&cell);
+                    current_oee(&cell, &metrics);
                 })
                 .await;
             }
-            _ = tick.tick() => clocks.flush(&cell),
+            _ = tick.tick() => clocks.flush(),
             message = changes.recv() => match message {
                 Ok(LiveMessage::Value(view)) if view.id.name() == CODE_POINT => {
-                    let code = match (view.quality, &view.value) {
-                        (Some(Quality::Good | Quality::Stale), Some(v)) => v
-                            .as_number()
-                            .and_then(|n| StateCode::new(n as i64).ok())
-                            .unwrap_or(StateCode::UNKNOWN),
+                    let code = match (view.quality, view.value.as_ref().and_then(Value::as_number)) {
+                        (Some(Quality::Good | Quality::Stale), Some(n)) => StateCode::of_number(n),
                         _ => StateCode::UNKNOWN,
                     };
-                    clocks.set(&cell, view.id.device(), code.category());
+                    clocks.set(view.id.device(), code.category());
                 }
                 Err(broadcast::error::RecvError::Closed) => break,
                 _ => {}
             },
         }
     }
-    clocks.flush(&cell);
+    clocks.flush();
 }
 
 /// Each producing device's OEE of the shift it is in, so far, as its OEE points and
 /// gauges. Outside every shift the points keep the last shift's figures.
-fn current_oee(cell: &Cell) {
+fn current_oee(cell: &Cell, metrics: &ProductionMetrics) {
     let now = Timestamp::now();
     let Some(shift) = cell.production.shifts.at(now) else {
         return;
@@ -138,8 +205,7 @@ fn current_oee(cell: &Cell) {
         ];
         let mut readings = Vec::new();
         for ((part, value), (name, _)) in parts.into_iter().zip(super::OEE_POINTS) {
-            let gauge = cell.metrics().oee_ratio(device.as_str(), part);
-            gauge.set(value.unwrap_or(f64::NAN));
+            metrics.set_oee(device.as_str(), part, value.unwrap_or(f64::NAN));
             if let Some(value) = value {
                 readings.push(Reading {
                     point: states::point_id(device, name),
@@ -154,10 +220,11 @@ fn current_oee(cell: &Cell) {
 /// The time each device with states has spent per category since the last flush.
 struct Clocks {
     running: HashMap<String, (Category, Instant)>,
+    metrics: ProductionMetrics,
 }
 
 impl Clocks {
-    fn new(cell: &Cell) -> Self {
+    fn new(cell: &Cell, metrics: ProductionMetrics) -> Self {
         let now = Instant::now();
         let running = cell
             .production
@@ -165,28 +232,26 @@ impl Clocks {
             .iter()
             .map(|d| (d.to_string(), (Category::Unknown, now)))
             .collect();
-        Self { running }
+        Self { running, metrics }
     }
 
     /// `device` is now in `category`: the time in the last one is counted.
-    fn set(&mut self, cell: &Cell, device: &str, category: Category) {
+    fn set(&mut self, device: &str, category: Category) {
         let now = Instant::now();
         if let Some((was, since)) = self.running.get_mut(device) {
-            cell.metrics()
-                .state_seconds(device, *was)
-                .inc_by(now.duration_since(*since).as_secs_f64());
+            let seconds = now.duration_since(*since).as_secs_f64();
+            self.metrics.add(device, *was, seconds);
             *was = category;
             *since = now;
         }
     }
 
     /// Counts the time up to now in each device's category.
-    fn flush(&mut self, cell: &Cell) {
+    fn flush(&mut self) {
         let now = Instant::now();
         for (device, (category, since)) in &mut self.running {
-            cell.metrics()
-                .state_seconds(device, *category)
-                .inc_by(now.duration_since(*since).as_secs_f64());
+            let seconds = now.duration_since(*since).as_secs_f64();
+            self.metrics.add(device, *category, seconds);
             *since = now;
         }
     }

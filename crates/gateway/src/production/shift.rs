@@ -293,19 +293,21 @@ fn to_jiff(t: Timestamp) -> jiff::Timestamp {
     jiff::Timestamp::from_millisecond(t.0).unwrap_or(jiff::Timestamp::UNIX_EPOCH)
 }
 
+/// The weekdays' names, Monday first, as [`EVERY_DAY`] orders them.
+const DAY_NAMES: [&str; 7] = [
+    "monday",
+    "tuesday",
+    "wednesday",
+    "thursday",
+    "friday",
+    "saturday",
+    "sunday",
+];
+
 /// Reads a weekday as the config writes it (`mon`, `monday`).
 pub fn weekday(text: &str) -> Option<Weekday> {
-    const NAMES: [&str; 7] = [
-        "monday",
-        "tuesday",
-        "wednesday",
-        "thursday",
-        "friday",
-        "saturday",
-        "sunday",
-    ];
     let t = text.to_ascii_lowercase();
-    NAMES
+    DAY_NAMES
         .iter()
         .zip(EVERY_DAY)
         .find(|(name, _)| t.len() >= 3 && name.starts_with(&t))
@@ -330,10 +332,9 @@ impl fmt::Display for Shift {
         let days = if self.days.len() == 7 {
             "every day".to_owned()
         } else {
-            const SHORT: [&str; 7] = ["mon", "tue", "wed", "thu", "fri", "sat", "sun"];
             self.days
                 .iter()
-                .map(|d| SHORT[d.to_monday_zero_offset() as usize])
+                .map(|d| &DAY_NAMES[d.to_monday_zero_offset() as usize][..3])
                 .collect::<Vec<_>>()
                 .join(", ")
         };

@@ -172,8 +172,7 @@ pub fn intervals(samples: &StateSamples, from: Timestamp, to: Timestamp) -> Vec<
             (Held::Value(state), Held::Value(code)) => {
                 let code = code
                     .as_number()
-                    .and_then(|n| StateCode::new(n as i64).ok())
-                    .unwrap_or(StateCode::UNKNOWN);
+                    .map_or(StateCode::UNKNOWN, StateCode::of_number);
                 Interval {
                     start: *start,
                     end,
