@@ -45,6 +45,8 @@ pub struct Cell {
     links_down: RwLock<BTreeMap<(DeviceId, String), String>>,
     /// The shifts, and which devices report states and production.
     pub production: crate::production::Plan,
+    /// Every alarm of the cell (`alarm::keeper` runs them).
+    pub alarms: crate::alarm::book::Desk,
 }
 
 /// The shifts of `config`, its devices with states and those that produce.
@@ -565,6 +567,20 @@ impl Cell {
                 writes: writes_rx,
             });
         }
+        let device_alarms: Vec<_> = devices
+            .values()
+            .map(|d| crate::alarm::book::DeviceAlarms {
+                device: d.id.clone(),
+                label: d.name.clone(),
+                rule_points: d
+                    .points
+                    .iter()
+                    .filter(|p| p.alarm.is_some())
+                    .cloned()
+                    .collect(),
+            })
+            .collect();
+        let alarms = crate::alarm::book::Book::new(&config.alarms, &device_alarms);
         let cell = Arc::new(Cell {
             devices,
             lines,
@@ -575,6 +591,7 @@ impl Cell {
             log_throttle: std::sync::Mutex::default(),
             links_down: RwLock::default(),
             production: production_plan(config),
+            alarms: crate::alarm::book::Desk::new(alarms),
         });
         Ok((cell, plans))
     }

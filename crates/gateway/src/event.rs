@@ -32,6 +32,10 @@ pub enum EventKind {
     AlarmRaised,
     /// A point came out of alarm.
     AlarmCleared,
+    /// An alarm was acknowledged, shelved or unshelved, or its shelving ran out (the
+    /// alarm journal's other entries; `alarm_raised` and `alarm_cleared` are its
+    /// activations and returns to normal).
+    AlarmChanged,
     /// A write was made.
     Write,
     /// A device changed state on its own: a CROSS transferred its load, a machine went
@@ -56,7 +60,7 @@ pub enum EventKind {
 
 impl EventKind {
     /// Every kind, for filters and the API description.
-    pub const ALL: [EventKind; 17] = [
+    pub const ALL: [EventKind; 18] = [
         EventKind::GatewayStarted,
         EventKind::GatewayStopped,
         EventKind::LineUp,
@@ -66,6 +70,7 @@ impl EventKind {
         EventKind::DeviceDown,
         EventKind::AlarmRaised,
         EventKind::AlarmCleared,
+        EventKind::AlarmChanged,
         EventKind::Write,
         EventKind::StateChanged,
         EventKind::DeviceEvent,
@@ -88,6 +93,7 @@ impl EventKind {
             EventKind::DeviceDown => "device_down",
             EventKind::AlarmRaised => "alarm_raised",
             EventKind::AlarmCleared => "alarm_cleared",
+            EventKind::AlarmChanged => "alarm_changed",
             EventKind::Write => "write",
             EventKind::StateChanged => "state_changed",
             EventKind::DeviceEvent => "device_event",
@@ -108,7 +114,7 @@ impl EventKind {
     /// | history_reset | 600 |
     /// | state_changed (a transfer, a machine's state), line_reopened, interface_down | 500 |
     /// | device_event (an R message) | 400 |
-    /// | alarm_cleared, device_up, line_up, history_recovered | 300 |
+    /// | alarm_cleared, alarm_changed, device_up, line_up, history_recovered | 300 |
     /// | write, gateway_started, gateway_stopped, interface_up | 200 |
     pub fn severity(self) -> u16 {
         match self {
@@ -120,6 +126,7 @@ impl EventKind {
             EventKind::StateChanged | EventKind::LineReopened | EventKind::InterfaceDown => 500,
             EventKind::DeviceEvent => 400,
             EventKind::AlarmCleared
+            | EventKind::AlarmChanged
             | EventKind::DeviceUp
             | EventKind::LineUp
             | EventKind::HistoryRecovered => 300,

@@ -47,6 +47,7 @@ pub fn level_of(kind: EventKind) -> Level {
         | EventKind::InterfaceUp => Level::INFO,
         EventKind::AlarmRaised
         | EventKind::AlarmCleared
+        | EventKind::AlarmChanged
         | EventKind::Write
         | EventKind::StateChanged
         | EventKind::DeviceEvent => Level::DEBUG,

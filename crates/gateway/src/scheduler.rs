@@ -792,7 +792,6 @@ pub(crate) fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Rea
     let now = Timestamp::now();
     let mut samples = Vec::new();
     let mut messages = Vec::new();
-    let mut events = Vec::new();
     {
         let mut state = entry.write_state();
         // Drivers give their readings in the order of their points: the point after the
@@ -816,37 +815,9 @@ pub(crate) fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Rea
                     let deadband = entry.deadband(i);
                     let changed = point.quality != Some(Quality::Good)
                         || moved_enough(point.recorded(), point.value.as_ref(), &value, deadband);
+                    // Whether it is an alarm; the alarm keeper (`alarm::keeper`) raises and
+                    // journals it from the change stream.
                     let alarm = spec.is_alarm(&value);
-                    if alarm != point.alarm {
-                        let text = spec
-                            .label(&value)
-                            .map(str::to_owned)
-                            .unwrap_or_else(|| with_unit(&value, spec.unit.as_deref()));
-                        let fields = crate::event::fields([
-                            ("value", serde_json::json!(value)),
-                            ("label", serde_json::json!(spec.label(&value))),
-                        ]);
-                        let (kind, message) = if alarm {
-                            (
-                                EventKind::AlarmRaised,
-                                format!("{}: {} is {text}", entry.name, spec.name),
-                            )
-                        } else {
-                            (
-                                EventKind::AlarmCleared,
-                                format!("{}: {} back to {text}", entry.name, spec.name),
-                            )
-                        };
-                        events.push(Event {
-                            t: now,
-                            kind,
-                            line: Some(entry.line.clone()),
-                            device: Some(entry.id.clone()),
-                            point: Some(spec.id.clone()),
-                            message,
-                            fields,
-                        });
-                    }
                     point.value = Some(value);
                     point.quality = Some(Quality::Good);
                     point.error = None;
@@ -880,9 +851,6 @@ pub(crate) fn apply_readings(cell: &Cell, entry: &DeviceEntry, readings: Vec<Rea
         }
     }
     record(cell, samples, messages);
-    for event in events {
-        cell.emit(event);
-    }
 }
 
 /// Whether a good value is to be recorded against the last recorded one: any change, or
@@ -1059,13 +1027,6 @@ fn mark_stale(cell: &Cell, entry: &DeviceEntry) {
         }
     }
     record(cell, samples, views);
-}
-
-fn with_unit(value: &Value, unit: Option<&str>) -> String {
-    match unit {
-        Some(unit) => format!("{value} {unit}"),
-        None => value.to_string(),
-    }
 }
 
 /// Records changes: counted, stored in the history, and told to the change stream.

@@ -206,7 +206,6 @@ impl Gateway {
         let pollers = Pollers::start(tasks, stopped.clone())?;
         tokio::spawn(crate::alarm::keeper::run(
             Arc::clone(&cell),
-            config.alarms.clone(),
             stopped.clone(),
         ));
         tokio::spawn(crate::production::keeper::run(

@@ -83,6 +83,11 @@ pub fn device(id: &str, address: i64) -> DeviceConfig {
 
 /// `count` stations at addresses 1, 2, … on one line, polled by a running line task.
 pub fn rig(count: u8) -> Rig {
+    rig_with_alarms(count, Vec::new())
+}
+
+/// [`rig`] with limit alarms (`[[alarm]]`).
+pub fn rig_with_alarms(count: u8, alarms: Vec<crate::alarm::config::AlarmConfig>) -> Rig {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(dir.path(), StoreOptions::default()).unwrap();
     let models: Vec<_> = (1..=count)
@@ -151,6 +156,7 @@ pub fn rig(count: u8) -> Rig {
                 .map(|a| device(&format!("jbc{a}"), i64::from(a)))
                 .collect(),
         }],
+        alarms,
         ..CellConfig::default()
     };
     let metrics = Arc::new(Metrics::new());
@@ -160,6 +166,8 @@ pub fn rig(count: u8) -> Rig {
         })
         .unwrap();
     let (shutdown, stop) = watch::channel(false);
+    // The alarms run as under `serve`: a device's own alarm is raised by the keeper.
+    tokio::spawn(crate::alarm::keeper::run(Arc::clone(&cell), stop.clone()));
     let task = tokio::spawn(tasks.remove(0).run(stop));
     Rig {
         cell,

@@ -1,10 +1,14 @@
-//! The limit alarms at work: a task that reads the change stream, feeds each watched
-//! point's values to its alarms' conditions, lets their delays run out, and records each
-//! activation and clearing as an event (`alarm_raised`, `alarm_cleared`) with the alarm's
-//! facts, which the history, MQTT, OPC UA and the page carry as they carry every event.
-//! The deciding is sans IO ([`Watcher`]); the task only feeds it.
+//! The alarms at work: a task that reads the change stream, feeds each watched point's
+//! values and each device's going down and coming back to the cell's [`Book`], lets
+//! delays and shelvings run out, and records every change of every alarm as an event, the
+//! alarm journal: `alarm_raised` (activated), `alarm_cleared` (returned to normal) and
+//! `alarm_changed` (acknowledged, shelved, unshelved, a shelving that ran out), each with
+//! the alarm's facts and its state after the change, and who did it with the comment for
+//! an operator's action ([`act`]). The history, MQTT, OPC UA and the page carry them as
+//! they carry every event; the history also keeps each alarm's last entry, from which
+//! [`run`] puts the alarms back after a restart (also after `kill -9`). The deciding is
+//! sans IO ([`Book`]); the task only feeds it.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -14,12 +18,11 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::Registry;
 use tokio::sync::{broadcast, watch};
 
-use super::config::AlarmConfig;
-use super::limit::{Condition, Level};
-use super::state::{Alarm, Change};
-use crate::cell::{Cell, LiveMessage};
+use super::book::{ActError, Action, Book, Happened, Source, View};
+use super::state::Change;
+use crate::cell::{Cell, DeviceStatus, LiveMessage};
 use crate::event::{Event, EventKind};
-use crate::point::{PointId, Quality, Value};
+use crate::point::{Quality, Value};
 use crate::time::Timestamp;
 
 /// How often the delays are looked at.
@@ -34,9 +37,9 @@ struct PriorityLabels {
 /// The keeper's metrics, registered when it starts.
 #[derive(Debug, Default)]
 struct AlarmMetrics {
-    /// Limit alarms whose condition is active, by priority.
+    /// Alarms whose condition is active, by priority.
     active: Family<PriorityLabels, Gauge>,
-    /// Limit alarms waiting for an acknowledgement (active or returned), by priority.
+    /// Alarms waiting for an acknowledgement (active or returned), by priority.
     unacknowledged: Family<PriorityLabels, Gauge>,
 }
 
@@ -44,282 +47,324 @@ impl AlarmMetrics {
     fn register(&self, registry: &mut Registry) {
         registry.register(
             "alarms_active",
-            "Limit alarms whose condition is active, by priority",
+            "Alarms whose condition is active, by priority",
             self.active.clone(),
         );
         registry.register(
             "alarms_unacknowledged",
-            "Limit alarms waiting for an acknowledgement (active or returned to normal), by priority",
+            "Alarms waiting for an acknowledgement (active or returned to normal), by priority",
             self.unacknowledged.clone(),
         );
     }
 
-    /// The gauges from the watcher's counts.
-    fn set(&self, watcher: &Watcher) {
-        for (priority, active, unacked) in watcher.counts() {
+    /// The gauges from the book's counts.
+    fn set(&self, book: &Book) {
+        for counts in book.counts() {
             let labels = PriorityLabels {
-                priority: priority.as_str().to_owned(),
+                priority: counts.priority.as_str().to_owned(),
             };
-            self.active.get_or_create(&labels).set(active);
-            self.unacknowledged.get_or_create(&labels).set(unacked);
+            let gauge = |n: u64| i64::try_from(n).unwrap_or(i64::MAX);
+            self.active.get_or_create(&labels).set(gauge(counts.active));
+            self.unacknowledged
+                .get_or_create(&labels)
+                .set(gauge(counts.unacknowledged));
         }
     }
 }
 
-/// One limit alarm: its level's condition and its ISA-18.2 state.
-#[derive(Debug)]
-struct Watched {
-    config: usize,
-    condition: Condition,
-    alarm: Alarm,
-}
-
-/// A condition that changed, for the event.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Raised {
-    /// Which `[[alarm]]` of the config (its index).
-    pub config: usize,
-    /// `point:level` (`meter1.active_power:high`).
-    pub id: String,
-    /// The point.
-    pub point: PointId,
-    /// Which limit.
-    pub level: Level,
-    /// Active now, or cleared.
-    pub active: bool,
-    /// The value that decided it (the last one seen, for a delay that ran out).
-    pub value: Option<f64>,
-    /// The limit crossed (the rate for a rate of change).
-    pub limit: f64,
-    /// What the ISA-18.2 state machine did with it.
-    pub changes: Vec<Change>,
-}
-
-/// Every limit alarm of the cell, sans IO.
-#[derive(Debug)]
-pub struct Watcher {
-    configs: Vec<AlarmConfig>,
-    watched: Vec<Watched>,
-    by_point: HashMap<PointId, Vec<usize>>,
-}
-
-impl Watcher {
-    /// The alarms of `configs`, one per level each sets, all normal.
-    pub fn new(configs: Vec<AlarmConfig>) -> Self {
-        let mut watched = Vec::new();
-        let mut by_point: HashMap<PointId, Vec<usize>> = HashMap::new();
-        for (i, config) in configs.iter().enumerate() {
-            for level in config.limits.levels() {
-                by_point
-                    .entry(config.point.clone())
-                    .or_default()
-                    .push(watched.len());
-                watched.push(Watched {
-                    config: i,
-                    condition: Condition::new(level, config.limits),
-                    alarm: Alarm::new(config.chatter),
-                });
-            }
-        }
-        Self {
-            configs,
-            watched,
-            by_point,
-        }
-    }
-
-    /// Per priority: alarms whose condition is active, and alarms waiting for an
-    /// acknowledgement (ISA-18.2's unacknowledged and returned unacknowledged).
-    pub fn counts(&self) -> Vec<(super::Priority, i64, i64)> {
-        super::Priority::ALL
-            .into_iter()
-            .map(|priority| {
-                let of = self
-                    .watched
-                    .iter()
-                    .filter(|w| self.configs[w.config].priority == priority);
-                let active = of.clone().filter(|w| w.alarm.state().active()).count();
-                let unacked = of.filter(|w| w.alarm.state().unacknowledged()).count();
-                (
-                    priority,
-                    i64::try_from(active).unwrap_or(i64::MAX),
-                    i64::try_from(unacked).unwrap_or(i64::MAX),
-                )
-            })
-            .collect()
-    }
-
-    /// Whether `point` is watched.
-    pub fn watches(&self, point: &PointId) -> bool {
-        self.by_point.contains_key(point)
-    }
-
-    /// The `[[alarm]]` a raised alarm comes from.
-    pub fn config(&self, raised: &Raised) -> Option<&AlarmConfig> {
-        self.configs.get(raised.config)
-    }
-
-    /// `point` read `value` at `t` (`None`: it has none, the device is not answering).
-    pub fn value(&mut self, point: &PointId, value: Option<f64>, t: Timestamp) -> Vec<Raised> {
-        let Some(indexes) = self.by_point.get(point) else {
-            return Vec::new();
-        };
-        let mut out = Vec::new();
-        for &i in indexes {
-            let w = &mut self.watched[i];
-            let changed = match value {
-                Some(v) => w.condition.value(v, t),
-                None => {
-                    w.condition.no_value();
-                    None
-                }
-            };
-            if let Some(active) = changed {
-                out.push(Self::raised(&self.configs, w, active, value, t));
-            }
-        }
-        out
-    }
-
-    /// Time passes: delays that ran out, and shelvings.
-    pub fn tick(&mut self, now: Timestamp) -> Vec<Raised> {
-        let mut out = Vec::new();
-        for w in &mut self.watched {
-            w.alarm.tick(now);
-            if let Some(active) = w.condition.tick(now) {
-                let value = w.condition.last_value();
-                out.push(Self::raised(&self.configs, w, active, value, now));
-            }
-        }
-        out
-    }
-
-    fn raised(
-        configs: &[AlarmConfig],
-        w: &mut Watched,
-        active: bool,
-        value: Option<f64>,
-        t: Timestamp,
-    ) -> Raised {
-        let config = &configs[w.config];
-        let level = w.condition.level();
-        let limits = &config.limits;
-        let limit = match level {
-            Level::HighHigh => limits.high_high,
-            Level::High => limits.high,
-            Level::Low => limits.low,
-            Level::LowLow => limits.low_low,
-            Level::RateOfChange => limits.rate_of_change,
-        }
-        .unwrap_or(f64::NAN);
-        Raised {
-            config: w.config,
-            id: format!("{}:{}", config.point, level.as_str()),
-            point: config.point.clone(),
-            level,
-            active,
-            value,
-            limit,
-            changes: w.alarm.condition(active, t),
-        }
-    }
-}
-
-/// Runs the limit alarms of `configs` on `cell`'s change stream until `stop` turns true.
-pub async fn run(cell: Arc<Cell>, configs: Vec<AlarmConfig>, mut stop: watch::Receiver<bool>) {
-    if configs.is_empty() {
+/// Runs the cell's alarms on its change stream until `stop` turns true: first puts back
+/// what the history kept of each, then follows values, devices and time.
+pub async fn run(cell: Arc<Cell>, mut stop: watch::Receiver<bool>) {
+    if cell.alarms.with(|book| book.is_empty()) {
         return;
     }
-    let mut watcher = Watcher::new(configs);
+    restore(&cell).await;
     let metrics = AlarmMetrics::default();
     cell.metrics()
         .register(|registry| metrics.register(registry));
-    metrics.set(&watcher);
     let mut changes = cell.subscribe();
+    let mut seen = u64::MAX;
+    let happened = resync(&cell);
+    record(&cell, &happened);
     let mut tick = tokio::time::interval(TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
-        let raised = tokio::select! {
+        let happened = tokio::select! {
             _ = stop.changed() => break,
-            _ = tick.tick() => watcher.tick(Timestamp::now()),
+            _ = tick.tick() => cell.alarms.with(|book| book.tick(Timestamp::now())),
             message = changes.recv() => match message {
-                Ok(LiveMessage::Value(view)) if watcher.watches(&view.id) => {
-                    let value = match (view.quality, &view.value) {
-                        (Some(Quality::Good | Quality::Stale), Some(v)) => v.as_number(),
+                Ok(LiveMessage::Value(view)) => {
+                    let value = match view.quality {
+                        Some(Quality::Good | Quality::Stale) => view.value.as_ref(),
                         _ => None,
                     };
-                    watcher.value(&view.id, value, view.t.unwrap_or_else(Timestamp::now))
+                    let t = view.t.unwrap_or_else(Timestamp::now);
+                    cell.alarms.with(|book| {
+                        if book.watches(&view.id) {
+                            book.value(&view.id, value, t)
+                        } else {
+                            Vec::new()
+                        }
+                    })
                 }
+                Ok(LiveMessage::Event(event)) => match (event.kind, &event.device) {
+                    (EventKind::DeviceDown | EventKind::DeviceUp, Some(device)) => {
+                        let down = event.kind == EventKind::DeviceDown;
+                        let why = event.fields.get("error").and_then(|e| e.as_str());
+                        cell.alarms
+                            .with(|book| book.down(device, down, why, event.t))
+                            .into_iter()
+                            .collect()
+                    }
+                    _ => Vec::new(),
+                },
+                // Changes were missed: the cell's current values say where each alarm is.
+                Err(broadcast::error::RecvError::Lagged(_)) => resync(&cell),
                 Err(broadcast::error::RecvError::Closed) => break,
-                _ => Vec::new(),
+                Ok(_) => Vec::new(),
             },
         };
-        if !raised.is_empty() {
-            metrics.set(&watcher);
-        }
-        for r in raised {
-            emit(&cell, &watcher, &r);
+        record(&cell, &happened);
+        let generation = cell.alarms.with(|book| book.generation());
+        if generation != seen {
+            seen = generation;
+            cell.alarms.with(|book| metrics.set(book));
         }
     }
 }
 
-/// Records a raised or cleared limit alarm as an event.
-fn emit(cell: &Cell, watcher: &Watcher, r: &Raised) {
-    let Some(entry) = cell.device_entry(r.point.device()) else {
-        return;
-    };
-    let Some(config) = watcher.config(r) else {
-        return;
-    };
-    let spec = cell.point(&r.point);
-    let unit = spec.and_then(|s| s.unit.as_deref()).unwrap_or("");
-    let what = config
-        .message
-        .clone()
-        .or_else(|| spec.map(|s| s.name.to_string()))
-        .unwrap_or_else(|| r.point.name().to_owned());
-    let value = r.value.map_or_else(
-        || "no value".to_owned(),
-        |v| format!("{v} {unit}").trim().to_owned(),
-    );
-    let message = if r.active {
-        format!(
-            "{}: {what}: {} limit {} {unit} crossed, {value}",
-            entry.label(),
-            r.level.as_str().replace('_', "-"),
-            r.limit
-        )
-    } else {
-        format!(
-            "{}: {what}: back within the {} limit, {value}",
-            entry.label(),
-            r.level.as_str().replace('_', "-")
-        )
-    };
-    cell.emit(Event {
-        t: Timestamp::now(),
-        kind: if r.active {
-            EventKind::AlarmRaised
-        } else {
-            EventKind::AlarmCleared
-        },
-        line: Some(entry.line.clone()),
-        device: Some(entry.id.clone()),
-        point: Some(r.point.clone()),
-        message,
-        fields: crate::event::fields([
-            ("alarm", serde_json::json!(r.id)),
-            ("level", serde_json::json!(r.level.as_str())),
-            ("limit", serde_json::json!(r.limit)),
-            ("value", serde_json::json!(r.value.map(Value::Number))),
-            ("priority", serde_json::json!(config.priority.as_str())),
-            ("category", serde_json::json!(config.category)),
+/// Puts each alarm back as its last journal entry left it.
+async fn restore(cell: &Cell) {
+    let store = cell.store().clone();
+    let saved = tokio::task::spawn_blocking(move || store.alarm_states())
+        .await
+        .map_err(|e| e.to_string())
+        .and_then(|r| r.map_err(|e| e.to_string()));
+    match saved {
+        Ok(saved) => {
+            let now = Timestamp::now();
+            let restored = cell.alarms.with(|book| {
+                saved
+                    .iter()
+                    .filter(|(id, fields)| book.restore(id, fields, now))
+                    .count()
+            });
+            if restored > 0 {
+                tracing::info!("{restored} alarms restored as the history kept them");
+            }
+        }
+        Err(e) => tracing::warn!("the alarms' states could not be read back: {e}"),
+    }
+}
+
+/// Feeds the book the cell's current values and device states (at start, and after the
+/// change stream lagged).
+fn resync(cell: &Cell) -> Vec<Happened> {
+    let now = Timestamp::now();
+    let points: Vec<_> = cell.alarms.with(|book| book.points().cloned().collect());
+    let mut out = Vec::new();
+    for point in points {
+        let Some(entry) = cell.device_entry(point.device()) else {
+            continue;
+        };
+        let Some(index) = entry.point_index(point.name()) else {
+            continue;
+        };
+        let (value, t) = {
+            let state = entry.read();
+            let Some(p) = state.points.get(index) else {
+                continue;
+            };
+            let value = match p.quality {
+                Some(Quality::Good | Quality::Stale) => p.value.clone(),
+                _ => None,
+            };
+            (value, p.t.unwrap_or(now))
+        };
+        out.extend(
+            cell.alarms
+                .with(|book| book.value(&point, value.as_ref(), t)),
+        );
+    }
+    for entry in cell.device_entries() {
+        let (down, why) = {
+            let state = entry.read();
             (
-                "changes",
-                serde_json::json!(r.changes.iter().map(|c| c.as_str()).collect::<Vec<_>>()),
+                state.status == DeviceStatus::Down,
+                state.error.as_ref().map(|e| e.message.clone()),
+            )
+        };
+        out.extend(
+            cell.alarms
+                .with(|book| book.down(&entry.id, down, why.as_deref(), now)),
+        );
+    }
+    out
+}
+
+/// An operator's action on alarm `id`, by `by` (`anna from 10.0.0.7:50312`, `opcua user
+/// anna`, `mqtt DCMD …`) with a comment: applied, journalled, and committed to the
+/// history before this returns. The alarm as it is now, or why nothing was done.
+pub async fn act(
+    cell: &Cell,
+    id: &str,
+    action: Action,
+    by: &str,
+    comment: Option<&str>,
+) -> Result<View, ActError> {
+    let by = crate::write::cut(by, crate::write::MAX_NAME);
+    let comment = comment.map(|c| crate::write::cut(c, MAX_COMMENT));
+    let happened = cell
+        .alarms
+        .with(|book| book.act(id, action, Timestamp::now(), &by, comment.as_deref()))?;
+    let index = happened.index;
+    record(cell, std::slice::from_ref(&happened));
+    if let Err(e) = cell.store().flush().await {
+        tracing::error!("alarm journal entry not committed: {e}");
+    }
+    cell.alarms
+        .with(|book| book.view(index))
+        .ok_or(ActError::Unknown { id: id.to_owned() })
+}
+
+/// Longest comment kept with an operator's action.
+pub const MAX_COMMENT: usize = 1024;
+
+/// Journals each change: one event each.
+fn record(cell: &Cell, happened: &[Happened]) {
+    for h in happened {
+        if let Some(event) = cell.alarms.with(|book| journal_entry(cell, book, h)) {
+            cell.emit(event);
+        }
+    }
+}
+
+/// The journal entry (an event) of one change.
+fn journal_entry(cell: &Cell, book: &Book, h: &Happened) -> Option<Event> {
+    let instance = book.instance(h.index)?;
+    let view = book.view(h.index)?;
+    let entry = cell.device_entry(instance.device.as_str());
+    let spec = instance.point.as_ref().and_then(|p| cell.point(p));
+    let unit = spec.and_then(|s| s.unit.as_deref()).unwrap_or("");
+    let shown = |value: &Option<serde_json::Value>| match value {
+        None | Some(serde_json::Value::Null) => "no value".to_owned(),
+        Some(v) => {
+            let value: Option<Value> = serde_json::from_value(v.clone()).ok();
+            match (spec, &value) {
+                (Some(spec), Some(value)) if spec.label(value).is_some() => {
+                    spec.label(value).unwrap_or_default().to_owned()
+                }
+                (_, Some(Value::Text(text))) => text.clone(),
+                (_, Some(value)) => format!("{value} {unit}").trim().to_owned(),
+                (_, None) => v.to_string(),
+            }
+        }
+    };
+    let who = instance.device_label.as_str();
+    let what = instance.message.as_str();
+    let level = instance.level.map(|l| l.as_str().replace('_', "-"));
+    let limit = instance
+        .limit
+        .map_or_else(String::new, |l| format!("{l} {unit}"));
+    let mut message = if h.activated() {
+        match instance.source {
+            Source::Limit => format!(
+                "{who}: {what}: {} limit {} crossed, {}",
+                level.unwrap_or_default(),
+                limit.trim(),
+                shown(&instance.value)
             ),
-        ]),
-    });
+            Source::Device => format!("{who}: {what} is {}", shown(&instance.value)),
+            Source::Down => format!("{who}: not answering ({})", shown(&instance.value)),
+        }
+    } else if h.cleared() {
+        match instance.source {
+            Source::Limit => format!(
+                "{who}: {what}: back within the {} limit, {}",
+                level.unwrap_or_default(),
+                shown(&instance.last_value)
+            ),
+            Source::Device => format!("{who}: {what} back to {}", shown(&instance.last_value)),
+            Source::Down => format!("{who}: answering again"),
+        }
+    } else {
+        format!("{who}: {what}")
+    };
+    for change in &h.changes {
+        let words = match change {
+            Change::Activated | Change::Cleared => continue,
+            Change::Acknowledged => "acknowledged".to_owned(),
+            Change::Shelved => format!("shelved until {}", until(&view)),
+            Change::ShelvedForChattering => format!(
+                "chattering ({} activations); shelved until {}",
+                view.count,
+                until(&view)
+            ),
+            Change::Unshelved => "unshelved".to_owned(),
+            Change::ShelveExpired => "its shelving ran out".to_owned(),
+            Change::RemovedFromService => "taken out of service".to_owned(),
+            Change::ReturnedToService => "back in service".to_owned(),
+        };
+        message.push_str("; ");
+        message.push_str(&words);
+    }
+    if let Some(by) = &h.by {
+        message.push_str(&format!(" by {by}"));
+    }
+    if let Some(comment) = h.comment.as_deref().filter(|c| !c.is_empty()) {
+        message.push_str(&format!(": {comment}"));
+    }
+    let kind = if h.activated() {
+        EventKind::AlarmRaised
+    } else if h.cleared() {
+        EventKind::AlarmCleared
+    } else {
+        EventKind::AlarmChanged
+    };
+    let serde_json::Value::Object(mut fields) = serde_json::json!(view) else {
+        return None;
+    };
+    fields.remove("id");
+    fields.remove("device");
+    fields.remove("point");
+    fields.insert("alarm".into(), serde_json::json!(view.id));
+    fields.insert(
+        "changes".into(),
+        serde_json::json!(h.changes.iter().map(|c| c.as_str()).collect::<Vec<_>>()),
+    );
+    if instance.source == Source::Device
+        && let (Some(spec), Some(value)) = (spec, &instance.last_value)
+        && let Ok(value) = serde_json::from_value::<Value>(value.clone())
+    {
+        fields.insert("label".into(), serde_json::json!(spec.label(&value)));
+    }
+    if h.cleared() {
+        fields.insert(
+            "value".into(),
+            instance.last_value.clone().unwrap_or_default(),
+        );
+    }
+    if let Some(by) = &h.by {
+        fields.insert("by".into(), serde_json::json!(by));
+    }
+    if let Some(comment) = &h.comment {
+        fields.insert("comment".into(), serde_json::json!(comment));
+    }
+    Some(Event {
+        t: h.t,
+        kind,
+        line: entry.map(|e| e.line.clone()),
+        device: Some(instance.device.clone()),
+        point: instance.point.clone(),
+        message,
+        fields: fields.into_iter().collect(),
+    })
+}
+
+/// When a shelving ends, in words.
+fn until(view: &View) -> String {
+    view.shelved_until
+        .map_or_else(|| "further notice".to_owned(), |t| t.to_string())
 }
 
 #[cfg(test)]

@@ -161,6 +161,14 @@ impl Condition {
         }
     }
 
+    /// Puts back a condition saved `active` (after a restart): it holds until values
+    /// say otherwise.
+    pub fn restore(&mut self, active: bool) {
+        self.raw = active;
+        self.active = active;
+        self.since = None;
+    }
+
     /// Its level.
     pub fn level(&self) -> Level {
         self.level

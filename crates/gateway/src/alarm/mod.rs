@@ -2,6 +2,7 @@
 //! alarms on numeric points ([`limit`]) the config's `[[alarm]]` tables set ([`config`]),
 //! and the task that runs them on the change stream ([`keeper`]).
 
+pub mod book;
 pub mod config;
 pub mod keeper;
 pub mod limit;

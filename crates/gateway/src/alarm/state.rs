@@ -25,7 +25,7 @@ use serde::Serialize;
 use crate::time::Timestamp;
 
 /// The states of ISA-18.2's state diagram.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum State {
     /// Inactive and acknowledged.
@@ -179,6 +179,32 @@ impl Alarm {
     /// Whether it is out of service.
     pub fn out_of_service(&self) -> bool {
         self.out_of_service
+    }
+
+    /// Whether its condition is active (also while shelved or out of service).
+    pub fn active(&self) -> bool {
+        self.active
+    }
+
+    /// Puts it back as it was saved (after a restart). The chatter rule's recent
+    /// activations are not saved: its window starts again.
+    pub fn restore(
+        &mut self,
+        state: State,
+        active: bool,
+        shelved_until: Option<Timestamp>,
+        out_of_service: bool,
+        (first_active, last_active): (Option<Timestamp>, Option<Timestamp>),
+        (count, chattered): (u64, u64),
+    ) {
+        self.state = state;
+        self.active = active;
+        self.shelved_until = shelved_until;
+        self.out_of_service = out_of_service;
+        self.first_active = first_active;
+        self.last_active = last_active;
+        self.count = count;
+        self.chattered = chattered;
     }
 
     /// Whether an operator is shown it: not normal, not shelved, in service.

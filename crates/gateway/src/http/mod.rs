@@ -29,6 +29,7 @@ use crate::point::PointId;
 use crate::store::EventFilter;
 use crate::time::Timestamp;
 
+mod alarms;
 mod listing;
 mod production;
 pub mod server;
@@ -58,6 +59,9 @@ pub const API_ROUTES: &[(&str, &str)] = &[
     ("GET", "/api/audit"),
     ("GET", "/api/states"),
     ("GET", "/api/production"),
+    ("GET", "/api/alarms"),
+    ("GET", "/api/alarms/journal"),
+    ("POST", "/api/alarms/{id}/{action}"),
     ("GET", "/api/openapi.json"),
 ];
 
@@ -138,6 +142,9 @@ pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bo
         .route("/api/audit", get(audit))
         .route("/api/states", get(production::states))
         .route("/api/production", get(production::production))
+        .route("/api/alarms", get(alarms::list))
+        .route("/api/alarms/journal", get(alarms::journal))
+        .route("/api/alarms/{id}/{action}", post(alarms::act))
         .route("/api/openapi.json", get(openapi))
         .merge(web::routes())
         .fallback(no_route)

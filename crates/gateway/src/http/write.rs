@@ -129,10 +129,12 @@ impl Guard {
     }
 }
 
-/// Reads the write's JSON body: at most [`BODY_LIMIT`] bytes (the route's
+/// Reads a JSON body (a write, an action on an alarm): at most [`BODY_LIMIT`] bytes (the route's
 /// `DefaultBodyLimit`), within [`BODY_TIMEOUT`].
-async fn read_body(request: Request) -> Result<Json<WriteBody>, ApiError> {
-    match tokio::time::timeout(BODY_TIMEOUT, Json::<WriteBody>::from_request(request, &())).await {
+pub(super) async fn read_body<T: serde::de::DeserializeOwned>(
+    request: Request,
+) -> Result<Json<T>, ApiError> {
+    match tokio::time::timeout(BODY_TIMEOUT, Json::<T>::from_request(request, &())).await {
         Ok(Ok(body)) => Ok(body),
         Ok(Err(rejection)) => Err(super::body_error(rejection)),
         Err(_) => Err(ApiError::new(
@@ -154,44 +156,12 @@ pub(super) async fn write(
     headers: HeaderMap,
     request: Request,
 ) -> ApiResult<Response> {
-    let now = Instant::now();
-    let addr = client.parse::<std::net::SocketAddr>().ok().map(|a| a.ip());
-    if !s.writes.enabled {
-        return Err(unauthorised(
-            &s,
-            &client,
-            ApiError::new(
-                StatusCode::FORBIDDEN,
-                "writes are disabled on this gateway; start it with --allow-writes (and a token)",
-            ),
-            now,
-        ));
-    }
-    if let Some(wait) = s.guard.blocked(addr, now) {
-        let error = ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            format!(
-                "too many wrong tokens from this address; try again in {} s",
-                wait.as_secs().max(1)
-            ),
-        );
-        let mut response = unauthorised(&s, &client, error, now).into_response();
-        if let Ok(value) = HeaderValue::from_str(&wait.as_secs().max(1).to_string()) {
-            response.headers_mut().insert(header::RETRY_AFTER, value);
-        }
-        return Ok(response);
-    }
-    if let Err(error) = check_token(&headers, s.writes.token.as_deref()) {
-        // Only a token sent counts as a guess: clients behind one address (a proxy, NAT)
-        // that forget the header do not lock each other out.
-        if error.status == StatusCode::UNAUTHORIZED && headers.contains_key(header::AUTHORIZATION) {
-            s.guard.failed(addr, now);
-        }
-        return Err(unauthorised(&s, &client, error, now));
+    if let Err(refused) = authorise(&s, &client, &headers) {
+        return Ok(*refused);
     }
 
     // Authorised from here on: every attempt is audited.
-    let body = read_body(request).await;
+    let body = read_body::<WriteBody>(request).await;
     let (point_text, new) = match &body {
         Ok(Json(b)) => (b.point.clone(), b.value.clone()),
         Err(_) => (String::new(), serde_json::Value::Null),
@@ -293,6 +263,52 @@ impl From<WriteError> for ApiError {
         };
         ApiError::new(status, error.to_string())
     }
+}
+
+/// Step 1 of the module docs, shared by every route that acts (a write, an action on an
+/// alarm): writes on, the address not locked out, the token right. A refusal is the
+/// response to send, counted and logged as such refusals are.
+pub(super) fn authorise(
+    s: &AppState,
+    client: &str,
+    headers: &HeaderMap,
+) -> Result<(), Box<Response>> {
+    let now = Instant::now();
+    let addr = client.parse::<std::net::SocketAddr>().ok().map(|a| a.ip());
+    if !s.writes.enabled {
+        let error = ApiError::new(
+            StatusCode::FORBIDDEN,
+            "writes are disabled on this gateway; start it with --allow-writes (and a token)",
+        );
+        return Err(Box::new(
+            unauthorised(s, client, error, now).into_response(),
+        ));
+    }
+    if let Some(wait) = s.guard.blocked(addr, now) {
+        let error = ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            format!(
+                "too many wrong tokens from this address; try again in {} s",
+                wait.as_secs().max(1)
+            ),
+        );
+        let mut response = unauthorised(s, client, error, now).into_response();
+        if let Ok(value) = HeaderValue::from_str(&wait.as_secs().max(1).to_string()) {
+            response.headers_mut().insert(header::RETRY_AFTER, value);
+        }
+        return Err(Box::new(response));
+    }
+    if let Err(error) = check_token(headers, s.writes.token.as_deref()) {
+        // Only a token sent counts as a guess: clients behind one address (a proxy, NAT)
+        // that forget the header do not lock each other out.
+        if error.status == StatusCode::UNAUTHORIZED && headers.contains_key(header::AUTHORIZATION) {
+            s.guard.failed(addr, now);
+        }
+        return Err(Box::new(
+            unauthorised(s, client, error, now).into_response(),
+        ));
+    }
+    Ok(())
 }
 
 /// Checks `Authorization: Bearer <token>`.

@@ -120,11 +120,16 @@ async fn a_silent_device_is_backed_off_while_its_neighbour_keeps_its_rate() {
     )
     .await;
     let kinds: Vec<&str> = events.iter().map(|e| e.kind.as_str()).collect();
-    assert_eq!(kinds, vec!["device_up", "device_down"]);
+    // Its silence is also an alarm (`jbc2:down`), raised and cleared.
+    assert_eq!(
+        kinds,
+        vec!["alarm_cleared", "device_up", "alarm_raised", "device_down"]
+    );
+    assert_eq!(events[2].fields["alarm"], "jbc2:down");
     assert!(
-        events[1].message.contains("timeout"),
+        events[3].message.contains("timeout"),
         "{}",
-        events[1].message
+        events[3].message
     );
 }
 
@@ -436,13 +441,16 @@ async fn a_line_closed_by_the_other_end_is_reopened_and_polling_resumes() {
     assert_eq!(
         kinds,
         vec![
+            "alarm_cleared",
             "device_up",
             "line_up",
+            "alarm_raised",
             "line_down",
             "device_down",
             "line_up"
         ],
-        "newest first: the poll fails, the line goes down, is reopened, the station answers"
+        "newest first: the poll fails, the line goes down (the station's silence an alarm), \
+         is reopened, the station answers"
     );
 }
 

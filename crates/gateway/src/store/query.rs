@@ -187,6 +187,53 @@ impl StoreHandle {
         })
     }
 
+    /// Each alarm's state as its last journal entry saved it: id and the entry's fields.
+    pub fn alarm_states(&self) -> Result<Vec<(String, serde_json::Value)>, StoreError> {
+        self.readers.with(|conn| {
+            let mut stmt = conn.prepare_cached("SELECT id, fields FROM alarm_states")?;
+            let rows = stmt.query_map([], |r| {
+                let fields: String = r.get(1)?;
+                Ok((
+                    r.get::<_, String>(0)?,
+                    serde_json::from_str(&fields).unwrap_or_default(),
+                ))
+            })?;
+            rows.collect()
+        })
+    }
+
+    /// The alarm journal: the alarm events (raised, cleared, changed) from `from` to `to`,
+    /// of one alarm or device if given, newest first, at most `limit`.
+    pub fn alarm_journal(
+        &self,
+        from: Timestamp,
+        to: Timestamp,
+        alarm: Option<&str>,
+        device: Option<&str>,
+        limit: usize,
+    ) -> Result<Vec<EventRecord>, StoreError> {
+        self.readers.with(|conn| {
+            let mut stmt = conn.prepare_cached(
+                "SELECT id, t, kind, line, device, point, message, fields FROM events \
+                 WHERE t >= ?1 AND t < ?2 \
+                 AND kind IN ('alarm_raised', 'alarm_cleared', 'alarm_changed') \
+                 AND (?3 IS NULL OR json_extract(fields, '$.alarm') = ?3) \
+                 AND (?4 IS NULL OR device = ?4) ORDER BY t DESC, id DESC LIMIT ?5",
+            )?;
+            let rows = stmt.query_map(
+                params![
+                    from.0,
+                    to.0,
+                    alarm,
+                    device,
+                    i64::try_from(limit).unwrap_or(i64::MAX)
+                ],
+                read_event,
+            )?;
+            rows.collect()
+        })
+    }
+
     /// Stored events, newest first.
     pub fn events(&self, filter: &EventFilter) -> Result<Vec<EventRecord>, StoreError> {
         self.readers.with(|conn| {
@@ -203,21 +250,7 @@ impl StoreHandle {
                     filter.kind.map(EventKind::as_str),
                     i64::try_from(filter.limit).unwrap_or(i64::MAX),
                 ],
-                |r| {
-                    Ok(EventRecord {
-                        id: r.get(0)?,
-                        t: Timestamp(r.get(1)?),
-                        kind: r.get(2)?,
-                        line: r.get(3)?,
-                        device: r.get(4)?,
-                        point: r.get(5)?,
-                        message: r.get(6)?,
-                        fields: r
-                            .get::<_, Option<String>>(7)?
-                            .and_then(|text| serde_json::from_str(&text).ok())
-                            .unwrap_or_default(),
-                    })
-                },
+                read_event,
             )?;
             rows.collect()
         })
@@ -442,4 +475,21 @@ fn point_row(conn: &Connection, point: &PointId) -> rusqlite::Result<Option<i64>
         |r| r.get(0),
     )
     .optional()
+}
+
+/// An event row: `id, t, kind, line, device, point, message, fields`.
+fn read_event(r: &rusqlite::Row<'_>) -> rusqlite::Result<EventRecord> {
+    Ok(EventRecord {
+        id: r.get(0)?,
+        t: Timestamp(r.get(1)?),
+        kind: r.get(2)?,
+        line: r.get(3)?,
+        device: r.get(4)?,
+        point: r.get(5)?,
+        message: r.get(6)?,
+        fields: r
+            .get::<_, Option<String>>(7)?
+            .and_then(|text| serde_json::from_str(&text).ok())
+            .unwrap_or_default(),
+    })
 }

@@ -45,6 +45,11 @@ CREATE TABLE IF NOT EXISTS audit (
     detail    TEXT NOT NULL
 );
 CREATE INDEX IF NOT EXISTS audit_by_time ON audit(t);
+CREATE TABLE IF NOT EXISTS alarm_states (
+    id     TEXT PRIMARY KEY,
+    t      INTEGER NOT NULL,
+    fields TEXT NOT NULL
+);
 ";
 
 /// Version 2: per-minute rollups of the good numeric samples (see `rollup`). `sum` is the

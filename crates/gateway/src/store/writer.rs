@@ -747,6 +747,22 @@ fn write_rows(
                     (!e.fields.is_empty())
                         .then(|| serde_json::to_string(&e.fields).unwrap_or_default()),
                 ])?;
+                // An alarm journal entry also keeps the alarm's state after it, read back
+                // after a restart (`alarm::keeper`), in the same commit.
+                if let (Some(id), true) = (
+                    e.fields.get("alarm").and_then(|a| a.as_str()),
+                    e.fields.contains_key("state"),
+                ) {
+                    tx.prepare_cached(
+                        "INSERT INTO alarm_states (id, t, fields) VALUES (?1, ?2, ?3) \
+                         ON CONFLICT(id) DO UPDATE SET t = excluded.t, fields = excluded.fields",
+                    )?
+                    .execute(params![
+                        id,
+                        e.t.0,
+                        serde_json::to_string(&e.fields).unwrap_or_default()
+                    ])?;
+                }
                 counts[1] += 1;
             }
             Row::Audit(a) => {

@@ -6,13 +6,11 @@ use tower::ServiceExt;
 
 use super::*;
 use crate::alarm::Priority;
+use crate::alarm::config::AlarmConfig;
 use crate::alarm::limit::Limits;
+use crate::point::PointId;
 use crate::store::EventFilter;
-use crate::testing::rig;
-
-fn t(ms: i64) -> Timestamp {
-    Timestamp(1_800_000_000_000 + ms)
-}
+use crate::testing::rig_with_alarms;
 
 fn alarm_on(point: &str, limits: Limits) -> AlarmConfig {
     AlarmConfig {
@@ -25,97 +23,10 @@ fn alarm_on(point: &str, limits: Limits) -> AlarmConfig {
     }
 }
 
-fn sealer_high() -> AlarmConfig {
-    alarm_on(
-        "sealer0.temperature",
-        Limits {
-            high: Some(180.0),
-            deadband: 2.0,
-            on_delay: Duration::from_secs(5),
-            off_delay: Duration::from_secs(5),
-            ..Limits::default()
-        },
-    )
-}
-
-#[test]
-fn a_sealers_temperature_alarm_fires_after_its_on_delay_and_clears_past_its_deadband_after_its_off_delay()
- {
-    let mut w = Watcher::new(vec![sealer_high()]);
-    let point = PointId::parse("sealer0.temperature").unwrap();
-    assert!(
-        w.value(&point, Some(185.0), t(0)).is_empty(),
-        "the on delay runs"
-    );
-    assert!(w.tick(t(4_999)).is_empty());
-    let [raised] = w.tick(t(5_000)).try_into().unwrap();
-    assert_eq!(raised.id, "sealer0.temperature:high");
-    assert!(raised.active);
-    assert_eq!((raised.value, raised.limit), (Some(185.0), 180.0));
-    assert_eq!(raised.changes, [Change::Activated]);
-    assert!(
-        w.value(&point, Some(179.0), t(6_000)).is_empty(),
-        "inside the deadband"
-    );
-    assert!(w.tick(t(20_000)).is_empty());
-    assert!(
-        w.value(&point, Some(170.0), t(21_000)).is_empty(),
-        "the off delay runs"
-    );
-    let [cleared] = w.tick(t(26_000)).try_into().unwrap();
-    assert!(!cleared.active);
-    assert_eq!(cleared.value, Some(170.0));
-    assert_eq!(cleared.changes, [Change::Cleared]);
-}
-
-#[test]
-fn each_level_of_a_point_is_its_own_alarm_and_other_points_are_not_watched() {
-    let config = alarm_on(
-        "meter1.active_power",
-        Limits {
-            high: Some(180.0),
-            high_high: Some(200.0),
-            ..Limits::default()
-        },
-    );
-    let mut w = Watcher::new(vec![config]);
-    let point = PointId::parse("meter1.active_power").unwrap();
-    let ids: Vec<String> = w
-        .value(&point, Some(210.0), t(0))
-        .into_iter()
-        .map(|r| r.id)
-        .collect();
-    assert_eq!(
-        ids,
-        ["meter1.active_power:high_high", "meter1.active_power:high"]
-    );
-    let other = PointId::parse("meter1.voltage").unwrap();
-    assert!(!w.watches(&other));
-    assert!(w.value(&other, Some(1e9), t(0)).is_empty());
-}
-
-#[test]
-fn a_point_that_loses_its_value_holds_its_alarm_as_it_was() {
-    let config = alarm_on(
-        "meter1.active_power",
-        Limits {
-            high: Some(180.0),
-            ..Limits::default()
-        },
-    );
-    let mut w = Watcher::new(vec![config]);
-    let point = PointId::parse("meter1.active_power").unwrap();
-    assert_eq!(w.value(&point, Some(190.0), t(0)).len(), 1);
-    assert!(w.value(&point, None, t(1_000)).is_empty());
-    assert!(w.tick(t(60_000)).is_empty());
-    assert_eq!(w.value(&point, Some(100.0), t(61_000)).len(), 1);
-}
-
 /// Through the cell's change stream: a station's air below 50 °C raises a low alarm; the
 /// tool switched on heats it, and the alarm clears. Both are events in the history.
 #[tokio::test(start_paused = true)]
 async fn a_limit_alarm_on_a_live_point_is_raised_and_cleared_as_events_in_the_history() {
-    let rig = rig(1);
     let config = alarm_on(
         "jbc1.air_temperature",
         Limits {
@@ -124,11 +35,7 @@ async fn a_limit_alarm_on_a_live_point_is_raised_and_cleared_as_events_in_the_hi
             ..Limits::default()
         },
     );
-    tokio::spawn(run(
-        Arc::clone(&rig.cell),
-        vec![config],
-        rig.shutdown.subscribe(),
-    ));
+    let rig = rig_with_alarms(1, vec![config]);
     let events = |kind| {
         let store = rig.cell.store().clone();
         async move {
@@ -223,4 +130,133 @@ async fn a_limit_alarm_on_a_live_point_is_raised_and_cleared_as_events_in_the_hi
     // Nobody acknowledged it: back to normal, still waiting for one (ISA-18.2).
     assert_eq!(gauge("alarms_active"), 0);
     assert_eq!(gauge("alarms_unacknowledged"), 1);
+    let list = get(&app, "/api/alarms").await;
+    assert_eq!(list["total"], 1, "{list}");
+    assert_eq!(list["alarms"][0]["id"], "jbc1.air_temperature:low");
+    assert_eq!(list["alarms"][0]["state"], "returned_unacknowledged");
+
+    // Acknowledged from the API: journalled with who and why, and off the list.
+    let ack = |id: &str, token: &str| {
+        Request::post(format!("/api/alarms/{id}/ack"))
+            .header("content-type", "application/json")
+            .header("authorization", format!("Bearer {token}"))
+            .body(Body::from(r#"{"by": "anna", "comment": "tool was off"}"#))
+            .unwrap()
+    };
+    let (status, body) = call(&app, ack("jbc1.air_temperature:low", "wrong")).await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED, "{body}");
+    let (status, body) = call(&app, ack("jbc9.nothing:high", "t0ken")).await;
+    assert_eq!(status, StatusCode::NOT_FOUND, "{body}");
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("no alarm \"jbc9.nothing:high\"")
+    );
+    let (status, body) = call(&app, ack("jbc1.air_temperature:low", "t0ken")).await;
+    assert_eq!(status, StatusCode::OK, "{body}");
+    assert_eq!(body["alarm"]["state"], "normal");
+    let (status, body) = call(&app, ack("jbc1.air_temperature:low", "t0ken")).await;
+    assert_eq!(status, StatusCode::CONFLICT, "{body}");
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("already acknowledged (it is normal)"),
+        "{body}"
+    );
+    assert_eq!(get(&app, "/api/alarms").await["total"], 0);
+    let journal = get(&app, "/api/alarms/journal?alarm=jbc1.air_temperature:low").await;
+    let entries = journal["entries"].as_array().unwrap();
+    let kinds: Vec<&str> = entries
+        .iter()
+        .map(|e| e["kind"].as_str().unwrap())
+        .collect();
+    assert_eq!(kinds, ["alarm_changed", "alarm_cleared", "alarm_raised"]);
+    assert_eq!(entries[0]["changes"], serde_json::json!(["acknowledged"]));
+    assert_eq!(entries[0]["comment"], "tool was off");
+    assert!(
+        entries[0]["by"]
+            .as_str()
+            .unwrap()
+            .starts_with("anna (http "),
+        "{}",
+        entries[0]
+    );
+    assert_eq!(entries[0]["state"], "normal");
+    rig.shutdown.send(true).unwrap();
+}
+
+/// A GET answered 200, as JSON.
+async fn get(app: &axum::Router, uri: &str) -> serde_json::Value {
+    let (status, body) = call(app, Request::get(uri).body(Body::empty()).unwrap()).await;
+    assert_eq!(status, StatusCode::OK, "{uri}: {body}");
+    body
+}
+
+async fn call(app: &axum::Router, request: Request<Body>) -> (StatusCode, serde_json::Value) {
+    let response = app.clone().oneshot(request).await.unwrap();
+    let status = response.status();
+    let bytes = axum::body::to_bytes(response.into_body(), 1 << 20)
+        .await
+        .unwrap();
+    (status, serde_json::from_slice(&bytes).unwrap_or_default())
+}
+
+/// What the history kept of each alarm puts it back after a restart: a fault nobody
+/// acknowledged still waits, a shelving still runs.
+#[tokio::test(start_paused = true)]
+async fn after_a_restart_the_alarms_are_as_the_journal_left_them() {
+    let rig = rig_with_alarms(1, Vec::new());
+    rig.models[0]
+        .lock()
+        .set_tool_error(jbc::code::ToolError::HeaterMalfunction);
+    let raised = loop {
+        let page = rig.cell.alarms.list(&crate::alarm::book::ListFilter {
+            limit: 10,
+            ..Default::default()
+        });
+        if let Some(alarm) = page.alarms.into_iter().find(|a| a.id == "jbc1.tool_error") {
+            break alarm;
+        }
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    };
+    assert_eq!(raised.state, crate::alarm::state::State::Unacknowledged);
+    act(
+        &rig.cell,
+        "jbc1.tool_error",
+        Action::Shelve(Duration::from_secs(3600)),
+        "anna",
+        Some("waiting for a heater"),
+    )
+    .await
+    .unwrap();
+    // A new book from the history alone, as `run` builds it at start.
+    let saved = rig.cell.store().alarm_states().unwrap();
+    let mut book = Book::new(
+        &[],
+        &[crate::alarm::book::DeviceAlarms {
+            device: crate::point::DeviceId::new("jbc1").unwrap(),
+            label: "jbc1".into(),
+            rule_points: rig
+                .cell
+                .device_entry("jbc1")
+                .unwrap()
+                .points
+                .iter()
+                .filter(|p| p.alarm.is_some())
+                .cloned()
+                .collect(),
+        }],
+    );
+    for (id, fields) in &saved {
+        book.restore(id, fields, Timestamp::now());
+    }
+    let alarm = book
+        .view(book.index_of("jbc1.tool_error").unwrap())
+        .unwrap();
+    assert_eq!(alarm.state, crate::alarm::state::State::Unacknowledged);
+    assert!(alarm.active);
+    assert!(alarm.shelved_until.unwrap() > Timestamp::now());
+    rig.shutdown.send(true).unwrap();
 }
