@@ -703,6 +703,21 @@ impl Desk {
     pub fn view(&self, id: &str) -> Option<View> {
         self.with(|book| book.index_of(id).and_then(|i| book.view(i)))
     }
+
+    /// Every alarm of `device`, normal or not (for an interface's birth of the device).
+    pub fn of_device(&self, device: &str) -> Vec<View> {
+        self.with(|book| {
+            (0..book.len())
+                .filter(|&i| book.instances[i].device.as_str() == device)
+                .filter_map(|i| book.view(i))
+                .collect()
+        })
+    }
+
+    /// Every alarm, normal or not.
+    pub fn all(&self) -> Vec<View> {
+        self.with(|book| (0..book.len()).filter_map(|i| book.view(i)).collect())
+    }
 }
 
 #[cfg(test)]
