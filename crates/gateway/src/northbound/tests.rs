@@ -848,3 +848,45 @@ async fn json_mode_answers_another_clients_retained_status_and_point_values_with
     assert_eq!(truth["quality"], "good", "{truth}");
     node.stop().await;
 }
+
+/// JSON mode: each alarm is a retained message on `{prefix}/alarms/{id}`, the alarm as
+/// the API shows it, published at the start and again at each change.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn json_mode_publishes_each_alarm_retained_under_alarms_and_again_when_it_changes() {
+    let broker = Mosquitto::start();
+    let rig = rig(1);
+    let config = MqttConfig {
+        mode: crate::northbound::mqtt::config::MqttMode::Json,
+        prefix: "plant/cell".into(),
+        ..config(&broker)
+    };
+    let (_client, mut seen) = plain_client(&broker, "plant/cell/alarms/#").await;
+    let node = Node::start(&rig, config, false);
+    let topic = "plant/cell/alarms/jbc1.tool_error";
+    let state_on = |seen: &mut tokio::sync::mpsc::UnboundedReceiver<(String, Vec<u8>)>,
+                    wanted: &'static str| {
+        let seen = &mut *seen;
+        async move {
+            tokio::time::timeout(LIMIT, async {
+                while let Some((t, payload)) = seen.recv().await {
+                    let alarm: serde_json::Value = serde_json::from_slice(&payload).unwrap();
+                    if t == topic && alarm["state"] == wanted {
+                        return alarm;
+                    }
+                }
+                panic!("the client stopped");
+            })
+            .await
+            .unwrap_or_else(|_| panic!("no {wanted} alarm on {topic} within {LIMIT:?}"))
+        }
+    };
+    let normal = state_on(&mut seen, "normal").await;
+    assert_eq!(normal["priority"], "high");
+    rig.models[0]
+        .lock()
+        .set_tool_error(jbc::code::ToolError::HeaterMalfunction);
+    let raised = state_on(&mut seen, "unacknowledged").await;
+    assert_eq!(raised["active"], true);
+    assert_eq!(raised["value"], 3.0, "{raised}");
+    node.stop().await;
+}
