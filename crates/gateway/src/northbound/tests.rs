@@ -863,30 +863,32 @@ async fn json_mode_publishes_each_alarm_retained_under_alarms_and_again_when_it_
     let (_client, mut seen) = plain_client(&broker, "plant/cell/alarms/#").await;
     let node = Node::start(&rig, config, false);
     let topic = "plant/cell/alarms/jbc1.tool_error";
-    let state_on = |seen: &mut tokio::sync::mpsc::UnboundedReceiver<(String, Vec<u8>)>,
-                    wanted: &'static str| {
-        let seen = &mut *seen;
-        async move {
-            tokio::time::timeout(LIMIT, async {
-                while let Some((t, payload)) = seen.recv().await {
-                    let alarm: serde_json::Value = serde_json::from_slice(&payload).unwrap();
-                    if t == topic && alarm["state"] == wanted {
-                        return alarm;
-                    }
-                }
-                panic!("the client stopped");
-            })
-            .await
-            .unwrap_or_else(|_| panic!("no {wanted} alarm on {topic} within {LIMIT:?}"))
-        }
-    };
-    let normal = state_on(&mut seen, "normal").await;
+    let normal = alarm_on(&mut seen, topic, "normal").await;
     assert_eq!(normal["priority"], "high");
     rig.models[0]
         .lock()
         .set_tool_error(jbc::code::ToolError::HeaterMalfunction);
-    let raised = state_on(&mut seen, "unacknowledged").await;
+    let raised = alarm_on(&mut seen, topic, "unacknowledged").await;
     assert_eq!(raised["active"], true);
     assert_eq!(raised["value"], 3.0, "{raised}");
     node.stop().await;
+}
+
+/// The next alarm on `topic` in `state`, within [`LIMIT`].
+async fn alarm_on(
+    seen: &mut tokio::sync::mpsc::UnboundedReceiver<(String, Vec<u8>)>,
+    topic: &str,
+    state: &str,
+) -> serde_json::Value {
+    tokio::time::timeout(LIMIT, async {
+        while let Some((t, payload)) = seen.recv().await {
+            let alarm: serde_json::Value = serde_json::from_slice(&payload).unwrap();
+            if t == topic && alarm["state"] == state {
+                return alarm;
+            }
+        }
+        panic!("the client stopped");
+    })
+    .await
+    .unwrap_or_else(|_| panic!("no {state} alarm on {topic} within {LIMIT:?}"))
 }
