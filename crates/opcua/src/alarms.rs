@@ -287,6 +287,7 @@ pub fn act_status(error: &ActError) -> StatusCode {
             Refused::NothingToAcknowledge(_) => StatusCode::BadConditionBranchAlreadyAcked,
             Refused::NotShelved => StatusCode::BadConditionNotShelved,
             Refused::OutOfService => StatusCode::BadConditionDisabled,
+            Refused::InService => StatusCode::BadConditionAlreadyEnabled,
             Refused::ShelveDuration { .. } => StatusCode::BadShelvingTimeOutOfRange,
         },
     }
