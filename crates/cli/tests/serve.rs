@@ -444,3 +444,34 @@ fn config_check_reports_every_mistake_of_a_file_at_once() {
     assert_stderr_has(&out, "cell.toml:7:");
     assert_stderr_has(&out, "cell.toml:14:");
 }
+
+#[test]
+fn with_log_format_json_every_log_line_is_one_json_object_for_a_log_shipper() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut serve = common::cellbus()
+        .args(["--log-format", "json", "serve", "--listen", "127.0.0.1:0", "--data"])
+        .arg(dir.path())
+        .env_remove("RUST_LOG")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("cellbus runs");
+    let stderr = serve.stderr.take().expect("piped");
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(stderr));
+    // The first line is the start, logged before anything else.
+    let first = lines.next().expect("a log line").expect("text");
+    serve.kill().unwrap();
+    serve.wait().unwrap();
+    let line: serde_json::Value =
+        serde_json::from_str(&first).unwrap_or_else(|e| panic!("{e}: {first}"));
+    assert_eq!(line["level"], "INFO", "{line}");
+    assert_eq!(line["fields"]["kind"], "gateway_started", "{line}");
+    assert!(
+        line["fields"]["message"]
+            .as_str()
+            .unwrap()
+            .starts_with("gateway started on http://127.0.0.1:"),
+        "{line}"
+    );
+    assert!(line["timestamp"].is_string(), "{line}");
+}
