@@ -521,7 +521,10 @@ fn an_operator_acknowledges_one_demo_alarm_shelves_another_and_the_journal_says_
     assert_eq!(seen["ack_dialog"]["title"], format!("Acknowledge {acked}?"));
     assert_eq!(seen["ack_dialog"]["duration_hidden"], true);
     let refused = seen["refused"]["text"].as_str().unwrap();
-    assert!(refused.contains("wrong token") && refused.contains("401"), "{refused}");
+    assert!(
+        refused.contains("wrong token") && refused.contains("401"),
+        "{refused}"
+    );
     assert_eq!(seen["refused"]["still_open"], true);
     assert!(
         seen["ack_done"].as_str().unwrap().contains(OPERATOR),
@@ -592,7 +595,10 @@ fn an_operator_acknowledges_one_demo_alarm_shelves_another_and_the_journal_says_
     ] {
         let e = entry(alarm, change);
         assert!(
-            e["by"].as_str().unwrap().starts_with(&format!("{OPERATOR} (http ")),
+            e["by"]
+                .as_str()
+                .unwrap()
+                .starts_with(&format!("{OPERATOR} (http ")),
             "{e}"
         );
         assert_eq!(e["comment"], comment, "{e}");
@@ -613,7 +619,10 @@ fn an_operator_acknowledges_one_demo_alarm_shelves_another_and_the_journal_says_
                         .any(|c| c == change)
             })
             .unwrap_or_else(|| panic!("the page's journal has no {change} of {alarm}: {seen}"));
-        assert!(row["cells"]["By"].as_str().unwrap().contains(OPERATOR), "{row}");
+        assert!(
+            row["cells"]["By"].as_str().unwrap().contains(OPERATOR),
+            "{row}"
+        );
         assert_eq!(row["cells"]["Comment"], comment, "{row}");
     }
     assert!(screenshot.exists());

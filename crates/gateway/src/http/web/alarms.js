@@ -3,9 +3,11 @@
 // Acknowledge, Shelve and Unshelve for each (POST /api/alarms/{id}/ack|shelve|unshelve with
 // the write token, the operator's name and a comment, asked in a dialog that is the
 // confirmation), and below it the journal of the last 24 hours (/api/alarms/journal).
-// The header's banner counts the alarms by priority on every view. Both are asked for
-// every 5 s, and half a second after an alarm event (alarm_raised, alarm_cleared,
-// alarm_changed) on the event stream.
+// The header's banner counts the alarms by priority on every view. The stream carries
+// every alarm change as an event (alarm_raised, alarm_cleared, alarm_changed, a shelving
+// that ran out included) whatever devices it follows: the banner, and the view when it is
+// shown, are asked for again half a second after one, and with each snapshot (a stream
+// opened again); the view also every 10 s, so its "now" moves on.
 //
 // The view is in the address: `#view=alarms` (`&page=N` past the first 50).
 //
@@ -22,8 +24,8 @@
 
 /** Alarms on a page of the list. */
 const ALARMS_PAGE = 50;
-/** The list, the journal and the banner are asked for again this often. */
-const ALARMS_REFRESH_MS = 5e3;
+/** The view (list, journal and banner) is asked for again this often while shown. */
+const ALARMS_REFRESH_MS = 10e3;
 const PRIORITY_WORDS = [['urgent', 'Urgent'], ['high', 'High'], ['medium', 'Medium'], ['low', 'Low']];
 const ALARM_STATE_WORDS = {
   normal: 'normal',
@@ -91,8 +93,13 @@ async function refreshAlarmBanner() {
 /** Shows the alarm view the address asks for (`params`), or hides it (`null`). */
 function showAlarms(params) {
   alarms.shown = Boolean(params);
+  clearInterval(alarms.timer);
+  alarms.timer = null;
   if (!params) return;
   alarms.page = Math.max(1, Number.parseInt(params.get('page'), 10) || 1);
+  alarms.timer = setInterval(() => {
+    if (!document.hidden) loadAlarms();
+  }, ALARMS_REFRESH_MS);
   loadAlarms();
 }
 
@@ -367,8 +374,4 @@ function setUpAlarms() {
   document.getElementById('alarm-dialog').addEventListener('close', () => {
     alarms.acting = null;
   });
-  refreshAlarmBanner();
-  alarms.timer = setInterval(() => {
-    if (!document.hidden) refreshAlarms();
-  }, ALARMS_REFRESH_MS);
 }

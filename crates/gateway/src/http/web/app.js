@@ -859,6 +859,7 @@ function connect(query) {
     renderLines(snapshot.lines);
     loadEvents();
     productionSnapshot();
+    refreshAlarms();
   });
   opened.addEventListener('value', (e) => updatePoint(JSON.parse(e.data)));
   opened.addEventListener('device', (e) => updateDeviceStatus(JSON.parse(e.data)));
