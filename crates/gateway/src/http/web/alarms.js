@@ -76,8 +76,6 @@ function renderAlarmBanner(counts) {
   }
   const banner = document.getElementById('alarm-banner');
   banner.title = `${said.join('\n')}\nOpen the alarm list`;
-  banner.dataset.state = counts.some((c) => c.unacknowledged) ? 'waiting'
-    : counts.some((c) => c.active) ? 'active' : 'quiet';
 }
 
 async function refreshAlarmBanner() {
