@@ -459,7 +459,7 @@ fn an_operator_acknowledges_one_demo_alarm_shelves_another_and_the_journal_says_
 
     // The demo's devices raise their own alarms within about a minute (a JBC tool error, a
     // sealer's fault, the placement machine's error stop): wait for two waiting for an
-    // acknowledgement.
+    // acknowledgement, neither shelved (a chattering alarm shelves itself) nor out of service.
     let started = std::time::Instant::now();
     loop {
         let list = gateway.get_json("/api/alarms?limit=50");
@@ -467,7 +467,11 @@ fn an_operator_acknowledges_one_demo_alarm_shelves_another_and_the_journal_says_
             .as_array()
             .unwrap()
             .iter()
-            .filter(|a| a["acknowledged"] == false)
+            .filter(|a| {
+                a["acknowledged"] == false
+                    && a["shelved_until"].is_null()
+                    && a["out_of_service"] == false
+            })
             .count();
         if waiting >= 2 {
             break;
@@ -574,18 +578,23 @@ fn an_operator_acknowledges_one_demo_alarm_shelves_another_and_the_journal_says_
         "{seen}"
     );
 
-    // The journal: on the page and from the API, who did what and why.
-    let journal = gateway.get_json("/api/alarms/journal?from=-1h&limit=100");
-    let entries = journal["entries"].as_array().unwrap();
-    let entry = |alarm: &str, change: &str| -> &serde_json::Value {
-        entries
+    // The journal: on the page and from the API (each alarm's own: a chattering one fills
+    // the cell's), who did what and why.
+    let entry = |alarm: &str, change: &str| -> serde_json::Value {
+        let journal = gateway.get_json(&format!(
+            "/api/alarms/journal?alarm={}&from=-1h&limit=100",
+            alarm.replace(':', "%3A")
+        ));
+        journal["entries"]
+            .as_array()
+            .unwrap()
             .iter()
             .find(|e| {
-                e["alarm"] == alarm
-                    && e["changes"]
-                        .as_array()
-                        .is_some_and(|c| c.contains(&change.into()))
+                e["changes"]
+                    .as_array()
+                    .is_some_and(|c| c.contains(&change.into()))
             })
+            .cloned()
             .unwrap_or_else(|| panic!("no {change} of {alarm} in the journal: {journal}"))
     };
     for (alarm, change, comment) in [

@@ -1,7 +1,7 @@
 // The alarm view in headless Chromium, on the demo cell, as an operator works with it: the
 // cell page, whose header's banner counts the alarms; a click on the banner opens the
-// alarm list. Once two alarms wait for an acknowledgement (the demo's devices raise their
-// own within about a minute), acknowledges the first (a wrong token first: the API's
+// alarm list. Once two alarms wait for an acknowledgement and are not shelved (the demo's
+// devices raise their own within about a minute), acknowledges the first (a wrong token first: the API's
 // refusal is shown, then the right one) and shelves the second for an hour, each through
 // the dialog with the operator's name and a comment; waits for the banner to change and
 // for the journal under the list to show both; then, on a 360 px phone, unshelves the
@@ -34,10 +34,11 @@ try {
     tab: document.querySelector('.pages a[aria-current="page"]').id,
   }));
 
-  // Two alarms waiting for an acknowledgement.
+  // Two alarms waiting for an acknowledgement that can be shelved (not shelved already).
+  const actionable = 'tr.alarm:has(button[data-action="ack"]):has(button[data-action="shelve"])';
   await page.waitForFunction(
-    () => document.querySelectorAll('#alarm-list tr.alarm[data-acknowledged="false"]').length >= 2,
-    null,
+    (rows) => document.querySelectorAll(`#alarm-list ${rows}`).length >= 2,
+    actionable,
     { timeout: 180000, polling: 250 },
   );
   const rows = () => page.evaluate(() => [...document.querySelectorAll('#alarm-list tr.alarm')].map((tr) => ({
@@ -47,7 +48,7 @@ try {
     actions: [...tr.querySelectorAll('button')].map((b) => b.dataset.action),
   })));
   const listed = await rows();
-  const waiting = listed.filter((r) => r.acknowledged === 'false');
+  const waiting = listed.filter((r) => r.actions.includes('ack') && r.actions.includes('shelve'));
   const [acked, shelved] = [waiting[0].id, waiting[1].id];
   const button = (id, action) => page.locator(`#alarm-list tr.alarm[data-id="${id}"] button[data-action="${action}"]`);
   const dialogOpen = () => page.evaluate(() => document.getElementById('alarm-dialog').open);

@@ -236,7 +236,7 @@ function renderAlarmList(list, pages) {
       button.addEventListener('click', () => openAlarmDialog(alarm, action));
       actions.append(button);
     };
-    if (!alarm.acknowledged) offer('ack', 'Acknowledge');
+    if (!alarm.acknowledged && !alarm.out_of_service) offer('ack', 'Acknowledge');
     if (alarm.shelved_until) offer('unshelve', 'Unshelve…');
     else if (!alarm.out_of_service) offer('shelve', 'Shelve…');
     row.append(actions);
