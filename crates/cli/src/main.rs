@@ -48,6 +48,19 @@ struct Cli {
     /// included; this option wins over it.
     #[arg(long, global = true, value_name = "LEVEL")]
     log_level: Option<tracing::level_filters::LevelFilter>,
+    /// How log lines look: `text` (one line each, in colour only on a terminal; journald
+    /// adds the time of its own) or `json` (one JSON object a line, for log shippers).
+    #[arg(long, global = true, value_name = "FORMAT", default_value = "text")]
+    log_format: LogFormat,
+}
+
+/// The form of the log lines (`--log-format`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum LogFormat {
+    /// Lines for people.
+    Text,
+    /// One JSON object a line: time, level, target, message and fields.
+    Json,
 }
 
 #[derive(Debug, Subcommand)]
@@ -57,7 +70,7 @@ enum Command {
     Serve(serve_cmd::ServeArgs),
     /// Run the plant historian: a Sparkplug B primary host that takes every gateway's data
     /// off the plant's MQTT broker into PostgreSQL (views cellbus_samples, cellbus_events,
-    /// cellbus_points, cellbus_states), and serves the gateway's history API for the whole
+    /// cellbus_points, cellbus_states, cellbus_alarms), and serves the gateway's history API for the whole
     /// plant.
     ///
     /// Exit codes: 0 stopped by Ctrl-C or SIGTERM (pending rows committed), 1 PostgreSQL
@@ -98,7 +111,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let service = matches!(cli.command, Command::Serve(_) | Command::Historian(_));
-    init_logging(cli.log_level, service);
+    init_logging(cli.log_level, cli.log_format, service);
     if matches!(cli.command, Command::Serve(_) | Command::Demo(_)) {
         // The gateway's malloc, set before the runtime starts its threads.
         gateway::tune_malloc();
@@ -159,7 +172,11 @@ const OWN_CRATES: [&str; 12] = [
 
 /// Logs go to stderr, so stdout stays for results; colour only on a terminal (and not with
 /// NO_COLOR set), so a journal or a file gets plain lines.
-fn init_logging(level: Option<tracing::level_filters::LevelFilter>, service: bool) {
+fn init_logging(
+    level: Option<tracing::level_filters::LevelFilter>,
+    format: LogFormat,
+    service: bool,
+) {
     let own = |level: tracing::level_filters::LevelFilter| {
         let mut filter = tracing_subscriber::EnvFilter::new("warn");
         for name in OWN_CRATES {
@@ -188,11 +205,13 @@ fn init_logging(level: Option<tracing::level_filters::LevelFilter>, service: boo
     };
     let colour = std::io::IsTerminal::is_terminal(&std::io::stderr())
         && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty());
-    tracing_subscriber::fmt()
+    let logs = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_ansi(colour)
-        .with_writer(std::io::stderr)
-        .init();
+        .with_writer(std::io::stderr);
+    match format {
+        LogFormat::Text => logs.with_ansi(colour).init(),
+        LogFormat::Json => logs.json().with_ansi(false).init(),
+    }
 }
 
 #[cfg(test)]

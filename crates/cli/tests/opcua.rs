@@ -227,6 +227,110 @@ fn a_device_that_stops_answering_turns_its_opcua_values_bad_without_a_value() {
 }
 
 #[test]
+fn an_independent_opcua_client_gets_an_alarm_event_and_acknowledges_and_shelves_it_as_its_user_which_the_alarm_journal_shows()
+ {
+    require_asyncua();
+    let data = tempfile::tempdir().expect("a temporary directory");
+    let mut sim = Some(common::Sim::start(&["jbc", "--listen", "127.0.0.1:0"]));
+    let endpoint = sim.as_ref().map(|s| s.endpoint.clone()).unwrap_or_default();
+    // Anonymous reading on None, the user `operator` (its password the write token) on
+    // Basic256Sha256; the client's certificate trusted as it comes.
+    let config = station_cell(
+        data.path(),
+        &endpoint,
+        "security = [\"None\", \"Basic256Sha256 SignAndEncrypt\"]\nanonymous = true\n\
+         trust_all_clients = true\n\
+         [[opcua.user]]\nname = \"operator\"\npassword_env = \"CELLBUS_TOKEN\"\nwrite = true",
+    );
+    let config = config.to_str().expect("a UTF-8 path");
+    let token = "opcua-alarm-secret";
+    let served = Served::start(
+        data.path(),
+        &["--config", config, "--allow-writes"],
+        Some(token),
+    );
+
+    let mut child = Command::new("python3")
+        .args([
+            &script(),
+            "alarm",
+            &served.opcua,
+            &served.http,
+            token,
+            "jbc1",
+        ])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("python3 runs");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let stdout = child.stdout.take().expect("piped");
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut out = Vec::new();
+    loop {
+        let line = rx.recv_timeout(LIMIT).expect("the script subscribes");
+        let subscribed = line == "subscribed";
+        out.push(line);
+        if subscribed {
+            break;
+        }
+    }
+    // The station is switched off: jbc1:down is raised.
+    drop(sim.take());
+    let deadline = std::time::Instant::now() + LIMIT;
+    while let Ok(line) =
+        rx.recv_timeout(deadline.saturating_duration_since(std::time::Instant::now()))
+    {
+        out.push(line);
+    }
+    let status = child.wait().expect("python3 ends");
+    let out = out.join("\n");
+    assert!(status.success(), "the asyncua script failed:\n{out}");
+    for expected in [
+        "refused to an anonymous session: BadUserAccessDenied",
+        "jbc1:down in jbc1's Alarms folder",
+        "the alarm_raised event of jbc1:down arrived",
+        "State unacknowledged",
+        "Acknowledge answered acknowledged",
+        "the alarm_changed event carries",
+        "BadConditionBranchAlreadyAcked",
+        "BadInvalidArgument",
+        "Shelve",
+        "BadConditionNotShelved",
+        "BadShelvingTimeOutOfRange",
+        "the alarm journal has the acknowledgement",
+    ] {
+        assert!(out.contains(expected), "{expected:?} not in:\n{out}");
+    }
+    // The journal as HTTP gives it, read here too: the acknowledgement with its comment,
+    // by the OPC UA user from the client's address.
+    let (code, body) = common::http_get(&served.http, "/api/alarms/journal?alarm=jbc1:down");
+    assert_eq!(code, 200, "{body}");
+    let journal: serde_json::Value = serde_json::from_str(&body).expect("JSON");
+    let entries = journal["entries"].as_array().expect("entries");
+    let acknowledged = entries
+        .iter()
+        .find(|e| {
+            e["kind"] == "alarm_changed" && e["changes"] == serde_json::json!(["acknowledged"])
+        })
+        .unwrap_or_else(|| panic!("no acknowledgement in {body}"));
+    assert_eq!(acknowledged["comment"], "seen by asyncua", "{acknowledged}");
+    let by = acknowledged["by"].as_str().expect("by");
+    assert!(
+        by.starts_with("opcua user operator from 127.0.0.1:"),
+        "{by}"
+    );
+    assert_eq!(acknowledged["acknowledged"], true, "{acknowledged}");
+}
+
+#[test]
 fn anonymous_sessions_are_refused_when_the_config_says_so() {
     require_asyncua();
     let data = tempfile::tempdir().expect("a temporary directory");

@@ -444,3 +444,92 @@ fn config_check_reports_every_mistake_of_a_file_at_once() {
     assert_stderr_has(&out, "cell.toml:7:");
     assert_stderr_has(&out, "cell.toml:14:");
 }
+
+#[test]
+fn with_log_format_json_every_log_line_is_one_json_object_for_a_log_shipper() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut serve = common::cellbus()
+        .args([
+            "--log-format",
+            "json",
+            "serve",
+            "--listen",
+            "127.0.0.1:0",
+            "--data",
+        ])
+        .arg(dir.path())
+        .env_remove("RUST_LOG")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("cellbus runs");
+    let stderr = serve.stderr.take().expect("piped");
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(stderr));
+    // The first line is the start, logged before anything else.
+    let first = lines.next().expect("a log line").expect("text");
+    serve.kill().unwrap();
+    serve.wait().unwrap();
+    let line: serde_json::Value =
+        serde_json::from_str(&first).unwrap_or_else(|e| panic!("{e}: {first}"));
+    assert_eq!(line["level"], "INFO", "{line}");
+    assert_eq!(line["fields"]["kind"], "gateway_started", "{line}");
+    assert!(
+        line["fields"]["message"]
+            .as_str()
+            .unwrap()
+            .starts_with("gateway started on http://127.0.0.1:"),
+        "{line}"
+    );
+    assert!(line["timestamp"].is_string(), "{line}");
+}
+
+/// Under systemd (`Type=notify`, `WatchdogSec=2`): READY=1 once it listens, WATCHDOG=1 at
+/// half the period while it works, STOPPING=1 on SIGTERM; read from the notification
+/// socket systemd would hold, here a datagram socket of the test's own.
+#[test]
+fn under_systemd_serve_says_ready_pets_the_watchdog_and_says_stopping() {
+    use std::os::unix::net::UnixDatagram;
+    let dir = tempfile::tempdir().unwrap();
+    let socket_path = dir.path().join("notify.sock");
+    let socket = UnixDatagram::bind(&socket_path).unwrap();
+    socket
+        .set_read_timeout(Some(std::time::Duration::from_secs(60)))
+        .unwrap();
+    let mut serve = common::cellbus()
+        .args(["serve", "--listen", "127.0.0.1:0", "--data"])
+        .arg(dir.path().join("data"))
+        .env("NOTIFY_SOCKET", &socket_path)
+        .env("WATCHDOG_USEC", "2000000")
+        .env_remove("WATCHDOG_PID")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("cellbus runs");
+    let next = || {
+        let mut buffer = [0u8; 1024];
+        let n = socket
+            .recv(&mut buffer)
+            .expect("a notification within a minute");
+        String::from_utf8_lossy(&buffer[..n]).into_owned()
+    };
+    let ready = next();
+    assert!(
+        ready.starts_with("READY=1\nSTATUS=listening on http://127.0.0.1:"),
+        "{ready:?}"
+    );
+    assert_eq!(next(), "WATCHDOG=1\n");
+    assert_eq!(next(), "WATCHDOG=1\n", "again, a period later");
+    let status = std::process::Command::new("kill")
+        .args(["-TERM", &serve.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let stopping = loop {
+        let message = next();
+        if message != "WATCHDOG=1\n" {
+            break message;
+        }
+    };
+    assert_eq!(stopping, "STOPPING=1\n");
+    assert!(serve.wait().unwrap().success(), "a clean stop");
+}

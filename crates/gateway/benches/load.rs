@@ -186,6 +186,9 @@ use helper::Helper;
 use mqtt_counter::Counter;
 use process::{ProcessUse, ticks_per_second};
 
+/// How far into the measured window `--alarm-flood` starts.
+const FLOOD_INTO_WINDOW: Duration = Duration::from_secs(5);
+
 /// Devices simulated when `--devices` is not given.
 const DEFAULT_DEVICES: usize = 100;
 /// Lines when `--lines` is not given.
@@ -245,6 +248,9 @@ usage: cargo bench -p gateway --bench load -- [options]
                       JTSE model's own is 5ms)
   --live-period D     poll period of the live group (default: the driver's, 1s; at
                       least 50ms)
+  --alarm-flood       every JBC station raises a tool error at once 5 s into the
+                      window and holds it (an alarm flood); the report
+                      counts the alarms and times the alarm list and journal
   --no-scrapes        skip the timed GETs after the window (/api/devices builds
                       megabytes: leave them out of a heap profile of the polling)
   --mqtt              also publish the cell as a Sparkplug B edge node to a local
@@ -377,6 +383,8 @@ struct Args {
     /// Whether to time the heavy GETs after the window (off for a heap profile of the
     /// polling alone: `/api/devices` builds megabytes).
     scrapes: bool,
+    /// Every JBC station's tool error at once, 5 s into the window (an alarm flood).
+    alarm_flood: bool,
     /// The floor instead of the gateway: the same requests sent by a bare loop.
     bare: bool,
 }
@@ -397,6 +405,7 @@ impl Args {
             opcua: false,
             opcua_items: DEFAULT_OPCUA_ITEMS,
             scrapes: true,
+            alarm_flood: false,
             bare: false,
         };
         let mut it = raw.iter();
@@ -406,6 +415,7 @@ impl Args {
                 "--mqtt" => Some((&mut args.mqtt, true)),
                 "--opcua" => Some((&mut args.opcua, true)),
                 "--no-scrapes" => Some((&mut args.scrapes, false)),
+                "--alarm-flood" => Some((&mut args.alarm_flood, true)),
                 "--serial" => Some((&mut args.serial, true)),
                 "--bare" => Some((&mut args.bare, true)),
                 _ => None,
@@ -509,6 +519,13 @@ impl Args {
         ];
         if self.serial {
             args.push("--serial".into());
+        }
+        if self.alarm_flood {
+            args.extend([
+                "--alarm-flood".into(),
+                "--warmup".into(),
+                format!("{}ms", self.warmup.as_millis()),
+            ]);
         }
         args
     }
@@ -722,6 +739,7 @@ async fn simulate_line(
     line: usize,
     reply_delay: Duration,
     pace: Option<SerialSettings>,
+    flood: Option<Duration>,
 ) -> anyhow::Result<SimulatedLine> {
     match plan.kind {
         Kind::Jbc => {
@@ -741,8 +759,9 @@ async fn simulate_line(
             let started = std::time::Instant::now();
             let operator = Box::new(move |now: std::time::Instant| {
                 let elapsed = now.saturating_duration_since(started);
+                let flooded = flood.is_some_and(|at| elapsed >= at);
                 for (model, address, phase, op) in &mut stations {
-                    op.act(model, *address, elapsed + *phase, now);
+                    op.act(model, *address, elapsed + *phase, now, flooded);
                 }
             });
             Ok(SimulatedLine::Bus(bus, operator))
@@ -1022,13 +1041,15 @@ struct JbcOperator {
 
 impl JbcOperator {
     /// The routine, 120 s a round: heat to 350 °C, off, heat to 420 °C with the suction
-    /// pedal pressed for a while, an air-flow fault in one round of three, off.
+    /// pedal pressed for a while, an air-flow fault in one round of three, off; with
+    /// `flooded`, the fault all the time.
     fn act(
         &mut self,
         model: &SharedModel<Station>,
         address: Address,
         at: Duration,
         now: std::time::Instant,
+        flooded: bool,
     ) {
         let round = at.as_secs() / ROUTINE.as_secs();
         let s = at.as_secs() % ROUTINE.as_secs();
@@ -1038,7 +1059,7 @@ impl JbcOperator {
             _ => None,
         };
         let suction = (70..75).contains(&s);
-        let fault = round.is_multiple_of(3) && (85..90).contains(&s);
+        let fault = flooded || (round.is_multiple_of(3) && (85..90).contains(&s));
         let mut station = model.lock();
         station.advance(now);
         if heat != self.heat {
@@ -1104,7 +1125,17 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
         let mut out = String::new();
         for (i, plan) in plans.iter().enumerate() {
             let pace = args.baud.and_then(|b| plan.kind.line_serial(b));
-            let (bus, operator) = match simulate_line(*plan, i, args.reply_delay, pace).await? {
+            let (bus, operator) = match simulate_line(
+                *plan,
+                i,
+                args.reply_delay,
+                pace,
+                // A few seconds into the window (the simulators start just before the
+                // gateway).
+                args.alarm_flood.then_some(args.warmup + FLOOD_INTO_WINDOW),
+            )
+            .await?
+            {
                 SimulatedLine::Bus(bus, operator) => (bus, operator),
                 SimulatedLine::Machine(twin, endpoint, operator) => {
                     machines.push(twin);
@@ -1740,6 +1771,8 @@ struct Report {
     mqtt_totals: Option<(u64, mqtt_counter::Counts)>,
     /// With `--opcua`: what was monitored, stored and received.
     opcua_totals: Option<OpcuaTotals>,
+    /// With `--alarm-flood`: the alarms at the window's end, in words.
+    alarms: Option<String>,
 }
 
 /// With `--opcua`, after the stop.
@@ -1871,8 +1904,8 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         };
         // After the window: what a dashboard and a Prometheus scrape cost with this cell.
         let mut scrapes = Vec::new();
-        let paths: &[&str] = if args.scrapes {
-            &[
+        let mut paths: Vec<&str> = if args.scrapes {
+            vec![
                 "/metrics",
                 "/api/devices",
                 "/api/devices?fields=id,status,line",
@@ -1880,9 +1913,29 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
                 "/healthz",
             ]
         } else {
-            &[]
+            Vec::new()
         };
-        for &path in paths {
+        if args.alarm_flood {
+            // What the page's banner, list and journal ask for during the flood.
+            paths.extend([
+                "/api/alarms?limit=1",
+                "/api/alarms?limit=50",
+                "/api/alarms?limit=50&offset=500",
+                "/api/alarms/journal?limit=100",
+            ]);
+        }
+        let alarms = args.alarm_flood.then(|| {
+            let counts = cell.alarms.counts();
+            let sum =
+                |f: fn(&gateway::alarm::book::Counts) -> u64| counts.iter().map(f).sum::<u64>();
+            format!(
+                "{} alarms kept, {} active, {} unacknowledged at the window's end",
+                cell.alarms.with(|book| book.len()),
+                sum(|c| c.active),
+                sum(|c| c.unacknowledged)
+            )
+        });
+        for &path in &paths {
             let mut times = Vec::with_capacity(SCRAPE_REPEATS);
             let (status, size, took) = get(addr, path).await?;
             times.push(took);
@@ -1897,12 +1950,12 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         run.await.context("the gateway task failed")??;
         let stop_took = stopping.elapsed();
         anyhow::Ok((
-            before, after, groups, load_after, scrapes, stop_took, published, opcua,
+            before, after, groups, load_after, scrapes, stop_took, published, opcua, alarms,
         ))
     })?;
     runtime.shutdown_timeout(Duration::from_secs(5));
     drop(simulators);
-    let (before, after, groups, load_after, scrapes, stop_took, published, opcua) = report;
+    let (before, after, groups, load_after, scrapes, stop_took, published, opcua, alarms) = report;
     host.load_after = load_after;
     let mqtt_totals = match &mut mqtt {
         Some(side) => Some((published.get(), side.settled(Duration::from_secs(10))?)),
@@ -1938,6 +1991,7 @@ fn run_bench(args: &Args) -> anyhow::Result<Report> {
         after,
         groups,
         scrapes,
+        alarms,
         stop_took,
         rows_at_stop,
         integrity,
@@ -2561,6 +2615,9 @@ impl std::fmt::Display for Report {
                 cpu(&oa.client, &ob.client),
                 mib(oa.client.peak_rss_kib),
             )?;
+        }
+        if let Some(alarms) = &self.alarms {
+            writeln!(f, "  alarms       {alarms}")?;
         }
         for (path, status, size, times) in &self.scrapes {
             let ms = |d: Duration| d.as_secs_f64() * 1000.0;

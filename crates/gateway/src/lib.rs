@@ -60,6 +60,7 @@ pub mod point;
 pub mod production;
 pub mod scheduler;
 pub mod serve;
+pub mod service;
 pub mod store;
 pub mod time;
 pub mod write;

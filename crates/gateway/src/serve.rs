@@ -84,6 +84,7 @@ pub async fn serve(
             .and_then(|()| out.flush())
             .context("cannot write to standard output")?;
     }
+    crate::service::ready(&format!("listening on http://{}", gateway.local_addr()));
     gateway.run(shutdown).await
 }
 
@@ -203,7 +204,13 @@ impl Gateway {
                 .context("the production keeper's start failed")?;
         }
         let (stop, stopped) = watch::channel(false);
-        let pollers = Pollers::start(tasks, stopped.clone())?;
+        let heartbeat = crate::service::Heartbeat::default();
+        let pollers = Pollers::start(tasks, stopped.clone(), heartbeat.clone())?;
+        tokio::spawn(crate::service::watchdog(
+            heartbeat,
+            cell.store().clone(),
+            stopped.clone(),
+        ));
         tokio::spawn(crate::alarm::keeper::run(
             Arc::clone(&cell),
             stopped.clone(),
@@ -290,6 +297,7 @@ impl Gateway {
         let served = tokio::select! {
             served = &mut server => served,
             () = shutdown => {
+                crate::service::stopping();
                 // Ends the event streams and starts the graceful stop of the server.
                 let _ = stop.send(true);
                 server.await
@@ -352,8 +360,13 @@ struct Pollers {
 }
 
 impl Pollers {
-    /// Starts `tasks` on the pollers' thread; they end when `stop` turns true.
-    fn start(tasks: Vec<LineTask>, stop: watch::Receiver<bool>) -> anyhow::Result<Self> {
+    /// Starts `tasks` on the pollers' thread, with `heartbeat` ticking there; they end when
+    /// `stop` turns true.
+    fn start(
+        tasks: Vec<LineTask>,
+        stop: watch::Receiver<bool>,
+        heartbeat: crate::service::Heartbeat,
+    ) -> anyhow::Result<Self> {
         let runtime = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
@@ -363,6 +376,16 @@ impl Pollers {
             .name("cellbus-poll".into())
             .spawn(move || {
                 runtime.block_on(async move {
+                    let mut beating = stop.clone();
+                    tokio::spawn(async move {
+                        let mut tick = tokio::time::interval(crate::service::HEARTBEAT);
+                        loop {
+                            tokio::select! {
+                                _ = beating.changed() => return,
+                                _ = tick.tick() => heartbeat.beat(),
+                            }
+                        }
+                    });
                     let running: Vec<_> = tasks
                         .into_iter()
                         .map(|task| tokio::spawn(task.run(stop.clone())))

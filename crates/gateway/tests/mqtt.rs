@@ -131,7 +131,15 @@ async fn births_describe_every_point_changes_arrive_by_alias_and_rebirth_and_dea
     let mut aliases = BTreeMap::new();
     for (device, points) in &api {
         let birth = &births[device];
-        assert_eq!(&names(birth), points, "DBIRTH of {device}");
+        // The points, and each of the device's alarms as three metrics (`Alarms/…`).
+        let (alarms, metrics): (BTreeSet<String>, BTreeSet<String>) = names(birth)
+            .into_iter()
+            .partition(|n| n.starts_with("Alarms/"));
+        assert_eq!(&metrics, points, "DBIRTH of {device}");
+        for what in ["State", "Priority", "Acknowledged"] {
+            let name = format!("Alarms/down/{what}");
+            assert!(alarms.contains(&name), "DBIRTH of {device} without {name}");
+        }
         for m in &birth.payload.metrics {
             assert!(
                 m.datatype.is_some(),

@@ -121,14 +121,14 @@ async fn column(client: &Client, sql: &str) -> Vec<String> {
 async fn the_schema_is_created_on_first_connect_and_not_migrated_again() {
     let (_pg, url) = database();
     let first = Store::connect(&url).await.expect("first connect");
-    assert_eq!(first.migrated(), [1, 2, 3, SCHEMA_VERSION]);
+    assert_eq!(first.migrated(), [1, 2, 3, 4, SCHEMA_VERSION]);
     assert_eq!(first.layout(), SamplesLayout::DayPartitions);
     let second = Store::connect(&url).await.expect("second connect");
     assert_eq!(second.migrated(), [] as [i32; 0]);
     let sql = client(&url).await;
     assert_eq!(
         column(&sql, "SELECT version::text FROM cellbus_schema ORDER BY 1").await,
-        ["1", "2", "3", "4"]
+        ["1", "2", "3", "4", "5"]
     );
 }
 
@@ -205,6 +205,73 @@ async fn the_views_have_exactly_the_stable_column_names_and_types() {
             "category text",
             "reason text",
             "group_id text",
+        ]
+    );
+    assert_eq!(
+        shape("cellbus_alarms").await,
+        [
+            "t timestamp with time zone",
+            "node text",
+            "device text",
+            "point text",
+            "alarm text",
+            "kind text",
+            "changes ARRAY",
+            "state text",
+            "acknowledged boolean",
+            "priority text",
+            "who text",
+            "comment text",
+            "value jsonb",
+            "message text",
+            "group_id text",
+        ]
+    );
+}
+
+/// A gateway's alarm journal reaches the plant: who acknowledged which alarm, and why.
+#[tokio::test]
+async fn the_alarms_view_reads_the_gateways_alarm_journal_from_their_events() {
+    let (_pg, url) = database();
+    let mut store = Store::connect(&url).await.expect("connect");
+    let t = MIDNIGHT_MS + 7_200_000;
+    let alarm = |ms: u64, kind: &str, fields: &str| EventRow {
+        kind: kind.into(),
+        point: Some("jbc1.tool_error".into()),
+        fields: Some(fields.into()),
+        ..event(ms, kind)
+    };
+    let batch = Batch {
+        events: vec![
+            alarm(
+                t,
+                "alarm_raised",
+                r#"{"alarm":"jbc1.tool_error","changes":["activated"],"state":"unacknowledged","acknowledged":false,"priority":"high","value":3}"#,
+            ),
+            alarm(
+                t + 60_000,
+                "alarm_changed",
+                r#"{"alarm":"jbc1.tool_error","changes":["acknowledged"],"state":"acknowledged","acknowledged":true,"priority":"high","by":"anna (http 10.0.0.7:50312)","comment":"heater ordered"}"#,
+            ),
+            // An older gateway's alarm event, without the journal's facts.
+            alarm(t + 1, "alarm_raised", r#"{"value":3}"#),
+            event(t + 2, "a device event"),
+        ],
+        ..Batch::default()
+    };
+    store.write(&batch).await.expect("write");
+    let sql = client(&url).await;
+    assert_eq!(
+        column(
+            &sql,
+            "SELECT format('%s %s %s %s %s %s', alarm, kind, array_to_string(changes, ','), \
+                 state, coalesce(who, '-'), coalesce(comment, '-')) \
+             FROM cellbus_alarms WHERE node = 'cell1' ORDER BY t"
+        )
+        .await,
+        [
+            "jbc1.tool_error alarm_raised activated unacknowledged - -",
+            "jbc1.tool_error alarm_changed acknowledged acknowledged anna (http 10.0.0.7:50312) heater ordered",
         ]
     );
 }

@@ -113,6 +113,12 @@ impl AuthManager for Users {
         }
     }
 
+    /// The cell's methods (`Objects/Gateway/Alarms`: acknowledge, shelve, unshelve) are
+    /// for those who may write, as writes are; namespace 0's (the server's own) for all.
+    fn is_user_executable(&self, token: &UserToken, method_id: &NodeId) -> bool {
+        method_id.namespace == 0 || self.may_write(token)
+    }
+
     fn user_token_policies(&self, endpoint: &ServerEndpoint) -> Vec<UserTokenPolicy> {
         let mut policies = Vec::new();
         if self.anonymous && endpoint.user_token_ids.contains(ANONYMOUS_USER_TOKEN_ID) {
@@ -174,6 +180,19 @@ mod tests {
         assert!(!on.may_write(&UserToken("viewer".into())));
         assert!(!on.may_write(&UserToken(ANONYMOUS_USER_TOKEN_ID.into())));
         assert!(!users(false).may_write(&UserToken("op".into())));
+    }
+
+    #[test]
+    fn only_a_writing_user_may_call_the_cells_methods_and_everyone_the_servers_own() {
+        let acknowledge = NodeId::new(2, "gateway/Alarms/Acknowledge");
+        let resend = NodeId::new(0, 12873_u32);
+        let on = users(true);
+        let anonymous = UserToken(ANONYMOUS_USER_TOKEN_ID.into());
+        assert!(on.is_user_executable(&UserToken("op".into()), &acknowledge));
+        assert!(!on.is_user_executable(&UserToken("viewer".into()), &acknowledge));
+        assert!(!on.is_user_executable(&anonymous, &acknowledge));
+        assert!(!users(false).is_user_executable(&UserToken("op".into()), &acknowledge));
+        assert!(on.is_user_executable(&anonymous, &resend));
     }
 
     #[test]

@@ -10,6 +10,8 @@
 //! - [`space`]: the sans-IO mapping (node ids, data types, status codes, units, times).
 //! - [`nodes`]: the node manager that builds the address space, writes and reads history.
 //! - [`history`]: HistoryRead raw and processed (Average, Minimum, Maximum), sans-IO.
+//! - [`alarms`]: the alarms, sans-IO: each alarm's state as variables, the methods that
+//!   acknowledge, shelve and unshelve them (why not Alarms & Conditions: there).
 //! - [`auth`]: anonymous sessions read only; users log in on secure endpoints.
 //! - [`peers`]: the gateway accepts the clients and relays them to the server on
 //!   loopback, to know each secure channel's client address (for the audit log), to close
@@ -37,6 +39,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod alarms;
 pub mod auth;
 pub mod chunks;
 pub mod config;
@@ -537,7 +540,7 @@ async fn follow(
     let mut tick = tokio::time::interval(GATEWAY_TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     // Changes between the address space's build and this subscription are caught up here.
-    resync(&cell, &manager, &subscriptions, ns);
+    let mut alarms_seen = resync(&cell, &manager, &subscriptions, ns);
     loop {
         tokio::select! {
             message = live.recv() => match message {
@@ -552,6 +555,14 @@ async fn follow(
                     set_values(&manager, &subscriptions, values.to_vec());
                 }
                 Ok(LiveMessage::Event(event)) => {
+                    if let Some(alarm) = changed_alarm(&event) {
+                        let values = cell
+                            .alarms
+                            .view(alarm)
+                            .map(|view| alarms::values(ns, &view, DateTime::now()))
+                            .unwrap_or_default();
+                        set_values(&manager, &subscriptions, values);
+                    }
                     numbered += 1;
                     let id = space::event_id(started, numbered);
                     let raised = space::cell_event(ns, &event, id, Timestamp::now());
@@ -562,7 +573,7 @@ async fn follow(
                 }
                 Err(broadcast::error::RecvError::Lagged(missed)) => {
                     tracing::warn!("the OPC UA server missed {missed} changes; reading the cell again");
-                    resync(&cell, &manager, &subscriptions, ns);
+                    alarms_seen = resync(&cell, &manager, &subscriptions, ns);
                 }
                 Err(broadcast::error::RecvError::Closed) => return,
             },
@@ -572,10 +583,29 @@ async fn follow(
                     ids::gateway(ns, Some(nodes::HISTORY_ROWS)),
                     DataValue::new_now(Variant::UInt64(rows)),
                 )]);
+                // Alarms follow their events; this catches what changed without one (the
+                // states the keeper restores after a restart).
+                if cell.alarms.with(|book| book.generation()) != alarms_seen {
+                    let (generation, values) = alarm_values(&cell, ns, DateTime::now());
+                    alarms_seen = generation;
+                    set_values(&manager, &subscriptions, values);
+                }
             }
             () = stopped(&mut stop) => return,
         }
     }
+}
+
+/// The alarm an event of the alarm journal changed (`alarm_raised`, `alarm_cleared`,
+/// `alarm_changed`: its `alarm` field), if it is one.
+fn changed_alarm(event: &gateway::event::Event) -> Option<&str> {
+    use gateway::event::EventKind;
+    matches!(
+        event.kind,
+        EventKind::AlarmRaised | EventKind::AlarmCleared | EventKind::AlarmChanged
+    )
+    .then(|| event.fields.get("alarm").and_then(|a| a.as_str()))
+    .flatten()
 }
 
 /// Resolves once `stop` turns true (or its sender is gone).
@@ -583,16 +613,16 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
     let _ = stop.wait_for(|stopped| *stopped).await;
 }
 
-/// Sets every variable from the cell's current state.
+/// Sets every variable from the cell's current state; the alarm book's generation read.
 fn resync(
     cell: &Cell,
     manager: &CellManager,
     subscriptions: &::opcua::server::SubscriptionCache,
     ns: u16,
-) {
+) -> u64 {
     let now = Timestamp::now();
     let t = space::opc_time(now);
-    let mut values = Vec::new();
+    let (generation, mut values) = alarm_values(cell, ns, t);
     for device in cell.devices() {
         values.extend(device_values(ns, &device.summary, t));
         for point in &device.points {
@@ -603,6 +633,22 @@ fn resync(
         }
     }
     set_values(manager, subscriptions, values);
+    generation
+}
+
+/// Every alarm's variables' values at `t`, and the book's generation they are of.
+fn alarm_values(
+    cell: &Cell,
+    ns: u16,
+    t: DateTime,
+) -> (u64, Vec<(::opcua::types::NodeId, DataValue)>) {
+    cell.alarms.with(|book| {
+        let values = (0..book.len())
+            .filter_map(|i| book.view(i))
+            .flat_map(|view| alarms::values(ns, &view, t))
+            .collect();
+        (book.generation(), values)
+    })
 }
 
 /// A device's `Status` and `Error` variables' values at `t`.

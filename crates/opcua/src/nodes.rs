@@ -7,15 +7,16 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use ::opcua::server::address_space::{
-    AccessLevel, AddressSpace, EventNotifier, NodeType, ObjectBuilder, ObjectTypeBuilder,
-    VariableBuilder,
+    AccessLevel, AddressSpace, EventNotifier, MethodBuilder, NodeType, ObjectBuilder,
+    ObjectTypeBuilder, VariableBuilder,
 };
 use ::opcua::server::diagnostics::NamespaceMetadata;
 use ::opcua::server::node_manager::memory::{
     InMemoryNodeManager, InMemoryNodeManagerBuilder, InMemoryNodeManagerImpl,
 };
 use ::opcua::server::node_manager::{
-    HistoryNode, NodeManagerBuilder, ParsedReadValueId, RequestContext, ServerContext, WriteNode,
+    HistoryNode, MethodCall, NodeManagerBuilder, ParsedReadValueId, RequestContext, ServerContext,
+    WriteNode,
 };
 use ::opcua::server::{ContinuationPoint, CreateMonitoredItem};
 use ::opcua::sync::RwLock;
@@ -25,10 +26,12 @@ use ::opcua::types::{
     StatusCode, TimestampsToReturn, VariableTypeId, Variant,
 };
 
+use super::alarms::{self, BadArguments, Method};
 use super::auth::Users;
 use super::history::{self, Aggregate, Fetched, RawRead};
 use super::peers::Peers;
 use super::space::{self, ids};
+use gateway::alarm::book::View as AlarmView;
 use gateway::cell::{Cell, DeviceView};
 use gateway::driver::{ErrorKind, WriteError};
 use gateway::point::{PointId, PointKind, ValueError};
@@ -105,6 +108,9 @@ fn build(
         .organized_by(ObjectId::ObjectsFolder)
         .insert(space);
     let devices = cell.devices();
+    let alarms: Vec<AlarmView> = cell
+        .alarms
+        .with(|book| (0..book.len()).filter_map(|i| book.view(i)).collect());
     for line in cell.lines() {
         let line_id = ids::line(ns, &line.name);
         ObjectBuilder::new(&line_id, QualifiedName::new(ns, &line.name), &line.name)
@@ -114,6 +120,11 @@ fn build(
             .insert(space);
         for device in devices.iter().filter(|d| d.line == line.name) {
             build_device(space, ns, &line_id, device, now, &mut points);
+            let of_device: Vec<&AlarmView> = alarms
+                .iter()
+                .filter(|a| a.device == device.summary.id)
+                .collect();
+            build_alarms(space, ns, device.summary.id.as_str(), &of_device, now);
         }
     }
     build_gateway(space, ns, cell);
@@ -317,6 +328,89 @@ fn build_device(
     }
 }
 
+/// A device's `Alarms` folder: an object per alarm, named by its id, with its state as
+/// variables ([`alarms::VARIABLES`]).
+fn build_alarms(
+    space: &mut AddressSpace,
+    ns: u16,
+    device: &str,
+    views: &[&AlarmView],
+    now: Timestamp,
+) {
+    if views.is_empty() {
+        return;
+    }
+    let folder = ids::device_alarms(ns, device);
+    ObjectBuilder::new(&folder, QualifiedName::new(ns, "Alarms"), "Alarms")
+        .description(
+            "The device's alarms (ISA-18.2), an object each named by its id; \
+             Objects/Gateway/Alarms acknowledges and shelves them",
+        )
+        .is_folder()
+        .component_of(ids::device(ns, device))
+        .insert(space);
+    let t = space::opc_time(now);
+    for view in views {
+        let alarm = ids::alarm(ns, &view.id);
+        ObjectBuilder::new(&alarm, QualifiedName::new(ns, &view.id), &view.id)
+            .description(view.message.as_str())
+            .has_type_definition(ObjectTypeId::BaseObjectType)
+            .organized_by(folder.clone())
+            .insert(space);
+        for (name, data_type, words) in alarms::VARIABLES {
+            VariableBuilder::new(
+                &ids::alarm_variable(ns, &view.id, name),
+                QualifiedName::new(ns, name),
+                name,
+            )
+            .description(words)
+            .data_type(data_type)
+            .value_rank(-1)
+            .access_level(AccessLevel::CURRENT_READ)
+            .user_access_level(AccessLevel::CURRENT_READ)
+            .has_type_definition(VariableTypeId::BaseDataVariableType)
+            .component_of(alarm.clone())
+            .insert(space);
+        }
+        for (node, value) in alarms::values(ns, view, t) {
+            set(space, &node, value);
+        }
+    }
+}
+
+/// `Objects/Gateway/Alarms`: the methods that act on alarms ([`alarms::Method`]).
+fn build_alarm_methods(space: &mut AddressSpace, ns: u16) {
+    let object = ids::alarm_methods(ns);
+    ObjectBuilder::new(&object, QualifiedName::new(ns, "Alarms"), "Alarms")
+        .description(
+            "Acknowledge, Shelve and Unshelve the cell's alarms by id, as the OPC UA user \
+             (who may write)",
+        )
+        .has_type_definition(ObjectTypeId::BaseObjectType)
+        .component_of(ids::gateway(ns, None))
+        .insert(space);
+    for method in Method::ALL {
+        let name = method.name();
+        let node = ids::alarm_method(ns, name);
+        MethodBuilder::new(&node, QualifiedName::new(ns, name), name)
+            .description(method.words())
+            .component_of(object.clone())
+            .executable(true)
+            .user_executable(true)
+            .input_args(
+                space,
+                &ids::alarm_method_arguments(ns, name, "InputArguments"),
+                &method.inputs(),
+            )
+            .output_args(
+                space,
+                &ids::alarm_method_arguments(ns, name, "OutputArguments"),
+                &Method::outputs(),
+            )
+            .insert(space);
+    }
+}
+
 /// The gateway object: its version, its lines and the history rows written.
 fn build_gateway(space: &mut AddressSpace, ns: u16, cell: &Cell) {
     let gateway = ids::gateway(ns, None);
@@ -363,6 +457,7 @@ fn build_gateway(space: &mut AddressSpace, ns: u16, cell: &Cell) {
             .insert(space);
         set(space, &node, DataValue::new_now(value));
     }
+    build_alarm_methods(space, ns);
 }
 
 /// The gateway variable counting history rows.
@@ -462,6 +557,19 @@ impl InMemoryNodeManagerImpl for CellNodes {
                 StatusCode::BadNodeIdUnknown
             };
             node.set_status(status);
+        }
+        Ok(())
+    }
+
+    async fn call(
+        &self,
+        context: &RequestContext,
+        _space: &RwLock<AddressSpace>,
+        methods_to_call: &mut [&mut &mut MethodCall],
+    ) -> Result<(), StatusCode> {
+        let by = actor_text(context, &self.peers);
+        for call in methods_to_call.iter_mut() {
+            self.call_one(context, &by, call).await;
         }
         Ok(())
     }
@@ -688,6 +796,71 @@ impl CellNodes {
         })
     }
 
+    /// One call of a method of `Objects/Gateway/Alarms`: refused unless writes are on and
+    /// the user may write (as a write), else the action through the alarm keeper, in a
+    /// task of its own (journalled and committed even if the client leaves).
+    async fn call_one(&self, context: &RequestContext, by: &str, call: &mut MethodCall) {
+        let Some(method) = Method::of(self.ns, call.method_id()) else {
+            call.set_status(StatusCode::BadMethodInvalid);
+            return;
+        };
+        if !self.users.may_write(&context.token) {
+            tracing::info!(
+                "OPC UA {} refused: {}",
+                method.name(),
+                if context.token.is_anonymous() {
+                    "anonymous sessions do not act on alarms".to_owned()
+                } else {
+                    format!("user {} may not write (or writes are off)", context.token.0)
+                }
+            );
+            call.set_status(StatusCode::BadUserAccessDenied);
+            return;
+        }
+        let asked = match alarms::asked(method, call.arguments()) {
+            Ok(asked) => asked,
+            Err(BadArguments::Status(status)) => {
+                call.set_status(status);
+                return;
+            }
+            Err(BadArguments::Each(results)) => {
+                call.set_argument_error(results);
+                return;
+            }
+        };
+        let cell = Arc::clone(&self.cell);
+        let by = by.to_owned();
+        let alarm = asked.alarm.clone();
+        let done = tokio::spawn(async move {
+            gateway::alarm::keeper::act(
+                &cell,
+                &asked.alarm,
+                asked.action,
+                &by,
+                asked.comment.as_deref(),
+            )
+            .await
+        });
+        match done.await {
+            Ok(Ok(view)) => {
+                call.set_outputs(vec![Variant::from(alarms::state_text(view.state))]);
+                call.set_status(StatusCode::Good);
+            }
+            Ok(Err(error)) => {
+                tracing::info!("OPC UA {} of {alarm} refused: {error}", method.name());
+                let status = alarms::act_status(&error);
+                if matches!(error, gateway::alarm::book::ActError::Unknown { .. }) {
+                    let mut results = vec![StatusCode::Good; call.arguments().len()];
+                    results[0] = status;
+                    call.set_argument_error(results);
+                } else {
+                    call.set_status(status);
+                }
+            }
+            Err(_) => call.set_status(StatusCode::BadInternalError),
+        }
+    }
+
     /// One write: refused before anything is stored unless writes are on and the user may
     /// write; from there through the audited write path.
     async fn write_one(
@@ -784,6 +957,27 @@ pub fn write_status(error: &WriteError) -> StatusCode {
         // a failure `WriteError` gains later (it is `non_exhaustive`): nothing was written.
         _ => StatusCode::BadCommunicationError,
     }
+}
+
+/// Who acts on an alarm, for the alarm journal: the user and the client's address first
+/// (the journal keeps 128 characters of it),
+/// `opcua user op from 192.0.2.7:50112 (session 3, urn:client:app)`.
+fn actor_text(context: &RequestContext, peers: &Peers) -> String {
+    let session = context.session.read();
+    let user = if context.token.is_anonymous() {
+        "anonymous".to_owned()
+    } else {
+        format!("user {}", context.token.0)
+    };
+    let from = peers
+        .address(session.secure_channel_id())
+        .map(|a| format!(" from {a}"))
+        .unwrap_or_default();
+    format!(
+        "opcua {user}{from} (session {}, {})",
+        context.session_id,
+        session.application_description().application_uri.as_ref()
+    )
 }
 
 /// Who writes, for the audit log:

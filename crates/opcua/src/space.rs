@@ -97,6 +97,37 @@ pub mod ids {
             None => NodeId::new(ns, "gateway"),
         }
     }
+
+    /// The gateway's `Alarms` object, which holds the methods that act on alarms.
+    pub fn alarm_methods(ns: u16) -> NodeId {
+        NodeId::new(ns, "gateway/Alarms")
+    }
+
+    /// A method of the `Alarms` object (`Acknowledge`, `Shelve`, `Unshelve`).
+    pub fn alarm_method(ns: u16, method: &str) -> NodeId {
+        NodeId::new(ns, format!("gateway/Alarms/{method}"))
+    }
+
+    /// An argument list (`InputArguments`, `OutputArguments`) of a method of the
+    /// `Alarms` object.
+    pub fn alarm_method_arguments(ns: u16, method: &str, which: &str) -> NodeId {
+        NodeId::new(ns, format!("gateway/Alarms/{method}/{which}"))
+    }
+
+    /// A device's `Alarms` folder.
+    pub fn device_alarms(ns: u16, device: &str) -> NodeId {
+        NodeId::new(ns, format!("{device}/Alarms"))
+    }
+
+    /// An alarm's object (its id: `jbc1:down`, `sealer0.temperature:high`).
+    pub fn alarm(ns: u16, alarm: &str) -> NodeId {
+        NodeId::new(ns, format!("alarm:{alarm}"))
+    }
+
+    /// A variable of an alarm's object (`State`, `Active`, …).
+    pub fn alarm_variable(ns: u16, alarm: &str, variable: &str) -> NodeId {
+        NodeId::new(ns, format!("alarm:{alarm}/{variable}"))
+    }
 }
 
 /// The OPC UA data type of a point of `kind`.

@@ -283,14 +283,37 @@ impl Gateway {
 
     /// Like [`Gateway::start`], with more `cellbus serve` arguments.
     pub fn start_with(data: &std::path::Path, args: &[&str]) -> Gateway {
-        let (child, _, addr) = start_listening(
-            cellbus()
-                .args(["serve", "--listen", "127.0.0.1:0", "--data"])
-                .arg(data)
-                .args(args),
-            "listening on http://",
-        );
+        Gateway::start_with_token(data, args, None)
+    }
+
+    /// Like [`Gateway::start_with`], with `token` as `CELLBUS_TOKEN` (none if `None`).
+    pub fn start_with_token(data: &std::path::Path, args: &[&str], token: Option<&str>) -> Gateway {
+        let mut command = cellbus();
+        command
+            .args(["serve", "--listen", "127.0.0.1:0", "--data"])
+            .arg(data)
+            .args(args)
+            .env_remove("CELLBUS_TOKEN");
+        if let Some(token) = token {
+            command.env("CELLBUS_TOKEN", token);
+        }
+        let (child, _, addr) = start_listening(&mut command, "listening on http://");
         Gateway { child, addr }
+    }
+
+    /// A plain HTTP/1.1 POST of the JSON `body` with `Authorization: Bearer token`;
+    /// returns the status code and the body.
+    pub fn post(&self, path: &str, token: &str, body: &str) -> (u16, String) {
+        http_exchange(
+            &self.addr,
+            &format!(
+                "POST {path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\
+                 Authorization: Bearer {token}\r\nContent-Type: application/json\r\n\
+                 Content-Length: {}\r\n\r\n{body}",
+                self.addr,
+                body.len()
+            ),
+        )
     }
 
     /// GETs `path`, which must answer 200 with JSON.
@@ -351,15 +374,19 @@ pub fn api_value(v: &serde_json::Value) -> Option<String> {
 
 /// A plain HTTP/1.1 GET to `addr` (`IP:PORT`); returns the status code and the body.
 pub fn http_get(addr: &str, path: &str) -> (u16, String) {
+    http_exchange(
+        addr,
+        &format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"),
+    )
+}
+
+/// Sends `request` to `addr` on a connection of its own; the answer's status and body.
+fn http_exchange(addr: &str, request: &str) -> (u16, String) {
     let mut stream = TcpStream::connect(addr).expect("the server accepts connections");
     stream
         .set_read_timeout(Some(Duration::from_secs(30)))
         .expect("timeout set");
-    write!(
-        stream,
-        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n",
-    )
-    .expect("request sent");
+    stream.write_all(request.as_bytes()).expect("request sent");
     let mut response = String::new();
     stream.read_to_string(&mut response).expect("response read");
     let status = response

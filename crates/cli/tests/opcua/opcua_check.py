@@ -6,6 +6,7 @@
     opcua_check.py anonymous-refused OPC_URL
     opcua_check.py flood OPC_URL HTTP_ADDR COUNT
     opcua_check.py items OPC_URL HTTP_ADDR CAP
+    opcua_check.py alarm OPC_URL HTTP_ADDR PASSWORD DEVICE
 
 `read`: browses Objects/Cell and compares every device and point with /api/devices
 (data type, description, unit, range, access, enumeration labels); subscribes to the point that changes most
@@ -36,6 +37,17 @@ whose client stays (`not_activated`) and the one whose client leaves (`abandoned
 is CAP), CAP - 50 on a device's Status and 70 on the server's own CurrentTime (namespace
 0): the 20 beyond get Bad_TooManyMonitoredItems, /healthz and /metrics count them, the
 server still answers, and deleting items frees their places.
+
+`alarm`: an anonymous session (security None) sees the methods of
+Objects/Gateway/Alarms not executable for it and is refused Acknowledge
+(Bad_UserAccessDenied); `operator` (Basic256Sha256 SignAndEncrypt, its certificate
+trusted as it comes) finds DEVICE:down in the device's Alarms folder, subscribes to the
+device's events and prints `subscribed` (the test stops the device meanwhile), receives
+the alarm_raised event, sees the alarm's State turn unacknowledged, acknowledges it with a
+comment, receives the alarm_changed event, is refused a second acknowledgement and an
+unknown alarm, shelves it (a shelving of 0 s refused) and unshelves it (twice: refused),
+and finds the acknowledgement in /api/alarms/journal with the comment and by `opcua user
+operator from 127.0.0.1:PORT` (the client's own port).
 
 Prints `ok: ...` lines; any failure raises (exit 1). Every wait is bounded.
 """
@@ -114,7 +126,9 @@ async def check_tree(client, devices):
         assert line == d["line"], (d["id"], line, d["line"])
         names = {p["id"].split(".", 1)[1] for p in d["points"]}
         folders = {"Production"} if "machine_state" in names else set()
-        assert set(children) == names | {"Status", "Error"} | folders, (d["id"], sorted(children))
+        assert set(children) == names | {"Status", "Error", "Alarms"} | folders, (d["id"], sorted(children))
+        alarms = {(await a.read_browse_name()).Name for a in await children["Alarms"].get_children()}
+        assert f"{d['id']}:down" in alarms, (d["id"], sorted(alarms))
         status = await children["Status"].read_value()
         assert status in ("up", "down", "backed off", "connecting"), status
         for p in d["points"]:
@@ -831,8 +845,150 @@ async def items(url, addr, cap):
         ok("the server still answers, and 10 items deleted made room for 10 more")
 
 
+async def alarm_event(handler, kind, alarm_id):
+    """The first CellbusEventType event of `kind` about alarm `alarm_id` (bounded)."""
+    others = []
+    try:
+        while True:
+            event = await asyncio.wait_for(handler.seen.get(), 2 * LIMIT)
+            fields = json.loads(event.Fields) if event.Fields else {}
+            if event.Kind == kind and fields.get("alarm") == alarm_id:
+                return event, fields
+            others.append((event.Kind, event.Message.Text))
+    except asyncio.TimeoutError:
+        raise AssertionError(f"no {kind} event of {alarm_id}; others: {others}") from None
+
+
+async def value_becomes(node, what, wanted):
+    """Reads `node` (every 0.2 s, up to LIMIT) until `wanted(value)` holds; the value."""
+    deadline = time.monotonic() + LIMIT
+    while True:
+        value = await node.read_value()
+        if wanted(value):
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"not within {LIMIT} s: {what} (last {value!r})")
+        await asyncio.sleep(0.2)
+
+
+async def refused(call, code):
+    """Awaits `call`, which must fail with status `code`."""
+    try:
+        await call
+    except ua.UaStatusCodeError as e:
+        assert e.code == code, (e, code)
+        return
+    raise AssertionError(f"accepted, not refused with {code:#x}")
+
+
+async def alarm(url, addr, password, device):
+    alarm_id = f"{device}:down"
+    async with Client(url, timeout=LIMIT) as anonymous:
+        ns = await anonymous.get_namespace_index("urn:cellbus:cell")
+        methods = await anonymous.nodes.objects.get_child([f"{ns}:Gateway", f"{ns}:Alarms"])
+        acknowledge = await methods.get_child(f"{ns}:Acknowledge")
+        executable = await acknowledge.read_attribute(ua.AttributeIds.UserExecutable)
+        assert executable.Value.Value is False, executable
+        await refused(
+            methods.call_method(acknowledge, alarm_id, "anonymous"), ua.StatusCodes.BadUserAccessDenied
+        )
+        ok("Objects/Gateway/Alarms.Acknowledge is not executable for and refused to an anonymous session: BadUserAccessDenied")
+
+    certs = tempfile.TemporaryDirectory(prefix="opcua-check-")
+    client = await secure_client(url, None, password, certs.name)
+    async with client:
+        ns, tree = await cell_tree(client)
+        folder = tree[device][1]["Alarms"]
+        node = await folder.get_child(f"{ns}:{alarm_id}")
+        variables = {
+            name: await node.get_child(f"{ns}:{name}")
+            for name in ["State", "Active", "Acknowledged", "Priority", "ShelvedUntil"]
+        }
+        state = await variables["State"].read_value()
+        assert state == "normal", state
+        assert await variables["Active"].read_value() is False
+        assert await variables["Priority"].read_value() == "high"
+        ok(f"{alarm_id} in {device}'s Alarms folder: State {state}, Priority high")
+        methods = await client.nodes.objects.get_child([f"{ns}:Gateway", f"{ns}:Alarms"])
+        method = {
+            name: await methods.get_child(f"{ns}:{name}") for name in ["Acknowledge", "Shelve", "Unshelve"]
+        }
+        executable = await method["Acknowledge"].read_attribute(ua.AttributeIds.UserExecutable)
+        assert executable.Value.Value is True, executable
+        device_node = await folder.get_parent()
+        cell_event_type = client.get_node(ua.NodeId("CellbusEventType", ns))
+        sub, handler = await subscribe_events(client, device_node, cell_event_type)
+        print("subscribed", flush=True)
+
+        event, fields = await alarm_event(handler, "alarm_raised", alarm_id)
+        assert fields["state"] == "unacknowledged", fields
+        assert event.SourceNode == device_node.nodeid, event.SourceNode
+        ok(f"the alarm_raised event of {alarm_id} arrived: {event.Message.Text!r}")
+        await value_becomes(variables["State"], "State unacknowledged", lambda v: v == "unacknowledged")
+        assert await variables["Active"].read_value() is True
+        assert await variables["Acknowledged"].read_value() is False
+        ok(f"{alarm_id}'s variables: State unacknowledged, Active, not Acknowledged")
+
+        comment = "seen by asyncua"
+        out = await methods.call_method(method["Acknowledge"], alarm_id, comment)
+        assert out == "acknowledged", out
+        ok(f"Acknowledge answered {out}")
+        event, fields = await alarm_event(handler, "alarm_changed", alarm_id)
+        assert fields["changes"] == ["acknowledged"], fields
+        assert fields["comment"] == comment, fields
+        host, port = client.uaclient.protocol.transport.get_extra_info("sockname")[:2]
+        by = f"opcua user operator from {host}:{port} ("
+        assert fields["by"].startswith(by), (fields["by"], by)
+        ok(f"the alarm_changed event carries changes {fields['changes']}, the comment and by {fields['by']!r}")
+        await value_becomes(variables["Acknowledged"], "Acknowledged", lambda v: v is True)
+        assert await variables["State"].read_value() == "acknowledged"
+
+        await refused(
+            methods.call_method(method["Acknowledge"], alarm_id, "again"),
+            ua.StatusCodes.BadConditionBranchAlreadyAcked,
+        )
+        ok("a second Acknowledge was refused: BadConditionBranchAlreadyAcked")
+        await refused(
+            methods.call_method(method["Acknowledge"], "no.such:alarm", ""), ua.StatusCodes.BadInvalidArgument
+        )
+        ok("an unknown alarm was refused: BadInvalidArgument")
+        await refused(
+            methods.call_method(method["Shelve"], alarm_id, ua.Variant(0.0, ua.VariantType.Double), "no"),
+            ua.StatusCodes.BadShelvingTimeOutOfRange,
+        )
+        ok("a shelving of 0 s was refused: BadShelvingTimeOutOfRange")
+        out = await methods.call_method(
+            method["Shelve"], alarm_id, ua.Variant(600.0, ua.VariantType.Double), "maintenance"
+        )
+        event, fields = await alarm_event(handler, "alarm_changed", alarm_id)
+        assert fields["changes"] == ["shelved"], fields
+        until = await value_becomes(
+            variables["ShelvedUntil"], "ShelvedUntil set", lambda v: v is not None and v.year > 2000
+        )
+        ok(f"Shelve for 600 s answered {out}; ShelvedUntil {until}")
+        await methods.call_method(method["Unshelve"], alarm_id, "back")
+        event, fields = await alarm_event(handler, "alarm_changed", alarm_id)
+        assert fields["changes"] == ["unshelved"], fields
+        await refused(
+            methods.call_method(method["Unshelve"], alarm_id, "again"), ua.StatusCodes.BadConditionNotShelved
+        )
+        ok("Unshelve, then a second one refused: BadConditionNotShelved")
+        await sub.delete()
+
+        journal = http(addr, f"/api/alarms/journal?alarm={alarm_id}")["entries"]
+        acks = [e for e in journal if e["kind"] == "alarm_changed" and e["changes"] == ["acknowledged"]]
+        assert len(acks) == 1, journal
+        assert acks[0]["comment"] == comment and acks[0]["by"].startswith(by), acks[0]
+        kinds = [e["kind"] for e in journal]
+        assert kinds.count("alarm_changed") == 3 and "alarm_raised" in kinds, kinds
+        ok(f"the alarm journal has the acknowledgement: {acks[0]['message']!r}, by {acks[0]['by']!r}")
+
+
 def main():
     mode = sys.argv[1]
+    if mode == "alarm":
+        asyncio.run(asyncio.wait_for(alarm(*sys.argv[2:6]), SCRIPT_LIMIT))
+        return
     if mode == "flood":
         asyncio.run(asyncio.wait_for(flood(*sys.argv[2:5]), SCRIPT_LIMIT))
         return

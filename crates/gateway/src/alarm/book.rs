@@ -91,6 +91,9 @@ pub enum Action {
     Shelve(Duration),
     /// Unshelve it.
     Unshelve,
+    /// Take it out of service (`true`: maintenance; it is not annunciated whatever its
+    /// condition) or return it to service (`false`).
+    OutOfService(bool),
 }
 
 impl Action {
@@ -100,6 +103,8 @@ impl Action {
             Action::Acknowledge => "ack",
             Action::Shelve(_) => "shelve",
             Action::Unshelve => "unshelve",
+            Action::OutOfService(true) => "out_of_service",
+            Action::OutOfService(false) => "in_service",
         }
     }
 }
@@ -515,6 +520,11 @@ impl Book {
             Action::Acknowledge => alarm.acknowledge(),
             Action::Shelve(duration) => alarm.shelve(duration, now),
             Action::Unshelve => alarm.unshelve(),
+            Action::OutOfService(out) => alarm.set_out_of_service(out).ok_or(if out {
+                Refused::OutOfService
+            } else {
+                Refused::InService
+            }),
         }
         .map_err(|refused| ActError::Refused {
             id: id.to_owned(),
@@ -702,6 +712,21 @@ impl Desk {
     /// One alarm as shown.
     pub fn view(&self, id: &str) -> Option<View> {
         self.with(|book| book.index_of(id).and_then(|i| book.view(i)))
+    }
+
+    /// Every alarm of `device`, normal or not (for an interface's birth of the device).
+    pub fn of_device(&self, device: &str) -> Vec<View> {
+        self.with(|book| {
+            (0..book.len())
+                .filter(|&i| book.instances[i].device.as_str() == device)
+                .filter_map(|i| book.view(i))
+                .collect()
+        })
+    }
+
+    /// Every alarm, normal or not.
+    pub fn all(&self) -> Vec<View> {
+        self.with(|book| (0..book.len()).filter_map(|i| book.view(i)).collect())
     }
 }
 

@@ -189,10 +189,13 @@ fn resync(cell: &Cell) -> Vec<Happened> {
     for entry in cell.device_entries() {
         let (down, why) = {
             let state = entry.read();
-            (
-                state.status == DeviceStatus::Down,
-                state.error.as_ref().map(|e| e.message.clone()),
-            )
+            let down = match state.status {
+                DeviceStatus::Down => true,
+                DeviceStatus::Up => false,
+                // Not polled yet (at start): nothing said either way.
+                DeviceStatus::Connecting => continue,
+            };
+            (down, state.error.as_ref().map(|e| e.message.clone()))
         };
         out.extend(
             cell.alarms

@@ -59,9 +59,12 @@ pub enum Refused {
     /// Unshelving an alarm that is not shelved.
     #[error("the alarm is not shelved")]
     NotShelved,
-    /// Shelving or acknowledging an alarm out of service.
+    /// Shelving or acknowledging an alarm out of service, or taking it out again.
     #[error("the alarm is out of service; return it to service first")]
     OutOfService,
+    /// Returning an alarm to service that is in service.
+    #[error("the alarm is in service")]
+    InService,
     /// A shelving that ends before it begins, or lasts longer than allowed.
     #[error("a shelving lasts from 1 s to {}; asked {}", humantime::format_duration(*max), humantime::format_duration(*asked))]
     ShelveDuration {

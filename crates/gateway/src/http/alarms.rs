@@ -1,7 +1,7 @@
 //! The alarms over HTTP: `GET /api/alarms` (the list: every alarm active, unacknowledged,
 //! shelved or out of service), `GET /api/alarms/journal` (what happened to them, with who
-//! and the comment) and `POST /api/alarms/{id}/ack|shelve|unshelve`, which need what a
-//! write needs (`--allow-writes` and the token: `write::authorise`).
+//! and the comment) and `POST /api/alarms/{id}/ack|shelve|unshelve|out_of_service|in_service`,
+//! which need what a write needs (`--allow-writes` and the token: `write::authorise`).
 
 use std::time::Duration;
 
@@ -179,6 +179,8 @@ pub(super) async fn act(
     let action = match action.as_str() {
         "ack" | "acknowledge" => Action::Acknowledge,
         "unshelve" => Action::Unshelve,
+        "out_of_service" => Action::OutOfService(true),
+        "in_service" => Action::OutOfService(false),
         "shelve" => {
             let Some(text) = body.duration.as_deref() else {
                 return Err(ApiError::bad_request(format!(
@@ -196,7 +198,7 @@ pub(super) async fn act(
         }
         other => {
             return Err(ApiError::not_found(format!(
-                "no action {:?} on alarms; actions: ack, shelve, unshelve",
+                "no action {:?} on alarms; actions: ack, shelve, unshelve, out_of_service, in_service",
                 cut(other, MAX_NAME)
             )));
         }

@@ -394,6 +394,92 @@ async fn dcmd_writes_are_carried_out_in_the_order_they_came_and_a_retained_one_n
     node.stop().await;
 }
 
+/// A device's alarm on MQTT: its state, priority and acknowledgement are metrics of the
+/// device, born with it and sent as DDATA when they change; a host acknowledges it by
+/// setting `Acknowledged` to true (a DCMD), which reaches the same journal as the API.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_devices_alarm_is_three_metrics_of_it_and_a_dcmd_acknowledges_it_in_the_journal() {
+    let (rig, broker, mut sub) = on_a_broker(1).await;
+    let mut live = rig.cell.subscribe();
+    let node = Node::start(&rig, taking_commands(&broker), true);
+    let birth = next_of_kind(&mut sub, "DBIRTH", "the DBIRTH of jbc1").await;
+    let state = "Alarms/tool_error/State";
+    assert_eq!(
+        birth.metric(state).and_then(|m| m.value.clone()),
+        Some(SpValue::StringValue("normal".into()))
+    );
+    assert!(birth.metric("Alarms/down/Acknowledged").is_some());
+    let alias = |name: &str| birth.metric(name).and_then(|m| m.alias).unwrap();
+    let (state_alias, ack_alias) = (alias(state), alias("Alarms/tool_error/Acknowledged"));
+
+    rig.models[0]
+        .lock()
+        .set_tool_error(jbc::code::ToolError::HeaterMalfunction);
+    next_event(&mut live, crate::event::EventKind::AlarmRaised).await;
+    let raised = sub
+        .next_where("the alarm's DDATA", LIMIT, |m| {
+            m.kind() == "DDATA"
+                && m.payload
+                    .metrics
+                    .iter()
+                    .any(|x| x.alias == Some(state_alias))
+        })
+        .await;
+    let value_of = |m: &SparkplugMessage, alias: u64| {
+        m.payload
+            .metrics
+            .iter()
+            .find(|x| x.alias == Some(alias))
+            .and_then(|x| x.value.clone())
+    };
+    assert_eq!(
+        value_of(&raised, state_alias),
+        Some(SpValue::StringValue("unacknowledged".into()))
+    );
+    assert_eq!(
+        value_of(&raised, ack_alias),
+        Some(SpValue::BooleanValue(false))
+    );
+
+    sub.publish(
+        JBC1_DCMD,
+        testkit::command_payload(
+            "Alarms/tool_error/Acknowledged",
+            sparkplug::DataType::Boolean,
+            SpValue::BooleanValue(true),
+        ),
+    )
+    .await;
+    let acked = next_event(&mut live, crate::event::EventKind::AlarmChanged).await;
+    assert_eq!(acked.fields["alarm"], "jbc1.tool_error");
+    assert_eq!(acked.fields["state"], "acknowledged");
+    assert_eq!(acked.fields["by"], "mqtt DCMD spBv1.0/rig/DCMD/cell/jbc1");
+    let data = sub
+        .next_where("the acknowledgement's DDATA", LIMIT, |m| {
+            m.kind() == "DDATA" && m.payload.metrics.iter().any(|x| x.alias == Some(ack_alias))
+        })
+        .await;
+    assert_eq!(
+        value_of(&data, ack_alias),
+        Some(SpValue::BooleanValue(true))
+    );
+    rig.cell.store().flush().await.unwrap();
+    let journal = rig
+        .cell
+        .store()
+        .alarm_journal(
+            crate::time::Timestamp(0),
+            crate::time::Timestamp(i64::MAX),
+            Some("jbc1.tool_error"),
+            None,
+            10,
+        )
+        .unwrap();
+    let kinds: Vec<&str> = journal.iter().map(|e| e.kind.as_str()).collect();
+    assert_eq!(kinds, ["alarm_changed", "alarm_raised"]);
+    node.stop().await;
+}
+
 /// The next event of `kind` on the cell's change stream.
 async fn next_event(
     live: &mut tokio::sync::broadcast::Receiver<crate::cell::LiveMessage>,
@@ -761,4 +847,48 @@ async fn json_mode_answers_another_clients_retained_status_and_point_values_with
     let truth: serde_json::Value = serde_json::from_slice(&retained.1).unwrap();
     assert_eq!(truth["quality"], "good", "{truth}");
     node.stop().await;
+}
+
+/// JSON mode: each alarm is a retained message on `{prefix}/alarms/{id}`, the alarm as
+/// the API shows it, published at the start and again at each change.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn json_mode_publishes_each_alarm_retained_under_alarms_and_again_when_it_changes() {
+    let broker = Mosquitto::start();
+    let rig = rig(1);
+    let config = MqttConfig {
+        mode: crate::northbound::mqtt::config::MqttMode::Json,
+        prefix: "plant/cell".into(),
+        ..config(&broker)
+    };
+    let (_client, mut seen) = plain_client(&broker, "plant/cell/alarms/#").await;
+    let node = Node::start(&rig, config, false);
+    let topic = "plant/cell/alarms/jbc1.tool_error";
+    let normal = alarm_on(&mut seen, topic, "normal").await;
+    assert_eq!(normal["priority"], "high");
+    rig.models[0]
+        .lock()
+        .set_tool_error(jbc::code::ToolError::HeaterMalfunction);
+    let raised = alarm_on(&mut seen, topic, "unacknowledged").await;
+    assert_eq!(raised["active"], true);
+    assert_eq!(raised["value"], 3.0, "{raised}");
+    node.stop().await;
+}
+
+/// The next alarm on `topic` in `state`, within [`LIMIT`].
+async fn alarm_on(
+    seen: &mut tokio::sync::mpsc::UnboundedReceiver<(String, Vec<u8>)>,
+    topic: &str,
+    state: &str,
+) -> serde_json::Value {
+    tokio::time::timeout(LIMIT, async {
+        while let Some((t, payload)) = seen.recv().await {
+            let alarm: serde_json::Value = serde_json::from_slice(&payload).unwrap();
+            if t == topic && alarm["state"] == state {
+                return alarm;
+            }
+        }
+        panic!("the client stopped");
+    })
+    .await
+    .unwrap_or_else(|_| panic!("no {state} alarm on {topic} within {LIMIT:?}"))
 }

@@ -10,7 +10,7 @@ use tokio_postgres::Client;
 use super::StoreError;
 
 /// The newest schema version this build writes.
-pub const SCHEMA_VERSION: i32 = 4;
+pub const SCHEMA_VERSION: i32 = 5;
 
 /// The advisory lock (per database) held while migrating: "cellbus" and 1.
 const MIGRATION_LOCK: i64 = 0x6365_6c6c_6275_7301;
@@ -56,6 +56,11 @@ const MIGRATIONS: &[Migration] = &[
         version: 4,
         what: "the cellbus_states view: each device's machine states as intervals",
         statements: version_4,
+    },
+    Migration {
+        version: 5,
+        what: "the cellbus_alarms view: the gateways' alarm journals",
+        statements: version_5,
     },
 ];
 
@@ -289,6 +294,34 @@ fn version_4(_: SamplesLayout) -> Vec<&'static str> {
             ) compared
             WHERE changed
             WINDOW device_time AS (PARTITION BY group_id, node, device ORDER BY start)"#,
+    ]
+}
+
+/// Version 5: `cellbus_alarms(t, node, device, point, alarm, kind, changes, state,
+/// acknowledged, priority, who, comment, value, message, group_id)`, the gateways' alarm
+/// journals: their alarm events (`alarm_raised`, `alarm_cleared`, `alarm_changed`) with
+/// the facts each carries in its fields (`alarm` id, what changed, the state after, the
+/// operator and the comment of an acknowledgement or shelving). Older alarm events (from a
+/// gateway before the journal) have no `alarm` field and are not shown.
+fn version_5(_: SamplesLayout) -> Vec<&'static str> {
+    vec![
+        "CREATE INDEX events_alarms ON events (t) WHERE kind IN ('alarm_raised', \
+            'alarm_cleared', 'alarm_changed')",
+        "CREATE VIEW cellbus_alarms AS
+            SELECT t, node, device, point, fields->>'alarm' AS alarm, kind,
+                ARRAY(SELECT jsonb_array_elements_text(
+                    CASE jsonb_typeof(fields->'changes') WHEN 'array' THEN fields->'changes'
+                        ELSE '[]'::jsonb END)) AS changes,
+                fields->>'state' AS state,
+                (fields->>'acknowledged')::boolean AS acknowledged,
+                fields->>'priority' AS priority,
+                fields->>'by' AS who,
+                fields->>'comment' AS comment,
+                fields->'value' AS value,
+                message, group_id
+            FROM events
+            WHERE kind IN ('alarm_raised', 'alarm_cleared', 'alarm_changed')
+                AND fields ? 'alarm'",
     ]
 }
 

@@ -195,7 +195,7 @@ async fn a_version_1_database_keeps_each_points_history_when_its_node_is_born_in
     drop(client);
 
     let mut store = Store::connect(&url).await.unwrap();
-    assert_eq!(store.migrated(), [2, 3, 4]);
+    assert_eq!(store.migrated(), [2, 3, 4, 5]);
     let old = store
         .find_points("cell1/jbc1.air_temperature")
         .await

@@ -397,3 +397,55 @@ fn a_chattering_alarm_is_shelved_on_its_own_when_its_rule_says_so() {
     assert_eq!(alarm.shelved_until, Some(t(4_000 + 600_000)));
     assert_eq!(alarm.chattered, 1);
 }
+
+#[test]
+fn an_alarm_taken_out_of_service_refuses_acknowledgement_until_it_returns_as_its_condition_is() {
+    let mut book = Book::new(&[], &[sealer()]);
+    book.value(&point("sealer0.fault"), Some(&n(4.0)), t(0));
+    let out = book
+        .act(
+            "sealer0.fault",
+            Action::OutOfService(true),
+            t(1_000),
+            "maintenance",
+            Some("band swap"),
+        )
+        .unwrap();
+    assert_eq!(out.changes, [Change::RemovedFromService]);
+    let alarm = book.view(out.index).unwrap();
+    assert!(alarm.out_of_service);
+    assert_eq!(book.list(&all()).total, 1, "listed, to be returned");
+    assert!(matches!(
+        book.act("sealer0.fault", Action::Acknowledge, t(2_000), "anna", None),
+        Err(ActError::Refused {
+            refused: Refused::OutOfService,
+            ..
+        })
+    ));
+    // Repaired meanwhile: back in service, normal.
+    book.value(&point("sealer0.fault"), Some(&n(0.0)), t(3_000));
+    let back = book
+        .act(
+            "sealer0.fault",
+            Action::OutOfService(false),
+            t(4_000),
+            "maintenance",
+            None,
+        )
+        .unwrap();
+    assert_eq!(back.changes, [Change::ReturnedToService]);
+    assert_eq!(book.view(back.index).unwrap().state, State::Normal);
+    assert!(matches!(
+        book.act(
+            "sealer0.fault",
+            Action::OutOfService(false),
+            t(5_000),
+            "anna",
+            None
+        ),
+        Err(ActError::Refused {
+            refused: Refused::InService,
+            ..
+        })
+    ));
+}

@@ -14,7 +14,12 @@ use thermosald::diagnostic::Fault;
 use thermosald::exchange::LineTiming;
 use wire::device::SharedModel;
 
+use crate::alarm::Priority;
+use crate::alarm::config::AlarmConfig;
+use crate::alarm::limit::Limits;
+use crate::alarm::state::ChatterRule;
 use crate::demo::{DemoCell, Starting, device};
+use crate::point::PointId;
 
 /// Sealing rhythms of the demo regulators: three packaging machines at their own pace.
 const SEAL_PERIODS: [Duration; 3] = [
@@ -53,7 +58,32 @@ pub fn start(demo: &mut DemoCell) -> Starting<'_> {
             .await?;
         demo.spawn(operate(model));
         demo.add_line("sealers-rs485".to_owned(), endpoint, devices);
+        demo.config.alarms.push(chattering_limit()?);
         Ok(())
+    })
+}
+
+/// A limit alarm that chatters, to be shelved: sealer 0's band passes 120 °C in every
+/// sealing cycle (every 3 s), so the alarm activates and clears again and again; its
+/// chatter rule counts it (more than 5 activations a minute) without shelving it.
+fn chattering_limit() -> std::io::Result<AlarmConfig> {
+    let point =
+        PointId::parse("sealer0.temperature").map_err(|e| std::io::Error::other(e.to_string()))?;
+    Ok(AlarmConfig {
+        point,
+        limits: Limits {
+            high: Some(120.0),
+            deadband: 5.0,
+            ..Limits::default()
+        },
+        priority: Priority::Low,
+        message: Some("Band above 120 °C".to_owned()),
+        category: Some("process".to_owned()),
+        chatter: Some(ChatterRule {
+            activations: 5,
+            window: Duration::from_secs(60),
+            shelve: None,
+        }),
     })
 }
 

@@ -6,6 +6,7 @@
 //! | `{prefix}/{device}/status` | `online` or `offline` | 1, retained |
 //! | `{prefix}/status` | `online`; `offline` as the gateway's Will | 1, retained |
 //! | `{prefix}/events` | an event as the API shows it | 1, not retained |
+//! | `{prefix}/alarms/{id}` | the alarm as `GET /api/alarms` shows it (its state after each change) | 1, retained |
 //!
 //! `value` is `null` unless the quality is `good` (a stale or bad point is never published
 //! with its last good value). After an outage the changes stored since the forwarded mark
@@ -284,8 +285,22 @@ impl Publisher {
             conn.publish(self.device_status(device.summary.id.as_str(), device.summary.status))
                 .await?;
         }
+        for alarm in self.cell.alarms.all() {
+            conn.publish(self.alarm_message(&alarm)).await?;
+        }
         self.born = true;
         Ok(())
+    }
+
+    /// An alarm's retained message: the alarm as the API shows it.
+    fn alarm_message(&self, alarm: &crate::alarm::book::View) -> Outgoing {
+        Outgoing {
+            topic: format!("{}/alarms/{}", self.prefix, alarm.id),
+            payload: serde_json::to_vec(alarm).unwrap_or_default(),
+            qos: QoS::AtLeastOnce,
+            retain: true,
+            latest: None,
+        }
     }
 
     async fn backlog(
@@ -346,6 +361,14 @@ impl Publisher {
                     latest: None,
                 })
                 .await?;
+                if let Some(alarm) = event
+                    .fields
+                    .get("alarm")
+                    .and_then(|a| a.as_str())
+                    .and_then(|id| self.cell.alarms.view(id))
+                {
+                    conn.publish(self.alarm_message(&alarm)).await?;
+                }
             }
         }
         Ok(())

@@ -11,9 +11,16 @@
 //! named by the point's short name (`air_temperature`); its words go in the
 //! `Documentation` property, its unit in `engUnit`, and writability and range in
 //! `writable`, `writeMin`, `writeMax`.
+//!
+//! Each alarm of a device is three metrics of the device, named by the alarm's id without
+//! the device (`sealer0.temperature:high` of `sealer0` is `Alarms/temperature:high/…`):
+//! `State` (String: normal, unacknowledged, acknowledged, returned_unacknowledged),
+//! `Priority` (Int32, 1 low to 4 urgent) and `Acknowledged` (Boolean), which a host sets
+//! to true by DCMD to acknowledge the alarm when commands are allowed.
 
 use sparkplug::{DataType, MetricName, MetricSpec, MetricValue, Sample, Writable, WriteRange};
 
+use crate::alarm::book::View as AlarmView;
 use crate::cell::{DeviceView, PointDetail, PointView};
 use crate::point::{PointKind, Quality, Value};
 use crate::time::Timestamp;
@@ -83,6 +90,66 @@ pub fn device_metrics(device: &DeviceView, now: Timestamp) -> Vec<(MetricSpec, S
         .iter()
         .filter_map(|p| Some((metric_spec(p)?, sample_of(&p.kind, &p.view, now))))
         .collect()
+}
+
+/// The first part of every alarm metric's name.
+pub const ALARMS: &str = "Alarms/";
+
+/// The metric names of alarm `id` of `device`, as `(state, priority, acknowledged)`.
+pub fn alarm_metric_names(device: &str, id: &str) -> Option<(MetricName, MetricName, MetricName)> {
+    let short = id
+        .strip_prefix(device)
+        .and_then(|rest| rest.strip_prefix(['.', ':']))
+        .unwrap_or(id);
+    let name = |what: &str| MetricName::new(format!("{ALARMS}{short}/{what}")).ok();
+    Some((name("State")?, name("Priority")?, name("Acknowledged")?))
+}
+
+/// The alarm ids a DCMD's `Alarms/{short}/Acknowledged` of `device` may mean: the device's
+/// point alarm (`device.short`) or its own (`device:short`). `None`: not an alarm's
+/// acknowledgement.
+pub fn acknowledged_alarm(device: &str, metric: &str) -> Option<[String; 2]> {
+    let short = metric.strip_prefix(ALARMS)?.strip_suffix("/Acknowledged")?;
+    Some([format!("{device}.{short}"), format!("{device}:{short}")])
+}
+
+/// An alarm's three metrics with their samples: for a DBIRTH (with `writable`: DCMDs
+/// are carried out) and for a DDATA.
+pub fn alarm_metrics(
+    device: &str,
+    alarm: &AlarmView,
+    writable: bool,
+    t: Timestamp,
+) -> Vec<(MetricSpec, Sample)> {
+    let Some((state, priority, acknowledged)) = alarm_metric_names(device, &alarm.id) else {
+        return Vec::new();
+    };
+    let t = sparkplug_time(t);
+    let state_name = serde_json::to_value(alarm.state)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_default();
+    vec![
+        (
+            MetricSpec::new(state, DataType::String).description(alarm.message.as_str()),
+            Sample::good(MetricValue::String(state_name), t),
+        ),
+        (
+            MetricSpec::new(priority, DataType::Int32)
+                .description("The alarm's priority: 1 low, 2 medium, 3 high, 4 urgent"),
+            Sample::good(MetricValue::Int32(i32::from(alarm.priority.number())), t),
+        ),
+        (
+            MetricSpec::new(acknowledged, DataType::Boolean)
+                .description("Set to true to acknowledge the alarm")
+                .writable(if writable {
+                    Writable::Yes
+                } else {
+                    Writable::No
+                }),
+            Sample::good(MetricValue::Boolean(alarm.acknowledged), t),
+        ),
+    ]
 }
 
 /// A gateway time as a Sparkplug time (times before 1970 read as 1970).

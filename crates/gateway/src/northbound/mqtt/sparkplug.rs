@@ -38,7 +38,9 @@ use sparkplug::{
 use tokio::sync::{broadcast, mpsc};
 
 use super::forward::Backlog;
-use super::mapping::{device_metrics, sample_of, sample_of_stored, sparkplug_time};
+use super::mapping::{
+    acknowledged_alarm, alarm_metrics, device_metrics, sample_of, sample_of_stored, sparkplug_time,
+};
 use super::primary::{OFFLINE_GRACE, PrimaryHost, STATE_SKEW_MS, Verdict};
 use super::status;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
@@ -369,9 +371,13 @@ impl Node {
             let Ok(id) = Id::new(device.summary.id.as_str()) else {
                 continue;
             };
+            let mut metrics = device_metrics(&device, now);
+            for alarm in self.cell.alarms.of_device(id.as_str()) {
+                metrics.extend(alarm_metrics(id.as_str(), &alarm, self.writes, now));
+            }
             let birth = self
                 .node
-                .device_birth(&id, &device_metrics(&device, now), t)
+                .device_birth(&id, &metrics, t)
                 .map_err(|e| lost(format!("cannot build the DBIRTH of {id}: {e}")))?;
             conn.publish(outgoing(birth, None)).await.map_err(lost)?;
             if device.summary.status == DeviceStatus::Down {
@@ -520,6 +526,20 @@ impl Node {
                     // Keep the order: what came before an event goes out first.
                     self.device_data(conn, std::mem::take(&mut values)).await?;
                     self.on_event(conn, &event).await?;
+                    // An alarm's change is also its device's alarm metrics.
+                    if let (Some(id), Some(device)) = (
+                        event.fields.get("alarm").and_then(|a| a.as_str()),
+                        &event.device,
+                    ) && let Some(alarm) = self.cell.alarms.view(id)
+                    {
+                        let now = Timestamp::now();
+                        let changes = alarm_metrics(device.as_str(), &alarm, self.writes, now)
+                            .into_iter()
+                            .map(|(spec, sample)| (spec.name.as_str().to_owned(), sample))
+                            .collect();
+                        self.device_data(conn, vec![(device.clone(), changes, now)])
+                            .await?;
+                    }
                 }
                 LiveMessage::Device(summary) => {
                     // Keep the order: what came before a status change goes out first.
@@ -690,10 +710,76 @@ impl Node {
                 } => writes.push((device, metric, value)),
             }
         }
+        let (acks, writes): (Vec<_>, Vec<_>) =
+            writes.into_iter().partition(|(device, metric, _)| {
+                device
+                    .as_ref()
+                    .is_some_and(|d| acknowledged_alarm(d.as_str(), metric.as_str()).is_some())
+            });
+        if !acks.is_empty() {
+            self.on_acknowledgements(topic, acks).await;
+        }
         if !writes.is_empty() {
             self.on_writes(topic, writes).await;
         }
         Ok(())
+    }
+
+    /// A DCMD's `Alarms/…/Acknowledged = true`: each alarm acknowledged through the one
+    /// alarm path (journalled with the topic as who), in a task of its own. Writes off:
+    /// refused as a write is. `false` asks nothing.
+    async fn on_acknowledgements(
+        &mut self,
+        topic: &str,
+        acks: Vec<(Option<Id>, MetricName, MetricValue)>,
+    ) {
+        let mut ids = Vec::new();
+        for (device, metric, value) in acks {
+            let Some(device) = device else { continue };
+            if !self.writes {
+                self.refuse(topic, &device, metric.as_str());
+                return;
+            }
+            if value != MetricValue::Boolean(true) {
+                continue;
+            }
+            if let Some(candidates) = acknowledged_alarm(device.as_str(), metric.as_str()) {
+                let known = candidates
+                    .into_iter()
+                    .find(|id| self.cell.alarms.view(id).is_some());
+                match known {
+                    Some(id) => ids.push(id),
+                    None => {
+                        self.audit_refused_command(
+                            topic,
+                            Refusal {
+                                why: format!("{metric}: device {device} has no such alarm"),
+                                point: metric.as_str().to_owned(),
+                                new: serde_json::json!(true),
+                            },
+                        )
+                        .await;
+                    }
+                }
+            }
+        }
+        let cell = Arc::clone(&self.cell);
+        let by = format!("mqtt DCMD {topic}");
+        tokio::spawn(async move {
+            for id in ids {
+                if let Err(e) = crate::alarm::keeper::act(
+                    &cell,
+                    &id,
+                    crate::alarm::book::Action::Acknowledge,
+                    &by,
+                    None,
+                )
+                .await
+                {
+                    tracing::info!("MQTT: {by}: {e}");
+                }
+            }
+        });
     }
 
     async fn on_host_state(
