@@ -443,6 +443,211 @@ fn the_production_view_shows_the_placement_machines_states_oee_and_stops_as_the_
     );
 }
 
+/// The alarm view on the demo, as an operator works with it: the header's banner opens the
+/// alarm list; once the demo's devices have raised two alarms of their own, the operator
+/// acknowledges one (a wrong token first, whose refusal the page shows) and shelves the
+/// other for an hour after confirming, giving a name and a comment each time; the banner's
+/// counts change, and the journal, on the page and from the API, says who did what and why.
+/// On a phone the view and its dialog fit the screen, and the shelving is undone there.
+#[test]
+fn an_operator_acknowledges_one_demo_alarm_shelves_another_and_the_journal_says_who_and_why() {
+    const TOKEN: &str = "alarm-desk-token";
+    const OPERATOR: &str = "Ann Operator";
+    let browser = browser();
+    let data = tempfile::tempdir().unwrap();
+    let gateway = Gateway::start_with(data.path(), &["--allow-writes", "--token", TOKEN]);
+
+    // The demo's devices raise their own alarms within about a minute (a JBC tool error, a
+    // sealer's fault, the placement machine's error stop): wait for two waiting for an
+    // acknowledgement, neither shelved (a chattering alarm shelves itself) nor out of service.
+    let started = std::time::Instant::now();
+    loop {
+        let list = gateway.get_json("/api/alarms?limit=50");
+        let waiting = list["alarms"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|a| {
+                a["acknowledged"] == false
+                    && a["shelved_until"].is_null()
+                    && a["out_of_service"] == false
+            })
+            .count();
+        if waiting >= 2 {
+            break;
+        }
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(240),
+            "the demo raised no two alarms in 4 minutes: {list}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(500));
+    }
+
+    let screenshot = data.path().join("alarms.png");
+    let seen = what_the_page_saw(
+        browser
+            .script("alarms.mjs", &gateway, &screenshot)
+            .env("TOKEN", TOKEN)
+            .env("OPERATOR", OPERATOR),
+    );
+    assert_eq!(seen["opened"]["address"], "#view=alarms", "{seen}");
+    assert_eq!(seen["opened"]["tab"], "tab-alarms");
+
+    // Each row says what the API says of an alarm, in words.
+    for row in seen["listed"].as_array().unwrap() {
+        for column in [
+            "Priority",
+            "Device",
+            "Message",
+            "State",
+            "Value",
+            "First active",
+            "Last active",
+            "Count",
+            "Shelved until",
+        ] {
+            let text = row["cells"][column].as_str().unwrap_or_default();
+            assert!(!text.is_empty(), "{column} of {row}");
+        }
+        assert!(
+            ["low", "medium", "high", "urgent"].contains(&row["priority"].as_str().unwrap()),
+            "{row}"
+        );
+    }
+    let (acked, shelved) = (
+        seen["acked"].as_str().unwrap(),
+        seen["shelved"].as_str().unwrap(),
+    );
+    assert_ne!(acked, shelved);
+
+    // The acknowledgement: a wrong token is refused in the API's words, the dialog stays.
+    assert_eq!(seen["ack_dialog"]["open"], true);
+    assert_eq!(seen["ack_dialog"]["title"], format!("Acknowledge {acked}?"));
+    assert_eq!(seen["ack_dialog"]["duration_hidden"], true);
+    let refused = seen["refused"]["text"].as_str().unwrap();
+    assert!(
+        refused.contains("wrong token") && refused.contains("401"),
+        "{refused}"
+    );
+    assert_eq!(seen["refused"]["still_open"], true);
+    assert!(
+        seen["ack_done"].as_str().unwrap().contains(OPERATOR),
+        "{seen}"
+    );
+
+    // The banner changed: one fewer waiting for an acknowledgement.
+    let unacknowledged = |banner: &serde_json::Value| -> Vec<i64> {
+        ["urgent", "high", "medium", "low"]
+            .iter()
+            .map(|p| banner[p]["unacknowledged"].as_i64().unwrap())
+            .collect()
+    };
+    let (before, after) = (
+        unacknowledged(&seen["banner_before"]),
+        unacknowledged(&seen["banner_after"]),
+    );
+    assert_ne!(before, after, "{seen}");
+    assert!(
+        after.iter().sum::<i64>() < before.iter().sum::<i64>(),
+        "{before:?} then {after:?}"
+    );
+
+    // The shelving: asked how long and why, confirmed by a button that says it.
+    let dialog = &seen["shelve_dialog"];
+    assert_eq!(dialog["title"], format!("Shelve {shelved}?"));
+    assert_eq!(dialog["durations"], serde_json::json!(["15m", "1h", "8h"]));
+    assert_eq!(dialog["duration_hidden"], false);
+    assert_eq!(dialog["operator"], OPERATOR, "the name is remembered");
+    assert_eq!(dialog["token_kept"], true, "the token is remembered");
+    assert_eq!(dialog["confirm"], "Shelve for 1 hour");
+    assert_eq!(
+        dialog["open_without_comment"], true,
+        "no shelving without a comment"
+    );
+    let until = seen["shelved_row"]["shelvedUntil"].as_str().unwrap();
+    let hour = common::rfc3339_ms(until) - common::now_ms();
+    assert!(
+        (50 * 60_000..=3_600_000).contains(&hour),
+        "shelved for an hour: until {until}"
+    );
+    assert!(
+        seen["shelved_row"]["actions"]
+            .as_array()
+            .unwrap()
+            .contains(&"unshelve".into()),
+        "{seen}"
+    );
+
+    // The journal: on the page and from the API (each alarm's own: a chattering one fills
+    // the cell's), who did what and why.
+    let entry = |alarm: &str, change: &str| -> serde_json::Value {
+        let journal = gateway.get_json(&format!(
+            "/api/alarms/journal?alarm={}&from=-1h&limit=100",
+            alarm.replace(':', "%3A")
+        ));
+        journal["entries"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|e| {
+                e["changes"]
+                    .as_array()
+                    .is_some_and(|c| c.contains(&change.into()))
+            })
+            .cloned()
+            .unwrap_or_else(|| panic!("no {change} of {alarm} in the journal: {journal}"))
+    };
+    for (alarm, change, comment) in [
+        (acked, "acknowledged", "Checked the air hose"),
+        (shelved, "shelved", "Known supply sag, electrician called"),
+        (shelved, "unshelved", "Supply fixed"),
+    ] {
+        let e = entry(alarm, change);
+        assert!(
+            e["by"]
+                .as_str()
+                .unwrap()
+                .starts_with(&format!("{OPERATOR} (http ")),
+            "{e}"
+        );
+        assert_eq!(e["comment"], comment, "{e}");
+    }
+    let shown = seen["journal"].as_array().unwrap();
+    for (alarm, change, comment) in [
+        (acked, "acknowledged", "Checked the air hose"),
+        (shelved, "shelved", "Known supply sag, electrician called"),
+    ] {
+        let row = shown
+            .iter()
+            .find(|r| {
+                r["alarm"] == alarm
+                    && r["changes"]
+                        .as_str()
+                        .unwrap()
+                        .split(' ')
+                        .any(|c| c == change)
+            })
+            .unwrap_or_else(|| panic!("the page's journal has no {change} of {alarm}: {seen}"));
+        assert!(
+            row["cells"]["By"].as_str().unwrap().contains(OPERATOR),
+            "{row}"
+        );
+        assert_eq!(row["cells"]["Comment"], comment, "{row}");
+    }
+    assert!(screenshot.exists());
+
+    let phone = &seen["phone"];
+    assert!(
+        phone["overflow"].as_i64().unwrap() <= 0,
+        "nothing wider than a 360 px phone: {phone}"
+    );
+    assert!(phone["dialog_right"].as_f64().unwrap() <= 360.0, "{phone}");
+    assert!(
+        phone["unshelved"].as_str().unwrap().contains("unshelved"),
+        "{phone}"
+    );
+}
+
 /// The span (ms since the epoch) a trend step of `trend.mjs` says it shows.
 fn shown(step: &serde_json::Value) -> (i64, i64) {
     let shown = &step["shown"];

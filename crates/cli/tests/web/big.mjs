@@ -176,9 +176,9 @@ try {
     paths: requests.slice(before.requests),
   };
   check(
-    refresh.paths.every((p) => [`/api/lines?line=${first.name}`, '/api/lines', '/healthz'].includes(p)
+    refresh.paths.every((p) => [`/api/lines?line=${first.name}`, '/api/lines', '/healthz', '/api/alarms?limit=1'].includes(p)
       || p.startsWith('/api/history')),
-    `a refresh asks only for the line's health and the gateway's (plots: history): ${refresh.paths}`,
+    `a refresh asks only for the line's health and the gateway's, and the alarm banner's counts after an alarm event (plots: history): ${refresh.paths}`,
   );
   check(
     refresh.paths.includes(`/api/lines?line=${first.name}`),

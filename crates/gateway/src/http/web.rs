@@ -1,9 +1,10 @@
-//! The web page at `/`: one HTML file, a style sheet and three scripts, with the chart library
+//! The web page at `/`: one HTML file, a style sheet and four scripts, with the chart library
 //! of its trend view (uPlot 1.6.32, MIT, vendored unchanged under `web/vendor/` with its
 //! licence), all compiled into the binary. Nothing is fetched from elsewhere at run time
 //! (plants are offline): no CDN, no web fonts. The page follows `/api/events/stream`,
-//! draws its own small plots, asks `/api/history` for the trend view and `/api/states` and
-//! `/api/production` for the production view.
+//! draws its own small plots, asks `/api/history` for the trend view, `/api/states` and
+//! `/api/production` for the production view, and `/api/alarms` and `/api/alarms/journal`
+//! for the alarm view and the header's alarm banner.
 
 use axum::Router;
 use axum::http::header;
@@ -22,6 +23,8 @@ pub const APP_JS: &str = include_str!("web/app.js");
 pub const TREND_JS: &str = include_str!("web/trend.js");
 /// The production view's script.
 pub const PRODUCTION_JS: &str = include_str!("web/production.js");
+/// The alarm view's script (and the header's alarm banner).
+pub const ALARMS_JS: &str = include_str!("web/alarms.js");
 /// uPlot, the trend view's charts (its release's minified script, unchanged).
 pub const UPLOT_JS: &str = include_str!("web/vendor/uPlot.iife.min.js");
 /// uPlot's style sheet.
@@ -36,6 +39,7 @@ pub const PAGE_ROUTES: &[(&str, &str)] = &[
     ("GET", "/app.js"),
     ("GET", "/trend.js"),
     ("GET", "/production.js"),
+    ("GET", "/alarms.js"),
     ("GET", "/vendor/uPlot.iife.min.js"),
     ("GET", "/vendor/uPlot.min.css"),
     ("GET", "/vendor/uPlot.LICENSE"),
@@ -51,6 +55,7 @@ pub(super) fn routes() -> Router<AppState> {
         .route("/app.js", get(|| asset(JS, APP_JS)))
         .route("/trend.js", get(|| asset(JS, TREND_JS)))
         .route("/production.js", get(|| asset(JS, PRODUCTION_JS)))
+        .route("/alarms.js", get(|| asset(JS, ALARMS_JS)))
         .route("/vendor/uPlot.iife.min.js", get(|| asset(JS, UPLOT_JS)))
         .route("/vendor/uPlot.min.css", get(|| asset(CSS, UPLOT_CSS)))
         .route(

@@ -7,7 +7,8 @@
 // and a plot loads its history when it scrolls into view. The view is in the address
 // (`#line=NAME`, `&q=TEXT` for a search, `&page=N`), so a link opens the same view.
 // `#view=trend&…` shows the trend view instead, `#view=production&device=ID` a device's
-// production (trend.js and production.js, loaded before this script).
+// production, `#view=alarms` the alarm list and journal (trend.js, production.js and
+// alarms.js, loaded before this script); the header's alarm banner is on every view.
 //
 // DOM contract (for tests and other tools): each device is <section class="device"
 // id="device-ID" data-status="up|down|connecting">; each point is an element with
@@ -27,7 +28,7 @@ const HISTORY_AT_ONCE = 4;
 const ALL_LINES = '*';
 
 const state = {
-  writesEnabled: false,
+  writesEnabled: null, // unknown until the stream's snapshot says
   devices: new Map(), // id -> device shown (with points by id in .byId)
   series: new Map(),  // point id -> [[t_ms, value|null], ...]
   dirty: new Set(),   // point ids whose plot needs drawing
@@ -485,11 +486,11 @@ async function refreshLines() {
   }
 }
 
-// ---- the pages: the cell, a trend, production ---------------------------------------------
+// ---- the pages: the cell, a trend, production, alarms -------------------------------------
 
-const PAGE_TITLES = { cell: 'cell overview', trend: 'trend', production: 'production' };
+const PAGE_TITLES = { cell: 'cell overview', trend: 'trend', production: 'production', alarms: 'alarms' };
 
-/** The page the address asks for: `#view=trend…`, `#view=production…`, else the cell. */
+/** The page the address asks for: `#view=trend…`, `#view=production…`, `#view=alarms…`, else the cell. */
 function pageFromAddress() {
   const params = new URLSearchParams(window.location.hash.slice(1));
   const view = params.get('view');
@@ -502,6 +503,7 @@ function showPage(load = true) {
   document.getElementById('cell-view').hidden = page !== 'cell';
   document.getElementById('trend-view').hidden = page !== 'trend';
   document.getElementById('production-view').hidden = page !== 'production';
+  document.getElementById('alarms-view').hidden = page !== 'alarms';
   for (const tab of document.querySelectorAll('.pages a')) {
     if (tab.dataset.page === page) tab.setAttribute('aria-current', 'page');
     else tab.removeAttribute('aria-current');
@@ -511,6 +513,7 @@ function showPage(load = true) {
   if (!load) return;
   showTrend(page === 'trend' ? params : null);
   showProduction(page === 'production' ? params : null);
+  showAlarms(page === 'alarms' ? params : null);
 }
 
 // ---- the view: which devices are shown ------------------------------------------------
@@ -692,6 +695,7 @@ function showCellSummary(health) {
 
 function addEvent(event, atTop = true) {
   if (atTop && event.kind && /^(interface_|device_|line_|history_)/.test(event.kind)) healthSoon();
+  if (atTop && event.kind && event.kind.startsWith('alarm_')) alarmsNoticed();
   const list = document.getElementById('events');
   const item = el('li');
   item.dataset.kind = event.kind;
@@ -855,6 +859,7 @@ function connect(query) {
     renderLines(snapshot.lines);
     loadEvents();
     productionSnapshot();
+    refreshAlarms();
   });
   opened.addEventListener('value', (e) => updatePoint(JSON.parse(e.data)));
   opened.addEventListener('device', (e) => updateDeviceStatus(JSON.parse(e.data)));
@@ -900,6 +905,7 @@ async function start() {
 setUpToolbar();
 setUpTrend();
 setUpProduction();
+setUpAlarms();
 showPage(false);
 start();
 tick();
