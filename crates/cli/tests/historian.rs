@@ -173,14 +173,17 @@ fn gateway_devices(gateway: &Gateway) -> Vec<String> {
         .collect()
 }
 
-/// The historian's rows of `node`'s devices over `[from, to)`, by `device.point`.
+/// The historian's rows of `node`'s devices over `[from, to)`, by `device.point`. A device's
+/// alarm metrics (`Alarms/…`, their state as the gateway's Sparkplug births and data give it) are
+/// stored too, but are not points of the gateway's history: the alarm journal is its events.
 fn historian_rows(pg: &Postgres, node: &str, from: i64, to: i64) -> BTreeMap<String, Vec<Row>> {
     let out = pg.psql(
         "plant",
         &format!(
             "SELECT device || '.' || point, (extract(epoch from t) * 1000)::bigint, quality, \
              coalesce(value::text, '=' || text) FROM cellbus_samples WHERE node = '{node}' \
-             AND device <> '' AND t >= to_timestamp({from} / 1000.0) \
+             AND device <> '' AND point NOT LIKE 'Alarms/%' \
+             AND t >= to_timestamp({from} / 1000.0) \
              AND t < to_timestamp({to} / 1000.0) ORDER BY 1, 2"
         ),
     );

@@ -78,6 +78,28 @@ impl Drop for Served {
     }
 }
 
+/// Starts the script with `args`; its standard output's lines as they come.
+fn script_lines(args: &[&str]) -> (std::process::Child, std::sync::mpsc::Receiver<String>) {
+    let mut child = Command::new("python3")
+        .arg(script())
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("python3 runs");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let stdout = child.stdout.take().expect("piped");
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    (child, rx)
+}
+
 /// Runs the script with `args`; panics with its output unless it succeeds.
 fn run_script(args: &[&str]) -> String {
     let mut child = Command::new("python3")
@@ -198,22 +220,7 @@ fn a_device_that_stops_answering_turns_its_opcua_values_bad_without_a_value() {
     let config = config.to_str().expect("a UTF-8 path");
     let served = Served::start(data.path(), &["--config", config], None);
 
-    let mut child = Command::new("python3")
-        .args([&script(), "down", &served.opcua, "jbc1", "air_temperature"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("python3 runs");
-    let (tx, rx) = std::sync::mpsc::channel();
-    let stdout = child.stdout.take().expect("piped");
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
+    let (mut child, rx) = script_lines(&["down", &served.opcua, "jbc1", "air_temperature"]);
     let first = rx.recv_timeout(LIMIT).expect("the script subscribes");
     assert_eq!(first, "subscribed");
     // The station is switched off: the gateway marks its points bad.
@@ -250,29 +257,7 @@ fn an_independent_opcua_client_gets_an_alarm_event_and_acknowledges_and_shelves_
         Some(token),
     );
 
-    let mut child = Command::new("python3")
-        .args([
-            &script(),
-            "alarm",
-            &served.opcua,
-            &served.http,
-            token,
-            "jbc1",
-        ])
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("python3 runs");
-    let (tx, rx) = std::sync::mpsc::channel();
-    let stdout = child.stdout.take().expect("piped");
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
+    let (mut child, rx) = script_lines(&["alarm", &served.opcua, &served.http, token, "jbc1"]);
     let mut out = Vec::new();
     loop {
         let line = rx.recv_timeout(LIMIT).expect("the script subscribes");

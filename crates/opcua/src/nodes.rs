@@ -548,7 +548,7 @@ impl InMemoryNodeManagerImpl for CellNodes {
         space: &RwLock<AddressSpace>,
         nodes_to_write: &mut [&mut WriteNode],
     ) -> Result<(), StatusCode> {
-        let client = client_text(context, &self.peers);
+        let client = Caller::of(context, &self.peers).client();
         for node in nodes_to_write {
             let exists = space.read().node_exists(&node.value().node_id);
             let status = if exists {
@@ -567,7 +567,7 @@ impl InMemoryNodeManagerImpl for CellNodes {
         _space: &RwLock<AddressSpace>,
         methods_to_call: &mut [&mut &mut MethodCall],
     ) -> Result<(), StatusCode> {
-        let by = actor_text(context, &self.peers);
+        let by = Caller::of(context, &self.peers).actor();
         for call in methods_to_call.iter_mut() {
             self.call_one(context, &by, call).await;
         }
@@ -959,43 +959,50 @@ pub fn write_status(error: &WriteError) -> StatusCode {
     }
 }
 
-/// Who acts on an alarm, for the alarm journal: the user and the client's address first
-/// (the journal keeps 128 characters of it),
-/// `opcua user op from 192.0.2.7:50112 (session 3, urn:client:app)`.
-fn actor_text(context: &RequestContext, peers: &Peers) -> String {
-    let session = context.session.read();
-    let user = if context.token.is_anonymous() {
-        "anonymous".to_owned()
-    } else {
-        format!("user {}", context.token.0)
-    };
-    let from = peers
-        .address(session.secure_channel_id())
-        .map(|a| format!(" from {a}"))
-        .unwrap_or_default();
-    format!(
-        "opcua {user}{from} (session {}, {})",
-        context.session_id,
-        session.application_description().application_uri.as_ref()
-    )
+/// Who a request comes from: the user (or `anonymous`), the client's address when the
+/// relay knows it, the session and the client's application URI.
+struct Caller {
+    user: String,
+    from: Option<std::net::SocketAddr>,
+    session: String,
+    uri: String,
 }
 
-/// Who writes, for the audit log:
-/// `opcua user op (session 3, urn:client:app, from 192.0.2.7:50112)`.
-fn client_text(context: &RequestContext, peers: &Peers) -> String {
-    let session = context.session.read();
-    let user = if context.token.is_anonymous() {
-        "anonymous".to_owned()
-    } else {
-        format!("user {}", context.token.0)
-    };
-    let from = peers
-        .address(session.secure_channel_id())
-        .map(|a| format!(", from {a}"))
-        .unwrap_or_default();
-    format!(
-        "opcua {user} (session {}, {}{from})",
-        context.session_id,
-        session.application_description().application_uri.as_ref()
-    )
+impl Caller {
+    fn of(context: &RequestContext, peers: &Peers) -> Self {
+        let session = context.session.read();
+        Self {
+            user: if context.token.is_anonymous() {
+                "anonymous".to_owned()
+            } else {
+                format!("user {}", context.token.0)
+            },
+            from: peers.address(session.secure_channel_id()),
+            session: context.session_id.to_string(),
+            uri: session
+                .application_description()
+                .application_uri
+                .as_ref()
+                .to_owned(),
+        }
+    }
+
+    /// For the alarm journal, the address first (the journal keeps 128 characters):
+    /// `opcua user op from 192.0.2.7:50112 (session 3, urn:client:app)`.
+    fn actor(&self) -> String {
+        let from = self.from.map(|a| format!(" from {a}")).unwrap_or_default();
+        format!(
+            "opcua {}{from} (session {}, {})",
+            self.user, self.session, self.uri
+        )
+    }
+
+    /// For the audit log: `opcua user op (session 3, urn:client:app, from 192.0.2.7:50112)`.
+    fn client(&self) -> String {
+        let from = self.from.map(|a| format!(", from {a}")).unwrap_or_default();
+        format!(
+            "opcua {} (session {}, {}{from})",
+            self.user, self.session, self.uri
+        )
+    }
 }

@@ -15,7 +15,7 @@ use serde::Deserialize;
 use serde_json::json;
 
 use super::write::{BODY_LIMIT, BODY_TIMEOUT, authorise};
-use super::{ApiError, ApiResult, AppState, ClientAddr, check_limit, parse_time, unknown_device};
+use super::{ApiError, ApiResult, AppState, ClientAddr, check_limit, known_device, parse_time};
 use crate::alarm::Priority;
 use crate::alarm::book::{ActError, Action, ListFilter};
 use crate::alarm::state::MAX_SHELVE;
@@ -51,11 +51,7 @@ pub(super) async fn list(
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
     let Query(q) = query?;
-    if let Some(device) = &q.device
-        && s.cell.device_entry(device).is_none()
-    {
-        return Err(unknown_device(&s.cell, device));
-    }
+    known_device(&s.cell, q.device.as_deref())?;
     let filter = ListFilter {
         priority: priority(q.priority.as_deref())?,
         device: q.device,
@@ -90,11 +86,7 @@ pub(super) async fn journal(
     query: Result<Query<JournalQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
     let Query(q) = query?;
-    if let Some(device) = &q.device
-        && s.cell.device_entry(device).is_none()
-    {
-        return Err(unknown_device(&s.cell, device));
-    }
+    known_device(&s.cell, q.device.as_deref())?;
     let now = Timestamp::now();
     let from = parse_time("from", q.from.as_deref(), now)?.unwrap_or(Timestamp(i64::MIN));
     let to = parse_time("to", q.to.as_deref(), now)?.unwrap_or(Timestamp(i64::MAX));

@@ -533,6 +533,14 @@ const KNOWN_LISTED: usize = 20;
 
 /// A 404 for `id` (cut to [`MAX_NAME`](crate::write::MAX_NAME) bytes) with the first
 /// [`KNOWN_LISTED`] devices: a cell of thousands answers a typo in a line, not in 50 kB.
+/// A query's `device`, when it names one, must be a device of the cell.
+fn known_device(cell: &Cell, device: Option<&str>) -> ApiResult<()> {
+    match device {
+        Some(device) if cell.device_entry(device).is_none() => Err(unknown_device(cell, device)),
+        _ => Ok(()),
+    }
+}
+
 fn unknown_device(cell: &Cell, id: &str) -> ApiError {
     let total = cell.device_entries().count();
     let first: Vec<String> = cell
@@ -671,11 +679,7 @@ async fn events(
     query: Result<Query<EventsQuery>, QueryRejection>,
 ) -> ApiResult<Response> {
     let Query(q) = query?;
-    if let Some(device) = &q.device
-        && s.cell.device_entry(device).is_none()
-    {
-        return Err(unknown_device(&s.cell, device));
-    }
+    known_device(&s.cell, q.device.as_deref())?;
     let filter = events_filter(q, Timestamp::now())?;
     let events = run_query(&s, move |store| store.events(&filter)).await?;
     Ok(Json(json!({ "events": events })).into_response())
