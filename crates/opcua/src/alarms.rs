@@ -24,7 +24,7 @@ use ::opcua::types::{
 
 use super::space::{ids, opc_time};
 use gateway::alarm::book::{ActError, Action, View};
-use gateway::alarm::state::{Refused, State};
+use gateway::alarm::state::Refused;
 
 /// The variables of an alarm's object: name, data type, words.
 pub const VARIABLES: [(&str, DataTypeId, &str); 5] = [
@@ -56,19 +56,11 @@ pub const VARIABLES: [(&str, DataTypeId, &str); 5] = [
     ),
 ];
 
-/// A state in the words of the API and the journal (`returned_unacknowledged`).
-pub fn state_text(state: State) -> String {
-    match serde_json::to_value(state) {
-        Ok(serde_json::Value::String(text)) => text,
-        _ => format!("{state:?}"),
-    }
-}
-
 /// The values of alarm `view`'s variables ([`VARIABLES`]) at `t`.
 pub fn values(ns: u16, view: &View, t: DateTime) -> Vec<(NodeId, DataValue)> {
     let shelved_until = view.shelved_until.map_or_else(DateTime::null, opc_time);
     let values = [
-        Variant::from(state_text(view.state)),
+        Variant::from(view.state.as_str()),
         Variant::Boolean(view.active),
         Variant::Boolean(view.acknowledged),
         Variant::from(view.priority.as_str()),
@@ -401,14 +393,5 @@ mod tests {
             assert_eq!(Method::of(3, &ids::alarm_method(2, m.name())), None);
         }
         assert_eq!(Method::of(2, &ids::alarm_methods(2)), None);
-    }
-
-    #[test]
-    fn states_read_as_the_api_writes_them() {
-        assert_eq!(state_text(State::Normal), "normal");
-        assert_eq!(
-            state_text(State::ReturnedUnacknowledged),
-            "returned_unacknowledged"
-        );
     }
 }

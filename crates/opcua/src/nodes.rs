@@ -843,7 +843,7 @@ impl CellNodes {
         });
         match done.await {
             Ok(Ok(view)) => {
-                call.set_outputs(vec![Variant::from(alarms::state_text(view.state))]);
+                call.set_outputs(vec![Variant::from(view.state.as_str())]);
                 call.set_status(StatusCode::Good);
             }
             Ok(Err(error)) => {

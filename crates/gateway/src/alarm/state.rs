@@ -39,6 +39,16 @@ pub enum State {
 }
 
 impl State {
+    /// Its name in the API, the journal and the interfaces (`returned_unacknowledged`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            State::Normal => "normal",
+            State::Unacknowledged => "unacknowledged",
+            State::Acknowledged => "acknowledged",
+            State::ReturnedUnacknowledged => "returned_unacknowledged",
+        }
+    }
+
     /// Whether the condition is active.
     pub fn active(self) -> bool {
         matches!(self, State::Unacknowledged | State::Acknowledged)

@@ -175,3 +175,15 @@ fn a_chattering_alarm_is_counted_and_shelved_on_its_own_when_the_rule_says_so() 
     }
     assert_eq!(slow.chattered, 0);
 }
+
+#[test]
+fn states_are_named_as_serde_names_them_in_the_api() {
+    for state in [
+        State::Normal,
+        State::Unacknowledged,
+        State::Acknowledged,
+        State::ReturnedUnacknowledged,
+    ] {
+        assert_eq!(serde_json::json!(state), state.as_str());
+    }
+}

@@ -125,14 +125,10 @@ pub fn alarm_metrics(
         return Vec::new();
     };
     let t = sparkplug_time(t);
-    let state_name = serde_json::to_value(alarm.state)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_owned))
-        .unwrap_or_default();
     vec![
         (
             MetricSpec::new(state, DataType::String).description(alarm.message.as_str()),
-            Sample::good(MetricValue::String(state_name), t),
+            Sample::good(MetricValue::String(alarm.state.as_str().to_owned()), t),
         ),
         (
             MetricSpec::new(priority, DataType::Int32)
