@@ -78,16 +78,21 @@ impl Drop for Served {
     }
 }
 
-/// Starts the script with `args`; its standard output's lines as they come.
-fn script_lines(args: &[&str]) -> (std::process::Child, std::sync::mpsc::Receiver<String>) {
-    let mut child = Command::new("python3")
+/// Starts the script with `args`, its standard output piped and its errors to `stderr`.
+fn spawn_script(args: &[&str], stderr: Stdio) -> std::process::Child {
+    Command::new("python3")
         .arg(script())
         .args(args)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
-        .expect("python3 runs");
+        .expect("python3 runs")
+}
+
+/// Starts the script with `args`; its standard output's lines as they come.
+fn script_lines(args: &[&str]) -> (std::process::Child, std::sync::mpsc::Receiver<String>) {
+    let mut child = spawn_script(args, Stdio::inherit());
     let (tx, rx) = std::sync::mpsc::channel();
     let stdout = child.stdout.take().expect("piped");
     std::thread::spawn(move || {
@@ -102,14 +107,7 @@ fn script_lines(args: &[&str]) -> (std::process::Child, std::sync::mpsc::Receive
 
 /// Runs the script with `args`; panics with its output unless it succeeds.
 fn run_script(args: &[&str]) -> String {
-    let mut child = Command::new("python3")
-        .arg(script())
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("python3 runs");
+    let mut child = spawn_script(args, Stdio::piped());
     let (tx, rx) = std::sync::mpsc::channel();
     let mut stdout = child.stdout.take().expect("piped");
     let mut stderr = child.stderr.take().expect("piped");

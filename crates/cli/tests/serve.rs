@@ -315,17 +315,15 @@ fn serve_says_at_the_default_level_which_devices_answer_and_what_to_check_in_pla
         ),
     )
     .unwrap();
-    let mut serve = common::cellbus()
-        .args(["serve", "--listen", "127.0.0.1:0", "--config"])
-        .arg(&path)
-        .arg("--data")
-        .arg(dir.path().join("data"))
-        .env_remove("RUST_LOG")
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("cellbus runs");
-    let stderr = serve.stderr.take().expect("piped");
+    let (mut serve, stderr) = logging(&[
+        "serve".as_ref(),
+        "--listen".as_ref(),
+        "127.0.0.1:0".as_ref(),
+        "--config".as_ref(),
+        path.as_os_str(),
+        "--data".as_ref(),
+        dir.path().join("data").as_os_str(),
+    ]);
     let (lines, seen) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         for line in std::io::BufRead::lines(std::io::BufReader::new(stderr)) {
@@ -448,22 +446,15 @@ fn config_check_reports_every_mistake_of_a_file_at_once() {
 #[test]
 fn with_log_format_json_every_log_line_is_one_json_object_for_a_log_shipper() {
     let dir = tempfile::tempdir().unwrap();
-    let mut serve = common::cellbus()
-        .args([
-            "--log-format",
-            "json",
-            "serve",
-            "--listen",
-            "127.0.0.1:0",
-            "--data",
-        ])
-        .arg(dir.path())
-        .env_remove("RUST_LOG")
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("cellbus runs");
-    let stderr = serve.stderr.take().expect("piped");
+    let (mut serve, stderr) = logging(&[
+        "--log-format".as_ref(),
+        "json".as_ref(),
+        "serve".as_ref(),
+        "--listen".as_ref(),
+        "127.0.0.1:0".as_ref(),
+        "--data".as_ref(),
+        dir.path().as_os_str(),
+    ]);
     let mut lines = std::io::BufRead::lines(std::io::BufReader::new(stderr));
     // The first line is the start, logged before anything else.
     let first = lines.next().expect("a log line").expect("text");
@@ -532,4 +523,18 @@ fn under_systemd_serve_says_ready_pets_the_watchdog_and_says_stopping() {
     };
     assert_eq!(stopping, "STOPPING=1\n");
     assert!(serve.wait().unwrap().success(), "a clean stop");
+}
+
+/// Starts `cellbus ARGS…` at its default log level (RUST_LOG left out), its standard
+/// output dropped; the process and its log (standard error).
+fn logging(args: &[&std::ffi::OsStr]) -> (std::process::Child, std::process::ChildStderr) {
+    let mut child = common::cellbus()
+        .args(args)
+        .env_remove("RUST_LOG")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("cellbus runs");
+    let stderr = child.stderr.take().expect("piped");
+    (child, stderr)
 }

@@ -204,6 +204,8 @@ impl Gateway {
                 .context("the production keeper's start failed")?;
         }
         let (stop, stopped) = watch::channel(false);
+        // The alarms as the history left them, before a poll or an interface sees them.
+        crate::alarm::keeper::restore(&cell).await;
         let heartbeat = crate::service::Heartbeat::default();
         let pollers = Pollers::start(tasks, stopped.clone(), heartbeat.clone())?;
         tokio::spawn(crate::service::watchdog(

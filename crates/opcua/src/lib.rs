@@ -540,7 +540,7 @@ async fn follow(
     let mut tick = tokio::time::interval(GATEWAY_TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     // Changes between the address space's build and this subscription are caught up here.
-    let mut alarms_seen = resync(&cell, &manager, &subscriptions, ns);
+    resync(&cell, &manager, &subscriptions, ns);
     loop {
         tokio::select! {
             message = live.recv() => match message {
@@ -573,7 +573,7 @@ async fn follow(
                 }
                 Err(broadcast::error::RecvError::Lagged(missed)) => {
                     tracing::warn!("the OPC UA server missed {missed} changes; reading the cell again");
-                    alarms_seen = resync(&cell, &manager, &subscriptions, ns);
+                    resync(&cell, &manager, &subscriptions, ns);
                 }
                 Err(broadcast::error::RecvError::Closed) => return,
             },
@@ -583,13 +583,6 @@ async fn follow(
                     ids::gateway(ns, Some(nodes::HISTORY_ROWS)),
                     DataValue::new_now(Variant::UInt64(rows)),
                 )]);
-                // Alarms follow their events; this catches what changed without one (the
-                // states the keeper restores after a restart).
-                if cell.alarms.with(|book| book.generation()) != alarms_seen {
-                    let (generation, values) = alarm_values(&cell, ns, DateTime::now());
-                    alarms_seen = generation;
-                    set_values(&manager, &subscriptions, values);
-                }
             }
             () = stopped(&mut stop) => return,
         }
@@ -613,16 +606,16 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
     let _ = stop.wait_for(|stopped| *stopped).await;
 }
 
-/// Sets every variable from the cell's current state; the alarm book's generation read.
+/// Sets every variable from the cell's current state.
 fn resync(
     cell: &Cell,
     manager: &CellManager,
     subscriptions: &::opcua::server::SubscriptionCache,
     ns: u16,
-) -> u64 {
+) {
     let now = Timestamp::now();
     let t = space::opc_time(now);
-    let (generation, mut values) = alarm_values(cell, ns, t);
+    let mut values = alarm_values(cell, ns, t);
     for device in cell.devices() {
         values.extend(device_values(ns, &device.summary, t));
         for point in &device.points {
@@ -633,21 +626,15 @@ fn resync(
         }
     }
     set_values(manager, subscriptions, values);
-    generation
 }
 
-/// Every alarm's variables' values at `t`, and the book's generation they are of.
-fn alarm_values(
-    cell: &Cell,
-    ns: u16,
-    t: DateTime,
-) -> (u64, Vec<(::opcua::types::NodeId, DataValue)>) {
+/// Every alarm's variables' values at `t`.
+fn alarm_values(cell: &Cell, ns: u16, t: DateTime) -> Vec<(::opcua::types::NodeId, DataValue)> {
     cell.alarms.with(|book| {
-        let values = (0..book.len())
+        (0..book.len())
             .filter_map(|i| book.view(i))
             .flat_map(|view| alarms::values(ns, &view, t))
-            .collect();
-        (book.generation(), values)
+            .collect()
     })
 }
 

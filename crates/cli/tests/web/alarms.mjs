@@ -76,14 +76,14 @@ try {
   await page.waitForFunction(() => !document.getElementById('alarm-dialog').open, null, { timeout: 10000 });
   // The banner follows: it comes to show the API's counts, which already hold the
   // acknowledgement (the demo may raise another alarm meanwhile, so no fixed difference).
-  const apiAfter = await (await page.waitForFunction(async () => {
+  // Both are taken in the same moment: the banner may move on with the next alarm event.
+  const { api: apiAfter, shown: bannerAfter } = await (await page.waitForFunction(async () => {
     const body = await (await fetch('/api/alarms?limit=1')).json();
     const shown = Object.fromEntries([...document.querySelectorAll('#alarm-banner .alarm-count')]
-      .map((c) => [c.dataset.priority, Number(c.dataset.unacknowledged)]));
+      .map((c) => [c.dataset.priority, { unacknowledged: Number(c.dataset.unacknowledged) }]));
     const api = Object.fromEntries(body.counts.map((c) => [c.priority, c.unacknowledged]));
-    return Object.keys(api).every((p) => shown[p] === api[p]) ? api : null;
+    return Object.keys(api).every((p) => shown[p]?.unacknowledged === api[p]) ? { api, shown } : null;
   }, null, { timeout: 15000, polling: 250 })).jsonValue();
-  const bannerAfter = await banner();
   const ackDone = await page.textContent('#alarms-done');
   await page.waitForFunction(
     (id) => !document.querySelector(`#alarm-list tr.alarm[data-id="${id}"][data-acknowledged="false"]`),

@@ -402,32 +402,32 @@ impl Book {
     /// `point` now reads `value` (`None`: it has no good value; the device stopped
     /// answering): the alarms it decides, limit and device alike.
     pub fn value(&mut self, point: &PointId, value: Option<&Value>, t: Timestamp) -> Vec<Happened> {
-        let Some(indexes) = self.by_point.get(point).cloned() else {
+        // Read by position: the point's list stays as it is, and a change of a watched point
+        // (thousands a second in a large cell) allocates nothing to look it up.
+        let watching = self.by_point.get(point).map_or(0, Vec::len);
+        if watching == 0 {
             return Vec::new();
-        };
+        }
+        let json = value.map(|v| serde_json::json!(v));
         let mut out = Vec::new();
-        for i in indexes {
+        for k in 0..watching {
+            let i = self.by_point[point][k];
             let instance = &mut self.instances[i];
-            let json = value.map(|v| serde_json::json!(v));
-            let active = match (&mut instance.condition, &instance.spec, value) {
-                (Some(condition), _, Some(v)) => match v.as_number() {
+            let active = match (&mut instance.condition, &instance.spec) {
+                (Some(condition), _) => match value.and_then(Value::as_number) {
                     Some(n) => condition.value(n, t),
                     None => {
                         condition.no_value();
                         None
                     }
                 },
-                (Some(condition), _, None) => {
-                    condition.no_value();
-                    None
-                }
                 // A device's alarm holds while it has no value: the device being down is
                 // its own alarm.
-                (None, Some(spec), Some(v)) => Some(spec.is_alarm(v)),
-                _ => None,
+                (None, Some(spec)) => value.map(|v| spec.is_alarm(v)),
+                (None, None) => None,
             };
             if json.is_some() {
-                instance.last_value = json;
+                instance.last_value = json.clone();
             }
             if let Some(active) = active
                 && let Some(h) = self.condition(i, active, t)
@@ -580,19 +580,20 @@ impl Book {
     /// The alarm list: every alarm that is active, unacknowledged, shelved or out of
     /// service, most urgent first, then the most recently activated.
     pub fn list(&self, filter: &ListFilter) -> Page {
-        let mut matching: Vec<&Instance> = self
+        let mut matching: Vec<(usize, &Instance)> = self
             .instances
             .iter()
-            .filter(|i| Self::listed(i))
-            .filter(|i| {
+            .enumerate()
+            .filter(|(_, i)| Self::listed(i))
+            .filter(|(_, i)| {
                 filter
                     .device
                     .as_deref()
                     .is_none_or(|d| i.device.as_str() == d)
             })
-            .filter(|i| filter.priority.is_none_or(|p| i.priority == p))
+            .filter(|(_, i)| filter.priority.is_none_or(|p| i.priority == p))
             .collect();
-        matching.sort_by(|a, b| {
+        matching.sort_by(|(_, a), (_, b)| {
             b.priority
                 .cmp(&a.priority)
                 .then(b.alarm.last_active.cmp(&a.alarm.last_active))
@@ -603,7 +604,7 @@ impl Book {
             .into_iter()
             .skip(filter.offset)
             .take(filter.limit)
-            .filter_map(|i| self.index_of(&i.id).and_then(|index| self.view(index)))
+            .filter_map(|(index, _)| self.view(index))
             .collect();
         Page { alarms, total }
     }

@@ -6,7 +6,7 @@
 //! the alarm's facts and its state after the change, and who did it with the comment for
 //! an operator's action ([`act`]). The history, MQTT, OPC UA and the page carry them as
 //! they carry every event; the history also keeps each alarm's last entry, from which
-//! [`run`] puts the alarms back after a restart (also after `kill -9`). The deciding is
+//! [`restore`] puts the alarms back after a restart (also after `kill -9`). The deciding is
 //! sans IO ([`Book`]); the task only feeds it.
 
 use std::sync::Arc;
@@ -72,13 +72,13 @@ impl AlarmMetrics {
     }
 }
 
-/// Runs the cell's alarms on its change stream until `stop` turns true: first puts back
-/// what the history kept of each, then follows values, devices and time.
+/// Runs the cell's alarms on its change stream until `stop` turns true: follows values,
+/// devices and time (`serve` has put back what the history kept of each, [`restore`],
+/// before the polls and the interfaces started).
 pub async fn run(cell: Arc<Cell>, mut stop: watch::Receiver<bool>) {
     if cell.alarms.with(|book| book.is_empty()) {
         return;
     }
-    restore(&cell).await;
     let metrics = AlarmMetrics::default();
     cell.metrics()
         .register(|registry| metrics.register(registry));
@@ -133,8 +133,10 @@ pub async fn run(cell: Arc<Cell>, mut stop: watch::Receiver<bool>) {
     }
 }
 
-/// Puts each alarm back as its last journal entry left it.
-async fn restore(cell: &Cell) {
+/// Puts each alarm back as its last journal entry left it: once, at the start, before
+/// anything reads or feeds the alarms (the polls, the interfaces' births and address
+/// spaces).
+pub async fn restore(cell: &Cell) {
     let store = cell.store().clone();
     let saved = tokio::task::spawn_blocking(move || store.alarm_states())
         .await

@@ -14,8 +14,11 @@ use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use serde_json::json;
 
-use super::write::{BODY_LIMIT, BODY_TIMEOUT, authorise};
-use super::{ApiError, ApiResult, AppState, ClientAddr, check_limit, known_device, parse_time};
+use super::write::{BODY_LIMIT, BODY_TIMEOUT, authorise, body_too_slow};
+use super::{
+    ApiError, ApiResult, AppState, ClientAddr, body_too_large, check_limit, known_device,
+    parse_time,
+};
 use crate::alarm::Priority;
 use crate::alarm::book::{ActError, Action, ListFilter};
 use crate::alarm::state::MAX_SHELVE;
@@ -131,21 +134,8 @@ struct ActBody {
 async fn act_body(request: Request) -> ApiResult<ActBody> {
     let bytes = tokio::time::timeout(BODY_TIMEOUT, to_bytes(request.into_body(), BODY_LIMIT))
         .await
-        .map_err(|_| {
-            ApiError::new(
-                StatusCode::REQUEST_TIMEOUT,
-                format!(
-                    "the request body did not arrive within {} s",
-                    BODY_TIMEOUT.as_secs()
-                ),
-            )
-        })?
-        .map_err(|_| {
-            ApiError::new(
-                StatusCode::PAYLOAD_TOO_LARGE,
-                format!("the request body is over {BODY_LIMIT} bytes"),
-            )
-        })?;
+        .map_err(|_| body_too_slow())?
+        .map_err(|_| body_too_large())?;
     if bytes.iter().all(u8::is_ascii_whitespace) {
         return Ok(ActBody::default());
     }

@@ -229,12 +229,17 @@ fn without_token(uri: &Uri) -> Option<Uri> {
 pub use kit::http::{ApiError, ApiResult};
 
 /// The error for a write body that is not the JSON a write takes (or is too large).
+/// A body over [`BODY_LIMIT`].
+pub(crate) fn body_too_large() -> ApiError {
+    ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        format!("the request body is larger than {BODY_LIMIT} bytes"),
+    )
+}
+
 pub(crate) fn body_error(rejection: JsonRejection) -> ApiError {
     if rejection.status() == StatusCode::PAYLOAD_TOO_LARGE {
-        return ApiError::new(
-            StatusCode::PAYLOAD_TOO_LARGE,
-            format!("the request body is larger than {BODY_LIMIT} bytes"),
-        );
+        return body_too_large();
     }
     ApiError::bad_request(format!(
         "bad request body: {}; send JSON like {{\"point\": \"air_temperature_setpoint\", \"value\": 350}}",

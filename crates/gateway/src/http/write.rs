@@ -129,22 +129,25 @@ impl Guard {
     }
 }
 
-/// Reads a JSON body (a write, an action on an alarm): at most [`BODY_LIMIT`] bytes (the route's
+/// Reads the write's JSON body: at most [`BODY_LIMIT`] bytes (the route's
 /// `DefaultBodyLimit`), within [`BODY_TIMEOUT`].
-pub(super) async fn read_body<T: serde::de::DeserializeOwned>(
-    request: Request,
-) -> Result<Json<T>, ApiError> {
-    match tokio::time::timeout(BODY_TIMEOUT, Json::<T>::from_request(request, &())).await {
+async fn read_body(request: Request) -> Result<Json<WriteBody>, ApiError> {
+    match tokio::time::timeout(BODY_TIMEOUT, Json::<WriteBody>::from_request(request, &())).await {
         Ok(Ok(body)) => Ok(body),
         Ok(Err(rejection)) => Err(super::body_error(rejection)),
-        Err(_) => Err(ApiError::new(
-            StatusCode::REQUEST_TIMEOUT,
-            format!(
-                "the request body did not arrive within {} s",
-                BODY_TIMEOUT.as_secs()
-            ),
-        )),
+        Err(_) => Err(body_too_slow()),
     }
+}
+
+/// A body that did not arrive within [`BODY_TIMEOUT`].
+pub(super) fn body_too_slow() -> ApiError {
+    ApiError::new(
+        StatusCode::REQUEST_TIMEOUT,
+        format!(
+            "the request body did not arrive within {} s",
+            BODY_TIMEOUT.as_secs()
+        ),
+    )
 }
 
 /// The handler. The body is read only once the caller is authorised (step 1 of the module
@@ -161,7 +164,7 @@ pub(super) async fn write(
     }
 
     // Authorised from here on: every attempt is audited.
-    let body = read_body::<WriteBody>(request).await;
+    let body = read_body(request).await;
     let (point_text, new) = match &body {
         Ok(Json(b)) => (b.point.clone(), b.value.clone()),
         Err(_) => (String::new(), serde_json::Value::Null),

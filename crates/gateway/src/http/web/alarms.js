@@ -197,11 +197,7 @@ function renderAlarmList(list, pages) {
   document.getElementById('alarms-next').disabled = alarms.page >= pages;
   const body = document.getElementById('alarm-list');
   if (count === 0) {
-    const row = el('tr');
-    const empty = el('td', 'placeholder', 'No alarm is active, waiting for an acknowledgement or shelved.');
-    empty.colSpan = 10;
-    row.append(empty);
-    body.replaceChildren(row);
+    emptyTable(body, 10, 'No alarm is active, waiting for an acknowledgement or shelved.');
     return;
   }
   body.replaceChildren(...list.alarms.map((alarm) => {
@@ -246,14 +242,19 @@ function renderAlarmList(list, pages) {
 
 // ---- the journal -----------------------------------------------------------------------------
 
+// A table body that has nothing to show: one row across its `columns` saying so.
+function emptyTable(body, columns, words) {
+  const empty = el('td', 'placeholder', words);
+  empty.colSpan = columns;
+  const row = el('tr');
+  row.append(empty);
+  body.replaceChildren(row);
+}
+
 function renderJournal(entries) {
   const body = document.getElementById('alarm-journal');
   if (!entries.length) {
-    const row = el('tr');
-    const empty = el('td', 'placeholder', 'Nothing happened to an alarm in the last 24 hours.');
-    empty.colSpan = 6;
-    row.append(empty);
-    body.replaceChildren(row);
+    emptyTable(body, 6, 'Nothing happened to an alarm in the last 24 hours.');
     return;
   }
   body.replaceChildren(...entries.map((entry) => {
