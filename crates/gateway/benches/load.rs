@@ -1647,7 +1647,7 @@ impl Sampler {
                 groups[group].1.devices += 1;
                 watches.push(Watch {
                     group,
-                    device: Arc::clone(device),
+                    device: Arc::clone(&device),
                     point,
                     points: points as u64,
                     last: None,

@@ -14,7 +14,7 @@ use std::time::Duration;
 use serde::Serialize;
 use tokio::sync::{broadcast, mpsc, oneshot};
 
-use crate::config::CellConfig;
+use crate::config::{CellConfig, LineConfig};
 use crate::driver::{DeviceError, Driver, Kind, PollGroup, WriteError};
 use crate::event::{Event, EventKind};
 use crate::metrics::Metrics;
@@ -33,8 +33,9 @@ const WRITE_QUEUE: usize = 32;
 /// The cell.
 #[derive(Debug)]
 pub struct Cell {
-    devices: BTreeMap<DeviceId, Arc<DeviceEntry>>,
-    lines: Vec<Arc<LineEntry>>,
+    /// The devices and lines polled now: replaced whole when the configuration is
+    /// reloaded ([`crate::reload`]), so a reader's snapshot never mixes two.
+    roster: RwLock<Arc<Roster>>,
     live: broadcast::Sender<LiveMessage>,
     store: StoreHandle,
     metrics: Arc<Metrics>,
@@ -43,10 +44,66 @@ pub struct Cell {
     /// A device's own links that are down (a Panasonic machine's Port 2), by device and
     /// link, with why: told by its events (`link`, `state`, `error` fields).
     links_down: RwLock<BTreeMap<(DeviceId, String), String>>,
-    /// The shifts, and which devices report states and production.
-    pub production: crate::production::Plan,
+    /// The shifts, and which devices report states and production ([`Cell::production`]).
+    production: RwLock<Arc<crate::production::Plan>>,
     /// Every alarm of the cell (`alarm::keeper` runs them).
     pub alarms: crate::alarm::book::Desk,
+    /// The configuration in force: where it came from, when it was loaded, and why the last
+    /// reload was refused, if it was.
+    config: RwLock<ConfigStatus>,
+}
+
+/// The devices and lines of the cell at one moment.
+#[derive(Debug, Default)]
+pub struct Roster {
+    devices: BTreeMap<DeviceId, Arc<DeviceEntry>>,
+    lines: Vec<Arc<LineEntry>>,
+}
+
+impl Roster {
+    /// Every device, by id.
+    pub fn devices(&self) -> impl Iterator<Item = &Arc<DeviceEntry>> {
+        self.devices.values()
+    }
+
+    /// A device by id.
+    pub fn device(&self, id: &str) -> Option<&Arc<DeviceEntry>> {
+        DeviceId::new(id).ok().and_then(|id| self.devices.get(&id))
+    }
+
+    /// Every line, in the configuration's order.
+    pub fn lines(&self) -> &[Arc<LineEntry>] {
+        &self.lines
+    }
+
+    /// The roster of `lines`, each with its devices.
+    pub(crate) fn of(lines: Vec<(Arc<LineEntry>, Vec<Arc<DeviceEntry>>)>) -> Result<Self, String> {
+        let mut roster = Roster::default();
+        for (line, devices) in lines {
+            for device in devices {
+                let id = device.id.clone();
+                if roster.devices.insert(id.clone(), device).is_some() {
+                    return Err(format!("device id {id} is used twice"));
+                }
+            }
+            roster.lines.push(line);
+        }
+        Ok(roster)
+    }
+}
+
+/// The configuration in force, as `/healthz` shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ConfigStatus {
+    /// The file, or `null` for the demo cell.
+    pub path: Option<String>,
+    /// When the configuration in force was loaded (at the start, or by a reload).
+    pub loaded_at: Timestamp,
+    /// Why the last reload was refused (the configuration in force stays), `null` when
+    /// the last load succeeded.
+    pub error: Option<String>,
+    /// When that reload was refused.
+    pub error_at: Option<Timestamp>,
 }
 
 /// The shifts of `config`, its devices with states and those that produce.
@@ -463,6 +520,21 @@ impl CheckedWrite {
     }
 }
 
+/// A point's spec, found in the roster in force (it stays valid after a reload).
+#[derive(Debug, Clone)]
+pub struct PointRef {
+    device: Arc<DeviceEntry>,
+    index: usize,
+}
+
+impl std::ops::Deref for PointRef {
+    type Target = PointSpec;
+
+    fn deref(&self) -> &PointSpec {
+        &self.device.points[self.index]
+    }
+}
+
 /// One line of a new cell, for its poll task ([`LineTask`](crate::scheduler::LineTask)):
 /// the line's entry, its devices with their drivers, and the queue of writes for them.
 pub struct LinePlan {
@@ -472,6 +544,62 @@ pub struct LinePlan {
     pub(crate) devices: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)>,
     /// The writes [`Cell::write_checked`] queues for the line's devices.
     pub(crate) writes: mpsc::Receiver<WriteRequest>,
+}
+
+impl LinePlan {
+    /// The plan of `line`: its devices' drivers built, their entries not yet polled since
+    /// `now`.
+    pub(crate) fn new(line: &LineConfig, now: Timestamp) -> Result<Self, String> {
+        let (writes_tx, writes_rx) = mpsc::channel(WRITE_QUEUE);
+        let mut slots: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)> = Vec::new();
+        for device in &line.devices {
+            let driver = device.driver.build()?;
+            let entry = DeviceEntry::new(device, &line.name, driver.as_ref(), now, &writes_tx);
+            slots.push((Arc::new(entry), driver));
+        }
+        let entry = Arc::new(LineEntry {
+            name: line.name.clone(),
+            endpoint: line.endpoint.to_string(),
+            devices: slots.iter().map(|(d, _)| d.id.clone()).collect(),
+            reopen_after_timeouts: if line.owns_connections() {
+                0
+            } else {
+                line.reopen_after_timeouts
+            },
+            state: RwLock::new(LineState::default()),
+        });
+        Ok(LinePlan {
+            entry,
+            devices: slots,
+            writes: writes_rx,
+        })
+    }
+
+    /// The line and its devices, for the roster.
+    pub(crate) fn roster_part(&self) -> (Arc<LineEntry>, Vec<Arc<DeviceEntry>>) {
+        (
+            Arc::clone(&self.entry),
+            self.devices.iter().map(|(d, _)| Arc::clone(d)).collect(),
+        )
+    }
+}
+
+/// The alarms of `config` over the devices of `roster`, all normal.
+fn alarm_book(config: &CellConfig, roster: &Roster) -> crate::alarm::book::Book {
+    let device_alarms: Vec<_> = roster
+        .devices()
+        .map(|d| crate::alarm::book::DeviceAlarms {
+            device: d.id.clone(),
+            label: d.name.clone(),
+            rule_points: d
+                .points
+                .iter()
+                .filter(|p| p.alarm.is_some())
+                .cloned()
+                .collect(),
+        })
+        .collect();
+    crate::alarm::book::Book::new(&config.alarms, &device_alarms)
 }
 
 impl std::fmt::Debug for LinePlan {
@@ -493,107 +621,87 @@ impl Cell {
     ) -> Result<(Arc<Cell>, Vec<LinePlan>), String> {
         let (live, _) = broadcast::channel(LIVE_CAPACITY);
         let now = Timestamp::now();
-        let mut devices = BTreeMap::new();
-        let mut lines = Vec::new();
-        let mut plans = Vec::new();
-        for line in &config.lines {
-            let (writes_tx, writes_rx) = mpsc::channel(WRITE_QUEUE);
-            let mut slots: Vec<(Arc<DeviceEntry>, Box<dyn Driver>)> = Vec::new();
-            for device in &line.devices {
-                let driver = device.driver.build()?;
-                let mut points = driver.points();
-                if device.driver.protocol.production().is_some() {
-                    points.extend(crate::production::oee_specs(&device.driver.id));
-                }
-                let groups = driver
-                    .groups()
-                    .into_iter()
-                    .map(|g| PollGroup {
-                        period: device.period_of(&g),
-                        name: g.name,
-                    })
-                    .collect();
-                let deadbands = points
-                    .iter()
-                    .map(|p| {
-                        driver
-                            .deadband(p.id.name())
-                            .unwrap_or(device.deadband)
-                            .filter(|_| p.kind == PointKind::Numeric)
-                    })
-                    .collect::<Vec<_>>();
-                let deadbands = if deadbands.iter().all(Option::is_none) {
-                    Vec::new()
-                } else {
-                    deadbands
-                };
-                let by_name = sorted_by_name(&points);
-                let entry = Arc::new(DeviceEntry {
-                    id: device.driver.id.clone(),
-                    name: device.name.clone(),
-                    protocol: device.driver.protocol,
-                    line: line.name.clone(),
-                    address: device.driver.address,
-                    state: RwLock::new(DeviceState::connecting(now, points.len())),
-                    points,
-                    deadbands,
-                    groups,
-                    by_name,
-                    writes: writes_tx.clone(),
-                });
-                if devices
-                    .insert(entry.id.clone(), Arc::clone(&entry))
-                    .is_some()
-                {
-                    return Err(format!("device id {} is used twice", entry.id));
-                }
-                slots.push((entry, driver));
-            }
-            let entry = Arc::new(LineEntry {
-                name: line.name.clone(),
-                endpoint: line.endpoint.to_string(),
-                devices: slots.iter().map(|(d, _)| d.id.clone()).collect(),
-                reopen_after_timeouts: if line.owns_connections() {
-                    0
-                } else {
-                    line.reopen_after_timeouts
-                },
-                state: RwLock::new(LineState::default()),
-            });
-            lines.push(Arc::clone(&entry));
-            plans.push(LinePlan {
-                entry,
-                devices: slots,
-                writes: writes_rx,
-            });
-        }
-        let device_alarms: Vec<_> = devices
-            .values()
-            .map(|d| crate::alarm::book::DeviceAlarms {
-                device: d.id.clone(),
-                label: d.name.clone(),
-                rule_points: d
-                    .points
-                    .iter()
-                    .filter(|p| p.alarm.is_some())
-                    .cloned()
-                    .collect(),
-            })
-            .collect();
-        let alarms = crate::alarm::book::Book::new(&config.alarms, &device_alarms);
+        let plans = config
+            .lines
+            .iter()
+            .map(|line| LinePlan::new(line, now))
+            .collect::<Result<Vec<_>, _>>()?;
+        let roster = Roster::of(plans.iter().map(LinePlan::roster_part).collect())?;
+        let alarms = alarm_book(config, &roster);
         let cell = Arc::new(Cell {
-            devices,
-            lines,
+            roster: RwLock::new(Arc::new(roster)),
             live,
             store,
             metrics,
             interfaces: RwLock::new(Vec::new()),
             log_throttle: std::sync::Mutex::default(),
             links_down: RwLock::default(),
-            production: production_plan(config),
+            production: RwLock::new(Arc::new(production_plan(config))),
             alarms: crate::alarm::book::Desk::new(alarms),
+            config: RwLock::new(ConfigStatus {
+                path: config.source.as_ref().map(|p| p.display().to_string()),
+                loaded_at: now,
+                error: None,
+                error_at: None,
+            }),
         });
         Ok((cell, plans))
+    }
+
+    /// The devices and lines polled now: a snapshot, kept whole by a reload.
+    pub fn roster(&self) -> Arc<Roster> {
+        Arc::clone(&self.roster.read().unwrap_or_else(PoisonError::into_inner))
+    }
+
+    /// Puts `roster` in force, with the production plan and the alarms of `config` (each
+    /// alarm that stays keeps its state): a reload's moment of change.
+    pub(crate) fn replace_roster(&self, roster: Roster, config: &CellConfig) {
+        let book = alarm_book(config, &roster);
+        self.alarms.replace(book, Timestamp::now());
+        *self
+            .production
+            .write()
+            .unwrap_or_else(PoisonError::into_inner) = Arc::new(production_plan(config));
+        *self.roster.write().unwrap_or_else(PoisonError::into_inner) = Arc::new(roster);
+        self.links_down
+            .write()
+            .unwrap_or_else(PoisonError::into_inner)
+            .retain(|(device, _), _| self.device_entry(device.as_str()).is_some());
+    }
+
+    /// The shifts, and which devices report states and production.
+    pub fn production(&self) -> Arc<crate::production::Plan> {
+        Arc::clone(
+            &self
+                .production
+                .read()
+                .unwrap_or_else(PoisonError::into_inner),
+        )
+    }
+
+    /// The configuration in force, and why the last reload was refused.
+    pub fn config_status(&self) -> ConfigStatus {
+        self.config
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    /// Notes a reload: loaded now (`error` `None`), or refused for `error`.
+    pub(crate) fn note_config(&self, error: Option<String>) {
+        let now = Timestamp::now();
+        let mut status = self.config.write().unwrap_or_else(PoisonError::into_inner);
+        match error {
+            None => {
+                status.loaded_at = now;
+                status.error = None;
+                status.error_at = None;
+            }
+            Some(error) => {
+                status.error = Some(error);
+                status.error_at = Some(now);
+            }
+        }
     }
 
     /// The history.
@@ -606,20 +714,21 @@ impl Cell {
         &self.metrics
     }
 
-    /// Every device, by id.
-    pub fn device_entries(&self) -> impl Iterator<Item = &Arc<DeviceEntry>> {
-        self.devices.values()
+    /// Every device, by id (of the roster in force when called).
+    pub fn device_entries(&self) -> impl Iterator<Item = Arc<DeviceEntry>> + use<> {
+        let roster = self.roster();
+        roster.devices().cloned().collect::<Vec<_>>().into_iter()
     }
 
     /// A device by id.
-    pub fn device_entry(&self, id: &str) -> Option<&Arc<DeviceEntry>> {
-        DeviceId::new(id).ok().and_then(|id| self.devices.get(&id))
+    pub fn device_entry(&self, id: &str) -> Option<Arc<DeviceEntry>> {
+        self.roster().device(id).cloned()
     }
 
     /// Every device with its points, as the API shows them.
     pub fn devices(&self) -> Vec<DeviceView> {
         let now = Timestamp::now();
-        self.devices.values().map(|d| d.view(now)).collect()
+        self.roster().devices().map(|d| d.view(now)).collect()
     }
 
     /// One device, as the API shows it.
@@ -628,16 +737,17 @@ impl Cell {
     }
 
     /// The spec of a point, if it exists.
-    pub fn point(&self, id: &PointId) -> Option<&PointSpec> {
+    pub fn point(&self, id: &PointId) -> Option<PointRef> {
         let device = self.device_entry(id.device())?;
-        device
-            .point_index(id.name())
-            .and_then(|i| device.points.get(i))
+        let index = device.point_index(id.name())?;
+        Some(PointRef { device, index })
     }
 
     /// Every line with its health.
     pub fn lines(&self) -> Vec<LineView> {
-        self.lines
+        let roster = self.roster();
+        roster
+            .lines
             .iter()
             .map(|line| LineView {
                 name: line.name.clone(),
@@ -647,7 +757,8 @@ impl Cell {
                     .devices
                     .iter()
                     .filter(|id| {
-                        self.devices
+                        roster
+                            .devices
                             .get(*id)
                             .is_some_and(|d| d.read().next_try_at.is_some())
                     })
@@ -775,7 +886,7 @@ impl Cell {
         let spec = device.points.get(index).ok_or_else(unknown)?;
         let value = spec.check_write(value)?;
         Ok(CheckedWrite {
-            device: Arc::clone(device),
+            device: Arc::clone(&device),
             index,
             value,
         })
@@ -835,6 +946,65 @@ impl Cell {
 }
 
 impl DeviceEntry {
+    /// The entry of `device` on the line `line`, read by `driver`, not yet polled since
+    /// `now`; its writes go to the line's queue `writes`.
+    fn new(
+        device: &crate::config::DeviceConfig,
+        line: &str,
+        driver: &dyn Driver,
+        now: Timestamp,
+        writes: &mpsc::Sender<WriteRequest>,
+    ) -> Self {
+        let mut points = driver.points();
+        if device.driver.protocol.production().is_some() {
+            points.extend(crate::production::oee_specs(&device.driver.id));
+        }
+        let groups = driver
+            .groups()
+            .into_iter()
+            .map(|g| PollGroup {
+                period: device.period_of(&g),
+                name: g.name,
+            })
+            .collect();
+        let deadbands = points
+            .iter()
+            .map(|p| {
+                driver
+                    .deadband(p.id.name())
+                    .unwrap_or(device.deadband)
+                    .filter(|_| p.kind == PointKind::Numeric)
+            })
+            .collect::<Vec<_>>();
+        let deadbands = if deadbands.iter().all(Option::is_none) {
+            Vec::new()
+        } else {
+            deadbands
+        };
+        let by_name = sorted_by_name(&points);
+        DeviceEntry {
+            id: device.driver.id.clone(),
+            name: device.name.clone(),
+            protocol: device.driver.protocol,
+            line: line.to_owned(),
+            address: device.driver.address,
+            state: RwLock::new(DeviceState::connecting(now, points.len())),
+            points,
+            deadbands,
+            groups,
+            by_name,
+            writes: writes.clone(),
+        }
+    }
+
+    /// Takes over `old`'s live state (status, values, errors): the same device, with the
+    /// same points, whose line's task was restarted by a reload.
+    pub(crate) fn take_state_of(&self, old: &DeviceEntry) {
+        if self.points == old.points {
+            *self.write_state() = old.read().clone();
+        }
+    }
+
     /// The live state, for reading.
     pub fn read(&self) -> RwLockReadGuard<'_, DeviceState> {
         self.state.read().unwrap_or_else(PoisonError::into_inner)

@@ -56,11 +56,17 @@ pub enum EventKind {
     /// An interface's link was lost or refused (MQTT: the broker); its `interface` field
     /// names it.
     InterfaceDown,
+    /// The configuration was reloaded (SIGHUP): its `added`, `removed` and `changed`
+    /// fields list device ids, `restart_needed` what only a restart applies.
+    ConfigReloaded,
+    /// A reload was refused: the file fails its check (`error`); the configuration in
+    /// force stays.
+    ConfigRefused,
 }
 
 impl EventKind {
     /// Every kind, for filters and the API description.
-    pub const ALL: [EventKind; 18] = [
+    pub const ALL: [EventKind; 20] = [
         EventKind::GatewayStarted,
         EventKind::GatewayStopped,
         EventKind::LineUp,
@@ -79,6 +85,8 @@ impl EventKind {
         EventKind::HistoryReset,
         EventKind::InterfaceUp,
         EventKind::InterfaceDown,
+        EventKind::ConfigReloaded,
+        EventKind::ConfigRefused,
     ];
 
     /// The name stored and printed (`device_down`).
@@ -102,6 +110,8 @@ impl EventKind {
             EventKind::HistoryReset => "history_reset",
             EventKind::InterfaceUp => "interface_up",
             EventKind::InterfaceDown => "interface_down",
+            EventKind::ConfigReloaded => "config_reloaded",
+            EventKind::ConfigRefused => "config_refused",
         }
     }
 
@@ -112,10 +122,10 @@ impl EventKind {
     /// |---|---|
     /// | alarm_raised, device_down, line_down, history_failed | 700 |
     /// | history_reset | 600 |
-    /// | state_changed (a transfer, a machine's state), line_reopened, interface_down | 500 |
+    /// | state_changed (a transfer, a machine's state), line_reopened, interface_down, config_refused | 500 |
     /// | device_event (an R message) | 400 |
     /// | alarm_cleared, alarm_changed, device_up, line_up, history_recovered | 300 |
-    /// | write, gateway_started, gateway_stopped, interface_up | 200 |
+    /// | write, gateway_started, gateway_stopped, interface_up, config_reloaded | 200 |
     pub fn severity(self) -> u16 {
         match self {
             EventKind::AlarmRaised
@@ -123,7 +133,10 @@ impl EventKind {
             | EventKind::LineDown
             | EventKind::HistoryFailed => 700,
             EventKind::HistoryReset => 600,
-            EventKind::StateChanged | EventKind::LineReopened | EventKind::InterfaceDown => 500,
+            EventKind::StateChanged
+            | EventKind::LineReopened
+            | EventKind::InterfaceDown
+            | EventKind::ConfigRefused => 500,
             EventKind::DeviceEvent => 400,
             EventKind::AlarmCleared
             | EventKind::AlarmChanged
@@ -133,7 +146,8 @@ impl EventKind {
             EventKind::Write
             | EventKind::GatewayStarted
             | EventKind::GatewayStopped
-            | EventKind::InterfaceUp => 200,
+            | EventKind::InterfaceUp
+            | EventKind::ConfigReloaded => 200,
         }
     }
 

@@ -52,6 +52,8 @@ pub struct Facts {
     /// Each device's own link that is down (a Panasonic machine's events): device, link,
     /// why.
     pub links_down: Vec<(String, String, String)>,
+    /// Why the last reload of the configuration was refused (the one in force stays).
+    pub config_refused: Option<String>,
 }
 
 impl Facts {
@@ -94,6 +96,7 @@ impl Facts {
             history: Some(history),
             interfaces_down,
             links_down,
+            config_refused: cell.config_status().error,
         }
     }
 }
@@ -142,6 +145,11 @@ pub fn judge(facts: &Facts) -> Health {
     }
     for (name, why) in &facts.interfaces_down {
         degraded.push(format!("{name}: {why}"));
+    }
+    if let Some(why) = &facts.config_refused {
+        degraded.push(format!(
+            "the configuration file was changed but not reloaded: {why}"
+        ));
     }
     let status = if !failing.is_empty() {
         Status::Failing

@@ -38,13 +38,16 @@ pub fn level_of(kind: EventKind) -> Level {
         | EventKind::HistoryFailed
         | EventKind::HistoryReset
         | EventKind::InterfaceDown => Level::WARN,
+        // A file that fails its check: the log says why, as `config check` would.
+        EventKind::ConfigRefused => Level::ERROR,
         EventKind::GatewayStarted
         | EventKind::GatewayStopped
         | EventKind::LineUp
         | EventKind::LineReopened
         | EventKind::DeviceUp
         | EventKind::HistoryRecovered
-        | EventKind::InterfaceUp => Level::INFO,
+        | EventKind::InterfaceUp
+        | EventKind::ConfigReloaded => Level::INFO,
         EventKind::AlarmRaised
         | EventKind::AlarmCleared
         | EventKind::AlarmChanged
@@ -174,6 +177,7 @@ pub fn log(throttle: &Mutex<Throttle>, event: &Event) {
         _ => level_of(event.kind),
     };
     match level {
+        Level::ERROR => tracing::error!(kind, "{message}"),
         Level::WARN => tracing::warn!(kind, "{message}"),
         Level::INFO => tracing::info!(kind, "{message}"),
         _ => tracing::debug!(kind, "{message}"),

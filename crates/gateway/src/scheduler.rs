@@ -105,6 +105,43 @@ pub fn build_with_openers(
     Ok((cell, tasks))
 }
 
+/// Drops the series of the line `line` and of its `devices` from `/metrics`: a reload
+/// stopped its task, and a device or line no longer polled must not show its last state
+/// (`cellbus_device_up` 1) for ever. A task started again for the line makes them anew.
+pub(crate) fn forget_metrics(metrics: &Metrics, line: &str, devices: &[crate::point::DeviceId]) {
+    for device in devices {
+        let labels = DeviceLabels {
+            line: line.to_owned(),
+            device: device.to_string(),
+        };
+        metrics.device_up.remove(&labels);
+        metrics.modbus_requests_per_poll.remove(&labels);
+        metrics.timeouts.remove(&labels);
+        for result in [PollResult::ok, PollResult::error] {
+            metrics.polls.remove(&PollLabels {
+                line: line.to_owned(),
+                device: device.to_string(),
+                result,
+            });
+        }
+        for kind in ErrorKind::ALL {
+            metrics.errors.remove(&ErrorLabels {
+                line: line.to_owned(),
+                device: device.to_string(),
+                kind: kind.as_str().to_owned(),
+            });
+        }
+    }
+    let labels = LineLabels {
+        line: line.to_owned(),
+    };
+    metrics.poll_seconds.remove(&labels);
+    metrics.line_busy_seconds.remove(&labels);
+    metrics.line_utilisation.remove(&labels);
+    metrics.line_open.remove(&labels);
+    metrics.line_reopens_for_silence.remove(&labels);
+}
+
 /// Opens a configured line: by its endpoint URL, or, for a protocol whose client keeps
 /// its own connections ([`DeviceKind::owns_connections`](crate::driver::DeviceKind::owns_connections)), not at all: the line task then
 /// gets a line that carries nothing and only schedules the device's polls.

@@ -22,7 +22,8 @@ pub use crate::options::{
     ServeOptions,
 };
 use crate::plugins::Registry;
-use crate::scheduler::LineTask;
+use crate::pollers::Pollers;
+use crate::reload::Reloader;
 use crate::store::lock::{DataLock, LockError};
 use crate::store::{HistoryState, Store, StoreOptions};
 use crate::time::Timestamp;
@@ -33,7 +34,7 @@ pub const TOKEN_ENV: &str = "CELLBUS_TOKEN";
 pub const READ_TOKEN_ENV: &str = "CELLBUS_READ_TOKEN";
 
 /// How long line tasks get to finish their request at shutdown.
-const STOP_GRACE: Duration = Duration::from_secs(5);
+const STOP_GRACE: Duration = crate::pollers::STOP_GRACE;
 
 /// Malloc arenas of the gateway's process. glibc's default, one for each thread that
 /// allocates while another holds the lock (up to eight per core), kept a heap each for the
@@ -97,7 +98,12 @@ pub struct Gateway {
     store: Store,
     writes: WritePolicy,
     stop: watch::Sender<bool>,
-    pollers: Pollers,
+    pollers: Arc<Pollers>,
+    reloader: Arc<Reloader>,
+    /// `SIGHUP`s, caught from the start (its default would end the process), handled
+    /// once the gateway runs.
+    #[cfg(unix)]
+    hangups: Option<tokio::signal::unix::Signal>,
     interfaces: Vec<Running>,
     _demo: Option<DemoCell>,
     _lock: Option<DataLock>,
@@ -164,6 +170,14 @@ impl Gateway {
             tracing::warn!("{warning}");
         }
         let metrics = Arc::new(Metrics::new());
+        #[cfg(unix)]
+        let hangups = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup()) {
+            Ok(signal) => Some(signal),
+            Err(e) => {
+                tracing::warn!("cannot catch SIGHUP, so the configuration cannot be reloaded: {e}");
+                None
+            }
+        };
         let (cell, tasks) = crate::scheduler::build(&config, store.handle(), metrics)
             .map_err(anyhow::Error::msg)?;
         // Lines asked for more polls than they can carry, from the drivers just built.
@@ -207,7 +221,14 @@ impl Gateway {
         // The alarms as the history left them, before a poll or an interface sees them.
         crate::alarm::keeper::restore(&cell).await;
         let heartbeat = crate::service::Heartbeat::default();
-        let pollers = Pollers::start(tasks, stopped.clone(), heartbeat.clone())?;
+        let pollers = Arc::new(Pollers::start(tasks, stopped.clone(), heartbeat.clone())?);
+        let reloader = Arc::new(Reloader::new(
+            Arc::clone(&cell),
+            Arc::clone(&pollers),
+            registry.config.clone(),
+            Arc::new(crate::scheduler::line_opener),
+            config.clone(),
+        ));
         tokio::spawn(crate::service::watchdog(
             heartbeat,
             cell.store().clone(),
@@ -249,10 +270,18 @@ impl Gateway {
             writes,
             stop,
             pollers,
+            reloader,
+            #[cfg(unix)]
+            hangups,
             interfaces,
             _demo: demo,
             _lock: lock,
         })
+    }
+
+    /// Reloads the configuration (what `SIGHUP` does): see [`crate::reload`].
+    pub fn reloader(&self) -> &Arc<Reloader> {
+        &self.reloader
     }
 
     /// The address the gateway listens on.
@@ -282,12 +311,25 @@ impl Gateway {
             writes,
             stop,
             pollers,
+            reloader,
+            #[cfg(unix)]
+            hangups,
             interfaces,
             _demo,
             // Held until the history is committed and the gateway has stopped.
             _lock,
             ..
         } = self;
+        #[cfg(unix)]
+        if let Some(hangups) = hangups {
+            tokio::spawn(crate::reload::on_hangup(
+                reloader,
+                hangups,
+                stop.subscribe(),
+            ));
+        }
+        #[cfg(not(unix))]
+        drop(reloader);
         let app = http::router(Arc::clone(&cell), writes, stop.subscribe());
         let server = http::server::serve(
             listener,
@@ -306,10 +348,7 @@ impl Gateway {
             }
         };
         let _ = stop.send(true);
-        if tokio::time::timeout(STOP_GRACE, pollers.stopped)
-            .await
-            .is_err()
-        {
+        if !pollers.stopped(STOP_GRACE).await {
             tracing::warn!("the line tasks did not stop in {STOP_GRACE:?}");
         }
         for interface in interfaces {
@@ -342,66 +381,6 @@ impl Gateway {
             flushed.context("the history could not be committed at shutdown")?;
         }
         Ok(())
-    }
-}
-
-/// The line tasks, on a thread of their own with a single-threaded runtime.
-///
-/// A poll is a chain of short exchanges, each waiting a few milliseconds for its reply.
-/// On the multi-threaded runtime each reply woke one worker, which often woke the other
-/// to share the work (a futex wake and two thread switches for a few microseconds of
-/// work); on one thread, the I/O driver hands every reply that arrived to its task
-/// without any. In the load bench (1,000 JBC stations) this alone took the CPU per point
-/// read from 11.0 to 9.0 µs (runs back to back). It also keeps polling away from the HTTP, MQTT and OPC UA work on the
-/// main runtime: a large API answer no longer delays a poll. One thread polls every line
-/// (a thousand stations take about a tenth of a core).
-#[derive(Debug)]
-struct Pollers {
-    /// Resolves when every line task has ended (or the thread is gone).
-    stopped: tokio::sync::oneshot::Receiver<()>,
-}
-
-impl Pollers {
-    /// Starts `tasks` on the pollers' thread, with `heartbeat` ticking there; they end when
-    /// `stop` turns true.
-    fn start(
-        tasks: Vec<LineTask>,
-        stop: watch::Receiver<bool>,
-        heartbeat: crate::service::Heartbeat,
-    ) -> anyhow::Result<Self> {
-        let runtime = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .context("cannot start the pollers' runtime")?;
-        let (ended, stopped) = tokio::sync::oneshot::channel();
-        std::thread::Builder::new()
-            .name("cellbus-poll".into())
-            .spawn(move || {
-                runtime.block_on(async move {
-                    let mut beating = stop.clone();
-                    tokio::spawn(async move {
-                        let mut tick = tokio::time::interval(crate::service::HEARTBEAT);
-                        loop {
-                            tokio::select! {
-                                _ = beating.changed() => return,
-                                _ = tick.tick() => heartbeat.beat(),
-                            }
-                        }
-                    });
-                    let running: Vec<_> = tasks
-                        .into_iter()
-                        .map(|task| tokio::spawn(task.run(stop.clone())))
-                        .collect();
-                    for task in running {
-                        if let Err(e) = task.await {
-                            tracing::error!("a line task failed: {e}");
-                        }
-                    }
-                });
-                let _ = ended.send(());
-            })
-            .context("cannot start the pollers' thread")?;
-        Ok(Self { stopped })
     }
 }
 

@@ -1,5 +1,6 @@
 //! Running as a systemd service (`Type=notify`): the gateway says `READY=1` once it
-//! listens, `STOPPING=1` when it stops, and, when the unit sets `WatchdogSec=`, pets the
+//! listens, `RELOADING=1` while it reloads its configuration (`SIGHUP`, then `READY=1`
+//! again), `STOPPING=1` when it stops, and, when the unit sets `WatchdogSec=`, pets the
 //! watchdog (`WATCHDOG=1`) at half that period for as long as it works: the pollers'
 //! thread ticks (a heartbeat on its own runtime, so a poll that blocks it stops the
 //! ticks) and the history writer commits (a flush answered in time). A gateway that is
@@ -22,6 +23,15 @@ pub const HEARTBEAT: Duration = Duration::from_secs(1);
 /// Tells systemd the gateway is ready, with a status line (`systemctl status`).
 pub fn ready(status: &str) {
     send(&[NotifyState::Ready, NotifyState::Status(status)]);
+}
+
+/// Tells systemd the gateway is reloading its configuration (`READY=1` follows when it is
+/// done, [`ready`]).
+pub fn reloading() {
+    match NotifyState::monotonic_usec_now() {
+        Ok(now) => send(&[NotifyState::Reloading, now]),
+        Err(_) => send(&[NotifyState::Reloading]),
+    }
 }
 
 /// Tells systemd the gateway is stopping.

@@ -700,6 +700,20 @@ impl Desk {
             .unwrap_or_else(std::sync::PoisonError::into_inner))
     }
 
+    /// Puts `book` in place of the one it holds (a reload): each alarm of both keeps its
+    /// state, as a restart would restore it; the others start normal or are gone.
+    pub fn replace(&self, mut book: Book, now: Timestamp) {
+        self.with(|old| {
+            for index in 0..old.len() {
+                if let Some(view) = old.view(index) {
+                    book.restore(&view.id, &serde_json::json!(view), now);
+                }
+            }
+            book.generation = old.generation + 1;
+            *old = book;
+        });
+    }
+
     /// The alarm list ([`Book::list`]).
     pub fn list(&self, filter: &ListFilter) -> Page {
         self.with(|book| book.list(filter))

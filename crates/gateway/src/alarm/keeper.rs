@@ -73,12 +73,9 @@ impl AlarmMetrics {
 }
 
 /// Runs the cell's alarms on its change stream until `stop` turns true: follows values,
-/// devices and time (`serve` has put back what the history kept of each, [`restore`],
+/// devices, time and reloads of the configuration (`serve` has put back what the history kept of each, [`restore`],
 /// before the polls and the interfaces started).
 pub async fn run(cell: Arc<Cell>, mut stop: watch::Receiver<bool>) {
-    if cell.alarms.with(|book| book.is_empty()) {
-        return;
-    }
     let metrics = AlarmMetrics::default();
     cell.metrics()
         .register(|registry| metrics.register(registry));
@@ -116,6 +113,8 @@ pub async fn run(cell: Arc<Cell>, mut stop: watch::Receiver<bool>) {
                             .into_iter()
                             .collect()
                     }
+                    // The alarms were replaced: the current values say where the new ones are.
+                    (EventKind::ConfigReloaded, _) => resync(&cell),
                     _ => Vec::new(),
                 },
                 // Changes were missed: the cell's current values say where each alarm is.
@@ -249,7 +248,8 @@ fn journal_entry(cell: &Cell, book: &Book, h: &Happened) -> Option<Event> {
     let instance = book.instance(h.index)?;
     let view = book.view(h.index)?;
     let entry = cell.device_entry(instance.device.as_str());
-    let spec = instance.point.as_ref().and_then(|p| cell.point(p));
+    let spec_ref = instance.point.as_ref().and_then(|p| cell.point(p));
+    let spec = spec_ref.as_deref();
     let unit = spec.and_then(|s| s.unit.as_deref()).unwrap_or("");
     let shown = |value: &Option<serde_json::Value>| match value {
         None | Some(serde_json::Value::Null) => "no value".to_owned(),

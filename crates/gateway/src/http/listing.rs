@@ -20,7 +20,7 @@ use std::time::Duration;
 use serde::Serialize;
 use serde_json::ser::{CompactFormatter, Formatter};
 
-use crate::cell::{Cell, DeviceEntry, DeviceState, DeviceStatus, judge_staleness};
+use crate::cell::{DeviceEntry, DeviceState, DeviceStatus, Roster, judge_staleness};
 use crate::point::{Quality, Value};
 use crate::time::{Timestamp, duration_millis};
 
@@ -240,10 +240,10 @@ pub(crate) struct Listing {
 
 impl Listing {
     /// Serialises every device's description once; equal ones are shared.
-    pub(crate) fn new(cell: &Cell) -> Listing {
+    pub(crate) fn new(roster: &Roster) -> Listing {
         let mut shared: HashMap<Vec<u8>, Arc<PointsTemplate>> = HashMap::new();
-        let devices: Vec<Listed> = cell
-            .device_entries()
+        let devices: Vec<Listed> = roster
+            .devices()
             .map(|entry| {
                 let template = PointsTemplate::of(entry);
                 let points = Arc::clone(

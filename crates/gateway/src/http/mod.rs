@@ -102,21 +102,39 @@ pub struct AppState {
     guard: Arc<write::Guard>,
     queries: Arc<tokio::sync::Semaphore>,
     streams: Arc<std::sync::atomic::AtomicUsize>,
-    listing: Arc<listing::Listing>,
+    /// The device listing of the roster in force ([`AppState::listing`]).
+    listing: Arc<std::sync::Mutex<(Arc<crate::cell::Roster>, Arc<listing::Listing>)>>,
     /// Bytes the last full device listing took: the next one's buffer is that big at once.
     listing_size: Arc<std::sync::atomic::AtomicUsize>,
 }
 
+impl AppState {
+    /// The device listing of the roster in force: made again after a reload changed it.
+    fn listing(&self) -> Arc<listing::Listing> {
+        let roster = self.cell.roster();
+        let mut held = self
+            .listing
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if !Arc::ptr_eq(&held.0, &roster) {
+            let listing = Arc::new(listing::Listing::new(&roster));
+            *held = (roster, listing);
+        }
+        Arc::clone(&held.1)
+    }
+}
+
 /// The router over `cell`; event streams end when `shutdown` turns true.
 pub fn router(cell: Arc<Cell>, writes: WritePolicy, shutdown: watch::Receiver<bool>) -> Router {
-    let listing = Arc::new(listing::Listing::new(&cell));
+    let roster = cell.roster();
+    let listing = Arc::new(listing::Listing::new(&roster));
     tracing::debug!(
         "device listings: {} device descriptions serialised once, {} distinct",
-        cell.device_entries().count(),
+        listing.len(),
         listing.templates()
     );
     let state = AppState {
-        listing,
+        listing: Arc::new(std::sync::Mutex::new((roster, listing))),
         listing_size: Arc::default(),
         cell,
         writes: Arc::new(writes),
@@ -275,7 +293,7 @@ async fn wrong_method(method: Method, uri: Uri) -> ApiError {
 }
 
 async fn healthz(State(s): State<AppState>) -> Response {
-    let devices = s.listing.len();
+    let devices = s.listing().len();
     let lines = s.cell.lines();
     let store = s.cell.store();
     let stats = store.stats();
@@ -308,6 +326,7 @@ async fn healthz(State(s): State<AppState>) -> Response {
         "history_last_error": last_error,
         "history_last_error_at": last_error_at,
         "writes_enabled": s.writes.enabled,
+        "config": s.cell.config_status(),
     });
     // Each running interface's state under its name (`mqtt`, `opcua`).
     if let Some(object) = health.as_object_mut() {
@@ -378,9 +397,9 @@ async fn devices(
     let full = fields == listing::Fields::ALL
         && selection.ids.is_none()
         && (offset, limit) == (0, usize::MAX);
-    let blocking = s.listing.len() > BLOCKING_LISTING;
+    let listing = s.listing();
+    let blocking = listing.len() > BLOCKING_LISTING;
     let write = move || {
-        let listing = &s.listing;
         let total = listing
             .entries()
             .filter(|d| selection.contains(d.id()))
@@ -491,8 +510,8 @@ impl Selection {
 }
 
 async fn device(State(s): State<AppState>, DeviceIdPath(id): DeviceIdPath) -> ApiResult<Response> {
-    let device = s
-        .listing
+    let listing = s.listing();
+    let device = listing
         .get(&id)
         .ok_or_else(|| unknown_device(&s.cell, &id))?;
     let mut out = Vec::with_capacity(16 << 10);
@@ -757,7 +776,7 @@ async fn stream(
     let mut snapshot = Vec::new();
     listing::devices_array(
         &mut snapshot,
-        s.listing.entries().filter(|d| selection.contains(d.id())),
+        s.listing().entries().filter(|d| selection.contains(d.id())),
         listing::Fields::ALL,
         Timestamp::now(),
     );

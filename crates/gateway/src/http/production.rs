@@ -34,7 +34,8 @@ fn range(
     q: &ProductionQuery,
     now: Timestamp,
 ) -> ApiResult<(Timestamp, Timestamp, Option<ShiftWindow>)> {
-    let shifts = &s.cell.production.shifts;
+    let plan = s.cell.production();
+    let shifts = &plan.shifts;
     if q.shift.is_some() && (q.from.is_some() || q.to.is_some()) {
         return Err(ApiError::bad_request(
             "give either shift (and day) or from and to, not both",
@@ -120,7 +121,7 @@ fn device(s: &AppState, q: &ProductionQuery) -> ApiResult<DeviceId> {
     let Some(entry) = s.cell.device_entry(id) else {
         return Err(unknown_device(&s.cell, id));
     };
-    if !s.cell.production.has_states(id) {
+    if !s.cell.production().has_states(id) {
         return Err(ApiError::not_found(format!(
             "device {id} ({}) reports no machine states",
             entry.protocol
@@ -175,7 +176,7 @@ pub(crate) async fn production(
     let cell = std::sync::Arc::clone(&s.cell);
     let answer = run_query(&s, move |store| {
         let range = (a.from, a.to);
-        report::production(&store, &cell.production, &a.device, range, a.shift, a.now)
+        report::production(&store, &cell.production(), &a.device, range, a.shift, a.now)
     })
     .await?;
     Ok(Json(answer).into_response())

@@ -1302,7 +1302,7 @@ const NOW: Timestamp = Timestamp(1_793_692_800_000);
 fn a_device_listing_is_byte_for_byte_what_the_device_views_serialise_to() {
     let dir = tempfile::tempdir().unwrap();
     let (_store, cell) = example_cell_with_every_kind_of_state(dir.path());
-    let listing = listing::Listing::new(&cell);
+    let listing = listing::Listing::new(&cell.roster());
     assert_eq!(listing.len(), cell.device_entries().count());
     for now in [
         NOW,
@@ -1336,7 +1336,7 @@ fn a_device_listing_is_byte_for_byte_what_the_device_views_serialise_to() {
 fn a_listing_cut_to_some_fields_has_just_those_of_the_full_view_and_the_id() {
     let dir = tempfile::tempdir().unwrap();
     let (_store, cell) = example_cell_with_every_kind_of_state(dir.path());
-    let listing = listing::Listing::new(&cell);
+    let listing = listing::Listing::new(&cell.roster());
     let names = listing::Field::NAMES;
     let mut selections: Vec<Vec<&str>> = names.iter().map(|n| vec![*n]).collect();
     selections.push(vec!["status", "line"]);
@@ -1370,7 +1370,7 @@ fn a_listing_cut_to_some_fields_has_just_those_of_the_full_view_and_the_id() {
 async fn devices_with_the_same_description_share_one_template() {
     let dir = tempfile::tempdir().unwrap();
     let (_store, cell) = example_cell_with_every_kind_of_state(dir.path());
-    let listing = listing::Listing::new(&cell);
+    let listing = listing::Listing::new(&cell.roster());
     let kinds: std::collections::HashSet<_> = cell
         .device_entries()
         .map(|d| format!("{:?}", d.protocol))
@@ -1378,7 +1378,7 @@ async fn devices_with_the_same_description_share_one_template() {
     assert!(listing.templates() >= kinds.len());
     assert!(listing.templates() <= listing.len());
     let rig = rig(3);
-    let stations = listing::Listing::new(&rig.cell);
+    let stations = listing::Listing::new(&rig.cell.roster());
     assert_eq!((stations.len(), stations.templates()), (3, 1));
     // Polled stations' listing is about as big as estimated (the first buffer's size).
     tokio::time::sleep(Duration::from_secs(2)).await;

@@ -21,6 +21,7 @@ use super::states::{self, CODE_POINT};
 use super::{OEE_PERIOD, report};
 use crate::cell::{Cell, LiveMessage};
 use crate::driver::Reading;
+use crate::event::EventKind;
 use crate::point::{Quality, Value};
 use crate::store::{HistoryState, Sample, read_setting, write_setting};
 use crate::time::Timestamp;
@@ -106,7 +107,7 @@ pub fn close_gap(cell: &Cell, data_dir: &Path) {
     }
     let alive = read_setting(data_dir, ALIVE_SETTING).ok().flatten();
     let now = Timestamp::now();
-    for device in &cell.production.with_states {
+    for device in &cell.production().with_states {
         for name in [states::STATE_POINT, CODE_POINT, states::REASON_POINT] {
             let point = states::point_id(device, name);
             let Ok(Some(last)) = store.history_nearest(&point, now, false) else {
@@ -165,6 +166,9 @@ pub async fn run(cell: Arc<Cell>, data_dir: PathBuf, mut stop: watch::Receiver<b
                     };
                     clocks.set(view.id.device(), code.category());
                 }
+                Ok(LiveMessage::Event(event)) if event.kind == EventKind::ConfigReloaded => {
+                    clocks.follow(&cell);
+                }
                 Err(broadcast::error::RecvError::Closed) => break,
                 _ => {}
             },
@@ -177,21 +181,17 @@ pub async fn run(cell: Arc<Cell>, data_dir: PathBuf, mut stop: watch::Receiver<b
 /// gauges. Outside every shift the points keep the last shift's figures.
 fn current_oee(cell: &Cell, metrics: &ProductionMetrics) {
     let now = Timestamp::now();
-    let Some(shift) = cell.production.shifts.at(now) else {
+    let plan = cell.production();
+    let Some(shift) = plan.shifts.at(now) else {
         return;
     };
-    for device in cell.production.producers.keys() {
+    for device in plan.producers.keys() {
         let Some(entry) = cell.device_entry(device.as_str()) else {
             continue;
         };
-        let Ok(report) = report::production(
-            cell.store(),
-            &cell.production,
-            device,
-            (shift.start, now),
-            None,
-            now,
-        ) else {
+        let Ok(report) =
+            report::production(cell.store(), &plan, device, (shift.start, now), None, now)
+        else {
             continue;
         };
         let Some(oee) = report.production else {
@@ -213,7 +213,7 @@ fn current_oee(cell: &Cell, metrics: &ProductionMetrics) {
                 });
             }
         }
-        crate::scheduler::apply_readings(cell, entry, readings);
+        crate::scheduler::apply_readings(cell, &entry, readings);
     }
 }
 
@@ -227,12 +227,27 @@ impl Clocks {
     fn new(cell: &Cell, metrics: ProductionMetrics) -> Self {
         let now = Instant::now();
         let running = cell
-            .production
+            .production()
             .with_states
             .iter()
             .map(|d| (d.to_string(), (Category::Unknown, now)))
             .collect();
         Self { running, metrics }
+    }
+
+    /// Follows a reload: a device added with states starts unknown, one removed (or no
+    /// longer with states) has its time counted and is dropped.
+    fn follow(&mut self, cell: &Cell) {
+        self.flush();
+        let plan = cell.production();
+        self.running
+            .retain(|device, _| plan.with_states.iter().any(|d| d.as_str() == device));
+        let now = Instant::now();
+        for device in &plan.with_states {
+            self.running
+                .entry(device.to_string())
+                .or_insert((Category::Unknown, now));
+        }
     }
 
     /// `device` is now in `category`: the time in the last one is counted.

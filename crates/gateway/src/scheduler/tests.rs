@@ -382,7 +382,7 @@ async fn the_task_stops_when_asked() {
 async fn values_not_refreshed_in_time_turn_stale_and_good_again_at_the_next_read() {
     let rig = rig(1);
     tokio::time::sleep(Duration::from_secs(2)).await;
-    let entry = Arc::clone(rig.cell.device_entry("jbc1").unwrap());
+    let entry = rig.cell.device_entry("jbc1").unwrap();
     let index = entry.point_index("air_temperature").unwrap();
     // As if the line had not reached it for a minute.
     entry.write_state().points[index].t = Some(Timestamp::now().minus(Duration::from_secs(60)));
@@ -589,7 +589,7 @@ async fn record(
                 None => Err(DeviceError::new(ErrorKind::Timeout, "no answer")),
             },
         };
-        apply_readings(&cell, entry, vec![reading]);
+        apply_readings(&cell, &entry, vec![reading]);
     }
     let samples = recorded(&cell, "jbc1.air_temperature").await;
     let mut published = 0;

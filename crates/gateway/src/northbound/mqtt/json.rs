@@ -3,7 +3,7 @@
 //! | topic | payload | QoS, retained |
 //! |---|---|---|
 //! | `{prefix}/{device}/{point}` | `{"t":ms,"value":…,"unit":"°C","quality":"good"}` | 1, retained |
-//! | `{prefix}/{device}/status` | `online` or `offline` | 1, retained |
+//! | `{prefix}/{device}/status` | `online` or `offline` (`removed` by a reload) | 1, retained |
 //! | `{prefix}/status` | `online`; `offline` as the gateway's Will | 1, retained |
 //! | `{prefix}/events` | an event as the API shows it | 1, not retained |
 //! | `{prefix}/alarms/{id}` | the alarm as `GET /api/alarms` shows it (its state after each change) | 1, retained |
@@ -35,7 +35,8 @@ use tokio::sync::broadcast;
 use super::forward::Backlog;
 use super::status;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
-use crate::cell::{Cell, DeviceStatus, LiveMessage};
+use crate::cell::{Cell, DeviceStatus, DeviceView, LiveMessage};
+use crate::event::{Event, EventKind};
 use crate::point::{PointId, Quality, Value};
 use crate::time::Timestamp;
 use crate::write::LogThrottle;
@@ -275,20 +276,59 @@ impl Publisher {
         let now = Timestamp::now();
         conn.publish(self.status(true)).await?;
         self.backlog(conn, from, now).await?;
-        for device in self.cell.devices() {
-            for point in &device.points {
-                let view = &point.view;
-                let message =
-                    self.point_message(&view.id, view.value.as_ref(), view.quality, view.t, false);
-                conn.publish(message).await?;
-            }
-            conn.publish(self.device_status(device.summary.id.as_str(), device.summary.status))
-                .await?;
+        for device in self.cell.device_entries() {
+            self.device_snapshot(conn, &device.view(now)).await?;
         }
         for alarm in self.cell.alarms.all() {
             conn.publish(self.alarm_message(&alarm)).await?;
         }
         self.born = true;
+        Ok(())
+    }
+
+    /// A device's points and status.
+    async fn device_snapshot(
+        &mut self,
+        conn: &mut Connection<'_>,
+        device: &DeviceView,
+    ) -> Result<(), String> {
+        for point in &device.points {
+            let view = &point.view;
+            let message =
+                self.point_message(&view.id, view.value.as_ref(), view.quality, view.t, false);
+            conn.publish(message).await?;
+        }
+        conn.publish(self.device_status(device.summary.id.as_str(), device.summary.status))
+            .await
+    }
+
+    /// A reload of the configuration (its `config_reloaded` event): each device added or
+    /// changed publishes its points, status and alarms; each removed has its status
+    /// `removed` (its points' retained messages stay until someone clears them).
+    async fn on_reload(&mut self, conn: &mut Connection<'_>, event: &Event) -> Result<(), String> {
+        for device in crate::reload::devices_in(event, "removed") {
+            conn.publish(Outgoing {
+                topic: format!("{}/{device}/status", self.prefix),
+                payload: "removed".into(),
+                qos: QoS::AtLeastOnce,
+                retain: true,
+                latest: None,
+            })
+            .await?;
+        }
+        let now = Timestamp::now();
+        for device in crate::reload::devices_in(event, "added")
+            .into_iter()
+            .chain(crate::reload::devices_in(event, "changed"))
+        {
+            let Some(entry) = self.cell.device_entry(device.as_str()) else {
+                continue;
+            };
+            self.device_snapshot(conn, &entry.view(now)).await?;
+            for alarm in self.cell.alarms.of_device(device.as_str()) {
+                conn.publish(self.alarm_message(&alarm)).await?;
+            }
+        }
         Ok(())
     }
 
@@ -368,6 +408,9 @@ impl Publisher {
                     .and_then(|id| self.cell.alarms.view(id))
                 {
                     conn.publish(self.alarm_message(&alarm)).await?;
+                }
+                if event.kind == EventKind::ConfigReloaded {
+                    self.on_reload(conn, &event).await?;
                 }
             }
         }

@@ -44,9 +44,9 @@ use super::mapping::{
 use super::primary::{OFFLINE_GRACE, PrimaryHost, STATE_SKEW_MS, Verdict};
 use super::status;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
-use crate::cell::{Cell, CheckedWrite, DeviceStatus, DeviceSummary, LiveMessage};
+use crate::cell::{Cell, CheckedWrite, DeviceEntry, DeviceStatus, DeviceSummary, LiveMessage};
 use crate::driver::WriteError;
-use crate::event::Event;
+use crate::event::{Event, EventKind};
 use crate::point::{DeviceId, PointId, Value};
 use crate::time::{Timestamp, duration_millis};
 use crate::write::{Attempt, LOG_EVERY, LogThrottle, RowThrottle, Unauthorised};
@@ -364,30 +364,76 @@ impl Node {
         self.rows_published = rows;
         self.dead.clear();
         // One device's view at a time: a large cell's views together are tens of MB.
-        let entries: Vec<_> = self.cell.device_entries().cloned().collect();
+        let entries: Vec<_> = self.cell.device_entries().collect();
         let mut down = Vec::new();
         for entry in entries {
-            let device = entry.view(now);
-            let Ok(id) = Id::new(device.summary.id.as_str()) else {
-                continue;
-            };
-            let mut metrics = device_metrics(&device, now);
-            for alarm in self.cell.alarms.of_device(id.as_str()) {
-                metrics.extend(alarm_metrics(id.as_str(), &alarm, self.writes, now));
-            }
-            let birth = self
-                .node
-                .device_birth(&id, &metrics, t)
-                .map_err(|e| lost(format!("cannot build the DBIRTH of {id}: {e}")))?;
-            conn.publish(outgoing(birth, None)).await.map_err(lost)?;
-            if device.summary.status == DeviceStatus::Down {
-                down.push(device.summary.id);
+            if self.device_birth(conn, &entry, now).await? == Some(DeviceStatus::Down) {
+                down.push(entry.id.clone());
             }
         }
         self.born = true;
         self.forward_backlog(conn, from, now).await?;
         for device in &down {
             self.device_down(conn, device, t).await?;
+        }
+        Ok(())
+    }
+
+    /// The DBIRTH of `entry` (its points and its alarms as they are now); its status then,
+    /// or `None` when its id cannot be a Sparkplug id.
+    async fn device_birth(
+        &mut self,
+        conn: &mut Connection<'_>,
+        entry: &DeviceEntry,
+        now: Timestamp,
+    ) -> Result<Option<DeviceStatus>, End> {
+        let device = entry.view(now);
+        let Ok(id) = Id::new(device.summary.id.as_str()) else {
+            return Ok(None);
+        };
+        let mut metrics = device_metrics(&device, now);
+        for alarm in self.cell.alarms.of_device(id.as_str()) {
+            metrics.extend(alarm_metrics(id.as_str(), &alarm, self.writes, now));
+        }
+        let birth = self
+            .node
+            .device_birth(&id, &metrics, sparkplug_time(now))
+            .map_err(|e| lost(format!("cannot build the DBIRTH of {id}: {e}")))?;
+        conn.publish(outgoing(birth, None)).await.map_err(lost)?;
+        Ok(Some(device.summary.status))
+    }
+
+    /// A reload of the configuration (its `config_reloaded` event): a DDEATH for each
+    /// device removed or changed, then a DBIRTH for each added or changed (with its new
+    /// points), a DDEATH after it when it is down.
+    async fn on_reload(&mut self, conn: &mut Connection<'_>, event: &Event) -> Done {
+        if !self.born {
+            return Ok(());
+        }
+        let now = Timestamp::now();
+        let t = sparkplug_time(now);
+        let changed = crate::reload::devices_in(event, "changed");
+        for device in crate::reload::devices_in(event, "removed")
+            .iter()
+            .chain(&changed)
+        {
+            if let Ok(id) = Id::new(device.as_str())
+                && let Ok(death) = self.node.device_death(&id, t)
+            {
+                conn.publish(outgoing(death, None)).await.map_err(lost)?;
+            }
+            self.dead.remove(device);
+        }
+        for device in crate::reload::devices_in(event, "added")
+            .iter()
+            .chain(&changed)
+        {
+            let Some(entry) = self.cell.device_entry(device.as_str()) else {
+                continue;
+            };
+            if self.device_birth(conn, &entry, now).await? == Some(DeviceStatus::Down) {
+                self.device_down(conn, device, t).await?;
+            }
         }
         Ok(())
     }
@@ -526,6 +572,9 @@ impl Node {
                     // Keep the order: what came before an event goes out first.
                     self.device_data(conn, std::mem::take(&mut values)).await?;
                     self.on_event(conn, &event).await?;
+                    if event.kind == EventKind::ConfigReloaded {
+                        self.on_reload(conn, &event).await?;
+                    }
                     // An alarm's change is also its device's alarm metrics.
                     if let (Some(id), Some(device)) = (
                         event.fields.get("alarm").and_then(|a| a.as_str()),
@@ -591,17 +640,10 @@ impl Node {
                 self.device_down(conn, &summary.id, t).await
             }
             DeviceStatus::Up if self.dead.contains(&summary.id) => {
-                let (Some(device), Ok(id)) = (
-                    self.cell.device(summary.id.as_str()),
-                    Id::new(summary.id.as_str()),
-                ) else {
+                let Some(entry) = self.cell.device_entry(summary.id.as_str()) else {
                     return Ok(());
                 };
-                let birth = self
-                    .node
-                    .device_birth(&id, &device_metrics(&device, now), t)
-                    .map_err(|e| lost(format!("cannot build the DBIRTH of {id}: {e}")))?;
-                conn.publish(outgoing(birth, None)).await.map_err(lost)?;
+                self.device_birth(conn, &entry, now).await?;
                 self.dead.remove(&summary.id);
                 Ok(())
             }
