@@ -298,3 +298,90 @@ async fn an_unreachable_broker_shows_in_healthz_and_events_and_nothing_else_stop
     }
     gateway.stop().await;
 }
+
+/// Serves a JBC station on a free loopback port (as a serial server would); its endpoint.
+async fn jbc_station() -> String {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let model = wire::device::SharedModel::new(jbc::device::Station::new(
+        jbc::device::StationConfig::default(),
+    ));
+    tokio::spawn(link::serve::serve_tcp(listener, move || model.line(), None));
+    format!("tcp://{addr}")
+}
+
+/// A cell file publishing to `broker`, with one JBC station per `(line, id, endpoint)`.
+fn cell_file(broker: &Mosquitto, stations: &[(&str, &str, &str)]) -> String {
+    let mut text = format!("[mqtt]\nbroker = \"{}\"\n", broker.url());
+    for (line, id, endpoint) in stations {
+        text.push_str(&format!(
+            "\n[[line]]\nname = \"{line}\"\nendpoint = \"{endpoint}\"\n\
+             [[line.device]]\nid = \"{id}\"\nprotocol = \"jbc\"\n"
+        ));
+    }
+    text
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_reload_births_the_device_added_and_buries_the_one_removed_while_the_node_stays_born() {
+    let broker = Mosquitto::start();
+    let mut all = Subscriber::start(broker.port(), "spBv1.0/#").await;
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b, c) = (
+        jbc_station().await,
+        jbc_station().await,
+        jbc_station().await,
+    );
+    let path = dir.path().join("cell.toml");
+    std::fs::write(
+        &path,
+        cell_file(&broker, &[("a", "jbc_a", &a), ("b", "jbc_b", &b)]),
+    )
+    .unwrap();
+    let gateway = Running::start(ServeOptions {
+        config: Some(path.clone()),
+        data_dir: dir.path().join("data"),
+        ..ServeOptions::default()
+    })
+    .await;
+    let mut born = BTreeSet::new();
+    while born.len() < 2 {
+        let birth = all
+            .next_where("the DBIRTHs of both stations", LIMIT, |m| {
+                m.kind() == "DBIRTH"
+            })
+            .await;
+        born.insert(birth.device().unwrap().to_owned());
+    }
+
+    std::fs::write(
+        &path,
+        cell_file(&broker, &[("a", "jbc_a", &a), ("c", "jbc_c", &c)]),
+    )
+    .unwrap();
+    let plan = gateway.reloader.reload().await.unwrap();
+    assert_eq!(plan.kept, ["a"]);
+    let mut seen = Vec::new();
+    while !(seen.contains(&("DDEATH".to_owned(), "jbc_b".to_owned()))
+        && seen.contains(&("DBIRTH".to_owned(), "jbc_c".to_owned())))
+    {
+        let m = all
+            .next_where("the DDEATH of b and the DBIRTH of c", LIMIT, |m| {
+                matches!(m.kind(), "DBIRTH" | "DDEATH" | "NBIRTH" | "NDEATH")
+            })
+            .await;
+        seen.push((
+            m.kind().to_owned(),
+            m.device().unwrap_or_default().to_owned(),
+        ));
+    }
+    // Nothing else died or was born again: the node and station a carry on.
+    assert_eq!(
+        seen,
+        [
+            ("DDEATH".to_owned(), "jbc_b".to_owned()),
+            ("DBIRTH".to_owned(), "jbc_c".to_owned())
+        ]
+    );
+    gateway.stop().await;
+}

@@ -316,6 +316,17 @@ impl Gateway {
         )
     }
 
+    /// Sends the gateway `SIGHUP` (what `systemctl reload cellbus` does): it reloads its
+    /// configuration.
+    pub fn hang_up(&self) {
+        let id = self.child.id();
+        let status = Command::new("sh")
+            .args(["-c", &format!("kill -HUP {id}")])
+            .status()
+            .expect("sh runs");
+        assert!(status.success(), "kill -HUP {id} failed");
+    }
+
     /// GETs `path`, which must answer 200 with JSON.
     pub fn get_json(&self, path: &str) -> serde_json::Value {
         let (status, body) = self.get(path);

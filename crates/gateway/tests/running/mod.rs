@@ -19,6 +19,8 @@ pub const LIMIT: Duration = Duration::from_secs(60);
 /// A running gateway.
 pub struct Running {
     pub cell: Arc<Cell>,
+    /// Reloads its configuration, as `SIGHUP` does.
+    pub reloader: Arc<gateway::reload::Reloader>,
     pub addr: SocketAddr,
     stop: oneshot::Sender<()>,
     task: JoinHandle<anyhow::Result<()>>,
@@ -34,6 +36,7 @@ impl Running {
         .await
         .unwrap();
         let cell = Arc::clone(gateway.cell());
+        let reloader = Arc::clone(gateway.reloader());
         let addr = gateway.local_addr();
         let (stop, stopped) = oneshot::channel::<()>();
         let task = tokio::spawn(gateway.run(async {
@@ -41,6 +44,7 @@ impl Running {
         }));
         Running {
             cell,
+            reloader,
             addr,
             stop,
             task,

@@ -694,7 +694,9 @@ function showCellSummary(health) {
 }
 
 function addEvent(event, atTop = true) {
-  if (atTop && event.kind && /^(interface_|device_|line_|history_)/.test(event.kind)) healthSoon();
+  if (atTop && event.kind && /^(interface_|device_|line_|history_|config_)/.test(event.kind)) healthSoon();
+  // The configuration was reloaded: devices and lines may have come and gone.
+  if (atTop && event.kind === 'config_reloaded' && source) connect(state.streamQuery);
   if (atTop && event.kind && event.kind.startsWith('alarm_')) alarmsNoticed();
   const list = document.getElementById('events');
   const item = el('li');
@@ -855,6 +857,7 @@ function connect(query) {
     document.getElementById('writes-badge').hidden = !snapshot.writes_enabled;
     state.lines = snapshot.lines;
     state.order = snapshot.lines.flatMap((line) => line.devices);
+    renderLineChoice();
     renderDevices(snapshot.devices);
     renderLines(snapshot.lines);
     loadEvents();
