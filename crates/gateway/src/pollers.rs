@@ -111,34 +111,31 @@ impl Pollers {
         }
     }
 
-    /// Stops the task of the line `name` and waits until it has finished its request (at
-    /// most [`STOP_GRACE`], after which it is cut off); `false` when no task polls it.
-    pub async fn stop_line(&self, name: &str) -> bool {
-        let running = self
-            .lines
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .remove(name);
-        let Some(Running { stop, mut done }) = running else {
-            return false;
+    /// Stops the tasks of the lines `names` together and waits until each has finished its
+    /// request (at most [`STOP_GRACE`], after which it is cut off); the lines no task
+    /// polled are left out of the answer.
+    pub async fn stop_lines(&self, names: &[String]) -> Vec<String> {
+        let running: Vec<(String, Running)> = {
+            let mut lines = self.lines.lock().unwrap_or_else(PoisonError::into_inner);
+            names
+                .iter()
+                .filter_map(|name| Some((name.clone(), lines.remove(name)?)))
+                .collect()
         };
-        let _ = stop.send(true);
-        if tokio::time::timeout(STOP_GRACE, &mut done).await.is_err() {
-            tracing::warn!("the task of line {name} did not stop in {STOP_GRACE:?}; cut off");
-            done.abort();
-            let _ = done.await;
+        for (_, line) in &running {
+            let _ = line.stop.send(true);
         }
-        true
-    }
-
-    /// The names of the lines polled now.
-    pub fn lines(&self) -> Vec<String> {
-        self.lines
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .keys()
-            .cloned()
-            .collect()
+        let deadline = tokio::time::Instant::now() + STOP_GRACE;
+        let mut stopped = Vec::new();
+        for (name, Running { mut done, .. }) in running {
+            if tokio::time::timeout_at(deadline, &mut done).await.is_err() {
+                tracing::warn!("the task of line {name} did not stop in {STOP_GRACE:?}; cut off");
+                done.abort();
+                let _ = done.await;
+            }
+            stopped.push(name);
+        }
+        stopped
     }
 
     /// Waits (at most `grace`) until the gateway's stop has ended every line task; `false`

@@ -207,11 +207,9 @@ impl Reloader {
             Ok(roster) => roster,
             Err(e) => return Err(self.refuse(&path, e)),
         };
-        for name in &plan.stop {
-            self.pollers.stop_line(name).await;
-            if let Some(line) = old.lines().iter().find(|l| &l.name == name) {
-                crate::scheduler::forget_metrics(self.cell.metrics(), name, &line.devices);
-            }
+        self.pollers.stop_lines(&plan.stop).await;
+        for line in old.lines().iter().filter(|l| plan.stop.contains(&l.name)) {
+            crate::scheduler::forget_metrics(self.cell.metrics(), &line.name, &line.devices);
         }
         // The devices of a restarted line that did not change carry on where they were.
         for (_, line) in &started {
@@ -227,9 +225,15 @@ impl Reloader {
         self.cell.note_config(None);
         self.cell.emit(reloaded_event(&plan, &path));
         for (index, line) in started {
-            let opener = (self.openers)(&new.lines[index]);
-            self.pollers
-                .add(LineTask::new(Arc::clone(&self.cell), line, opener));
+            let config = &new.lines[index];
+            let task = LineTask::new(Arc::clone(&self.cell), line, (self.openers)(config));
+            // A line asked for more polls than it can carry, as at the start.
+            if let Some(serial) = crate::load::serial_line(config)
+                && let Some(warning) = task.load(serial).warning()
+            {
+                tracing::warn!("{}: {warning}", path.display());
+            }
+            self.pollers.add(task);
         }
         *current = new;
         Ok(plan)
