@@ -11,6 +11,7 @@
 //!   (`cellbus-opcua`, in `crates/opcua`) behind the binary's `opcua` feature: it
 //!   implements [`Northbound`] with only what this crate makes public.
 //!
+pub mod cfx;
 pub mod mqtt;
 #[cfg(test)]
 mod tests;
