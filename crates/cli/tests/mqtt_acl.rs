@@ -1,4 +1,4 @@
-//! The broker access control of the README's recipe, `docs/mosquitto/cellbus.acl`, on a
+//! The broker access control of the user guide's recipe, `docs/mosquitto/cellbus.acl`, on a
 //! real mosquitto: the gateway (`cellbus serve` with the gateway's login) is born and
 //! publishes through it; a client with a valid login that the file does not name cannot
 //! publish a gateway's data or death, the host's STATE, or a command, and a client without

@@ -1,10 +1,12 @@
-//! The README's CLI sections run as printed: each ```console block of "A tour of the CLI",
-//! "Thermosald ISC", "Modbus RTU / JBUS and the Chloride CROSS" and "Panasonic BM" is read
-//! from README.md at test time and played the way a reader would type it.
+//! The guide's CLI chapters run as printed: each ```console block of the README's "A short
+//! tour" and of the user guide's device chapters (docs/guide/src: "JBC hot-air station",
+//! "Thermosald ISC", "Modbus RTU / JBUS and the Chloride CROSS", "Modbus TCP, typed values,
+//! scanning", "Panasonic BM") is read from its file at test time and played the way a reader
+//! would type it.
 //!
 //! - `$ cellbus sim … &` starts the simulator; the lines under it are what it prints first
 //!   (`listening on tcp://127.0.0.1:33331`). The address it really got (port 0 picks one)
-//!   replaces the README's in every later command and output line of the block.
+//!   replaces the text's in every later command and output line of the block.
 //! - `$ cellbus sim …` without `&` runs a simulator in the foreground with its control
 //!   channel: a line followed by an `ok: …` or `error: …` line is typed into it, the other
 //!   is its answer; the lines before the first typed one are what it prints first.
@@ -12,11 +14,11 @@
 //!   `cellbus` first on PATH (pipes to `head` work), stdout and stderr together as a
 //!   terminal shows them; the lines under it are its whole output.
 //!
-//! Output lines must match exactly (trailing blanks aside), except where the README says
+//! Output lines must match exactly (trailing blanks aside), except where the text says
 //! that numbers vary: an HTML comment right above the block, e.g.
 //! `<!-- vary: AT1 | ET1 | # s -->`, lists how such lines start (`#` stands for any number;
 //! runs of blanks count as one). In an output line that starts so, numbers may differ from
-//! the README's; its words, units and their order may not, nor its count of numbers. A
+//! the text's; its words, units and their order may not, nor its count of numbers. A
 //! pattern that matches no line of its block fails the test, so none outlives its line.
 
 use std::io::{BufRead, BufReader, Write};
@@ -30,27 +32,54 @@ use std::time::Duration;
 const LIMIT: Duration = Duration::from_secs(180);
 
 #[test]
-fn the_tour_of_the_cli_runs_as_printed() {
-    run_section("A tour of the CLI");
+fn the_readme_tour_runs_as_printed() {
+    run_section("README.md", "## A short tour");
 }
 
 #[test]
-fn the_thermosald_section_runs_as_printed() {
-    run_section("Thermosald ISC");
+fn the_jbc_chapter_runs_as_printed() {
+    run_section("docs/guide/src/jbc.md", "# JBC hot-air station");
 }
 
 #[test]
-fn the_modbus_and_cross_section_runs_as_printed() {
-    run_section("Modbus RTU / JBUS and the Chloride CROSS");
+fn the_thermosald_chapter_runs_as_printed() {
+    run_section("docs/guide/src/thermosald.md", "# Thermosald ISC");
 }
 
 #[test]
-fn the_panasonic_section_runs_as_printed() {
-    run_section("Panasonic BM");
+fn the_modbus_and_cross_chapter_runs_as_printed() {
+    run_section(
+        "docs/guide/src/modbus.md",
+        "# Modbus RTU / JBUS and the Chloride CROSS",
+    );
 }
 
 #[test]
-fn numbers_may_vary_only_in_lines_the_readme_marks() {
+fn the_modbus_tcp_chapter_runs_as_printed() {
+    run_section(
+        "docs/guide/src/modbus-tcp.md",
+        "# Modbus TCP, typed values, scanning",
+    );
+}
+
+#[test]
+fn the_panasonic_chapter_runs_as_printed() {
+    run_section("docs/guide/src/panasonic.md", "# Panasonic BM");
+}
+
+#[test]
+fn a_section_ends_at_a_heading_of_its_level_outside_code() {
+    let text = "# A\nintro\n## B\nb\n```sh\n# a comment\n```\n### C\nc\n## D\nd\n# E\n";
+    assert_eq!(
+        section(text, "## B"),
+        ["b", "```sh", "# a comment", "```", "### C", "c"]
+    );
+    assert_eq!(section(text, "# A").len(), 10);
+    assert_eq!(heading_level("#hashtag"), None);
+}
+
+#[test]
+fn numbers_may_vary_only_in_lines_the_text_marks() {
     let marked = Block::parse_vary("<!-- vary: AT1 | # s -->").expect("a vary comment");
     let block = Block {
         vary: marked,
@@ -68,19 +97,47 @@ fn numbers_may_vary_only_in_lines_the_readme_marks() {
     assert!(!same_but_numbers("1.0 s 135 °C", "1.0 s 135 1 °C"));
 }
 
-/// The workspace's root, where the README is and the commands run.
+/// The workspace's root, where the README and the guide are and the commands run.
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// Runs every console block of the README section titled `title`.
-fn run_section(title: &str) {
-    let readme = std::fs::read_to_string(root().join("README.md")).expect("README.md is there");
-    let blocks = Block::all_in(&readme, title);
-    assert!(!blocks.is_empty(), "no ```console block under ## {title}");
+/// Runs every console block of the section under `heading` (its subsections included) in
+/// `file`, a path from the workspace's root.
+fn run_section(file: &str, heading: &str) {
+    let text = std::fs::read_to_string(root().join(file))
+        .unwrap_or_else(|e| panic!("cannot read {file}: {e}"));
+    let blocks = Block::all_in(&section(&text, heading));
+    assert!(
+        !blocks.is_empty(),
+        "no ```console block under {heading} in {file}"
+    );
     for block in &blocks {
         block.run();
     }
+}
+
+/// The lines under `heading` (`## A short tour`, `# Panasonic BM`) up to the next heading
+/// of its level or above; a `#` line inside a code block is not a heading.
+fn section<'a>(text: &'a str, heading: &str) -> Vec<&'a str> {
+    let level = heading_level(heading).expect("a Markdown heading");
+    let mut lines = text.lines().skip_while(|line| *line != heading);
+    assert!(lines.next().is_some(), "no heading {heading:?}");
+    let mut fenced = false;
+    lines
+        .take_while(|line| {
+            if line.starts_with("```") {
+                fenced = !fenced;
+            }
+            fenced || heading_level(line).is_none_or(|l| l > level)
+        })
+        .collect()
+}
+
+/// 2 for `## Title`; none for a line that is not a heading.
+fn heading_level(line: &str) -> Option<usize> {
+    let hashes = line.len() - line.trim_start_matches('#').len();
+    (hashes > 0 && line[hashes..].starts_with(' ')).then_some(hashes)
 }
 
 /// One ```console block and the `vary` patterns written above it.
@@ -90,14 +147,9 @@ struct Block {
 }
 
 impl Block {
-    /// The console blocks of the `## title` section (its subsections included).
-    fn all_in(readme: &str, title: &str) -> Vec<Block> {
-        let heading = format!("## {title}");
-        let mut lines = readme
-            .lines()
-            .skip_while(|line| *line != heading)
-            .skip(1)
-            .take_while(|line| !line.starts_with("## "));
+    /// The console blocks among `lines`.
+    fn all_in(lines: &[&str]) -> Vec<Block> {
+        let mut lines = lines.iter().copied();
         let mut blocks = Vec::new();
         let mut vary = Vec::new();
         while let Some(line) = lines.next() {
@@ -126,7 +178,7 @@ impl Block {
         Some(inner.split('|').map(|p| shape(p.trim())).collect())
     }
 
-    /// Whether numbers may vary in the README's output line `line`.
+    /// Whether numbers may vary in the text's output line `line`.
     fn varies(&self, line: &str) -> bool {
         let line = shape(line);
         self.vary
@@ -134,7 +186,7 @@ impl Block {
             .any(|pattern| line.starts_with(pattern.as_str()))
     }
 
-    /// Plays the block: its commands, each output checked against the README's lines.
+    /// Plays the block: its commands, each output checked against the text's lines.
     fn run(&self) {
         let mut play = Play {
             block: self,
@@ -165,7 +217,7 @@ impl Block {
 /// A block being played: the addresses learnt so far and the simulators it started.
 struct Play<'a> {
     block: &'a Block,
-    /// README address → the running simulator's.
+    /// The text's address → the running simulator's.
     addresses: Vec<(String, String)>,
     /// Killed when the block ends, as the reader's shell would end them.
     sims: Vec<Sim>,
@@ -188,7 +240,7 @@ impl Play<'_> {
         let got: Vec<&str> = output.lines().collect();
         let context = || {
             format!(
-                "$ {command}\n--- README:\n{}\n--- got:\n{output}",
+                "$ {command}\n--- expected:\n{}\n--- got:\n{output}",
                 expected.join("\n")
             )
         };
@@ -232,21 +284,21 @@ impl Play<'_> {
         self.sims.push(sim);
     }
 
-    /// A simulator's first line: the README's (`listening on tcp://127.0.0.1:33331`) with
+    /// A simulator's first line: the text's (`listening on tcp://127.0.0.1:33331`) with
     /// another address; other lines must match.
     fn learn(&mut self, want: &str, got: &str) {
         match (address_in(want), address_in(got)) {
-            (Some((want_head, readme)), Some((got_head, real))) => {
+            (Some((want_head, written)), Some((got_head, real))) => {
                 assert_eq!(
                     want_head, got_head,
                     "a simulator printed {got:?}, not {want:?}"
                 );
-                self.addresses.push((readme.to_owned(), real.to_owned()));
+                self.addresses.push((written.to_owned(), real.to_owned()));
                 // `--events-port 41715` names the port alone.
-                if let (Some((_, readme)), Some((_, real))) =
-                    (readme.rsplit_once(':'), real.rsplit_once(':'))
+                if let (Some((_, written)), Some((_, real))) =
+                    (written.rsplit_once(':'), real.rsplit_once(':'))
                 {
-                    self.addresses.push((readme.to_owned(), real.to_owned()));
+                    self.addresses.push((written.to_owned(), real.to_owned()));
                 }
             }
             _ => self.check(want, got, &|| "a simulator's first lines".to_owned()),
@@ -272,16 +324,16 @@ impl Play<'_> {
         }
     }
 
-    /// `text` with the README's addresses replaced by the simulators'.
+    /// `text` with the addresses it was written with replaced by the simulators'.
     fn substituted(&self, text: &str) -> String {
         let words: Vec<String> = text
             .split(' ')
             .map(|word| {
-                let found = self.addresses.iter().find_map(|(readme, real)| {
-                    let at = word.find(readme.as_str())?;
+                let found = self.addresses.iter().find_map(|(written, real)| {
+                    let at = word.find(written.as_str())?;
                     // A port alone is one only as a whole word: 41715, not 1417150.
-                    (readme.contains(':') || word == readme)
-                        .then(|| format!("{}{real}{}", &word[..at], &word[at + readme.len()..]))
+                    (written.contains(':') || word == written)
+                        .then(|| format!("{}{real}{}", &word[..at], &word[at + written.len()..]))
                 });
                 found.unwrap_or_else(|| word.to_owned())
             })
@@ -290,7 +342,7 @@ impl Play<'_> {
     }
 }
 
-/// A simulator the README starts, killed when dropped.
+/// A simulator a block starts, killed when dropped.
 struct Sim {
     child: Child,
     stdout: BufReader<ChildStdout>,

@@ -26,7 +26,7 @@
 //!   bad one when there is no confirmed value yet. An acknowledged write confirms the
 //!   value written. A steady station costs no extra request.
 //! - The live measurements change between two reads and are only range-checked: the
-//!   README states the residual risk.
+//!   user guide states the residual risk (docs/guide/src/jbc.md).
 
 pub mod demo;
 

@@ -16,7 +16,7 @@
 //! good for them, and a clean phase at the end checks that the truth still holds (a point
 //! that changed on its own is left out, and counted). Measurements the drivers do not
 //! confirm by a second read because they change between reads are the residual risk the
-//! README states: an idle JBC station's temperatures and power keep one value and are
+//! user guide states (docs/guide/src/jbc.md, thermosald.md): an idle JBC station's temperatures and power keep one value and are
 //! counted apart; Thermosald run-time values move with every sealing cycle and are not
 //! judged. Every other wrong value fails the soak.
 

@@ -23,7 +23,8 @@
 //! retained messages the subscription brings (the broker flags them; live ones are not
 //! looked at), publishes the truth for each point whose retained message is not what the
 //! gateway last published, and unsubscribes. The broker's ACLs keep other clients off the
-//! prefix in the first place (README, "Broker access control").
+//! prefix in the first place (the user guide, docs/guide/src/mqtt.md,
+//! "Broker access control").
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -258,7 +259,8 @@ impl Publisher {
                 "MQTT: {count} message(s) on this gateway's topics said something else than \
                  the truth since the last report (the latest on {topic}: {:?}); another \
                  client of the broker publishes there: the truth is published again (the \
-                 broker's ACLs can keep other clients off the prefix, see the README)",
+                 broker's ACLs can keep other clients off the prefix: the user guide's MQTT \
+                 chapter, \"Broker access control\")",
                 String::from_utf8_lossy(&payload[..payload.len().min(64)])
             );
         }

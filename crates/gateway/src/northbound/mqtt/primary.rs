@@ -3,7 +3,8 @@
 //!
 //! Sparkplug B 3.0 has no authentication: any client of the broker can publish on
 //! `spBv1.0/STATE/{host}`. The rules below keep one forged message from stopping the
-//! node for good; the broker's ACLs (README, "Broker access control") keep it from
+//! node for good; the broker's ACLs (the user guide, docs/guide/src/mqtt.md, "Broker
+//! access control") keep it from
 //! being sent at all.
 //!
 //! - A STATE dated more than [`STATE_SKEW_MS`] after the node's clock is refused: it

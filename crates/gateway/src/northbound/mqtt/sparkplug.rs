@@ -860,7 +860,10 @@ impl Node {
                     .offline_contradicted
                     .inc();
                 tracing::warn!(
-                    "MQTT: an offline STATE on {topic} was contradicted by the host within {}                      s: another client of the broker published it; ignored (the broker's                      ACLs can keep it from happening, see the README)",
+                    "MQTT: an offline STATE on {topic} was contradicted by the host within {} s: \
+                     another client of the broker published it; ignored (the broker's ACLs \
+                     can keep it from happening: the user guide's MQTT chapter, \
+                     \"Broker access control\")",
                     OFFLINE_GRACE.as_secs()
                 );
                 Ok(())
