@@ -28,9 +28,8 @@
 use std::time::Duration;
 
 use cfx::messages::{
-    ComponentsPlaced, Fault, FaultCleared, FaultOccurred, Heartbeat, Placement,
-    RecipeActivated, StationOffline, StationOnline, StationStateChanged, WorkCompleted,
-    WorkStarted,
+    ComponentsPlaced, Fault, FaultCleared, FaultOccurred, Heartbeat, Placement, RecipeActivated,
+    StationOffline, StationOnline, StationStateChanged, WorkCompleted, WorkStarted,
 };
 use cfx::types::{FaultCause, FaultSeverity, PlacementFaultType, WorkResult};
 use cfx::{Envelope, Handle, Message, ResourceState, Time, TimeSpan};
