@@ -11,6 +11,7 @@
 //! a polymorphic value (the envelope's body, an SMT placement fault) carries
 //! `"$type": "<full type name>, CFX"` first.
 
+pub mod endpoint;
 pub mod envelope;
 pub mod messages;
 pub mod types;
