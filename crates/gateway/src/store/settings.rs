@@ -42,6 +42,9 @@ fn connect(dir: &Path) -> Result<(std::path::PathBuf, Connection), StoreError> {
         source,
     };
     let conn = Connection::open(&path).map_err(sqlite)?;
+    // Patience from the first statement: the writer may hold the file.
+    conn.busy_timeout(std::time::Duration::from_secs(5))
+        .map_err(sqlite)?;
     // As the writer's open does: should this connection create the file, it keeps the
     // incremental vacuum the retention relies on.
     conn.pragma_update(None, "auto_vacuum", "INCREMENTAL")

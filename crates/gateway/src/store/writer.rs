@@ -715,7 +715,12 @@ fn write_rows(
     rollups: &mut OpenMinutes,
     rows: &[Row],
 ) -> rusqlite::Result<[u64; 3]> {
-    let tx = conn.transaction()?;
+    // IMMEDIATE: the write lock is taken at the start, waiting (busy_timeout) for another
+    // connection's write (a setting, the production keeper's mark of life). A deferred
+    // transaction that read first and found the file written meanwhile got
+    // SQLITE_BUSY at once, without waiting: "database is locked" (seen once in the MQTT
+    // tests, failing the flush at shutdown).
+    let tx = conn.transaction_with_behavior(rusqlite::TransactionBehavior::Immediate)?;
     let mut counts = [0u64; 3];
     let mut staged = Staged::default();
     let mut samples: Vec<(i64, &Sample)> = Vec::new();
