@@ -356,3 +356,83 @@ fn monitored_items_beyond_the_cap_are_refused_with_bad_too_many_monitored_items(
         assert!(out.contains(expected), "{expected:?} not in:\n{out}");
     }
 }
+
+/// A cell of JBC stations on unreachable endpoints (their nodes are there while they are
+/// down), one line each: `(line, device, name)`, with anonymous OPC UA on security None.
+fn cell_of(stations: &[(&str, &str, &str)]) -> String {
+    let mut text = String::from("[opcua]\nsecurity = [\"None\"]\nanonymous = true\n");
+    for (port, (line, device, name)) in (1..).zip(stations) {
+        text.push_str(&format!(
+            "\n[[line]]\nname = \"{line}\"\nendpoint = \"tcp://127.0.0.1:{port}\"\n\n\
+             [[line.device]]\nid = \"{device}\"\nname = \"{name}\"\nprotocol = \"jbc\"\n"
+        ));
+    }
+    text
+}
+
+#[cfg(unix)]
+#[test]
+fn after_a_configuration_reload_an_opcua_client_finds_the_added_device_and_the_changed_one_as_it_now_is_and_the_removed_one_nowhere()
+ {
+    require_asyncua();
+    let data = tempfile::tempdir().expect("a temporary directory");
+    let config = data.path().join("cell.toml");
+    let before = cell_of(&[
+        ("a", "jbc_a", "Station A"),
+        ("b", "jbc_b", "Station B"),
+        ("c", "jbc_c", "Station C"),
+    ]);
+    std::fs::write(&config, before).expect("the config is written");
+    let path = config.to_str().expect("a UTF-8 path");
+    let served = Served::start(data.path(), &["--config", path], None);
+
+    let (mut child, rx) = script_lines(&[
+        "reload",
+        &served.opcua,
+        "jbc_b",
+        "jbc_d",
+        "jbc_c",
+        "Rework station C",
+        "a,c,d",
+    ]);
+    let mut out = Vec::new();
+    loop {
+        let line = rx.recv_timeout(LIMIT).expect("the script browses");
+        let browsed = line == "browsed";
+        out.push(line);
+        if browsed {
+            break;
+        }
+    }
+    // Line b and its station go, station C is renamed, line d comes with station D.
+    let after = cell_of(&[
+        ("a", "jbc_a", "Station A"),
+        ("c", "jbc_c", "Rework station C"),
+        ("d", "jbc_d", "Station D"),
+    ]);
+    std::fs::write(&config, after).expect("the config is rewritten");
+    let hup = Command::new("kill")
+        .args(["-HUP", &served.child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(hup.success(), "SIGHUP was sent");
+    let deadline = std::time::Instant::now() + LIMIT;
+    while let Ok(line) =
+        rx.recv_timeout(deadline.saturating_duration_since(std::time::Instant::now()))
+    {
+        out.push(line);
+    }
+    let status = child.wait().expect("python3 ends");
+    let out = out.join("\n");
+    assert!(status.success(), "the asyncua script failed:\n{out}");
+    for expected in [
+        "its Production and Alarms folders among them",
+        "the config_reloaded event arrived",
+        "jbc_d is found after the reload",
+        "jbc_c is described as 'Rework station C'",
+        "the Gateway's Lines are a,c,d",
+        "a read, a write and a monitored item are refused BadNodeIdUnknown",
+    ] {
+        assert!(out.contains(expected), "{expected:?} not in:\n{out}");
+    }
+}

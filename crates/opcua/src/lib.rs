@@ -75,11 +75,13 @@ use self::items::{Capped, ItemCount, capped};
 use self::nodes::CellManager;
 use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
 use self::space::ids;
-use gateway::cell::{Cell, LiveMessage};
+use gateway::cell::{Cell, LiveMessage, Roster};
 use gateway::config::{CellConfig, TableReader};
+use gateway::event::EventKind;
 use gateway::http::WritePolicy;
 use gateway::northbound::{BoxStart, Northbound, Running, Start};
 use gateway::options::ServeOptions;
+use gateway::point::DeviceId;
 use gateway::time::Timestamp;
 pub use status::{OpcuaProbe, OpcuaRefused, OpcuaState, state};
 
@@ -540,7 +542,8 @@ async fn follow(
     let mut tick = tokio::time::interval(GATEWAY_TICK);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     // Changes between the address space's build and this subscription are caught up here.
-    resync(&cell, &manager, &subscriptions, ns);
+    let mut laid_out = cell.roster();
+    resync(&laid_out, &cell, &manager, &subscriptions, ns);
     loop {
         tokio::select! {
             message = live.recv() => match message {
@@ -555,6 +558,12 @@ async fn follow(
                     set_values(&manager, &subscriptions, values.to_vec());
                 }
                 Ok(LiveMessage::Event(event)) => {
+                    // The new nodes are there before clients hear of the reload.
+                    if event.kind == EventKind::ConfigReloaded {
+                        let changed = gateway::reload::devices_in(&event, "changed");
+                        laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
+                        resync(&laid_out, &cell, &manager, &subscriptions, ns);
+                    }
                     if let Some(alarm) = changed_alarm(&event) {
                         let values = cell
                             .alarms
@@ -573,7 +582,22 @@ async fn follow(
                 }
                 Err(broadcast::error::RecvError::Lagged(missed)) => {
                     tracing::warn!("the OPC UA server missed {missed} changes; reading the cell again");
-                    resync(&cell, &manager, &subscriptions, ns);
+                    // A reload's event may be among them: its changed devices are those
+                    // whose entry is not the one laid out (some perhaps only restarted).
+                    let roster = cell.roster();
+                    if !Arc::ptr_eq(&roster, &laid_out) {
+                        let changed: Vec<DeviceId> = roster
+                            .devices()
+                            .filter(|d| {
+                                laid_out
+                                    .device(d.id.as_str())
+                                    .is_some_and(|was| !Arc::ptr_eq(was, d))
+                            })
+                            .map(|d| d.id.clone())
+                            .collect();
+                        laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
+                    }
+                    resync(&laid_out, &cell, &manager, &subscriptions, ns);
                 }
                 Err(broadcast::error::RecvError::Closed) => return,
             },
@@ -589,10 +613,38 @@ async fn follow(
     }
 }
 
+/// Brings the address space to the cell's roster in force (see
+/// [`nodes::CellNodes::follow_roster`]), `changed` the devices a reload changed, and sets
+/// the gateway's `Lines`; returns the roster laid out.
+fn follow_roster(
+    cell: &Cell,
+    handle: &ServerHandle,
+    manager: &CellManager,
+    ns: u16,
+    changed: &[DeviceId],
+) -> Arc<Roster> {
+    let roster = cell.roster();
+    {
+        let types = handle.type_tree().read();
+        let mut space = manager.address_space().write();
+        manager
+            .inner()
+            .follow_roster(&mut space, &*types, &roster, changed);
+    }
+    set_values(
+        manager,
+        handle.subscriptions(),
+        vec![(
+            ids::gateway(ns, Some(nodes::LINES)),
+            DataValue::new_now(nodes::line_names(&roster)),
+        )],
+    );
+    roster
+}
+
 /// The alarm an event of the alarm journal changed (`alarm_raised`, `alarm_cleared`,
 /// `alarm_changed`: its `alarm` field), if it is one.
 fn changed_alarm(event: &gateway::event::Event) -> Option<&str> {
-    use gateway::event::EventKind;
     matches!(
         event.kind,
         EventKind::AlarmRaised | EventKind::AlarmCleared | EventKind::AlarmChanged
@@ -606,8 +658,10 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
     let _ = stop.wait_for(|stopped| *stopped).await;
 }
 
-/// Sets every variable from the cell's current state.
+/// Sets every variable from the cell's current state, its devices those of `roster` (the
+/// one laid out).
 fn resync(
+    roster: &Roster,
     cell: &Cell,
     manager: &CellManager,
     subscriptions: &::opcua::server::SubscriptionCache,
@@ -616,7 +670,7 @@ fn resync(
     let now = Timestamp::now();
     let t = space::opc_time(now);
     let mut values = alarm_values(cell, ns, t);
-    for device in cell.devices() {
+    for device in roster.devices().map(|d| d.view(now)) {
         values.extend(device_values(ns, &device.summary, t));
         for point in &device.points {
             values.push((
@@ -669,7 +723,12 @@ fn set_values(
             .map(|(node, value)| (node, None, value.clone())),
     );
     if let Err(status) = result {
+        // async-opcua stops at a node that is not there (a device a reload removed, or added
+        // and not yet laid out) and notifies none: the others are set one by one.
         tracing::warn!("an OPC UA value was not set: {status}");
+        for (node, value) in values {
+            let _ = manager.set_value(subscriptions, &node, None, value);
+        }
     }
 }
 

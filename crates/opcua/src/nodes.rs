@@ -6,6 +6,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
+use ::opcua::nodes::TypeTree;
 use ::opcua::server::address_space::{
     AccessLevel, AddressSpace, EventNotifier, MethodBuilder, NodeType, ObjectBuilder,
     ObjectTypeBuilder, VariableBuilder,
@@ -21,9 +22,10 @@ use ::opcua::server::node_manager::{
 use ::opcua::server::{ContinuationPoint, CreateMonitoredItem};
 use ::opcua::sync::RwLock;
 use ::opcua::types::{
-    AttributeId, DataTypeId, DataValue, ExtensionObject, HistoryData, NodeId, NumericRange,
-    ObjectId, ObjectTypeId, QualifiedName, ReadProcessedDetails, ReadRawModifiedDetails,
-    StatusCode, TimestampsToReturn, VariableTypeId, Variant,
+    AttributeId, BrowseDirection, DataTypeId, DataValue, ExtensionObject, HistoryData,
+    LocalizedText, NodeId, NumericRange, ObjectId, ObjectTypeId, QualifiedName,
+    ReadProcessedDetails, ReadRawModifiedDetails, ReferenceTypeId, StatusCode, TimestampsToReturn,
+    VariableTypeId, Variant,
 };
 
 use super::alarms::{self, BadArguments, Method};
@@ -32,9 +34,9 @@ use super::history::{self, Aggregate, Fetched, RawRead};
 use super::peers::Peers;
 use super::space::{self, ids};
 use gateway::alarm::book::View as AlarmView;
-use gateway::cell::{Cell, DeviceView};
+use gateway::cell::{Cell, DeviceView, Roster};
 use gateway::driver::{ErrorKind, WriteError};
-use gateway::point::{PointId, PointKind, ValueError};
+use gateway::point::{DeviceId, PointId, PointKind, ValueError};
 use gateway::time::Timestamp;
 use gateway::write::Attempt;
 
@@ -47,8 +49,9 @@ pub struct CellNodes {
     users: Users,
     peers: Arc<Peers>,
     ns: u16,
-    /// Point variables by node id.
-    points: HashMap<NodeId, PointNode>,
+    /// Point variables by node id: those of the roster in force, kept in step with the
+    /// address space by [`CellNodes::follow_roster`].
+    points: RwLock<HashMap<NodeId, PointNode>>,
 }
 
 /// A point's variable.
@@ -75,13 +78,14 @@ pub fn builder(cell: Arc<Cell>, users: Users, peers: Arc<Peers>) -> impl NodeMan
             .namespaces_mut()
             .add_namespace(space::NAMESPACE_URI);
         space.add_namespace(space::NAMESPACE_URI, ns);
-        let points = build(space, ns, &cell, Timestamp::now());
+        let types = context.type_tree.read();
+        let points = build(space, &*types, ns, &cell, Timestamp::now());
         CellNodes {
             cell,
             users,
             peers,
             ns,
-            points,
+            points: RwLock::new(points),
         }
     })
 }
@@ -91,45 +95,224 @@ impl CellNodes {
     pub fn namespace(&self) -> u16 {
         self.ns
     }
+
+    /// Brings `Objects/Cell` to `roster` after a reload replaced the one it was laid out
+    /// from (see [`lay_out`]), with `changed` the devices whose table the reload changed;
+    /// keeps the point variables' table in step. `types` is the server's type tree.
+    ///
+    /// Monitored items on the nodes removed stay: async-opcua 0.19 keeps them in its
+    /// `SubscriptionCache` by node id and attribute whatever the address space holds (its
+    /// own DeleteNodes does not touch them either), with their last value and no new
+    /// status, until the client deletes them or its subscription ends; they are counted in
+    /// [`crate::items`] until then. An item on a node built again under the same id (a
+    /// changed device's points) is notified again, since values are set by node id.
+    /// Clients learn of the change by the `config_reloaded` event (a `CellbusEventType` of
+    /// the Gateway object) and browse again: no GeneralModelChangeEvent, which async-opcua
+    /// has only as a node id, with no event type or server side to raise it.
+    pub fn follow_roster(
+        &self,
+        space: &mut AddressSpace,
+        types: &dyn TypeTree,
+        roster: &Roster,
+        changed: &[DeviceId],
+    ) {
+        let mut points = self.points.write();
+        lay_out(
+            space,
+            types,
+            self.ns,
+            &self.cell,
+            roster,
+            changed,
+            Timestamp::now(),
+            &mut points,
+        );
+    }
 }
 
 /// Builds the cell's nodes; returns the point variables by node id.
 fn build(
     space: &mut AddressSpace,
+    types: &dyn TypeTree,
     ns: u16,
     cell: &Cell,
     now: Timestamp,
 ) -> HashMap<NodeId, PointNode> {
     let mut points = HashMap::new();
-    let cell_id = ids::cell(ns);
-    ObjectBuilder::new(&cell_id, QualifiedName::new(ns, "Cell"), "Cell")
+    ObjectBuilder::new(&ids::cell(ns), QualifiedName::new(ns, "Cell"), "Cell")
         .description("The production cell: a folder per line, an object per device")
         .is_folder()
         .organized_by(ObjectId::ObjectsFolder)
         .insert(space);
-    let devices = cell.devices();
-    let alarms: Vec<AlarmView> = cell
-        .alarms
-        .with(|book| (0..book.len()).filter_map(|i| book.view(i)).collect());
-    for line in cell.lines() {
-        let line_id = ids::line(ns, &line.name);
-        ObjectBuilder::new(&line_id, QualifiedName::new(ns, &line.name), &line.name)
-            .description(format!("Line {} on {}", line.name, line.endpoint))
-            .is_folder()
-            .organized_by(cell_id.clone())
-            .insert(space);
-        for device in devices.iter().filter(|d| d.line == line.name) {
-            build_device(space, ns, &line_id, device, now, &mut points);
-            let of_device: Vec<&AlarmView> = alarms
-                .iter()
-                .filter(|a| a.device == device.summary.id)
-                .collect();
-            build_alarms(space, ns, device.summary.id.as_str(), &of_device, now);
-        }
-    }
+    lay_out(
+        space,
+        types,
+        ns,
+        cell,
+        &cell.roster(),
+        &[],
+        now,
+        &mut points,
+    );
     build_gateway(space, ns, cell);
     build_event_type(space, ns);
     points
+}
+
+/// Lays `Objects/Cell` out as `roster` has it, the one path of the start (an empty
+/// folder) and of a reload: removes each device object (with all under it: points and
+/// their properties, `Status`, `Error`, `Production`, `Alarms` and the alarms' objects)
+/// that `roster` does not have, has on another line or that is in `changed`, and each
+/// line folder of a line it does not have; then adds a folder for each new line and
+/// builds each device that has no object (with its alarms), and makes each remaining
+/// device's `Alarms` folder hold its alarms of the book again if the reload changed them.
+/// Point variables removed leave `points`, those built enter it.
+///
+/// The devices added and removed are read from the address space against `roster`, not
+/// from the reload's event: the same answer, and one that holds after a lag too.
+#[allow(clippy::too_many_arguments)] // the address space, the cell and what changed, each needed
+fn lay_out(
+    space: &mut AddressSpace,
+    types: &dyn TypeTree,
+    ns: u16,
+    cell: &Cell,
+    roster: &Roster,
+    changed: &[DeviceId],
+    now: Timestamp,
+    points: &mut HashMap<NodeId, PointNode>,
+) {
+    let cell_id = ids::cell(ns);
+    let lines: Vec<NodeId> = children(space, types, ns, &cell_id, ReferenceTypeId::Organizes);
+    // Device objects that stay: on the folder of their line, and not changed.
+    for line in &lines {
+        for device in children(space, types, ns, line, ReferenceTypeId::Organizes) {
+            let stays = roster.devices().any(|d| {
+                ids::device(ns, d.id.as_str()) == device
+                    && ids::line(ns, &d.line) == *line
+                    && !changed.contains(&d.id)
+            });
+            if !stays {
+                forget(points, remove_tree(space, types, ns, &device));
+            }
+        }
+    }
+    for line in &lines {
+        if !roster
+            .lines()
+            .iter()
+            .any(|l| ids::line(ns, &l.name) == *line)
+        {
+            forget(points, remove_tree(space, types, ns, line));
+        }
+    }
+    let alarms: Vec<AlarmView> = cell
+        .alarms
+        .with(|book| (0..book.len()).filter_map(|i| book.view(i)).collect());
+    let of_device = |device: &DeviceId| -> Vec<&AlarmView> {
+        alarms.iter().filter(|a| a.device == *device).collect()
+    };
+    for line in roster.lines() {
+        let line_id = ids::line(ns, &line.name);
+        let description = format!("Line {} on {}", line.name, line.endpoint);
+        match space.find_mut(&line_id) {
+            // A line restarted on another endpoint keeps its folder.
+            Some(folder) => folder
+                .as_mut_node()
+                .set_description(LocalizedText::from(description.as_str())),
+            None => {
+                ObjectBuilder::new(&line_id, QualifiedName::new(ns, &line.name), &line.name)
+                    .description(description)
+                    .is_folder()
+                    .organized_by(cell_id.clone())
+                    .insert(space);
+            }
+        }
+        for device in roster.devices().filter(|d| d.line == line.name) {
+            let id = device.id.as_str();
+            let views = of_device(&device.id);
+            if space.node_exists(&ids::device(ns, id)) {
+                keep_alarms(space, types, ns, id, &views, now);
+            } else {
+                build_device(space, ns, &line_id, &device.view(now), now, points);
+                build_alarms(space, ns, id, &views, now);
+            }
+        }
+    }
+}
+
+/// Makes the existing `Alarms` folder of `device` hold the objects of `views`, built again
+/// when they differ (the alarms of a device a reload did not change, whose rules did).
+fn keep_alarms(
+    space: &mut AddressSpace,
+    types: &dyn TypeTree,
+    ns: u16,
+    device: &str,
+    views: &[&AlarmView],
+    now: Timestamp,
+) {
+    let folder = ids::device_alarms(ns, device);
+    let mut present = children(space, types, ns, &folder, ReferenceTypeId::Organizes);
+    let mut wanted: Vec<NodeId> = views.iter().map(|v| ids::alarm(ns, &v.id)).collect();
+    present.sort_by_key(ToString::to_string);
+    wanted.sort_by_key(ToString::to_string);
+    if present != wanted {
+        remove_tree(space, types, ns, &folder);
+        build_alarms(space, ns, device, views, now);
+    }
+}
+
+/// The targets of `node`'s forward references of type `reference` (or a subtype) in the
+/// namespace `ns`.
+fn children(
+    space: &AddressSpace,
+    types: &dyn TypeTree,
+    ns: u16,
+    node: &NodeId,
+    reference: ReferenceTypeId,
+) -> Vec<NodeId> {
+    space
+        .find_references(
+            node,
+            Some((reference, true)),
+            types,
+            BrowseDirection::Forward,
+        )
+        .filter(|r| r.target_node.namespace == ns)
+        .map(|r| r.target_node.clone())
+        .collect()
+}
+
+/// Deletes `root` and every node of the namespace `ns` under it (forward hierarchical
+/// references: Organizes, HasComponent, HasProperty), each with every reference from and
+/// to it (the parent's to it, the type definition's inverse); returns the nodes deleted.
+fn remove_tree(
+    space: &mut AddressSpace,
+    types: &dyn TypeTree,
+    ns: u16,
+    root: &NodeId,
+) -> Vec<NodeId> {
+    let mut deleted = Vec::new();
+    let mut to_delete = vec![root.clone()];
+    while let Some(node) = to_delete.pop() {
+        to_delete.extend(children(
+            space,
+            types,
+            ns,
+            &node,
+            ReferenceTypeId::HierarchicalReferences,
+        ));
+        if space.delete(&node, true).is_some() {
+            deleted.push(node);
+        }
+    }
+    deleted
+}
+
+/// Takes the nodes `deleted` out of the point variables' table.
+fn forget(points: &mut HashMap<NodeId, PointNode>, deleted: Vec<NodeId>) {
+    for node in deleted {
+        points.remove(&node);
+    }
 }
 
 /// `CellbusEventType`, the type of the gateway's events ([`space::CellEvent`]): a
@@ -420,7 +603,6 @@ fn build_gateway(space: &mut AddressSpace, ns: u16, cell: &Cell) {
         .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
         .organized_by(ObjectId::ObjectsFolder)
         .insert(space);
-    let lines: Vec<String> = cell.lines().into_iter().map(|l| l.name).collect();
     let variables: [(&str, &str, DataTypeId, i32, Variant); 3] = [
         (
             "Version",
@@ -430,11 +612,11 @@ fn build_gateway(space: &mut AddressSpace, ns: u16, cell: &Cell) {
             Variant::from(env!("CARGO_PKG_VERSION")),
         ),
         (
-            "Lines",
+            LINES,
             "The names of the lines the gateway polls",
             DataTypeId::String,
             1,
-            Variant::from(lines),
+            line_names(&cell.roster()),
         ),
         (
             HISTORY_ROWS,
@@ -462,6 +644,15 @@ fn build_gateway(space: &mut AddressSpace, ns: u16, cell: &Cell) {
 
 /// The gateway variable counting history rows.
 pub const HISTORY_ROWS: &str = "HistoryRows";
+
+/// The gateway variable naming the lines.
+pub const LINES: &str = "Lines";
+
+/// The value of the gateway's [`LINES`] for `roster`: its lines' names.
+pub fn line_names(roster: &Roster) -> Variant {
+    let names: Vec<String> = roster.lines().iter().map(|l| l.name.clone()).collect();
+    Variant::from(names)
+}
 
 fn property(
     space: &mut AddressSpace,
@@ -637,12 +828,18 @@ impl InMemoryNodeManagerImpl for CellNodes {
             .read_values(context, space, &to_read, 0.0, TimestampsToReturn::Both)
             .await;
         for (value, item) in values.into_iter().zip(items.iter_mut()) {
+            // async-opcua's default would make an item Good on a node that is not there (one a
+            // reload removed): refused, as Part 4 (5.12.2) says.
+            if value.status() == StatusCode::BadNodeIdUnknown {
+                item.set_status(StatusCode::BadNodeIdUnknown);
+                continue;
+            }
             if value.status() != StatusCode::BadAttributeIdInvalid {
                 item.set_initial_value(value);
             }
             item.set_status(StatusCode::Good);
             let asked = item.sampling_interval();
-            if let Some(point) = self.points.get(&item.item_to_monitor().node_id)
+            if let Some(point) = self.points.read().get(&item.item_to_monitor().node_id)
                 && asked >= 0.0
                 && asked <= point.period_ms
             {
@@ -734,9 +931,9 @@ fn aggregates_of(aggregates: &[NodeId], count: usize) -> Result<Vec<Option<&Node
 
 impl CellNodes {
     fn point_of(&self, node: &NodeId) -> Option<(PointId, PointKind)> {
-        let point = &self.points.get(node)?.id;
-        let spec = self.cell.point(point)?;
-        Some((point.clone(), spec.kind.clone()))
+        let point = self.points.read().get(node)?.id.clone();
+        let spec = self.cell.point(&point)?;
+        Some((point, spec.kind.clone()))
     }
 
     /// What one call of a raw read needs from the history.

@@ -7,6 +7,7 @@
     opcua_check.py flood OPC_URL HTTP_ADDR COUNT
     opcua_check.py items OPC_URL HTTP_ADDR CAP
     opcua_check.py alarm OPC_URL HTTP_ADDR PASSWORD DEVICE
+    opcua_check.py reload OPC_URL REMOVED ADDED CHANGED DESCRIPTION LINES
 
 `read`: browses Objects/Cell and compares every device and point with /api/devices
 (data type, description, unit, range, access, enumeration labels); subscribes to the point that changes most
@@ -48,6 +49,15 @@ comment, receives the alarm_changed event, is refused a second acknowledgement a
 unknown alarm, shelves it (a shelving of 0 s refused) and unshelves it (twice: refused),
 and finds the acknowledgement in /api/alarms/journal with the comment and by `opcua user
 operator from 127.0.0.1:PORT` (the client's own port).
+
+`reload`: browses Objects/Cell anonymously (security None), keeps the node ids of
+everything under REMOVED (its points and their properties, Status, Error, its Production
+and Alarms folders, its alarms' objects), subscribes to the Gateway object's events and
+prints `browsed` (the test rewrites the configuration and sends SIGHUP meanwhile); on the
+config_reloaded event it browses again and finds ADDED with its points (their data type
+read), CHANGED described as DESCRIPTION, the Gateway's Lines as LINES (comma-separated),
+and every node of REMOVED gone: a read, a write and a monitored item on it are refused
+with Bad_NodeIdUnknown.
 
 Prints `ok: ...` lines; any failure raises (exit 1). Every wait is bounded.
 """
@@ -183,13 +193,14 @@ class Events:
         self.seen.put_nowait(event)
 
 
-async def subscribe_events(client, node, event_type=ua.ObjectIds.BaseEventType):
+async def subscribe_events(client, node, event_type=ua.ObjectIds.BaseEventType, queue=0):
     handler = Events()
     sub = await client.create_subscription(100, handler)
     # Without asyncua's where clause (EventType InList [the type, its subtypes]): the
     # server's filter (async-opcua 0.19) compares no NodeIds in InList, so that clause
-    # matches nothing; the select clauses alone pick the type's fields.
-    await sub.subscribe_events(node, event_type, where_clause_generation=False)
+    # matches nothing; the select clauses alone pick the type's fields. A `queue` of 0 keeps
+    # only the last event of a publishing interval.
+    await sub.subscribe_events(node, event_type, where_clause_generation=False, queuesize=queue)
     return sub, handler
 
 
@@ -984,8 +995,77 @@ async def alarm(url, addr, password, device):
         ok(f"the alarm journal has the acknowledgement: {acks[0]['message']!r}, by {acks[0]['by']!r}")
 
 
+async def subtree(node):
+    """The node ids of `node` and of everything under it (forward hierarchical references)."""
+    found = [node.nodeid]
+    for child in await node.get_children():
+        found.extend(await subtree(child))
+    return found
+
+
+async def reload(url, removed, added, changed, description, lines):
+    async with Client(url, timeout=LIMIT) as client:
+        ns, tree = await cell_tree(client)
+        assert removed in tree and changed in tree and added not in tree, sorted(tree)
+        removed_object = client.get_node(ua.NodeId(removed, ns))
+        for folder in ["Production", "Alarms"]:
+            assert folder in tree[removed][1], f"{removed} has no {folder} folder: {sorted(tree[removed][1])}"
+        gone = await subtree(removed_object)
+        point = next(n for name, n in tree[removed][1].items() if name == "air_temperature")
+        gateway = await client.nodes.objects.get_child(f"{ns}:Gateway")
+        cell_event_type = client.get_node(ua.NodeId("CellbusEventType", ns))
+        # The reload's event comes with the lines' line_down events: all of them queued.
+        sub, handler = await subscribe_events(client, gateway, cell_event_type, queue=100)
+        ok(f"{sorted(tree)} browsed; {removed} has {len(gone)} nodes, its Production and Alarms folders among them")
+        print("browsed", flush=True)
+
+        others = []
+        try:
+            while True:
+                event = await asyncio.wait_for(handler.seen.get(), 2 * LIMIT)
+                if event.Kind == "config_reloaded":
+                    break
+                others.append((event.Kind, event.Message.Text))
+        except asyncio.TimeoutError:
+            raise AssertionError(f"no config_reloaded event from the Gateway object; others: {others}") from None
+        fields = json.loads(event.Fields)
+        assert fields["removed"] == [removed] and fields["added"] == [added], fields
+        ok(f"the config_reloaded event arrived: {event.Message.Text!r}")
+
+        _, tree = await cell_tree(client)
+        assert removed not in tree and added in tree and changed in tree, sorted(tree)
+        points = [n for name, n in tree[added][1].items() if name not in ["Status", "Error", "Production", "Alarms"]]
+        assert points, tree[added]
+        for node in points:
+            await node.read_data_type()
+        value = await tree[added][1]["air_temperature"].read_data_value(raise_on_bad_status=False)
+        assert value.StatusCode.is_bad(), value  # its endpoint does not answer
+        assert await tree[added][1]["Status"].read_value() in ["connecting", "down", "backed off"]
+        ok(f"{added} is found after the reload with its {len(points)} points (air_temperature {value.StatusCode.name})")
+        words = (await client.get_node(ua.NodeId(changed, ns)).read_description()).Text
+        assert words == description, words
+        ok(f"{changed} is described as {words!r}")
+        got = await gateway.get_child(f"{ns}:Lines")
+        assert await got.read_value() == lines.split(","), await got.read_value()
+        ok(f"the Gateway's Lines are {lines}")
+
+        read = await client.uaclient.read_attributes(gone, ua.AttributeIds.BrowseName)
+        known = [str(n) for n, v in zip(gone, read) if v.StatusCode.value != ua.StatusCodes.BadNodeIdUnknown]
+        assert not known, known
+        await refused(point.write_value(ua.Variant(1.0, ua.VariantType.Double)), ua.StatusCodes.BadNodeIdUnknown)
+        changes = await client.create_subscription(200, Changes())
+        items = await changes.subscribe_data_change([point])
+        assert isinstance(items[0], ua.StatusCode) and items[0].value == ua.StatusCodes.BadNodeIdUnknown, items
+        ok(f"the {len(gone)} nodes of {removed} are gone: a read, a write and a monitored item are refused BadNodeIdUnknown")
+        await changes.delete()
+        await sub.delete()
+
+
 def main():
     mode = sys.argv[1]
+    if mode == "reload":
+        asyncio.run(asyncio.wait_for(reload(*sys.argv[2:8]), SCRIPT_LIMIT))
+        return
     if mode == "alarm":
         asyncio.run(asyncio.wait_for(alarm(*sys.argv[2:6]), SCRIPT_LIMIT))
         return
