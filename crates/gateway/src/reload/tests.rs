@@ -1,29 +1,23 @@
 use super::*;
 use crate::testing::config::parse;
 
+/// A line `name` with the JBC station `id` (its `extra` keys) at port `port`.
+fn station(name: &str, port: u16, id: &str, extra: &str) -> String {
+    format!(
+        "[[line]]\nname = \"{name}\"\nendpoint = \"tcp://127.0.0.1:{port}\"\n\
+         [[line.device]]\nid = \"{id}\"\nprotocol = \"jbc\"\n{extra}\n"
+    )
+}
+
 /// A cell of three JBC stations, each on a line of its own.
-const THREE: &str = r#"
-[[line]]
-name = "a"
-endpoint = "tcp://127.0.0.1:7001"
-[[line.device]]
-id = "jbc_a"
-protocol = "jbc"
-
-[[line]]
-name = "b"
-endpoint = "tcp://127.0.0.1:7002"
-[[line.device]]
-id = "jbc_b"
-protocol = "jbc"
-
-[[line]]
-name = "c"
-endpoint = "tcp://127.0.0.1:7003"
-[[line.device]]
-id = "jbc_c"
-protocol = "jbc"
-"#;
+fn three() -> String {
+    [
+        station("a", 7001, "jbc_a", ""),
+        station("b", 7002, "jbc_b", ""),
+        station("c", 7003, "jbc_c", ""),
+    ]
+    .concat()
+}
 
 fn ids(ids: &[DeviceId]) -> Vec<&str> {
     ids.iter().map(DeviceId::as_str).collect()
@@ -31,7 +25,7 @@ fn ids(ids: &[DeviceId]) -> Vec<&str> {
 
 #[test]
 fn the_same_file_again_keeps_every_line_and_changes_nothing() {
-    let config = parse(THREE).unwrap();
+    let config = parse(&three()).unwrap();
     let plan = plan(&config, &config);
     assert!(plan.is_empty(), "{plan:?}");
     assert_eq!(plan.kept, ["a", "b", "c"]);
@@ -41,31 +35,14 @@ fn the_same_file_again_keeps_every_line_and_changes_nothing() {
 
 #[test]
 fn a_line_removed_stops_a_line_added_starts_and_a_changed_device_restarts_only_its_line() {
-    let old = parse(THREE).unwrap();
+    let old = parse(&three()).unwrap();
     let new = parse(
-        r#"
-[[line]]
-name = "a"
-endpoint = "tcp://127.0.0.1:7001"
-[[line.device]]
-id = "jbc_a"
-protocol = "jbc"
-
-[[line]]
-name = "c"
-endpoint = "tcp://127.0.0.1:7003"
-[[line.device]]
-id = "jbc_c"
-name = "Rework station C"
-protocol = "jbc"
-
-[[line]]
-name = "d"
-endpoint = "tcp://127.0.0.1:7004"
-[[line.device]]
-id = "jbc_d"
-protocol = "jbc"
-"#,
+        &[
+            station("a", 7001, "jbc_a", ""),
+            station("c", 7003, "jbc_c", "name = \"Rework station C\""),
+            station("d", 7004, "jbc_d", ""),
+        ]
+        .concat(),
     )
     .unwrap();
     let plan = plan(&old, &new);
@@ -79,8 +56,8 @@ protocol = "jbc"
 
 #[test]
 fn a_line_whose_endpoint_moved_restarts_but_its_unchanged_device_is_not_changed() {
-    let old = parse(THREE).unwrap();
-    let new = parse(&THREE.replace("7002", "7012")).unwrap();
+    let old = parse(&three()).unwrap();
+    let new = parse(&three().replace("7002", "7012")).unwrap();
     let plan = plan(&old, &new);
     assert_eq!(plan.stop, ["b"]);
     assert_eq!(plan.start, ["b"]);
@@ -89,9 +66,10 @@ fn a_line_whose_endpoint_moved_restarts_but_its_unchanged_device_is_not_changed(
 
 #[test]
 fn a_changed_token_or_interface_table_is_named_as_needing_a_restart() {
-    let old = parse(THREE).unwrap();
+    let old = parse(&three()).unwrap();
     let new = parse(&format!(
-        "token = \"a-new-token-for-writes\"\n\n[mqtt]\nbroker = \"mqtt://127.0.0.1:1883\"\n{THREE}"
+        "token = \"a-new-token-for-writes\"\n\n[mqtt]\nbroker = \"mqtt://127.0.0.1:1883\"\n{}",
+        three()
     ))
     .unwrap();
     let plan = plan(&old, &new);
@@ -101,8 +79,8 @@ fn a_changed_token_or_interface_table_is_named_as_needing_a_restart() {
 
 #[test]
 fn the_event_of_a_reload_lists_the_devices_for_the_interfaces() {
-    let old = parse(THREE).unwrap();
-    let new = parse(&THREE.replace("jbc_b", "jbc_e")).unwrap();
+    let old = parse(&three()).unwrap();
+    let new = parse(&three().replace("jbc_b", "jbc_e")).unwrap();
     let plan = plan(&old, &new);
     let event = reloaded_event(&plan, std::path::Path::new("/etc/cellbus/cell.toml"));
     assert_eq!(event.kind, EventKind::ConfigReloaded);
