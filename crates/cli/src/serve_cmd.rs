@@ -66,6 +66,12 @@ pub struct ServeArgs {
     /// spBv1.0/STATE/ID message) before publishing; while it is away, store and forward.
     #[arg(long, value_name = "ID")]
     pub mqtt_primary_host: Option<String>,
+    /// Publish the cell's placement machines as IPC-CFX endpoints over AMQP 1.0 to this
+    /// broker and address: amqp://HOST:PORT/ADDRESS (a queue; RabbitMQ 3.x exchanges as
+    /// amqp://HOST:PORT//exchange/NAME). The demo's machine is `cellbus.demo.placer1`;
+    /// with --config it replaces the [cfx] table's broker and address.
+    #[arg(long, value_name = "URL")]
+    pub cfx: Option<String>,
     /// Serve the cell over OPC UA on this address (port 0 picks a free port); the second
     /// line printed is `opcua on opc.tcp://IP:PORT`. The demo cell on loopback offers
     /// security None and anonymous reading next to Basic256Sha256, and the user `operator`
@@ -113,6 +119,9 @@ fn interface_flags(args: &ServeArgs) -> anyhow::Result<Flags> {
         mode: args.mqtt_mode,
         node: args.mqtt_node.clone(),
         primary_host: args.mqtt_primary_host.clone(),
+    });
+    let flags = flags.with(gateway::northbound::cfx::CfxFlags {
+        url: args.cfx.clone(),
     });
     #[cfg(feature = "opcua")]
     let flags = flags.with(cellbus_opcua::OpcuaFlags { listen: args.opcua });

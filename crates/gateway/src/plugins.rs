@@ -41,7 +41,7 @@ impl Registry {
     }
 }
 
-/// The gateway crate's own device kinds and interfaces (MQTT).
+/// The gateway crate's own device kinds and interfaces (MQTT, IPC-CFX).
 pub fn builtin() -> Registry {
     let config = Plugins::default()
         .with_kind(jbc::KIND)
@@ -61,6 +61,7 @@ pub fn builtin() -> Registry {
         demos,
     }
     .with_interface(&northbound::mqtt::Mqtt)
+    .with_interface(&northbound::cfx::Cfx)
 }
 
 /// Reads and checks the configuration at `path` with the gateway crate's own kinds and

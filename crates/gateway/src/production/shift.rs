@@ -118,6 +118,11 @@ impl Shifts {
         &self.shifts
     }
 
+    /// The cell's time zone.
+    pub fn zone(&self) -> &TimeZone {
+        &self.zone
+    }
+
     /// The zone's name.
     pub fn zone_name(&self) -> &str {
         &self.zone_name

@@ -28,8 +28,9 @@
 use std::time::Duration;
 
 use cfx::messages::{
-    ComponentsPlaced, Fault, FaultCleared, FaultOccurred, Heartbeat, Placement, RecipeActivated,
-    StationOffline, StationOnline, StationStateChanged, WorkCompleted, WorkStarted,
+    ComponentsPlaced, EndpointConnected, EndpointShuttingDown, Fault, FaultCleared, FaultOccurred,
+    Heartbeat, Placement, RecipeActivated, StationOffline, StationOnline, StationStateChanged,
+    WorkCompleted, WorkStarted,
 };
 use cfx::types::{FaultCause, FaultSeverity, PlacementFaultType, WorkResult};
 use cfx::{Envelope, Handle, Message, ResourceState, Time, TimeSpan};
@@ -148,6 +149,24 @@ impl Station {
             Input::Event(event) => self.on_event(event),
             Input::Tick(now) => self.on_tick(now),
         }
+    }
+
+    /// Its `EndpointConnected`, as a connection to the broker starts (`now`).
+    pub fn connected(&mut self, now: Timestamp) -> Envelope {
+        let message = Message::EndpointConnected(EndpointConnected {
+            cfx_handle: self.config.handle.clone(),
+            request_network_uri: None,
+            request_target_address: None,
+        });
+        self.envelope(now, message, "")
+    }
+
+    /// Its `EndpointShuttingDown`, as the gateway stops (`now`).
+    pub fn shutting_down(&self, now: Timestamp) -> Envelope {
+        let message = Message::EndpointShuttingDown(EndpointShuttingDown {
+            cfx_handle: self.config.handle.clone(),
+        });
+        self.envelope(now, message, "")
     }
 
     /// The `Heartbeat` due at `now`, with the active faults.

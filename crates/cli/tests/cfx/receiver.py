@@ -1,0 +1,55 @@
+"""An IPC-CFX consumer nobody here wrote: python-qpid-proton (pinned in scripts/test)
+listening for AMQP 1.0 without a broker, as an MES's CFX receiver would.
+
+Prints `listening on PORT` (a free loopback port), then one JSON line per message: the
+link's address, the AMQP properties and application properties, and the body (the CFX
+JSON, parsed). Accepts every message. Runs until killed.
+"""
+
+import json
+
+from proton.handlers import MessagingHandler
+from proton.reactor import Container
+
+
+def text(value):
+    """An AMQP value as JSON can carry it."""
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return str(value)
+
+
+class Receiver(MessagingHandler):
+    def on_start(self, event):
+        acceptor = event.container.listen("127.0.0.1:0")
+        # proton 0.40 keeps the listening socket here; the port 0 asked for is now known.
+        port = acceptor._selectable._delegate.getsockname()[1]
+        print(f"listening on {port}", flush=True)
+
+    def on_message(self, event):
+        message = event.message
+        body = message.body
+        if isinstance(body, memoryview):
+            body = bytes(body)
+        if isinstance(body, bytes):
+            body = body.decode("utf-8")
+        target = event.link.remote_target
+        print(
+            json.dumps(
+                {
+                    "address": target.address if target else None,
+                    "message_id": text(message.id),
+                    "subject": message.subject,
+                    "content_type": text(message.content_type),
+                    "reply_to": message.reply_to,
+                    "creation_time": message.creation_time,
+                    "durable": message.durable,
+                    "properties": {k: text(v) for k, v in (message.properties or {}).items()},
+                    "body": json.loads(body),
+                }
+            ),
+            flush=True,
+        )
+
+
+Container(Receiver()).run()
