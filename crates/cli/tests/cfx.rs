@@ -19,7 +19,8 @@ use serde_json::Value;
 const PIP: &str = "python-qpid-proton==0.40.0";
 
 /// A demo minute and a half: the first parts exhaustion comes at about 52 s, its clearing
-/// 15 s later (generous for CI's two loaded cores).
+/// 15 s later (generous for CI's two loaded cores). Also the bound of each wait after the
+/// receiver's outage.
 const WITHIN: Duration = Duration::from_secs(240);
 
 const HANDLE: &str = "cellbus.demo.placer1";
@@ -37,8 +38,8 @@ impl Drop for Receiver {
     }
 }
 
-/// Starts the receiver; its port.
-fn receiver() -> (Receiver, u16) {
+/// Starts the receiver on `port` (0: a free one); its port.
+fn start_receiver(port: u16) -> (Receiver, u16) {
     require_python(
         "import proton",
         "IPC-CFX interoperability test",
@@ -48,6 +49,7 @@ fn receiver() -> (Receiver, u16) {
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/cfx/receiver.py");
     let mut child = Command::new("python3")
         .arg(script)
+        .arg(port.to_string())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -74,7 +76,7 @@ fn receiver() -> (Receiver, u16) {
 
 #[test]
 fn a_demo_minute_reaches_a_proton_receiver_as_cfx_messages_with_the_sdks_envelope_and_properties() {
-    let (receiver, port) = receiver();
+    let (receiver, port) = start_receiver(0);
     let data = tempfile::tempdir().unwrap();
     let url = format!("amqp://127.0.0.1:{port}/cfx");
     let gateway = Gateway::start_with(data.path(), &["--cfx", &url]);
@@ -181,4 +183,79 @@ fn a_demo_minute_reaches_a_proton_receiver_as_cfx_messages_with_the_sdks_envelop
         format!("connected to amqp://127.0.0.1:{port}/cfx"),
         "{health}"
     );
+
+    // The receiver goes away for a while: what the machine does meanwhile waits, and comes
+    // once each, in order, after a new EndpointConnected, when a receiver is back.
+    drop(receiver);
+    let down = Instant::now();
+    loop {
+        let health = gateway.get_json("/healthz");
+        if health["cfx"]
+            .as_str()
+            .is_some_and(|l| l.starts_with("disconnected"))
+        {
+            assert_eq!(health["status"], "degraded", "{health}");
+            break;
+        }
+        assert!(
+            down.elapsed() < WITHIN,
+            "the link never went down: {health}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // At least one board's time (the demo finishes one about every 20 s while it runs).
+    std::thread::sleep(Duration::from_secs(25));
+    let reconnected = now_text();
+    let (receiver, _) = start_receiver(port);
+    let back = Instant::now();
+    let mut after: Vec<Value> = Vec::new();
+    // Until something made after the reconnection arrives: all before it waited.
+    while !after.iter().any(|m| {
+        m["body"]["MessageName"] != "CFX.EndpointConnected"
+            && m["body"]["TimeStamp"].as_str() > Some(reconnected.as_str())
+    }) {
+        let left = WITHIN.saturating_sub(back.elapsed());
+        let Ok(line) = receiver.lines.recv_timeout(left) else {
+            panic!("nothing made after the reconnection came; got {after:#?}")
+        };
+        after.push(serde_json::from_str(&line).unwrap());
+    }
+    assert_eq!(after[0]["body"]["MessageName"], "CFX.EndpointConnected");
+    for m in &after {
+        assert!(
+            ids.insert(m["body"]["UniqueID"].to_string()),
+            "sent twice: {m}"
+        );
+    }
+    let waited: Vec<&Value> = after[1..]
+        .iter()
+        .map(|m| &m["body"])
+        .filter(|b| b["TimeStamp"].as_str() < Some(reconnected.as_str()))
+        .collect();
+    assert!(
+        waited.iter().any(|b| b["MessageName"] != "CFX.Heartbeat"),
+        "nothing waited for the link: {after:#?}"
+    );
+    assert!(
+        waited.iter().all(|b| b["MessageName"] != "CFX.Heartbeat"),
+        "heartbeats are not kept while the link is down: {after:#?}"
+    );
+    // In the order they happened (a board's start is dated back by its time).
+    let times: Vec<&str> = waited
+        .iter()
+        .filter(|b| b["MessageName"] != "CFX.Production.WorkStarted")
+        .map(|b| b["TimeStamp"].as_str().unwrap())
+        .collect();
+    let mut sorted = times.clone();
+    sorted.sort_unstable();
+    assert_eq!(times, sorted, "in the order they happened");
+}
+
+/// Now as the envelopes write it, in the machine's zone (the demo cell's): compared as
+/// text with their `TimeStamp`s.
+fn now_text() -> String {
+    jiff::Timestamp::now()
+        .to_zoned(jiff::tz::TimeZone::system())
+        .strftime("%Y-%m-%dT%H:%M:%S%.7f%:z")
+        .to_string()
 }

@@ -1,12 +1,13 @@
 """An IPC-CFX consumer nobody here wrote: python-qpid-proton (pinned in scripts/test)
 listening for AMQP 1.0 without a broker, as an MES's CFX receiver would.
 
-Prints `listening on PORT` (a free loopback port), then one JSON line per message: the
+Prints `listening on PORT` (a free loopback port, or the one given as its argument), then one JSON line per message: the
 link's address, the AMQP properties and application properties, and the body (the CFX
 JSON, parsed). Accepts every message. Runs until killed.
 """
 
 import json
+import sys
 
 from proton.handlers import MessagingHandler
 from proton.reactor import Container
@@ -21,7 +22,8 @@ def text(value):
 
 class Receiver(MessagingHandler):
     def on_start(self, event):
-        acceptor = event.container.listen("127.0.0.1:0")
+        port = sys.argv[1] if len(sys.argv) > 1 else "0"
+        acceptor = event.container.listen(f"127.0.0.1:{port}")
         # proton 0.40 keeps the listening socket here; the port 0 asked for is now known.
         port = acceptor._selectable._delegate.getsockname()[1]
         print(f"listening on {port}", flush=True)

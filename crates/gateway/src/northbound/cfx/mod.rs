@@ -235,7 +235,7 @@ async fn run(
                         () = stopped(&mut stop) => return,
                         () = &mut wait => break,
                         message = live.recv() => feeder.live(message),
-                        _ = tick.tick() => feeder.feed_all(Input::Tick(Timestamp::now())),
+                        _ = tick.tick() => feeder.tick_offline(Timestamp::now()),
                     }
                 }
                 continue;
@@ -356,6 +356,19 @@ impl Feeder {
             .stations
             .iter_mut()
             .flat_map(|(_, s)| s.feed(input))
+            .collect();
+        self.keep(made);
+    }
+
+    /// Time passing while the link is down: placement windows close, but no heartbeat is
+    /// kept to be sent late (the receiver learns of the outage by their absence, and the
+    /// next connection's `EndpointConnected`).
+    fn tick_offline(&mut self, now: Timestamp) {
+        let made: Vec<_> = self
+            .stations
+            .iter_mut()
+            .flat_map(|(_, s)| s.feed(Input::Tick(now)))
+            .filter(|e| !matches!(e.message, cfx::Message::Heartbeat(_)))
             .collect();
         self.keep(made);
     }
