@@ -72,6 +72,11 @@ pub struct ServeArgs {
     /// with --config it replaces the [cfx] table's broker and address.
     #[arg(long, value_name = "URL")]
     pub cfx: Option<String>,
+    /// Answer the CFX endpoints' requests (AreYouThere, WhoIsThere, GetEndpointInformation)
+    /// on this address over AMQP 1.0, each at its handle (port 0 picks a free port; a line
+    /// `cfx on amqp://IP:PORT` is printed).
+    #[arg(long, value_name = "IP:PORT")]
+    pub cfx_listen: Option<SocketAddr>,
     /// Serve the cell over OPC UA on this address (port 0 picks a free port); the second
     /// line printed is `opcua on opc.tcp://IP:PORT`. The demo cell on loopback offers
     /// security None and anonymous reading next to Basic256Sha256, and the user `operator`
@@ -122,6 +127,7 @@ fn interface_flags(args: &ServeArgs) -> anyhow::Result<Flags> {
     });
     let flags = flags.with(gateway::northbound::cfx::CfxFlags {
         url: args.cfx.clone(),
+        listen: args.cfx_listen,
     });
     #[cfg(feature = "opcua")]
     let flags = flags.with(cellbus_opcua::OpcuaFlags { listen: args.opcua });

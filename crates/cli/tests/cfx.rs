@@ -259,3 +259,82 @@ fn now_text() -> String {
         .strftime("%Y-%m-%dT%H:%M:%S%.7f%:z")
         .to_string()
 }
+
+#[test]
+fn the_endpoint_answers_a_proton_requester_at_its_handle_and_refuses_what_it_does_not_support() {
+    let (_receiver, port) = start_receiver(0);
+    let data = tempfile::tempdir().unwrap();
+    let url = format!("amqp://127.0.0.1:{port}/cfx");
+    let mut command = common::cellbus();
+    command
+        .args(["serve", "--listen", "127.0.0.1:0", "--data"])
+        .arg(data.path())
+        .args(["--cfx", &url, "--cfx-listen", "127.0.0.1:0"]);
+    let (mut child, mut stdout, _) = common::start_listening(&mut command, "listening on http://");
+    let listener = common::line_after(&mut stdout, "cfx on ");
+    assert!(listener.starts_with("amqp://127.0.0.1:"), "{listener}");
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/cfx/requester.py");
+    let names = [
+        "CFX.AreYouThereRequest",
+        "CFX.WhoIsThereRequest",
+        "CFX.GetEndpointInformationRequest",
+        "CFX.Production.GetActiveRecipeRequest",
+    ];
+    let out = Command::new("python3")
+        .arg(script)
+        .arg(&listener)
+        .arg(HANDLE)
+        .args(names)
+        .output()
+        .expect("python3 runs the requester");
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let answers: Vec<Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let answer = |request: usize| {
+        answers
+            .iter()
+            .find(|a| a["correlation_id"] == format!("request-{request}"))
+            .unwrap_or_else(|| panic!("no answer to request {request}: {answers:#?}"))
+    };
+    let expected = [
+        "CFX.AreYouThereResponse",
+        "CFX.WhoIsThereResponse",
+        "CFX.GetEndpointInformationResponse",
+        "CFX.NotSupportedResponse",
+    ];
+    for (request, name) in expected.iter().enumerate() {
+        let a = answer(request);
+        let envelope = &a["body"];
+        assert_eq!(envelope["MessageName"], *name, "{a}");
+        assert_eq!(envelope["Source"], HANDLE, "{a}");
+        assert_eq!(envelope["Target"], "MES.Line1.Host", "{a}");
+        assert_eq!(envelope["RequestID"], format!("request-{request}"), "{a}");
+        assert_eq!(a["to"], "MES.Line1.Host", "{a}");
+        assert_eq!(a["properties"]["cfx-target"], "MES.Line1.Host", "{a}");
+    }
+    let there = &answer(0)["body"]["MessageBody"];
+    assert_eq!(there["Result"]["Result"], "Success");
+    assert_eq!(there["RequestNetworkUri"], format!("{listener}/"));
+    assert_eq!(there["RequestTargetAddress"], HANDLE);
+    let info = &answer(2)["body"]["MessageBody"]["EndpointInformation"];
+    assert_eq!(info["CFXHandle"], HANDLE, "{info}");
+    assert_eq!(info["ModelNumber"], "panasonic", "{info}");
+    let refused = &answer(3)["body"]["MessageBody"]["RequestResult"];
+    assert_eq!(refused["Result"], "Failed", "{refused}");
+    assert!(
+        refused["Message"]
+            .as_str()
+            .unwrap()
+            .contains("CFX.Production.GetActiveRecipeRequest is not supported"),
+        "{refused}"
+    );
+}

@@ -8,6 +8,7 @@
 //! username = "cellbus"                 # SASL PLAIN, with the password in the environment
 //! password_env = "CELLBUS_CFX_PASSWORD"
 //! heartbeat = "1m"                     # 10s to 5m
+//! listen = "0.0.0.0:5673"              # the endpoints' request listener (optional)
 //!
 //! [cfx.handles]                        # device id = its CFX handle (Vendor.Model.Serial)
 //! placer1 = "Panasonic.BM221.SN12345"
@@ -52,6 +53,8 @@ pub struct CfxConfig {
     pub heartbeat: Duration,
     /// Handles by device id.
     pub handles: BTreeMap<String, cfx::Handle>,
+    /// Where the endpoints listen for requests, if they do.
+    pub listen: Option<std::net::SocketAddr>,
 }
 
 impl CfxConfig {
@@ -169,6 +172,18 @@ fn check(
         )?,
         None => DEFAULT_HEARTBEAT,
     };
+    let listen = match &raw.listen {
+        Some(text) => Some(text.get_ref().trim().parse().map_err(|_| {
+            at(
+                text.span(),
+                format!(
+                    "listen {:?} is not IP:PORT (0.0.0.0:5673; port 0 picks a free one)",
+                    text.get_ref()
+                ),
+            )
+        })?),
+        None => None,
+    };
     let mut handles = BTreeMap::new();
     for (device, handle) in raw.handles.unwrap_or_default() {
         let checked =
@@ -183,6 +198,7 @@ fn check(
         password_env: raw.password_env.map(Spanned::into_inner),
         heartbeat,
         handles,
+        listen,
     })
 }
 
@@ -195,19 +211,25 @@ struct RawCfx {
     password_env: Option<Spanned<String>>,
     heartbeat: Option<Spanned<String>>,
     handles: Option<BTreeMap<String, Spanned<String>>>,
+    listen: Option<Spanned<String>>,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::config::{parse, refused};
+    use crate::testing::config::{ONE, parse, refused};
+
+    /// `table` in a file with one station (tables first, so positions are the table's).
+    fn with_a_line(table: &str) -> String {
+        format!("{table}{ONE}")
+    }
 
     #[test]
     fn a_cfx_table_names_the_broker_the_address_and_each_machines_handle() {
-        let config = parse(
+        let config = parse(&with_a_line(
             "[cfx]\nbroker = \"amqp://mes.plant\"\naddress = \"/exchange/cfx\"\nheartbeat = \"30s\"\n\
              [cfx.handles]\nplacer1 = \"Panasonic.BM221.SN1\"\n",
-        )
+        ))
         .unwrap();
         let cfx = config.interface::<CfxConfig>("cfx").unwrap();
         assert_eq!((cfx.host.as_str(), cfx.port), ("mes.plant", 5672));
@@ -231,33 +253,45 @@ mod tests {
             ("mes".to_owned(), 5672, Some("cfx".to_owned()))
         );
         refused(
-            "[cfx]\nbroker = \"http://mes\"\naddress = \"q\"\n",
+            &with_a_line("[cfx]\nbroker = \"http://mes\"\naddress = \"q\"\n"),
             2,
             10,
             "not an AMQP URL",
         );
-        refused("[cfx]\nbroker = \"amqp://mes\"\n", 2, 10, "no address");
         refused(
-            "[cfx]\nbroker = \"amqp://u:p@mes/q\"\n",
+            &with_a_line("[cfx]\nbroker = \"amqp://mes\"\n"),
+            2,
+            10,
+            "no address",
+        );
+        refused(
+            &with_a_line("[cfx]\nbroker = \"amqp://u:p@mes/q\"\n"),
             2,
             10,
             "password_env",
         );
-        refused("[cfx]\nbroker = \"amqp://mes:0/q\"\n", 2, 10, "not a port");
         refused(
-            "[cfx]\nbroker = \"amqp://mes/q\"\nheartbeat = \"10m\"\n",
+            &with_a_line("[cfx]\nbroker = \"amqp://mes:0/q\"\n"),
+            2,
+            10,
+            "not a port",
+        );
+        refused(
+            &with_a_line("[cfx]\nbroker = \"amqp://mes/q\"\nheartbeat = \"10m\"\n"),
             3,
             13,
             "out of range",
         );
         refused(
-            "[cfx]\nbroker = \"amqp://mes/q\"\n[cfx.handles]\nplacer1 = \"Panasonic BM\"\n",
+            &with_a_line(
+                "[cfx]\nbroker = \"amqp://mes/q\"\n[cfx.handles]\nplacer1 = \"Panasonic BM\"\n",
+            ),
             4,
             11,
             "CFX handle",
         );
         refused(
-            "[cfx]\nbroker = \"amqp://mes/q\"\nqueue = \"x\"\n",
+            &with_a_line("[cfx]\nbroker = \"amqp://mes/q\"\nqueue = \"x\"\n"),
             3,
             1,
             "queue",

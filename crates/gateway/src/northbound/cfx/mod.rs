@@ -14,6 +14,7 @@
 //! gives the same `UniqueID`s), and `cellbus cfx sub`.
 
 pub mod config;
+pub mod listen;
 pub mod station;
 
 use std::collections::{BTreeMap, VecDeque};
@@ -52,6 +53,8 @@ pub const DEMO_PREFIX: &str = "cellbus.demo";
 pub struct CfxFlags {
     /// The URL, with the address as its path.
     pub url: Option<String>,
+    /// `--cfx-listen IP:PORT`: where the endpoints answer requests (port 0: a free one).
+    pub listen: Option<std::net::SocketAddr>,
 }
 
 /// The IPC-CFX interface.
@@ -77,7 +80,21 @@ impl Northbound for Cfx {
             } else {
                 format!("cellbus.{}", super::default_edge_node_id())
             };
-            let stations = stations(start.cell, &config, &prefix)?;
+            let mut stations = stations(start.cell, &config, &prefix)?;
+            let (listener_url, listener) = match config.listen {
+                Some(addr) => {
+                    let socket = tokio::net::TcpListener::bind(addr).await.map_err(|e| {
+                        OptionError(format!("IPC-CFX: cannot listen on {addr}: {e}"))
+                    })?;
+                    let local = socket.local_addr()?;
+                    let url = format!("amqp://{local}");
+                    for station in &mut stations {
+                        station.listens_at(&format!("{url}/"));
+                    }
+                    (Some(url), Some(socket))
+                }
+                None => (None, None),
+            };
             let password = match &config.password_env {
                 Some(var) => Some(std::env::var(var).map_err(|_| {
                     OptionError(format!(
@@ -105,6 +122,20 @@ impl Northbound for Cfx {
                 config.url(),
                 config.address
             );
+            if let Some(socket) = listener {
+                let endpoints = stations
+                    .iter()
+                    .map(|s| endpoint_of(start.cell, s))
+                    .collect();
+                tokio::spawn(listen::serve(
+                    socket,
+                    listen::Listener {
+                        endpoints,
+                        zone: start.cell.production().shifts.zone().clone(),
+                    },
+                    start.stopped.clone(),
+                ));
+            }
             let task = tokio::spawn(run(
                 Arc::clone(start.cell),
                 config,
@@ -115,10 +146,25 @@ impl Northbound for Cfx {
             ));
             Ok(Some(Running {
                 name: NAME,
-                url: None,
+                url: listener_url,
                 task,
             }))
         })
+    }
+}
+
+/// What a station's endpoint says of itself (`GetEndpointInformation`).
+fn endpoint_of(cell: &Cell, station: &Station) -> cfx::endpoint::Endpoint {
+    let device = cell.device_entry(station.device());
+    cfx::endpoint::Endpoint {
+        handle: station.handle().clone(),
+        request_uri: station.request_uri().map(str::to_owned),
+        request_address: station.request_uri().map(|_| station.handle().to_string()),
+        friendly_name: device.as_ref().map(|d| d.name.clone()),
+        vendor: None,
+        model: device.as_ref().map(|d| d.protocol.name().to_owned()),
+        serial: None,
+        software: Some(format!("cellbus {}", env!("CARGO_PKG_VERSION"))),
     }
 }
 
@@ -131,8 +177,19 @@ fn cfx_config(start: &Start<'_>) -> anyhow::Result<Option<CfxConfig>> {
         .flags
         .get::<CfxFlags>()
         .and_then(|f| f.url.clone());
+    let listen = start.options.flags.get::<CfxFlags>().and_then(|f| f.listen);
     let Some(url) = url else {
-        return Ok(table.cloned());
+        if listen.is_some() && table.is_none() {
+            return Err(OptionError(
+                "--cfx-listen needs --cfx URL or a [cfx] table: the endpoints it answers for publish there"
+                    .to_owned(),
+            )
+            .into());
+        }
+        return Ok(table.cloned().map(|t| CfxConfig {
+            listen: listen.or(t.listen),
+            ..t
+        }));
     };
     let (host, port, address) =
         config::parse_url(&url).map_err(|m| OptionError(format!("--cfx: {m}")))?;
@@ -149,11 +206,19 @@ fn cfx_config(start: &Start<'_>) -> anyhow::Result<Option<CfxConfig>> {
         password_env: None,
         heartbeat: config::DEFAULT_HEARTBEAT,
         handles: BTreeMap::new(),
+        listen: None,
     });
+    let listen = start
+        .options
+        .flags
+        .get::<CfxFlags>()
+        .and_then(|f| f.listen)
+        .or(base.listen);
     Ok(Some(CfxConfig {
         host,
         port,
         address,
+        listen,
         ..base
     }))
 }
@@ -189,6 +254,7 @@ fn stations(cell: &Cell, config: &CfxConfig, prefix: &str) -> anyhow::Result<Vec
                 .map_err(|e| OptionError(format!("device {}: {e}", device.id)))?,
         };
         out.push(Station::new(StationConfig {
+            device: device.id.to_string(),
             handle,
             zone: zone.clone(),
             points: *points,
@@ -210,7 +276,7 @@ async fn run(
     let mut feeder = Feeder {
         stations: stations
             .into_iter()
-            .map(|s| (device_of(s.handle(), &config, &cell), s))
+            .map(|s| (s.device().to_owned(), s))
             .collect(),
         waiting: VecDeque::new(),
         status: Arc::clone(&status),
@@ -289,19 +355,6 @@ async fn run(
 /// Resolves once `stop` turns true (or its sender is gone).
 async fn stopped(stop: &mut watch::Receiver<bool>) {
     let _ = stop.wait_for(|s| *s).await;
-}
-
-/// The device a station speaks for.
-fn device_of(handle: &cfx::Handle, config: &CfxConfig, cell: &Cell) -> String {
-    if let Some((device, _)) = config.handles.iter().find(|(_, h)| *h == handle) {
-        return device.clone();
-    }
-    let text = handle.as_str();
-    cell.roster()
-        .devices()
-        .map(|d| d.id.to_string())
-        .find(|id| text.ends_with(&format!(".{id}")))
-        .unwrap_or_default()
 }
 
 /// The stations and the messages waiting to be sent.

@@ -53,6 +53,8 @@ const NAMESPACE: Uuid = Uuid::from_u128(0x6365_6c6c_6275_7300_8000_0000_6366_780
 /// What a station needs to know of its machine.
 #[derive(Debug, Clone)]
 pub struct StationConfig {
+    /// The device it speaks for.
+    pub device: String,
     /// Its CFX handle.
     pub handle: Handle,
     /// The zone its times are written in (the cell's, or UTC).
@@ -112,6 +114,8 @@ pub struct Station {
     program: Option<String>,
     window: Option<Window>,
     last_beat: Option<Timestamp>,
+    /// Where its requests go (`amqp://IP:PORT/`), when the gateway listens.
+    request_uri: Option<String>,
 }
 
 impl Station {
@@ -125,12 +129,29 @@ impl Station {
             program: None,
             window: None,
             last_beat: None,
+            request_uri: None,
         }
+    }
+
+    /// Says that its requests are answered at `uri` (`amqp://IP:PORT/`, the address its
+    /// handle): its `EndpointConnected` tells the line.
+    pub fn listens_at(&mut self, uri: &str) {
+        self.request_uri = Some(uri.to_owned());
+    }
+
+    /// Where its requests are answered, if they are.
+    pub fn request_uri(&self) -> Option<&str> {
+        self.request_uri.as_deref()
     }
 
     /// Its handle.
     pub fn handle(&self) -> &Handle {
         &self.config.handle
+    }
+
+    /// The device it speaks for.
+    pub fn device(&self) -> &str {
+        &self.config.device
     }
 
     /// The messages `input` makes.
@@ -155,8 +176,11 @@ impl Station {
     pub fn connected(&mut self, now: Timestamp) -> Envelope {
         let message = Message::EndpointConnected(EndpointConnected {
             cfx_handle: self.config.handle.clone(),
-            request_network_uri: None,
-            request_target_address: None,
+            request_network_uri: self.request_uri.clone(),
+            request_target_address: self
+                .request_uri
+                .as_ref()
+                .map(|_| self.config.handle.to_string()),
         });
         self.envelope(now, message, "")
     }

@@ -7,6 +7,7 @@ const MINUTE: i64 = 60_000;
 
 fn station() -> Station {
     Station::new(StationConfig {
+        device: "placer1".into(),
         handle: Handle::new("Panasonic.BM221.placer1").unwrap(),
         zone: jiff::tz::TimeZone::UTC,
         points: crate::driver::panasonic::PRODUCTION_POINTS,
