@@ -4,6 +4,7 @@
 //! logic lives here.
 #![forbid(unsafe_code)]
 
+mod cfx_cmd;
 mod decode;
 mod demo;
 mod historian_cmd;
@@ -100,6 +101,10 @@ enum Command {
     /// Sparkplug B decoded into metrics.
     #[command(subcommand)]
     Mqtt(mqtt_cmd::MqttCommand),
+    /// Watch IPC-CFX messages on AMQP 1.0: `cfx sub` prints what the gateway's placement
+    /// machines (or any CFX endpoint) publish, from a broker's address or as the receiver.
+    #[command(subcommand)]
+    Cfx(cfx_cmd::CfxCommand),
     /// Run a simulated device on a TCP port or a PTY.
     #[command(subcommand)]
     Sim(sim::SimCommand),
@@ -138,6 +143,7 @@ fn main() -> ExitCode {
             Command::Thermosald(args) => thermosald_cmd::run(args).await,
             Command::Panasonic(args) => panasonic_cmd::run(args).await,
             Command::Mqtt(command) => mqtt_cmd::run(command).await,
+            Command::Cfx(command) => cfx_cmd::run(command).await,
             Command::Sim(command) => sim::run(command).await,
             Command::Decode(command) => decode::run(command),
         }

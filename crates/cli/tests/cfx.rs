@@ -25,6 +25,16 @@ const WITHIN: Duration = Duration::from_secs(240);
 
 const HANDLE: &str = "cellbus.demo.placer1";
 
+/// A process killed when dropped.
+struct Killed(Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// The receiver, killed when dropped.
 struct Receiver {
     child: Child,
@@ -337,4 +347,84 @@ fn the_endpoint_answers_a_proton_requester_at_its_handle_and_refuses_what_it_doe
             .contains("CFX.Production.GetActiveRecipeRequest is not supported"),
         "{refused}"
     );
+}
+
+#[test]
+fn cfx_sub_as_the_receiver_prints_what_the_gateway_sends_and_from_a_source_address_each_envelope_of_a_batch()
+ {
+    // As the receiver, for serve --cfx: the endpoint's first messages, in words.
+    let (sub, mut out, endpoint) = common::start_listening(
+        common::cellbus().args([
+            "cfx",
+            "sub",
+            "--listen",
+            "127.0.0.1:0",
+            "--count",
+            "2",
+            "--timeout",
+            "120s",
+        ]),
+        "listening on ",
+    );
+    let sub = Killed(sub);
+    let data = tempfile::tempdir().unwrap();
+    let url = format!("{endpoint}/cfx");
+    let gateway = Gateway::start_with(data.path(), &["--cfx", &url]);
+    let first = common::line_after(&mut out, "");
+    assert!(
+        first.contains(&format!(" {HANDLE} CFX.EndpointConnected {{")),
+        "{first}"
+    );
+    drop(gateway);
+    drop(sub);
+
+    // From an address (python-qpid-proton as the source): a batch is two lines.
+    require_python(
+        "import proton",
+        "IPC-CFX interoperability test",
+        "python-qpid-proton",
+        &format!("run scripts/test, which installs it, or: python3 -m pip install {PIP}"),
+    );
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/cfx/source.py");
+    let (source, _, port) =
+        common::start_listening(Command::new("python3").arg(script), "listening on ");
+    let _source = Killed(source);
+    let out = common::run_within(
+        &[
+            "cfx",
+            "sub",
+            &format!("amqp://127.0.0.1:{port}/cfx"),
+            "--count",
+            "2",
+            "--json",
+            "--timeout",
+            "60s",
+        ],
+        Duration::from_secs(90),
+    );
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let lines: Vec<Value> = common::stdout(&out)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let names: Vec<&str> = lines
+        .iter()
+        .map(|l| l["envelope"]["MessageName"].as_str().unwrap_or_default())
+        .collect();
+    assert_eq!(
+        names[..3],
+        [
+            "CFX.ResourcePerformance.StationOffline",
+            "CFX.ResourcePerformance.StationOnline",
+            "CFX.EndpointShuttingDown"
+        ]
+    );
+
+    // Nobody there: exit 1, saying so.
+    let out = common::run_within(
+        &["cfx", "sub", "amqp://127.0.0.1:1/cfx", "--timeout", "20s"],
+        Duration::from_secs(60),
+    );
+    assert_eq!(out.status.code(), Some(1));
+    common::assert_stderr_has(&out, "cannot connect to amqp://127.0.0.1:1");
 }

@@ -200,3 +200,105 @@ fn body_bytes(body: &Body<Value>) -> Option<Vec<u8>> {
         _ => None,
     }
 }
+
+/// What a receiver took: the message's subject and its body's bytes, or why the link ended.
+pub type Taken = Result<(Option<String>, Vec<u8>), String>;
+
+/// Takes every message sent to `socket` (any address), as a broker-less receiver would:
+/// `cellbus cfx sub --listen`, for `serve --cfx` to send to. Each goes to `out`; ends when
+/// `out` is closed.
+pub async fn receive(socket: TcpListener, out: mpsc::Sender<Taken>) {
+    let acceptor = Arc::new(
+        ConnectionAcceptor::builder()
+            .container_id("cellbus-cfx-sub")
+            .sasl_acceptor(SaslAnonymousMechanism::new())
+            .build(),
+    );
+    loop {
+        let accepted = tokio::select! {
+            () = out.closed() => return,
+            accepted = socket.accept() => accepted,
+        };
+        let Ok((stream, _)) = accepted else {
+            continue;
+        };
+        let (acceptor, out) = (Arc::clone(&acceptor), out.clone());
+        tokio::spawn(async move {
+            let Ok(mut connection) = acceptor.accept(stream).await else {
+                return;
+            };
+            let sessions = SessionAcceptor::new();
+            while let Ok(mut session) = sessions.accept(&mut connection).await {
+                let out = out.clone();
+                tokio::spawn(async move {
+                    let links = LinkAcceptor::new();
+                    while let Ok(link) = links.accept(&mut session).await {
+                        if let LinkEndpoint::Receiver(receiver) = link {
+                            tokio::spawn(take_all(receiver, out.clone()));
+                        }
+                    }
+                });
+            }
+        });
+    }
+}
+
+/// Connects to the broker at `url` (`amqp://HOST:PORT`) and takes what comes to `address`:
+/// `cellbus cfx sub amqp://HOST:PORT/ADDRESS`. Each goes to `out`; an error ends it.
+pub async fn subscribe(
+    url: String,
+    address: String,
+    credentials: Option<(String, String)>,
+    out: mpsc::Sender<Taken>,
+) {
+    let builder = fe2o3_amqp::Connection::builder().container_id("cellbus-cfx-sub");
+    let builder = match credentials {
+        Some((username, password)) => builder
+            .sasl_profile(fe2o3_amqp::sasl_profile::SaslProfile::Plain { username, password }),
+        None => builder.sasl_profile(fe2o3_amqp::sasl_profile::SaslProfile::Anonymous),
+    };
+    let mut connection = match builder.open(url.as_str()).await {
+        Ok(connection) => connection,
+        Err(e) => {
+            let _ = out.send(Err(format!("cannot connect to {url}: {e}"))).await;
+            return;
+        }
+    };
+    let mut session = match fe2o3_amqp::Session::begin(&mut connection).await {
+        Ok(session) => session,
+        Err(e) => {
+            let _ = out.send(Err(format!("{url}: no session: {e}"))).await;
+            return;
+        }
+    };
+    match fe2o3_amqp::Receiver::attach(&mut session, "cellbus-cfx-sub", address.as_str()).await {
+        Ok(receiver) => take_all(receiver, out).await,
+        Err(e) => {
+            let _ = out
+                .send(Err(format!("{url}: address {address} refused: {e}")))
+                .await;
+        }
+    }
+}
+
+/// Takes the messages of one link until it ends or `out` is closed.
+async fn take_all(mut receiver: fe2o3_amqp::Receiver, out: mpsc::Sender<Taken>) {
+    loop {
+        let delivery = match receiver.recv::<Body<Value>>().await {
+            Ok(delivery) => delivery,
+            Err(e) => {
+                let _ = out.send(Err(format!("the link ended: {e}"))).await;
+                return;
+            }
+        };
+        let _ = receiver.accept(&delivery).await;
+        let message = delivery.message();
+        let subject = message.properties.as_ref().and_then(|p| p.subject.clone());
+        let Some(bytes) = body_bytes(&message.body) else {
+            continue;
+        };
+        if out.send(Ok((subject, bytes))).await.is_err() {
+            return;
+        }
+    }
+}

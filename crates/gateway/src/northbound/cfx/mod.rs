@@ -450,6 +450,7 @@ impl Link {
         let builder = fe2o3_amqp::Connection::builder()
             .container_id(format!("cellbus-{}", super::default_edge_node_id()))
             .hostname(config.host.as_str());
+        // SASL always (a broker such as RabbitMQ wants it; ANONYMOUS without a user).
         let builder = match (&config.username, password) {
             (Some(username), password) => {
                 builder.sasl_profile(fe2o3_amqp::sasl_profile::SaslProfile::Plain {
@@ -457,7 +458,7 @@ impl Link {
                     password: password.unwrap_or_default().to_owned(),
                 })
             }
-            _ => builder,
+            _ => builder.sasl_profile(fe2o3_amqp::sasl_profile::SaslProfile::Anonymous),
         };
         let mut connection = builder
             .open(url.as_str())
