@@ -9,6 +9,7 @@
 mod common;
 
 use std::fs::File;
+use std::io::Write;
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -207,6 +208,15 @@ fn cannot_install() -> Option<String> {
     None
 }
 
+/// Says why the installing part was skipped, on the test's standard error itself: the
+/// test harness captures `eprintln!` of a passing test, not a write to the handle.
+fn skipped(why: &str) {
+    let _ = writeln!(
+        std::io::stderr(),
+        "package test: SKIPPED installing the package: {why}"
+    );
+}
+
 /// The installed version of the `cellbus` package, if one is installed.
 fn installed_version() -> Option<String> {
     let output = Command::new("dpkg-query")
@@ -241,7 +251,7 @@ fn getent(database: &str, key: &str) -> Option<String> {
 #[test]
 fn the_package_installs_with_its_user_runs_as_it_and_purges_without_a_trace() {
     if let Some(why) = cannot_install() {
-        eprintln!("SKIPPED: the package is not installed here, since {why}");
+        skipped(&format!("the package is not installed here, since {why}"));
         return;
     }
     // One installing test at a time on this machine (another checkout's run included):
@@ -254,18 +264,18 @@ fn the_package_installs_with_its_user_runs_as_it_and_purges_without_a_trace() {
     match installed_version() {
         Some(version) if version == TEST_VERSION => drop(Installed),
         Some(version) => {
-            eprintln!(
-                "SKIPPED: cellbus {version} is installed on this machine; the test installs \
-                 and purges its own package only where none is"
-            );
+            skipped(&format!(
+                "cellbus {version} is installed on this machine; the test installs and \
+                 purges its own package only where none is"
+            ));
             return;
         }
         None => {}
     }
     if getent("passwd", "cellbus").is_some() || getent("group", "cellbus").is_some() {
-        eprintln!(
-            "SKIPPED: a `cellbus` user or group exists with no cellbus package installed; \
-             the test's purge would delete it"
+        skipped(
+            "a `cellbus` user or group exists with no cellbus package installed; the test's \
+             purge would delete it",
         );
         return;
     }
