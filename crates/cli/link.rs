@@ -41,7 +41,7 @@ fn link_options(kind: &str, code_order: &std::path::Path, lock: &std::path::Path
         return;
     }
     println!("cargo:rustc-link-arg-{kind}=-Wl,-z,pack-relative-relocs");
-    if !lays_out_code(kind, &var("OUT_DIR")) || !code_order.is_file() {
+    if !lays_out_code(kind, &var("OUT_DIR"), &var("OPT_LEVEL")) || !code_order.is_file() {
         return;
     }
     // Only here: `rustc --version` is a process of its own, which other builds skip.
@@ -64,17 +64,18 @@ fn link_options(kind: &str, code_order: &std::path::Path, lock: &std::path::Path
     }
 }
 
-/// Whether the targets of `kind` built into `out_dir` (the build script's `OUT_DIR`) are
-/// laid out by crates/cli/code-order.txt: those of the `dist` profile (one optimisation
-/// unit, whose function names the list can match), and the benches' in target/release,
-/// where cargo puts the `bench` profile's builds (one unit too, in the workspace's
-/// Cargo.toml). The quick `release` profile (16 units a crate, optimised for size) has
-/// other names, some with per-unit `.llvm.` suffixes, so its `cellbus` is left in the
-/// compiler's order. Cargo tells a build script its profile only as `PROFILE=release` or
-/// `debug` (`release` for every optimised profile), so the profile's name is read from
-/// `OUT_DIR`: `TARGET_DIR/[TRIPLE/]PROFILE/build/PACKAGE-HASH/out`, the directory before
-/// the last `build`.
-fn lays_out_code(kind: &str, out_dir: &str) -> bool {
+/// Whether the targets of `kind` built into `out_dir` (the build script's `OUT_DIR`) at
+/// `opt_level` (its `OPT_LEVEL`) are laid out by crates/cli/code-order.txt: those of the
+/// `dist` profile (one optimisation unit, whose function names the list can match), and
+/// the benches of the `bench` profile (one unit too, in the workspace's Cargo.toml). The
+/// quick `release` profile (16 units a crate, optimised for size) has other names, some
+/// with per-unit `.llvm.` suffixes, so its builds are left in the compiler's order. Cargo
+/// tells a build script its profile only as `PROFILE=release` or `debug` (`release` for
+/// every optimised profile), so the profile's name is read from `OUT_DIR`:
+/// `TARGET_DIR/[TRIPLE/]PROFILE/build/PACKAGE-HASH/out`, the directory before the last
+/// `build`. `bench` and `release` share `target/release`: there `bench` is the one at
+/// `opt-level = 3` (`release` is at `s`).
+fn lays_out_code(kind: &str, out_dir: &str, opt_level: &str) -> bool {
     let parts: Vec<&std::ffi::OsStr> = std::path::Path::new(out_dir).iter().collect();
     let profile = parts
         .iter()
@@ -82,7 +83,7 @@ fn lays_out_code(kind: &str, out_dir: &str) -> bool {
         .and_then(|at| at.checked_sub(1))
         .and_then(|at| parts[at].to_str())
         .unwrap_or_default();
-    profile == "dist" || (profile == "release" && kind == "benches")
+    profile == "dist" || (profile == "release" && kind == "benches" && opt_level == "3")
 }
 
 /// What a code-order list records of the build it was made from (written by

@@ -81,21 +81,24 @@ fn a_list_that_does_not_say_what_it_was_made_for_is_stale() {
 }
 
 #[test]
-fn only_the_dist_builds_and_the_benches_of_target_release_lay_code_out() {
+fn only_the_dist_builds_and_the_bench_profiles_benches_lay_code_out() {
     let out = |profile: &str| format!("/work/target/{profile}/build/cellbus-cli-0123abcd/out");
-    assert!(lays_out_code("bins", &out("dist")));
-    assert!(lays_out_code("benches", &out("dist")));
-    // cargo puts the bench profile's builds (one unit) into target/release.
-    assert!(lays_out_code("benches", &out("release")));
-    // The thin release profile's binary, and the debug builds, keep the compiler's order.
-    assert!(!lays_out_code("bins", &out("release")));
-    assert!(!lays_out_code("bins", &out("debug")));
-    assert!(!lays_out_code("benches", &out("debug")));
+    assert!(lays_out_code("bins", &out("dist"), "3"));
+    assert!(lays_out_code("benches", &out("dist"), "3"));
+    // cargo puts the bench profile's builds (opt-level 3) into target/release, beside the
+    // release profile's (opt-level s).
+    assert!(lays_out_code("benches", &out("release"), "3"));
+    assert!(!lays_out_code("benches", &out("release"), "s"));
+    // The release profile's binary, and the debug builds, keep the compiler's order.
+    assert!(!lays_out_code("bins", &out("release"), "s"));
+    assert!(!lays_out_code("bins", &out("debug"), "0"));
+    assert!(!lays_out_code("benches", &out("debug"), "0"));
     // With --target, the triple comes before the profile; a `build` in the target
     // directory's own path does not count.
     assert!(lays_out_code(
         "bins",
-        "/home/build/t/x86_64-unknown-linux-gnu/dist/build/cellbus-cli-0123abcd/out"
+        "/home/build/t/x86_64-unknown-linux-gnu/dist/build/cellbus-cli-0123abcd/out",
+        "3"
     ));
-    assert!(!lays_out_code("bins", ""));
+    assert!(!lays_out_code("bins", "", "3"));
 }
