@@ -7,9 +7,11 @@
 //   relocations to apply at start shrinks from 1.7 MB (read in full at every start, so
 //   resident) to 19 kB. GNU ld 2.38+ and lld use it only when the C library supports it
 //   (glibc 2.36+); older linkers ignore the option with a warning.
-// - In optimised builds linked by lld (Rust 1.90 and later on x86_64 Linux, unless another
-//   linker is configured), the functions listed in crates/cli/code-order.txt are laid out
-//   first, in that order: the few thousand functions a gateway runs sit side by side
+// - In the builds that lay code out (the `dist` profile, the package's; and for the
+//   benches the `bench` profile too, which shares target/release: `lays_out_code`) when
+//   linked by lld (Rust 1.90 and later on x86_64 Linux, unless another linker is
+//   configured), the functions listed in crates/cli/code-order.txt are laid out first, in
+//   that order: the few thousand functions a gateway runs sit side by side
 //   instead of spread over 20 MB of code, and the kernel maps only their pages (DESIGN.md,
 //   "Code layout"; scripts/code-order writes the list). Names the binary does not define
 //   are skipped, so a stale list costs memory, never a failed build; a release build warns
@@ -39,7 +41,7 @@ fn link_options(kind: &str, code_order: &std::path::Path, lock: &std::path::Path
         return;
     }
     println!("cargo:rustc-link-arg-{kind}=-Wl,-z,pack-relative-relocs");
-    if var("PROFILE") != "release" || !code_order.is_file() {
+    if !lays_out_code(kind, &var("OUT_DIR"), &var("OPT_LEVEL")) || !code_order.is_file() {
         return;
     }
     // Only here: `rustc --version` is a process of its own, which other builds skip.
@@ -60,6 +62,28 @@ fn link_options(kind: &str, code_order: &std::path::Path, lock: &std::path::Path
              be laid out by use and take more memory (scripts/code-order writes a new list)"
         );
     }
+}
+
+/// Whether the targets of `kind` built into `out_dir` (the build script's `OUT_DIR`) at
+/// `opt_level` (its `OPT_LEVEL`) are laid out by crates/cli/code-order.txt: those of the
+/// `dist` profile (one optimisation unit, whose function names the list can match), and
+/// the benches of the `bench` profile (one unit too, in the workspace's Cargo.toml). The
+/// quick `release` profile (16 units a crate, optimised for size) has other names, some
+/// with per-unit `.llvm.` suffixes, so its builds are left in the compiler's order. Cargo
+/// tells a build script its profile only as `PROFILE=release` or `debug` (`release` for
+/// every optimised profile), so the profile's name is read from `OUT_DIR`:
+/// `TARGET_DIR/[TRIPLE/]PROFILE/build/PACKAGE-HASH/out`, the directory before the last
+/// `build`. `bench` and `release` share `target/release`: there `bench` is the one at
+/// `opt-level = 3` (`release` is at `s`).
+fn lays_out_code(kind: &str, out_dir: &str, opt_level: &str) -> bool {
+    let parts: Vec<&std::ffi::OsStr> = std::path::Path::new(out_dir).iter().collect();
+    let profile = parts
+        .iter()
+        .rposition(|part| *part == "build")
+        .and_then(|at| at.checked_sub(1))
+        .and_then(|at| parts[at].to_str())
+        .unwrap_or_default();
+    profile == "dist" || (profile == "release" && kind == "benches" && opt_level == "3")
 }
 
 /// What a code-order list records of the build it was made from (written by

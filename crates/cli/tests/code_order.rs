@@ -1,6 +1,6 @@
-//! The release build's check that `crates/cli/code-order.txt` still fits the build
+//! The dist build's check that `crates/cli/code-order.txt` still fits the build
 //! (`crates/cli/link.rs`, shared by the build scripts) and `scripts/code-order`, which
-//! writes the list, agree on what a list was made for.
+//! writes the list, agree on what a list was made for; and which builds the list lays out.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -78,4 +78,27 @@ fn a_list_that_does_not_say_what_it_was_made_for_is_stale() {
         why,
         "does not say which compiler and Cargo.lock it was made for"
     );
+}
+
+#[test]
+fn only_the_dist_builds_and_the_bench_profiles_benches_lay_code_out() {
+    let out = |profile: &str| format!("/work/target/{profile}/build/cellbus-cli-0123abcd/out");
+    assert!(lays_out_code("bins", &out("dist"), "3"));
+    assert!(lays_out_code("benches", &out("dist"), "3"));
+    // cargo puts the bench profile's builds (opt-level 3) into target/release, beside the
+    // release profile's (opt-level s).
+    assert!(lays_out_code("benches", &out("release"), "3"));
+    assert!(!lays_out_code("benches", &out("release"), "s"));
+    // The release profile's binary, and the debug builds, keep the compiler's order.
+    assert!(!lays_out_code("bins", &out("release"), "s"));
+    assert!(!lays_out_code("bins", &out("debug"), "0"));
+    assert!(!lays_out_code("benches", &out("debug"), "0"));
+    // With --target, the triple comes before the profile; a `build` in the target
+    // directory's own path does not count.
+    assert!(lays_out_code(
+        "bins",
+        "/home/build/t/x86_64-unknown-linux-gnu/dist/build/cellbus-cli-0123abcd/out",
+        "3"
+    ));
+    assert!(!lays_out_code("bins", "", "3"));
 }
