@@ -4,7 +4,6 @@
 
 use std::net::SocketAddr;
 use std::process::ExitCode;
-use std::time::Duration;
 
 use anyhow::anyhow;
 use clap::{Args, Subcommand};
@@ -41,16 +40,9 @@ pub struct SubArgs {
     /// printed is `listening on amqp://IP:PORT`) and print what any sender sends.
     #[arg(long, value_name = "IP:PORT")]
     listen: Option<SocketAddr>,
-    /// One JSON object per message and line: the subject and the envelope.
-    #[arg(long)]
-    json: bool,
-    /// Exit (0) after this many messages.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
-    count: Option<u64>,
-    /// Exit (1) when no message arrives within this time (`10s`, `2m`), counted from the
-    /// start and again from each message.
-    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
-    timeout: Option<Duration>,
+    /// --json: one object per envelope and line, with the message's subject.
+    #[command(flatten)]
+    watch: crate::output::Watch,
     /// The SASL PLAIN user name.
     #[arg(long, requires = "url")]
     username: Option<String>,
@@ -67,6 +59,11 @@ pub async fn run(command: CfxCommand) -> anyhow::Result<ExitCode> {
 
 async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
     let (tx, mut rx) = mpsc::channel::<Taken>(256);
+    let source = match (&args.listen, &args.url) {
+        (Some(addr), _) => format!("on {addr}"),
+        (None, Some(url)) => url.clone(),
+        (None, None) => String::new(),
+    };
     match (&args.listen, &args.url) {
         (Some(addr), _) => {
             let socket = tokio::net::TcpListener::bind(addr)
@@ -106,20 +103,10 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
     }
     let mut received = 0u64;
     loop {
-        let taken = match args.timeout {
+        let taken = match args.watch.timeout {
             Some(limit) => match tokio::time::timeout(limit, rx.recv()).await {
                 Ok(taken) => taken,
-                Err(_) => {
-                    let what = if received == 0 {
-                        "no message".to_owned()
-                    } else {
-                        format!("no further message after {received}")
-                    };
-                    return Err(anyhow!(
-                        "{what} within {}",
-                        humantime::format_duration(limit)
-                    ));
-                }
+                Err(_) => return Err(args.watch.silence(received, &format!("from {source}"))),
             },
             None => rx.recv().await,
         };
@@ -128,11 +115,11 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
             Some(Err(why)) => return Err(anyhow!(why)),
             None => return Err(anyhow!("the receiver stopped")),
         };
-        for line in lines(subject.as_deref(), &bytes, args.json) {
+        for line in lines(subject.as_deref(), &bytes, args.watch.json) {
             println!("{line}");
         }
         received += 1;
-        if args.count.is_some_and(|count| received >= count) {
+        if args.watch.done(received) {
             return Ok(ExitCode::SUCCESS);
         }
     }

@@ -49,16 +49,8 @@ pub struct SubArgs {
     /// The client certificate's private key (PEM).
     #[arg(long, value_name = "FILE", requires = "client_cert")]
     client_key: Option<std::path::PathBuf>,
-    /// One JSON object per message and line, instead of words.
-    #[arg(long)]
-    json: bool,
-    /// Exit (0) after this many messages.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
-    count: Option<u64>,
-    /// Exit (1) when no message arrives within this time (`10s`, `2m`), counted from the
-    /// start and again from each message.
-    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
-    timeout: Option<Duration>,
+    #[command(flatten)]
+    watch: crate::output::Watch,
     /// The MQTT user name.
     #[arg(long)]
     username: Option<String>,
@@ -144,23 +136,18 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
     let mut connected = false;
     let mut received = 0u64;
     let mut deadline = args
+        .watch
         .timeout
         .map(|limit| tokio::time::Instant::now() + limit);
     loop {
-        let event = match (deadline, args.timeout) {
-            (Some(deadline), Some(limit)) => {
+        let event = match (deadline, args.watch.timeout) {
+            (Some(deadline), Some(_)) => {
                 match tokio::time::timeout_at(deadline, eventloop.poll()).await {
                     Ok(event) => event,
                     Err(_) => {
-                        let what = if received == 0 {
-                            "no message".to_owned()
-                        } else {
-                            format!("no further message after {received}")
-                        };
-                        return Err(anyhow!(
-                            "{what} from {broker} on {} within {}",
-                            args.topics.join(" "),
-                            humantime::format_duration(limit)
+                        return Err(args.watch.silence(
+                            received,
+                            &format!("from {broker} on {}", args.topics.join(" ")),
                         ));
                     }
                 }
@@ -197,16 +184,17 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
                 if let Some(node) = unborn_node(&description) {
                     unborn.meet(node, args.rebirth, &client).await;
                 }
-                if args.json {
+                if args.watch.json {
                     output::line(description.to_json())?;
                 } else {
                     output::line(description.to_text())?;
                 }
                 received += 1;
                 deadline = args
+                    .watch
                     .timeout
                     .map(|limit| tokio::time::Instant::now() + limit);
-                if args.count.is_some_and(|n| received >= n) {
+                if args.watch.done(received) {
                     // Acknowledge what came (QoS 1) and leave politely, within a bound.
                     let _ = client.try_disconnect();
                     let _ = tokio::time::timeout(Duration::from_secs(1), async {

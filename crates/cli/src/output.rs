@@ -274,3 +274,41 @@ mod tests {
         assert_eq!(printable(b"\x02RST1\x03\xFF"), "<STX>RST1<ETX><0xFF>");
     }
 }
+
+/// How long a watching command (`mqtt sub`, `cfx sub`) runs: `--json`, `--count` and
+/// `--timeout`.
+#[derive(Debug, clap::Args)]
+pub struct Watch {
+    /// One JSON object per message and line, instead of words.
+    #[arg(long)]
+    pub json: bool,
+    /// Exit (0) after this many messages.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub count: Option<u64>,
+    /// Exit (1) when no message arrives within this time (`10s`, `2m`), counted from the
+    /// start and again from each message.
+    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
+    pub timeout: Option<std::time::Duration>,
+}
+
+impl Watch {
+    /// Whether `received` messages are all that was asked for.
+    pub fn done(&self, received: u64) -> bool {
+        self.count.is_some_and(|count| received >= count)
+    }
+
+    /// The error of a silence as long as `--timeout` after `received` messages, from
+    /// `where_from` (`from mqtt://… on spBv1.0/#`).
+    pub fn silence(&self, received: u64, where_from: &str) -> anyhow::Error {
+        let what = if received == 0 {
+            "no message".to_owned()
+        } else {
+            format!("no further message after {received}")
+        };
+        let within = self
+            .timeout
+            .map(|limit| format!(" within {}", humantime::format_duration(limit)))
+            .unwrap_or_default();
+        anyhow::anyhow!("{what} {where_from}{within}")
+    }
+}

@@ -267,31 +267,25 @@ fn an_independent_opcua_client_gets_an_alarm_event_and_acknowledges_and_shelves_
     }
     // The station is switched off: jbc1:down is raised.
     drop(sim.take());
-    let deadline = std::time::Instant::now() + LIMIT;
-    while let Ok(line) =
-        rx.recv_timeout(deadline.saturating_duration_since(std::time::Instant::now()))
-    {
-        out.push(line);
-    }
-    let status = child.wait().expect("python3 ends");
-    let out = out.join("\n");
-    assert!(status.success(), "the asyncua script failed:\n{out}");
-    for expected in [
-        "refused to an anonymous session: BadUserAccessDenied",
-        "jbc1:down in jbc1's Alarms folder",
-        "the alarm_raised event of jbc1:down arrived",
-        "State unacknowledged",
-        "Acknowledge answered acknowledged",
-        "the alarm_changed event carries",
-        "BadConditionBranchAlreadyAcked",
-        "BadInvalidArgument",
-        "Shelve",
-        "BadConditionNotShelved",
-        "BadShelvingTimeOutOfRange",
-        "the alarm journal has the acknowledgement",
-    ] {
-        assert!(out.contains(expected), "{expected:?} not in:\n{out}");
-    }
+    script_said(
+        &mut child,
+        &rx,
+        out,
+        &[
+            "refused to an anonymous session: BadUserAccessDenied",
+            "jbc1:down in jbc1's Alarms folder",
+            "the alarm_raised event of jbc1:down arrived",
+            "State unacknowledged",
+            "Acknowledge answered acknowledged",
+            "the alarm_changed event carries",
+            "BadConditionBranchAlreadyAcked",
+            "BadInvalidArgument",
+            "Shelve",
+            "BadConditionNotShelved",
+            "BadShelvingTimeOutOfRange",
+            "the alarm journal has the acknowledgement",
+        ],
+    );
     // The journal as HTTP gives it, read here too: the acknowledgement with its comment,
     // by the OPC UA user from the client's address.
     let (code, body) = common::http_get(&served.http, "/api/alarms/journal?alarm=jbc1:down");
@@ -416,6 +410,29 @@ fn after_a_configuration_reload_an_opcua_client_finds_the_added_device_and_the_c
         .status()
         .expect("kill runs");
     assert!(hup.success(), "SIGHUP was sent");
+    script_said(
+        &mut child,
+        &rx,
+        out,
+        &[
+            "its Production and Alarms folders among them",
+            "the config_reloaded event arrived",
+            "jbc_d is found after the reload",
+            "jbc_c is described as 'Rework station C'",
+            "the Gateway's Lines are a,c,d",
+            "a read, a write and a monitored item are refused BadNodeIdUnknown",
+        ],
+    );
+}
+
+/// Takes the asyncua script's remaining lines (for at most [`LIMIT`]) after `out`, waits
+/// for it to end, and checks that it succeeded and printed each of `expected`.
+fn script_said(
+    child: &mut std::process::Child,
+    rx: &std::sync::mpsc::Receiver<String>,
+    mut out: Vec<String>,
+    expected: &[&str],
+) {
     let deadline = std::time::Instant::now() + LIMIT;
     while let Ok(line) =
         rx.recv_timeout(deadline.saturating_duration_since(std::time::Instant::now()))
@@ -425,14 +442,7 @@ fn after_a_configuration_reload_an_opcua_client_finds_the_added_device_and_the_c
     let status = child.wait().expect("python3 ends");
     let out = out.join("\n");
     assert!(status.success(), "the asyncua script failed:\n{out}");
-    for expected in [
-        "its Production and Alarms folders among them",
-        "the config_reloaded event arrived",
-        "jbc_d is found after the reload",
-        "jbc_c is described as 'Rework station C'",
-        "the Gateway's Lines are a,c,d",
-        "a read, a write and a monitored item are refused BadNodeIdUnknown",
-    ] {
+    for expected in expected {
         assert!(out.contains(expected), "{expected:?} not in:\n{out}");
     }
 }
