@@ -40,6 +40,9 @@ use crate::time::Timestamp;
 /// The interface's name in `/healthz` and logs.
 pub const NAME: &str = "cfx";
 
+/// How long opening the link, or the receiver's verdict on one message, may take.
+const LINK_PATIENCE: Duration = Duration::from_secs(30);
+
 /// Messages kept while the link is down, at most.
 pub const MAX_WAITING: usize = 10_000;
 
@@ -288,7 +291,11 @@ async fn run(
     loop {
         let opened = tokio::select! {
             () = stopped(&mut stop) => return,
-            opened = Link::open(&config, password.as_deref()) => opened,
+            opened = tokio::time::timeout(LINK_PATIENCE, Link::open(&config, password.as_deref())) => {
+                opened.unwrap_or_else(|_| Err(format!(
+                    "{} did not open the link within {LINK_PATIENCE:?}", config.url()
+                )))
+            }
         };
         let mut link = match opened {
             Ok(link) => link,
@@ -478,12 +485,12 @@ impl Link {
         })
     }
 
-    /// Sends one envelope and waits for the receiver's verdict.
+    /// Sends one envelope and waits for the receiver's verdict (at most
+    /// [`LINK_PATIENCE`]: a receiver that takes no more is a lost link).
     async fn send(&mut self, envelope: &cfx::Envelope) -> Result<(), String> {
-        let outcome = self
-            .sender
-            .send(amqp_message(envelope))
+        let outcome = tokio::time::timeout(LINK_PATIENCE, self.sender.send(amqp_message(envelope)))
             .await
+            .map_err(|_| format!("no verdict on a message within {LINK_PATIENCE:?}"))?
             .map_err(|e| e.to_string())?;
         outcome
             .accepted_or_else(|state| format!("the receiver did not accept it: {state:?}"))
