@@ -59,6 +59,13 @@ fn package(out: &Path, extra: &[&str]) -> PathBuf {
         out.to_str().unwrap(),
     ];
     args.extend_from_slice(extra);
+    // One cargo-deb at a time: both tests' runs stage the package's files under the same
+    // target/debian directory, and one could archive a binary the other is copying there
+    // (seen once: "Exec format error" from the extracted binary).
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     run("cargo", &args, Some(&workspace));
     std::fs::read_dir(out)
         .unwrap()
@@ -126,7 +133,13 @@ fn the_debian_package_holds_the_binary_units_conffiles_and_a_user_and_its_units_
         "{postinst}"
     );
     let fields = std::fs::read_to_string(control.join("control")).unwrap();
-    assert!(fields.contains("Depends: adduser"), "{fields}");
+    let depends = fields
+        .lines()
+        .find_map(|l| l.strip_prefix("Depends: "))
+        .unwrap_or_default();
+    for wanted in ["adduser", "procps"] {
+        assert!(depends.split(", ").any(|d| d == wanted), "{fields}");
+    }
 
     // The package's files in a root of their own: the units verify against them (the
     // binary they start must be there), and the packaged binary accepts the packaged
@@ -137,10 +150,25 @@ fn the_debian_package_holds_the_binary_units_conffiles_and_a_user_and_its_units_
         &["-x", deb.to_str().unwrap(), root.to_str().unwrap()],
         None,
     );
+    // ExecReload runs /bin/kill, which the package depends on (procps) rather than ships:
+    // verify checks that it is there and executable, so the root gets a stand-in.
+    std::fs::create_dir_all(root.join("bin")).unwrap();
+    std::fs::write(root.join("bin/kill"), "#!/bin/sh\n").unwrap();
+    std::fs::set_permissions(
+        root.join("bin/kill"),
+        std::os::unix::fs::PermissionsExt::from_mode(0o755),
+    )
+    .unwrap();
     for unit in ["cellbus.service", "cellbus-historian.service"] {
         let path = root.join("usr/lib/systemd/system").join(unit);
         let text = std::fs::read_to_string(&path).unwrap();
         assert!(text.contains("User=cellbus"), "{unit}");
+        if unit == "cellbus.service" {
+            assert!(
+                text.contains("ExecReload=/bin/kill -HUP $MAINPID"),
+                "{text}"
+            );
+        }
         assert!(text.contains("NoNewPrivileges=yes"), "{unit}");
         run(
             "systemd-analyze",
