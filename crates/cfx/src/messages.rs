@@ -350,6 +350,27 @@ pub struct RecipeActivated {
     pub recipe_stages_information: Vec<()>,
 }
 
+impl RecipeActivated {
+    /// The program `recipe_name` selected, with nothing else known (a host protocol that
+    /// says only its name).
+    pub fn named(recipe_name: impl Into<String>) -> Self {
+        Self {
+            recipe_name: recipe_name.into(),
+            revision: None,
+            lane: None,
+            stage: None,
+            expected_cycle_time: 0.0,
+            expected_work_time: None,
+            expected_units_per_work_transaction: 1.0,
+            number_of_components_per_unit: 0.0,
+            work_order_identifier: None,
+            target_quantity: None,
+            relevant_surface: "Unspecified",
+            recipe_stages_information: Vec::new(),
+        }
+    }
+}
+
 /// `CFX.ResourcePerformance.StationOffline`: the machine stopped answering.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StationOffline {}

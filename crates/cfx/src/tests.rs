@@ -325,20 +325,7 @@ fn placements_recipes_heartbeats_and_the_station_going_off_and_on_line_match_the
         ),
         (
             // The SDK's example has a typographic quote and misses two commas; fixed here.
-            Message::RecipeActivated(RecipeActivated {
-                recipe_name: "MAINBOARD-A".into(),
-                revision: None,
-                lane: None,
-                stage: None,
-                expected_cycle_time: 0.0,
-                expected_work_time: None,
-                expected_units_per_work_transaction: 1.0,
-                number_of_components_per_unit: 0.0,
-                work_order_identifier: None,
-                target_quantity: None,
-                relevant_surface: "Unspecified",
-                recipe_stages_information: Vec::new(),
-            }),
+            Message::RecipeActivated(RecipeActivated::named("MAINBOARD-A")),
             json!({
               "RecipeName": "RECIPE3234",
               "Revision": "B",

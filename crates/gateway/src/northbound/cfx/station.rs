@@ -218,20 +218,7 @@ impl Station {
                 return Vec::new();
             }
             self.program = Some(program.clone());
-            let message = Message::RecipeActivated(RecipeActivated {
-                recipe_name: program.clone(),
-                revision: None,
-                lane: None,
-                stage: None,
-                expected_cycle_time: 0.0,
-                expected_work_time: None,
-                expected_units_per_work_transaction: 1.0,
-                number_of_components_per_unit: 0.0,
-                work_order_identifier: None,
-                target_quantity: None,
-                relevant_surface: "Unspecified",
-                recipe_stages_information: Vec::new(),
-            });
+            let message = Message::RecipeActivated(RecipeActivated::named(program.clone()));
             return vec![self.envelope(at, message, program)];
         }
         let count = value.and_then(Value::as_number).and_then(whole);
