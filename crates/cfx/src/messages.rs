@@ -306,6 +306,41 @@ pub struct WorkCompleted {
     pub performance_impacts: Vec<()>,
 }
 
+impl WorkStarted {
+    /// A board's work started, in transaction `transaction_id`, under the program
+    /// `recipe_name` if known; nothing else known (a host protocol that reports boards
+    /// without identifiers).
+    pub fn board(transaction_id: Uuid, recipe_name: Option<String>) -> Self {
+        Self {
+            primary_identifier: None,
+            hermes_identifier: None,
+            transaction_id,
+            lane: None,
+            unit_count: 0,
+            units: Vec::new(),
+            recipe_name,
+            revision: None,
+            relevant_surface: "Unspecified",
+            work_order_identifier: None,
+        }
+    }
+}
+
+impl WorkCompleted {
+    /// The board of transaction `transaction_id` completed; nothing else known.
+    pub fn board(transaction_id: Uuid) -> Self {
+        Self {
+            transaction_id,
+            result: WorkResult::Completed,
+            primary_identifier: None,
+            hermes_identifier: None,
+            unit_count: 0,
+            units: Vec::new(),
+            performance_impacts: Vec::new(),
+        }
+    }
+}
+
 /// `CFX.ResourcePerformance.SMTPlacement.ComponentsPlaced`: the parts placed in a window.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(rename_all = "PascalCase")]

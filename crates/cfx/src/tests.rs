@@ -273,27 +273,11 @@ fn a_board_is_a_work_started_and_a_work_completed_with_one_transaction() {
       "UnitCount": 0,
       "Units": []
     });
-    let started = body(&Message::WorkStarted(WorkStarted {
-        primary_identifier: None,
-        hermes_identifier: None,
-        transaction_id: id(9),
-        lane: None,
-        unit_count: 0,
-        units: Vec::new(),
-        recipe_name: Some("MAINBOARD-A".into()),
-        revision: None,
-        relevant_surface: "Unspecified",
-        work_order_identifier: None,
-    }));
-    let completed = body(&Message::WorkCompleted(WorkCompleted {
-        transaction_id: id(9),
-        result: WorkResult::Completed,
-        primary_identifier: None,
-        hermes_identifier: None,
-        unit_count: 0,
-        units: Vec::new(),
-        performance_impacts: Vec::new(),
-    }));
+    let started = body(&Message::WorkStarted(WorkStarted::board(
+        id(9),
+        Some("MAINBOARD-A".into()),
+    )));
+    let completed = body(&Message::WorkCompleted(WorkCompleted::board(id(9))));
     same_shape(&started, &started_sdk, &[], "WorkStarted");
     same_shape(
         &completed,

@@ -32,7 +32,7 @@ use cfx::messages::{
     Heartbeat, Placement, RecipeActivated, StationOffline, StationOnline, StationStateChanged,
     WorkCompleted, WorkStarted,
 };
-use cfx::types::{FaultCause, FaultSeverity, PlacementFaultType, WorkResult};
+use cfx::types::{FaultCause, FaultSeverity, PlacementFaultType};
 use cfx::{Envelope, Handle, Message, ResourceState, Time, TimeSpan};
 use uuid::Uuid;
 
@@ -384,27 +384,9 @@ impl Station {
                     None => at,
                 };
                 let transaction_id = self.id("board", at, "");
-                let start = Message::WorkStarted(WorkStarted {
-                    primary_identifier: None,
-                    hermes_identifier: None,
-                    transaction_id,
-                    lane: None,
-                    unit_count: 0,
-                    units: Vec::new(),
-                    recipe_name: self.program.clone(),
-                    revision: None,
-                    relevant_surface: "Unspecified",
-                    work_order_identifier: None,
-                });
-                let end = Message::WorkCompleted(WorkCompleted {
-                    transaction_id,
-                    result: WorkResult::Completed,
-                    primary_identifier: None,
-                    hermes_identifier: None,
-                    unit_count: 0,
-                    units: Vec::new(),
-                    performance_impacts: Vec::new(),
-                });
+                let start =
+                    Message::WorkStarted(WorkStarted::board(transaction_id, self.program.clone()));
+                let end = Message::WorkCompleted(WorkCompleted::board(transaction_id));
                 vec![
                     self.envelope(started, start, &at.0.to_string()),
                     self.envelope(at, end, ""),
