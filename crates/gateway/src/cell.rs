@@ -53,45 +53,6 @@ pub struct Cell {
     config: RwLock<ConfigStatus>,
 }
 
-/// The devices and lines of the cell at one moment.
-#[derive(Debug, Default)]
-pub struct Roster {
-    devices: BTreeMap<DeviceId, Arc<DeviceEntry>>,
-    lines: Vec<Arc<LineEntry>>,
-}
-
-impl Roster {
-    /// Every device, by id.
-    pub fn devices(&self) -> impl Iterator<Item = &Arc<DeviceEntry>> {
-        self.devices.values()
-    }
-
-    /// A device by id.
-    pub fn device(&self, id: &str) -> Option<&Arc<DeviceEntry>> {
-        DeviceId::new(id).ok().and_then(|id| self.devices.get(&id))
-    }
-
-    /// Every line, in the configuration's order.
-    pub fn lines(&self) -> &[Arc<LineEntry>] {
-        &self.lines
-    }
-
-    /// The roster of `lines`, each with its devices.
-    pub(crate) fn of(lines: Vec<(Arc<LineEntry>, Vec<Arc<DeviceEntry>>)>) -> Result<Self, String> {
-        let mut roster = Roster::default();
-        for (line, devices) in lines {
-            for device in devices {
-                let id = device.id.clone();
-                if roster.devices.insert(id.clone(), device).is_some() {
-                    return Err(format!("device id {id} is used twice"));
-                }
-            }
-            roster.lines.push(line);
-        }
-        Ok(roster)
-    }
-}
-
 /// The configuration in force, as `/healthz` shows it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ConfigStatus {
@@ -517,21 +478,6 @@ impl CheckedWrite {
             .points
             .get(self.index)
             .and_then(|p| p.value.clone())
-    }
-}
-
-/// A point's spec, found in the roster in force (it stays valid after a reload).
-#[derive(Debug, Clone)]
-pub struct PointRef {
-    device: Arc<DeviceEntry>,
-    index: usize,
-}
-
-impl std::ops::Deref for PointRef {
-    type Target = PointSpec;
-
-    fn deref(&self) -> &PointSpec {
-        &self.device.points[self.index]
     }
 }
 
@@ -1182,6 +1128,9 @@ pub fn judge_staleness(
         _ => quality,
     }
 }
+
+mod roster;
+pub use roster::{PointRef, Roster};
 
 #[cfg(test)]
 mod tests;
