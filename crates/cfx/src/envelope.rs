@@ -96,20 +96,47 @@ impl Envelope {
 
     /// The AMQP properties it is sent with.
     pub fn amqp(&self) -> AmqpProperties {
-        let handle = self.source.to_string();
+        AmqpProperties::of(Header {
+            name: self.message.name(),
+            unique_id: self.unique_id,
+            time_stamp: &self.time_stamp,
+            source: self.source.as_str(),
+            target: self.target.as_ref().map(Handle::as_str),
+            request_id: self.request_id.as_deref(),
+        })
+    }
+}
+
+/// What the AMQP properties are made of: the envelope's header.
+struct Header<'a> {
+    name: &'a str,
+    unique_id: Uuid,
+    time_stamp: &'a Time,
+    source: &'a str,
+    target: Option<&'a str>,
+    request_id: Option<&'a str>,
+}
+
+impl AmqpProperties {
+    fn of(header: Header<'_>) -> Self {
+        let handle = header.source.to_owned();
+        let topic = header
+            .name
+            .rsplit_once('.')
+            .map_or(header.name, |(topic, _)| topic);
         AmqpProperties {
-            message_id: self.unique_id.to_string(),
-            to: self.target.as_ref().map(ToString::to_string),
+            message_id: header.unique_id.to_string(),
+            to: header.target.map(str::to_owned),
             reply_to: handle.clone(),
-            correlation_id: self.request_id.clone(),
-            subject: format!("{handle}.{}", self.message.name()),
+            correlation_id: header.request_id.map(str::to_owned),
+            subject: format!("{handle}.{}", header.name),
             content_type: CONTENT_TYPE,
-            creation_time_ms: self.time_stamp.timestamp().as_millisecond(),
+            creation_time_ms: header.time_stamp.timestamp().as_millisecond(),
             application: vec![
-                ("cfx-topic", Some(self.message.topic().to_owned())),
-                ("cfx-message", Some(self.message.name().to_owned())),
+                ("cfx-topic", Some(topic.to_owned())),
+                ("cfx-message", Some(header.name.to_owned())),
                 ("cfx-handle", Some(handle)),
-                ("cfx-target", self.target.as_ref().map(ToString::to_string)),
+                ("cfx-target", header.target.map(str::to_owned)),
             ],
         }
     }
@@ -147,6 +174,21 @@ pub struct Received {
 pub struct DecodeError(String);
 
 impl Received {
+    /// The AMQP properties it was sent with (as [`Envelope::amqp`] gives them): how a
+    /// message kept as its JSON is sent again. Fails when the header lacks the `UniqueID`,
+    /// `TimeStamp` or `Source` they are made of.
+    pub fn amqp(&self) -> Result<AmqpProperties, DecodeError> {
+        let missing = |what: &str| DecodeError(format!("{} has no {what}", self.message_name));
+        Ok(AmqpProperties::of(Header {
+            name: &self.message_name,
+            unique_id: self.unique_id.ok_or_else(|| missing("UniqueID"))?,
+            time_stamp: self.time_stamp.as_ref().ok_or_else(|| missing("TimeStamp"))?,
+            source: self.source.as_deref().ok_or_else(|| missing("Source"))?,
+            target: self.target.as_deref(),
+            request_id: self.request_id.as_deref(),
+        }))
+    }
+
     /// The envelopes of one AMQP message's body: one object, or an array of them (a
     /// batch).
     pub fn decode(bytes: &[u8]) -> Result<Vec<Received>, DecodeError> {

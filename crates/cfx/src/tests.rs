@@ -463,6 +463,24 @@ fn an_amqp_message_carries_the_sdks_subject_content_type_and_application_propert
 }
 
 #[test]
+fn a_message_kept_as_its_json_is_sent_again_with_the_same_amqp_properties() {
+    let mut envelope = Envelope {
+        unique_id: id(4),
+        ..Envelope::new(handle(), at(0), Message::StationOffline(StationOffline {}))
+    };
+    envelope.target = Some(Handle::new("Line1.MES").unwrap());
+    envelope.request_id = Some("req-7".to_owned());
+    let kept = Received::decode(&envelope.to_bytes()).unwrap();
+    assert_eq!(kept[0].amqp().unwrap(), envelope.amqp());
+
+    let headless = Received::decode(br#"{"MessageName": "CFX.Heartbeat"}"#).unwrap();
+    assert_eq!(
+        headless[0].amqp().unwrap_err().to_string(),
+        "not a CFX envelope: CFX.Heartbeat has no UniqueID"
+    );
+}
+
+#[test]
 fn time_spans_are_written_and_read_as_dotnet_writes_them() {
     for (duration, text) in [
         (Duration::from_secs(85), "00:01:25"),

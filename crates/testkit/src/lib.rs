@@ -10,6 +10,9 @@
 //!   payloads with the `sparkplug` crate and survives broker restarts.
 //! - `postgres` (feature `postgres`): `Postgres`, a real, throwaway PostgreSQL cluster on
 //!   a free loopback port, with crash-restart, stop and start again; stopped on drop.
+//! - `rabbitmq` (feature `rabbitmq`): `RabbitMq`, a real AMQP 1.0 broker (Debian's
+//!   RabbitMQ with its AMQP 1.0 plugin) on free loopback ports, stopped and started again
+//!   at will; stopped on drop.
 //! - [`noise`]: [`Noise`], a seeded, sans-IO byte mangler with the trouble of a bad
 //!   serial line (flipped bits, lost, inserted and duplicated bytes, whole chunks lost,
 //!   bursts), and its counts.
@@ -34,6 +37,8 @@ pub mod noise;
 #[cfg(feature = "postgres")]
 pub mod postgres;
 pub mod proxy;
+#[cfg(feature = "rabbitmq")]
+pub mod rabbitmq;
 #[cfg(feature = "mqtt")]
 pub mod sparkplug_sub;
 pub mod tricks;
@@ -46,6 +51,8 @@ pub use noise::{Noise, NoiseConfig, NoiseCounts};
 #[cfg(feature = "postgres")]
 pub use postgres::Postgres;
 pub use proxy::{LineControl, NoisyProxy, noisy_pipe};
+#[cfg(feature = "rabbitmq")]
+pub use rabbitmq::RabbitMq;
 #[cfg(feature = "mqtt")]
 pub use sparkplug_sub::{SparkplugMessage, Subscriber, command_payload, rebirth_command};
 pub use tricks::{At, Tap, Trick, Tricky};

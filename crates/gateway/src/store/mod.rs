@@ -55,6 +55,8 @@
 //!   in the batches' transactions; bucketed queries of whole minutes read them.
 //! - `query`: the read connections and the queries.
 //! - `settings`: small values kept across restarts (the Sparkplug `bdSeq`).
+//! - `outbox`: messages an interface made and its receiver has not yet accepted (IPC-CFX's),
+//!   with what made them must remember, kept across restarts.
 
 use std::future::Future;
 use std::path::{Path, PathBuf};
@@ -70,6 +72,7 @@ mod fault;
 mod inbox;
 pub mod lock;
 mod open;
+mod outbox;
 mod query;
 mod records;
 mod rollup;
@@ -78,6 +81,7 @@ mod settings;
 mod writer;
 
 pub use changes::ChangeCursor;
+pub use outbox::Outbox;
 pub use records::*;
 pub use settings::{read_setting, write_setting};
 

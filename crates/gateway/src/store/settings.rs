@@ -35,7 +35,9 @@ pub fn write_setting(dir: &Path, key: &str, value: i64) -> Result<(), StoreError
     .map_err(|source| StoreError::Sqlite { path, source })
 }
 
-fn connect(dir: &Path) -> Result<(std::path::PathBuf, Connection), StoreError> {
+/// A short connection of its own to the database in `dir`, set up as the writer's is, with
+/// the `settings` table there.
+pub(super) fn connect(dir: &Path) -> Result<(std::path::PathBuf, Connection), StoreError> {
     let path = super::open::database_path(dir)?;
     let sqlite = |source| StoreError::Sqlite {
         path: path.clone(),

@@ -1,17 +1,26 @@
 //! IPC-CFX (IPC-2591): the cell's placement machines as CFX endpoints on an AMQP 1.0
 //! broker (or receiver). The messages' JSON and AMQP properties are the `cfx` crate's;
 //! [`station`] turns what the change stream says of one machine into its messages, sans
-//! IO; this module sends them (`fe2o3-amqp`), one AMQP message each with the SDK's
-//! properties, to the `[cfx]` table's (or `--cfx`'s) address.
+//! IO; this module keeps them and sends them (`fe2o3-amqp`), one AMQP message each with
+//! the SDK's properties, to the `[cfx]` table's (or `--cfx`'s) address; [`listen`]
+//! answers the requests sent to the endpoints.
 //!
-//! Each connection starts with every endpoint's `EndpointConnected`; a clean stop ends with
-//! `EndpointShuttingDown`. While the link is down, the messages wait in memory (at most
-//! [`MAX_WAITING`], the oldest dropped and counted) and go out in order, each once, when it
-//! is back; the link is opened again with a backoff of 1 s doubling to 30 s.
+//! Delivery: every message a station makes (heartbeats aside) is first committed to the
+//! history database's outbox (`store::Outbox`), in one transaction with what the stations
+//! must remember (their state and since when, their open faults, their placement window);
+//! only then is it sent, oldest first, and it is removed when the receiver has accepted it.
+//! So a broker outage, a lost link or a gateway restart (`kill -9` and power cuts included)
+//! loses nothing: what was kept goes out when the link is back, in order, each with its
+//! original `UniqueID` and `TimeStamp`, and a station after a restart goes on where it was
+//! (an open fault still gets its `FaultCleared`). At most [`MAX_KEPT`] messages are kept,
+//! the oldest dropped first and counted. A message whose acceptance was not heard before the
+//! link broke is sent again with its id (at least once: a receiver drops an id it has).
+//! Heartbeats are sent only while the link is up, never late: the receiver learns of the
+//! outage by their absence and by the next connection's `EndpointConnected`.
 //!
-//! Not built yet (issue #39): `amqps://`, the endpoint's request listener, the catch-up
-//! from the history after a restart (the stations' ids are made for it: the same history
-//! gives the same `UniqueID`s), and `cellbus cfx sub`.
+//! Each connection starts with every endpoint's `EndpointConnected`; a clean stop sends
+//! what is kept (for at most [`FINISH_PATIENCE`]) and ends with `EndpointShuttingDown`. The
+//! link is opened again with a backoff of 1 s doubling to 30 s.
 
 pub mod config;
 pub mod listen;
@@ -26,15 +35,16 @@ use fe2o3_amqp::types::primitives::{Binary, SimpleValue, Timestamp as AmqpTime};
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::Registry;
-use tokio::sync::{broadcast, watch};
+use tokio::sync::{Notify, broadcast, mpsc, watch};
 use wire::backoff::Backoff;
 
 use self::config::{CfxConfig, CfxTable};
-use self::station::{Input, Station, StationConfig};
+use self::station::{Input, Memory, Station, StationConfig};
 use super::{BoxStart, Northbound, Running, Start};
 use crate::cell::{Cell, InterfaceStatus, LiveMessage};
 use crate::config::TableReader;
 use crate::options::OptionError;
+use crate::store::Outbox;
 use crate::time::Timestamp;
 
 /// The interface's name in `/healthz` and logs.
@@ -43,8 +53,21 @@ pub const NAME: &str = "cfx";
 /// How long opening the link, or the receiver's verdict on one message, may take.
 const LINK_PATIENCE: Duration = Duration::from_secs(30);
 
-/// Messages kept while the link is down, at most.
+/// Messages kept in the outbox, at most (about 60 MB of the history database).
+pub const MAX_KEPT: u64 = 100_000;
+
+/// Messages made that wait in memory while the outbox cannot take them, at most.
 pub const MAX_WAITING: usize = 10_000;
+
+/// Kept messages read from the outbox at a time.
+const PAGE: usize = 200;
+
+/// How often the stations' memory is kept when no message was made (a placement window's
+/// counts move with every poll).
+const MEMORY_EVERY: Duration = Duration::from_secs(10);
+
+/// How long a clean stop goes on sending what is kept (the rest waits for the next start).
+const FINISH_PATIENCE: Duration = Duration::from_secs(5);
 
 /// The demo cell's handles: `cellbus.demo.<device>`.
 pub const DEMO_PREFIX: &str = "cellbus.demo";
@@ -145,6 +168,7 @@ impl Northbound for Cfx {
                 password,
                 stations,
                 status,
+                start.options.data_dir.clone(),
                 start.stopped,
             ));
             Ok(Some(Running {
@@ -267,13 +291,50 @@ fn stations(cell: &Cell, config: &CfxConfig, prefix: &str) -> anyhow::Result<Vec
     Ok(out)
 }
 
-/// Feeds the stations from the change stream and sends what they make, until `stop`.
+/// Feeds the stations from the change stream and keeps what they make (a task), sends
+/// what is kept (another), until `stop`.
 async fn run(
     cell: Arc<Cell>,
     config: CfxConfig,
     password: Option<String>,
-    stations: Vec<Station>,
+    mut stations: Vec<Station>,
     status: Arc<CfxStatus>,
+    data_dir: std::path::PathBuf,
+    stop: watch::Receiver<bool>,
+) {
+    let kept = Kept::open(&cell, &data_dir).await;
+    kept.recall(&mut stations).await;
+    status.metrics.waiting.set(kept.len().await);
+    let wake = Arc::new(Notify::new());
+    let (beats, beats_rx) = mpsc::channel(64);
+    let (finish, finished) = watch::channel(false);
+    let endpoints = stations.clone();
+    let sender = tokio::spawn(send(
+        Sender {
+            config,
+            password,
+            endpoints,
+            kept: kept.clone(),
+            status: Arc::clone(&status),
+        },
+        Arc::clone(&wake),
+        beats_rx,
+        finished,
+    ));
+    feed(&cell, stations, &kept, &wake, beats, &status, stop).await;
+    let _ = finish.send(true);
+    let _ = sender.await;
+}
+
+/// Feeds the stations from the change stream until `stop`, and keeps what they make;
+/// heartbeats go straight to the sender (a heartbeat is not sent late).
+async fn feed(
+    cell: &Cell,
+    stations: Vec<Station>,
+    kept: &Kept,
+    wake: &Notify,
+    beats: mpsc::Sender<cfx::Envelope>,
+    status: &CfxStatus,
     mut stop: watch::Receiver<bool>,
 ) {
     let mut feeder = Feeder {
@@ -281,81 +342,38 @@ async fn run(
             .into_iter()
             .map(|s| (s.device().to_owned(), s))
             .collect(),
-        waiting: VecDeque::new(),
-        status: Arc::clone(&status),
+        made: VecDeque::new(),
+        remember: false,
+        status,
     };
     let mut live = cell.subscribe();
     let mut tick = tokio::time::interval(Duration::from_secs(1));
-    let mut backoff = Backoff::new(Duration::from_secs(1), Duration::from_secs(30)).timer();
-    let mut first = true;
+    let mut last_kept = tokio::time::Instant::now();
     loop {
-        let opened = tokio::select! {
-            () = stopped(&mut stop) => return,
-            opened = tokio::time::timeout(LINK_PATIENCE, Link::open(&config, password.as_deref())) => {
-                opened.unwrap_or_else(|_| Err(format!(
-                    "{} did not open the link within {LINK_PATIENCE:?}", config.url()
-                )))
+        let stopping = tokio::select! {
+            () = stopped(&mut stop) => true,
+            message = live.recv() => {
+                feeder.live(message);
+                false
             }
-        };
-        let mut link = match opened {
-            Ok(link) => link,
-            Err(why) => {
-                status.set_link(Err(why));
-                let wait = tokio::time::sleep(backoff.next_wait());
-                tokio::pin!(wait);
-                loop {
-                    tokio::select! {
-                        () = stopped(&mut stop) => return,
-                        () = &mut wait => break,
-                        message = live.recv() => feeder.live(message),
-                        _ = tick.tick() => feeder.tick_offline(Timestamp::now()),
-                    }
+            _ = tick.tick() => {
+                for beat in feeder.tick(Timestamp::now()) {
+                    // Full only while the link is down: then it is not sent at all.
+                    let _ = beats.try_send(beat);
                 }
-                continue;
+                false
             }
         };
-        if !first {
-            status.metrics.reconnects.inc();
+        // The memory alone (a placement window's counts) is kept every MEMORY_EVERY.
+        let memory_due = feeder.remember && last_kept.elapsed() >= MEMORY_EVERY;
+        let due = !feeder.made.is_empty() || memory_due || (stopping && feeder.remember);
+        if due && feeder.keep(kept).await {
+            last_kept = tokio::time::Instant::now();
+            wake.notify_one();
         }
-        first = false;
-        status.set_link(Ok(()));
-        backoff.reset();
-        let now = Timestamp::now();
-        let connected: Vec<_> = feeder
-            .stations
-            .iter_mut()
-            .map(|(_, s)| s.connected(now))
-            .collect();
-        let lost = 'connected: {
-            for envelope in &connected {
-                if let Err(why) = link.send(envelope).await {
-                    break 'connected why;
-                }
-            }
-            loop {
-                while let Some(envelope) = feeder.waiting.front() {
-                    if let Err(why) = link.send(envelope).await {
-                        break 'connected why;
-                    }
-                    feeder.waiting.pop_front();
-                    status.metrics.sent.inc();
-                }
-                tokio::select! {
-                    () = stopped(&mut stop) => {
-                        let now = Timestamp::now();
-                        for (_, station) in &feeder.stations {
-                            let _ = link.send(&station.shutting_down(now)).await;
-                        }
-                        link.close().await;
-                        return;
-                    }
-                    message = live.recv() => feeder.live(message),
-                    _ = tick.tick() => feeder.feed_all(Input::Tick(Timestamp::now())),
-                }
-            }
-        };
-        tracing::warn!("IPC-CFX: the link to {} was lost: {lost}", config.url());
-        status.set_link(Err(lost));
+        if stopping {
+            return;
+        }
     }
 }
 
@@ -364,14 +382,17 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
     let _ = stop.wait_for(|s| *s).await;
 }
 
-/// The stations and the messages waiting to be sent.
-struct Feeder {
+/// The stations, and what they made that is not kept yet.
+struct Feeder<'a> {
     stations: Vec<(String, Station)>,
-    waiting: VecDeque<cfx::Envelope>,
-    status: Arc<CfxStatus>,
+    /// Made, waiting for the outbox (only while it fails: at most [`MAX_WAITING`]).
+    made: VecDeque<cfx::Envelope>,
+    /// A station's memory changed since it was last kept.
+    remember: bool,
+    status: &'a CfxStatus,
 }
 
-impl Feeder {
+impl Feeder<'_> {
     /// One message of the change stream.
     fn live(&mut self, message: Result<LiveMessage, broadcast::error::RecvError>) {
         match message {
@@ -402,45 +423,238 @@ impl Feeder {
     }
 
     fn feed(&mut self, device: &str, input: Input<'_>) {
-        let made: Vec<_> = self
-            .stations
-            .iter_mut()
-            .filter(|(d, _)| d == device)
-            .flat_map(|(_, s)| s.feed(input))
-            .collect();
-        self.keep(made);
-    }
-
-    fn feed_all(&mut self, input: Input<'_>) {
-        let made: Vec<_> = self
-            .stations
-            .iter_mut()
-            .flat_map(|(_, s)| s.feed(input))
-            .collect();
-        self.keep(made);
-    }
-
-    /// Time passing while the link is down: placement windows close, but no heartbeat is
-    /// kept to be sent late (the receiver learns of the outage by their absence, and the
-    /// next connection's `EndpointConnected`).
-    fn tick_offline(&mut self, now: Timestamp) {
-        let made: Vec<_> = self
-            .stations
-            .iter_mut()
-            .flat_map(|(_, s)| s.feed(Input::Tick(now)))
-            .filter(|e| !matches!(e.message, cfx::Message::Heartbeat(_)))
-            .collect();
-        self.keep(made);
-    }
-
-    fn keep(&mut self, made: Vec<cfx::Envelope>) {
-        for envelope in made {
-            if self.waiting.len() >= MAX_WAITING {
-                self.waiting.pop_front();
-                self.status.metrics.dropped.inc();
-            }
-            self.waiting.push_back(envelope);
+        for (_, station) in self.stations.iter_mut().filter(|(d, _)| d == device) {
+            let before = station.memory();
+            let made = station.feed(input);
+            self.remember |= station.memory() != before;
+            self.made.extend(made);
         }
+        self.bound();
+    }
+
+    /// Time passing: placement windows close; the heartbeats due are returned.
+    fn tick(&mut self, now: Timestamp) -> Vec<cfx::Envelope> {
+        let mut beats = Vec::new();
+        for (_, station) in &mut self.stations {
+            let before = station.memory();
+            for envelope in station.feed(Input::Tick(now)) {
+                if matches!(envelope.message, cfx::Message::Heartbeat(_)) {
+                    beats.push(envelope);
+                } else {
+                    self.made.push_back(envelope);
+                }
+            }
+            self.remember |= station.memory() != before;
+        }
+        self.bound();
+        beats
+    }
+
+    fn bound(&mut self) {
+        while self.made.len() > MAX_WAITING {
+            self.made.pop_front();
+            self.status.metrics.dropped.inc();
+        }
+    }
+
+    /// Keeps what was made, with the stations' memory; whether it was kept (else it waits
+    /// here for the next try).
+    async fn keep(&mut self, kept: &Kept) -> bool {
+        let bodies: Vec<_> = self.made.iter().map(cfx::Envelope::to_bytes).collect();
+        let memory: BTreeMap<String, Memory> = self
+            .stations
+            .iter()
+            .map(|(_, s)| (s.handle().to_string(), s.memory()))
+            .collect();
+        let memory = serde_json::to_string(&memory).ok();
+        match kept.keep(bodies, memory).await {
+            Ok(dropped) => {
+                self.made.clear();
+                self.remember = false;
+                self.status.metrics.dropped.inc_by(dropped);
+                self.status.metrics.waiting.set(kept.len().await);
+                true
+            }
+            Err(why) => {
+                tracing::warn!("IPC-CFX: cannot keep its messages: {why}; they wait in memory");
+                false
+            }
+        }
+    }
+}
+
+/// The outbox of the history database (or, when the data directory cannot be used, one in
+/// memory), shared by the feeder and the sender; its calls run off the async threads.
+#[derive(Clone)]
+struct Kept(Arc<std::sync::Mutex<Outbox>>);
+
+impl Kept {
+    async fn open(cell: &Cell, dir: &std::path::Path) -> Kept {
+        let store = cell.store().clone();
+        let dir = dir.to_owned();
+        let opened = tokio::task::spawn_blocking(move || {
+            // The history's open moves a damaged file aside first.
+            let _ = store.wait_open();
+            Outbox::open(&dir, NAME)
+        })
+        .await;
+        let outbox = match opened {
+            Ok(Ok(outbox)) => outbox,
+            Ok(Err(e)) => {
+                tracing::warn!(
+                    "IPC-CFX: cannot keep its messages in the history ({e}); they wait in \
+                     memory and a restart loses those not yet sent"
+                );
+                Outbox::in_memory(NAME).expect("SQLite opens a database in memory")
+            }
+            Err(e) => std::panic::resume_unwind(e.into_panic()),
+        };
+        Kept(Arc::new(std::sync::Mutex::new(outbox)))
+    }
+
+    async fn call<R: Send + 'static>(
+        &self,
+        f: impl FnOnce(&mut Outbox) -> R + Send + 'static,
+    ) -> R {
+        let outbox = Arc::clone(&self.0);
+        match tokio::task::spawn_blocking(move || {
+            f(&mut outbox.lock().unwrap_or_else(PoisonError::into_inner))
+        })
+        .await
+        {
+            Ok(r) => r,
+            Err(e) => std::panic::resume_unwind(e.into_panic()),
+        }
+    }
+
+    /// Gives each station the memory kept for its handle.
+    async fn recall(&self, stations: &mut [Station]) {
+        let memory = match self.call(|o| o.memory()).await {
+            Ok(memory) => memory,
+            Err(e) => {
+                tracing::warn!("IPC-CFX: cannot read what the stations knew: {e}");
+                None
+            }
+        };
+        let Some(memory) = memory else { return };
+        let mut memory: BTreeMap<String, Memory> = match serde_json::from_str(&memory) {
+            Ok(memory) => memory,
+            Err(e) => {
+                tracing::warn!("IPC-CFX: what the stations knew is unreadable ({e}); they start afresh");
+                return;
+            }
+        };
+        for station in stations {
+            if let Some(m) = memory.remove(station.handle().as_str()) {
+                station.remember(m);
+            }
+        }
+    }
+
+    async fn keep(&self, bodies: Vec<Vec<u8>>, memory: Option<String>) -> Result<u64, String> {
+        self.call(move |o| o.keep(&bodies, memory.as_deref(), MAX_KEPT))
+            .await
+            .map_err(|e| e.to_string())
+    }
+
+    async fn len(&self) -> i64 {
+        self.call(|o| i64::try_from(o.len()).unwrap_or(i64::MAX)).await
+    }
+}
+
+/// What the sender needs.
+struct Sender {
+    config: CfxConfig,
+    password: Option<String>,
+    /// The stations as they were at the start: their handles and request addresses.
+    endpoints: Vec<Station>,
+    kept: Kept,
+    status: Arc<CfxStatus>,
+}
+
+/// Sends what is kept, oldest first, each removed when the receiver accepted it, and the
+/// heartbeats while the link is up; opens the link again with a backoff. Once `finish`
+/// turns true (the feeder has kept its last messages), sends what is kept for at most
+/// [`FINISH_PATIENCE`], the endpoints' `EndpointShuttingDown`, and closes the link.
+async fn send(
+    sender: Sender,
+    wake: Arc<Notify>,
+    mut beats: mpsc::Receiver<cfx::Envelope>,
+    mut finish: watch::Receiver<bool>,
+) {
+    let Sender {
+        config,
+        password,
+        endpoints,
+        kept,
+        status,
+    } = sender;
+    let mut backoff = Backoff::new(Duration::from_secs(1), Duration::from_secs(30)).timer();
+    let mut sent: i64 = 0;
+    let mut first = true;
+    loop {
+        let opened = tokio::select! {
+            () = stopped(&mut finish) => return,
+            opened = tokio::time::timeout(LINK_PATIENCE, Link::open(&config, password.as_deref())) => {
+                opened.unwrap_or_else(|_| Err(format!(
+                    "{} did not open the link within {LINK_PATIENCE:?}", config.url()
+                )))
+            }
+        };
+        let mut link = match opened {
+            Ok(link) => link,
+            Err(why) => {
+                status.set_link(Err(why));
+                tokio::select! {
+                    () = stopped(&mut finish) => return,
+                    () = tokio::time::sleep(backoff.next_wait()) => {}
+                }
+                continue;
+            }
+        };
+        if !first {
+            status.metrics.reconnects.inc();
+        }
+        first = false;
+        status.set_link(Ok(()));
+        backoff.reset();
+        // Heartbeats made while the link was down are not sent late.
+        while beats.try_recv().is_ok() {}
+        let now = Timestamp::now();
+        let lost = 'connected: {
+            for station in &endpoints {
+                if let Err(why) = link.send(amqp_message(&station.connected(now))).await {
+                    break 'connected why;
+                }
+            }
+            loop {
+                if let Err(why) = link.send_kept(&kept, &mut sent, &status).await {
+                    break 'connected why;
+                }
+                tokio::select! {
+                    () = stopped(&mut finish) => {
+                        let _ = tokio::time::timeout(
+                            FINISH_PATIENCE,
+                            link.send_kept(&kept, &mut sent, &status),
+                        ).await;
+                        let now = Timestamp::now();
+                        for station in &endpoints {
+                            let _ = link.send(amqp_message(&station.shutting_down(now))).await;
+                        }
+                        link.close().await;
+                        return;
+                    }
+                    () = wake.notified() => {}
+                    Some(beat) = beats.recv() => {
+                        if let Err(why) = link.send(amqp_message(&beat)).await {
+                            break 'connected why;
+                        }
+                    }
+                }
+            }
+        };
+        tracing::warn!("IPC-CFX: the link to {} was lost: {lost}", config.url());
+        status.set_link(Err(lost));
     }
 }
 
@@ -485,10 +699,59 @@ impl Link {
         })
     }
 
-    /// Sends one envelope and waits for the receiver's verdict (at most
+    /// Sends what is kept after number `sent`, oldest first, moving `sent` on as the
+    /// receiver accepts each and removing them from the outbox page by page.
+    async fn send_kept(
+        &mut self,
+        kept: &Kept,
+        sent: &mut i64,
+        status: &CfxStatus,
+    ) -> Result<(), String> {
+        loop {
+            let after = *sent;
+            let page = kept
+                .call(move |o| o.waiting(after, PAGE))
+                .await
+                .map_err(|e| format!("cannot read the kept messages: {e}"))?;
+            let Some(&(last, _)) = page.last() else {
+                return Ok(());
+            };
+            let mut result = Ok(());
+            for (seq, body) in page {
+                match kept_message(&body) {
+                    Ok(message) => {
+                        if let Err(why) = self.send(message).await {
+                            result = Err(why);
+                            break;
+                        }
+                        status.metrics.sent.inc();
+                    }
+                    Err(why) => {
+                        tracing::warn!("IPC-CFX: a kept message is dropped: {why}");
+                        status.metrics.dropped.inc();
+                    }
+                }
+                *sent = seq;
+            }
+            let through = *sent;
+            if let Err(e) = kept.call(move |o| o.taken(through)).await {
+                tracing::warn!("IPC-CFX: cannot remove the messages sent from the outbox: {e}");
+            }
+            status.metrics.waiting.set(kept.len().await);
+            result?;
+            if *sent < last {
+                return Ok(());
+            }
+        }
+    }
+
+    /// Sends one message and waits for the receiver's verdict (at most
     /// [`LINK_PATIENCE`]: a receiver that takes no more is a lost link).
-    async fn send(&mut self, envelope: &cfx::Envelope) -> Result<(), String> {
-        let outcome = tokio::time::timeout(LINK_PATIENCE, self.sender.send(amqp_message(envelope)))
+    async fn send(
+        &mut self,
+        message: Message<fe2o3_amqp::types::messaging::Data>,
+    ) -> Result<(), String> {
+        let outcome = tokio::time::timeout(LINK_PATIENCE, self.sender.send(message))
             .await
             .map_err(|_| format!("no verdict on a message within {LINK_PATIENCE:?}"))?
             .map_err(|e| e.to_string())?;
@@ -511,7 +774,24 @@ impl Link {
 
 /// The AMQP message of `envelope`: one Data section of its JSON, the SDK's properties.
 pub fn amqp_message(envelope: &cfx::Envelope) -> Message<fe2o3_amqp::types::messaging::Data> {
-    let p = envelope.amqp();
+    message_of(envelope.amqp(), envelope.to_bytes())
+}
+
+/// The AMQP message of an envelope kept as its JSON.
+fn kept_message(body: &[u8]) -> Result<Message<fe2o3_amqp::types::messaging::Data>, String> {
+    let envelopes = cfx::Received::decode(body).map_err(|e| e.to_string())?;
+    let [envelope] = envelopes.as_slice() else {
+        return Err(format!("{} envelopes in one kept message", envelopes.len()));
+    };
+    let properties = envelope.amqp().map_err(|e| e.to_string())?;
+    Ok(message_of(properties, body.to_vec()))
+}
+
+/// One Data section of `body`, with `p`.
+fn message_of(
+    p: cfx::envelope::AmqpProperties,
+    body: Vec<u8>,
+) -> Message<fe2o3_amqp::types::messaging::Data> {
     let mut properties = Properties::builder()
         .message_id(p.message_id)
         .subject(p.subject)
@@ -535,7 +815,7 @@ pub fn amqp_message(envelope: &cfx::Envelope) -> Message<fe2o3_amqp::types::mess
         })
         .properties(properties.build())
         .application_properties(application.build())
-        .data(Binary::from(envelope.to_bytes()))
+        .data(Binary::from(body))
         .build()
 }
 
@@ -555,8 +835,11 @@ pub struct CfxMetrics {
     pub connected: Gauge,
     /// Messages accepted by the receiver.
     pub sent: Counter,
-    /// Messages dropped while the link was down past [`MAX_WAITING`].
+    /// Messages dropped: the oldest past [`MAX_KEPT`] (or [`MAX_WAITING`] while the outbox
+    /// failed), or a kept one that could not be read.
     pub dropped: Counter,
+    /// Messages kept, waiting to be sent.
+    pub waiting: Gauge,
     /// Connections made after the first.
     pub reconnects: Counter,
 }
@@ -575,8 +858,13 @@ impl CfxMetrics {
         );
         registry.register(
             "cfx_dropped",
-            "IPC-CFX messages dropped, the oldest first, while more than 10,000 waited for the link",
+            "IPC-CFX messages dropped, the oldest first, past the 100,000 the outbox keeps",
             self.dropped.clone(),
+        );
+        registry.register(
+            "cfx_waiting",
+            "IPC-CFX messages kept in the outbox, waiting for the link",
+            self.waiting.clone(),
         );
         registry.register(
             "cfx_reconnects",
@@ -614,9 +902,14 @@ impl CfxStatus {
 
 impl InterfaceStatus for CfxStatus {
     fn health(&self) -> serde_json::Value {
+        let waiting = match self.metrics.waiting.get() {
+            0 => String::new(),
+            1 => "; 1 message waits".to_owned(),
+            n => format!("; {n} messages wait"),
+        };
         match self.link() {
-            Ok(()) => serde_json::json!(format!("connected to {}", self.url)),
-            Err(why) => serde_json::json!(format!("disconnected: {why}")),
+            Ok(()) => serde_json::json!(format!("connected to {}{waiting}", self.url)),
+            Err(why) => serde_json::json!(format!("disconnected: {why}{waiting}")),
         }
     }
 

@@ -34,6 +34,7 @@ use cfx::messages::{
 };
 use cfx::types::{FaultCause, FaultSeverity, PlacementFaultType};
 use cfx::{Envelope, Handle, Message, ResourceState, Time, TimeSpan};
+use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
 use crate::event::{Event, EventKind};
@@ -93,15 +94,59 @@ struct Active {
 }
 
 /// The counts at the start of the placement window.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 struct Window {
+    #[serde(with = "millis_serde")]
     start: Timestamp,
     placed: Option<u64>,
     pickups: Option<u64>,
     /// The counts last seen.
     last_placed: Option<u64>,
     last_pickups: Option<u64>,
+    #[serde(with = "millis_serde")]
     last_at: Timestamp,
+}
+
+/// What a station must know after a restart of the gateway, kept with the messages it
+/// made (`store::Outbox`): its state and since when, its open faults (so that their
+/// `FaultCleared` still comes), whether the machine is offline, its program, and its
+/// placement window. Times in ms since the epoch.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Memory {
+    state: Option<(u16, i64)>,
+    #[serde(default)]
+    faults: Vec<KeptFault>,
+    offline_since: Option<i64>,
+    program: Option<String>,
+    window: Option<Window>,
+}
+
+/// An open fault, as kept.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct KeptFault {
+    code: String,
+    occurrence: Uuid,
+    at: i64,
+    cause: FaultCause,
+    severity: FaultSeverity,
+    description: Option<String>,
+    transaction: Option<Uuid>,
+    placement: Option<(PlacementFaultType, i32, Option<String>, Option<i32>)>,
+}
+
+/// A `Timestamp` as its ms.
+mod millis_serde {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    use crate::time::Timestamp;
+
+    pub fn serialize<S: Serializer>(t: &Timestamp, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_i64(t.0)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Timestamp, D::Error> {
+        i64::deserialize(d).map(Timestamp)
+    }
 }
 
 /// One machine as a CFX endpoint.
@@ -154,6 +199,65 @@ impl Station {
         &self.config.device
     }
 
+    /// What it must know after a restart.
+    pub fn memory(&self) -> Memory {
+        Memory {
+            state: self.state.map(|(state, since)| (state.code(), since.0)),
+            faults: self
+                .faults
+                .iter()
+                .map(|Active { fault }| KeptFault {
+                    code: fault.fault_code.clone(),
+                    occurrence: fault.fault_occurrence_id,
+                    at: fault.occurred_at.timestamp().as_millisecond(),
+                    cause: fault.cause,
+                    severity: fault.severity,
+                    description: fault.description.clone(),
+                    transaction: fault.transaction_id,
+                    placement: fault.placement.as_ref().map(|p| {
+                        (p.fault_type, p.program_step, p.feeder.clone(), p.nozzle)
+                    }),
+                })
+                .collect(),
+            offline_since: self.offline_since.map(|t| t.0),
+            program: self.program.clone(),
+            window: self.window,
+        }
+    }
+
+    /// Takes up where a station of the same machine was when it kept `memory`.
+    pub fn remember(&mut self, memory: Memory) {
+        self.state = memory
+            .state
+            .and_then(|(code, since)| Some((ResourceState::new(u32::from(code)).ok()?, Timestamp(since))));
+        self.faults = memory
+            .faults
+            .into_iter()
+            .map(|kept| Active {
+                fault: Fault {
+                    placement: kept.placement.map(|(fault_type, program_step, feeder, nozzle)| {
+                        Placement {
+                            fault_type,
+                            program_step,
+                            feeder,
+                            nozzle,
+                        }
+                    }),
+                    transaction_id: kept.transaction,
+                    cause: kept.cause,
+                    severity: kept.severity,
+                    fault_code: kept.code,
+                    fault_occurrence_id: kept.occurrence,
+                    description: kept.description,
+                    occurred_at: self.time(Timestamp(kept.at)),
+                },
+            })
+            .collect();
+        self.offline_since = memory.offline_since.map(Timestamp);
+        self.program = memory.program;
+        self.window = memory.window;
+    }
+
     /// The messages `input` makes.
     pub fn feed(&mut self, input: Input<'_>) -> Vec<Envelope> {
         match input {
@@ -173,7 +277,7 @@ impl Station {
     }
 
     /// Its `EndpointConnected`, as a connection to the broker starts (`now`).
-    pub fn connected(&mut self, now: Timestamp) -> Envelope {
+    pub fn connected(&self, now: Timestamp) -> Envelope {
         let message = Message::EndpointConnected(EndpointConnected {
             cfx_handle: self.config.handle.clone(),
             request_network_uri: self.request_uri.clone(),

@@ -268,3 +268,60 @@ fn bad_values_and_codes_cfx_does_not_have_change_nothing() {
     assert!(value(&mut s, "parts_placed", Value::Number(-3.0), 0).is_empty());
     assert!(value(&mut s, "temperature", Value::Number(20.0), 0).is_empty());
 }
+
+#[test]
+fn a_station_that_remembers_goes_on_as_the_one_before_the_restart_would_have() {
+    let mut before = station();
+    value(&mut before, "machine_state_code", Value::Number(1100.0), 0);
+    value(&mut before, "program", Value::Text("BOARD-A".into()), 0);
+    value(&mut before, "parts_placed", Value::Number(100.0), MINUTE);
+    device_event(
+        &mut before,
+        EventKind::DeviceEvent,
+        fields([
+            ("event", json!("parts_exhausted")),
+            ("error_code", json!(3)),
+            ("step", json!(87)),
+            ("nozzle", json!(7)),
+            ("feeder", json!(12)),
+        ]),
+        2 * MINUTE,
+    );
+    device_event(&mut before, EventKind::DeviceDown, fields([]), 3 * MINUTE);
+
+    // Kept as JSON (as the outbox keeps it) and taken up by a new station.
+    let kept = serde_json::to_string(&before.memory()).unwrap();
+    let mut after = station();
+    after.remember(serde_json::from_str(&kept).unwrap());
+    assert_eq!(after.memory(), before.memory());
+
+    let later = |s: &mut Station| {
+        let mut out = device_event(s, EventKind::DeviceUp, fields([]), 4 * MINUTE);
+        out.extend(value(s, "program", Value::Text("BOARD-A".into()), 4 * MINUTE));
+        out.extend(device_event(
+            s,
+            EventKind::DeviceEvent,
+            fields([("event", json!("recovery_succeeded"))]),
+            5 * MINUTE,
+        ));
+        out.extend(value(s, "machine_state_code", Value::Number(2000.0), 5 * MINUTE));
+        out.extend(value(s, "parts_placed", Value::Number(160.0), 11 * MINUTE));
+        out
+    };
+    let expected = later(&mut before);
+    let got = later(&mut after);
+    assert_eq!(got, expected);
+    // The open fault is cleared, the state's duration runs from before the restart, the
+    // program is not activated again and the window counts from its first count.
+    assert_eq!(
+        names(&got),
+        [
+            "CFX.ResourcePerformance.StationOnline",
+            "CFX.ResourcePerformance.FaultCleared",
+            "CFX.ResourcePerformance.StationStateChanged",
+            "CFX.ResourcePerformance.SMTPlacement.ComponentsPlaced",
+        ]
+    );
+    assert_eq!(body(&got[2])["OldStateDuration"], "00:05:00");
+    assert_eq!(body(&got[3])["TotalComponentsPlaced"], 60);
+}
