@@ -12,19 +12,27 @@ use common::{Gateway, Sim};
 #[test]
 fn the_page_shows_every_demo_device_a_value_changing_by_itself_and_the_mqtt_link() {
     let broker = testkit::Mosquitto::start();
-    let seen = open_the_page(None, Some(&broker.url()));
+    let seen = open_the_page(None, Some(&broker.url()), &[]);
     assert_eq!(seen["asked"], 0, "no prompt without a read token");
     assert_eq!(seen["mqtt"], "MQTT", "the MQTT link shows as up");
+    assert_eq!(seen["cfx"], serde_json::Value::Null, "no IPC-CFX, no badge");
 }
 
 #[test]
 fn a_gateway_with_a_read_token_is_asked_for_it_once_and_then_shows_the_cell() {
-    let seen = open_the_page(Some("look-only"), None);
+    // An IPC-CFX receiver that is not there: its link shows as down.
+    let nobody = format!("amqp://127.0.0.1:{}/cfx", testkit::free_port());
+    let seen = open_the_page(Some("look-only"), None, &["--cfx", &nobody]);
     assert_eq!(seen["asked"], 1, "one prompt");
     assert_eq!(
         seen["mqtt"],
         serde_json::Value::Null,
         "no MQTT, no MQTT badge"
+    );
+    assert!(
+        seen["cfx"].as_str().is_some_and(|b| b.starts_with("CFX down")),
+        "{}",
+        seen["cfx"]
     );
 }
 
@@ -720,15 +728,16 @@ fn what_the_page_saw(node: &mut Command) -> serde_json::Value {
 }
 
 /// Starts the demo gateway (with `read_token` if given, publishing to the MQTT broker
-/// `mqtt` if given), opens its page in Chromium and checks a card for every device and a
-/// value that changes; returns what the page saw.
-fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>) -> serde_json::Value {
+/// `mqtt` if given, with `more` arguments), opens its page in Chromium and checks a card
+/// for every device and a value that changes; returns what the page saw.
+fn open_the_page(read_token: Option<&str>, mqtt: Option<&str>, more: &[&str]) -> serde_json::Value {
     let browser = browser();
     let data = tempfile::tempdir().unwrap();
     let mut args: Vec<&str> = read_token.map_or(vec![], |t| vec!["--read-token", t]);
     if let Some(url) = mqtt {
         args.extend(["--mqtt", url]);
     }
+    args.extend(more);
     let gateway = Gateway::start_with(data.path(), &args);
     let screenshot = data.path().join("page.png");
     let seen = what_the_page_saw(

@@ -59,6 +59,10 @@ try {
     const badge = document.getElementById('mqtt');
     return badge.hidden ? null : badge.textContent;
   });
+  const cfx = await page.evaluate(() => {
+    const badge = document.getElementById('cfx');
+    return badge.hidden ? null : badge.textContent;
+  });
   if (screenshot) await page.screenshot({ path: screenshot, fullPage: true });
   // The header's word on the cell (from /healthz, which needs no token).
   await page.waitForFunction(
@@ -82,7 +86,7 @@ try {
   // On a phone: nothing wider than the screen.
   const phone = await onAPhone(page, screenshot);
   if (errors.length) throw new Error(`the page threw: ${errors.join('; ')}`);
-  console.log(JSON.stringify({ devices: ids, points: before.length, change, asked, mqtt, summary, formats, phone }));
+  console.log(JSON.stringify({ devices: ids, points: before.length, change, asked, mqtt, cfx, summary, formats, phone }));
 } finally {
   await browser.close();
 }

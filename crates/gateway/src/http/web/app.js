@@ -634,8 +634,8 @@ function setUpToolbar() {
   window.addEventListener('hashchange', follow);
 }
 
-// The cell's summary, the MQTT link and the OPC UA server as /healthz says them (the
-// interfaces hidden when the gateway does not serve them).
+// The cell's summary, the MQTT and IPC-CFX links and the OPC UA server as /healthz says
+// them (the interfaces hidden when the gateway does not serve them).
 async function refreshHealth() {
   try {
     const response = await api('/healthz');
@@ -651,6 +651,18 @@ async function refreshHealth() {
       badge.dataset.state = connected ? 'live' : 'lost';
       badge.textContent = connected ? 'MQTT' : 'MQTT down';
       badge.title = `MQTT ${link}`;
+    }
+    // IPC-CFX: "connected to URL" or "disconnected: why", then "; N messages wait".
+    const cfx = health.cfx;
+    const endpoint = document.getElementById('cfx');
+    endpoint.hidden = !cfx;
+    if (cfx) {
+      const connected = cfx.startsWith('connected');
+      const waiting = /; (\d+) messages? waits?$/.exec(cfx);
+      endpoint.dataset.state = connected ? 'live' : 'lost';
+      endpoint.textContent = (connected ? 'CFX' : 'CFX down') +
+        (waiting ? ` · ${waiting[1]} waiting` : '');
+      endpoint.title = `IPC-CFX ${cfx}`;
     }
     const opcua = health.opcua;
     const served = document.getElementById('opcua');

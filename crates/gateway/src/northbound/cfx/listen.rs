@@ -24,8 +24,8 @@ type Replies = Arc<Mutex<HashMap<String, mpsc::Sender<cfx::Envelope>>>>;
 /// What the listener answers for.
 #[derive(Debug, Clone)]
 pub struct Listener {
-    /// The endpoints, by handle.
-    pub endpoints: Vec<cfx::endpoint::Endpoint>,
+    /// The endpoints now (a reload adds and removes them).
+    pub endpoints: super::Endpoints,
     /// The zone answers are dated in.
     pub zone: jiff::tz::TimeZone,
 }
@@ -151,15 +151,22 @@ async fn requests_on(
                 continue;
             }
         };
-        let Some(endpoint) = listener
-            .endpoints
-            .iter()
-            .find(|e| {
-                to.as_deref()
-                    .is_some_and(|to| to.ends_with(e.handle.as_str()))
-            })
-            .or_else(|| listener.endpoints.first())
-        else {
+        let endpoint = {
+            let endpoints = listener
+                .endpoints
+                .read()
+                .unwrap_or_else(PoisonError::into_inner);
+            endpoints
+                .iter()
+                .map(|s| &s.endpoint)
+                .find(|e| {
+                    to.as_deref()
+                        .is_some_and(|to| to.ends_with(e.handle.as_str()))
+                })
+                .or_else(|| endpoints.first().map(|s| &s.endpoint))
+                .cloned()
+        };
+        let Some(endpoint) = endpoint else {
             continue;
         };
         let now = jiff::Timestamp::from_millisecond(Timestamp::now().0)

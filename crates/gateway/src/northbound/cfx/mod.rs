@@ -42,6 +42,7 @@ use self::config::{CfxConfig, CfxTable};
 use self::station::{Input, Memory, Station, StationConfig};
 use super::{BoxStart, Northbound, Running, Start};
 use crate::cell::{Cell, InterfaceStatus, LiveMessage};
+use crate::event::EventKind;
 use crate::config::TableReader;
 use crate::options::OptionError;
 use crate::store::Outbox;
@@ -106,21 +107,24 @@ impl Northbound for Cfx {
             } else {
                 format!("cellbus.{}", super::default_edge_node_id())
             };
-            let mut stations = stations(start.cell, &config, &prefix)?;
             let (listener_url, listener) = match config.listen {
                 Some(addr) => {
                     let socket = tokio::net::TcpListener::bind(addr).await.map_err(|e| {
                         OptionError(format!("IPC-CFX: cannot listen on {addr}: {e}"))
                     })?;
-                    let local = socket.local_addr()?;
-                    let url = format!("amqp://{local}");
-                    for station in &mut stations {
-                        station.listens_at(&format!("{url}/"));
-                    }
+                    let url = format!("amqp://{}", socket.local_addr()?);
                     (Some(url), Some(socket))
                 }
                 None => (None, None),
             };
+            let maker = Maker {
+                handles: config.handles.clone(),
+                prefix,
+                zone: start.cell.production().shifts.zone().clone(),
+                heartbeat: config.heartbeat,
+                request_uri: listener_url.as_ref().map(|url| format!("{url}/")),
+            };
+            let stations = stations(start.cell, &config, &maker)?;
             let password = match &config.password_env {
                 Some(var) => Some(std::env::var(var).map_err(|_| {
                     OptionError(format!(
@@ -148,27 +152,30 @@ impl Northbound for Cfx {
                 config.url(),
                 config.address
             );
+            let endpoints: Endpoints = Arc::new(RwLock::new(
+                stations.iter().map(|s| Shown::of(start.cell, s)).collect(),
+            ));
             if let Some(socket) = listener {
-                let endpoints = stations
-                    .iter()
-                    .map(|s| endpoint_of(start.cell, s))
-                    .collect();
                 tokio::spawn(listen::serve(
                     socket,
                     listen::Listener {
-                        endpoints,
-                        zone: start.cell.production().shifts.zone().clone(),
+                        endpoints: Arc::clone(&endpoints),
+                        zone: maker.zone.clone(),
                     },
                     start.stopped.clone(),
                 ));
             }
             let task = tokio::spawn(run(
                 Arc::clone(start.cell),
-                config,
-                password,
-                stations,
-                status,
-                start.options.data_dir.clone(),
+                Setup {
+                    config,
+                    password,
+                    stations,
+                    maker,
+                    endpoints,
+                    status,
+                    data_dir: start.options.data_dir.clone(),
+                },
                 start.stopped,
             ));
             Ok(Some(Running {
@@ -180,19 +187,46 @@ impl Northbound for Cfx {
     }
 }
 
-/// What a station's endpoint says of itself (`GetEndpointInformation`).
-fn endpoint_of(cell: &Cell, station: &Station) -> cfx::endpoint::Endpoint {
-    let device = cell.device_entry(station.device());
-    cfx::endpoint::Endpoint {
-        handle: station.handle().clone(),
-        request_uri: station.request_uri().map(str::to_owned),
-        request_address: station.request_uri().map(|_| station.handle().to_string()),
-        friendly_name: device.as_ref().map(|d| d.name.clone()),
-        vendor: None,
-        model: device.as_ref().map(|d| d.protocol.name().to_owned()),
-        serial: None,
-        software: Some(format!("cellbus {}", env!("CARGO_PKG_VERSION"))),
+/// The endpoints now (a reload adds and removes them): whom the sender greets on each
+/// connection and bids farewell at a stop, and whom the listener answers for.
+pub type Endpoints = Arc<RwLock<Vec<Shown>>>;
+
+/// One endpoint as the sender and the listener see it.
+#[derive(Debug, Clone)]
+pub struct Shown {
+    /// Its station as it was made (its handle and request address).
+    pub station: Station,
+    /// What it says of itself (`GetEndpointInformation`).
+    pub endpoint: cfx::endpoint::Endpoint,
+}
+
+impl Shown {
+    fn of(cell: &Cell, station: &Station) -> Self {
+        let device = cell.device_entry(station.device());
+        Self {
+            station: station.clone(),
+            endpoint: cfx::endpoint::Endpoint {
+                handle: station.handle().clone(),
+                request_uri: station.request_uri().map(str::to_owned),
+                request_address: station.request_uri().map(|_| station.handle().to_string()),
+                friendly_name: device.as_ref().map(|d| d.name.clone()),
+                vendor: None,
+                model: device.as_ref().map(|d| d.protocol.name().to_owned()),
+                serial: None,
+                software: Some(format!("cellbus {}", env!("CARGO_PKG_VERSION"))),
+            },
+        }
     }
+}
+
+/// The endpoints' stations, as they are now.
+fn shown_stations(endpoints: &Endpoints) -> Vec<Station> {
+    endpoints
+        .read()
+        .unwrap_or_else(PoisonError::into_inner)
+        .iter()
+        .map(|s| s.station.clone())
+        .collect()
 }
 
 /// The link to run, if any: `--cfx` (replacing the table's broker and address), else the
@@ -250,9 +284,47 @@ fn cfx_config(start: &Start<'_>) -> anyhow::Result<Option<CfxConfig>> {
     }))
 }
 
-/// One station per device that counts production (and per device given a handle), in
-/// the cell's time zone.
-fn stations(cell: &Cell, config: &CfxConfig, prefix: &str) -> anyhow::Result<Vec<Station>> {
+/// How a device's station is made: at the start, and when a reload adds a device.
+#[derive(Debug, Clone)]
+struct Maker {
+    /// `[cfx.handles]`.
+    handles: BTreeMap<String, cfx::Handle>,
+    /// The default handles' start: `cellbus.<host>` (`cellbus.demo` for the demo).
+    prefix: String,
+    /// The cell's time zone.
+    zone: jiff::tz::TimeZone,
+    heartbeat: Duration,
+    /// `amqp://IP:PORT/`, when the gateway answers requests.
+    request_uri: Option<String>,
+}
+
+impl Maker {
+    /// The station of `device`, if it counts production (a placement machine).
+    fn station(&self, device: &crate::cell::DeviceEntry) -> Result<Option<Station>, OptionError> {
+        let Some(points) = device.protocol.production() else {
+            return Ok(None);
+        };
+        let handle = match self.handles.get(device.id.as_str()) {
+            Some(handle) => handle.clone(),
+            None => cfx::Handle::new(&format!("{}.{}", self.prefix, device.id))
+                .map_err(|e| OptionError(format!("device {}: {e}", device.id)))?,
+        };
+        let mut station = Station::new(StationConfig {
+            device: device.id.to_string(),
+            handle,
+            zone: self.zone.clone(),
+            points: *points,
+            heartbeat: self.heartbeat,
+        });
+        if let Some(uri) = &self.request_uri {
+            station.listens_at(uri);
+        }
+        Ok(Some(station))
+    }
+}
+
+/// One station per device that counts production (and per device given a handle).
+fn stations(cell: &Cell, config: &CfxConfig, maker: &Maker) -> anyhow::Result<Vec<Station>> {
     let roster = cell.roster();
     for device in config.handles.keys() {
         let Some(entry) = roster.device(device) else {
@@ -269,84 +341,77 @@ fn stations(cell: &Cell, config: &CfxConfig, prefix: &str) -> anyhow::Result<Vec
             .into());
         }
     }
-    let zone = cell.production().shifts.zone().clone();
     let mut out = Vec::new();
     for device in roster.devices() {
-        let Some(points) = device.protocol.production() else {
-            continue;
-        };
-        let handle = match config.handles.get(device.id.as_str()) {
-            Some(handle) => handle.clone(),
-            None => cfx::Handle::new(&format!("{prefix}.{}", device.id))
-                .map_err(|e| OptionError(format!("device {}: {e}", device.id)))?,
-        };
-        out.push(Station::new(StationConfig {
-            device: device.id.to_string(),
-            handle,
-            zone: zone.clone(),
-            points: *points,
-            heartbeat: config.heartbeat,
-        }));
+        out.extend(maker.station(device)?);
     }
     Ok(out)
 }
 
-/// Feeds the stations from the change stream and keeps what they make (a task), sends
-/// what is kept (another), until `stop`.
-async fn run(
-    cell: Arc<Cell>,
+/// What the interface's task starts from.
+struct Setup {
     config: CfxConfig,
     password: Option<String>,
-    mut stations: Vec<Station>,
+    stations: Vec<Station>,
+    maker: Maker,
+    endpoints: Endpoints,
     status: Arc<CfxStatus>,
     data_dir: std::path::PathBuf,
-    stop: watch::Receiver<bool>,
-) {
+}
+
+/// Feeds the stations from the change stream and keeps what they make (a task), sends
+/// what is kept (another), until `stop`.
+async fn run(cell: Arc<Cell>, setup: Setup, stop: watch::Receiver<bool>) {
+    let Setup {
+        config,
+        password,
+        mut stations,
+        maker,
+        endpoints,
+        status,
+        data_dir,
+    } = setup;
     let kept = Kept::open(&cell, &data_dir).await;
     kept.recall(&mut stations).await;
     status.metrics.waiting.set(kept.len().await);
     let wake = Arc::new(Notify::new());
-    let (beats, beats_rx) = mpsc::channel(64);
+    // Sent at once while the link is up, never kept: heartbeats, and the greetings and
+    // farewells of endpoints a reload adds and removes.
+    let (now, now_rx) = mpsc::channel(64);
     let (finish, finished) = watch::channel(false);
-    let endpoints = stations.clone();
     let sender = tokio::spawn(send(
         Sender {
             config,
             password,
-            endpoints,
+            endpoints: Arc::clone(&endpoints),
             kept: kept.clone(),
             status: Arc::clone(&status),
         },
         Arc::clone(&wake),
-        beats_rx,
+        now_rx,
         finished,
     ));
-    feed(&cell, stations, &kept, &wake, beats, &status, stop).await;
-    let _ = finish.send(true);
-    let _ = sender.await;
-}
-
-/// Feeds the stations from the change stream until `stop`, and keeps what they make;
-/// heartbeats go straight to the sender (a heartbeat is not sent late).
-async fn feed(
-    cell: &Cell,
-    stations: Vec<Station>,
-    kept: &Kept,
-    wake: &Notify,
-    beats: mpsc::Sender<cfx::Envelope>,
-    status: &CfxStatus,
-    mut stop: watch::Receiver<bool>,
-) {
-    let mut feeder = Feeder {
+    let feeder = Feeder {
         stations: stations
             .into_iter()
             .map(|s| (s.device().to_owned(), s))
             .collect(),
         made: VecDeque::new(),
         remember: false,
-        status,
+        status: &status,
+        cell: &cell,
+        maker,
+        endpoints,
+        now,
     };
-    let mut live = cell.subscribe();
+    feed(feeder, &kept, &wake, stop).await;
+    let _ = finish.send(true);
+    let _ = sender.await;
+}
+
+/// Feeds the stations from the change stream until `stop`, and keeps what they make.
+async fn feed(mut feeder: Feeder<'_>, kept: &Kept, wake: &Notify, mut stop: watch::Receiver<bool>) {
+    let mut live = feeder.cell.subscribe();
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     let mut last_kept = tokio::time::Instant::now();
     loop {
@@ -357,10 +422,7 @@ async fn feed(
                 false
             }
             _ = tick.tick() => {
-                for beat in feeder.tick(Timestamp::now()) {
-                    // Full only while the link is down: then it is not sent at all.
-                    let _ = beats.try_send(beat);
-                }
+                feeder.tick(Timestamp::now());
                 false
             }
         };
@@ -390,6 +452,12 @@ struct Feeder<'a> {
     /// A station's memory changed since it was last kept.
     remember: bool,
     status: &'a CfxStatus,
+    cell: &'a Cell,
+    /// Makes the station of a device a reload adds.
+    maker: Maker,
+    endpoints: Endpoints,
+    /// To the sender, sent at once if the link is up (see [`run`]).
+    now: mpsc::Sender<cfx::Envelope>,
 }
 
 impl Feeder<'_> {
@@ -410,7 +478,9 @@ impl Feeder<'_> {
                 );
             }
             Ok(LiveMessage::Event(event)) => {
-                if let Some(device) = event.device.as_ref().map(ToString::to_string) {
+                if event.kind == EventKind::ConfigReloaded {
+                    self.reloaded(&event);
+                } else if let Some(device) = event.device.as_ref().map(ToString::to_string) {
                     self.feed(&device, Input::Event(&event));
                 }
             }
@@ -420,6 +490,50 @@ impl Feeder<'_> {
             }
             Err(broadcast::error::RecvError::Closed) => {}
         }
+    }
+
+    /// A reload: the stations of devices removed (or no longer placement machines) say
+    /// `EndpointShuttingDown` and go; devices added (or now placement machines) get a
+    /// station, which says `EndpointConnected`. A changed device keeps its station.
+    fn reloaded(&mut self, event: &crate::event::Event) {
+        let roster = self.cell.roster();
+        let now = Timestamp::now();
+        let touched: Vec<String> = ["removed", "changed", "added"]
+            .into_iter()
+            .flat_map(|field| crate::reload::devices_in(event, field))
+            .map(|d| d.to_string())
+            .collect();
+        for device in &touched {
+            let entry = roster.device(device);
+            let had = self.stations.iter().position(|(d, _)| d == device);
+            let counts = entry.is_some_and(|e| e.protocol.production().is_some());
+            match (had, counts) {
+                (Some(i), false) => {
+                    let (_, station) = self.stations.remove(i);
+                    tracing::info!("IPC-CFX: endpoint {} removed", station.handle());
+                    let _ = self.now.try_send(station.shutting_down(now));
+                    self.shown().retain(|s| s.station.device() != device);
+                }
+                (None, true) => {
+                    let made = entry.map(|e| self.maker.station(e));
+                    match made {
+                        Some(Ok(Some(station))) => {
+                            tracing::info!("IPC-CFX: endpoint {} added", station.handle());
+                            let _ = self.now.try_send(station.connected(now));
+                            self.shown().push(Shown::of(self.cell, &station));
+                            self.stations.push((device.clone(), station));
+                        }
+                        Some(Err(e)) => tracing::warn!("IPC-CFX: no endpoint for {device}: {e}"),
+                        _ => {}
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    fn shown(&self) -> std::sync::RwLockWriteGuard<'_, Vec<Shown>> {
+        self.endpoints.write().unwrap_or_else(PoisonError::into_inner)
     }
 
     fn feed(&mut self, device: &str, input: Input<'_>) {
@@ -432,14 +546,14 @@ impl Feeder<'_> {
         self.bound();
     }
 
-    /// Time passing: placement windows close; the heartbeats due are returned.
-    fn tick(&mut self, now: Timestamp) -> Vec<cfx::Envelope> {
-        let mut beats = Vec::new();
+    /// Time passing: placement windows close; the heartbeats due go to the sender (a
+    /// heartbeat is not sent late: while the link is down it is not sent at all).
+    fn tick(&mut self, now: Timestamp) {
         for (_, station) in &mut self.stations {
             let before = station.memory();
             for envelope in station.feed(Input::Tick(now)) {
                 if matches!(envelope.message, cfx::Message::Heartbeat(_)) {
-                    beats.push(envelope);
+                    let _ = self.now.try_send(envelope);
                 } else {
                     self.made.push_back(envelope);
                 }
@@ -447,7 +561,6 @@ impl Feeder<'_> {
             self.remember |= station.memory() != before;
         }
         self.bound();
-        beats
     }
 
     fn bound(&mut self) {
@@ -566,8 +679,8 @@ impl Kept {
 struct Sender {
     config: CfxConfig,
     password: Option<String>,
-    /// The stations as they were at the start: their handles and request addresses.
-    endpoints: Vec<Station>,
+    /// The endpoints now.
+    endpoints: Endpoints,
     kept: Kept,
     status: Arc<CfxStatus>,
 }
@@ -622,7 +735,7 @@ async fn send(
         while beats.try_recv().is_ok() {}
         let now = Timestamp::now();
         let lost = 'connected: {
-            for station in &endpoints {
+            for station in shown_stations(&endpoints) {
                 if let Err(why) = link.send(amqp_message(&station.connected(now))).await {
                     break 'connected why;
                 }
@@ -638,7 +751,7 @@ async fn send(
                             link.send_kept(&kept, &mut sent, &status),
                         ).await;
                         let now = Timestamp::now();
-                        for station in &endpoints {
+                        for station in shown_stations(&endpoints) {
                             let _ = link.send(amqp_message(&station.shutting_down(now))).await;
                         }
                         link.close().await;
