@@ -1,0 +1,98 @@
+//! The IPC-CFX endpoints follow a reload of the configuration: a placement machine added
+//! by `SIGHUP` greets the line (`EndpointConnected`), one removed says goodbye
+//! (`EndpointShuttingDown`), while the link stays up. Received by cellbus's own AMQP 1.0
+//! receiver (`cellbus cfx sub --listen`'s); the messages' fidelity is checked against an
+//! independent peer in the CLI's tests.
+
+use gateway::ServeOptions;
+use gateway::northbound::cfx::listen;
+use panasonic::server::{RunningTwin, TwinServer};
+use panasonic::{Machine, MachineConfig};
+use tokio::sync::mpsc;
+
+mod running;
+use running::{LIMIT, Running};
+
+/// A Panasonic BM twin on two free loopback ports.
+async fn placer() -> RunningTwin {
+    let any = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
+    let machine = Machine::new(MachineConfig::default()).unwrap();
+    TwinServer::bind(any, any, machine)
+        .await
+        .unwrap()
+        .spawn()
+        .unwrap()
+}
+
+/// A cell file publishing to `receiver`'s address `cfx`, with one placement machine per
+/// `(line, id, twin)`.
+fn cell_file(receiver: u16, machines: &[(&str, &str, &RunningTwin)]) -> String {
+    let mut text = format!("[cfx]\nbroker = \"amqp://127.0.0.1:{receiver}\"\naddress = \"cfx\"\n");
+    for (line, id, twin) in machines {
+        text.push_str(&format!(
+            "\n[[line]]\nname = \"{line}\"\nendpoint = \"tcp://{}\"\n\
+             [[line.device]]\nid = \"{id}\"\nprotocol = \"panasonic\"\nevent_port = {}\n",
+            twin.command_addr(),
+            twin.event_addr().port()
+        ));
+    }
+    text
+}
+
+/// The next message named `name` (its source handle), skipping others.
+async fn next_named(messages: &mut mpsc::Receiver<listen::Taken>, name: &str) -> String {
+    loop {
+        let taken = tokio::time::timeout(LIMIT, messages.recv())
+            .await
+            .unwrap_or_else(|_| panic!("no {name} within {LIMIT:?}"))
+            .expect("the receiver runs");
+        let (_, body) = taken.expect("a message");
+        for envelope in cfx::Received::decode(&body).unwrap() {
+            if envelope.message_name == name {
+                return envelope.source.unwrap_or_default();
+            }
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_reload_greets_the_placement_machine_added_and_says_goodbye_for_the_one_removed() {
+    let socket = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let port = socket.local_addr().unwrap().port();
+    let (tx, mut messages) = mpsc::channel(1000);
+    tokio::spawn(listen::receive(socket, tx));
+    let (a, b) = (placer().await, placer().await);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cell.toml");
+    std::fs::write(&path, cell_file(port, &[("lan-a", "pa", &a)])).unwrap();
+    let gateway = Running::start(ServeOptions {
+        config: Some(path.clone()),
+        data_dir: dir.path().join("data"),
+        ..ServeOptions::default()
+    })
+    .await;
+    let first = next_named(&mut messages, "CFX.EndpointConnected").await;
+    assert!(first.ends_with(".pa"), "{first}");
+
+    std::fs::write(&path, cell_file(port, &[("lan-b", "pb", &b)])).unwrap();
+    let plan = gateway.reloader.reload().await.unwrap();
+    assert!(plan.restart_needed.is_empty(), "{:?}", plan.restart_needed);
+    let gone = next_named(&mut messages, "CFX.EndpointShuttingDown").await;
+    assert_eq!(gone, first);
+    let added = next_named(&mut messages, "CFX.EndpointConnected").await;
+    assert!(added.ends_with(".pb"), "{added}");
+    // The new machine beats under its handle; the removed one beats no more.
+    let beat = tokio::time::timeout(LIMIT, async {
+        loop {
+            let (_, body) = messages.recv().await.unwrap().unwrap();
+            let envelope = cfx::Received::decode(&body).unwrap().remove(0);
+            if envelope.message_name == "CFX.Heartbeat" {
+                return envelope.source.unwrap_or_default();
+            }
+        }
+    })
+    .await
+    .expect("a heartbeat of the new endpoint");
+    assert_eq!(beat, added);
+    gateway.stop().await;
+}
