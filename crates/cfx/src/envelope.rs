@@ -182,7 +182,10 @@ impl Received {
         Ok(AmqpProperties::of(Header {
             name: &self.message_name,
             unique_id: self.unique_id.ok_or_else(|| missing("UniqueID"))?,
-            time_stamp: self.time_stamp.as_ref().ok_or_else(|| missing("TimeStamp"))?,
+            time_stamp: self
+                .time_stamp
+                .as_ref()
+                .ok_or_else(|| missing("TimeStamp"))?,
             source: self.source.as_deref().ok_or_else(|| missing("Source"))?,
             target: self.target.as_deref(),
             request_id: self.request_id.as_deref(),

@@ -74,8 +74,14 @@ async fn sub(args: SubArgs) -> anyhow::Result<ExitCode> {
             tokio::spawn(listen::receive(socket, tx));
         }
         (None, Some(url)) => {
-            let (host, port, address) = parse_url(url).map_err(usage)?;
-            let address = address.ok_or_else(|| {
+            let parsed = parse_url(url).map_err(usage)?;
+            if parsed.tls {
+                return Err(usage(format!(
+                    "{url}: cfx sub reads amqp:// only; read the broker's plain listener, or receive the gateway's messages yourself with --listen"
+                )));
+            }
+            let (host, port) = (parsed.host, parsed.port);
+            let address = parsed.address.ok_or_else(|| {
                 usage(format!(
                     "{url}: no address; write amqp://HOST:PORT/ADDRESS (a queue, or //exchange/NAME)"
                 ))

@@ -13,8 +13,8 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use common::{Gateway, require_python};
-use testkit::RabbitMq;
 use serde_json::Value;
+use testkit::RabbitMq;
 
 /// The version scripts/test installs.
 const PIP: &str = "python-qpid-proton==0.40.0";
@@ -305,10 +305,12 @@ fn through_rabbitmq_a_broker_restart_and_a_gateway_killed_meanwhile_lose_no_mess
             received.push(serde_json::from_str(&line).unwrap());
         }
     };
-    let named = |name: &'static str| {
-        move |r: &[Value]| r.iter().any(|m| m["body"]["MessageName"] == name)
-    };
-    take(&named("CFX.ResourcePerformance.StationStateChanged"), "a state");
+    let named =
+        |name: &'static str| move |r: &[Value]| r.iter().any(|m| m["body"]["MessageName"] == name);
+    take(
+        &named("CFX.ResourcePerformance.StationStateChanged"),
+        "a state",
+    );
 
     // The broker goes away; the gateway keeps what it makes until a board is finished.
     broker.stop();
@@ -365,11 +367,17 @@ fn through_rabbitmq_a_broker_restart_and_a_gateway_killed_meanwhile_lose_no_mess
     let boards = events(&gateway, "board_finished", began, killed - 1000);
     assert!(!boards.is_empty(), "no board before the kill");
     for t in &boards {
-        assert!(completed.contains(t), "the board of {t} has no WorkCompleted: {completed:?}");
+        assert!(
+            completed.contains(t),
+            "the board of {t} has no WorkCompleted: {completed:?}"
+        );
     }
     let faults = times("CFX.ResourcePerformance.FaultOccurred");
     for t in events(&gateway, "parts_exhausted", began, killed - 1000) {
-        assert!(faults.contains(&t), "the exhaustion of {t} has no FaultOccurred");
+        assert!(
+            faults.contains(&t),
+            "the exhaustion of {t} has no FaultOccurred"
+        );
     }
     // What waited through the outage and the kill came after the restart, in order.
     let waited: Vec<i64> = received
@@ -390,7 +398,10 @@ fn through_rabbitmq_a_broker_restart_and_a_gateway_killed_meanwhile_lose_no_mess
         .iter()
         .filter(|m| m["body"]["MessageBody"]["OldState"] == 6000)
         .count();
-    assert_eq!(from_unknown, 1, "the station forgot its state across the restart");
+    assert_eq!(
+        from_unknown, 1,
+        "the station forgot its state across the restart"
+    );
     assert!(waited.is_sorted(), "in the order they happened: {waited:?}");
 }
 

@@ -30,7 +30,9 @@ fn a_gateway_with_a_read_token_is_asked_for_it_once_and_then_shows_the_cell() {
         "no MQTT, no MQTT badge"
     );
     assert!(
-        seen["cfx"].as_str().is_some_and(|b| b.starts_with("CFX down")),
+        seen["cfx"]
+            .as_str()
+            .is_some_and(|b| b.starts_with("CFX down")),
         "{}",
         seen["cfx"]
     );

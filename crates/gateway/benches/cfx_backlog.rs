@@ -50,7 +50,9 @@ fn main() -> ExitCode {
         },
         None if benching => DEFAULT_MESSAGES,
         None => {
-            println!("cfx_backlog: smoke run (cargo bench -p gateway --bench cfx_backlog for the benchmark)");
+            println!(
+                "cfx_backlog: smoke run (cargo bench -p gateway --bench cfx_backlog for the benchmark)"
+            );
             200
         }
     };

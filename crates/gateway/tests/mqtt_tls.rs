@@ -5,81 +5,20 @@
 //!
 //! The test's subscriber uses the broker's plain listener.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use gateway::ServeOptions;
 use gateway::northbound::mqtt::MqttLink;
-use rcgen::{
-    BasicConstraints, CertificateParams, CertifiedIssuer, DnType, ExtendedKeyUsagePurpose, IsCa,
-    KeyPair, KeyUsagePurpose,
-};
+use rcgen::ExtendedKeyUsagePurpose;
 use testkit::{Mosquitto, SparkplugMessage, Subscriber, TlsFiles};
 
+mod certs;
 mod running;
+use certs::Ca;
 use running::{LIMIT, Running};
 
 /// Generous: a loaded 2-core machine.
 const NODE: &str = "spBv1.0/cellbus/+/tls";
-
-/// A certificate authority made for one test.
-struct Ca(CertifiedIssuer<'static, KeyPair>);
-
-impl Ca {
-    fn new(name: &str) -> Self {
-        let mut params = CertificateParams::new(Vec::<String>::new()).unwrap();
-        params.distinguished_name.push(DnType::CommonName, name);
-        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-        params.key_usages = vec![
-            KeyUsagePurpose::KeyCertSign,
-            KeyUsagePurpose::CrlSign,
-            KeyUsagePurpose::DigitalSignature,
-        ];
-        Self(CertifiedIssuer::self_signed(params, KeyPair::generate().unwrap()).unwrap())
-    }
-
-    /// Writes this CA's certificate to `dir/name.pem`.
-    fn write(&self, dir: &Path, name: &str) -> PathBuf {
-        let path = dir.join(format!("{name}.pem"));
-        std::fs::write(&path, self.0.pem()).unwrap();
-        path
-    }
-
-    /// Signs a certificate for `names` (its first as common name) and writes it to
-    /// `dir/name.pem` and its key to `dir/name.key`.
-    fn sign(
-        &self,
-        dir: &Path,
-        name: &str,
-        names: &[&str],
-        usage: ExtendedKeyUsagePurpose,
-    ) -> (PathBuf, PathBuf) {
-        let key = KeyPair::generate().unwrap();
-        let alt_names: Vec<String> = names.iter().map(|n| (*n).to_owned()).collect();
-        let mut params = CertificateParams::new(alt_names).unwrap();
-        params
-            .distinguished_name
-            .push(DnType::CommonName, names.first().copied().unwrap_or(name));
-        params.extended_key_usages = vec![usage];
-        let cert = params.signed_by(&key, &self.0).unwrap();
-        let (cert_path, key_path) = (
-            dir.join(format!("{name}.pem")),
-            dir.join(format!("{name}.key")),
-        );
-        std::fs::write(&cert_path, cert.pem()).unwrap();
-        std::fs::write(&key_path, key.serialize_pem()).unwrap();
-        (cert_path, key_path)
-    }
-
-    /// A broker certificate for 127.0.0.1 and localhost, as `dir/broker.pem` and `.key`.
-    fn broker(&self, dir: &Path) -> (PathBuf, PathBuf) {
-        self.sign(
-            dir,
-            "broker",
-            &["127.0.0.1", "localhost"],
-            ExtendedKeyUsagePurpose::ServerAuth,
-        )
-    }
-}
 
 /// A mosquitto with a TLS listener whose certificate `broker_ca` signs; it trusts
 /// `client_ca`'s client certificates, and requires one if `require_certificate`.

@@ -9,6 +9,9 @@
 //! to a durable queue (a publisher writes to `/exchange/NAME`, a consumer reads
 //! `/amq/queue/NAME`): what a consumer has not taken survives a restart of the node.
 //!
+//! [`RabbitMq::start_tls`] adds a TLS listener (AMQP over TLS, `amqps://`) on a second
+//! port, with the certificate and key given; it asks clients for no certificate.
+//!
 //! [`RabbitMq::stop`] is a clean stop (SIGTERM: durable queues and their persistent
 //! messages are kept); [`RabbitMq::start_again`] starts the node again on the same
 //! directory and ports.
@@ -29,6 +32,7 @@ pub struct RabbitMq {
     child: Option<Child>,
     dir: tempfile::TempDir,
     port: u16,
+    tls_port: Option<u16>,
     dist_port: u16,
     epmd_port: u16,
 }
@@ -43,6 +47,20 @@ impl RabbitMq {
     /// When RabbitMQ is not installed (the message says what to install) or does not
     /// start within 90 s (its log is shown).
     pub fn start(exchange: &str, queue: &str) -> Self {
+        Self::launched(exchange, queue, None)
+    }
+
+    /// As [`RabbitMq::start`], with a TLS listener on [`RabbitMq::tls_port`] showing the
+    /// certificate `cert` (PEM, its chain after it) with the private key `key`.
+    ///
+    /// # Panics
+    ///
+    /// As [`RabbitMq::start`].
+    pub fn start_tls(exchange: &str, queue: &str, cert: &Path, key: &Path) -> Self {
+        Self::launched(exchange, queue, Some((cert, key)))
+    }
+
+    fn launched(exchange: &str, queue: &str, tls: Option<(&Path, &Path)>) -> Self {
         assert!(
             Path::new(BIN).join("rabbitmq-server").exists(),
             "RabbitMQ is not installed: run scripts/test, which installs it, or \
@@ -53,6 +71,7 @@ impl RabbitMq {
             child: None,
             dir,
             port: crate::free_port(),
+            tls_port: tls.map(|_| crate::free_port()),
             dist_port: crate::free_port(),
             epmd_port: crate::free_port(),
         };
@@ -60,15 +79,21 @@ impl RabbitMq {
             .expect("the plugins file is written");
         std::fs::write(node.path("definitions.json"), definitions(exchange, queue))
             .expect("the definitions file is written");
-        std::fs::write(
-            node.path("rabbitmq.conf"),
-            format!(
-                "listeners.tcp.1 = 127.0.0.1:{}\nload_definitions = {}\n",
-                node.port,
-                node.path("definitions.json").display()
-            ),
-        )
-        .expect("the config file is written");
+        let mut conf = format!(
+            "listeners.tcp.1 = 127.0.0.1:{}\nload_definitions = {}\n",
+            node.port,
+            node.path("definitions.json").display()
+        );
+        if let (Some((cert, key)), Some(port)) = (tls, node.tls_port) {
+            conf.push_str(&format!(
+                "listeners.ssl.1 = 127.0.0.1:{port}\nssl_options.certfile = {}\n\
+                 ssl_options.keyfile = {}\nssl_options.verify = verify_none\n\
+                 ssl_options.fail_if_no_peer_cert = false\n",
+                cert.display(),
+                key.display()
+            ));
+        }
+        std::fs::write(node.path("rabbitmq.conf"), conf).expect("the config file is written");
         node.start_again();
         node
     }
@@ -76,6 +101,11 @@ impl RabbitMq {
     /// The AMQP port on 127.0.0.1.
     pub fn port(&self) -> u16 {
         self.port
+    }
+
+    /// The AMQP over TLS port on 127.0.0.1, if it was started with TLS.
+    pub fn tls_port(&self) -> Option<u16> {
+        self.tls_port
     }
 
     /// The start of an outage: stops the node cleanly (SIGTERM); every client loses its
@@ -146,7 +176,10 @@ impl RabbitMq {
         let dir = self.dir.path();
         command
             .env("HOME", dir)
-            .env("RABBITMQ_NODENAME", format!("cellbus{}@localhost", self.port))
+            .env(
+                "RABBITMQ_NODENAME",
+                format!("cellbus{}@localhost", self.port),
+            )
             .env("RABBITMQ_NODE_IP_ADDRESS", "127.0.0.1")
             .env("RABBITMQ_NODE_PORT", self.port.to_string())
             .env("RABBITMQ_DIST_PORT", self.dist_port.to_string())
@@ -188,10 +221,14 @@ impl Drop for RabbitMq {
         self.stop();
         // The node's port mapper outlives it (a daemon of its own): it is stopped too.
         let epmd = Path::new("/usr/bin/epmd");
-        let _ = Command::new(if epmd.exists() { epmd } else { Path::new("epmd") })
-            .args(["-port", &self.epmd_port.to_string(), "-kill"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status();
+        let _ = Command::new(if epmd.exists() {
+            epmd
+        } else {
+            Path::new("epmd")
+        })
+        .args(["-port", &self.epmd_port.to_string(), "-kill"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status();
     }
 }

@@ -15,6 +15,7 @@ pub mod cfx;
 pub mod mqtt;
 #[cfg(test)]
 mod tests;
+pub mod tls;
 
 use std::fmt;
 use std::future::Future;

@@ -66,7 +66,10 @@ impl Outbox {
             channel: channel.to_owned(),
             len: 0,
         };
-        outbox.conn.execute_batch(CREATE).map_err(|e| outbox.err(e))?;
+        outbox
+            .conn
+            .execute_batch(CREATE)
+            .map_err(|e| outbox.err(e))?;
         outbox.len = outbox
             .conn
             .query_row(
@@ -100,12 +103,16 @@ impl Outbox {
         max: u64,
     ) -> Result<u64, StoreError> {
         let over = (self.len + messages.len() as u64).saturating_sub(max);
-        let tx = self.conn.transaction().map_err(|source| StoreError::Sqlite {
-            path: self.path.clone(),
-            source,
-        })?;
+        let tx = self
+            .conn
+            .transaction()
+            .map_err(|source| StoreError::Sqlite {
+                path: self.path.clone(),
+                source,
+            })?;
         let write = |tx: &rusqlite::Transaction<'_>| -> rusqlite::Result<()> {
-            let mut insert = tx.prepare_cached("INSERT INTO outbox (channel, body) VALUES (?1, ?2)")?;
+            let mut insert =
+                tx.prepare_cached("INSERT INTO outbox (channel, body) VALUES (?1, ?2)")?;
             for body in messages {
                 insert.execute(params![self.channel, body])?;
             }
@@ -138,7 +145,11 @@ impl Outbox {
                 "SELECT seq, body FROM outbox WHERE channel = ?1 AND seq > ?2 ORDER BY seq LIMIT ?3",
             )?;
             let rows = select.query_map(
-                params![self.channel, after, i64::try_from(limit).unwrap_or(i64::MAX)],
+                params![
+                    self.channel,
+                    after,
+                    i64::try_from(limit).unwrap_or(i64::MAX)
+                ],
                 |r| Ok((r.get(0)?, r.get(1)?)),
             )?;
             rows.collect()
@@ -211,7 +222,9 @@ mod tests {
     #[test]
     fn taken_rows_are_gone_and_numbers_are_never_used_again() {
         let mut outbox = Outbox::in_memory("cfx").unwrap();
-        outbox.keep(&[b"a".to_vec(), b"b".to_vec()], None, 100).unwrap();
+        outbox
+            .keep(&[b"a".to_vec(), b"b".to_vec()], None, 100)
+            .unwrap();
         let rows = outbox.waiting(0, 10).unwrap();
         outbox.taken(rows[1].0).unwrap();
         assert!(outbox.is_empty());

@@ -116,7 +116,7 @@ fn system_roots() -> Result<RootCertStore, TlsSetupError> {
         return Err(error(
             "broker",
             format!(
-                "no CA certificates found on this system{why}: name the broker's CA in the [mqtt] table's ca_file"
+                "no CA certificates found on this system{why}: name the broker's CA in the table's ca_file ([mqtt], [cfx])"
             ),
         ));
     }

@@ -3,8 +3,11 @@
 //!
 //! ```toml
 //! [cfx]
-//! broker = "amqp://mes.plant:5672"     # amqp://HOST[:PORT] (5672)
+//! broker = "amqp://mes.plant:5672"     # amqp://HOST[:PORT] (5672), amqps://HOST[:PORT] (5671)
 //! address = "/exchange/cfx"            # where messages go (RabbitMQ 3.x: /exchange/NAME)
+//! ca_file = "plant-ca.pem"             # amqps://: the broker's CA (else the system's)
+//! client_cert = "cellbus.pem"          # amqps://: a certificate to show, with its key
+//! client_key = "cellbus.key"
 //! username = "cellbus"                 # SASL PLAIN, with the password in the environment
 //! password_env = "CELLBUS_CFX_PASSWORD"
 //! heartbeat = "1m"                     # 10s to 5m
@@ -19,12 +22,14 @@
 
 use std::collections::BTreeMap;
 use std::ops::Range;
+use std::path::Path;
 use std::time::Duration;
 
 use serde::Deserialize;
 use toml::Spanned;
 
 use crate::config::{ConfigError, Settings, Table, TableReader, duration};
+use crate::northbound::tls::{TlsFiles, TlsKeys, check_tls};
 
 /// The `[cfx]` table's reader.
 #[derive(Debug)]
@@ -33,12 +38,17 @@ pub struct CfxTable;
 /// The AMQP port when the URL names none.
 pub const DEFAULT_PORT: u16 = 5672;
 
+/// The AMQP over TLS port when an `amqps://` URL names none.
+pub const DEFAULT_TLS_PORT: u16 = 5671;
+
 /// How often each endpoint beats by default (the SDK's default).
 pub const DEFAULT_HEARTBEAT: Duration = Duration::from_secs(60);
 
 /// The `[cfx]` table, checked.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct CfxConfig {
+    /// TLS to the broker (`amqps://`): its files; `None` for `amqp://`.
+    pub tls: Option<TlsFiles>,
     /// The broker's host.
     pub host: String,
     /// Its port.
@@ -58,9 +68,10 @@ pub struct CfxConfig {
 }
 
 impl CfxConfig {
-    /// `amqp://HOST:PORT`, for messages and logs.
+    /// `amqp://HOST:PORT` (or `amqps://`), for messages and logs.
     pub fn url(&self) -> String {
-        format!("amqp://{}:{}", self.host, self.port)
+        let scheme = if self.tls.is_some() { "amqps" } else { "amqp" };
+        format!("{scheme}://{}:{}", self.host, self.port)
     }
 }
 
@@ -71,7 +82,7 @@ impl TableReader for CfxTable {
 
     fn read(&self, table: &Table<'_>) -> Result<Settings, ConfigError> {
         let raw: RawCfx = table.read()?;
-        check(raw, &|span, message| table.at(span, message)).map(Settings::new)
+        check(raw, table.path(), &|span, message| table.at(span, message)).map(Settings::new)
     }
 
     fn environment(&self, settings: &Settings) -> Vec<(&'static str, String)> {
@@ -91,20 +102,30 @@ impl TableReader for CfxTable {
     }
 }
 
-/// A broker URL, `amqp://HOST[:PORT][/ADDRESS]`: host, port and the address if the path
-/// names one (`amqp://mes:5672/cfx` → `cfx`; `amqp://mes:5672//exchange/cfx` →
-/// `/exchange/cfx`).
-pub fn parse_url(text: &str) -> Result<(String, u16, Option<String>), String> {
+/// A broker URL, read by [`parse_url`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CfxUrl {
+    /// `amqps://`.
+    pub tls: bool,
+    /// The host.
+    pub host: String,
+    /// The port.
+    pub port: u16,
+    /// The address, if the path names one.
+    pub address: Option<String>,
+}
+
+/// A broker URL, `amqp://HOST[:PORT][/ADDRESS]` or `amqps://…`: the address is the path
+/// (`amqp://mes:5672/cfx` → `cfx`; `amqp://mes:5672//exchange/cfx` → `/exchange/cfx`).
+pub fn parse_url(text: &str) -> Result<CfxUrl, String> {
     let text = text.trim();
-    let rest = if let Some(rest) = text.strip_prefix("amqp://") {
-        rest
-    } else if text.starts_with("amqps://") {
-        return Err(format!(
-            "{text}: amqps:// (TLS) is not offered yet; use amqp:// on a trusted network or through a TLS tunnel"
-        ));
+    let (tls, rest) = if let Some(rest) = text.strip_prefix("amqp://") {
+        (false, rest)
+    } else if let Some(rest) = text.strip_prefix("amqps://") {
+        (true, rest)
     } else {
         return Err(format!(
-            "{text:?} is not an AMQP URL; write amqp://HOST:PORT (port {DEFAULT_PORT} if left out)"
+            "{text:?} is not an AMQP URL; write amqp://HOST:PORT (port {DEFAULT_PORT} if left out) or amqps://HOST:PORT ({DEFAULT_TLS_PORT})"
         ));
     };
     let (authority, path) = rest.split_once('/').unwrap_or((rest, ""));
@@ -114,6 +135,7 @@ pub fn parse_url(text: &str) -> Result<(String, u16, Option<String>), String> {
                 .to_owned(),
         );
     }
+    let default_port = if tls { DEFAULT_TLS_PORT } else { DEFAULT_PORT };
     let (host, port) = match authority.rsplit_once(':') {
         Some((host, port)) if !host.ends_with(']') || host.starts_with('[') => {
             let port = port
@@ -123,21 +145,37 @@ pub fn parse_url(text: &str) -> Result<(String, u16, Option<String>), String> {
                 .ok_or_else(|| format!("{text}: port {port:?} is not a port (1-65535)"))?;
             (host, port)
         }
-        _ => (authority, DEFAULT_PORT),
+        _ => (authority, default_port),
     };
     if host.is_empty() {
         return Err(format!("{text}: no host; write amqp://HOST:PORT"));
     }
-    let address = (!path.is_empty()).then(|| path.to_owned());
-    Ok((host.to_owned(), port, address))
+    Ok(CfxUrl {
+        tls,
+        host: host.to_owned(),
+        port,
+        address: (!path.is_empty()).then(|| path.to_owned()),
+    })
 }
 
 fn check(
     raw: RawCfx,
+    path: &Path,
     at: &impl Fn(Range<usize>, String) -> ConfigError,
 ) -> Result<CfxConfig, ConfigError> {
-    let (host, port, in_url) =
-        parse_url(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
+    let CfxUrl {
+        tls,
+        host,
+        port,
+        address: in_url,
+    } = parse_url(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
+    let keys = TlsKeys {
+        broker: &raw.broker,
+        ca_file: raw.ca_file.as_ref(),
+        client_cert: raw.client_cert.as_ref(),
+        client_key: raw.client_key.as_ref(),
+    };
+    let tls = check_tls(&keys, tls, "amqps://host:5671", path, at)?;
     let address = match (&raw.address, in_url) {
         (Some(address), _) if address.get_ref().trim().is_empty() => {
             return Err(at(
@@ -191,6 +229,7 @@ fn check(
         handles.insert(device, checked);
     }
     Ok(CfxConfig {
+        tls,
         host,
         port,
         address,
@@ -212,6 +251,9 @@ struct RawCfx {
     heartbeat: Option<Spanned<String>>,
     handles: Option<BTreeMap<String, Spanned<String>>>,
     listen: Option<Spanned<String>>,
+    ca_file: Option<Spanned<String>>,
+    client_cert: Option<Spanned<String>>,
+    client_key: Option<Spanned<String>>,
 }
 
 #[cfg(test)]
@@ -242,15 +284,33 @@ mod tests {
     fn the_address_may_be_the_urls_path_and_mistakes_are_refused_where_they_are() {
         assert_eq!(
             parse_url("amqp://127.0.0.1:5673//exchange/cfx").unwrap(),
-            (
-                "127.0.0.1".to_owned(),
-                5673,
-                Some("/exchange/cfx".to_owned())
-            )
+            CfxUrl {
+                tls: false,
+                host: "127.0.0.1".to_owned(),
+                port: 5673,
+                address: Some("/exchange/cfx".to_owned())
+            }
         );
         assert_eq!(
-            parse_url("amqp://mes/cfx").unwrap(),
-            ("mes".to_owned(), 5672, Some("cfx".to_owned()))
+            parse_url("amqps://mes/cfx").unwrap(),
+            CfxUrl {
+                tls: true,
+                host: "mes".to_owned(),
+                port: 5671,
+                address: Some("cfx".to_owned())
+            }
+        );
+        refused(
+            &with_a_line("[cfx]\nbroker = \"amqp://mes/q\"\nca_file = \"ca.pem\"\n"),
+            3,
+            11,
+            "ca_file is for TLS: the broker is amqp://; write amqps://host:5671",
+        );
+        refused(
+            &with_a_line("[cfx]\nbroker = \"amqps://mes/q\"\nca_file = \"missing.pem\"\n"),
+            3,
+            11,
+            "missing.pem",
         );
         refused(
             &with_a_line("[cfx]\nbroker = \"http://mes\"\naddress = \"q\"\n"),

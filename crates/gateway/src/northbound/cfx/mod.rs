@@ -42,8 +42,8 @@ use self::config::{CfxConfig, CfxTable};
 use self::station::{Input, Memory, Station, StationConfig};
 use super::{BoxStart, Northbound, Running, Start};
 use crate::cell::{Cell, InterfaceStatus, LiveMessage};
-use crate::event::EventKind;
 use crate::config::TableReader;
+use crate::event::EventKind;
 use crate::options::OptionError;
 use crate::store::Outbox;
 use crate::time::Timestamp;
@@ -252,14 +252,19 @@ fn cfx_config(start: &Start<'_>) -> anyhow::Result<Option<CfxConfig>> {
             ..t
         }));
     };
-    let (host, port, address) =
-        config::parse_url(&url).map_err(|m| OptionError(format!("--cfx: {m}")))?;
+    let config::CfxUrl {
+        tls,
+        host,
+        port,
+        address,
+    } = config::parse_url(&url).map_err(|m| OptionError(format!("--cfx: {m}")))?;
     let address = address.ok_or_else(|| {
         OptionError(format!(
             "--cfx {url}: no address; write amqp://HOST:PORT/ADDRESS (a queue, or //exchange/NAME)"
         ))
     })?;
     let base = table.cloned().unwrap_or(CfxConfig {
+        tls: None,
         host: String::new(),
         port: 0,
         address: String::new(),
@@ -275,7 +280,10 @@ fn cfx_config(start: &Start<'_>) -> anyhow::Result<Option<CfxConfig>> {
         .get::<CfxFlags>()
         .and_then(|f| f.listen)
         .or(base.listen);
+    // amqps:// with the table's TLS files, else the system's roots.
+    let tls = tls.then(|| base.tls.clone().unwrap_or_default());
     Ok(Some(CfxConfig {
+        tls,
         host,
         port,
         address,
@@ -533,7 +541,9 @@ impl Feeder<'_> {
     }
 
     fn shown(&self) -> std::sync::RwLockWriteGuard<'_, Vec<Shown>> {
-        self.endpoints.write().unwrap_or_else(PoisonError::into_inner)
+        self.endpoints
+            .write()
+            .unwrap_or_else(PoisonError::into_inner)
     }
 
     fn feed(&mut self, device: &str, input: Input<'_>) {
@@ -653,7 +663,9 @@ impl Kept {
         let mut memory: BTreeMap<String, Memory> = match serde_json::from_str(&memory) {
             Ok(memory) => memory,
             Err(e) => {
-                tracing::warn!("IPC-CFX: what the stations knew is unreadable ({e}); they start afresh");
+                tracing::warn!(
+                    "IPC-CFX: what the stations knew is unreadable ({e}); they start afresh"
+                );
                 return;
             }
         };
@@ -671,7 +683,8 @@ impl Kept {
     }
 
     async fn len(&self) -> i64 {
-        self.call(|o| i64::try_from(o.len()).unwrap_or(i64::MAX)).await
+        self.call(|o| i64::try_from(o.len()).unwrap_or(i64::MAX))
+            .await
     }
 }
 
@@ -794,10 +807,30 @@ impl Link {
             }
             _ => builder.sasl_profile(fe2o3_amqp::sasl_profile::SaslProfile::Anonymous),
         };
-        let mut connection = builder
-            .open(url.as_str())
-            .await
-            .map_err(|e| format!("cannot connect to {url}: {e}"))?;
+        let opened = match &config.tls {
+            None => builder.open(url.as_str()).await,
+            // amqps://: TLS on our own stream (fe2o3-amqp's TLS features bring aws-lc;
+            // this is the rustls with ring the MQTT link uses), then AMQP inside it.
+            Some(files) => {
+                let tls = kit::mqtt::tls::client_config(files).map_err(|e| e.to_string())?;
+                let name =
+                    rustls::pki_types::ServerName::try_from(config.host.clone()).map_err(|e| {
+                        format!(
+                            "{url}: {} is not a host name TLS can check: {e}",
+                            config.host
+                        )
+                    })?;
+                let tcp = tokio::net::TcpStream::connect((config.host.as_str(), config.port))
+                    .await
+                    .map_err(|e| format!("cannot connect to {url}: {e}"))?;
+                let stream = tokio_rustls::TlsConnector::from(tls)
+                    .connect(name, tcp)
+                    .await
+                    .map_err(|e| format!("TLS with {url} failed: {e}"))?;
+                builder.open_with_stream(stream).await
+            }
+        };
+        let mut connection = opened.map_err(|e| format!("cannot connect to {url}: {e}"))?;
         let mut session = fe2o3_amqp::Session::begin(&mut connection)
             .await
             .map_err(|e| format!("{url}: no session: {e}"))?;

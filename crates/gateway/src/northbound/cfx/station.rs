@@ -214,9 +214,10 @@ impl Station {
                     severity: fault.severity,
                     description: fault.description.clone(),
                     transaction: fault.transaction_id,
-                    placement: fault.placement.as_ref().map(|p| {
-                        (p.fault_type, p.program_step, p.feeder.clone(), p.nozzle)
-                    }),
+                    placement: fault
+                        .placement
+                        .as_ref()
+                        .map(|p| (p.fault_type, p.program_step, p.feeder.clone(), p.nozzle)),
                 })
                 .collect(),
             offline_since: self.offline_since.map(|t| t.0),
@@ -227,22 +228,22 @@ impl Station {
 
     /// Takes up where a station of the same machine was when it kept `memory`.
     pub fn remember(&mut self, memory: Memory) {
-        self.state = memory
-            .state
-            .and_then(|(code, since)| Some((ResourceState::new(u32::from(code)).ok()?, Timestamp(since))));
+        self.state = memory.state.and_then(|(code, since)| {
+            Some((ResourceState::new(u32::from(code)).ok()?, Timestamp(since)))
+        });
         self.faults = memory
             .faults
             .into_iter()
             .map(|kept| Active {
                 fault: Fault {
-                    placement: kept.placement.map(|(fault_type, program_step, feeder, nozzle)| {
-                        Placement {
+                    placement: kept
+                        .placement
+                        .map(|(fault_type, program_step, feeder, nozzle)| Placement {
                             fault_type,
                             program_step,
                             feeder,
                             nozzle,
-                        }
-                    }),
+                        }),
                     transaction_id: kept.transaction,
                     cause: kept.cause,
                     severity: kept.severity,

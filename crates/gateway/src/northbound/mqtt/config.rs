@@ -18,6 +18,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use crate::config::{ConfigError, Settings, Table, TableReader, bounded, duration};
+use crate::northbound::tls::{TlsKeys, check_tls};
 pub use kit::mqtt::{Broker, MqttClientCert, MqttTls, parse_broker};
 
 /// The `[mqtt]` table's reader.
@@ -182,7 +183,13 @@ fn check_mqtt(
 ) -> Result<MqttConfig, ConfigError> {
     let Broker { host, port, tls } =
         parse_broker(raw.broker.get_ref()).map_err(|m| at(raw.broker.span(), m))?;
-    let tls = check_mqtt_tls(&raw, tls, path, at)?;
+    let keys = TlsKeys {
+        broker: &raw.broker,
+        ca_file: raw.ca_file.as_ref(),
+        client_cert: raw.client_cert.as_ref(),
+        client_key: raw.client_key.as_ref(),
+    };
+    let tls = check_tls(&keys, tls, "mqtts://host:8883", path, at)?;
     let group_id =
         id_opt(&raw.group_id, "group_id", at)?.unwrap_or_else(|| DEFAULT_MQTT_GROUP.to_owned());
     let edge_node_id = id_opt(&raw.edge_node_id, "edge_node_id", at)?
@@ -309,79 +316,6 @@ fn id_opt(
                 })
         })
         .transpose()
-}
-
-/// The `[mqtt]` table's TLS keys, for an `mqtts://` broker (`tls`). The files are read
-/// here, so `cellbus config check` reports a missing file or bad PEM; the gateway reads
-/// them again when it starts.
-fn check_mqtt_tls(
-    raw: &RawMqtt,
-    tls: bool,
-    path: &Path,
-    at: &impl Fn(Range<usize>, String) -> ConfigError,
-) -> Result<Option<MqttTls>, ConfigError> {
-    let keys = [
-        ("ca_file", &raw.ca_file),
-        ("client_cert", &raw.client_cert),
-        ("client_key", &raw.client_key),
-    ];
-    if !tls {
-        if let Some((key, Some(value))) = keys.iter().find(|(_, v)| v.is_some()) {
-            return Err(at(
-                value.span(),
-                format!(
-                    "{key} is for TLS: the broker is mqtt://; write mqtts://host:8883 or remove {key}"
-                ),
-            ));
-        }
-        return Ok(None);
-    }
-    let base = path.parent().unwrap_or(Path::new(""));
-    for (key, value) in keys {
-        if let Some(value) = value
-            && value.get_ref().trim().is_empty()
-        {
-            return Err(at(
-                value.span(),
-                format!("{key} is empty; name a PEM file or remove {key}"),
-            ));
-        }
-    }
-    let file = |value: &Spanned<String>| base.join(value.get_ref().trim());
-    let client = match (&raw.client_cert, &raw.client_key) {
-        (Some(cert), Some(key)) => Some(MqttClientCert {
-            cert: file(cert),
-            key: file(key),
-        }),
-        (None, None) => None,
-        (Some(cert), None) => {
-            return Err(at(
-                cert.span(),
-                "client_cert needs client_key (its private key, PEM)".into(),
-            ));
-        }
-        (None, Some(key)) => {
-            return Err(at(
-                key.span(),
-                "client_key needs client_cert (its certificate, PEM)".into(),
-            ));
-        }
-    };
-    let tls = MqttTls {
-        ca_file: raw.ca_file.as_ref().map(file),
-        client,
-    };
-    super::tls::check_files(&tls).map_err(|e| {
-        let span = match e.key {
-            "ca_file" => raw.ca_file.as_ref(),
-            "client_cert" => raw.client_cert.as_ref(),
-            "client_key" => raw.client_key.as_ref(),
-            _ => None,
-        }
-        .map_or(raw.broker.span(), Spanned::span);
-        at(span, e.message)
-    })?;
-    Ok(Some(tls))
 }
 
 #[derive(Debug, Deserialize)]

@@ -297,14 +297,24 @@ fn a_station_that_remembers_goes_on_as_the_one_before_the_restart_would_have() {
 
     let later = |s: &mut Station| {
         let mut out = device_event(s, EventKind::DeviceUp, fields([]), 4 * MINUTE);
-        out.extend(value(s, "program", Value::Text("BOARD-A".into()), 4 * MINUTE));
+        out.extend(value(
+            s,
+            "program",
+            Value::Text("BOARD-A".into()),
+            4 * MINUTE,
+        ));
         out.extend(device_event(
             s,
             EventKind::DeviceEvent,
             fields([("event", json!("recovery_succeeded"))]),
             5 * MINUTE,
         ));
-        out.extend(value(s, "machine_state_code", Value::Number(2000.0), 5 * MINUTE));
+        out.extend(value(
+            s,
+            "machine_state_code",
+            Value::Number(2000.0),
+            5 * MINUTE,
+        ));
         out.extend(value(s, "parts_placed", Value::Number(160.0), 11 * MINUTE));
         out
     };
