@@ -113,6 +113,9 @@ fn a_demo_minute_reaches_a_proton_receiver_as_cfx_messages_with_the_sdks_envelop
         "CFX.ResourcePerformance.FaultOccurred",
         "CFX.ResourcePerformance.FaultCleared",
         "CFX.Heartbeat",
+        // The program, read once at the start (whether before or after the interface took
+        // the change stream).
+        "CFX.Production.RecipeActivated",
     ];
     let started = Instant::now();
     let mut messages: Vec<Value> = Vec::new();

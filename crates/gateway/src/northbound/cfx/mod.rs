@@ -420,6 +420,8 @@ async fn run(cell: Arc<Cell>, setup: Setup, stop: watch::Receiver<bool>) {
 /// Feeds the stations from the change stream until `stop`, and keeps what they make.
 async fn feed(mut feeder: Feeder<'_>, kept: &Kept, wake: &Notify, mut stop: watch::Receiver<bool>) {
     let mut live = feeder.cell.subscribe();
+    // What was read before the stream was taken (the program is read once, at the start).
+    feeder.seed();
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     let mut last_kept = tokio::time::Instant::now();
     loop {
@@ -536,6 +538,38 @@ impl Feeder<'_> {
                     }
                 }
                 _ => {}
+            }
+        }
+    }
+
+    /// Feeds each station the current values of its machine's state code and program:
+    /// the change stream says only what changes after it was taken.
+    fn seed(&mut self) {
+        for (device, station) in &mut self.stations {
+            let Some(entry) = self.cell.device_entry(device) else {
+                continue;
+            };
+            let points = entry.protocol.production().copied();
+            let names = [
+                Some(crate::production::states::CODE_POINT),
+                points.and_then(|p| p.program),
+            ];
+            for name in names.into_iter().flatten() {
+                let Some(index) = entry.point_index(name) else {
+                    continue;
+                };
+                let current = entry.read().points[index].clone();
+                let (Some(value), Some(at)) = (current.value, current.t) else {
+                    continue;
+                };
+                let made = station.feed(Input::Value {
+                    point: name,
+                    value: Some(&value),
+                    quality: current.quality,
+                    at,
+                });
+                self.made.extend(made);
+                self.remember = true;
             }
         }
     }

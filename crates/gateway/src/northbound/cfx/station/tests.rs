@@ -42,6 +42,22 @@ fn device_event(
     station.feed(Input::Event(&event))
 }
 
+/// Feeder 12 ran out at step 87, nozzle 7 (R message E03).
+fn parts_exhausted(station: &mut Station, at: i64) -> Vec<Envelope> {
+    device_event(
+        station,
+        EventKind::DeviceEvent,
+        fields([
+            ("event", json!("parts_exhausted")),
+            ("error_code", json!(3)),
+            ("step", json!(87)),
+            ("nozzle", json!(7)),
+            ("feeder", json!(12)),
+        ]),
+        at,
+    )
+}
+
 fn names(out: &[Envelope]) -> Vec<&'static str> {
     out.iter().map(|e| e.message.name()).collect()
 }
@@ -63,18 +79,7 @@ fn a_state_change_says_the_old_state_its_duration_and_the_fault_that_stopped_the
     assert_eq!(body(&first[0])["OldStateDuration"], json!(null));
     assert!(value(&mut s, "machine_state_code", Value::Number(1100.0), 1000).is_empty());
 
-    let fault = device_event(
-        &mut s,
-        EventKind::DeviceEvent,
-        fields([
-            ("event", json!("parts_exhausted")),
-            ("error_code", json!(3)),
-            ("step", json!(87)),
-            ("nozzle", json!(7)),
-            ("feeder", json!(12)),
-        ]),
-        2 * MINUTE,
-    );
+    let fault = parts_exhausted(&mut s, 2 * MINUTE);
     assert_eq!(names(&fault), ["CFX.ResourcePerformance.FaultOccurred"]);
     let occurred = body(&fault[0])["Fault"].clone();
     assert_eq!(
@@ -275,18 +280,7 @@ fn a_station_that_remembers_goes_on_as_the_one_before_the_restart_would_have() {
     value(&mut before, "machine_state_code", Value::Number(1100.0), 0);
     value(&mut before, "program", Value::Text("BOARD-A".into()), 0);
     value(&mut before, "parts_placed", Value::Number(100.0), MINUTE);
-    device_event(
-        &mut before,
-        EventKind::DeviceEvent,
-        fields([
-            ("event", json!("parts_exhausted")),
-            ("error_code", json!(3)),
-            ("step", json!(87)),
-            ("nozzle", json!(7)),
-            ("feeder", json!(12)),
-        ]),
-        2 * MINUTE,
-    );
+    parts_exhausted(&mut before, 2 * MINUTE);
     device_event(&mut before, EventKind::DeviceDown, fields([]), 3 * MINUTE);
 
     // Kept as JSON (as the outbox keeps it) and taken up by a new station.
