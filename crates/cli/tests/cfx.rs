@@ -408,6 +408,68 @@ fn through_rabbitmq_a_broker_restart_and_a_gateway_killed_meanwhile_lose_no_mess
     assert!(waited.is_sorted(), "in the order they happened: {waited:?}");
 }
 
+/// SASL PLAIN with the password from the environment (`username`, `password_env`): the
+/// broker takes the right one and refuses a wrong one, which `/healthz` says.
+#[test]
+fn with_a_user_and_the_password_in_the_environment_the_broker_takes_the_gateway() {
+    let broker = RabbitMq::start("cfx", "mes");
+    let consumer = start_consumer(
+        &format!("amqp://127.0.0.1:{}", broker.port()),
+        "/amq/queue/mes",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("cell.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[cfx]\nbroker = \"amqp://127.0.0.1:{}\"\naddress = \"/exchange/cfx\"\n\
+             username = \"guest\"\npassword_env = \"CELLBUS_CFX_PASSWORD\"\n\
+             [cfx.handles]\nplacer1 = \"Panasonic.BM221.SN1\"\n\n\
+             [[line]]\nname = \"lan\"\nendpoint = \"tcp://127.0.0.1:{}\"\n\
+             [[line.device]]\nid = \"placer1\"\nprotocol = \"panasonic\"\n",
+            broker.port(),
+            testkit::free_port()
+        ),
+    )
+    .unwrap();
+    let start = |password: &str, data: &str| {
+        Gateway::start_with_env(
+            &dir.path().join(data),
+            &["--config", config.to_str().unwrap()],
+            &[("CELLBUS_CFX_PASSWORD", password)],
+        )
+    };
+
+    let refused = start("not the password", "refused");
+    wait_for(&refused, "the login refused", |g| {
+        // 503: the machine is not there either.
+        let (_, body) = g.get("/healthz");
+        let health: Value = serde_json::from_str(&body).unwrap();
+        health["cfx"].as_str().is_some_and(|l| {
+            l.starts_with("disconnected: cannot connect")
+                && l.contains(
+                    "the broker refused the user guest with the password in CELLBUS_CFX_PASSWORD",
+                )
+        })
+    });
+    drop(refused);
+
+    let _taken = start("guest", "taken");
+    let started = Instant::now();
+    loop {
+        let left = WITHIN.saturating_sub(started.elapsed());
+        let line = consumer
+            .lines
+            .recv_timeout(left)
+            .expect("the gateway's EndpointConnected");
+        let m: Value = serde_json::from_str(&line).unwrap();
+        if m["body"]["MessageName"] == "CFX.EndpointConnected" {
+            assert_eq!(m["body"]["Source"], "Panasonic.BM221.SN1");
+            break;
+        }
+    }
+}
+
 /// Polls `gateway` until `ready` (at most [`WITHIN`]).
 fn wait_for(gateway: &Gateway, what: &str, ready: impl Fn(&Gateway) -> bool) {
     let started = Instant::now();

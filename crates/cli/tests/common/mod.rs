@@ -288,15 +288,20 @@ impl Gateway {
 
     /// Like [`Gateway::start_with`], with `token` as `CELLBUS_TOKEN` (none if `None`).
     pub fn start_with_token(data: &std::path::Path, args: &[&str], token: Option<&str>) -> Gateway {
+        let env: Vec<(&str, &str)> = token.map(|t| ("CELLBUS_TOKEN", t)).into_iter().collect();
+        Gateway::start_with_env(data, args, &env)
+    }
+
+    /// Like [`Gateway::start_with`], with the environment variables `env` (and no
+    /// `CELLBUS_TOKEN` unless it is one of them).
+    pub fn start_with_env(data: &std::path::Path, args: &[&str], env: &[(&str, &str)]) -> Gateway {
         let mut command = cellbus();
         command
             .args(["serve", "--listen", "127.0.0.1:0", "--data"])
             .arg(data)
             .args(args)
-            .env_remove("CELLBUS_TOKEN");
-        if let Some(token) = token {
-            command.env("CELLBUS_TOKEN", token);
-        }
+            .env_remove("CELLBUS_TOKEN")
+            .envs(env.iter().copied());
         let (child, _, addr) = start_listening(&mut command, "listening on http://");
         Gateway { child, addr }
     }

@@ -764,6 +764,10 @@ async fn send(
         let mut link = match opened {
             Ok(link) => link,
             Err(why) => {
+                // Said once, not at every try.
+                if status.link().err().as_deref() != Some(why.as_str()) {
+                    tracing::warn!("IPC-CFX: no link: {why}; trying again");
+                }
                 status.set_link(Err(why));
                 tokio::select! {
                     () = stopped(&mut finish) => return,
@@ -864,7 +868,19 @@ impl Link {
                 builder.open_with_stream(stream).await
             }
         };
-        let mut connection = opened.map_err(|e| format!("cannot connect to {url}: {e}"))?;
+        let mut connection = opened.map_err(|e| match e {
+            fe2o3_amqp::connection::OpenError::SaslError { code, .. } => {
+                let who = match (&config.username, &config.password_env) {
+                    (Some(user), Some(var)) => {
+                        format!("the user {user} with the password in {var}")
+                    }
+                    (Some(user), None) => format!("the user {user} without a password"),
+                    _ => "an anonymous login".to_owned(),
+                };
+                format!("cannot connect to {url}: the broker refused {who} (SASL {code:?})")
+            }
+            e => format!("cannot connect to {url}: {e}"),
+        })?;
         let mut session = fe2o3_amqp::Session::begin(&mut connection)
             .await
             .map_err(|e| format!("{url}: no session: {e}"))?;
