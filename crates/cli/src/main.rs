@@ -4,6 +4,7 @@
 //! logic lives here.
 #![forbid(unsafe_code)]
 
+#[cfg(feature = "cfx")]
 mod cfx_cmd;
 mod decode;
 mod demo;
@@ -103,6 +104,7 @@ enum Command {
     Mqtt(mqtt_cmd::MqttCommand),
     /// Watch IPC-CFX messages on AMQP 1.0: `cfx sub` prints what the gateway's placement
     /// machines (or any CFX endpoint) publish, from a broker's address or as the receiver.
+    #[cfg(feature = "cfx")]
     #[command(subcommand)]
     Cfx(cfx_cmd::CfxCommand),
     /// Run a simulated device on a TCP port or a PTY.
@@ -143,6 +145,7 @@ fn main() -> ExitCode {
             Command::Thermosald(args) => thermosald_cmd::run(args).await,
             Command::Panasonic(args) => panasonic_cmd::run(args).await,
             Command::Mqtt(command) => mqtt_cmd::run(command).await,
+            #[cfg(feature = "cfx")]
             Command::Cfx(command) => cfx_cmd::run(command).await,
             Command::Sim(command) => sim::run(command).await,
             Command::Decode(command) => decode::run(command),
