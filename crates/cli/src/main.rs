@@ -8,6 +8,7 @@
 mod cfx_cmd;
 mod decode;
 mod demo;
+#[cfg(feature = "historian")]
 mod historian_cmd;
 mod jbc_cmd;
 mod jbus_cmd;
@@ -77,6 +78,7 @@ enum Command {
     ///
     /// Exit codes: 0 stopped by Ctrl-C or SIGTERM (pending rows committed), 1 PostgreSQL
     /// refused the login or the schema is newer, 2 bad arguments.
+    #[cfg(feature = "historian")]
     Historian(historian_cmd::HistorianArgs),
     /// Check or print a gateway configuration file.
     #[command(subcommand)]
@@ -117,7 +119,10 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    #[cfg(feature = "historian")]
     let service = matches!(cli.command, Command::Serve(_) | Command::Historian(_));
+    #[cfg(not(feature = "historian"))]
+    let service = matches!(cli.command, Command::Serve(_));
     init_logging(cli.log_level, cli.log_format, service);
     if matches!(cli.command, Command::Serve(_) | Command::Demo(_)) {
         // The gateway's malloc, set before the runtime starts its threads.
@@ -137,6 +142,7 @@ fn main() -> ExitCode {
         match cli.command {
             Command::Serve(args) => serve_cmd::serve(args).await,
             Command::Config(command) => serve_cmd::config(command),
+            #[cfg(feature = "historian")]
             Command::Historian(args) => historian_cmd::run(args).await,
             Command::Demo(args) => demo::run(args).await,
             Command::Jbc(args) => jbc_cmd::run(args).await,
