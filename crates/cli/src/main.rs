@@ -4,9 +4,11 @@
 //! logic lives here.
 #![forbid(unsafe_code)]
 
+#[cfg(feature = "cfx")]
 mod cfx_cmd;
 mod decode;
 mod demo;
+#[cfg(feature = "historian")]
 mod historian_cmd;
 mod jbc_cmd;
 mod jbus_cmd;
@@ -76,6 +78,7 @@ enum Command {
     ///
     /// Exit codes: 0 stopped by Ctrl-C or SIGTERM (pending rows committed), 1 PostgreSQL
     /// refused the login or the schema is newer, 2 bad arguments.
+    #[cfg(feature = "historian")]
     Historian(historian_cmd::HistorianArgs),
     /// Check or print a gateway configuration file.
     #[command(subcommand)]
@@ -103,6 +106,7 @@ enum Command {
     Mqtt(mqtt_cmd::MqttCommand),
     /// Watch IPC-CFX messages on AMQP 1.0: `cfx sub` prints what the gateway's placement
     /// machines (or any CFX endpoint) publish, from a broker's address or as the receiver.
+    #[cfg(feature = "cfx")]
     #[command(subcommand)]
     Cfx(cfx_cmd::CfxCommand),
     /// Run a simulated device on a TCP port or a PTY.
@@ -115,7 +119,10 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    #[cfg(feature = "historian")]
     let service = matches!(cli.command, Command::Serve(_) | Command::Historian(_));
+    #[cfg(not(feature = "historian"))]
+    let service = matches!(cli.command, Command::Serve(_));
     init_logging(cli.log_level, cli.log_format, service);
     if matches!(cli.command, Command::Serve(_) | Command::Demo(_)) {
         // The gateway's malloc, set before the runtime starts its threads.
@@ -135,6 +142,7 @@ fn main() -> ExitCode {
         match cli.command {
             Command::Serve(args) => serve_cmd::serve(args).await,
             Command::Config(command) => serve_cmd::config(command),
+            #[cfg(feature = "historian")]
             Command::Historian(args) => historian_cmd::run(args).await,
             Command::Demo(args) => demo::run(args).await,
             Command::Jbc(args) => jbc_cmd::run(args).await,
@@ -143,6 +151,7 @@ fn main() -> ExitCode {
             Command::Thermosald(args) => thermosald_cmd::run(args).await,
             Command::Panasonic(args) => panasonic_cmd::run(args).await,
             Command::Mqtt(command) => mqtt_cmd::run(command).await,
+            #[cfg(feature = "cfx")]
             Command::Cfx(command) => cfx_cmd::run(command).await,
             Command::Sim(command) => sim::run(command).await,
             Command::Decode(command) => decode::run(command),

@@ -70,11 +70,15 @@ pub struct ServeArgs {
     /// broker and address: amqp://HOST:PORT/ADDRESS (a queue; RabbitMQ 3.x exchanges as
     /// amqp://HOST:PORT//exchange/NAME). The demo's machine is `cellbus.demo.placer1`;
     /// with --config it replaces the [cfx] table's broker and address.
+    // A build without IPC-CFX hides the two flags and refuses them in words
+    // (`interface_flags`).
+    #[cfg_attr(not(feature = "cfx"), arg(hide = true))]
     #[arg(long, value_name = "URL")]
     pub cfx: Option<String>,
     /// Answer the CFX endpoints' requests (AreYouThere, WhoIsThere, GetEndpointInformation)
     /// on this address over AMQP 1.0, each at its handle (port 0 picks a free port; a line
     /// `cfx on amqp://IP:PORT` is printed).
+    #[cfg_attr(not(feature = "cfx"), arg(hide = true))]
     #[arg(long, value_name = "IP:PORT")]
     pub cfx_listen: Option<SocketAddr>,
     /// Serve the cell over OPC UA on this address (port 0 picks a free port); the second
@@ -110,6 +114,13 @@ const NO_OPCUA_TABLE: &str = "this build of cellbus has no OPC UA interface (it 
 const NO_OPCUA_FLAG: &str = "--opcua: this build of cellbus has no OPC UA interface (it was \
      built without the `opcua` feature): leave the flag out, or use a build with OPC UA";
 
+/// Why a build without the `cfx` feature refuses `serve --cfx` and `--cfx-listen` (its
+/// `[cfx]` table is refused by `gateway::plugins::builtin`).
+#[cfg(not(feature = "cfx"))]
+const NO_CFX_FLAG: &str = "--cfx, --cfx-listen: this build of cellbus has no IPC-CFX \
+     interface (it was built without the `cfx` feature): leave the flags out, or use a \
+     build with IPC-CFX";
+
 /// `registry` as a build without OPC UA has it: a config's `[opcua]` table is refused in
 /// those words, not as a table nobody knows.
 #[cfg(any(test, not(feature = "opcua")))]
@@ -125,10 +136,15 @@ fn interface_flags(args: &ServeArgs) -> anyhow::Result<Flags> {
         node: args.mqtt_node.clone(),
         primary_host: args.mqtt_primary_host.clone(),
     });
+    #[cfg(feature = "cfx")]
     let flags = flags.with(gateway::northbound::cfx::CfxFlags {
         url: args.cfx.clone(),
         listen: args.cfx_listen,
     });
+    #[cfg(not(feature = "cfx"))]
+    if args.cfx.is_some() || args.cfx_listen.is_some() {
+        return Err(usage(NO_CFX_FLAG));
+    }
     #[cfg(feature = "opcua")]
     let flags = flags.with(cellbus_opcua::OpcuaFlags { listen: args.opcua });
     #[cfg(not(feature = "opcua"))]
@@ -354,6 +370,24 @@ mod tests {
         assert!(
             shown.contains("no OPC UA interface (it was built without the `opcua` feature)"),
             "{shown}"
+        );
+    }
+
+    #[cfg(not(feature = "cfx"))]
+    #[test]
+    fn a_build_without_cfx_refuses_a_cfx_table_where_it_is_and_says_why() {
+        let cell = CELL.replace("[opcua]", "[cfx]");
+        let refused = gateway::config::parse_config(
+            &cell,
+            std::path::Path::new("cell.toml"),
+            &registry().config,
+        )
+        .expect_err("the [cfx] table is refused");
+        let shown = refused.to_string();
+        assert_eq!(refused.position(), Some((8, 2)), "{shown}");
+        assert_eq!(
+            shown.lines().next(),
+            Some(format!("cell.toml:8:2: {}", gateway::plugins::NO_CFX_TABLE).as_str())
         );
     }
 

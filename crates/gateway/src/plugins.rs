@@ -41,7 +41,8 @@ impl Registry {
     }
 }
 
-/// The gateway crate's own device kinds and interfaces (MQTT, IPC-CFX).
+/// The gateway crate's own device kinds and interfaces (MQTT; IPC-CFX with the `cfx`
+/// feature, and without it a config's `[cfx]` table is refused in words).
 pub fn builtin() -> Registry {
     let config = Plugins::default()
         .with_kind(jbc::KIND)
@@ -55,14 +56,23 @@ pub fn builtin() -> Registry {
         cross::demo::start,
         panasonic::demo::start,
     ];
-    Registry {
+    let registry = Registry {
         config,
         interfaces: Vec::new(),
         demos,
     }
-    .with_interface(&northbound::mqtt::Mqtt)
-    .with_interface(&northbound::cfx::Cfx)
+    .with_interface(&northbound::mqtt::Mqtt);
+    #[cfg(feature = "cfx")]
+    let registry = registry.with_interface(&northbound::cfx::Cfx);
+    #[cfg(not(feature = "cfx"))]
+    let registry = registry.with_interface_left_out("cfx", NO_CFX_TABLE);
+    registry
 }
+
+/// Why a build without the `cfx` feature refuses a config's `[cfx]` table.
+#[cfg(not(feature = "cfx"))]
+pub const NO_CFX_TABLE: &str = "this build of cellbus has no IPC-CFX interface (it was built \
+     without the `cfx` feature): remove the [cfx] table, or use a build with IPC-CFX";
 
 /// Reads and checks the configuration at `path` with the gateway crate's own kinds and
 /// interfaces.

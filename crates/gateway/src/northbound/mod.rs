@@ -10,7 +10,10 @@
 //! - OPC UA, the cell as an OPC UA server (async-opcua), is a crate of its own
 //!   (`cellbus-opcua`, in `crates/opcua`) behind the binary's `opcua` feature: it
 //!   implements [`Northbound`] with only what this crate makes public.
+//! - [`cfx`]: the cell's placement machines as IPC-CFX endpoints over AMQP 1.0
+//!   (fe2o3-amqp), behind this crate's `cfx` feature (on by default).
 //!
+#[cfg(feature = "cfx")]
 pub mod cfx;
 pub mod mqtt;
 #[cfg(test)]
