@@ -18,6 +18,8 @@ fn the_page_shows_every_demo_device_a_value_changing_by_itself_and_the_mqtt_link
     assert_eq!(seen["cfx"], serde_json::Value::Null, "no IPC-CFX, no badge");
 }
 
+// It shows an IPC-CFX link too (`serve --cfx`).
+#[cfg(feature = "cfx")]
 #[test]
 fn a_gateway_with_a_read_token_is_asked_for_it_once_and_then_shows_the_cell() {
     // An IPC-CFX receiver that is not there: its link shows as down.
