@@ -57,6 +57,8 @@ pub(super) struct Feeder<'a> {
     pub(super) made: VecDeque<cfx::Envelope>,
     /// A station's memory changed since it was last kept.
     pub(super) remember: bool,
+    /// The outbox refused the last try (said once in the log, until it takes again).
+    pub(super) failing: bool,
     pub(super) status: &'a CfxStatus,
     pub(super) cell: &'a Cell,
     /// Makes the station of a device a reload adds.
@@ -222,6 +224,9 @@ impl Feeder<'_> {
         let memory = serde_json::to_string(&memory).ok();
         match kept.keep(bodies, memory).await {
             Ok(dropped) => {
+                if std::mem::take(&mut self.failing) {
+                    tracing::info!("IPC-CFX: the outbox takes the messages again");
+                }
                 self.made.clear();
                 self.remember = false;
                 self.status.metrics.dropped.inc_by(dropped);
@@ -229,7 +234,11 @@ impl Feeder<'_> {
                 true
             }
             Err(why) => {
-                tracing::warn!("IPC-CFX: cannot keep its messages: {why}; they wait in memory");
+                if !std::mem::replace(&mut self.failing, true) {
+                    tracing::warn!(
+                        "IPC-CFX: cannot keep its messages: {why}; they wait in memory (at most {MAX_WAITING})"
+                    );
+                }
                 false
             }
         }

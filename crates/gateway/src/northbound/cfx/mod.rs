@@ -408,6 +408,7 @@ async fn run(cell: Arc<Cell>, setup: Setup, stop: watch::Receiver<bool>) {
             .collect(),
         made: VecDeque::new(),
         remember: false,
+        failing: false,
         status: &status,
         cell: &cell,
         maker,

@@ -23,14 +23,15 @@ pub(super) struct Sender {
     pub(super) status: Arc<CfxStatus>,
 }
 
-/// Sends what is kept, oldest first, each removed when the receiver accepted it, and the
-/// heartbeats while the link is up; opens the link again with a backoff. Once `finish`
+/// Sends what is kept, oldest first, each removed when the receiver accepted it, and what
+/// comes on `now` (heartbeats, the greetings and farewells of endpoints a reload adds and
+/// removes) while the link is up; opens the link again with a backoff. Once `finish`
 /// turns true (the feeder has kept its last messages), sends what is kept for at most
 /// [`FINISH_PATIENCE`], the endpoints' `EndpointShuttingDown`, and closes the link.
 pub(super) async fn send(
     sender: Sender,
     wake: Arc<Notify>,
-    mut beats: mpsc::Receiver<cfx::Envelope>,
+    mut now: mpsc::Receiver<cfx::Envelope>,
     mut finish: watch::Receiver<bool>,
 ) {
     let Sender {
@@ -73,12 +74,13 @@ pub(super) async fn send(
         first = false;
         status.set_link(Ok(()));
         backoff.reset();
-        // Heartbeats made while the link was down are not sent late.
-        while beats.try_recv().is_ok() {}
-        let now = Timestamp::now();
+        // What was to be sent at once while the link was down is not sent late (every
+        // endpoint now greets the line below).
+        while now.try_recv().is_ok() {}
+        let at = Timestamp::now();
         let lost = 'connected: {
             for station in shown_stations(&endpoints) {
-                if let Err(why) = link.send(amqp_message(&station.connected(now))).await {
+                if let Err(why) = link.send(amqp_message(&station.connected(at))).await {
                     break 'connected why;
                 }
             }
@@ -92,16 +94,16 @@ pub(super) async fn send(
                             FINISH_PATIENCE,
                             link.send_kept(&kept, &mut sent, &status),
                         ).await;
-                        let now = Timestamp::now();
+                        let at = Timestamp::now();
                         for station in shown_stations(&endpoints) {
-                            let _ = link.send(amqp_message(&station.shutting_down(now))).await;
+                            let _ = link.send(amqp_message(&station.shutting_down(at))).await;
                         }
                         link.close().await;
                         return;
                     }
                     () = wake.notified() => {}
-                    Some(beat) = beats.recv() => {
-                        if let Err(why) = link.send(amqp_message(&beat)).await {
+                    Some(envelope) = now.recv() => {
+                        if let Err(why) = link.send(amqp_message(&envelope)).await {
                             break 'connected why;
                         }
                     }
