@@ -178,12 +178,13 @@ impl Feeder<'_> {
             .unwrap_or_else(PoisonError::into_inner)
     }
 
+    /// One input of `device`. A placement machine's counters move with nearly every
+    /// poll, so its station's memory is taken as changed (kept at most every
+    /// `MEMORY_EVERY` without a message) rather than compared copy for copy each time.
     fn feed(&mut self, device: &str, input: Input<'_>) {
         for (_, station) in self.stations.iter_mut().filter(|(d, _)| d == device) {
-            let before = station.memory();
-            let made = station.feed(input);
-            self.remember |= station.memory() != before;
-            self.made.extend(made);
+            self.made.extend(station.feed(input));
+            self.remember = true;
         }
         self.bound();
     }
