@@ -28,6 +28,7 @@ use ::opcua::types::{
     ReadEventDetails, ReadProcessedDetails, ReadRawModifiedDetails, StatusCode, TimestampsToReturn,
 };
 
+use crate::points::PointTable;
 use gateway::write::LogThrottle;
 
 /// The monitored items of the whole server, and how many were refused.
@@ -109,6 +110,21 @@ pub fn capped(
     move |context: ServerContext| Capped {
         inner: Box::new(builder).build(context),
         items,
+        yields: None,
+    }
+}
+
+/// [`capped`], and the manager leaves the nodes of `points` to the points' own manager
+/// (async-opcua gives each node to the first manager that says it owns it).
+pub fn capped_yielding(
+    builder: impl NodeManagerBuilder + 'static,
+    items: Arc<ItemCount>,
+    points: Arc<PointTable>,
+) -> impl NodeManagerBuilder {
+    move |context: ServerContext| Capped {
+        inner: Box::new(builder).build(context),
+        items,
+        yields: Some(points),
     }
 }
 
@@ -116,6 +132,8 @@ pub fn capped(
 pub struct Capped {
     inner: Arc<DynNodeManager>,
     items: Arc<ItemCount>,
+    /// Nodes it does not own although they are in its namespace.
+    yields: Option<Arc<PointTable>>,
 }
 
 impl Capped {
@@ -128,7 +146,7 @@ impl Capped {
 #[async_trait::async_trait]
 impl NodeManager for Capped {
     fn owns_node(&self, id: &NodeId) -> bool {
-        self.inner.owns_node(id)
+        self.inner.owns_node(id) && !self.yields.as_ref().is_some_and(|points| points.owns(id))
     }
 
     fn name(&self) -> &str {

@@ -8,7 +8,9 @@
 //! with its `opcua` feature (the default). A build without it leaves async-opcua out.
 //!
 //! - [`space`]: the sans-IO mapping (node ids, data types, status codes, units, times).
-//! - [`nodes`]: the node manager that builds the address space, writes and reads history.
+//! - [`nodes`]: the in-memory node manager of the cell's folders, devices, alarms and
+//!   gateway object; the points' writes and history reads.
+//! - [`points`]: the node manager of the points, made when asked from the cell's state.
 //! - [`history`]: HistoryRead raw and processed (Average, Minimum, Maximum), sans-IO.
 //! - [`alarms`]: the alarms, sans-IO: each alarm's state as variables, the methods that
 //!   acknowledge, shelve and unshelve them (why not Alarms & Conditions: there).
@@ -23,8 +25,9 @@
 //! - [`status`]: the server's state in `/healthz` and `/metrics`.
 //! - [`fuzzing`]: the bodies of the fuzz targets over the relay's sniffer and chunk reader.
 //!
-//! One task follows [`Cell::subscribe`] and sets the variables' values; subscriptions and
-//! monitored items are the server's own over those values (no second polling). A point's
+//! One task follows [`Cell::subscribe`] and sets the variables' values (a point's value goes
+//! straight to the items that monitor it); subscriptions and monitored items are the
+//! server's own over those values (no second polling). A point's
 //! monitored item asked to sample at its poll period or faster gets
 //! [`nodes::EVERY_CHANGE_MS`]: every change, with the time it was read. `/healthz` and
 //! `/metrics` read the server's connections, sessions, subscriptions and monitored items
@@ -48,6 +51,7 @@ pub mod history;
 pub mod items;
 pub mod nodes;
 pub mod peers;
+pub mod points;
 pub mod space;
 pub mod status;
 
@@ -71,9 +75,10 @@ use tokio::task::JoinHandle;
 
 use self::auth::{User, Users};
 use self::config::{OpcuaConfig, OpcuaMode, OpcuaPolicy, OpcuaSecurity};
-use self::items::{Capped, ItemCount, capped};
+use self::items::{Capped, ItemCount, capped, capped_yielding};
 use self::nodes::CellManager;
 use self::peers::{Guard, Peers, Refusal, SessionState, SessionStates};
+use self::points::PointTable;
 use self::space::ids;
 use gateway::cell::{Cell, LiveMessage, Roster};
 use gateway::config::{CellConfig, TableReader};
@@ -179,9 +184,20 @@ pub async fn start(
     let users = Users::new(options.users, options.anonymous, options.allow_writes);
     let peers = Arc::new(Peers::default());
     let items = Arc::new(ItemCount::new(config.max_monitored_items));
+    let points = PointTable::new(Arc::clone(&cell));
     let (server, handle) = builder(&config, &pki, &url, users.clone(), &items)
+        .with_node_manager(capped_yielding(
+            nodes::builder(
+                Arc::clone(&cell),
+                users.clone(),
+                Arc::clone(&peers),
+                Arc::clone(&points),
+            ),
+            Arc::clone(&items),
+            Arc::clone(&points),
+        ))
         .with_node_manager(capped(
-            nodes::builder(Arc::clone(&cell), users, Arc::clone(&peers)),
+            points::builder(Arc::clone(&points), users, Arc::clone(&peers)),
             Arc::clone(&items),
         ))
         .build()
@@ -197,7 +213,10 @@ pub async fn start(
     let follow = tokio::spawn(follow(
         Arc::clone(&cell),
         handle.clone(),
-        manager,
+        Managers {
+            cell: manager,
+            points,
+        },
         ns,
         live,
         stop.clone(),
@@ -525,17 +544,27 @@ fn ensure_keypair(pki: &Path, config: &OpcuaConfig) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The cell's two node managers: the in-memory one and the points'.
+struct Managers {
+    cell: Arc<CellManager>,
+    points: Arc<PointTable>,
+}
+
 /// Follows the change stream and sets the variables; after a lag, sets every value again
 /// from the cell.
 async fn follow(
     cell: Arc<Cell>,
     handle: ServerHandle,
-    manager: Arc<CellManager>,
+    managers: Managers,
     ns: u16,
     mut live: broadcast::Receiver<LiveMessage>,
     mut stop: watch::Receiver<bool>,
 ) {
     let subscriptions = Arc::clone(handle.subscriptions());
+    let Managers {
+        cell: manager,
+        points,
+    } = managers;
     // Event ids: this task's start and the event's number.
     let started = Timestamp::now();
     let mut numbered: u64 = 0;
@@ -543,16 +572,11 @@ async fn follow(
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     // Changes between the address space's build and this subscription are caught up here.
     let mut laid_out = cell.roster();
-    resync(&laid_out, &cell, &manager, &subscriptions, ns);
+    resync(&laid_out, &cell, &manager, &points, &subscriptions, ns);
     loop {
         tokio::select! {
             message = live.recv() => match message {
-                Ok(LiveMessage::Value(view)) => {
-                    let Some(spec) = cell.point(&view.id) else { continue };
-                    let value = space::data_value(&spec.kind, &view, Timestamp::now());
-                    let node = ids::point(ns, view.id.as_str());
-                    set_values(&manager, &subscriptions, vec![(node, value)]);
-                }
+                Ok(LiveMessage::Value(view)) => points.notify(&subscriptions, &view),
                 Ok(LiveMessage::Device(summary)) => {
                     let values = device_values(ns, &summary, DateTime::now());
                     set_values(&manager, &subscriptions, values.to_vec());
@@ -562,7 +586,7 @@ async fn follow(
                     if event.kind == EventKind::ConfigReloaded {
                         let changed = gateway::reload::devices_in(&event, "changed");
                         laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
-                        resync(&laid_out, &cell, &manager, &subscriptions, ns);
+                        resync(&laid_out, &cell, &manager, &points, &subscriptions, ns);
                     }
                     if let Some(alarm) = changed_alarm(&event) {
                         let values = cell
@@ -597,7 +621,7 @@ async fn follow(
                             .collect();
                         laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
                     }
-                    resync(&laid_out, &cell, &manager, &subscriptions, ns);
+                    resync(&laid_out, &cell, &manager, &points, &subscriptions, ns);
                 }
                 Err(broadcast::error::RecvError::Closed) => return,
             },
@@ -659,27 +683,22 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
 }
 
 /// Sets every variable from the cell's current state, its devices those of `roster` (the
-/// one laid out).
+/// one laid out), and tells the points' monitored items their values.
 fn resync(
     roster: &Roster,
     cell: &Cell,
     manager: &CellManager,
+    points: &PointTable,
     subscriptions: &::opcua::server::SubscriptionCache,
     ns: u16,
 ) {
-    let now = Timestamp::now();
-    let t = space::opc_time(now);
+    let t = space::opc_time(Timestamp::now());
     let mut values = alarm_values(cell, ns, t);
-    for device in roster.devices().map(|d| d.view(now)) {
-        values.extend(device_values(ns, &device.summary, t));
-        for point in &device.points {
-            values.push((
-                ids::point(ns, point.view.id.as_str()),
-                space::data_value(&point.kind, &point.view, now),
-            ));
-        }
+    for device in roster.devices() {
+        values.extend(device_values(ns, &device.summary(), t));
     }
     set_values(manager, subscriptions, values);
+    points.notify_all(subscriptions);
 }
 
 /// Every alarm's variables' values at `t`.

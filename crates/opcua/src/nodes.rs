@@ -1,12 +1,14 @@
-//! The cell's node manager: builds `Objects/Cell/{line}/{device}/{point}` and the gateway
-//! object (device objects and the gateway object notify events), takes writes through the audited write path and answers HistoryRead from the
-//! history.
+//! The cell's in-memory node manager: builds `Objects/Cell/{line}/{device}` (each device's
+//! `Status`, `Error`, `Production` and `Alarms`) and the gateway object (device objects and
+//! the gateway object notify events), and calls the alarm methods. The points under the
+//! devices are [`crate::points`]'s; the writes and history reads of points, which that
+//! manager answers, are here too ([`write_one`], [`fetch_raw`], [`read_history`]).
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
 use ::opcua::nodes::TypeTree;
+use ::opcua::server::CreateMonitoredItem;
 use ::opcua::server::address_space::{
     AccessLevel, AddressSpace, EventNotifier, MethodBuilder, NodeType, ObjectBuilder,
     ObjectTypeBuilder, VariableBuilder,
@@ -16,25 +18,23 @@ use ::opcua::server::node_manager::memory::{
     InMemoryNodeManager, InMemoryNodeManagerBuilder, InMemoryNodeManagerImpl,
 };
 use ::opcua::server::node_manager::{
-    HistoryNode, MethodCall, NodeManagerBuilder, ParsedReadValueId, RequestContext, ServerContext,
-    WriteNode,
+    MethodCall, NodeManagerBuilder, ParsedReadValueId, RequestContext, ServerContext, WriteNode,
 };
-use ::opcua::server::{ContinuationPoint, CreateMonitoredItem};
 use ::opcua::sync::RwLock;
 use ::opcua::types::{
-    AttributeId, BrowseDirection, DataTypeId, DataValue, ExtensionObject, HistoryData,
-    LocalizedText, NodeId, NumericRange, ObjectId, ObjectTypeId, QualifiedName,
-    ReadProcessedDetails, ReadRawModifiedDetails, ReferenceTypeId, StatusCode, TimestampsToReturn,
+    AttributeId, BrowseDirection, DataTypeId, DataValue, LocalizedText, NodeId, NumericRange,
+    ObjectId, ObjectTypeId, QualifiedName, ReferenceTypeId, StatusCode, TimestampsToReturn,
     VariableTypeId, Variant,
 };
 
 use super::alarms::{self, BadArguments, Method};
 use super::auth::Users;
-use super::history::{self, Aggregate, Fetched, RawRead};
+use super::history::{self, Fetched, RawRead};
 use super::peers::Peers;
+use super::points::PointTable;
 use super::space::{self, ids};
 use gateway::alarm::book::View as AlarmView;
-use gateway::cell::{Cell, DeviceView, Roster};
+use gateway::cell::{Cell, DeviceEntry, DeviceView, Roster};
 use gateway::driver::{ErrorKind, WriteError};
 use gateway::point::{DeviceId, PointId, PointKind, ValueError};
 use gateway::time::Timestamp;
@@ -49,17 +49,6 @@ pub struct CellNodes {
     users: Users,
     peers: Arc<Peers>,
     ns: u16,
-    /// Point variables by node id: those of the roster in force, kept in step with the
-    /// address space by [`CellNodes::follow_roster`].
-    points: RwLock<HashMap<NodeId, PointNode>>,
-}
-
-/// A point's variable.
-#[derive(Debug, Clone)]
-struct PointNode {
-    id: PointId,
-    /// Its poll period, in milliseconds.
-    period_ms: f64,
 }
 
 /// The sampling interval a monitored item of a point gets when the client asks for its
@@ -69,8 +58,14 @@ struct PointNode {
 /// and restamp it a period after that one.)
 pub const EVERY_CHANGE_MS: f64 = 1.0;
 
-/// The builder the server takes: registers the namespace and builds the nodes.
-pub fn builder(cell: Arc<Cell>, users: Users, peers: Arc<Peers>) -> impl NodeManagerBuilder {
+/// The builder the server takes: registers the namespace (and tells `points` its index)
+/// and builds the nodes.
+pub fn builder(
+    cell: Arc<Cell>,
+    users: Users,
+    peers: Arc<Peers>,
+    points: Arc<PointTable>,
+) -> impl NodeManagerBuilder {
     InMemoryNodeManagerBuilder::new(move |context: ServerContext, space: &mut AddressSpace| {
         let ns = context
             .type_tree
@@ -78,14 +73,14 @@ pub fn builder(cell: Arc<Cell>, users: Users, peers: Arc<Peers>) -> impl NodeMan
             .namespaces_mut()
             .add_namespace(space::NAMESPACE_URI);
         space.add_namespace(space::NAMESPACE_URI, ns);
+        points.set_namespace(ns);
         let types = context.type_tree.read();
-        let points = build(space, &*types, ns, &cell, Timestamp::now());
+        build(space, &*types, ns, &cell, Timestamp::now());
         CellNodes {
             cell,
             users,
             peers,
             ns,
-            points: RwLock::new(points),
         }
     })
 }
@@ -116,7 +111,6 @@ impl CellNodes {
         roster: &Roster,
         changed: &[DeviceId],
     ) {
-        let mut points = self.points.write();
         lay_out(
             space,
             types,
@@ -125,38 +119,20 @@ impl CellNodes {
             roster,
             changed,
             Timestamp::now(),
-            &mut points,
         );
     }
 }
 
-/// Builds the cell's nodes; returns the point variables by node id.
-fn build(
-    space: &mut AddressSpace,
-    types: &dyn TypeTree,
-    ns: u16,
-    cell: &Cell,
-    now: Timestamp,
-) -> HashMap<NodeId, PointNode> {
-    let mut points = HashMap::new();
+/// Builds the cell's nodes.
+fn build(space: &mut AddressSpace, types: &dyn TypeTree, ns: u16, cell: &Cell, now: Timestamp) {
     ObjectBuilder::new(&ids::cell(ns), QualifiedName::new(ns, "Cell"), "Cell")
         .description("The production cell: a folder per line, an object per device")
         .is_folder()
         .organized_by(ObjectId::ObjectsFolder)
         .insert(space);
-    lay_out(
-        space,
-        types,
-        ns,
-        cell,
-        &cell.roster(),
-        &[],
-        now,
-        &mut points,
-    );
+    lay_out(space, types, ns, cell, &cell.roster(), &[], now);
     build_gateway(space, ns, cell);
     build_event_type(space, ns);
-    points
 }
 
 /// Lays `Objects/Cell` out as `roster` has it, the one path of the start (an empty
@@ -166,11 +142,10 @@ fn build(
 /// line folder of a line it does not have; then adds a folder for each new line and
 /// builds each device that has no object (with its alarms), and makes each remaining
 /// device's `Alarms` folder hold its alarms of the book again if the reload changed them.
-/// Point variables removed leave `points`, those built enter it.
+/// (The points are not in the address space: [`crate::points`] follows the roster.)
 ///
 /// The devices added and removed are read from the address space against `roster`, not
 /// from the reload's event: the same answer, and one that holds after a lag too.
-#[allow(clippy::too_many_arguments)] // the address space, the cell and what changed, each needed
 fn lay_out(
     space: &mut AddressSpace,
     types: &dyn TypeTree,
@@ -179,7 +154,6 @@ fn lay_out(
     roster: &Roster,
     changed: &[DeviceId],
     now: Timestamp,
-    points: &mut HashMap<NodeId, PointNode>,
 ) {
     let cell_id = ids::cell(ns);
     let lines: Vec<NodeId> = children(space, types, ns, &cell_id, ReferenceTypeId::Organizes);
@@ -192,7 +166,7 @@ fn lay_out(
                     && !changed.contains(&d.id)
             });
             if !stays {
-                forget(points, remove_tree(space, types, ns, &device));
+                remove_tree(space, types, ns, &device);
             }
         }
     }
@@ -202,7 +176,7 @@ fn lay_out(
             .iter()
             .any(|l| ids::line(ns, &l.name) == *line)
         {
-            forget(points, remove_tree(space, types, ns, line));
+            remove_tree(space, types, ns, line);
         }
     }
     let alarms: Vec<AlarmView> = cell
@@ -233,7 +207,14 @@ fn lay_out(
             if space.node_exists(&ids::device(ns, id)) {
                 keep_alarms(space, types, ns, id, &views, now);
             } else {
-                build_device(space, ns, &line_id, &device.view(now), now, points);
+                build_device(
+                    space,
+                    ns,
+                    &line_id,
+                    &device.view_without_points(now),
+                    device,
+                    now,
+                );
                 build_alarms(space, ns, id, &views, now);
             }
         }
@@ -308,13 +289,6 @@ fn remove_tree(
     deleted
 }
 
-/// Takes the nodes `deleted` out of the point variables' table.
-fn forget(points: &mut HashMap<NodeId, PointNode>, deleted: Vec<NodeId>) {
-    for node in deleted {
-        points.remove(&node);
-    }
-}
-
 /// `CellbusEventType`, the type of the gateway's events ([`space::CellEvent`]): a
 /// BaseEventType with `Kind` and `Fields`, so a client finds both by browsing the type and
 /// selects them in its event filter.
@@ -363,8 +337,8 @@ fn build_device(
     ns: u16,
     line_id: &NodeId,
     device: &DeviceView,
+    entry: &DeviceEntry,
     now: Timestamp,
-    points: &mut HashMap<NodeId, PointNode>,
 ) {
     let id = device.summary.id.as_str();
     let device_id = ids::device(ns, id);
@@ -400,114 +374,25 @@ fn build_device(
         "Why the device is down, or its last refusal (empty when none)",
         space::device_error(&device.summary),
     );
-    // The machine state and the OEE go in a `Production` folder, made with its first point.
-    let production = ids::production(ns, id);
-    let mut production_made = false;
-    for point in &device.points {
-        let point_id = point.view.id.as_str();
-        let node = ids::point(ns, point_id);
-        let parent = if gateway::production::is_production_point(point.view.id.name()) {
-            if !production_made {
-                ObjectBuilder::new(
-                    &production,
-                    QualifiedName::new(ns, "Production"),
-                    "Production",
-                )
-                .description(
-                    "The device's machine state on the SEMI E10 scale (its word, its \
-                         IPC-CFX code, its reason) and, for a device that counts production, \
-                         the OEE of the shift under way",
-                )
-                .is_folder()
-                .component_of(device_id.clone())
-                .insert(space);
-                production_made = true;
-            }
-            production.clone()
-        } else {
-            device_id.clone()
-        };
-        let mut access = AccessLevel::CURRENT_READ | AccessLevel::HISTORY_READ;
-        if point.writable.is_some() {
-            access |= AccessLevel::CURRENT_WRITE;
-        }
-        let type_definition = match (&point.kind, &point.view.unit, &point.writable) {
-            (PointKind::Numeric, _, Some(_)) => VariableTypeId::AnalogItemType,
-            (PointKind::Numeric, Some(_), None) => VariableTypeId::AnalogUnitType,
-            _ => VariableTypeId::BaseDataVariableType,
-        };
-        let name = point.view.id.name();
-        VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
-            .description(point.view.name.as_ref())
-            .data_type(space::data_type(&point.kind))
-            .value_rank(-1)
-            .access_level(access)
-            .user_access_level(access)
-            .historizing(true)
-            .minimum_sampling_interval(point.view.period_ms as f64)
-            .has_type_definition(type_definition)
-            .component_of(parent)
-            .insert(space);
-        set(
-            space,
-            &node,
-            space::data_value(&point.kind, &point.view, now),
-        );
-        points.insert(
-            node.clone(),
-            PointNode {
-                id: point.view.id.clone(),
-                period_ms: point.view.period_ms as f64,
-            },
-        );
-        if let Some(unit) = &point.view.unit {
-            property(
-                space,
-                ns,
-                &node,
-                point_id,
-                "EngineeringUnits",
-                DataTypeId::EUInformation,
-                ExtensionObject::from_message(space::eu_information(unit)),
-            );
-        }
-        if let PointKind::Enum { states } = &point.kind {
-            let values: Vec<ExtensionObject> = space::enum_values(states)
-                .into_iter()
-                .map(ExtensionObject::from_message)
-                .collect();
-            array_property(
-                space,
-                ns,
-                &node,
-                point_id,
-                "EnumValues",
-                DataTypeId::EnumValueType,
-                Variant::from(values),
-            );
-            if let Some(strings) = space::enum_strings(states) {
-                array_property(
-                    space,
-                    ns,
-                    &node,
-                    point_id,
-                    "EnumStrings",
-                    DataTypeId::LocalizedText,
-                    Variant::from(strings),
-                );
-            }
-        }
-        if let (PointKind::Numeric, Some(range)) = (&point.kind, &point.writable) {
-            property(
-                space,
-                ns,
-                &node,
-                point_id,
-                "EURange",
-                DataTypeId::Range,
-                ExtensionObject::from_message(space::eu_range(range)),
-            );
-        }
+    // The machine state and the OEE go in a `Production` folder, when the device has them;
+    // their variables, like the others, are `crate::points`'.
+    if entry
+        .points
+        .iter()
+        .any(|p| gateway::production::is_production_point(p.id.name()))
+    {
+        ObjectBuilder::new(
+            &ids::production(ns, id),
+            QualifiedName::new(ns, "Production"),
+            "Production",
+        )
+        .description(
+            "The device's machine state on the SEMI E10 scale (its word, its IPC-CFX code, its \
+             reason) and, for a device that counts production, the OEE of the shift under way",
+        )
+        .is_folder()
+        .component_of(device_id.clone())
+        .insert(space);
     }
 }
 
@@ -654,63 +539,6 @@ pub fn line_names(roster: &Roster) -> Variant {
     Variant::from(names)
 }
 
-fn property(
-    space: &mut AddressSpace,
-    ns: u16,
-    parent: &NodeId,
-    point: &str,
-    name: &str,
-    data_type: DataTypeId,
-    value: ExtensionObject,
-) {
-    property_of_rank(
-        space,
-        ns,
-        parent,
-        point,
-        name,
-        data_type,
-        -1,
-        Variant::from(value),
-    );
-}
-
-/// A one-dimensional array property (`EnumValues`, `EnumStrings`).
-fn array_property(
-    space: &mut AddressSpace,
-    ns: u16,
-    parent: &NodeId,
-    point: &str,
-    name: &str,
-    data_type: DataTypeId,
-    value: Variant,
-) {
-    property_of_rank(space, ns, parent, point, name, data_type, 1, value);
-}
-
-#[allow(clippy::too_many_arguments)] // the parts of a property node, each needed
-fn property_of_rank(
-    space: &mut AddressSpace,
-    ns: u16,
-    parent: &NodeId,
-    point: &str,
-    name: &str,
-    data_type: DataTypeId,
-    rank: i32,
-    value: Variant,
-) {
-    let node = ids::property(ns, point, name);
-    VariableBuilder::new(&node, QualifiedName::new(0, name), name)
-        .data_type(data_type)
-        .value_rank(rank)
-        .access_level(AccessLevel::CURRENT_READ)
-        .user_access_level(AccessLevel::CURRENT_READ)
-        .has_type_definition(VariableTypeId::PropertyType)
-        .property_of(parent.clone())
-        .insert(space);
-    set(space, &node, DataValue::new_now(value));
-}
-
 fn set(space: &mut AddressSpace, node: &NodeId, value: DataValue) {
     if let Some(NodeType::Variable(variable)) = space.find_mut(node) {
         variable.set_data_value(value);
@@ -739,15 +567,15 @@ impl InMemoryNodeManagerImpl for CellNodes {
         space: &RwLock<AddressSpace>,
         nodes_to_write: &mut [&mut WriteNode],
     ) -> Result<(), StatusCode> {
-        let client = Caller::of(context, &self.peers).client();
+        // The points, which are written, are `crate::points`'.
+        let _ = context;
         for node in nodes_to_write {
             let exists = space.read().node_exists(&node.value().node_id);
-            let status = if exists {
-                self.write_one(context, &client, node.value()).await
+            node.set_status(if exists {
+                StatusCode::BadNotWritable
             } else {
                 StatusCode::BadNodeIdUnknown
-            };
-            node.set_status(status);
+            });
         }
         Ok(())
     }
@@ -761,58 +589,6 @@ impl InMemoryNodeManagerImpl for CellNodes {
         let by = Caller::of(context, &self.peers).actor();
         for call in methods_to_call.iter_mut() {
             self.call_one(context, &by, call).await;
-        }
-        Ok(())
-    }
-
-    async fn history_read_raw_modified(
-        &self,
-        _context: &RequestContext,
-        details: &ReadRawModifiedDetails,
-        nodes: &mut [&mut &mut HistoryNode],
-        timestamps: TimestampsToReturn,
-    ) -> Result<(), StatusCode> {
-        if details.is_read_modified {
-            return Err(StatusCode::BadHistoryOperationUnsupported);
-        }
-        if timestamps == TimestampsToReturn::Neither {
-            return Err(StatusCode::BadTimestampsToReturnInvalid);
-        }
-        let asked = RawRead::new(
-            history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now()),
-            details.num_values_per_node,
-            details.return_bounds,
-        );
-        for node in nodes.iter_mut() {
-            let Some((point, kind)) = self.point_of(node.node_id()) else {
-                node.set_status(StatusCode::BadNodeIdUnknown);
-                continue;
-            };
-            // A continuation point carries the read as the first call asked it, and the
-            // point it was for: another node's is refused.
-            let read = match node.continuation_point() {
-                None => asked.clone(),
-                Some(continued) => match continued.get::<(PointId, RawRead)>() {
-                    Some((of, read)) if *of == point => read.clone(),
-                    _ => {
-                        node.set_status(StatusCode::BadContinuationPointInvalid);
-                        continue;
-                    }
-                },
-            };
-            match self.fetch_raw(point.clone(), &read).await {
-                Ok(fetched) => {
-                    let (values, more) = read.page(&kind, fetched);
-                    node.set_result(HistoryData {
-                        data_values: Some(history::with_timestamps(values, timestamps)),
-                    });
-                    node.set_next_continuation_point(
-                        more.map(|read| ContinuationPoint::new(Box::new((point.clone(), read)))),
-                    );
-                    node.set_status(StatusCode::Good);
-                }
-                Err(status) => node.set_status(status),
-            }
         }
         Ok(())
     }
@@ -838,75 +614,7 @@ impl InMemoryNodeManagerImpl for CellNodes {
                 item.set_initial_value(value);
             }
             item.set_status(StatusCode::Good);
-            let asked = item.sampling_interval();
-            if let Some(point) = self.points.read().get(&item.item_to_monitor().node_id)
-                && asked >= 0.0
-                && asked <= point.period_ms
-            {
-                item.revise_sampling_interval(EVERY_CHANGE_MS);
-            }
         }
-    }
-
-    async fn history_read_processed(
-        &self,
-        _context: &RequestContext,
-        details: &ReadProcessedDetails,
-        nodes: &mut [&mut &mut HistoryNode],
-        timestamps: TimestampsToReturn,
-    ) -> Result<(), StatusCode> {
-        if timestamps == TimestampsToReturn::Neither {
-            return Err(StatusCode::BadTimestampsToReturnInvalid);
-        }
-        let range =
-            history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now());
-        let milliseconds = details.processing_interval;
-        let interval = (milliseconds.is_finite() && milliseconds >= 0.0)
-            .then(|| Duration::try_from_secs_f64(milliseconds / 1000.0).ok())
-            .flatten();
-        let aggregates = details.aggregate_type.clone().unwrap_or_default();
-        let chosen = match aggregates_of(&aggregates, nodes.len()) {
-            Ok(chosen) => chosen,
-            Err(status) => {
-                for node in nodes.iter_mut() {
-                    node.set_status(status);
-                }
-                return Ok(());
-            }
-        };
-        for (node, aggregate) in nodes.iter_mut().zip(chosen) {
-            let Some(aggregate) = aggregate.and_then(Aggregate::of) else {
-                node.set_status(StatusCode::BadAggregateNotSupported);
-                continue;
-            };
-            let Some(interval) = interval else {
-                node.set_status(StatusCode::BadAggregateInvalidInputs);
-                continue;
-            };
-            let Some((point, kind)) = self.point_of(node.node_id()) else {
-                node.set_status(StatusCode::BadNodeIdUnknown);
-                continue;
-            };
-            if !matches!(kind, PointKind::Numeric) {
-                node.set_status(StatusCode::BadAggregateInvalidInputs);
-                continue;
-            }
-            let Some(step) = history::check_interval(range, interval) else {
-                node.set_status(StatusCode::BadAggregateInvalidInputs);
-                continue;
-            };
-            match self.read_history(point, range, None).await {
-                Ok(stored) => {
-                    let values = history::processed(&stored, range, step, aggregate);
-                    node.set_result(HistoryData {
-                        data_values: Some(history::with_timestamps(values, timestamps)),
-                    });
-                    node.set_status(StatusCode::Good);
-                }
-                Err(status) => node.set_status(status),
-            }
-        }
-        Ok(())
     }
 }
 
@@ -916,7 +624,10 @@ impl InMemoryNodeManagerImpl for CellNodes {
 /// node only when every node came (as many as aggregates). Otherwise the aggregates are
 /// known only when they are all the same; when they differ, the nodes are refused
 /// (`Bad_AggregateInvalidInputs`) rather than given another node's aggregate.
-fn aggregates_of(aggregates: &[NodeId], count: usize) -> Result<Vec<Option<&NodeId>>, StatusCode> {
+pub(crate) fn aggregates_of(
+    aggregates: &[NodeId],
+    count: usize,
+) -> Result<Vec<Option<&NodeId>>, StatusCode> {
     if aggregates.len() < count {
         return Err(StatusCode::BadAggregateListMismatch);
     }
@@ -929,70 +640,67 @@ fn aggregates_of(aggregates: &[NodeId], count: usize) -> Result<Vec<Option<&Node
     }
 }
 
-impl CellNodes {
-    fn point_of(&self, node: &NodeId) -> Option<(PointId, PointKind)> {
-        let point = self.points.read().get(node)?.id.clone();
-        let spec = self.cell.point(&point)?;
-        Some((point, spec.kind.clone()))
-    }
+/// What one call of a raw read of `point`'s history needs from the history.
+pub(crate) async fn fetch_raw(
+    cell: &Arc<Cell>,
+    point: PointId,
+    read: &RawRead,
+) -> Result<Fetched, StatusCode> {
+    let cell = Arc::clone(cell);
+    let read = read.clone();
+    tokio::task::spawn_blocking(move || {
+        let store = cell.store();
+        let range = read.range;
+        let start_bound = if read.wants_start_bound() {
+            Some(store.history_nearest(&point, range.start(), range.reverse)?)
+        } else {
+            None
+        };
+        let rows = store.history_page(
+            &point,
+            range.from,
+            range.to,
+            range.order(),
+            read.after,
+            read.rows_wanted(),
+        )?;
+        let end_bound = if read.bounds {
+            Some(store.history_nearest(&point, range.end(), !range.reverse)?)
+        } else {
+            None
+        };
+        Ok(Fetched {
+            start_bound,
+            rows,
+            end_bound,
+        })
+    })
+    .await
+    .map_err(|_| StatusCode::BadInternalError)?
+    .map_err(|e: gateway::store::StoreError| {
+        tracing::warn!("OPC UA history read failed: {e}");
+        StatusCode::BadHistoryOperationUnsupported
+    })
+}
 
-    /// What one call of a raw read needs from the history.
-    async fn fetch_raw(&self, point: PointId, read: &RawRead) -> Result<Fetched, StatusCode> {
-        let cell = Arc::clone(&self.cell);
-        let read = read.clone();
-        tokio::task::spawn_blocking(move || {
-            let store = cell.store();
-            let range = read.range;
-            let start_bound = if read.wants_start_bound() {
-                Some(store.history_nearest(&point, range.start(), range.reverse)?)
-            } else {
-                None
-            };
-            let rows = store.history_page(
-                &point,
-                range.from,
-                range.to,
-                range.order(),
-                read.after,
-                read.rows_wanted(),
-            )?;
-            let end_bound = if read.bounds {
-                Some(store.history_nearest(&point, range.end(), !range.reverse)?)
-            } else {
-                None
-            };
-            Ok(Fetched {
-                start_bound,
-                rows,
-                end_bound,
-            })
-        })
-        .await
-        .map_err(|_| StatusCode::BadInternalError)?
-        .map_err(|e: gateway::store::StoreError| {
-            tracing::warn!("OPC UA history read failed: {e}");
-            StatusCode::BadHistoryOperationUnsupported
-        })
-    }
-
-    async fn read_history(
-        &self,
-        point: PointId,
-        range: history::TimeRange,
-        step: Option<Duration>,
-    ) -> Result<gateway::store::History, StatusCode> {
-        let cell = Arc::clone(&self.cell);
-        tokio::task::spawn_blocking(move || {
-            cell.store().history(&point, range.from, range.to, step)
-        })
+/// `point`'s stored history in `range` (every `step` when given).
+pub(crate) async fn read_history(
+    cell: &Arc<Cell>,
+    point: PointId,
+    range: history::TimeRange,
+    step: Option<Duration>,
+) -> Result<gateway::store::History, StatusCode> {
+    let cell = Arc::clone(cell);
+    tokio::task::spawn_blocking(move || cell.store().history(&point, range.from, range.to, step))
         .await
         .map_err(|_| StatusCode::BadInternalError)?
         .map_err(|e| {
             tracing::warn!("OPC UA history read failed: {e}");
             StatusCode::BadHistoryOperationUnsupported
         })
-    }
+}
 
+impl CellNodes {
     /// One call of a method of `Objects/Gateway/Alarms`: refused unless writes are on and
     /// the user may write (as a write), else the action through the alarm keeper, in a
     /// task of its own (journalled and committed even if the client leaves).
@@ -1057,87 +765,76 @@ impl CellNodes {
             Err(_) => call.set_status(StatusCode::BadInternalError),
         }
     }
+}
 
-    /// One write: refused before anything is stored unless writes are on and the user may
-    /// write; from there through the audited write path.
-    async fn write_one(
-        &self,
-        context: &RequestContext,
-        client: &str,
-        write: &::opcua::server::node_manager::ParsedWriteValue,
-    ) -> StatusCode {
-        if write.attribute_id != AttributeId::Value {
-            return StatusCode::BadNotWritable;
-        }
-        let Some((point, kind)) = self.point_of(&write.node_id) else {
-            return if write.node_id.namespace == self.ns {
-                StatusCode::BadNotWritable
+/// One write of `point` (of `kind`): refused before anything is stored unless writes are
+/// on and the user may write; from there through the audited write path.
+pub(crate) async fn write_one(
+    cell: &Arc<Cell>,
+    users: &Users,
+    context: &RequestContext,
+    client: &str,
+    (point, kind): (PointId, PointKind),
+    write: &::opcua::server::node_manager::ParsedWriteValue,
+) -> StatusCode {
+    if write.attribute_id != AttributeId::Value {
+        return StatusCode::BadNotWritable;
+    }
+    if !users.may_write(&context.token) {
+        tracing::info!(
+            "OPC UA write to {point} refused: {}",
+            if context.token.is_anonymous() {
+                "anonymous sessions do not write".to_owned()
             } else {
-                StatusCode::BadNodeIdUnknown
-            };
-        };
-        if !self.users.may_write(&context.token) {
-            tracing::info!(
-                "OPC UA write to {point} refused: {}",
-                if context.token.is_anonymous() {
-                    "anonymous sessions do not write".to_owned()
-                } else {
-                    format!("user {} may not write (or writes are off)", context.token.0)
-                }
-            );
-            return StatusCode::BadUserAccessDenied;
-        }
-        if write.index_range != NumericRange::None {
-            return StatusCode::BadIndexRangeInvalid;
-        }
-        let given = write.value.value.clone().unwrap_or(Variant::Empty);
-        let refuse = |words: String| {
-            let attempt = Attempt::new(
-                Arc::clone(&self.cell),
-                client,
-                point.device(),
-                point.to_string(),
-                space::variant_json(&given),
-            );
-            async move { attempt.refuse(&words, None).await }
-        };
-        // The gateway writes values only: a status other than Good, or a time, that the
-        // client sets would be dropped on the way (a Bad value must never reach a device as
-        // a good one). OPC UA Part 4, 5.10.4: Bad_WriteNotSupported.
-        let value = &write.value;
-        if value.status.is_some_and(|s| !s.is_good())
-            || value.source_timestamp.is_some()
-            || value.server_timestamp.is_some()
-        {
-            refuse(format!(
-                "{point}: a write carries a value only, not a status (other than Good) or timestamps"
-            ))
-            .await;
-            return StatusCode::BadWriteNotSupported;
-        }
-        let Some((value, json)) = space::written_value(&kind, &given) else {
-            refuse(format!(
-                "{point} takes {:?}, not {}",
-                space::data_type(&kind),
-                space::variant_kind(&given)
-            ))
-            .await;
-            return StatusCode::BadTypeMismatch;
-        };
+                format!("user {} may not write (or writes are off)", context.token.0)
+            }
+        );
+        return StatusCode::BadUserAccessDenied;
+    }
+    if write.index_range != NumericRange::None {
+        return StatusCode::BadIndexRangeInvalid;
+    }
+    let given = write.value.value.clone().unwrap_or(Variant::Empty);
+    let refuse = |words: String| {
         let attempt = Attempt::new(
-            Arc::clone(&self.cell),
+            Arc::clone(cell),
             client,
             point.device(),
-            point.name(),
-            json,
+            point.to_string(),
+            space::variant_json(&given),
         );
-        // A task of its own: the write and its audit rows finish even if the client leaves.
-        let done = tokio::spawn(attempt.carry_out(point, value));
-        match done.await {
-            Ok(Ok(_)) => StatusCode::Good,
-            Ok(Err(error)) => write_status(&error),
-            Err(_) => StatusCode::BadInternalError,
-        }
+        async move { attempt.refuse(&words, None).await }
+    };
+    // The gateway writes values only: a status other than Good, or a time, that the
+    // client sets would be dropped on the way (a Bad value must never reach a device as
+    // a good one). OPC UA Part 4, 5.10.4: Bad_WriteNotSupported.
+    let value = &write.value;
+    if value.status.is_some_and(|s| !s.is_good())
+        || value.source_timestamp.is_some()
+        || value.server_timestamp.is_some()
+    {
+        refuse(format!(
+            "{point}: a write carries a value only, not a status (other than Good) or timestamps"
+        ))
+        .await;
+        return StatusCode::BadWriteNotSupported;
+    }
+    let Some((value, json)) = space::written_value(&kind, &given) else {
+        refuse(format!(
+            "{point} takes {:?}, not {}",
+            space::data_type(&kind),
+            space::variant_kind(&given)
+        ))
+        .await;
+        return StatusCode::BadTypeMismatch;
+    };
+    let attempt = Attempt::new(Arc::clone(cell), client, point.device(), point.name(), json);
+    // A task of its own: the write and its audit rows finish even if the client leaves.
+    let done = tokio::spawn(attempt.carry_out(point, value));
+    match done.await {
+        Ok(Ok(_)) => StatusCode::Good,
+        Ok(Err(error)) => write_status(&error),
+        Err(_) => StatusCode::BadInternalError,
     }
 }
 
@@ -1158,7 +855,7 @@ pub fn write_status(error: &WriteError) -> StatusCode {
 
 /// Who a request comes from: the user (or `anonymous`), the client's address when the
 /// relay knows it, the session and the client's application URI.
-struct Caller {
+pub(crate) struct Caller {
     user: String,
     from: Option<std::net::SocketAddr>,
     session: String,
@@ -1166,7 +863,7 @@ struct Caller {
 }
 
 impl Caller {
-    fn of(context: &RequestContext, peers: &Peers) -> Self {
+    pub(crate) fn of(context: &RequestContext, peers: &Peers) -> Self {
         let session = context.session.read();
         Self {
             user: if context.token.is_anonymous() {
@@ -1195,7 +892,7 @@ impl Caller {
     }
 
     /// For the audit log: `opcua user op (session 3, urn:client:app, from 192.0.2.7:50112)`.
-    fn client(&self) -> String {
+    pub(crate) fn client(&self) -> String {
         let from = self.from.map(|a| format!(", from {a}")).unwrap_or_default();
         format!(
             "opcua {} (session {}, {}{from})",

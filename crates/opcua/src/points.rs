@@ -1,0 +1,860 @@
+//! The cell's points as OPC UA variables, made when a client asks for one instead of kept
+//! in the address space: a node manager of its own ([`PointNodes`]) that answers Browse,
+//! TranslateBrowsePathsToNodeIds, Read, Write, HistoryRead and CreateMonitoredItems for
+//! every point variable and its properties (`EngineeringUnits`, `EURange`, `EnumValues`,
+//! `EnumStrings`) from the cell's roster and live state.
+//!
+//! Why: async-opcua's in-memory address space keeps each node with its attributes, its
+//! value and both directions of every reference in hash maps of their own, about 1.8 kB a
+//! point (200 MiB for 100,000 points). Here a point costs nothing until it is asked for;
+//! each answer builds the variable the in-memory space would have held (the same
+//! attributes, through async-opcua's own `read_node_value`) and drops it.
+//!
+//! The rest of the namespace (the `Cell` folder, lines, device objects with `Status`,
+//! `Error`, `Production` and `Alarms`, the gateway object, the event type) stays in the
+//! in-memory manager ([`crate::nodes`]), which yields the point nodes to this one
+//! ([`crate::items::capped_yielding`]). The two meet at the device objects and their
+//! `Production` folders: async-opcua asks every node manager to browse every node, so the
+//! in-memory manager gives a device's `Status`, `Error`, … and this one its points; a
+//! browse path is followed by each in turn.
+//!
+//! Values reach monitored items from the change stream ([`PointTable::notify`]): a value
+//! is made only for a point some item monitors.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, OnceLock};
+use std::time::Duration;
+
+use ::opcua::nodes::{DefaultTypeTree, ReferenceDirection, TypeTree};
+use ::opcua::server::address_space::{
+    AccessLevel, NodeType, VariableBuilder, read_node_value, user_access_level,
+    validate_node_read,
+};
+use ::opcua::server::diagnostics::NamespaceMetadata;
+use ::opcua::server::node_manager::{
+    BrowseNode, BrowsePathItem, ExternalReference, ExternalReferenceRequest, HistoryNode,
+    NodeManager, NodeManagerBuilder, NodeMetadata, ReadNode, RequestContext, ServerContext,
+    WriteNode,
+};
+use ::opcua::server::{
+    ContinuationPoint, CreateMonitoredItem, SubscriptionCache, node_manager::AddReferenceResult,
+};
+use ::opcua::types::{
+    AttributeId, BrowseDirection, DataTypeId, DataValue, ExpandedNodeId, ExtensionObject,
+    HistoryData, Identifier, LocalizedText, NodeClass, NodeId, QualifiedName, ReadProcessedDetails,
+    ReadRawModifiedDetails, ReferenceDescription, ReferenceTypeId, StatusCode, TimestampsToReturn,
+    VariableTypeId, Variant,
+};
+
+use super::auth::Users;
+use super::history::{self, Aggregate, RawRead};
+use super::nodes::{self, Caller, EVERY_CHANGE_MS};
+use super::peers::Peers;
+use super::space::{self, ids};
+use gateway::cell::{Cell, DeviceEntry, PointView};
+use gateway::point::{PointId, PointKind};
+use gateway::time::Timestamp;
+
+/// The cell's points as node ids: which node is a point or a point's property, in the
+/// roster in force. Shared by [`PointNodes`] and the in-memory manager's wrapper, which
+/// leaves these nodes to it.
+pub struct PointTable {
+    cell: Arc<Cell>,
+    /// The cell's namespace, once the in-memory manager has registered it.
+    ns: OnceLock<u16>,
+}
+
+impl std::fmt::Debug for PointTable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PointTable").field("ns", &self.ns).finish()
+    }
+}
+
+/// A property of a point variable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Property {
+    /// The unit (`EUInformation`), when the point has one.
+    EngineeringUnits,
+    /// The labels of an enumeration's states (`EnumValueType[]`).
+    EnumValues,
+    /// The labels when the states are numbered 0, 1, 2, … (`LocalizedText[]`).
+    EnumStrings,
+    /// The range a numeric point may be written in (`Range`).
+    EuRange,
+}
+
+impl Property {
+    /// Every property, in the order a point's are listed.
+    pub const ALL: [Property; 4] = [
+        Property::EngineeringUnits,
+        Property::EnumValues,
+        Property::EnumStrings,
+        Property::EuRange,
+    ];
+
+    /// Its browse name (in namespace 0, as Part 8 names them).
+    pub fn name(self) -> &'static str {
+        match self {
+            Property::EngineeringUnits => "EngineeringUnits",
+            Property::EnumValues => "EnumValues",
+            Property::EnumStrings => "EnumStrings",
+            Property::EuRange => "EURange",
+        }
+    }
+
+    fn of_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| p.name() == name)
+    }
+
+    /// Whether a point of `spec` has this property.
+    fn of(self, spec: &gateway::point::PointDescription) -> bool {
+        match (self, &spec.kind) {
+            (Property::EngineeringUnits, _) => spec.unit.is_some(),
+            (Property::EnumValues, PointKind::Enum { .. }) => true,
+            (Property::EnumStrings, PointKind::Enum { states }) => {
+                space::enum_strings(states).is_some()
+            }
+            (Property::EuRange, PointKind::Numeric) => spec.writable.is_some(),
+            _ => false,
+        }
+    }
+
+    /// Its data type and value rank.
+    fn data_type(self) -> (DataTypeId, i32) {
+        match self {
+            Property::EngineeringUnits => (DataTypeId::EUInformation, -1),
+            Property::EnumValues => (DataTypeId::EnumValueType, 1),
+            Property::EnumStrings => (DataTypeId::LocalizedText, 1),
+            Property::EuRange => (DataTypeId::Range, -1),
+        }
+    }
+
+    /// Its value for a point of `spec` (`Empty` when it has none).
+    fn value(self, spec: &gateway::point::PointDescription) -> Variant {
+        match (self, &spec.kind) {
+            (Property::EngineeringUnits, _) => spec.unit.as_ref().map_or(Variant::Empty, |u| {
+                Variant::from(ExtensionObject::from_message(space::eu_information(u)))
+            }),
+            (Property::EnumValues, PointKind::Enum { states }) => Variant::from(
+                space::enum_values(states)
+                    .into_iter()
+                    .map(ExtensionObject::from_message)
+                    .collect::<Vec<_>>(),
+            ),
+            (Property::EnumStrings, PointKind::Enum { states }) => {
+                space::enum_strings(states).map_or(Variant::Empty, Variant::from)
+            }
+            (Property::EuRange, _) => spec.writable.as_ref().map_or(Variant::Empty, |r| {
+                Variant::from(ExtensionObject::from_message(space::eu_range(r)))
+            }),
+            _ => Variant::Empty,
+        }
+    }
+}
+
+/// A node this manager answers for: a point's variable or one of its properties.
+#[derive(Clone)]
+struct Found {
+    device: Arc<DeviceEntry>,
+    index: usize,
+    property: Option<Property>,
+}
+
+/// A node whose children include points: a device object or its `Production` folder.
+struct Parent {
+    device: Arc<DeviceEntry>,
+    production: bool,
+}
+
+impl PointTable {
+    /// The points of `cell`; the namespace is set by [`PointTable::set_namespace`].
+    pub fn new(cell: Arc<Cell>) -> Arc<Self> {
+        Arc::new(Self {
+            cell,
+            ns: OnceLock::new(),
+        })
+    }
+
+    /// Sets the cell's namespace index (once; later calls are ignored).
+    pub fn set_namespace(&self, ns: u16) {
+        let _ = self.ns.set(ns);
+    }
+
+    /// Whether `id` is a point's variable or property in the roster in force.
+    pub fn owns(&self, id: &NodeId) -> bool {
+        self.find(id).is_some()
+    }
+
+    fn text<'a>(&self, id: &'a NodeId) -> Option<&'a str> {
+        let ns = *self.ns.get()?;
+        match &id.identifier {
+            Identifier::String(s) if id.namespace == ns => Some(s.as_ref()),
+            _ => None,
+        }
+    }
+
+    fn find(&self, id: &NodeId) -> Option<Found> {
+        let text = self.text(id)?;
+        let (point, property) = match text.rsplit_once('/') {
+            Some((point, name)) => (point, Some(Property::of_name(name)?)),
+            None => (text, None),
+        };
+        let (device, name) = point.split_once('.')?;
+        let device = Arc::clone(self.cell.roster().device(device)?);
+        let index = device.point_index(name)?;
+        if property.is_some_and(|p| !p.of(&device.points[index])) {
+            return None;
+        }
+        Some(Found {
+            device,
+            index,
+            property,
+        })
+    }
+
+    fn parent(&self, id: &NodeId) -> Option<Parent> {
+        let text = self.text(id)?;
+        let (device, production) = match text.strip_suffix("/Production") {
+            Some(device) => (device, true),
+            None => (text, false),
+        };
+        let device = Arc::clone(self.cell.roster().device(device)?);
+        Some(Parent { device, production })
+    }
+
+    /// Tells the monitored items of the point that `view` is read: its value is made only
+    /// when some item monitors it.
+    pub fn notify(&self, subscriptions: &SubscriptionCache, view: &PointView) {
+        let Some(&ns) = self.ns.get() else { return };
+        let node = ids::point(ns, view.id.as_str());
+        subscriptions.maybe_notify(
+            std::iter::once((&node, AttributeId::Value)),
+            |_, _, _, _| {
+                let spec = self.cell.point(&view.id)?;
+                Some(space::data_value(&spec.kind, view, Timestamp::now()))
+            },
+        );
+    }
+
+    /// Sets every point's monitored items from the cell's state (after a lag or a reload).
+    pub fn notify_all(&self, subscriptions: &SubscriptionCache) {
+        let now = Timestamp::now();
+        for device in self.cell.roster().devices() {
+            let state = device.read();
+            for (index, point) in state.points.iter().enumerate() {
+                let view = device.point_view(index, point, now);
+                let Some(&ns) = self.ns.get() else { return };
+                let node = ids::point(ns, view.id.as_str());
+                let kind = &device.points[index].kind;
+                subscriptions.maybe_notify(
+                    std::iter::once((&node, AttributeId::Value)),
+                    |_, _, _, _| Some(space::data_value(kind, &view, now)),
+                );
+            }
+        }
+    }
+}
+
+impl Found {
+    fn spec(&self) -> &gateway::point::PointSpec {
+        &self.device.points[self.index]
+    }
+
+    fn point_node(&self, ns: u16) -> NodeId {
+        ids::point(ns, self.spec().id.as_str())
+    }
+
+    fn node_id(&self, ns: u16) -> NodeId {
+        match self.property {
+            None => self.point_node(ns),
+            Some(p) => ids::property(ns, self.spec().id.as_str(), p.name()),
+        }
+    }
+
+    /// The node the in-memory space would have held, with its value now.
+    fn node(&self, ns: u16) -> NodeType {
+        let spec = self.spec();
+        let node = self.node_id(ns);
+        let variable = match self.property {
+            None => {
+                let view = {
+                    let state = self.device.read();
+                    // A device's state has a place for each of its points.
+                    let point = &state.points[self.index];
+                    self.device.point_view(self.index, point, Timestamp::now())
+                };
+                let mut access = AccessLevel::CURRENT_READ | AccessLevel::HISTORY_READ;
+                if spec.writable.is_some() {
+                    access |= AccessLevel::CURRENT_WRITE;
+                }
+                let name = spec.id.name();
+                let mut variable = VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
+                    .description(spec.name.as_ref())
+                    .data_type(space::data_type(&spec.kind))
+                    .value_rank(-1)
+                    .access_level(access)
+                    .user_access_level(access)
+                    .historizing(true)
+                    .minimum_sampling_interval(view.period_ms as f64)
+                    .build();
+                variable.set_data_value(space::data_value(&spec.kind, &view, Timestamp::now()));
+                variable
+            }
+            Some(property) => {
+                let (data_type, rank) = property.data_type();
+                let name = property.name();
+                let mut variable = VariableBuilder::new(&node, QualifiedName::new(0, name), name)
+                    .data_type(data_type)
+                    .value_rank(rank)
+                    .access_level(AccessLevel::CURRENT_READ)
+                    .user_access_level(AccessLevel::CURRENT_READ)
+                    .build();
+                variable.set_data_value(DataValue::new_now(property.value(spec)));
+                variable
+            }
+        };
+        NodeType::Variable(Box::new(variable))
+    }
+
+    fn type_definition(&self) -> VariableTypeId {
+        match self.property {
+            Some(_) => VariableTypeId::PropertyType,
+            None => {
+                let spec = self.spec();
+                match (&spec.kind, &spec.unit, &spec.writable) {
+                    (PointKind::Numeric, _, Some(_)) => VariableTypeId::AnalogItemType,
+                    (PointKind::Numeric, Some(_), None) => VariableTypeId::AnalogUnitType,
+                    _ => VariableTypeId::BaseDataVariableType,
+                }
+            }
+        }
+    }
+
+    fn metadata(&self, ns: u16) -> NodeMetadata {
+        let (browse_name, display) = match self.property {
+            None => {
+                let name = self.spec().id.name();
+                (QualifiedName::new(ns, name), name)
+            }
+            Some(p) => (QualifiedName::new(0, p.name()), p.name()),
+        };
+        NodeMetadata {
+            node_id: self.node_id(ns).into(),
+            type_definition: ExpandedNodeId::new(NodeId::from(self.type_definition())),
+            browse_name,
+            display_name: LocalizedText::from(display),
+            node_class: NodeClass::Variable,
+        }
+    }
+
+    /// The point's properties.
+    fn properties(&self) -> impl Iterator<Item = Found> + '_ {
+        Property::ALL
+            .into_iter()
+            .filter(|p| p.of(self.spec()))
+            .map(|p| Found {
+                property: Some(p),
+                ..self.clone()
+            })
+    }
+
+    /// The node the point hangs under: its device object, or the device's `Production`
+    /// folder for the machine state's points.
+    fn parent(&self, ns: u16) -> NodeId {
+        let device = self.device.id.as_str();
+        if gateway::production::is_production_point(self.spec().id.name()) {
+            ids::production(ns, device)
+        } else {
+            ids::device(ns, device)
+        }
+    }
+}
+
+impl Parent {
+    /// The points under this node.
+    fn points(&self) -> impl Iterator<Item = Found> + '_ {
+        (0..self.device.points.len())
+            .filter(|&i| {
+                gateway::production::is_production_point(self.device.points[i].id.name())
+                    == self.production
+            })
+            .map(|index| Found {
+                device: Arc::clone(&self.device),
+                index,
+                property: None,
+            })
+    }
+}
+
+/// A reference from a node of this manager (or to one, from a device object).
+enum Reference {
+    /// To a node of this manager.
+    Own(ReferenceTypeId, bool, Found),
+    /// To a node of another manager (a type definition, a device object).
+    Other(ReferenceTypeId, bool, NodeId),
+}
+
+/// What is left of a browse when the client's page was full.
+struct Rest(VecDeque<ReferenceDescription>);
+
+/// The node manager of the points ([`PointTable`]).
+pub struct PointNodes {
+    table: Arc<PointTable>,
+    users: Users,
+    peers: Arc<Peers>,
+}
+
+/// The builder the server takes, after the in-memory manager of the cell (which sets
+/// the namespace).
+pub fn builder(table: Arc<PointTable>, users: Users, peers: Arc<Peers>) -> impl NodeManagerBuilder {
+    move |_context: ServerContext| PointNodes {
+        table,
+        users,
+        peers,
+    }
+}
+
+impl PointNodes {
+    fn ns(&self) -> u16 {
+        self.table.ns.get().copied().unwrap_or_default()
+    }
+
+    /// The references of `id` (in `direction`), if it is a node this manager knows of or
+    /// a device object or `Production` folder with points.
+    fn references(&self, id: &NodeId, direction: BrowseDirection) -> Vec<Reference> {
+        let ns = self.ns();
+        let forward = matches!(direction, BrowseDirection::Forward | BrowseDirection::Both);
+        let inverse = matches!(direction, BrowseDirection::Inverse | BrowseDirection::Both);
+        let mut refs = Vec::new();
+        if let Some(found) = self.table.find(id) {
+            if forward {
+                refs.push(Reference::Other(
+                    ReferenceTypeId::HasTypeDefinition,
+                    true,
+                    found.type_definition().into(),
+                ));
+                if found.property.is_none() {
+                    refs.extend(
+                        found
+                            .properties()
+                            .map(|p| Reference::Own(ReferenceTypeId::HasProperty, true, p)),
+                    );
+                }
+            }
+            if inverse {
+                refs.push(match found.property {
+                    None => {
+                        Reference::Other(ReferenceTypeId::HasComponent, false, found.parent(ns))
+                    }
+                    Some(_) => Reference::Own(
+                        ReferenceTypeId::HasProperty,
+                        false,
+                        Found {
+                            property: None,
+                            ..found
+                        },
+                    ),
+                });
+            }
+        } else if forward && let Some(parent) = self.table.parent(id) {
+            refs.extend(
+                parent
+                    .points()
+                    .map(|p| Reference::Own(ReferenceTypeId::HasComponent, true, p)),
+            );
+        }
+        refs
+    }
+
+    fn browse_one(&self, types: &DefaultTypeTree, node: &mut BrowseNode) {
+        let ns = self.ns();
+        let mut rest = match node.take_continuation_point::<Rest>() {
+            Some(rest) => rest.0,
+            None => {
+                let mut rest = VecDeque::new();
+                for reference in self.references(node.node_id(), node.browse_direction()) {
+                    match reference {
+                        Reference::Own(kind, forward, found) => {
+                            let description = found.metadata(ns).into_ref_desc(forward, kind);
+                            if node.matches_filter(types, &description) {
+                                rest.push_back(description);
+                            }
+                        }
+                        Reference::Other(kind, forward, target) => {
+                            node.push_external_reference(ExternalReference::new(
+                                target.into(),
+                                kind.into(),
+                                if forward {
+                                    ReferenceDirection::Forward
+                                } else {
+                                    ReferenceDirection::Inverse
+                                },
+                            ));
+                        }
+                    }
+                }
+                rest
+            }
+        };
+        while let Some(description) = rest.pop_front() {
+            if let AddReferenceResult::Full(description) = node.add(types, description) {
+                rest.push_front(description);
+                break;
+            }
+        }
+        if !rest.is_empty() {
+            node.set_next_continuation_point(Box::new(Rest(rest)));
+        }
+    }
+
+    /// Follows `item`'s path through this manager's references, adding every node reached
+    /// at each depth (async-opcua goes on from them through the other managers).
+    fn translate_one(&self, types: &DefaultTypeTree, item: &mut BrowsePathItem) {
+        let ns = self.ns();
+        let mut reached = vec![item.node_id().clone()];
+        let mut depth = 0;
+        for element in item.path() {
+            depth += 1;
+            let direction = if element.is_inverse {
+                BrowseDirection::Inverse
+            } else {
+                BrowseDirection::Forward
+            };
+            let mut next = Vec::new();
+            for node in &reached {
+                for reference in self.references(node, direction) {
+                    let Reference::Own(kind, _, found) = reference else {
+                        continue;
+                    };
+                    let kind: NodeId = kind.into();
+                    let allowed = element.reference_type_id.is_null()
+                        || kind == element.reference_type_id
+                        || element.include_subtypes
+                            && types.is_subtype_of(&kind, &element.reference_type_id);
+                    let meta = found.metadata(ns);
+                    if allowed
+                        && (element.target_name.is_null()
+                            || meta.browse_name == element.target_name)
+                    {
+                        next.push(meta.node_id.node_id);
+                    }
+                }
+            }
+            for node in &next {
+                item.add_element(node.clone(), depth, None);
+            }
+            if next.is_empty() {
+                break;
+            }
+            reached = next;
+        }
+    }
+
+    fn point_of(&self, node: &NodeId) -> Option<(PointId, PointKind)> {
+        let found = self.table.find(node)?;
+        if found.property.is_some() {
+            return None;
+        }
+        let spec = found.spec();
+        Some((spec.id.clone(), spec.kind.clone()))
+    }
+
+    /// The point of a history node, or why it has no history.
+    fn history_point(
+        &self,
+        context: &RequestContext,
+        node: &HistoryNode,
+    ) -> Result<(PointId, PointKind), StatusCode> {
+        let found = self
+            .table
+            .find(node.node_id())
+            .ok_or(StatusCode::BadNodeIdUnknown)?;
+        if found.property.is_some() {
+            return Err(StatusCode::BadUserAccessDenied);
+        }
+        let access = user_access_level(context, &found.node(self.ns()));
+        if !access.contains(AccessLevel::HISTORY_READ) {
+            return Err(StatusCode::BadUserAccessDenied);
+        }
+        let spec = found.spec();
+        Ok((spec.id.clone(), spec.kind.clone()))
+    }
+}
+
+#[async_trait::async_trait]
+impl NodeManager for PointNodes {
+    fn owns_node(&self, id: &NodeId) -> bool {
+        self.table.owns(id)
+    }
+
+    fn name(&self) -> &str {
+        "cellbus points"
+    }
+
+    /// The namespace is the cell's, which its in-memory manager names.
+    fn namespaces_for_user(&self, _context: &RequestContext) -> Vec<NamespaceMetadata> {
+        Vec::new()
+    }
+
+    async fn init(&self, _type_tree: &mut DefaultTypeTree, _context: ServerContext) {}
+
+    async fn resolve_external_references(
+        &self,
+        _context: &RequestContext,
+        items: &mut [&mut ExternalReferenceRequest],
+    ) {
+        let ns = self.ns();
+        for item in items.iter_mut() {
+            if let Some(found) = self.table.find(item.node_id()) {
+                item.set(found.metadata(ns));
+            }
+        }
+    }
+
+    async fn browse(
+        &self,
+        context: &RequestContext,
+        nodes_to_browse: &mut [BrowseNode],
+    ) -> Result<(), StatusCode> {
+        let types = context.type_tree.read();
+        for node in nodes_to_browse.iter_mut() {
+            if self.table.text(node.node_id()).is_some() {
+                self.browse_one(&types, node);
+            }
+        }
+        Ok(())
+    }
+
+    async fn translate_browse_paths_to_node_ids(
+        &self,
+        context: &RequestContext,
+        nodes: &mut [&mut BrowsePathItem],
+    ) -> Result<(), StatusCode> {
+        let types = context.type_tree.read();
+        for item in nodes.iter_mut() {
+            if self.table.text(item.node_id()).is_some() {
+                self.translate_one(&types, item);
+            }
+        }
+        Ok(())
+    }
+
+    async fn read(
+        &self,
+        context: &RequestContext,
+        max_age: f64,
+        timestamps_to_return: TimestampsToReturn,
+        nodes_to_read: &mut [&mut ReadNode],
+    ) -> Result<(), StatusCode> {
+        let ns = self.ns();
+        for read in nodes_to_read.iter_mut() {
+            let Some(found) = self.table.find(&read.node().node_id) else {
+                read.set_error(StatusCode::BadNodeIdUnknown);
+                continue;
+            };
+            let node = found.node(ns);
+            match validate_node_read(&node, context, read.node()) {
+                Ok(()) => {
+                    let value =
+                        read_node_value(&node, context, read.node(), max_age, timestamps_to_return);
+                    read.set_result(value);
+                }
+                Err(status) => read.set_error(status),
+            }
+        }
+        Ok(())
+    }
+
+    async fn write(
+        &self,
+        context: &RequestContext,
+        nodes_to_write: &mut [&mut WriteNode],
+    ) -> Result<(), StatusCode> {
+        let client = Caller::of(context, &self.peers).client();
+        for node in nodes_to_write.iter_mut() {
+            let status = match self.point_of(&node.value().node_id) {
+                Some(point) => {
+                    nodes::write_one(
+                        &self.table.cell,
+                        &self.users,
+                        context,
+                        &client,
+                        point,
+                        node.value(),
+                    )
+                    .await
+                }
+                // A property.
+                None => StatusCode::BadNotWritable,
+            };
+            node.set_status(status);
+        }
+        Ok(())
+    }
+
+    async fn history_read_raw_modified(
+        &self,
+        context: &RequestContext,
+        details: &ReadRawModifiedDetails,
+        nodes: &mut [&mut HistoryNode],
+        timestamps: TimestampsToReturn,
+    ) -> Result<(), StatusCode> {
+        if details.is_read_modified {
+            return Err(StatusCode::BadHistoryOperationUnsupported);
+        }
+        if timestamps == TimestampsToReturn::Neither {
+            return Err(StatusCode::BadTimestampsToReturnInvalid);
+        }
+        let asked = RawRead::new(
+            history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now()),
+            details.num_values_per_node,
+            details.return_bounds,
+        );
+        for node in nodes.iter_mut() {
+            let (point, kind) = match self.history_point(context, node) {
+                Ok(point) => point,
+                Err(status) => {
+                    node.set_status(status);
+                    continue;
+                }
+            };
+            // A continuation point carries the read as the first call asked it, and the
+            // point it was for: another node's is refused.
+            let read = match node.continuation_point() {
+                None => asked.clone(),
+                Some(continued) => match continued.get::<(PointId, RawRead)>() {
+                    Some((of, read)) if *of == point => read.clone(),
+                    _ => {
+                        node.set_status(StatusCode::BadContinuationPointInvalid);
+                        continue;
+                    }
+                },
+            };
+            match nodes::fetch_raw(&self.table.cell, point.clone(), &read).await {
+                Ok(fetched) => {
+                    let (values, more) = read.page(&kind, fetched);
+                    node.set_result(HistoryData {
+                        data_values: Some(history::with_timestamps(values, timestamps)),
+                    });
+                    node.set_next_continuation_point(
+                        more.map(|read| ContinuationPoint::new(Box::new((point.clone(), read)))),
+                    );
+                    node.set_status(StatusCode::Good);
+                }
+                Err(status) => node.set_status(status),
+            }
+        }
+        Ok(())
+    }
+
+    async fn history_read_processed(
+        &self,
+        context: &RequestContext,
+        details: &ReadProcessedDetails,
+        nodes: &mut [&mut HistoryNode],
+        timestamps: TimestampsToReturn,
+    ) -> Result<(), StatusCode> {
+        if timestamps == TimestampsToReturn::Neither {
+            return Err(StatusCode::BadTimestampsToReturnInvalid);
+        }
+        let range =
+            history::TimeRange::of(&details.start_time, &details.end_time, Timestamp::now());
+        let milliseconds = details.processing_interval;
+        let interval = (milliseconds.is_finite() && milliseconds >= 0.0)
+            .then(|| Duration::try_from_secs_f64(milliseconds / 1000.0).ok())
+            .flatten();
+        let aggregates = details.aggregate_type.clone().unwrap_or_default();
+        let chosen = match nodes::aggregates_of(&aggregates, nodes.len()) {
+            Ok(chosen) => chosen,
+            Err(status) => {
+                for node in nodes.iter_mut() {
+                    node.set_status(status);
+                }
+                return Ok(());
+            }
+        };
+        for (node, aggregate) in nodes.iter_mut().zip(chosen) {
+            let Some(aggregate) = aggregate.and_then(Aggregate::of) else {
+                node.set_status(StatusCode::BadAggregateNotSupported);
+                continue;
+            };
+            let Some(interval) = interval else {
+                node.set_status(StatusCode::BadAggregateInvalidInputs);
+                continue;
+            };
+            let (point, kind) = match self.history_point(context, node) {
+                Ok(point) => point,
+                Err(status) => {
+                    node.set_status(status);
+                    continue;
+                }
+            };
+            if !matches!(kind, PointKind::Numeric) {
+                node.set_status(StatusCode::BadAggregateInvalidInputs);
+                continue;
+            }
+            let Some(step) = history::check_interval(range, interval) else {
+                node.set_status(StatusCode::BadAggregateInvalidInputs);
+                continue;
+            };
+            match nodes::read_history(&self.table.cell, point, range, None).await {
+                Ok(stored) => {
+                    let values = history::processed(&stored, range, step, aggregate);
+                    node.set_result(HistoryData {
+                        data_values: Some(history::with_timestamps(values, timestamps)),
+                    });
+                    node.set_status(StatusCode::Good);
+                }
+                Err(status) => node.set_status(status),
+            }
+        }
+        Ok(())
+    }
+
+    /// Each item gets the node's value now; a point's value item asked to sample at its
+    /// poll period or faster gets [`EVERY_CHANGE_MS`]. Values come from
+    /// [`PointTable::notify`]. A variable has no events to subscribe to.
+    async fn create_monitored_items(
+        &self,
+        context: &RequestContext,
+        items: &mut [&mut CreateMonitoredItem],
+    ) -> Result<(), StatusCode> {
+        let ns = self.ns();
+        for item in items.iter_mut() {
+            let Some(found) = self.table.find(&item.item_to_monitor().node_id) else {
+                item.set_status(StatusCode::BadNodeIdUnknown);
+                continue;
+            };
+            let node = found.node(ns);
+            if let Err(status) = validate_node_read(&node, context, item.item_to_monitor()) {
+                item.set_status(status);
+                continue;
+            }
+            let attribute = item.item_to_monitor().attribute_id;
+            if attribute == AttributeId::EventNotifier {
+                item.set_status(StatusCode::BadAttributeIdInvalid);
+                continue;
+            }
+            let value = read_node_value(
+                &node,
+                context,
+                item.item_to_monitor(),
+                0.0,
+                item.timestamps_to_return(),
+            );
+            if value.status() != StatusCode::BadAttributeIdInvalid {
+                item.set_initial_value(value);
+            }
+            item.set_status(StatusCode::Good);
+            let asked = item.sampling_interval();
+            if attribute == AttributeId::Value
+                && found.property.is_none()
+                && asked >= 0.0
+                && asked <= found.device.period(&found.spec().group).as_secs_f64() * 1000.0
+            {
+                item.revise_sampling_interval(EVERY_CHANGE_MS);
+            }
+        }
+        Ok(())
+    }
+}
