@@ -173,8 +173,57 @@ async def check_tree(client, devices):
     assert enums > 0, "the demo cell has enumeration points"
     production = sum(1 for d in devices if "Production" in tree[d["id"]][1])
     assert production > 0, "no device has a Production folder"
+    await check_paths(client, ns, tree, devices)
     ok(f"{len(devices)} devices and {points} points match /api/devices ({enums} enumerations with EnumValues, {production} Production folders)")
     return ns, tree
+
+
+async def check_paths(client, ns, tree, devices):
+    """A device's references two at a time (BrowseNext) are all of them, its folders and
+    variables then its points (the server's two node managers); a browse path reaches a
+    point's property, and a point's parent is its device."""
+    d = next(d for d in devices if "Production" in tree[d["id"]][1])
+    device = client.get_node(ua.NodeId(d["id"], ns))
+    whole = [
+        r.NodeId
+        for r in await device.get_references(ua.ObjectIds.HierarchicalReferences, ua.BrowseDirection.Forward)
+    ]
+    desc = ua.BrowseDescription()
+    desc.NodeId = device.nodeid
+    desc.BrowseDirection = ua.BrowseDirection.Forward
+    desc.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HierarchicalReferences)
+    desc.IncludeSubtypes = True
+    desc.ResultMask = ua.BrowseResultMask.All
+    params = ua.BrowseParameters()
+    params.View.Timestamp = ua.get_win_epoch()
+    params.RequestedMaxReferencesPerNode = 2
+    params.NodesToBrowse = [desc]
+    [result] = await client.uaclient.browse(params)
+    paged, pages = list(result.References), 1
+    while result.ContinuationPoint:
+        more = ua.BrowseNextParameters()
+        more.ReleaseContinuationPoints = False
+        more.ContinuationPoints = [result.ContinuationPoint]
+        [result] = await client.uaclient.browse_next(more)
+        assert len(result.References) <= 2, result
+        paged.extend(result.References)
+        pages += 1
+    # The same references, each once (async-opcua hands its own pages back in another order).
+    got = sorted(r.NodeId.to_string() for r in paged)
+    assert got == sorted(n.to_string() for n in whole) and len(set(got)) == len(got), (got, whole)
+    assert len(whole) > 4 and pages == (len(whole) + 1) // 2, (len(whole), pages)
+    ok(f"{d['id']}'s {len(whole)} references came two at a time in {pages} pages")
+    line = tree[d["id"]][0]
+    p = next(p for p in d["points"] if p["unit"] and ua.NodeId(p["id"], ns) in whole)
+    name = p["id"].split(".", 1)[1]
+    eu = await client.nodes.objects.get_child(
+        [f"{ns}:Cell", f"{ns}:{line}", f"{ns}:{d['id']}", f"{ns}:{name}", "0:EngineeringUnits"]
+    )
+    assert eu.nodeid == ua.NodeId(f"{p['id']}/EngineeringUnits", ns), eu.nodeid
+    assert (await eu.read_value()).DisplayName.Text == p["unit"]
+    parent = await client.get_node(ua.NodeId(p["id"], ns)).get_parent()
+    assert parent.nodeid == device.nodeid, parent
+    ok(f"the browse path Cell/{line}/{d['id']}/{name}/EngineeringUnits gives {eu.nodeid.Identifier}, whose point's parent is {d['id']}")
 
 
 class Changes:
