@@ -27,8 +27,7 @@ use std::time::Duration;
 
 use ::opcua::nodes::{DefaultTypeTree, ReferenceDirection, TypeTree};
 use ::opcua::server::address_space::{
-    AccessLevel, NodeType, VariableBuilder, read_node_value, user_access_level,
-    validate_node_read,
+    AccessLevel, NodeType, VariableBuilder, read_node_value, user_access_level, validate_node_read,
 };
 use ::opcua::server::diagnostics::NamespaceMetadata;
 use ::opcua::server::node_manager::{
@@ -238,12 +237,12 @@ impl PointTable {
 
     /// Sets every point's monitored items from the cell's state (after a lag or a reload).
     pub fn notify_all(&self, subscriptions: &SubscriptionCache) {
+        let Some(&ns) = self.ns.get() else { return };
         let now = Timestamp::now();
         for device in self.cell.roster().devices() {
             let state = device.read();
             for (index, point) in state.points.iter().enumerate() {
                 let view = device.point_view(index, point, now);
-                let Some(&ns) = self.ns.get() else { return };
                 let node = ids::point(ns, view.id.as_str());
                 let kind = &device.points[index].kind;
                 subscriptions.maybe_notify(
