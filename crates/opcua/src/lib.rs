@@ -213,10 +213,8 @@ pub async fn start(
     let follow = tokio::spawn(follow(
         Arc::clone(&cell),
         handle.clone(),
-        Managers {
-            cell: manager,
-            points,
-        },
+        manager,
+        points,
         ns,
         live,
         stop.clone(),
@@ -544,27 +542,18 @@ fn ensure_keypair(pki: &Path, config: &OpcuaConfig) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The cell's two node managers: the in-memory one and the points'.
-struct Managers {
-    cell: Arc<CellManager>,
-    points: Arc<PointTable>,
-}
-
 /// Follows the change stream and sets the variables; after a lag, sets every value again
 /// from the cell.
 async fn follow(
     cell: Arc<Cell>,
     handle: ServerHandle,
-    managers: Managers,
+    manager: Arc<CellManager>,
+    points: Arc<PointTable>,
     ns: u16,
     mut live: broadcast::Receiver<LiveMessage>,
     mut stop: watch::Receiver<bool>,
 ) {
     let subscriptions = Arc::clone(handle.subscriptions());
-    let Managers {
-        cell: manager,
-        points,
-    } = managers;
     // Event ids: this task's start and the event's number.
     let started = Timestamp::now();
     let mut numbered: u64 = 0;
