@@ -516,6 +516,13 @@ impl MetricName {
     }
 }
 
+/// Looked up by its text (a hash map keyed by names answers a `&str` without a copy).
+impl std::borrow::Borrow<str> for MetricName {
+    fn borrow(&self) -> &str {
+        &self.0
+    }
+}
+
 impl fmt::Display for MetricName {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.0)

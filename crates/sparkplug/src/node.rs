@@ -31,7 +31,7 @@
 //!   the last reading). A stale or bad reading is `is_null` with a `Quality` property;
 //!   the first good reading after one carries `Quality` 192, so a host clears it.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 
 use prost::Message as _;
 
@@ -297,17 +297,41 @@ pub struct EdgeNode {
     devices: HashMap<Id, Table>,
 }
 
+/// The metrics of one birth: about 150 bytes each (a million metrics of a large plant
+/// take 150 MB), so what is kept is what data and commands are checked against.
 #[derive(Debug, Default)]
 struct Table {
-    entries: BTreeMap<u64, Entry>,
-    by_name: HashMap<MetricName, u64>,
+    /// In the order of their aliases.
+    entries: Vec<Entry>,
+    /// Each metric's place in `entries`.
+    by_name: HashMap<MetricName, usize>,
 }
 
 #[derive(Debug)]
 struct Entry {
-    spec: MetricSpec,
+    alias: u64,
+    name: MetricName,
+    datatype: DataType,
+    writable: Writable,
     /// The last live reading sent.
     last: Reading,
+}
+
+impl Table {
+    /// The metric named `name`.
+    fn named(&self, name: &str) -> Option<&Entry> {
+        let &at = self.by_name.get(name)?;
+        self.entries.get(at)
+    }
+
+    /// The metric of `alias`.
+    fn aliased(&self, alias: u64) -> Option<&Entry> {
+        let at = self
+            .entries
+            .binary_search_by_key(&alias, |e| e.alias)
+            .ok()?;
+        self.entries.get(at)
+    }
 }
 
 impl EdgeNode {
@@ -515,13 +539,14 @@ impl EdgeNode {
     pub fn node_event(&mut self, event: &NodeEvent, now: Timestamp) -> Result<Publish, NodeError> {
         self.born()?;
         let table = self.node.as_ref().ok_or(NodeError::NodeNotBorn)?;
-        let alias = MetricName::new(EVENT)
-            .ok()
-            .and_then(|n| table.by_name.get(&n).copied())
-            .ok_or_else(|| NodeError::UnknownMetric {
-                device: None,
-                name: EVENT.to_owned(),
-            })?;
+        let alias =
+            table
+                .named(EVENT)
+                .map(|e| e.alias)
+                .ok_or_else(|| NodeError::UnknownMetric {
+                    device: None,
+                    name: EVENT.to_owned(),
+                })?;
         let metrics = vec![crate::event::metric(alias, event)];
         Ok(self.message(self.node_topic(MessageKind::Data), metrics, now))
     }
@@ -574,13 +599,13 @@ impl EdgeNode {
         let mut commands = Vec::new();
         for (index, m) in payload.metrics.iter().enumerate() {
             let entry = lookup(table, &device, index, m)?;
-            let metric_name = entry.spec.name.clone();
+            let metric_name = entry.name.clone();
             if m.is_null == Some(true) {
                 return Err(CommandError::NullValue {
                     metric: metric_name,
                 });
             }
-            let expected = entry.spec.datatype;
+            let expected = entry.datatype;
             if let Some(got) = m.datatype.filter(|&code| code != expected.code()) {
                 return Err(CommandError::DataTypeMismatch {
                     metric: metric_name,
@@ -600,7 +625,7 @@ impl EdgeNode {
                 }
                 continue;
             }
-            check_writable(&entry.spec, &value)?;
+            check_writable(&entry.name, entry.writable, &value)?;
             commands.push(Command::Write {
                 device: device.clone(),
                 metric: metric_name,
@@ -631,22 +656,28 @@ impl EdgeNode {
                     name: spec.name.clone(),
                 });
             }
-            check_type(spec, sample)?;
+            check_type(&spec.name, spec.datatype, sample)?;
             table.by_name.insert(spec.name.clone(), 0);
         }
         table.by_name.clear();
         let mut metrics = Vec::with_capacity(specs.len());
+        table.entries.reserve_exact(specs.len());
         for (spec, sample) in specs {
             let alias = self.alias(device, &spec.name);
             metrics.push(birth_metric(spec, Some(alias), sample));
-            table.by_name.insert(spec.name.clone(), alias);
-            table.entries.insert(
+            // What data and commands are checked against; the unit and the description
+            // went out with the birth.
+            table.entries.push(Entry {
                 alias,
-                Entry {
-                    spec: spec.clone(),
-                    last: sample.reading.clone(),
-                },
-            );
+                name: spec.name.clone(),
+                datatype: spec.datatype,
+                writable: spec.writable,
+                last: sample.reading.clone(),
+            });
+        }
+        table.entries.sort_unstable_by_key(|e| e.alias);
+        for (at, entry) in table.entries.iter().enumerate() {
+            table.by_name.insert(entry.name.clone(), at);
         }
         Ok((table, metrics))
     }
@@ -741,11 +772,11 @@ fn bd_seq_metric(bd_seq: BdSeq) -> Metric {
     }
 }
 
-fn check_type(spec: &MetricSpec, sample: &Sample) -> Result<(), NodeError> {
+fn check_type(name: &MetricName, datatype: DataType, sample: &Sample) -> Result<(), NodeError> {
     match sample.reading.value() {
-        Some(v) if v.datatype() != spec.datatype => Err(NodeError::DataTypeMismatch {
-            metric: spec.name.clone(),
-            expected: spec.datatype,
+        Some(v) if v.datatype() != datatype => Err(NodeError::DataTypeMismatch {
+            metric: name.clone(),
+            expected: datatype,
             got: v.datatype(),
         }),
         _ => Ok(()),
@@ -765,15 +796,17 @@ fn data<N: AsRef<str>>(
     let mut updates = Vec::new();
     for (name, sample) in changes {
         let name = name.as_ref();
-        let alias = MetricName::new(name)
-            .ok()
-            .and_then(|n| table.by_name.get(&n).copied())
+        let at = table
+            .by_name
+            .get(name)
+            .copied()
             .ok_or_else(|| NodeError::UnknownMetric {
                 device: device.cloned(),
                 name: name.to_owned(),
             })?;
-        let entry = &table.entries[&alias];
-        check_type(&entry.spec, sample)?;
+        let entry = &table.entries[at];
+        let alias = entry.alias;
+        check_type(&entry.name, entry.datatype, sample)?;
         if historical {
             metrics.push(data_metric(alias, sample, false, true));
             continue;
@@ -784,10 +817,10 @@ fn data<N: AsRef<str>>(
         let recovered =
             sample.reading.quality() == Quality::Good && entry.last.quality() != Quality::Good;
         metrics.push(data_metric(alias, sample, recovered, false));
-        updates.push((alias, sample.reading.clone()));
+        updates.push((at, sample.reading.clone()));
     }
-    for (alias, reading) in updates {
-        if let Some(entry) = table.entries.get_mut(&alias) {
+    for (at, reading) in updates {
+        if let Some(entry) = table.entries.get_mut(at) {
             entry.last = reading;
         }
     }
@@ -802,16 +835,13 @@ fn lookup<'t>(
 ) -> Result<&'t Entry, CommandError> {
     match (m.alias, &m.name) {
         (Some(alias), _) => table
-            .entries
-            .get(&alias)
+            .aliased(alias)
             .ok_or_else(|| CommandError::UnknownAlias {
                 device: device.clone(),
                 alias,
             }),
-        (None, Some(name)) => MetricName::new(name.as_str())
-            .ok()
-            .and_then(|n| table.by_name.get(&n))
-            .and_then(|alias| table.entries.get(alias))
+        (None, Some(name)) => table
+            .named(name)
             .ok_or_else(|| CommandError::UnknownMetric {
                 device: device.clone(),
                 name: name.clone(),
@@ -820,16 +850,20 @@ fn lookup<'t>(
     }
 }
 
-fn check_writable(spec: &MetricSpec, value: &MetricValue) -> Result<(), CommandError> {
-    match spec.writable {
+fn check_writable(
+    name: &MetricName,
+    writable: Writable,
+    value: &MetricValue,
+) -> Result<(), CommandError> {
+    match writable {
         Writable::No => Err(CommandError::NotWritable {
-            metric: spec.name.clone(),
+            metric: name.clone(),
         }),
         Writable::Yes => Ok(()),
         Writable::Within(range) => match value.as_f64() {
             Some(v) if range.contains(v) => Ok(()),
             Some(v) => Err(CommandError::OutOfRange {
-                metric: spec.name.clone(),
+                metric: name.clone(),
                 value: v,
                 min: range.min(),
                 max: range.max(),
