@@ -577,13 +577,8 @@ async fn follow(
                         laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
                         resync(&laid_out, &cell, &manager, &points, &subscriptions, ns);
                     }
-                    if let Some(alarm) = changed_alarm(&event) {
-                        let values = cell
-                            .alarms
-                            .view(alarm)
-                            .map(|view| alarms::values(ns, &view, DateTime::now()))
-                            .unwrap_or_default();
-                        set_values(&manager, &subscriptions, values);
+                    if let Some(view) = changed_alarm(&event).and_then(|a| cell.alarms.view(a)) {
+                        points.notify_alarm(&subscriptions, &view, DateTime::now());
                     }
                     numbered += 1;
                     let id = space::event_id(started, numbered);
@@ -682,22 +677,18 @@ fn resync(
     ns: u16,
 ) {
     let t = space::opc_time(Timestamp::now());
-    let mut values = alarm_values(cell, ns, t);
-    for device in roster.devices() {
-        values.extend(device_values(ns, &device.summary(), t));
-    }
+    let values: Vec<_> = roster
+        .devices()
+        .flat_map(|device| device_values(ns, &device.summary(), t))
+        .collect();
     set_values(manager, subscriptions, values);
     points.notify_all(subscriptions);
-}
-
-/// Every alarm's variables' values at `t`.
-fn alarm_values(cell: &Cell, ns: u16, t: DateTime) -> Vec<(::opcua::types::NodeId, DataValue)> {
-    cell.alarms.with(|book| {
-        (0..book.len())
-            .filter_map(|i| book.view(i))
-            .flat_map(|view| alarms::values(ns, &view, t))
-            .collect()
-    })
+    let views: Vec<_> = cell
+        .alarms
+        .with(|book| (0..book.len()).filter_map(|i| book.view(i)).collect());
+    for view in &views {
+        points.notify_alarm(subscriptions, view, t);
+    }
 }
 
 /// A device's `Status` and `Error` variables' values at `t`.

@@ -205,7 +205,7 @@ fn lay_out(
             let id = device.id.as_str();
             let views = of_device(&device.id);
             if space.node_exists(&ids::device(ns, id)) {
-                keep_alarms(space, types, ns, id, &views, now);
+                keep_alarms(space, types, ns, id, &views);
             } else {
                 build_device(
                     space,
@@ -215,7 +215,7 @@ fn lay_out(
                     device,
                     now,
                 );
-                build_alarms(space, ns, id, &views, now);
+                build_alarms(space, ns, id, &views);
             }
         }
     }
@@ -229,7 +229,6 @@ fn keep_alarms(
     ns: u16,
     device: &str,
     views: &[&AlarmView],
-    now: Timestamp,
 ) {
     let folder = ids::device_alarms(ns, device);
     let mut present = children(space, types, ns, &folder, ReferenceTypeId::Organizes);
@@ -238,7 +237,7 @@ fn keep_alarms(
     wanted.sort_by_key(ToString::to_string);
     if present != wanted {
         remove_tree(space, types, ns, &folder);
-        build_alarms(space, ns, device, views, now);
+        build_alarms(space, ns, device, views);
     }
 }
 
@@ -396,15 +395,9 @@ fn build_device(
     }
 }
 
-/// A device's `Alarms` folder: an object per alarm, named by its id, with its state as
-/// variables ([`alarms::VARIABLES`]).
-fn build_alarms(
-    space: &mut AddressSpace,
-    ns: u16,
-    device: &str,
-    views: &[&AlarmView],
-    now: Timestamp,
-) {
+/// A device's `Alarms` folder: an object per alarm, named by its id (its state's variables,
+/// [`alarms::VARIABLES`], are [`crate::points`]').
+fn build_alarms(space: &mut AddressSpace, ns: u16, device: &str, views: &[&AlarmView]) {
     if views.is_empty() {
         return;
     }
@@ -417,32 +410,17 @@ fn build_alarms(
         .is_folder()
         .component_of(ids::device(ns, device))
         .insert(space);
-    let t = space::opc_time(now);
     for view in views {
-        let alarm = ids::alarm(ns, &view.id);
-        ObjectBuilder::new(&alarm, QualifiedName::new(ns, &view.id), &view.id)
-            .description(view.message.as_str())
-            .has_type_definition(ObjectTypeId::BaseObjectType)
-            .organized_by(folder.clone())
-            .insert(space);
-        for (name, data_type, words) in alarms::VARIABLES {
-            VariableBuilder::new(
-                &ids::alarm_variable(ns, &view.id, name),
-                QualifiedName::new(ns, name),
-                name,
-            )
-            .description(words)
-            .data_type(data_type)
-            .value_rank(-1)
-            .access_level(AccessLevel::CURRENT_READ)
-            .user_access_level(AccessLevel::CURRENT_READ)
-            .has_type_definition(VariableTypeId::BaseDataVariableType)
-            .component_of(alarm.clone())
-            .insert(space);
-        }
-        for (node, value) in alarms::values(ns, view, t) {
-            set(space, &node, value);
-        }
+        // Its variables (`alarms::VARIABLES`) are `crate::points`', made when asked.
+        ObjectBuilder::new(
+            &ids::alarm(ns, &view.id),
+            QualifiedName::new(ns, &view.id),
+            &view.id,
+        )
+        .description(view.message.as_str())
+        .has_type_definition(ObjectTypeId::BaseObjectType)
+        .organized_by(folder.clone())
+        .insert(space);
     }
 }
 

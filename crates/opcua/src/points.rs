@@ -39,17 +39,19 @@ use ::opcua::server::{
     ContinuationPoint, CreateMonitoredItem, SubscriptionCache, node_manager::AddReferenceResult,
 };
 use ::opcua::types::{
-    AttributeId, BrowseDirection, DataTypeId, DataValue, ExpandedNodeId, ExtensionObject,
+    AttributeId, BrowseDirection, DataTypeId, DataValue, DateTime, ExpandedNodeId, ExtensionObject,
     HistoryData, Identifier, LocalizedText, NodeClass, NodeId, QualifiedName, ReadProcessedDetails,
     ReadRawModifiedDetails, ReferenceDescription, ReferenceTypeId, StatusCode, TimestampsToReturn,
     VariableTypeId, Variant,
 };
 
+use super::alarms;
 use super::auth::Users;
 use super::history::{self, Aggregate, RawRead};
 use super::nodes::{self, Caller, EVERY_CHANGE_MS};
 use super::peers::Peers;
 use super::space::{self, ids};
+use gateway::alarm::book::View as AlarmView;
 use gateway::cell::{Cell, DeviceEntry, PointView};
 use gateway::point::{PointId, PointKind};
 use gateway::time::Timestamp;
@@ -151,7 +153,23 @@ impl Property {
     }
 }
 
-/// A node this manager answers for: a point's variable or one of its properties.
+/// A node this manager makes: a point's variable or property, or a variable of an
+/// alarm's object.
+#[derive(Clone)]
+enum Made {
+    Point(Found),
+    Alarm(AlarmVariable),
+}
+
+/// A variable of an alarm's object ([`alarms::VARIABLES`]): the alarm as it is now.
+#[derive(Clone)]
+struct AlarmVariable {
+    view: Arc<AlarmView>,
+    /// Its place in [`alarms::VARIABLES`].
+    index: usize,
+}
+
+/// A point's variable or one of its properties.
 #[derive(Clone)]
 struct Found {
     device: Arc<DeviceEntry>,
@@ -159,10 +177,14 @@ struct Found {
     property: Option<Property>,
 }
 
-/// A node whose children include points: a device object or its `Production` folder.
-struct Parent {
-    device: Arc<DeviceEntry>,
-    production: bool,
+/// A node whose children this manager makes: a device object or its `Production`
+/// folder (points), or an alarm's object (its variables).
+enum Parent {
+    Device {
+        device: Arc<DeviceEntry>,
+        production: bool,
+    },
+    Alarm(Arc<AlarmView>),
 }
 
 impl PointTable {
@@ -179,9 +201,25 @@ impl PointTable {
         let _ = self.ns.set(ns);
     }
 
-    /// Whether `id` is a point's variable or property in the roster in force.
+    /// Whether `id` is a point's variable or property in the roster in force, or a
+    /// variable of an alarm in the book.
     pub fn owns(&self, id: &NodeId) -> bool {
         self.find(id).is_some()
+    }
+
+    fn find(&self, id: &NodeId) -> Option<Made> {
+        match self.find_point(id) {
+            Some(found) => Some(Made::Point(found)),
+            None => self.find_alarm_variable(id).map(Made::Alarm),
+        }
+    }
+
+    fn find_alarm_variable(&self, id: &NodeId) -> Option<AlarmVariable> {
+        let text = self.text(id)?;
+        let (alarm, name) = text.strip_prefix("alarm:")?.rsplit_once('/')?;
+        let index = alarms::VARIABLES.iter().position(|(n, _, _)| *n == name)?;
+        let view = Arc::new(self.cell.alarms.view(alarm)?);
+        Some(AlarmVariable { view, index })
     }
 
     fn text<'a>(&self, id: &'a NodeId) -> Option<&'a str> {
@@ -192,7 +230,7 @@ impl PointTable {
         }
     }
 
-    fn find(&self, id: &NodeId) -> Option<Found> {
+    fn find_point(&self, id: &NodeId) -> Option<Found> {
         let text = self.text(id)?;
         let (point, property) = match text.rsplit_once('/') {
             Some((point, name)) => (point, Some(Property::of_name(name)?)),
@@ -213,12 +251,30 @@ impl PointTable {
 
     fn parent(&self, id: &NodeId) -> Option<Parent> {
         let text = self.text(id)?;
+        if let Some(alarm) = text.strip_prefix("alarm:") {
+            return self
+                .cell
+                .alarms
+                .view(alarm)
+                .map(|view| Parent::Alarm(Arc::new(view)));
+        }
         let (device, production) = match text.strip_suffix("/Production") {
             Some(device) => (device, true),
             None => (text, false),
         };
         let device = Arc::clone(self.cell.roster().device(device)?);
-        Some(Parent { device, production })
+        Some(Parent::Device { device, production })
+    }
+
+    /// Tells the monitored items of alarm `view`'s variables its state at `t`.
+    pub fn notify_alarm(&self, subscriptions: &SubscriptionCache, view: &AlarmView, t: DateTime) {
+        let Some(&ns) = self.ns.get() else { return };
+        let values = alarms::values(ns, view, t);
+        subscriptions.notify_data_change(
+            values
+                .iter()
+                .map(|(node, value)| (value.clone(), node, AttributeId::Value)),
+        );
     }
 
     /// Tells the monitored items of the point that `view` is read: its value is made only
@@ -370,25 +426,93 @@ impl Found {
 }
 
 impl Parent {
-    /// The points under this node.
-    fn points(&self) -> impl Iterator<Item = Found> + '_ {
-        (0..self.device.points.len())
-            .filter(|&i| {
-                gateway::production::is_production_point(self.device.points[i].id.name())
-                    == self.production
-            })
-            .map(|index| Found {
-                device: Arc::clone(&self.device),
-                index,
-                property: None,
-            })
+    /// The nodes of this manager under this node.
+    fn children(&self) -> Vec<Made> {
+        match self {
+            Parent::Device { device, production } => (0..device.points.len())
+                .filter(|&i| {
+                    gateway::production::is_production_point(device.points[i].id.name())
+                        == *production
+                })
+                .map(|index| {
+                    Made::Point(Found {
+                        device: Arc::clone(device),
+                        index,
+                        property: None,
+                    })
+                })
+                .collect(),
+            Parent::Alarm(view) => (0..alarms::VARIABLES.len())
+                .map(|index| {
+                    Made::Alarm(AlarmVariable {
+                        view: Arc::clone(view),
+                        index,
+                    })
+                })
+                .collect(),
+        }
+    }
+}
+
+impl AlarmVariable {
+    fn node_id(&self, ns: u16) -> NodeId {
+        ids::alarm_variable(ns, &self.view.id, alarms::VARIABLES[self.index].0)
+    }
+
+    /// The variable as the in-memory space would hold it, with its value now.
+    fn node(&self, ns: u16) -> NodeType {
+        let (name, data_type, words) = alarms::VARIABLES[self.index];
+        let node = self.node_id(ns);
+        let mut variable = VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
+            .description(words)
+            .data_type(data_type)
+            .value_rank(-1)
+            .access_level(AccessLevel::CURRENT_READ)
+            .user_access_level(AccessLevel::CURRENT_READ)
+            .build();
+        if let Some((_, value)) = alarms::values(ns, &self.view, DateTime::now())
+            .into_iter()
+            .nth(self.index)
+        {
+            variable.set_data_value(value);
+        }
+        NodeType::Variable(Box::new(variable))
+    }
+
+    fn metadata(&self, ns: u16) -> NodeMetadata {
+        let name = alarms::VARIABLES[self.index].0;
+        NodeMetadata {
+            node_id: self.node_id(ns).into(),
+            type_definition: ExpandedNodeId::new(NodeId::from(
+                VariableTypeId::BaseDataVariableType,
+            )),
+            browse_name: QualifiedName::new(ns, name),
+            display_name: LocalizedText::from(name),
+            node_class: NodeClass::Variable,
+        }
+    }
+}
+
+impl Made {
+    fn node(&self, ns: u16) -> NodeType {
+        match self {
+            Made::Point(found) => found.node(ns),
+            Made::Alarm(variable) => variable.node(ns),
+        }
+    }
+
+    fn metadata(&self, ns: u16) -> NodeMetadata {
+        match self {
+            Made::Point(found) => found.metadata(ns),
+            Made::Alarm(variable) => variable.metadata(ns),
+        }
     }
 }
 
 /// A reference from a node of this manager (or to one, from a device object).
 enum Reference {
     /// To a node of this manager.
-    Own(ReferenceTypeId, bool, Found),
+    Own(ReferenceTypeId, bool, Made),
     /// To a node of another manager (a type definition, a device object).
     Other(ReferenceTypeId, bool, NodeId),
 }
@@ -425,7 +549,22 @@ impl PointNodes {
         let forward = matches!(direction, BrowseDirection::Forward | BrowseDirection::Both);
         let inverse = matches!(direction, BrowseDirection::Inverse | BrowseDirection::Both);
         let mut refs = Vec::new();
-        if let Some(found) = self.table.find(id) {
+        if let Some(Made::Alarm(variable)) = self.table.find(id) {
+            if forward {
+                refs.push(Reference::Other(
+                    ReferenceTypeId::HasTypeDefinition,
+                    true,
+                    VariableTypeId::BaseDataVariableType.into(),
+                ));
+            }
+            if inverse {
+                refs.push(Reference::Other(
+                    ReferenceTypeId::HasComponent,
+                    false,
+                    ids::alarm(ns, &variable.view.id),
+                ));
+            }
+        } else if let Some(found) = self.table.find_point(id) {
             if forward {
                 refs.push(Reference::Other(
                     ReferenceTypeId::HasTypeDefinition,
@@ -433,11 +572,9 @@ impl PointNodes {
                     found.type_definition().into(),
                 ));
                 if found.property.is_none() {
-                    refs.extend(
-                        found
-                            .properties()
-                            .map(|p| Reference::Own(ReferenceTypeId::HasProperty, true, p)),
-                    );
+                    refs.extend(found.properties().map(|p| {
+                        Reference::Own(ReferenceTypeId::HasProperty, true, Made::Point(p))
+                    }));
                 }
             }
             if inverse {
@@ -448,18 +585,19 @@ impl PointNodes {
                     Some(_) => Reference::Own(
                         ReferenceTypeId::HasProperty,
                         false,
-                        Found {
+                        Made::Point(Found {
                             property: None,
                             ..found
-                        },
+                        }),
                     ),
                 });
             }
         } else if forward && let Some(parent) = self.table.parent(id) {
             refs.extend(
                 parent
-                    .points()
-                    .map(|p| Reference::Own(ReferenceTypeId::HasComponent, true, p)),
+                    .children()
+                    .into_iter()
+                    .map(|child| Reference::Own(ReferenceTypeId::HasComponent, true, child)),
             );
         }
         refs
@@ -550,7 +688,7 @@ impl PointNodes {
     }
 
     fn point_of(&self, node: &NodeId) -> Option<(PointId, PointKind)> {
-        let found = self.table.find(node)?;
+        let found = self.table.find_point(node)?;
         if found.property.is_some() {
             return None;
         }
@@ -564,13 +702,12 @@ impl PointNodes {
         context: &RequestContext,
         node: &HistoryNode,
     ) -> Result<(PointId, PointKind), StatusCode> {
-        let found = self
-            .table
-            .find(node.node_id())
-            .ok_or(StatusCode::BadNodeIdUnknown)?;
-        if found.property.is_some() {
-            return Err(StatusCode::BadUserAccessDenied);
-        }
+        let found = match self.table.find(node.node_id()) {
+            Some(Made::Point(found)) if found.property.is_none() => found,
+            // A property or an alarm's variable: no history.
+            Some(_) => return Err(StatusCode::BadUserAccessDenied),
+            None => return Err(StatusCode::BadNodeIdUnknown),
+        };
         let access = user_access_level(context, &found.node(self.ns()));
         if !access.contains(AccessLevel::HISTORY_READ) {
             return Err(StatusCode::BadUserAccessDenied);
@@ -846,10 +983,11 @@ impl NodeManager for PointNodes {
             }
             item.set_status(StatusCode::Good);
             let asked = item.sampling_interval();
-            if attribute == AttributeId::Value
-                && found.property.is_none()
+            if let Made::Point(point) = &found
+                && attribute == AttributeId::Value
+                && point.property.is_none()
                 && asked >= 0.0
-                && asked <= found.device.period(&found.spec().group).as_secs_f64() * 1000.0
+                && asked <= point.device.period(&point.spec().group).as_secs_f64() * 1000.0
             {
                 item.revise_sampling_interval(EVERY_CHANGE_MS);
             }

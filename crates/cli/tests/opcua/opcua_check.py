@@ -978,12 +978,21 @@ async def alarm(url, addr, password, device):
         device_node = await folder.get_parent()
         cell_event_type = client.get_node(ua.NodeId("CellbusEventType", ns))
         sub, handler = await subscribe_events(client, device_node, cell_event_type)
+        states = Changes()
+        state_sub = await client.create_subscription(100, states)
+        await state_sub.subscribe_data_change(variables["State"])
+        _, first, _ = await asyncio.wait_for(states.seen.get(), LIMIT)
+        assert first == "normal", first
         print("subscribed", flush=True)
 
         event, fields = await alarm_event(handler, "alarm_raised", alarm_id)
         assert fields["state"] == "unacknowledged", fields
         assert event.SourceNode == device_node.nodeid, event.SourceNode
         ok(f"the alarm_raised event of {alarm_id} arrived: {event.Message.Text!r}")
+        _, notified, _ = await asyncio.wait_for(states.seen.get(), LIMIT)
+        assert notified == "unacknowledged", notified
+        await state_sub.delete()
+        ok(f"a subscription to {alarm_id}'s State was told: normal, then unacknowledged")
         await value_becomes(variables["State"], "State unacknowledged", lambda v: v == "unacknowledged")
         assert await variables["Active"].read_value() is True
         assert await variables["Acknowledged"].read_value() is False
