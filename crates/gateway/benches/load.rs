@@ -258,6 +258,8 @@ usage: cargo bench -p gateway --bench load -- [options]
                       processes of their own)
   --opcua             also serve the cell over OPC UA, with a client in a process of
                       its own monitoring --opcua-items points and counting what arrives
+  --modbus-changes N  points of each Modbus meter that change a second (default 15, at
+                      most 100)
   --opcua-items N     points the OPC UA client monitors (default 10000; at most
                       10000: ten subscriptions of 1000, async-opcua's limits)
   --bare              the floor instead of the gateway: a bare loop on one thread
@@ -380,6 +382,8 @@ struct Args {
     mqtt: bool,
     opcua: bool,
     opcua_items: usize,
+    /// Points of each Modbus meter that take a new value each second.
+    modbus_changes: f64,
     /// Whether to time the heavy GETs after the window (off for a heap profile of the
     /// polling alone: `/api/devices` builds megabytes).
     scrapes: bool,
@@ -404,6 +408,7 @@ impl Args {
             mqtt: false,
             opcua: false,
             opcua_items: DEFAULT_OPCUA_ITEMS,
+            modbus_changes: MODBUS_CHANGES_PER_SECOND,
             scrapes: true,
             alarm_flood: false,
             bare: false,
@@ -434,6 +439,14 @@ impl Args {
                 "--seconds" => args.seconds = seconds(flag, value)?,
                 "--warmup" => args.warmup = seconds(flag, value)?,
                 "--mix" => args.mix = mix(value)?,
+                "--modbus-changes" => {
+                    args.modbus_changes = count(flag, value)? as f64;
+                    if args.modbus_changes > MODBUS_POINTS as f64 {
+                        return Err(format!(
+                            "--modbus-changes {value}: at most {MODBUS_POINTS} (a meter's points)"
+                        ));
+                    }
+                }
                 "--opcua-items" => {
                     args.opcua_items = count(flag, value)?;
                     let most = 10 * opcua_counter::ITEMS_PER_SUBSCRIPTION;
@@ -516,6 +529,8 @@ impl Args {
             self.baud.map_or("none".into(), |b| b.to_string()),
             "--reply-delay".into(),
             format!("{}us", self.reply_delay.as_micros()),
+            "--modbus-changes".into(),
+            self.modbus_changes.to_string(),
         ];
         if self.serial {
             args.push("--serial".into());
@@ -740,6 +755,7 @@ async fn simulate_line(
     reply_delay: Duration,
     pace: Option<SerialSettings>,
     flood: Option<Duration>,
+    modbus_changes: f64,
 ) -> anyhow::Result<SimulatedLine> {
     match plan.kind {
         Kind::Jbc => {
@@ -777,7 +793,8 @@ async fn simulate_line(
                 ))
                 .context("the simulated Modbus device's map")?;
                 let mut slave = Slave::new(map).with_reply_delay(reply_delay);
-                let operator = ModbusOperator::new(&mut slave, (line * 1000 + i) as u64);
+                let operator =
+                    ModbusOperator::new(&mut slave, (line * 1000 + i) as u64, modbus_changes);
                 devices.push((SharedModel::new(slave), operator));
             }
             let models: Vec<SharedModel<Slave>> = devices.iter().map(|(m, _)| m.clone()).collect();
@@ -971,10 +988,12 @@ impl CrossOperator {
 }
 
 /// The process behind one simulated Modbus device: [`MODBUS_CHANGES_PER_SECOND`] of its
-/// points take a new value each second, in turn, each a small random step from the last
-/// (a slow process: temperatures, pressures, flows), so every point changes every
-/// `MODBUS_POINTS / MODBUS_CHANGES_PER_SECOND` seconds.
+/// points (`--modbus-changes`) take a new value each second, in turn, each a small random
+/// step from the last (a slow process: temperatures, pressures, flows), so every point
+/// changes every `MODBUS_POINTS / MODBUS_CHANGES_PER_SECOND` seconds.
 struct ModbusOperator {
+    /// Points changed a second.
+    rate: f64,
     values: Vec<f32>,
     next: usize,
     due: f64,
@@ -983,7 +1002,7 @@ struct ModbusOperator {
 
 impl ModbusOperator {
     /// The operator of `slave`, whose registers it fills with their first values.
-    fn new(slave: &mut Slave, seed: u64) -> Self {
+    fn new(slave: &mut Slave, seed: u64, rate: f64) -> Self {
         let mut rng = fastrand::Rng::with_seed(seed);
         let values: Vec<f32> = (0..MODBUS_POINTS)
             .map(|_| (rng.f32() * 1000.0).round() / 10.0)
@@ -994,6 +1013,7 @@ impl ModbusOperator {
         // Devices start at different fractions of a change, not all in step.
         let due = rng.f64();
         Self {
+            rate,
             values,
             next: 0,
             due,
@@ -1002,7 +1022,7 @@ impl ModbusOperator {
     }
 
     fn act(&mut self, slave: &mut Slave, elapsed: Duration) {
-        self.due += MODBUS_CHANGES_PER_SECOND * elapsed.as_secs_f64();
+        self.due += self.rate * elapsed.as_secs_f64();
         while self.due >= 1.0 {
             self.due -= 1.0;
             // 37 and 100 have no common factor: every point in turn, spread over the map.
@@ -1133,6 +1153,7 @@ fn run_simulators(args: &Args) -> anyhow::Result<()> {
                 // A few seconds into the window (the simulators start just before the
                 // gateway).
                 args.alarm_flood.then_some(args.warmup + FLOOD_INTO_WINDOW),
+                args.modbus_changes,
             )
             .await?
             {
