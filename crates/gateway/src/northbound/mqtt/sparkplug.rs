@@ -548,28 +548,44 @@ impl Node {
         first: LiveMessage,
     ) -> Done {
         let mut values: Vec<DeviceChanges> = Vec::new();
+        // The entry of each device in `values`, in the same order.
+        let mut entries: Vec<Arc<DeviceEntry>> = Vec::new();
+        let roster = self.cell.roster();
+        let now = Timestamp::now();
         let mut next = Some(first);
         while let Some(message) = next.take() {
             match message {
                 LiveMessage::Value(view) => {
-                    if let (Some(spec), Ok(device)) =
-                        (self.cell.point(&view.id), DeviceId::new(view.id.device()))
-                    {
-                        let now = Timestamp::now();
-                        let sample = sample_of(&spec.kind, &view, now);
-                        let read = view.t.unwrap_or(now);
-                        let name = view.id.name().to_owned();
-                        match values.iter_mut().find(|(d, _, _)| *d == device) {
-                            Some((_, changes, latest)) => {
-                                changes.push((name, sample));
+                    let (device, name) = (view.id.device(), view.id.name());
+                    let read = view.t.unwrap_or(now);
+                    // A poll's changes come together: the group is nearly always the last.
+                    match values.iter().rposition(|(d, _, _)| d.as_str() == device) {
+                        Some(at) => {
+                            if let Some(index) = entries[at].point_index(name) {
+                                let sample = sample_of(&entries[at].points[index].kind, &view, now);
+                                let (_, changes, latest) = &mut values[at];
+                                changes.push((name.to_owned(), sample));
                                 *latest = (*latest).max(read);
                             }
-                            None => values.push((device, vec![(name, sample)], read)),
+                        }
+                        None => {
+                            if let Some(entry) = roster.device(device)
+                                && let Some(index) = entry.point_index(name)
+                            {
+                                let sample = sample_of(&entry.points[index].kind, &view, now);
+                                values.push((
+                                    entry.id.clone(),
+                                    vec![(name.to_owned(), sample)],
+                                    read,
+                                ));
+                                entries.push(Arc::clone(entry));
+                            }
                         }
                     }
                 }
                 LiveMessage::Event(event) => {
                     // Keep the order: what came before an event goes out first.
+                    entries.clear();
                     self.device_data(conn, std::mem::take(&mut values)).await?;
                     self.on_event(conn, &event).await?;
                     if event.kind == EventKind::ConfigReloaded {
@@ -592,6 +608,7 @@ impl Node {
                 }
                 LiveMessage::Device(summary) => {
                     // Keep the order: what came before a status change goes out first.
+                    entries.clear();
                     self.device_data(conn, std::mem::take(&mut values)).await?;
                     self.on_status(conn, *summary).await?;
                 }
