@@ -561,21 +561,20 @@ async fn follow(
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     // Changes between the address space's build and this subscription are caught up here.
     let mut laid_out = cell.roster();
-    resync(&laid_out, &cell, &manager, &points, &subscriptions, ns);
+    resync(&laid_out, &cell, &points, &subscriptions);
     loop {
         tokio::select! {
             message = live.recv() => match message {
                 Ok(LiveMessage::Value(view)) => points.notify(&subscriptions, &view),
                 Ok(LiveMessage::Device(summary)) => {
-                    let values = device_values(ns, &summary, DateTime::now());
-                    set_values(&manager, &subscriptions, values.to_vec());
+                    points.notify_device(&subscriptions, &summary, DateTime::now());
                 }
                 Ok(LiveMessage::Event(event)) => {
                     // The new nodes are there before clients hear of the reload.
                     if event.kind == EventKind::ConfigReloaded {
                         let changed = gateway::reload::devices_in(&event, "changed");
                         laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
-                        resync(&laid_out, &cell, &manager, &points, &subscriptions, ns);
+                        resync(&laid_out, &cell, &points, &subscriptions);
                     }
                     if let Some(view) = changed_alarm(&event).and_then(|a| cell.alarms.view(a)) {
                         points.notify_alarm(&subscriptions, &view, DateTime::now());
@@ -605,7 +604,7 @@ async fn follow(
                             .collect();
                         laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
                     }
-                    resync(&laid_out, &cell, &manager, &points, &subscriptions, ns);
+                    resync(&laid_out, &cell, &points, &subscriptions);
                 }
                 Err(broadcast::error::RecvError::Closed) => return,
             },
@@ -671,17 +670,13 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
 fn resync(
     roster: &Roster,
     cell: &Cell,
-    manager: &CellManager,
     points: &PointTable,
     subscriptions: &::opcua::server::SubscriptionCache,
-    ns: u16,
 ) {
     let t = space::opc_time(Timestamp::now());
-    let values: Vec<_> = roster
-        .devices()
-        .flat_map(|device| device_values(ns, &device.summary(), t))
-        .collect();
-    set_values(manager, subscriptions, values);
+    for device in roster.devices() {
+        points.notify_device(subscriptions, &device.summary(), t);
+    }
     points.notify_all(subscriptions);
     let views: Vec<_> = cell
         .alarms
@@ -689,25 +684,6 @@ fn resync(
     for view in &views {
         points.notify_alarm(subscriptions, view, t);
     }
-}
-
-/// A device's `Status` and `Error` variables' values at `t`.
-fn device_values(
-    ns: u16,
-    summary: &gateway::cell::DeviceSummary,
-    t: DateTime,
-) -> [(::opcua::types::NodeId, DataValue); 2] {
-    let id = summary.id.as_str();
-    [
-        (
-            ids::device_status(ns, id),
-            DataValue::new_at(space::device_status(summary), t),
-        ),
-        (
-            ids::device_error(ns, id),
-            DataValue::new_at(space::device_error(summary), t),
-        ),
-    ]
 }
 
 fn set_values(

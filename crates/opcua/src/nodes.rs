@@ -1,5 +1,5 @@
 //! The cell's in-memory node manager: builds `Objects/Cell/{line}/{device}` (each device's
-//! `Status`, `Error`, `Production` and `Alarms`) and the gateway object (device objects and
+//! `Production` and `Alarms` folders and its alarms' objects) and the gateway object (device objects and
 //! the gateway object notify events), and calls the alarm methods. The points under the
 //! devices are [`crate::points`]'s; the writes and history reads of points, which that
 //! manager answers, are here too ([`write_one`], [`fetch_raw`], [`read_history`]).
@@ -213,7 +213,6 @@ fn lay_out(
                     &line_id,
                     &device.view_without_points(now),
                     device,
-                    now,
                 );
                 build_alarms(space, ns, id, &views);
             }
@@ -337,7 +336,6 @@ fn build_device(
     line_id: &NodeId,
     device: &DeviceView,
     entry: &DeviceEntry,
-    now: Timestamp,
 ) {
     let id = device.summary.id.as_str();
     let device_id = ids::device(ns, id);
@@ -347,34 +345,8 @@ fn build_device(
         .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
         .organized_by(line_id.clone())
         .insert(space);
-    let text = |space: &mut AddressSpace, node: NodeId, name: &str, words: &str, value: String| {
-        VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
-            .description(words)
-            .data_type(DataTypeId::String)
-            .value_rank(-1)
-            .access_level(AccessLevel::CURRENT_READ)
-            .user_access_level(AccessLevel::CURRENT_READ)
-            .has_type_definition(VariableTypeId::BaseDataVariableType)
-            .component_of(device_id.clone())
-            .insert(space);
-        set(space, &node, DataValue::new_at(value, space::opc_time(now)));
-    };
-    text(
-        space,
-        ids::device_status(ns, id),
-        "Status",
-        "Whether the device answers: up, down, backed off or connecting",
-        space::device_status(&device.summary).to_owned(),
-    );
-    text(
-        space,
-        ids::device_error(ns, id),
-        "Error",
-        "Why the device is down, or its last refusal (empty when none)",
-        space::device_error(&device.summary),
-    );
-    // The machine state and the OEE go in a `Production` folder, when the device has them;
-    // their variables, like the others, are `crate::points`'.
+    // Its `Status` and `Error` and its points are `crate::points`'. The machine state and
+    // the OEE go in a `Production` folder, when the device has them.
     if entry
         .points
         .iter()

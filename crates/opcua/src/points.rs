@@ -52,7 +52,7 @@ use super::nodes::{self, Caller, EVERY_CHANGE_MS};
 use super::peers::Peers;
 use super::space::{self, ids};
 use gateway::alarm::book::View as AlarmView;
-use gateway::cell::{Cell, DeviceEntry, PointView};
+use gateway::cell::{Cell, DeviceEntry, DeviceSummary, PointView};
 use gateway::point::{PointId, PointKind};
 use gateway::time::Timestamp;
 
@@ -153,21 +153,38 @@ impl Property {
     }
 }
 
-/// A node this manager makes: a point's variable or property, or a variable of an
-/// alarm's object.
+/// A node this manager makes: a point's variable or property, or a read-only variable of
+/// an object in the in-memory space (a device's `Status` and `Error`, an alarm's
+/// variables).
 #[derive(Clone)]
 enum Made {
     Point(Found),
-    Alarm(AlarmVariable),
+    Plain(Plain),
 }
 
-/// A variable of an alarm's object ([`alarms::VARIABLES`]): the alarm as it is now.
+/// A read-only variable of an in-memory object, with its value now.
 #[derive(Clone)]
-struct AlarmVariable {
-    view: Arc<AlarmView>,
-    /// Its place in [`alarms::VARIABLES`].
-    index: usize,
+struct Plain {
+    node: NodeId,
+    /// The object it is a component of.
+    parent: NodeId,
+    name: &'static str,
+    data_type: DataTypeId,
+    words: &'static str,
+    value: DataValue,
 }
+
+/// A device's `Status` and `Error`: name, words.
+const DEVICE_VARIABLES: [(&str, &str); 2] = [
+    (
+        "Status",
+        "Whether the device answers: up, down, backed off or connecting",
+    ),
+    (
+        "Error",
+        "Why the device is down, or its last refusal (empty when none)",
+    ),
+];
 
 /// A point's variable or one of its properties.
 #[derive(Clone)]
@@ -184,7 +201,7 @@ enum Parent {
         device: Arc<DeviceEntry>,
         production: bool,
     },
-    Alarm(Arc<AlarmView>),
+    Alarm(Box<AlarmView>),
 }
 
 impl PointTable {
@@ -210,16 +227,27 @@ impl PointTable {
     fn find(&self, id: &NodeId) -> Option<Made> {
         match self.find_point(id) {
             Some(found) => Some(Made::Point(found)),
-            None => self.find_alarm_variable(id).map(Made::Alarm),
+            None => self.find_plain(id).map(Made::Plain),
         }
     }
 
-    fn find_alarm_variable(&self, id: &NodeId) -> Option<AlarmVariable> {
-        let text = self.text(id)?;
-        let (alarm, name) = text.strip_prefix("alarm:")?.rsplit_once('/')?;
-        let index = alarms::VARIABLES.iter().position(|(n, _, _)| *n == name)?;
-        let view = Arc::new(self.cell.alarms.view(alarm)?);
-        Some(AlarmVariable { view, index })
+    fn find_plain(&self, id: &NodeId) -> Option<Plain> {
+        let ns = *self.ns.get()?;
+        let (object, name) = self.text(id)?.rsplit_once('/')?;
+        match object.strip_prefix("alarm:") {
+            Some(alarm) => {
+                let view = self.cell.alarms.view(alarm)?;
+                alarm_variables(ns, &view)
+                    .into_iter()
+                    .find(|v| v.name == name)
+            }
+            None => {
+                let device = Arc::clone(self.cell.roster().device(object)?);
+                device_variables(ns, &device)
+                    .into_iter()
+                    .find(|v| v.name == name)
+            }
+        }
     }
 
     fn text<'a>(&self, id: &'a NodeId) -> Option<&'a str> {
@@ -256,7 +284,7 @@ impl PointTable {
                 .cell
                 .alarms
                 .view(alarm)
-                .map(|view| Parent::Alarm(Arc::new(view)));
+                .map(|view| Parent::Alarm(Box::new(view)));
         }
         let (device, production) = match text.strip_suffix("/Production") {
             Some(device) => (device, true),
@@ -264,6 +292,22 @@ impl PointTable {
         };
         let device = Arc::clone(self.cell.roster().device(device)?);
         Some(Parent::Device { device, production })
+    }
+
+    /// Tells the monitored items of a device's `Status` and `Error` its state at `t`.
+    pub fn notify_device(
+        &self,
+        subscriptions: &SubscriptionCache,
+        summary: &DeviceSummary,
+        t: DateTime,
+    ) {
+        let Some(&ns) = self.ns.get() else { return };
+        let values = device_values(ns, summary, t);
+        subscriptions.notify_data_change(
+            values
+                .iter()
+                .map(|(node, value)| (value.clone(), node, AttributeId::Value)),
+        );
     }
 
     /// Tells the monitored items of alarm `view`'s variables its state at `t`.
@@ -427,67 +471,113 @@ impl Found {
 
 impl Parent {
     /// The nodes of this manager under this node.
-    fn children(&self) -> Vec<Made> {
+    fn children(&self, ns: u16) -> Vec<Made> {
         match self {
-            Parent::Device { device, production } => (0..device.points.len())
-                .filter(|&i| {
-                    gateway::production::is_production_point(device.points[i].id.name())
-                        == *production
-                })
-                .map(|index| {
-                    Made::Point(Found {
-                        device: Arc::clone(device),
-                        index,
-                        property: None,
+            Parent::Device { device, production } => {
+                let variables = if *production {
+                    Vec::new()
+                } else {
+                    device_variables(ns, device)
+                };
+                let points = (0..device.points.len())
+                    .filter(|&i| {
+                        gateway::production::is_production_point(device.points[i].id.name())
+                            == *production
                     })
-                })
-                .collect(),
-            Parent::Alarm(view) => (0..alarms::VARIABLES.len())
-                .map(|index| {
-                    Made::Alarm(AlarmVariable {
-                        view: Arc::clone(view),
-                        index,
-                    })
-                })
+                    .map(|index| {
+                        Made::Point(Found {
+                            device: Arc::clone(device),
+                            index,
+                            property: None,
+                        })
+                    });
+                variables
+                    .into_iter()
+                    .map(Made::Plain)
+                    .chain(points)
+                    .collect()
+            }
+            Parent::Alarm(view) => alarm_variables(ns, view)
+                .into_iter()
+                .map(Made::Plain)
                 .collect(),
         }
     }
 }
 
-impl AlarmVariable {
-    fn node_id(&self, ns: u16) -> NodeId {
-        ids::alarm_variable(ns, &self.view.id, alarms::VARIABLES[self.index].0)
-    }
+/// Alarm `view`'s variables ([`alarms::VARIABLES`]), their values now.
+fn alarm_variables(ns: u16, view: &AlarmView) -> Vec<Plain> {
+    let parent = ids::alarm(ns, &view.id);
+    alarms::VARIABLES
+        .iter()
+        .zip(alarms::values(ns, view, DateTime::now()))
+        .map(|(&(name, data_type, words), (node, value))| Plain {
+            node,
+            parent: parent.clone(),
+            name,
+            data_type,
+            words,
+            value,
+        })
+        .collect()
+}
 
-    /// The variable as the in-memory space would hold it, with its value now.
+/// A device's `Status` and `Error`, their values timed when the status began.
+fn device_variables(ns: u16, device: &DeviceEntry) -> Vec<Plain> {
+    let summary = device.summary();
+    let values = device_values(ns, &summary, space::opc_time(summary.since));
+    DEVICE_VARIABLES
+        .iter()
+        .zip(values)
+        .map(|(&(name, words), (node, value))| Plain {
+            node,
+            parent: ids::device(ns, device.id.as_str()),
+            name,
+            data_type: DataTypeId::String,
+            words,
+            value,
+        })
+        .collect()
+}
+
+/// The values of a device's `Status` and `Error` ([`DEVICE_VARIABLES`]) at `t`.
+fn device_values(ns: u16, summary: &DeviceSummary, t: DateTime) -> [(NodeId, DataValue); 2] {
+    let id = summary.id.as_str();
+    [
+        (
+            ids::device_status(ns, id),
+            DataValue::new_at(space::device_status(summary), t),
+        ),
+        (
+            ids::device_error(ns, id),
+            DataValue::new_at(space::device_error(summary), t),
+        ),
+    ]
+}
+
+impl Plain {
+    /// The variable as the in-memory space would hold it.
     fn node(&self, ns: u16) -> NodeType {
-        let (name, data_type, words) = alarms::VARIABLES[self.index];
-        let node = self.node_id(ns);
-        let mut variable = VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
-            .description(words)
-            .data_type(data_type)
-            .value_rank(-1)
-            .access_level(AccessLevel::CURRENT_READ)
-            .user_access_level(AccessLevel::CURRENT_READ)
-            .build();
-        if let Some((_, value)) = alarms::values(ns, &self.view, DateTime::now())
-            .into_iter()
-            .nth(self.index)
-        {
-            variable.set_data_value(value);
-        }
+        let mut variable =
+            VariableBuilder::new(&self.node, QualifiedName::new(ns, self.name), self.name)
+                .description(self.words)
+                .data_type(self.data_type)
+                .value_rank(-1)
+                .access_level(AccessLevel::CURRENT_READ)
+                .user_access_level(AccessLevel::CURRENT_READ)
+                .build();
+        variable.set_data_value(self.value.clone());
         NodeType::Variable(Box::new(variable))
     }
 
     fn metadata(&self, ns: u16) -> NodeMetadata {
-        let name = alarms::VARIABLES[self.index].0;
         NodeMetadata {
-            node_id: self.node_id(ns).into(),
+            node_id: self.node.clone().into(),
             type_definition: ExpandedNodeId::new(NodeId::from(
                 VariableTypeId::BaseDataVariableType,
             )),
-            browse_name: QualifiedName::new(ns, name),
-            display_name: LocalizedText::from(name),
+            browse_name: QualifiedName::new(ns, self.name),
+            display_name: LocalizedText::from(self.name),
             node_class: NodeClass::Variable,
         }
     }
@@ -497,14 +587,14 @@ impl Made {
     fn node(&self, ns: u16) -> NodeType {
         match self {
             Made::Point(found) => found.node(ns),
-            Made::Alarm(variable) => variable.node(ns),
+            Made::Plain(variable) => variable.node(ns),
         }
     }
 
     fn metadata(&self, ns: u16) -> NodeMetadata {
         match self {
             Made::Point(found) => found.metadata(ns),
-            Made::Alarm(variable) => variable.metadata(ns),
+            Made::Plain(variable) => variable.metadata(ns),
         }
     }
 }
@@ -549,7 +639,7 @@ impl PointNodes {
         let forward = matches!(direction, BrowseDirection::Forward | BrowseDirection::Both);
         let inverse = matches!(direction, BrowseDirection::Inverse | BrowseDirection::Both);
         let mut refs = Vec::new();
-        if let Some(Made::Alarm(variable)) = self.table.find(id) {
+        if let Some(Made::Plain(variable)) = self.table.find(id) {
             if forward {
                 refs.push(Reference::Other(
                     ReferenceTypeId::HasTypeDefinition,
@@ -561,7 +651,7 @@ impl PointNodes {
                 refs.push(Reference::Other(
                     ReferenceTypeId::HasComponent,
                     false,
-                    ids::alarm(ns, &variable.view.id),
+                    variable.parent,
                 ));
             }
         } else if let Some(found) = self.table.find_point(id) {
@@ -595,7 +685,7 @@ impl PointNodes {
         } else if forward && let Some(parent) = self.table.parent(id) {
             refs.extend(
                 parent
-                    .children()
+                    .children(ns)
                     .into_iter()
                     .map(|child| Reference::Own(ReferenceTypeId::HasComponent, true, child)),
             );

@@ -608,10 +608,12 @@ async def write(url, addr, data_dir, password):
         assert good(low) == {ms(b["t"]): b["min"] for b in h["buckets"]}, (good(low), h["buckets"])
         assert good(high) == {ms(b["t"]): b["max"] for b in h["buckets"]}, (good(high), h["buckets"])
         ok("one processed read gives each node its own aggregate (Minimum, Maximum)")
-        # A node the server answers itself (no history) ahead of them: the aggregates'
-        # places cannot be known, so the cell's nodes are refused, never given another's.
-        status_node = tree[d["id"]][1]["Status"]
-        first, low, high = await read_processed([status_node, node, node], ["Average", "Minimum", "Maximum"])
+        # A node of the server's other node manager (the device's Alarms folder, an object
+        # without history) ahead of them: async-opcua hands the points' manager its nodes
+        # without their places, so the aggregates' places cannot be known and the points
+        # are refused, never given another's.
+        folder = tree[d["id"]][1]["Alarms"]
+        first, low, high = await read_processed([folder, node, node], ["Average", "Minimum", "Maximum"])
         for result in (low, high):
             assert result.StatusCode.value == ua.StatusCodes.BadAggregateInvalidInputs, result.StatusCode
         ok(f"with a node not historized first and aggregates that differ: {first.StatusCode.name}, then refused")
