@@ -29,7 +29,7 @@
 //! straight to the items that monitor it); subscriptions and monitored items are the
 //! server's own over those values (no second polling). A point's
 //! monitored item asked to sample at its poll period or faster gets
-//! [`nodes::EVERY_CHANGE_MS`]: every change, with the time it was read. `/healthz` and
+//! [`points::EVERY_CHANGE_MS`]: every change, with the time it was read. `/healthz` and
 //! `/metrics` read the server's connections, sessions, subscriptions and monitored items
 //! through the probe it registers with the cell ([`status`]; [`state`] reads it). The same
 //! task raises each of the gateway's events as a BaseEventType event on the device's
@@ -561,7 +561,7 @@ async fn follow(
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     // Changes between the address space's build and this subscription are caught up here.
     let mut laid_out = cell.roster();
-    resync(&laid_out, &cell, &points, &subscriptions);
+    points.notify_all(&subscriptions, &laid_out);
     loop {
         tokio::select! {
             message = live.recv() => match message {
@@ -574,7 +574,7 @@ async fn follow(
                     if event.kind == EventKind::ConfigReloaded {
                         let changed = gateway::reload::devices_in(&event, "changed");
                         laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
-                        resync(&laid_out, &cell, &points, &subscriptions);
+                        points.notify_all(&subscriptions, &laid_out);
                     }
                     if let Some(view) = changed_alarm(&event).and_then(|a| cell.alarms.view(a)) {
                         points.notify_alarm(&subscriptions, &view, DateTime::now());
@@ -604,16 +604,18 @@ async fn follow(
                             .collect();
                         laid_out = follow_roster(&cell, &handle, &manager, ns, &changed);
                     }
-                    resync(&laid_out, &cell, &points, &subscriptions);
+                    points.notify_all(&subscriptions, &laid_out);
                 }
                 Err(broadcast::error::RecvError::Closed) => return,
             },
             _ = tick.tick() => {
                 let rows = cell.store().stats().rows_written();
-                set_values(&manager, &subscriptions, vec![(
-                    ids::gateway(ns, Some(nodes::HISTORY_ROWS)),
+                set_value(
+                    &manager,
+                    &subscriptions,
+                    &ids::gateway(ns, Some(nodes::HISTORY_ROWS)),
                     DataValue::new_now(Variant::UInt64(rows)),
-                )]);
+                );
             }
             () = stopped(&mut stop) => return,
         }
@@ -638,13 +640,11 @@ fn follow_roster(
             .inner()
             .follow_roster(&mut space, &*types, &roster, changed);
     }
-    set_values(
+    set_value(
         manager,
         handle.subscriptions(),
-        vec![(
-            ids::gateway(ns, Some(nodes::LINES)),
-            DataValue::new_now(nodes::line_names(&roster)),
-        )],
+        &ids::gateway(ns, Some(nodes::LINES)),
+        DataValue::new_now(nodes::line_names(&roster)),
     );
     roster
 }
@@ -665,45 +665,15 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
     let _ = stop.wait_for(|stopped| *stopped).await;
 }
 
-/// Sets every variable from the cell's current state, its devices those of `roster` (the
-/// one laid out), and tells the points' monitored items their values.
-fn resync(
-    roster: &Roster,
-    cell: &Cell,
-    points: &PointTable,
-    subscriptions: &::opcua::server::SubscriptionCache,
-) {
-    let t = space::opc_time(Timestamp::now());
-    for device in roster.devices() {
-        points.notify_device(subscriptions, &device.summary(), t);
-    }
-    points.notify_all(subscriptions);
-    let views: Vec<_> = cell
-        .alarms
-        .with(|book| (0..book.len()).filter_map(|i| book.view(i)).collect());
-    for view in &views {
-        points.notify_alarm(subscriptions, view, t);
-    }
-}
-
-fn set_values(
+/// Sets a variable of the in-memory space (the gateway object's).
+fn set_value(
     manager: &CellManager,
     subscriptions: &::opcua::server::SubscriptionCache,
-    values: Vec<(::opcua::types::NodeId, DataValue)>,
+    node: &::opcua::types::NodeId,
+    value: DataValue,
 ) {
-    let result = manager.set_values(
-        subscriptions,
-        values
-            .iter()
-            .map(|(node, value)| (node, None, value.clone())),
-    );
-    if let Err(status) = result {
-        // async-opcua stops at a node that is not there (a device a reload removed, or added
-        // and not yet laid out) and notifies none: the others are set one by one.
-        tracing::warn!("an OPC UA value was not set: {status}");
-        for (node, value) in values {
-            let _ = manager.set_value(subscriptions, &node, None, value);
-        }
+    if let Err(status) = manager.set_value(subscriptions, node, None, value) {
+        tracing::warn!("the OPC UA value of {node} was not set: {status}");
     }
 }
 

@@ -34,10 +34,9 @@ use super::peers::Peers;
 use super::points::PointTable;
 use super::space::{self, ids};
 use gateway::alarm::book::View as AlarmView;
-use gateway::cell::{Cell, DeviceEntry, DeviceView, Roster};
+use gateway::cell::{Cell, DeviceEntry, Roster};
 use gateway::driver::{ErrorKind, WriteError};
 use gateway::point::{DeviceId, PointId, PointKind, ValueError};
-use gateway::time::Timestamp;
 use gateway::write::Attempt;
 
 /// The node manager of the cell.
@@ -50,13 +49,6 @@ pub struct CellNodes {
     peers: Arc<Peers>,
     ns: u16,
 }
-
-/// The sampling interval a monitored item of a point gets when the client asks for its
-/// poll period or less: the values are set as they are read, one per poll at most, so
-/// the item passes every change with the time it was read. (async-opcua, told the poll
-/// period, would hold back a change read a little less than one period after the last
-/// and restamp it a period after that one.)
-pub const EVERY_CHANGE_MS: f64 = 1.0;
 
 /// The builder the server takes: registers the namespace (and tells `points` its index)
 /// and builds the nodes.
@@ -75,7 +67,7 @@ pub fn builder(
         space.add_namespace(space::NAMESPACE_URI, ns);
         points.set_namespace(ns);
         let types = context.type_tree.read();
-        build(space, &*types, ns, &cell, Timestamp::now());
+        build(space, &*types, ns, &cell);
         CellNodes {
             cell,
             users,
@@ -111,26 +103,18 @@ impl CellNodes {
         roster: &Roster,
         changed: &[DeviceId],
     ) {
-        lay_out(
-            space,
-            types,
-            self.ns,
-            &self.cell,
-            roster,
-            changed,
-            Timestamp::now(),
-        );
+        lay_out(space, types, self.ns, &self.cell, roster, changed);
     }
 }
 
 /// Builds the cell's nodes.
-fn build(space: &mut AddressSpace, types: &dyn TypeTree, ns: u16, cell: &Cell, now: Timestamp) {
+fn build(space: &mut AddressSpace, types: &dyn TypeTree, ns: u16, cell: &Cell) {
     ObjectBuilder::new(&ids::cell(ns), QualifiedName::new(ns, "Cell"), "Cell")
         .description("The production cell: a folder per line, an object per device")
         .is_folder()
         .organized_by(ObjectId::ObjectsFolder)
         .insert(space);
-    lay_out(space, types, ns, cell, &cell.roster(), &[], now);
+    lay_out(space, types, ns, cell, &cell.roster(), &[]);
     build_gateway(space, ns, cell);
     build_event_type(space, ns);
 }
@@ -153,7 +137,6 @@ fn lay_out(
     cell: &Cell,
     roster: &Roster,
     changed: &[DeviceId],
-    now: Timestamp,
 ) {
     let cell_id = ids::cell(ns);
     let lines: Vec<NodeId> = children(space, types, ns, &cell_id, ReferenceTypeId::Organizes);
@@ -207,13 +190,7 @@ fn lay_out(
             if space.node_exists(&ids::device(ns, id)) {
                 keep_alarms(space, types, ns, id, &views);
             } else {
-                build_device(
-                    space,
-                    ns,
-                    &line_id,
-                    &device.view_without_points(now),
-                    device,
-                );
+                build_device(space, ns, &line_id, device);
                 build_alarms(space, ns, id, &views);
             }
         }
@@ -330,14 +307,8 @@ fn build_event_type(space: &mut AddressSpace, ns: u16) {
     }
 }
 
-fn build_device(
-    space: &mut AddressSpace,
-    ns: u16,
-    line_id: &NodeId,
-    device: &DeviceView,
-    entry: &DeviceEntry,
-) {
-    let id = device.summary.id.as_str();
+fn build_device(space: &mut AddressSpace, ns: u16, line_id: &NodeId, device: &DeviceEntry) {
+    let id = device.id.as_str();
     let device_id = ids::device(ns, id);
     ObjectBuilder::new(&device_id, QualifiedName::new(ns, id), id)
         .description(device.name.as_str())
@@ -347,7 +318,7 @@ fn build_device(
         .insert(space);
     // Its `Status` and `Error` and its points are `crate::points`'. The machine state and
     // the OEE go in a `Production` folder, when the device has them.
-    if entry
+    if device
         .points
         .iter()
         .any(|p| gateway::production::is_production_point(p.id.name()))

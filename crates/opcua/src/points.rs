@@ -1,25 +1,26 @@
-//! The cell's points as OPC UA variables, made when a client asks for one instead of kept
-//! in the address space: a node manager of its own ([`PointNodes`]) that answers Browse,
+//! The cell's variables made when a client asks for one instead of kept in the address
+//! space: a node manager of its own ([`PointNodes`]) that answers Browse,
 //! TranslateBrowsePathsToNodeIds, Read, Write, HistoryRead and CreateMonitoredItems for
 //! every point variable and its properties (`EngineeringUnits`, `EURange`, `EnumValues`,
-//! `EnumStrings`) from the cell's roster and live state.
+//! `EnumStrings`), each device's `Status` and `Error` and each alarm's variables, from the
+//! cell's roster, live state and alarm book.
 //!
 //! Why: async-opcua's in-memory address space keeps each node with its attributes, its
 //! value and both directions of every reference in hash maps of their own, about 1.8 kB a
-//! point (200 MiB for 100,000 points). Here a point costs nothing until it is asked for;
-//! each answer builds the variable the in-memory space would have held (the same
+//! point (200 MiB for 100,000 points). Here a variable costs nothing until it is asked
+//! for; each answer builds the variable the in-memory space would have held (the same
 //! attributes, through async-opcua's own `read_node_value`) and drops it.
 //!
-//! The rest of the namespace (the `Cell` folder, lines, device objects with `Status`,
-//! `Error`, `Production` and `Alarms`, the gateway object, the event type) stays in the
-//! in-memory manager ([`crate::nodes`]), which yields the point nodes to this one
-//! ([`crate::items::capped_yielding`]). The two meet at the device objects and their
-//! `Production` folders: async-opcua asks every node manager to browse every node, so the
-//! in-memory manager gives a device's `Status`, `Error`, … and this one its points; a
-//! browse path is followed by each in turn.
+//! The objects (the `Cell` folder, lines, devices with their `Production` and `Alarms`
+//! folders, alarms, the gateway object, the event type) stay in the in-memory manager
+//! ([`crate::nodes`]), which yields these variables to this one
+//! ([`crate::items::capped_yielding`]). The two meet at the objects: async-opcua asks
+//! every node manager to browse every node, so the in-memory manager gives a device's
+//! folders and this one its `Status`, `Error` and points; a browse path is followed by
+//! each in turn.
 //!
-//! Values reach monitored items from the change stream ([`PointTable::notify`]): a value
-//! is made only for a point some item monitors.
+//! Values reach monitored items from the change stream ([`PointTable::notify`]): a point's
+//! value is made only when some item monitors it.
 
 use std::collections::VecDeque;
 use std::sync::{Arc, OnceLock};
@@ -27,7 +28,7 @@ use std::time::Duration;
 
 use ::opcua::nodes::{DefaultTypeTree, ReferenceDirection, TypeTree};
 use ::opcua::server::address_space::{
-    AccessLevel, NodeType, VariableBuilder, read_node_value, user_access_level, validate_node_read,
+    AccessLevel, NodeType, VariableBuilder, read_node_value, validate_node_read,
 };
 use ::opcua::server::diagnostics::NamespaceMetadata;
 use ::opcua::server::node_manager::{
@@ -48,17 +49,17 @@ use ::opcua::types::{
 use super::alarms;
 use super::auth::Users;
 use super::history::{self, Aggregate, RawRead};
-use super::nodes::{self, Caller, EVERY_CHANGE_MS};
+use super::nodes::{self, Caller};
 use super::peers::Peers;
 use super::space::{self, ids};
 use gateway::alarm::book::View as AlarmView;
-use gateway::cell::{Cell, DeviceEntry, DeviceSummary, PointView};
+use gateway::cell::{Cell, DeviceEntry, DeviceSummary, PointView, Roster};
 use gateway::point::{PointId, PointKind};
 use gateway::time::Timestamp;
 
-/// The cell's points as node ids: which node is a point or a point's property, in the
-/// roster in force. Shared by [`PointNodes`] and the in-memory manager's wrapper, which
-/// leaves these nodes to it.
+/// Which node ids are the variables [`PointNodes`] makes, in the roster and alarm book in
+/// force. Shared by [`PointNodes`] and the in-memory manager's wrapper, which leaves these
+/// nodes to it.
 pub struct PointTable {
     cell: Arc<Cell>,
     /// The cell's namespace, once the in-memory manager has registered it.
@@ -162,19 +163,23 @@ enum Made {
     Plain(Plain),
 }
 
-/// A read-only variable of an in-memory object, with its value now.
+/// A read-only variable of an in-memory object; its value is read when asked.
 #[derive(Clone)]
-struct Plain {
-    node: NodeId,
-    /// The object it is a component of.
-    parent: NodeId,
-    name: &'static str,
-    data_type: DataTypeId,
-    words: &'static str,
-    value: DataValue,
+enum Plain {
+    /// The device's `DEVICE_VARIABLES[index]`.
+    Device(Arc<DeviceEntry>, usize),
+    /// The alarm's `alarms::VARIABLES[index]`.
+    Alarm(Arc<AlarmView>, usize),
 }
 
-/// A device's `Status` and `Error`: name, words.
+/// The sampling interval a monitored item of a point gets when the client asks for its
+/// poll period or less: the values are set as they are read, one per poll at most, so
+/// the item passes every change with the time it was read. (async-opcua, told the poll
+/// period, would hold back a change read a little less than one period after the last
+/// and restamp it a period after that one.)
+pub const EVERY_CHANGE_MS: f64 = 1.0;
+
+/// A device's `Status` and `Error`: name, words (in the order of [`device_values`]).
 const DEVICE_VARIABLES: [(&str, &str); 2] = [
     (
         "Status",
@@ -201,7 +206,7 @@ enum Parent {
         device: Arc<DeviceEntry>,
         production: bool,
     },
-    Alarm(Box<AlarmView>),
+    Alarm(Arc<AlarmView>),
 }
 
 impl PointTable {
@@ -232,20 +237,17 @@ impl PointTable {
     }
 
     fn find_plain(&self, id: &NodeId) -> Option<Plain> {
-        let ns = *self.ns.get()?;
         let (object, name) = self.text(id)?.rsplit_once('/')?;
         match object.strip_prefix("alarm:") {
             Some(alarm) => {
+                let index = alarms::VARIABLES.iter().position(|v| v.0 == name)?;
                 let view = self.cell.alarms.view(alarm)?;
-                alarm_variables(ns, &view)
-                    .into_iter()
-                    .find(|v| v.name == name)
+                Some(Plain::Alarm(Arc::new(view), index))
             }
             None => {
-                let device = Arc::clone(self.cell.roster().device(object)?);
-                device_variables(ns, &device)
-                    .into_iter()
-                    .find(|v| v.name == name)
+                let index = DEVICE_VARIABLES.iter().position(|v| v.0 == name)?;
+                let device = self.cell.roster().device(object)?.clone();
+                Some(Plain::Device(device, index))
             }
         }
     }
@@ -284,7 +286,7 @@ impl PointTable {
                 .cell
                 .alarms
                 .view(alarm)
-                .map(|view| Parent::Alarm(Box::new(view)));
+                .map(|view| Parent::Alarm(Arc::new(view)));
         }
         let (device, production) = match text.strip_suffix("/Production") {
             Some(device) => (device, true),
@@ -335,11 +337,22 @@ impl PointTable {
         );
     }
 
-    /// Sets every point's monitored items from the cell's state (after a lag or a reload).
-    pub fn notify_all(&self, subscriptions: &SubscriptionCache) {
+    /// Tells the monitored items of every variable its value now (after a lag or a
+    /// reload): those of the devices of `roster` (the one laid out) and their points, and
+    /// those of every alarm.
+    pub fn notify_all(&self, subscriptions: &SubscriptionCache, roster: &Roster) {
         let Some(&ns) = self.ns.get() else { return };
         let now = Timestamp::now();
-        for device in self.cell.roster().devices() {
+        let t = space::opc_time(now);
+        let alarms: Vec<AlarmView> = self
+            .cell
+            .alarms
+            .with(|book| (0..book.len()).filter_map(|i| book.view(i)).collect());
+        for view in &alarms {
+            self.notify_alarm(subscriptions, view, t);
+        }
+        for device in roster.devices() {
+            self.notify_device(subscriptions, &device.summary(), t);
             let state = device.read();
             for (index, point) in state.points.iter().enumerate() {
                 let view = device.point_view(index, point, now);
@@ -382,10 +395,7 @@ impl Found {
                     let point = &state.points[self.index];
                     self.device.point_view(self.index, point, Timestamp::now())
                 };
-                let mut access = AccessLevel::CURRENT_READ | AccessLevel::HISTORY_READ;
-                if spec.writable.is_some() {
-                    access |= AccessLevel::CURRENT_WRITE;
-                }
+                let access = self.access();
                 let name = spec.id.name();
                 let mut variable = VariableBuilder::new(&node, QualifiedName::new(ns, name), name)
                     .description(spec.name.as_ref())
@@ -413,6 +423,15 @@ impl Found {
             }
         };
         NodeType::Variable(Box::new(variable))
+    }
+
+    /// A point's access level: read, history, and write when it is writable.
+    fn access(&self) -> AccessLevel {
+        let mut access = AccessLevel::CURRENT_READ | AccessLevel::HISTORY_READ;
+        if self.spec().writable.is_some() {
+            access |= AccessLevel::CURRENT_WRITE;
+        }
+        access
     }
 
     fn type_definition(&self) -> VariableTypeId {
@@ -471,14 +490,16 @@ impl Found {
 
 impl Parent {
     /// The nodes of this manager under this node.
-    fn children(&self, ns: u16) -> Vec<Made> {
+    fn children(&self) -> Vec<Made> {
         match self {
             Parent::Device { device, production } => {
                 let variables = if *production {
-                    Vec::new()
+                    0
                 } else {
-                    device_variables(ns, device)
+                    DEVICE_VARIABLES.len()
                 };
+                let variables = (0..variables)
+                    .map(|index| Made::Plain(Plain::Device(Arc::clone(device), index)));
                 let points = (0..device.points.len())
                     .filter(|&i| {
                         gateway::production::is_production_point(device.points[i].id.name())
@@ -491,53 +512,13 @@ impl Parent {
                             property: None,
                         })
                     });
-                variables
-                    .into_iter()
-                    .map(Made::Plain)
-                    .chain(points)
-                    .collect()
+                variables.chain(points).collect()
             }
-            Parent::Alarm(view) => alarm_variables(ns, view)
-                .into_iter()
-                .map(Made::Plain)
+            Parent::Alarm(view) => (0..alarms::VARIABLES.len())
+                .map(|index| Made::Plain(Plain::Alarm(Arc::clone(view), index)))
                 .collect(),
         }
     }
-}
-
-/// Alarm `view`'s variables ([`alarms::VARIABLES`]), their values now.
-fn alarm_variables(ns: u16, view: &AlarmView) -> Vec<Plain> {
-    let parent = ids::alarm(ns, &view.id);
-    alarms::VARIABLES
-        .iter()
-        .zip(alarms::values(ns, view, DateTime::now()))
-        .map(|(&(name, data_type, words), (node, value))| Plain {
-            node,
-            parent: parent.clone(),
-            name,
-            data_type,
-            words,
-            value,
-        })
-        .collect()
-}
-
-/// A device's `Status` and `Error`, their values timed when the status began.
-fn device_variables(ns: u16, device: &DeviceEntry) -> Vec<Plain> {
-    let summary = device.summary();
-    let values = device_values(ns, &summary, space::opc_time(summary.since));
-    DEVICE_VARIABLES
-        .iter()
-        .zip(values)
-        .map(|(&(name, words), (node, value))| Plain {
-            node,
-            parent: ids::device(ns, device.id.as_str()),
-            name,
-            data_type: DataTypeId::String,
-            words,
-            value,
-        })
-        .collect()
 }
 
 /// The values of a device's `Status` and `Error` ([`DEVICE_VARIABLES`]) at `t`.
@@ -556,28 +537,74 @@ fn device_values(ns: u16, summary: &DeviceSummary, t: DateTime) -> [(NodeId, Dat
 }
 
 impl Plain {
+    fn name(&self) -> &'static str {
+        match self {
+            Plain::Device(_, index) => DEVICE_VARIABLES[*index].0,
+            Plain::Alarm(_, index) => alarms::VARIABLES[*index].0,
+        }
+    }
+
+    fn node_id(&self, ns: u16) -> NodeId {
+        match self {
+            Plain::Device(device, 0) => ids::device_status(ns, device.id.as_str()),
+            Plain::Device(device, _) => ids::device_error(ns, device.id.as_str()),
+            Plain::Alarm(view, _) => ids::alarm_variable(ns, &view.id, self.name()),
+        }
+    }
+
+    /// The object it is a component of.
+    fn parent(&self, ns: u16) -> NodeId {
+        match self {
+            Plain::Device(device, _) => ids::device(ns, device.id.as_str()),
+            Plain::Alarm(view, _) => ids::alarm(ns, &view.id),
+        }
+    }
+
+    /// Its value now: a device's timed when its status began.
+    fn value(&self, ns: u16) -> DataValue {
+        let values = match self {
+            Plain::Device(device, _) => {
+                let summary = device.summary();
+                device_values(ns, &summary, space::opc_time(summary.since)).to_vec()
+            }
+            Plain::Alarm(view, _) => alarms::values(ns, view, DateTime::now()),
+        };
+        let (Plain::Device(_, index) | Plain::Alarm(_, index)) = self;
+        values
+            .into_iter()
+            .nth(*index)
+            .map_or_else(DataValue::null, |(_, value)| value)
+    }
+
     /// The variable as the in-memory space would hold it.
     fn node(&self, ns: u16) -> NodeType {
+        let (name, data_type, words) = match self {
+            Plain::Device(_, index) => {
+                let (name, words) = DEVICE_VARIABLES[*index];
+                (name, DataTypeId::String, words)
+            }
+            Plain::Alarm(_, index) => alarms::VARIABLES[*index],
+        };
         let mut variable =
-            VariableBuilder::new(&self.node, QualifiedName::new(ns, self.name), self.name)
-                .description(self.words)
-                .data_type(self.data_type)
+            VariableBuilder::new(&self.node_id(ns), QualifiedName::new(ns, name), name)
+                .description(words)
+                .data_type(data_type)
                 .value_rank(-1)
                 .access_level(AccessLevel::CURRENT_READ)
                 .user_access_level(AccessLevel::CURRENT_READ)
                 .build();
-        variable.set_data_value(self.value.clone());
+        variable.set_data_value(self.value(ns));
         NodeType::Variable(Box::new(variable))
     }
 
     fn metadata(&self, ns: u16) -> NodeMetadata {
         NodeMetadata {
-            node_id: self.node.clone().into(),
+            node_id: self.node_id(ns).into(),
             type_definition: ExpandedNodeId::new(NodeId::from(
                 VariableTypeId::BaseDataVariableType,
             )),
-            browse_name: QualifiedName::new(ns, self.name),
-            display_name: LocalizedText::from(self.name),
+            browse_name: QualifiedName::new(ns, self.name()),
+            display_name: LocalizedText::from(self.name()),
             node_class: NodeClass::Variable,
         }
     }
@@ -639,56 +666,61 @@ impl PointNodes {
         let forward = matches!(direction, BrowseDirection::Forward | BrowseDirection::Both);
         let inverse = matches!(direction, BrowseDirection::Inverse | BrowseDirection::Both);
         let mut refs = Vec::new();
-        if let Some(Made::Plain(variable)) = self.table.find(id) {
-            if forward {
-                refs.push(Reference::Other(
-                    ReferenceTypeId::HasTypeDefinition,
-                    true,
-                    VariableTypeId::BaseDataVariableType.into(),
-                ));
-            }
-            if inverse {
-                refs.push(Reference::Other(
-                    ReferenceTypeId::HasComponent,
-                    false,
-                    variable.parent,
-                ));
-            }
-        } else if let Some(found) = self.table.find_point(id) {
-            if forward {
-                refs.push(Reference::Other(
-                    ReferenceTypeId::HasTypeDefinition,
-                    true,
-                    found.type_definition().into(),
-                ));
-                if found.property.is_none() {
-                    refs.extend(found.properties().map(|p| {
-                        Reference::Own(ReferenceTypeId::HasProperty, true, Made::Point(p))
-                    }));
+        match self.table.find(id) {
+            Some(Made::Plain(variable)) => {
+                if forward {
+                    refs.push(Reference::Other(
+                        ReferenceTypeId::HasTypeDefinition,
+                        true,
+                        VariableTypeId::BaseDataVariableType.into(),
+                    ));
+                }
+                if inverse {
+                    refs.push(Reference::Other(
+                        ReferenceTypeId::HasComponent,
+                        false,
+                        variable.parent(ns),
+                    ));
                 }
             }
-            if inverse {
-                refs.push(match found.property {
-                    None => {
-                        Reference::Other(ReferenceTypeId::HasComponent, false, found.parent(ns))
+            Some(Made::Point(found)) => {
+                if forward {
+                    refs.push(Reference::Other(
+                        ReferenceTypeId::HasTypeDefinition,
+                        true,
+                        found.type_definition().into(),
+                    ));
+                    if found.property.is_none() {
+                        refs.extend(found.properties().map(|p| {
+                            Reference::Own(ReferenceTypeId::HasProperty, true, Made::Point(p))
+                        }));
                     }
-                    Some(_) => Reference::Own(
-                        ReferenceTypeId::HasProperty,
-                        false,
-                        Made::Point(Found {
-                            property: None,
-                            ..found
-                        }),
-                    ),
-                });
+                }
+                if inverse {
+                    refs.push(match found.property {
+                        None => {
+                            Reference::Other(ReferenceTypeId::HasComponent, false, found.parent(ns))
+                        }
+                        Some(_) => Reference::Own(
+                            ReferenceTypeId::HasProperty,
+                            false,
+                            Made::Point(Found {
+                                property: None,
+                                ..found
+                            }),
+                        ),
+                    });
+                }
             }
-        } else if forward && let Some(parent) = self.table.parent(id) {
-            refs.extend(
-                parent
-                    .children(ns)
-                    .into_iter()
-                    .map(|child| Reference::Own(ReferenceTypeId::HasComponent, true, child)),
-            );
+            None => {
+                if forward && let Some(parent) = self.table.parent(id) {
+                    refs.extend(
+                        parent.children().into_iter().map(|child| {
+                            Reference::Own(ReferenceTypeId::HasComponent, true, child)
+                        }),
+                    );
+                }
+            }
         }
         refs
     }
@@ -798,7 +830,11 @@ impl PointNodes {
             Some(_) => return Err(StatusCode::BadUserAccessDenied),
             None => return Err(StatusCode::BadNodeIdUnknown),
         };
-        let access = user_access_level(context, &found.node(self.ns()));
+        let access = context.authenticator.effective_user_access_level(
+            &context.token,
+            found.access(),
+            node.node_id(),
+        );
         if !access.contains(AccessLevel::HISTORY_READ) {
             return Err(StatusCode::BadUserAccessDenied);
         }
@@ -910,7 +946,7 @@ impl NodeManager for PointNodes {
                     )
                     .await
                 }
-                // A property.
+                // A property, a device's `Status` or `Error`, an alarm's variable.
                 None => StatusCode::BadNotWritable,
             };
             node.set_status(status);

@@ -44,7 +44,9 @@ use super::mapping::{
 use super::primary::{OFFLINE_GRACE, PrimaryHost, STATE_SKEW_MS, Verdict};
 use super::status;
 use super::{Connection, End, Link, Mode, Outgoing, Step};
-use crate::cell::{Cell, CheckedWrite, DeviceEntry, DeviceStatus, DeviceSummary, LiveMessage};
+use crate::cell::{
+    Cell, CheckedWrite, DeviceEntry, DeviceStatus, DeviceSummary, LiveMessage, PointView,
+};
 use crate::driver::WriteError;
 use crate::event::{Event, EventKind};
 use crate::point::{DeviceId, PointId, Value};
@@ -65,6 +67,17 @@ pub const HISTORY_ROWS_METRIC: &str = "Gateway/History rows";
 const NODE_DATA_EVERY: Duration = Duration::from_secs(10);
 /// Value changes of one device taken together, with the latest read time among them.
 type DeviceChanges = (DeviceId, Vec<(String, Sample)>, Timestamp);
+
+/// The change of `entry`'s point that `view` read, as a metric name and sample; `None`
+/// when the device has no such point (any more).
+fn change_of(entry: &DeviceEntry, view: &PointView, now: Timestamp) -> Option<(String, Sample)> {
+    let name = view.id.name();
+    let index = entry.point_index(name)?;
+    Some((
+        name.to_owned(),
+        sample_of(&entry.points[index].kind, view, now),
+    ))
+}
 
 /// Most metrics in one historical DDATA.
 const HISTORICAL_BATCH: usize = 500;
@@ -550,34 +563,30 @@ impl Node {
         let mut values: Vec<DeviceChanges> = Vec::new();
         // The entry of each device in `values`, in the same order.
         let mut entries: Vec<Arc<DeviceEntry>> = Vec::new();
-        let roster = self.cell.roster();
+        let mut roster = self.cell.roster();
         let now = Timestamp::now();
         let mut next = Some(first);
         while let Some(message) = next.take() {
             match message {
                 LiveMessage::Value(view) => {
-                    let (device, name) = (view.id.device(), view.id.name());
                     let read = view.t.unwrap_or(now);
                     // A poll's changes come together: the group is nearly always the last.
-                    match values.iter().rposition(|(d, _, _)| d.as_str() == device) {
+                    match values
+                        .iter()
+                        .rposition(|(d, _, _)| d.as_str() == view.id.device())
+                    {
                         Some(at) => {
-                            if let Some(index) = entries[at].point_index(name) {
-                                let sample = sample_of(&entries[at].points[index].kind, &view, now);
+                            if let Some(change) = change_of(&entries[at], &view, now) {
                                 let (_, changes, latest) = &mut values[at];
-                                changes.push((name.to_owned(), sample));
+                                changes.push(change);
                                 *latest = (*latest).max(read);
                             }
                         }
                         None => {
-                            if let Some(entry) = roster.device(device)
-                                && let Some(index) = entry.point_index(name)
+                            if let Some(entry) = roster.device(view.id.device())
+                                && let Some(change) = change_of(entry, &view, now)
                             {
-                                let sample = sample_of(&entry.points[index].kind, &view, now);
-                                values.push((
-                                    entry.id.clone(),
-                                    vec![(name.to_owned(), sample)],
-                                    read,
-                                ));
+                                values.push((entry.id.clone(), vec![change], read));
                                 entries.push(Arc::clone(entry));
                             }
                         }
@@ -587,6 +596,8 @@ impl Node {
                     // Keep the order: what came before an event goes out first.
                     entries.clear();
                     self.device_data(conn, std::mem::take(&mut values)).await?;
+                    // A reload's devices are in the roster from its event on.
+                    roster = self.cell.roster();
                     self.on_event(conn, &event).await?;
                     if event.kind == EventKind::ConfigReloaded {
                         self.on_reload(conn, &event).await?;
